@@ -1,0 +1,10 @@
+//! Analysis: pure math on recorded series, no I/O.
+//!
+//! `series` reduces frames to interval means, `figures` computes figures of
+//! merit, `model` fits the study's compensation models, `study` holds the
+//! definitions of the study's figures.
+
+pub mod figures;
+pub mod model;
+pub mod series;
+pub mod study;

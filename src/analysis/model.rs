@@ -1,0 +1,304 @@
+//! Thermal compensation models of the study, fitted by least squares.
+//!
+//! - model 1 (classic): `K1 T^3 + K2 T^2 + K3 T` in the case temperature;
+//! - model 3: `K1 dT + K2 dT^2 + K3 d(dT)/dt`;
+//! - model 4: model 3 `+ K4 T_K + K5 exp(-tau/tau_w)`, tau_w found by a
+//!   one-dimensional search (the rest is linear).
+//!
+//! Every model also fits a constant (the run's bias offset). Inputs are the
+//! 1 Hz interval means; d(dT)/dt is a local-regression slope over
+//! [`DERIVATIVE_HALF_WINDOW_S`] either side, which keeps the 0.01 degC
+//! quantization of the sensors out of the rate term.
+
+use nalgebra::{DMatrix, DVector};
+use serde::{Deserialize, Serialize};
+
+use super::figures::smoothed_derivative;
+use super::series::Interval;
+
+/// Half-width of the window over which d(dT)/dt is estimated, s (ours).
+pub const DERIVATIVE_HALF_WINDOW_S: f64 = 30.0;
+
+/// Which compensation model.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ModelKind {
+    /// Cubic in one temperature.
+    Model1,
+    /// Gradient, gradient squared, gradient rate.
+    Model3,
+    /// Model 3 plus case temperature and warm-up.
+    Model4,
+}
+
+impl ModelKind {
+    /// Names of the coefficients, in order (the constant comes last).
+    pub fn terms(self) -> &'static [&'static str] {
+        match self {
+            Self::Model1 => &["k1_t3", "k2_t2", "k3_t", "offset"],
+            Self::Model3 => &["k1_dt", "k2_dt2", "k3_ddt_dt", "offset"],
+            Self::Model4 => &["k1_dt", "k2_dt2", "k3_ddt_dt", "k4_tk", "k5_f", "offset"],
+        }
+    }
+}
+
+/// A fitted model.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Fit {
+    /// Which model.
+    pub kind: ModelKind,
+    /// Coefficients in the order of [`ModelKind::terms`]; units deg/h per
+    /// degC^n (or per degC/s for the rate term; deg/h for K5 and offset).
+    pub coeffs: Vec<f64>,
+    /// Warm-up time constant (model 4 only), s.
+    pub warmup_tau_s: Option<f64>,
+    /// RMS of the fit residual on the data it was fitted to, deg/h.
+    pub rms_dph: f64,
+}
+
+/// Why a fit could not be made.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum FitError {
+    /// Fewer samples than coefficients.
+    #[error(
+        "too little data to fit {kind:?}: {samples} samples for {terms} coefficients; record a longer run"
+    )]
+    TooShort {
+        kind: ModelKind,
+        samples: usize,
+        terms: usize,
+    },
+    /// The least-squares solve failed (NaN input or a degenerate design).
+    #[error("the least-squares solve for {kind:?} failed: {reason}")]
+    Solve { kind: ModelKind, reason: String },
+}
+
+/// Regressor columns (without the constant) for one model at one tau_w.
+fn design(kind: ModelKind, series: &[Interval], ddt: &[f64], tau_w: f64) -> Vec<Vec<f64>> {
+    let col = |f: &dyn Fn(usize, &Interval) -> f64| -> Vec<f64> {
+        series.iter().enumerate().map(|(i, s)| f(i, s)).collect()
+    };
+    match kind {
+        ModelKind::Model1 => vec![
+            col(&|_, s| s.tcase_c.powi(3)),
+            col(&|_, s| s.tcase_c.powi(2)),
+            col(&|_, s| s.tcase_c),
+        ],
+        ModelKind::Model3 | ModelKind::Model4 => {
+            let mut cols = vec![
+                col(&|_, s| s.gradient_c()),
+                col(&|_, s| s.gradient_c().powi(2)),
+                col(&|i, _| ddt[i]),
+            ];
+            if kind == ModelKind::Model4 {
+                cols.push(col(&|_, s| s.tcase_c));
+                cols.push(col(&|_, s| (-s.time_s / tau_w).exp()));
+            }
+            cols
+        }
+    }
+}
+
+/// d(dT)/dt for a series of evenly spaced intervals, degC/s.
+pub fn gradient_rate(series: &[Interval]) -> Vec<f64> {
+    let dt = spacing_s(series);
+    let half = (DERIVATIVE_HALF_WINDOW_S / dt).round().max(1.0) as usize;
+    let grad: Vec<f64> = series.iter().map(Interval::gradient_c).collect();
+    smoothed_derivative(&grad, dt, half)
+}
+
+fn spacing_s(series: &[Interval]) -> f64 {
+    match series {
+        [a, .., b] => (b.time_s - a.time_s) / (series.len() - 1) as f64,
+        _ => 1.0,
+    }
+}
+
+/// Least squares with a constant column; returns coefficients and RSS.
+fn solve(kind: ModelKind, cols: &[Vec<f64>], y: &[f64]) -> Result<(Vec<f64>, f64), FitError> {
+    let n = y.len();
+    let p = cols.len() + 1;
+    if n < p + 1 {
+        return Err(FitError::TooShort {
+            kind,
+            samples: n,
+            terms: p,
+        });
+    }
+    // Scale columns to unit RMS so T^3 and exp(-tau) sit in one conditioning.
+    let scales: Vec<f64> = cols
+        .iter()
+        .map(|c| {
+            let r = (c.iter().map(|v| v * v).sum::<f64>() / n as f64).sqrt();
+            if r > 0.0 && r.is_finite() { r } else { 1.0 }
+        })
+        .collect();
+    let x = DMatrix::from_fn(n, p, |i, j| {
+        if j < cols.len() {
+            cols[j][i] / scales[j]
+        } else {
+            1.0
+        }
+    });
+    let b = DVector::from_column_slice(y);
+    let svd = x.clone().svd(true, true);
+    let beta = svd.solve(&b, 1e-12).map_err(|e| FitError::Solve {
+        kind,
+        reason: e.to_string(),
+    })?;
+    let resid = &b - &x * &beta;
+    let rss = resid.norm_squared();
+    if !rss.is_finite() {
+        return Err(FitError::Solve {
+            kind,
+            reason: "non-finite residual (NaN in the data?)".into(),
+        });
+    }
+    let coeffs = (0..p)
+        .map(|j| beta[j] / scales.get(j).copied().unwrap_or(1.0))
+        .collect();
+    Ok((coeffs, rss))
+}
+
+/// Fit `kind` to the Earth-removed bias of `series`.
+pub fn fit(kind: ModelKind, series: &[Interval]) -> Result<Fit, FitError> {
+    let y: Vec<f64> = series.iter().map(Interval::bias_dph).collect();
+    let ddt = gradient_rate(series);
+    let n = y.len().max(1) as f64;
+    if kind != ModelKind::Model4 {
+        let (coeffs, rss) = solve(kind, &design(kind, series, &ddt, 1.0), &y)?;
+        return Ok(Fit {
+            kind,
+            coeffs,
+            warmup_tau_s: None,
+            rms_dph: (rss / n).sqrt(),
+        });
+    }
+    // tau_w: coarse log grid, then golden-section refinement in log tau.
+    let eval = |log_tau: f64| solve(kind, &design(kind, series, &ddt, log_tau.exp()), &y);
+    let grid: Vec<f64> = (0..=40)
+        .map(|i| (30f64).ln() + f64::from(i) / 40.0 * ((30_000f64).ln() - (30f64).ln()))
+        .collect();
+    let mut best = (grid[0], f64::INFINITY);
+    for &g in &grid {
+        let (_, rss) = eval(g)?;
+        if rss < best.1 {
+            best = (g, rss);
+        }
+    }
+    let step = grid[1] - grid[0];
+    let (mut a, mut b) = (best.0 - step, best.0 + step);
+    let phi = 0.5 * (5f64.sqrt() - 1.0);
+    for _ in 0..40 {
+        let c = b - phi * (b - a);
+        let d = a + phi * (b - a);
+        if eval(c)?.1 < eval(d)?.1 {
+            b = d;
+        } else {
+            a = c;
+        }
+    }
+    let log_tau = 0.5 * (a + b);
+    let (coeffs, rss) = eval(log_tau)?;
+    Ok(Fit {
+        kind,
+        coeffs,
+        warmup_tau_s: Some(log_tau.exp()),
+        rms_dph: (rss / n).sqrt(),
+    })
+}
+
+impl Fit {
+    /// Predicted thermal bias (with the fitted constant) for each interval, deg/h.
+    pub fn predict(&self, series: &[Interval]) -> Vec<f64> {
+        let ddt = gradient_rate(series);
+        let cols = design(self.kind, series, &ddt, self.warmup_tau_s.unwrap_or(1.0));
+        let offset = self.coeffs.last().copied().unwrap_or(0.0);
+        (0..series.len())
+            .map(|i| {
+                offset
+                    + cols
+                        .iter()
+                        .zip(&self.coeffs)
+                        .map(|(c, k)| c[i] * k)
+                        .sum::<f64>()
+            })
+            .collect()
+    }
+
+    /// Earth-removed bias minus the model, deg/h.
+    pub fn residual(&self, series: &[Interval]) -> Vec<f64> {
+        self.predict(series)
+            .iter()
+            .zip(series)
+            .map(|(p, s)| s.bias_dph() - p)
+            .collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn synthetic(k: [f64; 5], tau_w: f64, offset: f64) -> Vec<Interval> {
+        (0..20_000)
+            .map(|i| {
+                let t = f64::from(i) + 0.5;
+                let tk = 20.0 + 30.0 * (t / 3000.0).sin();
+                let dt = 0.8 * (t / 1700.0).cos() + 0.3;
+                let ddt = -0.8 / 1700.0 * (t / 1700.0).sin();
+                let bias = k[0] * dt
+                    + k[1] * dt * dt
+                    + k[2] * ddt
+                    + k[3] * tk
+                    + k[4] * (-t / tau_w).exp()
+                    + offset;
+                Interval {
+                    time_s: t,
+                    rate_dph: bias + 10.0,
+                    reference_dph: 10.0,
+                    t1_c: tk + dt,
+                    t2_c: tk,
+                    tcase_c: tk,
+                    chamber_c: tk,
+                    frames: 400,
+                }
+            })
+            .collect()
+    }
+
+    #[test]
+    fn model4_recovers_known_coefficients_and_warmup() {
+        let k = [0.12, -0.01, 20.0, -0.004, 0.35];
+        let series = synthetic(k, 600.0, 0.8);
+        let f = fit(ModelKind::Model4, &series).expect("fit");
+        let tau = f.warmup_tau_s.expect("model 4 has tau_w");
+        assert!((tau - 600.0).abs() < 1.0, "tau_w {tau}");
+        for (got, want) in f.coeffs.iter().zip(k.iter().chain([0.8].iter())) {
+            assert!(
+                (got - want).abs() < 1e-3 * want.abs().max(1.0),
+                "{got} vs {want}"
+            );
+        }
+        assert!(f.rms_dph < 1e-5);
+        assert!(f.residual(&series).iter().all(|r| r.abs() < 1e-4));
+    }
+
+    #[test]
+    fn model3_cannot_explain_a_case_temperature_term() {
+        let series = synthetic([0.0, 0.0, 0.0, 0.01, 0.0], 600.0, 0.0);
+        let m3 = fit(ModelKind::Model3, &series).expect("fit");
+        let m4 = fit(ModelKind::Model4, &series).expect("fit");
+        assert!(m3.rms_dph > 0.05, "{}", m3.rms_dph);
+        assert!(m4.rms_dph < 1e-6);
+    }
+
+    #[test]
+    fn too_short_is_an_error() {
+        let series = synthetic([0.0; 5], 600.0, 0.0);
+        assert!(matches!(
+            fit(ModelKind::Model4, &series[..3]),
+            Err(FitError::TooShort { .. })
+        ));
+    }
+}

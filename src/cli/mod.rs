@@ -1,0 +1,76 @@
+//! Command-line interface: argument parsing, dispatch, exit codes.
+//!
+//! Each subcommand lives in its own file with `run(args) -> Result<Outcome>`;
+//! rendering (`render_*` -> String) is kept apart from printing so it can be
+//! unit tested. Results go to stdout, diagnostics to stderr.
+
+mod twin;
+
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+
+/// How a command ended, mapped to the process exit code.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Outcome {
+    /// Done (or the unit passed): exit 0.
+    Success,
+    /// The unit failed its limits: exit 3.
+    Fail,
+    /// Interrupted by the operator: exit 130.
+    Interrupted,
+}
+
+/// Exit code for an error (bad input, device or I/O failure).
+pub const EXIT_ERROR: u8 = 1;
+/// Exit code for a usage error.
+pub const EXIT_USAGE: u8 = 2;
+
+impl Outcome {
+    fn code(self) -> u8 {
+        match self {
+            Self::Success => 0,
+            Self::Fail => 3,
+            Self::Interrupted => 130,
+        }
+    }
+}
+
+#[derive(Debug, Parser)]
+#[command(
+    name = "gyrobench",
+    version,
+    about = "Hardware-in-the-loop test bench controller for ring laser gyroscopes"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// The simulated RL-16 and its bench (digital twin).
+    #[command(subcommand)]
+    Twin(twin::TwinCommand),
+}
+
+/// Parse arguments, run, print the error chain once, and map to an exit code.
+pub fn main() -> ExitCode {
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(e) => {
+            let _ = e.print();
+            return ExitCode::from(if e.use_stderr() { EXIT_USAGE } else { 0 });
+        }
+    };
+    let result = match cli.command {
+        Command::Twin(cmd) => twin::run(cmd),
+    };
+    match result {
+        Ok(outcome) => ExitCode::from(outcome.code()),
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::from(EXIT_ERROR)
+        }
+    }
+}

@@ -1,0 +1,172 @@
+//! Time for everything else in the crate.
+//!
+//! Nothing outside this module reads the system time. Simulated benches run on
+//! a [`VirtualClock`] that jumps forward as fast as the machine allows or is
+//! paced at a speed factor; real devices run on a [`WallClock`].
+
+use std::sync::Mutex;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::{Duration, Instant};
+
+/// A source of run time, in seconds since the clock's epoch (the run start).
+pub trait Clock: Send + Sync {
+    /// Seconds since the epoch of this clock.
+    fn now_s(&self) -> f64;
+
+    /// Block the calling thread until the clock reads at least `t_s`.
+    ///
+    /// A virtual clock moves its time to `t_s` (pacing itself against the
+    /// wall when it has a speed factor); a wall clock sleeps.
+    fn sleep_until(&self, t_s: f64);
+
+    /// True when time here is simulated rather than physical.
+    fn is_virtual(&self) -> bool;
+}
+
+/// How a virtual clock relates to the wall.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Pacing {
+    /// Jump straight to the requested time.
+    Max,
+    /// Run `factor` times faster than real time (1.0 = real time).
+    Factor(f64),
+}
+
+/// Simulated time, held as whole nanoseconds so that it never drifts by
+/// rounding however many small steps are taken.
+#[derive(Debug)]
+pub struct VirtualClock {
+    nanos: AtomicU64,
+    pacing: Pacing,
+    /// Wall instant and virtual time at which pacing was anchored.
+    anchor: Mutex<Option<(Instant, u64)>>,
+}
+
+impl VirtualClock {
+    /// A virtual clock at t = 0 with the given pacing.
+    pub fn new(pacing: Pacing) -> Self {
+        Self {
+            nanos: AtomicU64::new(0),
+            pacing,
+            anchor: Mutex::new(None),
+        }
+    }
+
+    /// Advance by `dt_s` seconds (negative or NaN steps are ignored).
+    pub fn advance(&self, dt_s: f64) {
+        self.sleep_until(self.now_s() + dt_s);
+    }
+
+    fn pace(&self, target_ns: u64) {
+        let Pacing::Factor(factor) = self.pacing else {
+            return;
+        };
+        if !(factor.is_finite() && factor > 0.0) {
+            return;
+        }
+        let (start, start_ns) = {
+            let mut anchor = self.anchor.lock().unwrap_or_else(|p| p.into_inner());
+            *anchor.get_or_insert_with(|| (Instant::now(), self.nanos.load(Ordering::Relaxed)))
+        };
+        let virtual_elapsed = target_ns.saturating_sub(start_ns) as f64 * 1e-9;
+        let due = start + Duration::from_secs_f64(virtual_elapsed / factor);
+        let now = Instant::now();
+        if due > now {
+            std::thread::sleep(due - now);
+        }
+    }
+}
+
+impl Clock for VirtualClock {
+    fn now_s(&self) -> f64 {
+        self.nanos.load(Ordering::Relaxed) as f64 * 1e-9
+    }
+
+    fn sleep_until(&self, t_s: f64) {
+        if !t_s.is_finite() {
+            return;
+        }
+        let target = (t_s.max(0.0) * 1e9).round() as u64;
+        if target <= self.nanos.load(Ordering::Relaxed) {
+            return;
+        }
+        self.pace(target);
+        self.nanos.fetch_max(target, Ordering::Relaxed);
+    }
+
+    fn is_virtual(&self) -> bool {
+        true
+    }
+}
+
+/// Physical time from the monotonic clock, for runs on real devices.
+#[derive(Debug)]
+pub struct WallClock {
+    start: Instant,
+}
+
+impl WallClock {
+    /// A wall clock whose epoch is now.
+    pub fn start() -> Self {
+        Self {
+            start: Instant::now(),
+        }
+    }
+}
+
+impl Clock for WallClock {
+    fn now_s(&self) -> f64 {
+        self.start.elapsed().as_secs_f64()
+    }
+
+    fn sleep_until(&self, t_s: f64) {
+        let now = self.now_s();
+        if t_s.is_finite() && t_s > now {
+            std::thread::sleep(Duration::from_secs_f64(t_s - now));
+        }
+    }
+
+    fn is_virtual(&self) -> bool {
+        false
+    }
+}
+
+/// Wall-clock seconds taken by `f`, for benchmarks that report speed.
+pub fn time_it<T>(f: impl FnOnce() -> T) -> (T, f64) {
+    let start = Instant::now();
+    let out = f();
+    (out, start.elapsed().as_secs_f64())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn virtual_clock_jumps_without_waiting_and_never_goes_back() {
+        let clock = VirtualClock::new(Pacing::Max);
+        let ((), wall) = time_it(|| clock.sleep_until(36_000.0));
+        assert_eq!(clock.now_s(), 36_000.0);
+        assert!(wall < 1.0, "a max-speed virtual clock must not sleep");
+        clock.sleep_until(10.0);
+        assert_eq!(clock.now_s(), 36_000.0);
+    }
+
+    #[test]
+    fn many_small_steps_do_not_accumulate_rounding() {
+        let clock = VirtualClock::new(Pacing::Max);
+        for _ in 0..400_000 {
+            clock.advance(1.0 / 400.0);
+        }
+        assert!((clock.now_s() - 1000.0).abs() < 1e-3);
+    }
+
+    #[test]
+    fn paced_clock_waits_for_the_wall() {
+        let clock = VirtualClock::new(Pacing::Factor(100.0));
+        let ((), wall) = time_it(|| clock.sleep_until(5.0));
+        // 5 s of device time at 100x takes at least 50 ms of wall time.
+        assert!(wall >= 0.045, "paced clock returned after {wall} s");
+        assert_eq!(clock.now_s(), 5.0);
+    }
+}

@@ -1,0 +1,263 @@
+//! Loading TOML files in two stages, with errors that point into the file.
+//!
+//! Stage one deserializes raw structs that mirror the file one-to-one
+//! (`deny_unknown_fields`); stage two validates values and builds typed,
+//! checked configuration. Both stages report `file:line:column` and the key.
+
+use std::path::{Path, PathBuf};
+
+use serde::de::DeserializeOwned;
+use toml::de::{DeTable, DeValue};
+
+/// What went wrong reading a configuration file, and where.
+#[derive(Debug, thiserror::Error)]
+pub enum ConfigError {
+    /// The file could not be read at all.
+    #[error("cannot read {path}: {source}; check the path")]
+    Read {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    /// The text is not valid TOML, or does not match the expected structure
+    /// (unknown key, wrong type, missing field).
+    #[error("{path}:{line}:{column}: {message}")]
+    Parse {
+        path: PathBuf,
+        line: usize,
+        column: usize,
+        message: String,
+    },
+    /// A value has the right type but is not acceptable.
+    #[error("{path}:{line}:{column}: `{key}` {message}")]
+    Invalid {
+        path: PathBuf,
+        line: usize,
+        column: usize,
+        key: String,
+        message: String,
+    },
+}
+
+impl ConfigError {
+    /// The 1-based line the error points at.
+    pub fn line(&self) -> Option<usize> {
+        match self {
+            Self::Read { .. } => None,
+            Self::Parse { line, .. } | Self::Invalid { line, .. } => Some(*line),
+        }
+    }
+}
+
+/// A TOML document kept beside its path, so that validation can point back
+/// into the text.
+#[derive(Debug, Clone)]
+pub struct Source {
+    /// Where the text came from (shown in errors).
+    pub path: PathBuf,
+    /// The whole text.
+    pub text: String,
+}
+
+impl Source {
+    /// Read a file from disk.
+    pub fn read(path: &Path) -> Result<Self, ConfigError> {
+        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
+            path: path.to_owned(),
+            source,
+        })?;
+        Ok(Self {
+            path: path.to_owned(),
+            text,
+        })
+    }
+
+    /// Wrap text that did not come from disk (embedded defaults, tests).
+    pub fn from_text(name: &str, text: &str) -> Self {
+        Self {
+            path: PathBuf::from(name),
+            text: text.to_owned(),
+        }
+    }
+
+    /// Stage one: deserialize the raw structure.
+    pub fn parse<T: DeserializeOwned>(&self) -> Result<T, ConfigError> {
+        toml::from_str(&self.text).map_err(|e| {
+            let (line, column) = e
+                .span()
+                .map(|s| line_col(&self.text, s.start))
+                .unwrap_or((1, 1));
+            ConfigError::Parse {
+                path: self.path.clone(),
+                line,
+                column,
+                message: e.message().trim().to_owned(),
+            }
+        })
+    }
+
+    /// An error about the value at dotted `key` (e.g. `thermal.tau_case_s`,
+    /// `table.geometry.outer_axis_ned`), located in the text when present,
+    /// else at its nearest enclosing table.
+    pub fn invalid(&self, key: &str, message: impl Into<String>) -> ConfigError {
+        let (line, column) = self.locate(key).unwrap_or((1, 1));
+        ConfigError::Invalid {
+            path: self.path.clone(),
+            line,
+            column,
+            key: key.to_owned(),
+            message: message.into(),
+        }
+    }
+
+    /// Line and column (1-based) of the value at a dotted key path.
+    pub fn locate(&self, key: &str) -> Option<(usize, usize)> {
+        let doc = DeTable::parse(&self.text).ok()?;
+        let mut table = doc.get_ref();
+        let mut best = None;
+        let mut parts = key.split('.').peekable();
+        while let Some(part) = parts.next() {
+            let (k, v) = table.iter().find(|(k, _)| k.get_ref().as_ref() == part)?;
+            best = Some(line_col(&self.text, k.span().start));
+            match v.get_ref() {
+                DeValue::Table(t) if parts.peek().is_some() => table = t,
+                _ => {
+                    if parts.peek().is_some() {
+                        return best;
+                    }
+                    return Some(line_col(&self.text, v.span().start));
+                }
+            }
+        }
+        best
+    }
+}
+
+/// 1-based line and column of a byte offset.
+pub fn line_col(text: &str, offset: usize) -> (usize, usize) {
+    let offset = offset.min(text.len());
+    let before = &text.as_bytes()[..offset];
+    let line = before.iter().filter(|&&b| b == b'\n').count() + 1;
+    let line_start = before
+        .iter()
+        .rposition(|&b| b == b'\n')
+        .map_or(0, |p| p + 1);
+    let column = text[line_start..offset].chars().count() + 1;
+    (line, column)
+}
+
+/// Collects validation checks; the first failure wins.
+#[derive(Debug)]
+pub struct Checker<'a> {
+    source: &'a Source,
+}
+
+impl<'a> Checker<'a> {
+    /// Checks against one source file.
+    pub fn new(source: &'a Source) -> Self {
+        Self { source }
+    }
+
+    /// Fail with `message` at `key` unless `ok`.
+    pub fn ensure(&self, ok: bool, key: &str, message: &str) -> Result<(), ConfigError> {
+        if ok {
+            Ok(())
+        } else {
+            Err(self.source.invalid(key, message))
+        }
+    }
+
+    /// A finite value strictly above zero.
+    pub fn positive(&self, value: f64, key: &str) -> Result<f64, ConfigError> {
+        self.ensure(
+            value.is_finite() && value > 0.0,
+            key,
+            &format!("must be a finite number above zero, got {value}"),
+        )?;
+        Ok(value)
+    }
+
+    /// A finite value at or above zero.
+    pub fn non_negative(&self, value: f64, key: &str) -> Result<f64, ConfigError> {
+        self.ensure(
+            value.is_finite() && value >= 0.0,
+            key,
+            &format!("must be a finite number at or above zero, got {value}"),
+        )?;
+        Ok(value)
+    }
+
+    /// A finite value within `[lo, hi]`.
+    pub fn within(&self, value: f64, lo: f64, hi: f64, key: &str) -> Result<f64, ConfigError> {
+        self.ensure(
+            value.is_finite() && (lo..=hi).contains(&value),
+            key,
+            &format!("must be between {lo} and {hi}, got {value}"),
+        )?;
+        Ok(value)
+    }
+
+    /// Any finite value.
+    pub fn finite(&self, value: f64, key: &str) -> Result<f64, ConfigError> {
+        self.ensure(
+            value.is_finite(),
+            key,
+            &format!("must be a finite number, got {value}"),
+        )?;
+        Ok(value)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[derive(Debug, serde::Deserialize)]
+    #[serde(deny_unknown_fields)]
+    #[expect(dead_code, reason = "fields exist to be deserialized")]
+    struct Raw {
+        a: Inner,
+    }
+
+    #[derive(Debug, serde::Deserialize)]
+    #[serde(deny_unknown_fields)]
+    #[expect(dead_code, reason = "fields exist to be deserialized")]
+    struct Inner {
+        x: f64,
+    }
+
+    #[test]
+    fn unknown_key_points_at_its_line() {
+        let src = Source::from_text("t.toml", "[a]\nx = 1.0\ny = 2.0\n");
+        let err = src.parse::<Raw>().expect_err("unknown key must be refused");
+        assert_eq!(err.line(), Some(3));
+        assert!(err.to_string().contains("unknown field `y`"), "{err}");
+        assert!(err.to_string().starts_with("t.toml:3:"), "{err}");
+    }
+
+    #[test]
+    fn missing_field_is_named() {
+        let src = Source::from_text("t.toml", "[a]\n");
+        let err = src
+            .parse::<Raw>()
+            .expect_err("missing field must be refused");
+        assert!(err.to_string().contains("missing field `x`"), "{err}");
+    }
+
+    #[test]
+    fn invalid_value_is_located_by_dotted_key() {
+        let src = Source::from_text("t.toml", "# c\n[a]\n\nx = -1.0\n");
+        let err = Checker::new(&src)
+            .positive(-1.0, "a.x")
+            .expect_err("negative must be refused");
+        assert_eq!(err.line(), Some(4));
+        assert!(err.to_string().contains("`a.x` must be"), "{err}");
+        assert!(err.to_string().contains("t.toml:4:5"), "{err}");
+    }
+
+    #[test]
+    fn line_col_counts_from_one() {
+        assert_eq!(line_col("ab\ncd", 0), (1, 1));
+        assert_eq!(line_col("ab\ncd", 4), (2, 2));
+    }
+}

@@ -1,0 +1,388 @@
+//! Frames, Earth rate and two-axis table kinematics (see `docs/physics.md`).
+//!
+//! Local frame: North-East-Down. Body frame: x = the gyro's sensitive axis.
+//! Orientation: aerospace Z-Y-X Euler angles, `R_nb = Rz(yaw) Ry(pitch) Rx(roll)`.
+
+use nalgebra::{Rotation3, Unit, Vector3};
+use serde::{Deserialize, Serialize};
+
+/// Earth rotation rate, rad/s.
+pub const EARTH_RATE_RAD_S: f64 = 7.292_115e-5;
+/// Earth rotation rate, deg/h (= arcsec/s).
+pub const EARTH_RATE_DPH: f64 = EARTH_RATE_RAD_S * 180.0 / std::f64::consts::PI * 3600.0;
+/// deg/s to deg/h.
+pub const DPS_TO_DPH: f64 = 3600.0;
+
+/// Where the bench stands.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Site {
+    /// Geodetic latitude, deg (north positive).
+    pub latitude_deg: f64,
+    /// Longitude, deg (east positive).
+    pub longitude_deg: f64,
+    /// Height above the ellipsoid, m.
+    pub height_m: f64,
+    /// Earth magnetic field in NED, microtesla.
+    pub magnetic_field_ned_ut: [f64; 3],
+}
+
+impl Site {
+    /// Earth-rate vector in NED, deg/h: `W (cos phi, 0, -sin phi)`.
+    pub fn earth_rate_ned_dph(&self) -> Vector3<f64> {
+        let phi = self.latitude_deg.to_radians();
+        Vector3::new(phi.cos(), 0.0, -phi.sin()) * EARTH_RATE_DPH
+    }
+
+    /// Magnetic field in NED, microtesla.
+    pub fn magnetic_ned_ut(&self) -> Vector3<f64> {
+        Vector3::from(self.magnetic_field_ned_ut)
+    }
+}
+
+/// Gravity direction in NED, in g.
+pub fn gravity_ned_g() -> Vector3<f64> {
+    Vector3::new(0.0, 0.0, 1.0)
+}
+
+/// Orientation of the gyro body in NED, degrees.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Orientation {
+    /// Azimuth of the sensitive axis (yaw), deg.
+    pub azimuth_deg: f64,
+    /// Elevation of the sensitive axis above the horizon (pitch), deg.
+    pub elevation_deg: f64,
+    /// Rotation about the sensitive axis (roll), deg.
+    pub roll_deg: f64,
+}
+
+impl Orientation {
+    /// From yaw, pitch, roll in degrees.
+    pub fn new(azimuth_deg: f64, elevation_deg: f64, roll_deg: f64) -> Self {
+        Self {
+            azimuth_deg,
+            elevation_deg,
+            roll_deg,
+        }
+    }
+
+    /// Body-to-NED rotation `Rz(yaw) Ry(pitch) Rx(roll)`.
+    pub fn rotation(&self) -> Rotation3<f64> {
+        Rotation3::from_euler_angles(
+            self.roll_deg.to_radians(),
+            self.elevation_deg.to_radians(),
+            self.azimuth_deg.to_radians(),
+        )
+    }
+
+    /// Euler angles of a body-to-NED rotation (azimuth wrapped to [0, 360)).
+    pub fn from_rotation(r: &Rotation3<f64>) -> Self {
+        let (roll, pitch, yaw) = r.euler_angles();
+        Self {
+            azimuth_deg: yaw.to_degrees().rem_euclid(360.0),
+            elevation_deg: pitch.to_degrees(),
+            roll_deg: roll.to_degrees(),
+        }
+    }
+
+    /// Sensitive axis in NED: `(cos p cos y, cos p sin y, -sin p)`.
+    pub fn sensitive_axis_ned(&self) -> Vector3<f64> {
+        self.rotation() * Vector3::x()
+    }
+
+    /// Earth rate seen on the sensitive axis, deg/h:
+    /// `W (sin e sin phi + cos e cos psi cos phi)`.
+    pub fn earth_rate_dph(&self, site: &Site) -> f64 {
+        site.earth_rate_ned_dph().dot(&self.sensitive_axis_ned())
+    }
+}
+
+/// Angle between two rotations, degrees.
+pub fn rotation_distance_deg(a: &Rotation3<f64>, b: &Rotation3<f64>) -> f64 {
+    (a.inverse() * b).angle().to_degrees()
+}
+
+/// Geometry of a two-axis table: which way its axes point when both read
+/// zero, and how the gyro sits on the inner axis.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TableGeometry {
+    /// Outer axis direction in NED (a positive outer angle turns right-handed
+    /// about it).
+    pub outer_axis_ned: [f64; 3],
+    /// Inner axis direction in NED with the outer axis at zero.
+    pub inner_axis_ned: [f64; 3],
+    /// Body orientation in NED with both table angles at zero.
+    pub mount: Orientation,
+}
+
+/// Table axis angles, deg.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TableAngles {
+    /// Outer axis angle, deg.
+    pub outer_deg: f64,
+    /// Inner axis angle, deg.
+    pub inner_deg: f64,
+}
+
+/// An orientation the table cannot reach.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error(
+    "the table cannot reach azimuth {:.2} deg, elevation {:.2} deg, roll {:.2} deg: \
+     the nearest pose is {error_deg:.3} deg away; choose an orientation the table geometry allows \
+     or give table angles",
+    target.azimuth_deg, target.elevation_deg, target.roll_deg
+)]
+pub struct Unreachable {
+    /// The orientation asked for.
+    pub target: Orientation,
+    /// Angle between the target and the nearest reachable pose, deg.
+    pub error_deg: f64,
+}
+
+/// Tolerance for calling an orientation reachable, deg.
+pub const REACH_TOLERANCE_DEG: f64 = 0.01;
+
+impl TableGeometry {
+    /// The geometry of `docs/physics.md`: outer axis horizontal along north,
+    /// inner axis perpendicular to it, sensitive axis along the inner axis.
+    /// Outer 0 deg: axis horizontal (east); outer 90 deg: axis up;
+    /// outer 35 deg: axis 55 deg from vertical.
+    ///
+    /// A positive outer angle raises the east end, i.e. it turns
+    /// right-handed about south (`outer_axis_ned = [-1, 0, 0]`).
+    pub fn study() -> Self {
+        Self {
+            outer_axis_ned: [-1.0, 0.0, 0.0],
+            inner_axis_ned: [0.0, 1.0, 0.0],
+            mount: Orientation::new(90.0, 0.0, 0.0),
+        }
+    }
+
+    fn outer_axis(&self) -> Unit<Vector3<f64>> {
+        Unit::new_normalize(Vector3::from(self.outer_axis_ned))
+    }
+
+    fn inner_axis(&self) -> Unit<Vector3<f64>> {
+        Unit::new_normalize(Vector3::from(self.inner_axis_ned))
+    }
+
+    /// Body-to-NED rotation at given table angles:
+    /// `R_o(outer) R_i(inner) R_mount`.
+    pub fn rotation(&self, a: TableAngles) -> Rotation3<f64> {
+        let ro = Rotation3::from_axis_angle(&self.outer_axis(), a.outer_deg.to_radians());
+        let ri = Rotation3::from_axis_angle(&self.inner_axis(), a.inner_deg.to_radians());
+        ro * ri * self.mount.rotation()
+    }
+
+    /// Body orientation at given table angles.
+    pub fn orientation(&self, a: TableAngles) -> Orientation {
+        Orientation::from_rotation(&self.rotation(a))
+    }
+
+    /// Body angular velocity in NED, deg/s, for table angles and rates (deg/s).
+    pub fn angular_velocity_ned_dps(&self, a: TableAngles, rates: TableAngles) -> Vector3<f64> {
+        let ro = Rotation3::from_axis_angle(&self.outer_axis(), a.outer_deg.to_radians());
+        self.outer_axis().into_inner() * rates.outer_deg
+            + ro * self.inner_axis().into_inner() * rates.inner_deg
+    }
+
+    /// Rate the nominal sensitive axis sees from Earth rotation and table
+    /// motion, deg/h (what a perfectly aligned gyro would read).
+    pub fn kinematic_rate_dph(&self, site: &Site, a: TableAngles, rates: TableAngles) -> f64 {
+        let axis = self.rotation(a) * Vector3::x();
+        axis.dot(
+            &(site.earth_rate_ned_dph() + self.angular_velocity_ned_dps(a, rates) * DPS_TO_DPH),
+        )
+    }
+
+    /// Table angles that put the body in `target`, or why they do not exist.
+    ///
+    /// The inner axis is fixed in the inner gimbal, so the body-frame inner
+    /// axis must land on `R_target R_mount^T a_i`; one rotation about the
+    /// outer axis does that, then the inner angle takes up the rest.
+    pub fn angles_for(&self, target: Orientation) -> Result<TableAngles, Unreachable> {
+        let r_target = target.rotation();
+        let a_o = self.outer_axis();
+        let a_i = self.inner_axis().into_inner();
+        let v = r_target * self.mount.rotation().inverse() * a_i;
+        let outer = angle_about(&a_o, &a_i, &v);
+        let ro = Rotation3::from_axis_angle(&a_o, outer);
+        let ri_needed = ro.inverse() * r_target * self.mount.rotation().inverse();
+        let inner = signed_angle_of(&ri_needed, &self.inner_axis());
+        let angles = TableAngles {
+            outer_deg: wrap_deg(outer.to_degrees()),
+            inner_deg: wrap_deg(inner.to_degrees()),
+        };
+        let error_deg = rotation_distance_deg(&self.rotation(angles), &r_target);
+        if error_deg <= REACH_TOLERANCE_DEG {
+            Ok(angles)
+        } else {
+            Err(Unreachable { target, error_deg })
+        }
+    }
+}
+
+/// Rotation angle about `axis` that brings `from` closest to `to`.
+fn angle_about(axis: &Unit<Vector3<f64>>, from: &Vector3<f64>, to: &Vector3<f64>) -> f64 {
+    let k = axis.into_inner();
+    let f = from - k * k.dot(from);
+    let t = to - k * k.dot(to);
+    if f.norm() < 1e-12 || t.norm() < 1e-12 {
+        return 0.0;
+    }
+    k.dot(&f.cross(&t)).atan2(f.dot(&t))
+}
+
+/// Signed rotation angle of `r` about `axis` (its component about that axis).
+fn signed_angle_of(r: &Rotation3<f64>, axis: &Unit<Vector3<f64>>) -> f64 {
+    let k = axis.into_inner();
+    // Any vector perpendicular to the axis, then see where r takes it.
+    let helper = if k.x.abs() < 0.9 {
+        Vector3::x()
+    } else {
+        Vector3::y()
+    };
+    let p = (helper - k * k.dot(&helper)).normalize();
+    angle_about(axis, &p, &(r * p))
+}
+
+/// Wrap an angle to (-180, 180], deg; values within a hair of 360 become 0.
+pub fn wrap_deg(a: f64) -> f64 {
+    let w = (a + 180.0).rem_euclid(360.0) - 180.0;
+    if (w + 180.0).abs() < 1e-9 {
+        180.0
+    } else if w.abs() < 1e-9 {
+        0.0
+    } else {
+        w
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn kyiv() -> Site {
+        Site {
+            latitude_deg: 50.45,
+            longitude_deg: 30.52,
+            height_m: 180.0,
+            magnetic_field_ned_ut: [19.5, 2.7, 46.5],
+        }
+    }
+
+    fn closed_form(site: &Site, o: &Orientation) -> f64 {
+        let (e, psi, phi) = (
+            o.elevation_deg.to_radians(),
+            o.azimuth_deg.to_radians(),
+            site.latitude_deg.to_radians(),
+        );
+        EARTH_RATE_DPH * (e.sin() * phi.sin() + e.cos() * psi.cos() * phi.cos())
+    }
+
+    #[test]
+    fn earth_rate_constant_matches_physics_notes() {
+        assert!((EARTH_RATE_DPH - 15.0411).abs() < 1e-4);
+    }
+
+    #[test]
+    fn study_geometry_reaches_the_nine_positions() {
+        let g = TableGeometry::study();
+        let site = kyiv();
+        let phi = site.latitude_deg.to_radians();
+        for inner in [0.0, 90.0, 180.0, 270.0] {
+            let up = g.orientation(TableAngles {
+                outer_deg: 90.0,
+                inner_deg: inner,
+            });
+            assert!((up.elevation_deg - 90.0).abs() < 1e-6, "{up:?}");
+            let w = up.earth_rate_dph(&site);
+            assert!((w - EARTH_RATE_DPH * phi.sin()).abs() < 1e-9);
+
+            let horiz = g.orientation(TableAngles {
+                outer_deg: 0.0,
+                inner_deg: inner,
+            });
+            assert!(horiz.elevation_deg.abs() < 1e-9);
+            assert!((horiz.azimuth_deg - 90.0).abs() < 1e-9, "{horiz:?}");
+            assert!(
+                horiz.earth_rate_dph(&site).abs() < 1e-9,
+                "east axis sees no Earth rate"
+            );
+        }
+        let tilt = g.orientation(TableAngles {
+            outer_deg: 35.0,
+            inner_deg: 0.0,
+        });
+        assert!((tilt.elevation_deg - 35.0).abs() < 1e-9);
+        let w = tilt.earth_rate_dph(&site);
+        assert!((w - closed_form(&site, &tilt)).abs() < 1e-9);
+    }
+
+    #[test]
+    fn rolls_with_axis_horizontal_turn_gravity_around_the_housing() {
+        let g = TableGeometry::study();
+        let mut seen = Vec::new();
+        for inner in [0.0, 90.0, 180.0, 270.0] {
+            let r = g.rotation(TableAngles {
+                outer_deg: 0.0,
+                inner_deg: inner,
+            });
+            let g_body = r.inverse() * gravity_ned_g();
+            assert!(g_body.x.abs() < 1e-12);
+            seen.push(g_body);
+        }
+        assert!((seen[0] + seen[2]).norm() < 1e-12);
+        assert!((seen[1] + seen[3]).norm() < 1e-12);
+        assert!((seen[0] - seen[1]).norm() > 1.0);
+    }
+
+    #[test]
+    fn inverse_kinematics_round_trips() {
+        let g = TableGeometry::study();
+        for outer in [-170.0, -35.0, 0.0, 35.0, 90.0, 135.0] {
+            for inner in [-90.0, 0.0, 45.0, 180.0] {
+                let a = TableAngles {
+                    outer_deg: outer,
+                    inner_deg: inner,
+                };
+                let o = g.orientation(a);
+                let back = g.angles_for(o).expect("reachable by construction");
+                let err = rotation_distance_deg(&g.rotation(back), &g.rotation(a));
+                assert!(err < 1e-6, "{a:?} -> {o:?} -> {back:?}: {err}");
+            }
+        }
+    }
+
+    #[test]
+    fn unreachable_orientation_is_refused() {
+        // Axis horizontal pointing north cannot be reached: the sensitive axis
+        // always stays in the east-vertical plane on the study table.
+        let err = TableGeometry::study()
+            .angles_for(Orientation::new(0.0, 0.0, 0.0))
+            .expect_err("north is out of reach");
+        assert!(err.error_deg > 80.0, "{err}");
+        assert!(err.to_string().contains("cannot reach"));
+    }
+
+    #[test]
+    fn angular_velocity_of_inner_axis_lies_on_sensitive_axis() {
+        let g = TableGeometry::study();
+        let a = TableAngles {
+            outer_deg: 90.0,
+            inner_deg: 30.0,
+        };
+        let w = g.angular_velocity_ned_dps(
+            a,
+            TableAngles {
+                outer_deg: 0.0,
+                inner_deg: 10.0,
+            },
+        );
+        let x = g.rotation(a) * Vector3::x();
+        assert!((w.dot(&x) - 10.0).abs() < 1e-9);
+    }
+}

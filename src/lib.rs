@@ -1,0 +1,16 @@
+//! gyrobench: a hardware-in-the-loop test bench controller for ring laser
+//! gyroscopes.
+//!
+//! Layers, each depending only on those above it in this list:
+//! `clock` and `config` (time, TOML loading) <- `geometry` (frames, Earth
+//! rate, table kinematics) <- `twin` (the simulated gyro and bench) <-
+//! `analysis` (pure math) <- `cli`. See `ARCHITECTURE.md`.
+
+pub mod analysis;
+pub mod cli;
+pub mod clock;
+pub mod config;
+pub mod fsutil;
+pub mod geometry;
+pub mod study;
+pub mod twin;

@@ -1,0 +1,7 @@
+//! The `gyrobench` command line; see `gyrobench --help`.
+
+use std::process::ExitCode;
+
+fn main() -> ExitCode {
+    gyrobench::cli::main()
+}

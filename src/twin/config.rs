@@ -1,0 +1,535 @@
+//! The twin's TOML configuration (`fixtures/twin/rl16.toml` is the default).
+//!
+//! Every key is documented in `docs/twin.md`. Structs mirror the file with
+//! `deny_unknown_fields`; [`TwinConfig::load`] then validates the values and
+//! reports a bad one with its key and place in the file.
+
+use std::path::Path;
+
+use serde::{Deserialize, Serialize};
+
+use crate::config::{Checker, ConfigError, Source};
+use crate::geometry::{Site, TableAngles, TableGeometry};
+
+/// The default twin configuration, embedded so the tool runs without files.
+pub const DEFAULT_TWIN_TOML: &str = include_str!("../../fixtures/twin/rl16.toml");
+
+/// Complete configuration of the simulated gyro and its bench.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TwinConfig {
+    /// Bench site (latitude for Earth rate, magnetic field).
+    pub site: Site,
+    /// Climatic chamber air model and capability.
+    pub chamber: ChamberConfig,
+    /// Gyro thermal network.
+    pub thermal: ThermalConfig,
+    /// Digital output.
+    pub gyro: GyroConfig,
+    /// The study's model-4 thermal bias and the turn-on bias.
+    pub bias: BiasConfig,
+    /// Random noise terms.
+    pub noise: NoiseConfig,
+    /// Two-axis motion simulator.
+    pub table: TableConfig,
+    /// Extra effects beyond model 4, each off unless enabled.
+    #[serde(default)]
+    pub effects: EffectsConfig,
+}
+
+/// Chamber air: follows a ramped set point through a first-order lag.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ChamberConfig {
+    /// Lowest set point the chamber can hold, degC.
+    pub min_c: f64,
+    /// Highest set point the chamber can hold, degC.
+    pub max_c: f64,
+    /// Fastest set-point ramp, degC/min.
+    pub max_ramp_c_per_min: f64,
+    /// Lag of the air behind the controller's ramped set point, s.
+    pub air_tau_s: f64,
+    /// Air (and soaked unit) temperature at the start, degC.
+    pub initial_c: f64,
+}
+
+/// Three-node thermal network: case, block side 1 (sensor T1), block side 2 (T2).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ThermalConfig {
+    /// Time constant of the case towards chamber air, s.
+    pub case_tau_s: f64,
+    /// Time constant of block node 1 towards the case, s.
+    pub block1_tau_s: f64,
+    /// Time constant of block node 2 towards the case, s.
+    pub block2_tau_s: f64,
+    /// Time constant of the exchange between the two block nodes, s
+    /// (with no convection help).
+    pub coupling_tau_s: f64,
+    /// Extra exchange between the block nodes when the line joining the two
+    /// sensors is vertical (internal convection), fraction: 0.5 = 50 % faster.
+    pub convection_gain: f64,
+    /// Direction from sensor 2 to sensor 1 in the body frame.
+    pub sensor_axis_body: [f64; 3],
+    /// Steady rise of the case above the air from the gyro's own dissipation, degC.
+    pub case_rise_c: f64,
+    /// Steady rise of block node 1 above the case it would reach alone, degC.
+    pub block1_rise_c: f64,
+    /// Steady rise of block node 2 above the case it would reach alone, degC.
+    pub block2_rise_c: f64,
+    /// White noise of each temperature sensor reading, degC (1 sigma).
+    pub sensor_noise_c: f64,
+}
+
+/// Digital output of the gyro.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GyroConfig {
+    /// Frames per second, Hz.
+    pub frame_rate_hz: f64,
+    /// Angle per count of the delta-angle output, arcsec.
+    pub lsb_arcsec: f64,
+    /// Resolution of the temperature fields, degC.
+    pub temp_lsb_c: f64,
+}
+
+/// Model-4 thermal bias `K1 dT + K2 dT^2 + K3 d(dT)/dt + K4 T_K + K5 F(tau)`
+/// with `dT = T1 - T2`, `F(tau) = exp(-tau/tau_w)`, plus a fixed and a
+/// turn-on bias.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BiasConfig {
+    /// Fixed bias, deg/h.
+    pub offset_dph: f64,
+    /// Run-to-run (turn-on) bias repeatability, deg/h, 1 sigma.
+    pub turn_on_sigma_dph: f64,
+    /// K1, deg/h per degC of dT.
+    pub k1_dph_per_c: f64,
+    /// K2, deg/h per degC^2 of dT.
+    pub k2_dph_per_c2: f64,
+    /// K3, deg/h per degC/s of d(dT)/dt.
+    pub k3_dph_per_c_per_s: f64,
+    /// K4, deg/h per degC of case temperature.
+    pub k4_dph_per_c: f64,
+    /// K5, deg/h at power-on (times F(tau)).
+    pub k5_dph: f64,
+    /// Warm-up time constant tau_w of F(tau), s.
+    pub warmup_tau_s: f64,
+    /// Which model-4 terms act (all true reproduces the study).
+    pub terms: BiasTerms,
+}
+
+/// Switches for the model-4 terms (names as in the diagnosis library).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BiasTerms {
+    /// K1 dT.
+    pub gradient: bool,
+    /// K2 dT^2.
+    pub gradient_quadratic: bool,
+    /// K3 d(dT)/dt.
+    pub gradient_rate: bool,
+    /// K4 T_K.
+    pub case_temperature: bool,
+    /// K5 F(tau).
+    pub self_heating: bool,
+}
+
+/// Random noise terms of the rate output.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct NoiseConfig {
+    /// Angle random walk N, deg/sqrt(h).
+    pub arw_deg_per_rt_h: f64,
+    /// Bias-instability coefficient B (IEEE: ADEV floor = 0.664 B), deg/h.
+    pub bias_instability_dph: f64,
+    /// Rate random walk K, deg/h/sqrt(h).
+    pub rrw_dph_per_rt_h: f64,
+}
+
+/// The two-axis motion simulator.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TableConfig {
+    /// Axis directions and gyro mount.
+    pub geometry: TableGeometry,
+    /// Fastest axis rate, deg/s.
+    pub max_rate_dps: f64,
+    /// Largest axis acceleration, deg/s^2.
+    pub max_acc_dps2: f64,
+    /// Table angles at the start.
+    pub initial: TableAngles,
+}
+
+/// Extra effects, named as in the diagnosis library.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct EffectsConfig {
+    /// Heating/cooling memory: play operator on the case temperature.
+    pub hysteresis: Option<Hysteresis>,
+    /// Bias following the case temperature through a first-order lag.
+    pub thermal_lag: Option<ThermalLag>,
+    /// Bias proportional to gravity in the body frame.
+    pub g_sensitivity: Option<GSensitivity>,
+    /// Bias proportional to the Earth's field in the body frame.
+    pub magnetic_sensitivity: Option<MagneticSensitivity>,
+    /// Sensitive axis tilted from the body x axis.
+    pub axis_misalignment: Option<AxisMisalignment>,
+    /// Scale factor drifting with block temperature.
+    pub scale_factor_temperature: Option<ScaleFactorTemperature>,
+}
+
+/// `amplitude * (y - T_K) / width`, y the play (backlash) operator of T_K
+/// with half-width `width_c`: `-amplitude` while heating, `+amplitude` while cooling.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Hysteresis {
+    /// Whether the effect acts.
+    pub enabled: bool,
+    /// Bias step between heating and cooling branches / 2, deg/h.
+    pub amplitude_dph: f64,
+    /// Half-width of the play operator, degC.
+    pub width_c: f64,
+}
+
+/// `coeff * (lag(T_K) - reference)`, lag a first-order filter with `tau_s`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ThermalLag {
+    /// Whether the effect acts.
+    pub enabled: bool,
+    /// deg/h per degC of the lagged temperature.
+    pub coeff_dph_per_c: f64,
+    /// Lag time constant, s.
+    pub tau_s: f64,
+    /// Temperature at which the term is zero, degC.
+    pub reference_c: f64,
+}
+
+/// `k . g_body`, g in units of g.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GSensitivity {
+    /// Whether the effect acts.
+    pub enabled: bool,
+    /// deg/h per g along body x, y, z.
+    pub coeff_dph_per_g: [f64; 3],
+}
+
+/// `k . B_body`, B in microtesla.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MagneticSensitivity {
+    /// Whether the effect acts.
+    pub enabled: bool,
+    /// deg/h per microtesla along body x, y, z.
+    pub coeff_dph_per_ut: [f64; 3],
+}
+
+/// The true sensitive axis is body x turned by small angles about y then z.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct AxisMisalignment {
+    /// Whether the effect acts.
+    pub enabled: bool,
+    /// Tilt about body y, arcmin.
+    pub about_y_arcmin: f64,
+    /// Tilt about body z, arcmin.
+    pub about_z_arcmin: f64,
+}
+
+/// Scale factor `1 + ppm * 1e-6 * (T_block - reference)` on the sensed rate.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ScaleFactorTemperature {
+    /// Whether the effect acts.
+    pub enabled: bool,
+    /// Scale-factor change per degC, ppm.
+    pub ppm_per_c: f64,
+    /// Temperature of the nominal scale factor, degC.
+    pub reference_c: f64,
+}
+
+impl TwinConfig {
+    /// The embedded default (the study's RL-16 bench).
+    pub fn default_rl16() -> Self {
+        // The embedded file is validated by a unit test, so this cannot fail.
+        match Self::from_source(&Source::from_text(
+            "fixtures/twin/rl16.toml",
+            DEFAULT_TWIN_TOML,
+        )) {
+            Ok(cfg) => cfg,
+            Err(e) => unreachable!("embedded twin config is invalid: {e}"),
+        }
+    }
+
+    /// Read and validate a twin file.
+    pub fn load(path: &Path) -> Result<Self, ConfigError> {
+        Self::from_source(&Source::read(path)?)
+    }
+
+    /// Parse and validate a twin configuration from text.
+    pub fn from_source(src: &Source) -> Result<Self, ConfigError> {
+        let cfg: Self = src.parse()?;
+        cfg.validate(&Checker::new(src))?;
+        Ok(cfg)
+    }
+
+    /// The configuration as TOML text (for logs and `twin-updated.toml`).
+    pub fn to_toml(&self) -> String {
+        toml::to_string_pretty(self)
+            .unwrap_or_else(|e| format!("# cannot render twin config: {e}\n"))
+    }
+
+    fn validate(&self, c: &Checker<'_>) -> Result<(), ConfigError> {
+        let s = &self.site;
+        c.within(s.latitude_deg, -90.0, 90.0, "site.latitude_deg")?;
+        c.within(s.longitude_deg, -180.0, 360.0, "site.longitude_deg")?;
+        c.within(s.height_m, -500.0, 10_000.0, "site.height_m")?;
+        for v in s.magnetic_field_ned_ut {
+            c.within(v, -100.0, 100.0, "site.magnetic_field_ned_ut")?;
+        }
+
+        let ch = &self.chamber;
+        c.within(ch.min_c, -100.0, 300.0, "chamber.min_c")?;
+        c.within(ch.max_c, -100.0, 300.0, "chamber.max_c")?;
+        c.ensure(
+            ch.max_c > ch.min_c,
+            "chamber.max_c",
+            "must be above chamber.min_c",
+        )?;
+        c.positive(ch.max_ramp_c_per_min, "chamber.max_ramp_c_per_min")?;
+        c.positive(ch.air_tau_s, "chamber.air_tau_s")?;
+        c.within(ch.initial_c, ch.min_c, ch.max_c, "chamber.initial_c")?;
+
+        let th = &self.thermal;
+        c.positive(th.case_tau_s, "thermal.case_tau_s")?;
+        c.positive(th.block1_tau_s, "thermal.block1_tau_s")?;
+        c.positive(th.block2_tau_s, "thermal.block2_tau_s")?;
+        c.positive(th.coupling_tau_s, "thermal.coupling_tau_s")?;
+        c.non_negative(th.convection_gain, "thermal.convection_gain")?;
+        let n = th
+            .sensor_axis_body
+            .iter()
+            .map(|v| v * v)
+            .sum::<f64>()
+            .sqrt();
+        c.ensure(
+            n.is_finite() && n > 1e-6,
+            "thermal.sensor_axis_body",
+            "must be a non-zero direction",
+        )?;
+        c.within(th.case_rise_c, 0.0, 50.0, "thermal.case_rise_c")?;
+        c.within(th.block1_rise_c, 0.0, 50.0, "thermal.block1_rise_c")?;
+        c.within(th.block2_rise_c, 0.0, 50.0, "thermal.block2_rise_c")?;
+        c.within(th.sensor_noise_c, 0.0, 5.0, "thermal.sensor_noise_c")?;
+
+        let g = &self.gyro;
+        c.within(g.frame_rate_hz, 1.0, 100_000.0, "gyro.frame_rate_hz")?;
+        c.within(g.lsb_arcsec, 1e-6, 100.0, "gyro.lsb_arcsec")?;
+        c.within(g.temp_lsb_c, 1e-6, 1.0, "gyro.temp_lsb_c")?;
+
+        let b = &self.bias;
+        c.finite(b.offset_dph, "bias.offset_dph")?;
+        c.non_negative(b.turn_on_sigma_dph, "bias.turn_on_sigma_dph")?;
+        c.finite(b.k1_dph_per_c, "bias.k1_dph_per_c")?;
+        c.finite(b.k2_dph_per_c2, "bias.k2_dph_per_c2")?;
+        c.finite(b.k3_dph_per_c_per_s, "bias.k3_dph_per_c_per_s")?;
+        c.finite(b.k4_dph_per_c, "bias.k4_dph_per_c")?;
+        c.finite(b.k5_dph, "bias.k5_dph")?;
+        c.positive(b.warmup_tau_s, "bias.warmup_tau_s")?;
+
+        let nz = &self.noise;
+        c.non_negative(nz.arw_deg_per_rt_h, "noise.arw_deg_per_rt_h")?;
+        c.non_negative(nz.bias_instability_dph, "noise.bias_instability_dph")?;
+        c.non_negative(nz.rrw_dph_per_rt_h, "noise.rrw_dph_per_rt_h")?;
+
+        let t = &self.table;
+        c.positive(t.max_rate_dps, "table.max_rate_dps")?;
+        c.positive(t.max_acc_dps2, "table.max_acc_dps2")?;
+        for (v, key) in [
+            (t.geometry.outer_axis_ned, "table.geometry.outer_axis_ned"),
+            (t.geometry.inner_axis_ned, "table.geometry.inner_axis_ned"),
+        ] {
+            let n = v.iter().map(|x| x * x).sum::<f64>().sqrt();
+            c.ensure(
+                n.is_finite() && n > 1e-6,
+                key,
+                "must be a non-zero direction",
+            )?;
+        }
+        c.finite(t.initial.outer_deg, "table.initial.outer_deg")?;
+        c.finite(t.initial.inner_deg, "table.initial.inner_deg")?;
+
+        self.effects.validate(c)
+    }
+}
+
+impl EffectsConfig {
+    fn validate(&self, c: &Checker<'_>) -> Result<(), ConfigError> {
+        if let Some(h) = &self.hysteresis {
+            c.finite(h.amplitude_dph, "effects.hysteresis.amplitude_dph")?;
+            c.positive(h.width_c, "effects.hysteresis.width_c")?;
+        }
+        if let Some(l) = &self.thermal_lag {
+            c.finite(l.coeff_dph_per_c, "effects.thermal_lag.coeff_dph_per_c")?;
+            c.positive(l.tau_s, "effects.thermal_lag.tau_s")?;
+            c.finite(l.reference_c, "effects.thermal_lag.reference_c")?;
+        }
+        if let Some(g) = &self.g_sensitivity {
+            for v in g.coeff_dph_per_g {
+                c.finite(v, "effects.g_sensitivity.coeff_dph_per_g")?;
+            }
+        }
+        if let Some(m) = &self.magnetic_sensitivity {
+            for v in m.coeff_dph_per_ut {
+                c.finite(v, "effects.magnetic_sensitivity.coeff_dph_per_ut")?;
+            }
+        }
+        if let Some(a) = &self.axis_misalignment {
+            c.within(
+                a.about_y_arcmin,
+                -600.0,
+                600.0,
+                "effects.axis_misalignment.about_y_arcmin",
+            )?;
+            c.within(
+                a.about_z_arcmin,
+                -600.0,
+                600.0,
+                "effects.axis_misalignment.about_z_arcmin",
+            )?;
+        }
+        if let Some(s) = &self.scale_factor_temperature {
+            c.finite(s.ppm_per_c, "effects.scale_factor_temperature.ppm_per_c")?;
+            c.finite(
+                s.reference_c,
+                "effects.scale_factor_temperature.reference_c",
+            )?;
+        }
+        Ok(())
+    }
+
+    /// Names of the enabled effects, as in the diagnosis library.
+    pub fn enabled_names(&self) -> Vec<&'static str> {
+        let mut out = Vec::new();
+        let on = |e: Option<bool>| e.unwrap_or(false);
+        if on(self.hysteresis.as_ref().map(|e| e.enabled)) {
+            out.push("hysteresis");
+        }
+        if on(self.thermal_lag.as_ref().map(|e| e.enabled)) {
+            out.push("thermal_lag");
+        }
+        if on(self.g_sensitivity.as_ref().map(|e| e.enabled)) {
+            out.push("g_sensitivity");
+        }
+        if on(self.magnetic_sensitivity.as_ref().map(|e| e.enabled)) {
+            out.push("magnetic_sensitivity");
+        }
+        if on(self.axis_misalignment.as_ref().map(|e| e.enabled)) {
+            out.push("axis_misalignment");
+        }
+        if on(self.scale_factor_temperature.as_ref().map(|e| e.enabled)) {
+            out.push("scale_factor_temperature");
+        }
+        out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn with(replace: &str, by: &str) -> Result<TwinConfig, ConfigError> {
+        assert!(
+            DEFAULT_TWIN_TOML.contains(replace),
+            "fixture lacks {replace}"
+        );
+        let text = DEFAULT_TWIN_TOML.replacen(replace, by, 1);
+        TwinConfig::from_source(&Source::from_text("rl16.toml", &text))
+    }
+
+    fn line_of(needle: &str) -> usize {
+        DEFAULT_TWIN_TOML
+            .lines()
+            .position(|l| l.starts_with(needle))
+            .map(|i| i + 1)
+            .expect("needle present")
+    }
+
+    #[test]
+    fn default_fixture_is_valid_and_has_every_effect_off() {
+        let cfg = TwinConfig::from_source(&Source::from_text("rl16.toml", DEFAULT_TWIN_TOML))
+            .expect("default twin must load");
+        assert!(cfg.effects.enabled_names().is_empty());
+        let t = cfg.bias.terms;
+        assert!(t.gradient && t.gradient_quadratic && t.gradient_rate);
+        assert!(t.case_temperature && t.self_heating);
+    }
+
+    #[test]
+    fn unknown_key_is_refused_with_its_line() {
+        let err = with("case_tau_s", "case_tau_sec = 1.0\ncase_tau_s").expect_err("unknown key");
+        let msg = err.to_string();
+        assert!(msg.contains("unknown field `case_tau_sec`"), "{msg}");
+        assert_eq!(err.line(), Some(line_of("case_tau_s")));
+    }
+
+    #[test]
+    fn missing_field_is_refused_and_named() {
+        let line = DEFAULT_TWIN_TOML
+            .lines()
+            .find(|l| l.starts_with("warmup_tau_s"))
+            .expect("fixture has warmup_tau_s");
+        let err = with(line, "").expect_err("missing field");
+        assert!(
+            err.to_string().contains("missing field `warmup_tau_s`"),
+            "{err}"
+        );
+    }
+
+    #[test]
+    fn negative_time_constant_is_refused_with_key_and_place() {
+        let line = DEFAULT_TWIN_TOML
+            .lines()
+            .find(|l| l.starts_with("block1_tau_s"))
+            .expect("fixture has block1_tau_s");
+        let err = with(line, "block1_tau_s = -5.0").expect_err("negative tau");
+        let msg = err.to_string();
+        assert!(msg.contains("`thermal.block1_tau_s` must be"), "{msg}");
+        assert_eq!(err.line(), Some(line_of("block1_tau_s")));
+    }
+
+    #[test]
+    fn latitude_beyond_ninety_is_refused() {
+        let line = DEFAULT_TWIN_TOML
+            .lines()
+            .find(|l| l.starts_with("latitude_deg"))
+            .expect("fixture has latitude");
+        let err = with(line, "latitude_deg = 91.0").expect_err("latitude > 90");
+        assert!(
+            err.to_string()
+                .contains("`site.latitude_deg` must be between -90 and 90"),
+            "{err}"
+        );
+        assert_eq!(err.line(), Some(line_of("latitude_deg")));
+    }
+
+    #[test]
+    fn wrong_type_is_refused() {
+        let line = DEFAULT_TWIN_TOML
+            .lines()
+            .find(|l| l.starts_with("frame_rate_hz"))
+            .expect("fixture has frame rate");
+        let err = with(line, "frame_rate_hz = \"fast\"").expect_err("string for number");
+        assert_eq!(err.line(), Some(line_of("frame_rate_hz")));
+    }
+
+    #[test]
+    fn round_trips_through_toml() {
+        let cfg = TwinConfig::default_rl16();
+        let back = TwinConfig::from_source(&Source::from_text("x", &cfg.to_toml()))
+            .expect("rendered config must load");
+        assert_eq!(cfg, back);
+    }
+}

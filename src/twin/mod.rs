@@ -1,0 +1,436 @@
+//! The simulated RL-16 and its bench: chamber air, gyro thermal network,
+//! rate output, and the two-axis table, on virtual time.
+//!
+//! Deterministic: the same configuration and seed give the same frames bit
+//! for bit. The slow physics (air, thermal network, bias, flicker) advances on
+//! a fixed 0.1 s step; each frame adds white angle noise to the cached rate
+//! and quantizes the angle, carrying the residual so no angle is lost.
+
+pub mod config;
+pub mod effects;
+pub mod noise;
+pub mod table;
+pub mod thermal;
+
+use nalgebra::Vector3;
+use rand::{RngExt, SeedableRng};
+use rand_distr::StandardNormal;
+use rand_xoshiro::Xoshiro256PlusPlus;
+
+pub use config::TwinConfig;
+pub use table::AxisDemand;
+pub use thermal::ChamberLimit;
+
+use crate::geometry::{DPS_TO_DPH, Orientation, TableAngles, gravity_ned_g};
+use effects::{EffectInputs, Effects};
+use noise::Noise;
+use table::Axis;
+use thermal::{ChamberAir, ThermalNetwork};
+
+/// Length of the slow-physics step, s (ours: 40 frames at 400 Hz).
+pub const THERMAL_STEP_S: f64 = 0.1;
+
+/// Status bits of a gyro frame.
+pub mod status {
+    /// Laser discharge lit.
+    pub const LASING: u16 = 1 << 0;
+    /// Mechanical dither running.
+    pub const DITHER: u16 = 1 << 1;
+    /// Path-length control locked.
+    pub const PATH_LENGTH_LOCK: u16 = 1 << 2;
+    /// Built-in self-test passed.
+    pub const SELF_TEST_OK: u16 = 1 << 3;
+    /// Everything nominal.
+    pub const NOMINAL: u16 = LASING | DITHER | PATH_LENGTH_LOCK | SELF_TEST_OK;
+}
+
+/// One output frame of the gyro, as its digital interface reports it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GyroSample {
+    /// Frame index since power-on (the wire counter is this modulo 256).
+    pub index: u64,
+    /// Device time at the end of the frame, s since the twin started.
+    pub time_s: f64,
+    /// Delta-angle counts since the previous frame (LSB from the config).
+    pub delta_counts: i32,
+    /// Block sensor 1, degC (quantized to the output resolution).
+    pub t1_c: f64,
+    /// Block sensor 2, degC.
+    pub t2_c: f64,
+    /// Case sensor, degC.
+    pub tcase_c: f64,
+    /// Status bits ([`status`]).
+    pub status: u16,
+}
+
+/// What the twin knows that a real bench would not: for tests and diagnosis.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Truth {
+    /// Chamber air, degC.
+    pub air_c: f64,
+    /// True node temperatures (case, T1, T2), degC.
+    pub case_c: f64,
+    /// Block node 1, degC.
+    pub t1_c: f64,
+    /// Block node 2, degC.
+    pub t2_c: f64,
+    /// Kinematic rate on the sensitive axis (Earth + table), deg/h.
+    pub kinematic_dph: f64,
+    /// Thermal and effect bias now (without white noise), deg/h.
+    pub bias_dph: f64,
+    /// Time since power-on, s.
+    pub tau_s: f64,
+    /// Angle fed to the quantizer since power-on (true rate plus white
+    /// noise), arcsec; the counts must add up to it.
+    pub angle_arcsec: f64,
+}
+
+/// The simulated gyro on its bench.
+#[derive(Debug, Clone)]
+pub struct Twin {
+    cfg: TwinConfig,
+    rng: Xoshiro256PlusPlus,
+    frame_dt_s: f64,
+    frames_per_step: u64,
+    step_dt_s: f64,
+    /// Frames since the twin started (powered or not).
+    tick: u64,
+    power_on_tick: Option<u64>,
+    frame_index: u64,
+    chamber: ChamberAir,
+    thermal: ThermalNetwork,
+    outer: Axis,
+    inner: Axis,
+    noise: Noise,
+    effects: Effects,
+    axis_body: Vector3<f64>,
+    turn_on_dph: f64,
+    // Caches refreshed by the slow step or when the table moves.
+    kinematic_dph: f64,
+    scale_factor: f64,
+    bias_dph: f64,
+    effect_dph: f64,
+    noise_dph: f64,
+    convection: f64,
+    gravity_body_g: Vector3<f64>,
+    magnetic_body_ut: Vector3<f64>,
+    sensor_c: [f64; 3],
+    // Angle bookkeeping.
+    residual_arcsec: f64,
+    true_angle_arcsec: f64,
+    true_angle_comp: f64,
+}
+
+impl Twin {
+    /// A twin soaked at the chamber's initial temperature, gyro powered on at t = 0.
+    pub fn new(cfg: TwinConfig, seed: u64) -> Self {
+        let mut twin = Self::unpowered(cfg, seed);
+        twin.power_on();
+        twin
+    }
+
+    /// A twin soaked at the chamber's initial temperature with the gyro off.
+    pub fn unpowered(cfg: TwinConfig, seed: u64) -> Self {
+        let frame_dt_s = 1.0 / cfg.gyro.frame_rate_hz;
+        let frames_per_step = (THERMAL_STEP_S / frame_dt_s).round().max(1.0) as u64;
+        let step_dt_s = frames_per_step as f64 * frame_dt_s;
+        let t = &cfg.table;
+        let mut twin = Self {
+            rng: Xoshiro256PlusPlus::seed_from_u64(seed),
+            frame_dt_s,
+            frames_per_step,
+            step_dt_s,
+            tick: 0,
+            power_on_tick: None,
+            frame_index: 0,
+            chamber: ChamberAir::new(&cfg.chamber),
+            thermal: ThermalNetwork::soaked(&cfg.thermal, cfg.chamber.initial_c),
+            outer: Axis::at_rest(t.initial.outer_deg, t.max_rate_dps, t.max_acc_dps2),
+            inner: Axis::at_rest(t.initial.inner_deg, t.max_rate_dps, t.max_acc_dps2),
+            noise: Noise::new(&cfg.noise, frame_dt_s, step_dt_s),
+            effects: Effects::new(&cfg.effects),
+            axis_body: Vector3::x(),
+            turn_on_dph: 0.0,
+            kinematic_dph: 0.0,
+            scale_factor: 1.0,
+            bias_dph: 0.0,
+            effect_dph: 0.0,
+            noise_dph: 0.0,
+            convection: 1.0,
+            gravity_body_g: Vector3::zeros(),
+            magnetic_body_ut: Vector3::zeros(),
+            sensor_c: [cfg.chamber.initial_c; 3],
+            residual_arcsec: 0.0,
+            true_angle_arcsec: 0.0,
+            true_angle_comp: 0.0,
+            cfg,
+        };
+        twin.axis_body = twin.effects.sensitive_axis_body();
+        twin.update_orientation();
+        twin.read_sensors();
+        twin
+    }
+
+    /// The configuration this twin runs.
+    pub fn config(&self) -> &TwinConfig {
+        &self.cfg
+    }
+
+    /// Switch the gyro on: time since power-on restarts, a new turn-on bias
+    /// is drawn, self-heating begins.
+    pub fn power_on(&mut self) {
+        self.power_on_tick = Some(self.tick);
+        self.frame_index = 0;
+        self.turn_on_dph =
+            self.cfg.bias.turn_on_sigma_dph * self.rng.sample::<f64, _>(StandardNormal);
+        self.noise.randomize(&mut self.rng);
+        self.residual_arcsec = 0.0;
+        self.true_angle_arcsec = 0.0;
+        self.true_angle_comp = 0.0;
+        self.refresh_bias();
+    }
+
+    /// Switch the gyro off (no frames; the unit cools towards the case).
+    pub fn power_off(&mut self) {
+        self.power_on_tick = None;
+    }
+
+    /// True while the gyro is powered.
+    pub fn is_powered(&self) -> bool {
+        self.power_on_tick.is_some()
+    }
+
+    /// Device time since the twin started, s.
+    pub fn time_s(&self) -> f64 {
+        self.tick as f64 * self.frame_dt_s
+    }
+
+    /// Time between frames, s.
+    pub fn frame_dt_s(&self) -> f64 {
+        self.frame_dt_s
+    }
+
+    /// Command the chamber.
+    pub fn set_chamber(&mut self, set_c: f64, ramp_c_per_min: f64) -> Result<(), ChamberLimit> {
+        self.chamber.set_point(set_c, ramp_c_per_min)
+    }
+
+    /// Chamber state: (air, final set point, ramped working set point), degC.
+    pub fn chamber_state(&self) -> (f64, f64, f64) {
+        (
+            self.chamber.air_c(),
+            self.chamber.target_c(),
+            self.chamber.working_set_point_c(),
+        )
+    }
+
+    /// Demand motion on the outer and/or inner table axis.
+    pub fn demand_table(&mut self, outer: Option<AxisDemand>, inner: Option<AxisDemand>) {
+        if let Some(d) = outer {
+            self.outer.demand(d);
+        }
+        if let Some(d) = inner {
+            self.inner.demand(d);
+        }
+    }
+
+    /// Move both axes to `angles` (a position demand).
+    pub fn move_table(&mut self, angles: TableAngles) {
+        self.demand_table(
+            Some(AxisDemand::Position(angles.outer_deg)),
+            Some(AxisDemand::Position(angles.inner_deg)),
+        );
+    }
+
+    /// Table angles now.
+    pub fn table_angles(&self) -> TableAngles {
+        TableAngles {
+            outer_deg: self.outer.pos_deg,
+            inner_deg: self.inner.pos_deg,
+        }
+    }
+
+    /// Table axis rates now, deg/s.
+    pub fn table_rates(&self) -> TableAngles {
+        TableAngles {
+            outer_deg: self.outer.rate_dps,
+            inner_deg: self.inner.rate_dps,
+        }
+    }
+
+    /// True while either axis moves.
+    pub fn table_moving(&self) -> bool {
+        self.outer.is_moving() || self.inner.is_moving()
+    }
+
+    /// Body orientation now.
+    pub fn orientation(&self) -> Orientation {
+        self.cfg.table.geometry.orientation(self.table_angles())
+    }
+
+    /// What the twin knows that a real bench would not.
+    pub fn truth(&self) -> Truth {
+        Truth {
+            air_c: self.chamber.air_c(),
+            case_c: self.thermal.case_c,
+            t1_c: self.thermal.t1_c,
+            t2_c: self.thermal.t2_c,
+            kinematic_dph: self.kinematic_dph,
+            bias_dph: self.bias_dph,
+            tau_s: self.tau_s(),
+            angle_arcsec: self.true_angle_arcsec + self.true_angle_comp,
+        }
+    }
+
+    fn tau_s(&self) -> f64 {
+        self.power_on_tick
+            .map_or(0.0, |t0| (self.tick - t0) as f64 * self.frame_dt_s)
+    }
+
+    /// Advance one frame period. Returns the frame the gyro sent, or `None`
+    /// while it is off.
+    #[inline]
+    pub fn step(&mut self) -> Option<GyroSample> {
+        self.tick += 1;
+        let moving = self.outer.is_moving() || self.inner.is_moving();
+        if moving {
+            self.outer.step(self.frame_dt_s);
+            self.inner.step(self.frame_dt_s);
+            self.update_orientation();
+        }
+        if self.tick % self.frames_per_step == 0 {
+            self.slow_step();
+        }
+        self.power_on_tick?;
+
+        let rate_dph = self.scale_factor * self.kinematic_dph + self.bias_dph;
+        let d_angle = rate_dph * self.frame_dt_s + self.noise.frame_angle_arcsec(&mut self.rng);
+        // Kahan sum: the reference angle must stay exact over 1e7+ frames.
+        let y = d_angle - self.true_angle_comp;
+        let t = self.true_angle_arcsec + y;
+        self.true_angle_comp = (t - self.true_angle_arcsec) - y;
+        self.true_angle_arcsec = t;
+
+        self.residual_arcsec += d_angle;
+        let lsb = self.cfg.gyro.lsb_arcsec;
+        let counts = (self.residual_arcsec / lsb).floor();
+        self.residual_arcsec -= counts * lsb;
+        self.frame_index += 1;
+        Some(GyroSample {
+            index: self.frame_index,
+            time_s: self.time_s(),
+            delta_counts: counts as i32,
+            t1_c: self.sensor_c[0],
+            t2_c: self.sensor_c[1],
+            tcase_c: self.sensor_c[2],
+            status: status::NOMINAL,
+        })
+    }
+
+    /// Advance until device time reaches `t_s`, handing every frame to `sink`.
+    pub fn run_until(&mut self, t_s: f64, mut sink: impl FnMut(&Self, &GyroSample)) {
+        let end_tick = (t_s / self.frame_dt_s).round() as u64;
+        while self.tick < end_tick {
+            if let Some(sample) = self.step() {
+                sink(self, &sample);
+            }
+        }
+    }
+
+    /// Recompute everything that depends on the table pose.
+    fn update_orientation(&mut self) {
+        let geom = &self.cfg.table.geometry;
+        let angles = self.table_angles();
+        let r_nb = geom.rotation(angles);
+        let axis_ned = r_nb * self.axis_body;
+        let omega_ned_dph = self.cfg.site.earth_rate_ned_dph()
+            + geom.angular_velocity_ned_dps(angles, self.table_rates()) * DPS_TO_DPH;
+        self.kinematic_dph = axis_ned.dot(&omega_ned_dph);
+        let r_bn = r_nb.inverse();
+        self.gravity_body_g = r_bn * gravity_ned_g();
+        self.magnetic_body_ut = r_bn * self.cfg.site.magnetic_ned_ut();
+        let s = Vector3::from(self.cfg.thermal.sensor_axis_body).normalize();
+        self.convection =
+            1.0 + self.cfg.thermal.convection_gain * self.gravity_body_g.dot(&s).abs();
+    }
+
+    /// The 0.1 s physics step: air, thermal network, bias, sensors.
+    fn slow_step(&mut self) {
+        let dt = self.step_dt_s;
+        let powered = self.is_powered();
+        self.chamber.step(dt);
+        self.thermal
+            .step(dt, self.chamber.air_c(), powered, self.convection);
+        let th = &self.thermal;
+        self.scale_factor = self.effects.scale_factor(0.5 * (th.t1_c + th.t2_c));
+        self.effect_dph = self.effects.step_bias_dph(&EffectInputs {
+            dt_s: dt,
+            case_c: th.case_c,
+            gravity_body_g: self.gravity_body_g,
+            magnetic_body_ut: self.magnetic_body_ut,
+        });
+        self.noise_dph = self.noise.step_bias_dph(&mut self.rng);
+        self.refresh_bias();
+        self.read_sensors();
+    }
+
+    fn refresh_bias(&mut self) {
+        self.bias_dph = self.cfg.bias.offset_dph
+            + self.turn_on_dph
+            + model4_bias_dph(
+                &self.cfg.bias,
+                &Model4Inputs::of(&self.thermal, self.tau_s()),
+            )
+            + self.effect_dph
+            + self.noise_dph;
+    }
+
+    fn read_sensors(&mut self) {
+        let th = &self.thermal;
+        let truth = [th.t1_c, th.t2_c, th.case_c];
+        let (noise, lsb) = (self.cfg.thermal.sensor_noise_c, self.cfg.gyro.temp_lsb_c);
+        for (out, t) in self.sensor_c.iter_mut().zip(truth) {
+            let noisy = t + noise * self.rng.sample::<f64, _>(StandardNormal);
+            *out = (noisy / lsb).round() * lsb;
+        }
+    }
+}
+
+/// Inputs of the model-4 bias.
+#[derive(Debug, Clone, Copy)]
+pub struct Model4Inputs {
+    /// dT = T1 - T2, degC.
+    pub gradient_c: f64,
+    /// d(dT)/dt, degC/s.
+    pub gradient_rate_c_per_s: f64,
+    /// Case temperature T_K, degC.
+    pub case_c: f64,
+    /// Time since power-on, s.
+    pub tau_s: f64,
+}
+
+impl Model4Inputs {
+    fn of(th: &ThermalNetwork, tau_s: f64) -> Self {
+        Self {
+            gradient_c: th.gradient_c(),
+            gradient_rate_c_per_s: th.ddt_dt_c_per_s,
+            case_c: th.case_c,
+            tau_s,
+        }
+    }
+}
+
+/// The study's model 4, `K1 dT + K2 dT^2 + K3 d(dT)/dt + K4 T_K + K5 exp(-tau/tau_w)`,
+/// with switched-off terms left out, deg/h.
+pub fn model4_bias_dph(b: &config::BiasConfig, x: &Model4Inputs) -> f64 {
+    let t = b.terms;
+    let on = |flag: bool| if flag { 1.0 } else { 0.0 };
+    on(t.gradient) * b.k1_dph_per_c * x.gradient_c
+        + on(t.gradient_quadratic) * b.k2_dph_per_c2 * x.gradient_c * x.gradient_c
+        + on(t.gradient_rate) * b.k3_dph_per_c_per_s * x.gradient_rate_c_per_s
+        + on(t.case_temperature) * b.k4_dph_per_c * x.case_c
+        + on(t.self_heating) * b.k5_dph * (-x.tau_s / b.warmup_tau_s).exp()
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,109 @@
+//! Whole-system tests across the process boundary: spawn the binary, check
+//! exit codes, stdout and stderr.
+
+#![expect(
+    clippy::expect_used,
+    reason = "a test helper that cannot run should fail the test loudly"
+)]
+
+use std::process::{Command, Output};
+
+fn gyrobench(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_gyrobench"))
+        .args(args)
+        .output()
+        .expect("the gyrobench binary runs")
+}
+
+fn temp_dir(name: &str) -> std::path::PathBuf {
+    let dir = std::env::temp_dir().join(format!("gyrobench-test-{name}-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    dir
+}
+
+#[test]
+fn twin_study_reproduces_the_study_figures() {
+    let out = gyrobench(&["twin", "study", "--json", "--seed", "1"]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let j: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON on stdout");
+    let num = |p: &str| j.pointer(p).and_then(serde_json::Value::as_f64).expect(p);
+    let self_heating = num("/self_heating_dph").abs();
+    let raw = num("/thermal/raw_drift_pp_dph");
+    let comp = num("/thermal/compensated_drift_pp_dph");
+    assert!(
+        (0.4..=0.6).contains(&self_heating),
+        "self-heating {self_heating}"
+    );
+    assert!((0.6..=0.7).contains(&raw), "raw drift {raw}");
+    assert!(comp <= 0.05, "compensated drift {comp}");
+    assert!(
+        comp < raw / 10.0,
+        "model 4 must cut the drift by more than 10x"
+    );
+}
+
+#[test]
+fn twin_study_writes_the_interchange_csv() {
+    let dir = temp_dir("csv");
+    let csv = dir.join("cycle.csv");
+    let out = gyrobench(&["twin", "study", "--csv", csv.to_str().expect("utf-8 path")]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = std::fs::read_to_string(&csv).expect("csv written");
+    let mut lines = text.lines();
+    assert_eq!(
+        lines.next(),
+        Some("time_s,rate_dph,t1_c,t2_c,tcase_c,chamber_c,azimuth_deg,elevation_deg,roll_deg,step")
+    );
+    // 6.5 h at 1 Hz.
+    assert_eq!(lines.clone().count(), 23_400);
+    let hot = lines
+        .filter(|l| l.ends_with(",soak_hot"))
+        .filter_map(|l| l.split(',').nth(5)?.parse::<f64>().ok())
+        .fold(f64::NEG_INFINITY, f64::max);
+    assert!((hot - 50.0).abs() < 0.1, "chamber reaches +50 degC: {hot}");
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
+
+#[test]
+fn bad_twin_file_is_refused_with_file_line_and_key() {
+    let dir = temp_dir("bad-twin");
+    let path = dir.join("bad.toml");
+    let default = gyrobench(&["twin", "default-config"]);
+    let text = String::from_utf8(default.stdout).expect("utf-8");
+    let bad = text.replacen("case_tau_s = 1200.0", "case_tau_s = -3.0", 1);
+    assert_ne!(bad, text, "fixture must contain the line the test edits");
+    std::fs::write(&path, bad).expect("write");
+    let out = gyrobench(&[
+        "twin",
+        "study",
+        "--config",
+        path.to_str().expect("utf-8 path"),
+    ]);
+    assert_eq!(out.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&out.stderr);
+    let line = text
+        .lines()
+        .position(|l| l.starts_with("case_tau_s"))
+        .expect("line")
+        + 1;
+    assert!(err.contains(&format!("bad.toml:{line}:")), "{err}");
+    assert!(err.contains("`thermal.case_tau_s` must be"), "{err}");
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
+
+#[test]
+fn missing_file_and_bad_usage_have_their_exit_codes() {
+    let out = gyrobench(&["twin", "study", "--config", "/nonexistent/twin.toml"]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("cannot read /nonexistent/twin.toml"));
+    let out = gyrobench(&["twin", "no-such-command"]);
+    assert_eq!(out.status.code(), Some(2));
+}
