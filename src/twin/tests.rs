@@ -295,3 +295,52 @@ fn thermal_lag_trails_the_case_temperature() {
     );
     assert!(lagged < case - 1.0, "and trail the case ({case}): {lagged}");
 }
+
+/// Non-overlapping Allan deviation of a 1 Hz series at `m` samples.
+fn adev(x: &[f64], m: usize) -> f64 {
+    let means = crate::analysis::figures::block_means(x, m);
+    let d: Vec<f64> = means.windows(2).map(|w| w[1] - w[0]).collect();
+    (0.5 * d.iter().map(|v| v * v).sum::<f64>() / d.len() as f64).sqrt()
+}
+
+/// 1 Hz output rates of a quiet twin with the given noise, deg/h.
+fn noise_series(arw: f64, bi: f64, hours: f64) -> Vec<f64> {
+    let mut c = quiet();
+    c.noise.arw_deg_per_rt_h = arw;
+    c.noise.bias_instability_dph = bi;
+    c.gyro.lsb_arcsec = 1e-4; // keep quantization far below the noise
+    let lsb = c.gyro.lsb_arcsec;
+    let mut twin = Twin::new(c, 21);
+    let mut out = Vec::new();
+    let mut acc: i64 = 0;
+    twin.run_until(hours * 3600.0, |_, g| {
+        acc += i64::from(g.delta_counts);
+        if g.index % 400 == 0 {
+            out.push(acc as f64 * lsb);
+            acc = 0;
+        }
+    });
+    out
+}
+
+#[test]
+fn angle_random_walk_has_the_configured_coefficient() {
+    // ADEV(tau) = N * 60 / sqrt(tau) for white rate noise.
+    let x = noise_series(0.003, 0.0, 3.0);
+    for tau in [1usize, 10] {
+        let want = 0.003 * 60.0 / (tau as f64).sqrt();
+        let got = adev(&x, tau);
+        assert!((got / want - 1.0).abs() < 0.1, "tau {tau}: {got} vs {want}");
+    }
+}
+
+#[test]
+fn bias_instability_sets_the_allan_floor() {
+    // Flicker: flat ADEV at 0.664 B over the middle of its band.
+    let b = 0.01;
+    let x = noise_series(0.0, b, 60.0);
+    for tau in [30usize, 300] {
+        let got = adev(&x, tau);
+        assert!((got / (0.664 * b) - 1.0).abs() < 0.25, "tau {tau}: {got}");
+    }
+}
