@@ -12,5 +12,6 @@ pub mod clock;
 pub mod config;
 pub mod fsutil;
 pub mod geometry;
+pub mod protocol;
 pub mod study;
 pub mod twin;
