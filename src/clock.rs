@@ -99,35 +99,48 @@ impl Clock for VirtualClock {
     }
 }
 
-/// Physical time from the monotonic clock, for runs on real devices.
+/// Physical time from the monotonic clock, for runs on real devices;
+/// optionally sped up (a simulated bench served to real drivers at N x).
 #[derive(Debug)]
 pub struct WallClock {
     start: Instant,
+    speed: f64,
 }
 
 impl WallClock {
     /// A wall clock whose epoch is now.
     pub fn start() -> Self {
+        Self::scaled(1.0)
+    }
+
+    /// A clock running `speed` times faster than the wall (non-positive or
+    /// non-finite speeds mean real time).
+    pub fn scaled(speed: f64) -> Self {
         Self {
             start: Instant::now(),
+            speed: if speed.is_finite() && speed > 0.0 {
+                speed
+            } else {
+                1.0
+            },
         }
     }
 }
 
 impl Clock for WallClock {
     fn now_s(&self) -> f64 {
-        self.start.elapsed().as_secs_f64()
+        self.start.elapsed().as_secs_f64() * self.speed
     }
 
     fn sleep_until(&self, t_s: f64) {
         let now = self.now_s();
         if t_s.is_finite() && t_s > now {
-            std::thread::sleep(Duration::from_secs_f64(t_s - now));
+            std::thread::sleep(Duration::from_secs_f64((t_s - now) / self.speed));
         }
     }
 
     fn is_virtual(&self) -> bool {
-        false
+        self.speed != 1.0
     }
 }
 

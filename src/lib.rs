@@ -13,5 +13,7 @@ pub mod config;
 pub mod fsutil;
 pub mod geometry;
 pub mod protocol;
+pub mod sim;
 pub mod study;
+pub mod transport;
 pub mod twin;

@@ -4,6 +4,7 @@
 //! rendering (`render_*` -> String) is kept apart from printing so it can be
 //! unit tested. Results go to stdout, diagnostics to stderr.
 
+mod sim;
 mod twin;
 
 use std::process::ExitCode;
@@ -52,6 +53,9 @@ enum Command {
     /// The simulated RL-16 and its bench (digital twin).
     #[command(subcommand)]
     Twin(twin::TwinCommand),
+    /// Simulated instruments speaking the real protocols.
+    #[command(subcommand)]
+    Sim(sim::SimCommand),
 }
 
 /// Parse arguments, run, print the error chain once, and map to an exit code.
@@ -65,6 +69,7 @@ pub fn main() -> ExitCode {
     };
     let result = match cli.command {
         Command::Twin(cmd) => twin::run(cmd),
+        Command::Sim(cmd) => sim::run(cmd),
     };
     match result {
         Ok(outcome) => ExitCode::from(outcome.code()),

@@ -18,13 +18,12 @@ use rand_distr::StandardNormal;
 use rand_xoshiro::Xoshiro256PlusPlus;
 
 pub use config::TwinConfig;
-pub use table::AxisDemand;
+pub use table::{Axis, AxisDemand};
 pub use thermal::ChamberLimit;
 
 use crate::geometry::{DPS_TO_DPH, Orientation, TableAngles, gravity_ned_g};
 use effects::{EffectInputs, Effects};
 use noise::Noise;
-use table::Axis;
 use thermal::{ChamberAir, ThermalNetwork};
 
 /// Length of the slow-physics step, s (ours: 40 frames at 400 Hz).
@@ -232,6 +231,23 @@ impl Twin {
         if let Some(d) = inner {
             self.inner.demand(d);
         }
+    }
+
+    /// The outer (`false`) or inner (`true`) axis.
+    pub fn axis(&self, inner: bool) -> &Axis {
+        if inner { &self.inner } else { &self.outer }
+    }
+
+    /// Set an axis' rate and acceleration limits, clamped to the physical
+    /// limits of the configuration.
+    pub fn set_axis_limits(&mut self, inner: bool, rate_dps: f64, acc_dps2: f64) {
+        let physical = (self.cfg.table.max_rate_dps, self.cfg.table.max_acc_dps2);
+        let ax = if inner {
+            &mut self.inner
+        } else {
+            &mut self.outer
+        };
+        ax.set_limits(rate_dps, acc_dps2, physical);
     }
 
     /// Move both axes to `angles` (a position demand).

@@ -44,6 +44,17 @@ impl Axis {
         };
     }
 
+    /// Lower the rate and acceleration limits (never above `physical`).
+    pub fn set_limits(&mut self, rate_dps: f64, acc_dps2: f64, physical: (f64, f64)) {
+        self.max_rate_dps = rate_dps.clamp(0.0, physical.0);
+        self.max_acc_dps2 = acc_dps2.clamp(0.0, physical.1);
+    }
+
+    /// Rate and acceleration limits in force, deg/s and deg/s^2.
+    pub fn limits(&self) -> (f64, f64) {
+        (self.max_rate_dps, self.max_acc_dps2)
+    }
+
     /// The current demand.
     pub fn current_demand(&self) -> AxisDemand {
         self.demand

@@ -1,0 +1,224 @@
+//! Simulated instruments that speak the real protocols, driven by the twin.
+//!
+//! One [`SimBench`] holds the twin and each instrument's own state (chamber
+//! mode and alarm limits, table servo modes, interlocks and error queue);
+//! [`SharedBench`] advances it to the clock's time before every request and
+//! on a ticker that streams gyro frames. Servers for each protocol run over
+//! any byte stream (TCP, pty, in-memory duplex). Every device can be told
+//! to misbehave through [`Faults`].
+
+pub mod acl;
+pub mod espec;
+pub mod faults;
+pub mod gyro;
+pub mod serve;
+pub mod watlow;
+
+use std::sync::{Arc, Mutex, MutexGuard};
+
+use tokio::sync::broadcast;
+
+pub use faults::{Action, DeviceFaults, Faults, GyroFaults};
+
+use crate::clock::Clock;
+use crate::protocol::acl::{ScpiError, ServoMode};
+use crate::protocol::espec::Mode;
+use crate::protocol::frame::{FrameLayout, WireFrame};
+use crate::twin::{Twin, TwinConfig};
+
+/// Passive drift of the chamber air towards the room when it is not
+/// controlling (standby or off), degC/min (ours).
+pub const PASSIVE_DRIFT_C_PER_MIN: f64 = 0.5;
+
+/// Chamber alarm codes raised by the simulator itself.
+pub mod alarm {
+    /// Air above the upper alarm limit.
+    pub const UPPER_LIMIT: u16 = 1;
+    /// Air below the lower alarm limit.
+    pub const LOWER_LIMIT: u16 = 2;
+}
+
+/// Chamber controller state beyond the twin's air model.
+#[derive(Debug, Clone)]
+pub struct ChamberState {
+    /// Operating mode.
+    pub mode: Mode,
+    /// Constant set point, degC.
+    pub set_point_c: f64,
+    /// Upper alarm limit, degC.
+    pub upper_c: f64,
+    /// Lower alarm limit, degC.
+    pub lower_c: f64,
+    /// Alarms injected by a test or an operator.
+    pub injected_alarms: Vec<u16>,
+}
+
+/// Motion-simulator state beyond the twin's axis dynamics.
+#[derive(Debug, Clone)]
+pub struct TableState {
+    /// Servo mode per axis (outer, inner).
+    pub mode: [ServoMode; 2],
+    /// Interlock closed (servo on) per axis.
+    pub closed: [bool; 2],
+    /// System interlock tripped (needs `:INT:RESET`).
+    pub tripped: bool,
+    /// SCPI error queue, oldest first.
+    pub errors: std::collections::VecDeque<ScpiError>,
+}
+
+/// The simulated bench: twin plus instrument state.
+#[derive(Debug)]
+pub struct SimBench {
+    /// The physics.
+    pub twin: Twin,
+    /// Gyro frame layout on the wire.
+    pub layout: FrameLayout,
+    /// Chamber controller.
+    pub chamber: ChamberState,
+    /// Motion simulator.
+    pub table: TableState,
+    gyro_tx: broadcast::Sender<Arc<Vec<u8>>>,
+    out: Vec<u8>,
+}
+
+impl SimBench {
+    /// A bench around a fresh twin.
+    pub fn new(cfg: TwinConfig, seed: u64, layout: FrameLayout) -> Self {
+        let initial = cfg.chamber.initial_c;
+        let (gyro_tx, _) = broadcast::channel(4096);
+        Self {
+            twin: Twin::new(cfg, seed),
+            layout,
+            chamber: ChamberState {
+                mode: Mode::Constant,
+                set_point_c: initial,
+                upper_c: 100.0,
+                lower_c: -60.0,
+                injected_alarms: Vec::new(),
+            },
+            table: TableState {
+                mode: [ServoMode::Position; 2],
+                closed: [true; 2],
+                tripped: false,
+                errors: Default::default(),
+            },
+            gyro_tx,
+            out: Vec::new(),
+        }
+    }
+
+    /// Advance the physics to `t_s`, encoding every gyro frame.
+    pub fn advance_to(&mut self, t_s: f64) {
+        let layout = &self.layout;
+        let out = &mut self.out;
+        self.twin.run_until(t_s, |_, g| {
+            let wf = WireFrame {
+                frame_type: layout.frame_type,
+                seq: (g.index % 256) as u8,
+                delta_counts: g.delta_counts,
+                temps_raw: [
+                    layout.temp_to_raw(g.t1_c),
+                    layout.temp_to_raw(g.t2_c),
+                    layout.temp_to_raw(g.tcase_c),
+                ],
+                status: g.status,
+            };
+            layout.encode(&wf, out);
+        });
+        if !self.out.is_empty() {
+            let bytes = std::mem::take(&mut self.out);
+            // No subscriber = nobody on the cable: the bytes are gone.
+            let _ = self.gyro_tx.send(Arc::new(bytes));
+        }
+    }
+
+    /// Subscribe to the gyro's byte stream.
+    pub fn subscribe_gyro(&self) -> broadcast::Receiver<Arc<Vec<u8>>> {
+        self.gyro_tx.subscribe()
+    }
+
+    /// Chamber alarm codes active now (injected ones and limit alarms).
+    pub fn chamber_alarms(&self) -> Vec<u16> {
+        let mut codes = self.chamber.injected_alarms.clone();
+        let air = self.twin.chamber_state().0;
+        if air > self.chamber.upper_c {
+            codes.push(alarm::UPPER_LIMIT);
+        }
+        if air < self.chamber.lower_c {
+            codes.push(alarm::LOWER_LIMIT);
+        }
+        codes
+    }
+
+    /// Raise a chamber alarm (as a fault on the real unit would).
+    pub fn raise_chamber_alarm(&mut self, code: u16) {
+        self.chamber.injected_alarms.push(code);
+    }
+
+    /// Trip the table's system interlock: both axes stop and open.
+    pub fn trip_interlock(&mut self) {
+        self.table.tripped = true;
+        self.table.closed = [false; 2];
+        self.twin.demand_table(
+            Some(crate::twin::AxisDemand::Stop),
+            Some(crate::twin::AxisDemand::Stop),
+        );
+    }
+}
+
+/// A [`SimBench`] shared by the servers, kept at the clock's time.
+pub struct SharedBench {
+    bench: Mutex<SimBench>,
+    clock: Arc<dyn Clock>,
+    /// Fault injection for every device.
+    pub faults: Faults,
+}
+
+impl std::fmt::Debug for SharedBench {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("SharedBench").finish_non_exhaustive()
+    }
+}
+
+impl SharedBench {
+    /// Share `bench`, advanced by `clock`.
+    pub fn new(bench: SimBench, clock: Arc<dyn Clock>) -> Arc<Self> {
+        Arc::new(Self {
+            bench: Mutex::new(bench),
+            clock,
+            faults: Faults::default(),
+        })
+    }
+
+    /// Lock the bench, brought up to the clock's time.
+    pub fn lock(&self) -> MutexGuard<'_, SimBench> {
+        let mut b = self.bench.lock().unwrap_or_else(|p| p.into_inner());
+        b.advance_to(self.clock.now_s());
+        b
+    }
+
+    /// The clock the bench follows.
+    pub fn clock(&self) -> &Arc<dyn Clock> {
+        &self.clock
+    }
+
+    /// Keep the physics moving (and gyro frames flowing) every `period`
+    /// until the bench is dropped elsewhere.
+    pub fn spawn_ticker(
+        self: &Arc<Self>,
+        period: std::time::Duration,
+    ) -> tokio::task::JoinHandle<()> {
+        let weak = Arc::downgrade(self);
+        tokio::spawn(async move {
+            let mut tick = tokio::time::interval(period);
+            tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
+            loop {
+                tick.tick().await;
+                match weak.upgrade() {
+                    Some(b) => drop(b.lock()),
+                    None => return,
+                }
+            }
+        })
+    }
+}

@@ -1,0 +1,246 @@
+//! `gyrobench sim serve`: the simulated bench on loopback TCP and ptys.
+
+use std::net::{Ipv4Addr, SocketAddr};
+use std::path::Path;
+use std::sync::Arc;
+use std::time::Duration;
+
+use serde::Deserialize;
+use tokio::net::TcpListener;
+
+use super::{
+    SharedBench, SimBench, acl::serve_acl, espec::serve_espec, gyro::serve_gyro,
+    watlow::WatlowService,
+};
+use crate::clock::WallClock;
+use crate::config::{Checker, ConfigError, Source};
+use crate::protocol::frame::FrameLayout;
+use crate::transport::pty_pair;
+use crate::twin::TwinConfig;
+
+/// `sim serve` configuration (`fixtures/sim/serve.toml`).
+#[derive(Debug, Clone, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ServeConfig {
+    /// Twin file, relative to this file (default: the embedded RL-16 twin).
+    pub twin: Option<String>,
+    /// Seed of the twin's random terms.
+    #[serde(default = "one")]
+    pub seed: u64,
+    /// Device time runs this many times faster than the wall.
+    #[serde(default = "unit")]
+    pub speed: f64,
+    /// Offer each device on a pty as well as on TCP.
+    #[serde(default = "yes")]
+    pub ptys: bool,
+    /// Fixed TCP ports (0 or absent: chosen by the OS).
+    #[serde(default)]
+    pub ports: Ports,
+    /// Gyro frame layout (default: the documented one).
+    #[serde(default)]
+    pub frame: Option<FrameLayout>,
+}
+
+fn one() -> u64 {
+    1
+}
+fn unit() -> f64 {
+    1.0
+}
+fn yes() -> bool {
+    true
+}
+
+/// TCP ports of the simulated devices.
+#[derive(Debug, Clone, Copy, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Ports {
+    /// Espec ASCII chamber.
+    #[serde(default)]
+    pub espec: u16,
+    /// Watlow F4T Modbus TCP chamber.
+    #[serde(default)]
+    pub watlow: u16,
+    /// ACL motion simulator.
+    #[serde(default)]
+    pub acl: u16,
+    /// Gyro frame stream.
+    #[serde(default)]
+    pub gyro: u16,
+}
+
+/// A loaded serve configuration with its twin resolved.
+#[derive(Debug, Clone)]
+pub struct Serve {
+    /// Settings.
+    pub config: ServeConfig,
+    /// The twin to serve.
+    pub twin: TwinConfig,
+    /// The frame layout.
+    pub layout: FrameLayout,
+}
+
+impl Serve {
+    /// Read and check a serve file (None: defaults).
+    pub fn load(path: Option<&Path>) -> Result<Self, ConfigError> {
+        let Some(path) = path else {
+            return Ok(Self {
+                config: ServeConfig {
+                    seed: 1,
+                    speed: 1.0,
+                    ptys: true,
+                    ..ServeConfig::default()
+                },
+                twin: TwinConfig::default_rl16(),
+                layout: FrameLayout::default(),
+            });
+        };
+        let src = Source::read(path)?;
+        let config: ServeConfig = src.parse()?;
+        let c = Checker::new(&src);
+        c.within(config.speed, 0.001, 1e6, "speed")?;
+        let twin = match &config.twin {
+            Some(rel) => TwinConfig::load(&path.parent().unwrap_or(Path::new(".")).join(rel))?,
+            None => TwinConfig::default_rl16(),
+        };
+        let layout = config.frame.clone().unwrap_or_default();
+        layout
+            .validate()
+            .map_err(|e| src.invalid("frame", e.to_string()))?;
+        Ok(Self {
+            config,
+            twin,
+            layout,
+        })
+    }
+}
+
+/// One served endpoint: `<device> <protocol> <address>`.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Endpoint {
+    /// `chamber`, `table` or `gyro`.
+    pub device: &'static str,
+    /// `espec-ascii`, `watlow-f4t-modbus`, `acl`, `rlg-frame`.
+    pub protocol: &'static str,
+    /// `tcp://127.0.0.1:PORT` or `pty:///dev/pts/N`.
+    pub address: String,
+}
+
+impl std::fmt::Display for Endpoint {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{} {} {}", self.device, self.protocol, self.address)
+    }
+}
+
+async fn listen(port: u16) -> std::io::Result<TcpListener> {
+    TcpListener::bind(SocketAddr::from((Ipv4Addr::LOCALHOST, port))).await
+}
+
+fn tcp_endpoint(
+    device: &'static str,
+    protocol: &'static str,
+    l: &TcpListener,
+) -> std::io::Result<Endpoint> {
+    Ok(Endpoint {
+        device,
+        protocol,
+        address: format!("tcp://{}", l.local_addr()?),
+    })
+}
+
+/// Accept connections forever, serving each with `serve`.
+fn spawn_accept<F, Fut>(listener: TcpListener, bench: Arc<SharedBench>, serve: F)
+where
+    F: Fn(tokio::net::TcpStream, Arc<SharedBench>) -> Fut + Send + 'static,
+    Fut: std::future::Future<Output = std::io::Result<()>> + Send + 'static,
+{
+    tokio::spawn(async move {
+        while let Ok((stream, _)) = listener.accept().await {
+            let _ = stream.set_nodelay(true);
+            tokio::spawn(serve(stream, bench.clone()));
+        }
+    });
+}
+
+/// A running simulated bench; dropping it stops nothing until the runtime ends.
+#[derive(Debug)]
+pub struct Served {
+    /// Every endpoint, in the order printed.
+    pub endpoints: Vec<Endpoint>,
+    /// The bench behind them (for fault injection in tests).
+    pub bench: Arc<SharedBench>,
+    /// Slave sides held open so each pty lives while no client has it.
+    _ptys: Vec<tokio_serial::SerialStream>,
+}
+
+/// Start every simulated device; returns once all endpoints listen.
+pub async fn start(s: &Serve) -> std::io::Result<Served> {
+    let clock = Arc::new(WallClock::scaled(s.config.speed));
+    let bench = SharedBench::new(
+        SimBench::new(s.twin.clone(), s.config.seed, s.layout.clone()),
+        clock,
+    );
+    bench.spawn_ticker(Duration::from_millis(5));
+    let p = s.config.ports;
+    let mut endpoints = Vec::new();
+
+    let espec = listen(p.espec).await?;
+    endpoints.push(tcp_endpoint("chamber", "espec-ascii", &espec)?);
+    spawn_accept(espec, bench.clone(), serve_espec);
+
+    let watlow = listen(p.watlow).await?;
+    endpoints.push(tcp_endpoint("chamber", "watlow-f4t-modbus", &watlow)?);
+    let b = bench.clone();
+    tokio::spawn(async move {
+        let server = tokio_modbus::server::tcp::Server::new(watlow);
+        let on_connected = |stream, addr| {
+            let b = b.clone();
+            async move {
+                tokio_modbus::server::tcp::accept_tcp_connection(stream, addr, |_| {
+                    Ok(Some(WatlowService::new(b.clone())))
+                })
+            }
+        };
+        let _ = server.serve(&on_connected, |_| {}).await;
+    });
+
+    let acl = listen(p.acl).await?;
+    endpoints.push(tcp_endpoint("table", "acl", &acl)?);
+    spawn_accept(acl, bench.clone(), serve_acl);
+
+    let gyro = listen(p.gyro).await?;
+    endpoints.push(tcp_endpoint("gyro", "rlg-frame", &gyro)?);
+    spawn_accept(gyro, bench.clone(), serve_gyro);
+
+    let mut ptys = Vec::new();
+    if s.config.ptys {
+        for (device, protocol) in [
+            ("chamber", "espec-ascii"),
+            ("table", "acl"),
+            ("gyro", "rlg-frame"),
+        ] {
+            let crate::transport::PtyPair {
+                master,
+                slave,
+                path,
+            } = pty_pair()?;
+            endpoints.push(Endpoint {
+                device,
+                protocol,
+                address: format!("pty://{path}"),
+            });
+            let b = bench.clone();
+            match protocol {
+                "espec-ascii" => drop(tokio::spawn(serve_espec(master, b))),
+                "acl" => drop(tokio::spawn(serve_acl(master, b))),
+                _ => drop(tokio::spawn(serve_gyro(master, b))),
+            }
+            ptys.push(slave);
+        }
+    }
+    Ok(Served {
+        endpoints,
+        bench,
+        _ptys: ptys,
+    })
+}
