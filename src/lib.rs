@@ -10,6 +10,7 @@ pub mod analysis;
 pub mod cli;
 pub mod clock;
 pub mod config;
+pub mod driver;
 pub mod fsutil;
 pub mod geometry;
 pub mod protocol;

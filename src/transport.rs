@@ -11,8 +11,8 @@ use std::time::Duration;
 use tokio::io::{AsyncBufRead, AsyncBufReadExt, AsyncRead, AsyncReadExt, AsyncWrite};
 
 /// Any byte stream a driver can talk over.
-pub trait Transport: AsyncRead + AsyncWrite + Unpin + Send {}
-impl<T: AsyncRead + AsyncWrite + Unpin + Send> Transport for T {}
+pub trait Transport: AsyncRead + AsyncWrite + Unpin + Send + std::fmt::Debug {}
+impl<T: AsyncRead + AsyncWrite + Unpin + Send + std::fmt::Debug> Transport for T {}
 
 /// A boxed transport.
 pub type BoxTransport = Box<dyn Transport>;
@@ -139,11 +139,18 @@ impl std::fmt::Display for DeviceSpec {
     }
 }
 
-/// Open a serial port or pty as a raw byte stream.
-pub fn open_serial(path: &str, baud: u32) -> std::io::Result<tokio_serial::SerialStream> {
+/// Open a serial port as a raw byte stream. `exclusive` locks the port
+/// against other openers (right for hardware; a pty is shared with the
+/// simulator that made it).
+pub fn open_serial(
+    path: &str,
+    baud: u32,
+    exclusive: bool,
+) -> std::io::Result<tokio_serial::SerialStream> {
     use tokio_serial::SerialPortBuilderExt;
     tokio_serial::new(path, baud)
         .timeout(Duration::from_millis(100))
+        .exclusive(exclusive)
         .open_native_async()
         .map_err(std::io::Error::from)
 }
@@ -151,9 +158,9 @@ pub fn open_serial(path: &str, baud: u32) -> std::io::Result<tokio_serial::Seria
 /// Open a transport for a spec (not `sim://`, which is no byte stream).
 pub async fn open(spec: &DeviceSpec, connect_timeout: Duration) -> std::io::Result<BoxTransport> {
     match spec {
-        DeviceSpec::Serial { path, baud } => Ok(Box::new(open_serial(path, *baud)?)),
+        DeviceSpec::Serial { path, baud } => Ok(Box::new(open_serial(path, *baud, true)?)),
         // A pty ignores the line speed; 0 avoids "not a typewriter" on some ptys.
-        DeviceSpec::Pty { path } => Ok(Box::new(open_serial(path, 0)?)),
+        DeviceSpec::Pty { path } => Ok(Box::new(open_serial(path, 0, false)?)),
         DeviceSpec::Tcp { addr } => {
             let s = tokio::time::timeout(connect_timeout, tokio::net::TcpStream::connect(addr))
                 .await

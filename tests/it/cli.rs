@@ -1,21 +1,15 @@
-//! Whole-system tests across the process boundary: spawn the binary, check
-//! exit codes, stdout and stderr.
-
-#![expect(
-    clippy::expect_used,
-    reason = "a test helper that cannot run should fail the test loudly"
-)]
+//! The process boundary: spawn the binary, check exit codes, stdout and stderr.
 
 use std::process::{Command, Output};
 
-fn gyrobench(args: &[&str]) -> Output {
+pub fn gyrobench(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_gyrobench"))
         .args(args)
         .output()
         .expect("the gyrobench binary runs")
 }
 
-fn temp_dir(name: &str) -> std::path::PathBuf {
+pub fn temp_dir(name: &str) -> std::path::PathBuf {
     let dir = std::env::temp_dir().join(format!("gyrobench-test-{name}-{}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("temp dir");
     dir

@@ -1,0 +1,266 @@
+//! Device drivers, built on an already-open transport.
+//!
+//! Small traits (`Chamber`, `MotionTable`) over the instruments; the gyro
+//! link is a reader of frames. Transient faults (a missed or garbled reply,
+//! a dropped connection) are retried a bounded number of times; persistent
+//! ones end in a [`DeviceError`] that names the device, what failed and
+//! what to check.
+
+pub mod acl;
+pub mod espec;
+pub mod gyro;
+pub mod link;
+pub mod watlow;
+
+use std::time::Duration;
+
+use async_trait::async_trait;
+
+use crate::geometry::TableAngles;
+
+/// A device failure the caller cannot retry away.
+#[derive(Debug, thiserror::Error)]
+pub enum DeviceError {
+    /// No (usable) reply within the timeout, after every attempt.
+    #[error(
+        "{device}: no reply to `{request}` within {timeout_s} s ({attempts} attempts); \
+         check the cable or network, the address and the baud rate in bench.toml"
+    )]
+    Timeout {
+        /// Device name from the bench file.
+        device: String,
+        /// What was sent.
+        request: String,
+        /// Per-attempt timeout, s.
+        timeout_s: f64,
+        /// Attempts made.
+        attempts: u32,
+    },
+    /// The instrument refused the request.
+    #[error(
+        "{device}: refused `{request}`: {reason}; check the value against the instrument's limits"
+    )]
+    Refused {
+        /// Device name.
+        device: String,
+        /// What was sent.
+        request: String,
+        /// The instrument's reason.
+        reason: String,
+    },
+    /// Replies kept arriving in a form the protocol does not allow.
+    #[error(
+        "{device}: unusable reply to `{request}` ({attempts} attempts): {detail}; \
+         check the protocol selected in bench.toml and the line for noise"
+    )]
+    Malformed {
+        /// Device name.
+        device: String,
+        /// What was sent.
+        request: String,
+        /// What was wrong with the last reply.
+        detail: String,
+        /// Attempts made.
+        attempts: u32,
+    },
+    /// A value outside what the device can physically report.
+    #[error(
+        "{device}: {what} = {value} is out of range ({range}); the device or its link is faulty"
+    )]
+    OutOfRange {
+        /// Device name.
+        device: String,
+        /// Which value.
+        what: &'static str,
+        /// The value reported.
+        value: f64,
+        /// The plausible range.
+        range: &'static str,
+    },
+    /// The link could not be (re)opened.
+    #[error(
+        "{device}: cannot open the link: {source}; check that the device is on and the spec in bench.toml"
+    )]
+    Connect {
+        /// Device name.
+        device: String,
+        /// Why.
+        #[source]
+        source: std::io::Error,
+    },
+    /// The chamber reports alarms.
+    #[error(
+        "{device}: alarm {codes:?}; see the chamber's panel and clear the cause before resuming"
+    )]
+    Alarm {
+        /// Device name.
+        device: String,
+        /// Alarm codes.
+        codes: Vec<u16>,
+    },
+    /// The motion simulator's interlock tripped.
+    #[error(
+        "{device}: system interlock tripped; check the table's emergency stop and doors, then reset"
+    )]
+    Interlock {
+        /// Device name.
+        device: String,
+    },
+    /// The gyro sent nothing usable for longer than the link timeout.
+    #[error(
+        "{device}: no valid frame for {timeout_s} s; check the gyro's power and the data cable"
+    )]
+    Silent {
+        /// Device name.
+        device: String,
+        /// Timeout, s.
+        timeout_s: f64,
+    },
+}
+
+/// Bounded retry of a request/reply exchange.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RetryPolicy {
+    /// Time to wait for each reply.
+    pub timeout: Duration,
+    /// Attempts before giving up (at least 1).
+    pub attempts: u32,
+}
+
+impl Default for RetryPolicy {
+    fn default() -> Self {
+        Self {
+            timeout: Duration::from_millis(1000),
+            attempts: 3,
+        }
+    }
+}
+
+/// Controller mode of a chamber.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ChamberMode {
+    /// Off.
+    Off,
+    /// Powered, not controlling (the safe state).
+    Standby,
+    /// Holding the set point.
+    Constant,
+}
+
+/// What a chamber reports.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ChamberReading {
+    /// Air temperature, degC.
+    pub air_c: f64,
+    /// Set point, degC.
+    pub set_point_c: f64,
+    /// Mode.
+    pub mode: ChamberMode,
+    /// Active alarm codes (empty when none).
+    pub alarms: Vec<u16>,
+}
+
+/// A climatic chamber.
+#[async_trait]
+pub trait Chamber: Send {
+    /// Name of the device (from the bench file).
+    fn name(&self) -> &str;
+    /// Read temperature, set point, mode and alarms.
+    async fn read(&mut self) -> Result<ChamberReading, DeviceError>;
+    /// Set the constant set point, degC.
+    async fn set_point(&mut self, temp_c: f64) -> Result<(), DeviceError>;
+    /// Change the controller mode.
+    async fn set_mode(&mut self, mode: ChamberMode) -> Result<(), DeviceError>;
+}
+
+/// What a motion simulator reports.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TableReading {
+    /// Axis angles, deg.
+    pub angles: TableAngles,
+    /// Axis rates, deg/s.
+    pub rates: TableAngles,
+}
+
+/// A two-axis motion simulator.
+#[async_trait]
+pub trait MotionTable: Send {
+    /// Name of the device.
+    fn name(&self) -> &str;
+    /// Read both axes.
+    async fn read(&mut self) -> Result<TableReading, DeviceError>;
+    /// Put both axes in position mode and go to `angles`.
+    async fn move_to(&mut self, angles: TableAngles) -> Result<(), DeviceError>;
+    /// Turn an axis (false = outer, true = inner) at a constant rate, deg/s.
+    async fn rate(&mut self, inner: bool, rate_dps: f64) -> Result<(), DeviceError>;
+    /// Controlled stop of both axes (the safe state).
+    async fn stop(&mut self) -> Result<(), DeviceError>;
+}
+
+/// Decides "in position": every axis within `tolerance_deg` of the target
+/// and slower than `rate_tolerance_dps`, continuously for `settle_s`.
+#[derive(Debug, Clone)]
+pub struct InPosition {
+    /// Angle tolerance, deg.
+    pub tolerance_deg: f64,
+    /// Rate tolerance, deg/s.
+    pub rate_tolerance_dps: f64,
+    /// Settle time, s.
+    pub settle_s: f64,
+    since: Option<f64>,
+}
+
+impl InPosition {
+    /// A tracker with the given tolerances.
+    pub fn new(tolerance_deg: f64, rate_tolerance_dps: f64, settle_s: f64) -> Self {
+        Self {
+            tolerance_deg,
+            rate_tolerance_dps,
+            settle_s,
+            since: None,
+        }
+    }
+
+    /// Feed a reading taken at `t_s`; true once settled on `target`.
+    pub fn update(&mut self, r: &TableReading, target: TableAngles, t_s: f64) -> bool {
+        let err = |a: f64, b: f64| crate::geometry::wrap_deg(a - b).abs();
+        let within = err(r.angles.outer_deg, target.outer_deg) <= self.tolerance_deg
+            && err(r.angles.inner_deg, target.inner_deg) <= self.tolerance_deg
+            && r.rates.outer_deg.abs() <= self.rate_tolerance_dps
+            && r.rates.inner_deg.abs() <= self.rate_tolerance_dps;
+        if !within {
+            self.since = None;
+            return false;
+        }
+        t_s - *self.since.get_or_insert(t_s) >= self.settle_s
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn in_position_needs_the_settle_time() {
+        let target = TableAngles {
+            outer_deg: 90.0,
+            inner_deg: 0.0,
+        };
+        let at = |o: f64, rate: f64| TableReading {
+            angles: TableAngles {
+                outer_deg: o,
+                inner_deg: 359.999,
+            },
+            rates: TableAngles {
+                outer_deg: rate,
+                inner_deg: 0.0,
+            },
+        };
+        let mut ip = InPosition::new(0.01, 0.01, 2.0);
+        assert!(!ip.update(&at(89.5, 0.0), target, 0.0));
+        assert!(!ip.update(&at(90.001, 0.0), target, 1.0));
+        assert!(!ip.update(&at(90.001, 0.5), target, 2.0), "still moving");
+        assert!(!ip.update(&at(90.001, 0.0), target, 3.0));
+        assert!(ip.update(&at(90.0, 0.0), target, 5.0));
+    }
+}

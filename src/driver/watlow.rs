@@ -1,0 +1,186 @@
+//! Watlow F4T chamber driver over Modbus TCP (tokio-modbus client).
+//!
+//! The F4T's constant set point has no ramp of its own here: ramps are made
+//! by the caller stepping the set point (see the sequencer).
+
+use async_trait::async_trait;
+use tokio_modbus::client::{Context, Reader, Writer};
+use tokio_modbus::{ExceptionCode, Slave};
+
+use super::link::{Connector, LinkCounters};
+use super::{Chamber, ChamberMode, ChamberReading, DeviceError, RetryPolicy};
+use crate::protocol::watlow::{self as w, decode_f32, encode_f32, mode};
+use crate::transport::BoxTransport;
+
+/// One Modbus operation.
+#[derive(Debug, Clone)]
+enum Op {
+    Read(u16, u16),
+    Write(u16, Vec<u16>),
+}
+
+impl std::fmt::Display for Op {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Op::Read(a, n) => write!(f, "read {n} registers at {a}"),
+            Op::Write(a, v) => write!(f, "write {v:?} at {a}"),
+        }
+    }
+}
+
+/// An F4T on a Modbus TCP connection.
+pub struct WatlowChamber {
+    device: String,
+    ctx: Option<Context>,
+    connector: Option<Connector>,
+    policy: RetryPolicy,
+    counters: LinkCounters,
+}
+
+impl std::fmt::Debug for WatlowChamber {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("WatlowChamber")
+            .field("device", &self.device)
+            .field("counters", &self.counters)
+            .finish_non_exhaustive()
+    }
+}
+
+impl WatlowChamber {
+    /// A driver over an open transport; `connector` reopens it after a drop.
+    pub fn new(
+        device: &str,
+        transport: BoxTransport,
+        connector: Option<Connector>,
+        policy: RetryPolicy,
+    ) -> Self {
+        Self {
+            device: device.to_owned(),
+            ctx: Some(tokio_modbus::client::tcp::attach_slave(transport, Slave(1))),
+            connector,
+            policy,
+            counters: LinkCounters::default(),
+        }
+    }
+
+    /// Transient trouble so far.
+    pub fn counters(&self) -> LinkCounters {
+        self.counters
+    }
+
+    async fn op(&mut self, op: Op) -> Result<Vec<u16>, DeviceError> {
+        let attempts = self.policy.attempts.max(1);
+        for attempt in 1..=attempts {
+            if attempt > 1 {
+                self.counters.retries += 1;
+            }
+            if self.ctx.is_none() {
+                let Some(connect) = &self.connector else {
+                    break;
+                };
+                let t = connect().await.map_err(|source| DeviceError::Connect {
+                    device: self.device.clone(),
+                    source,
+                })?;
+                self.counters.reconnects += 1;
+                self.ctx = Some(tokio_modbus::client::tcp::attach_slave(t, Slave(1)));
+            }
+            let Some(ctx) = self.ctx.as_mut() else { break };
+            let call = async {
+                match &op {
+                    Op::Read(a, n) => ctx.read_holding_registers(*a, *n).await,
+                    Op::Write(a, v) if v.len() == 1 => ctx
+                        .write_single_register(*a, v[0])
+                        .await
+                        .map(|r| r.map(|()| Vec::new())),
+                    Op::Write(a, v) => ctx
+                        .write_multiple_registers(*a, v)
+                        .await
+                        .map(|r| r.map(|()| Vec::new())),
+                }
+            };
+            match tokio::time::timeout(self.policy.timeout, call).await {
+                Ok(Ok(Ok(words))) => return Ok(words),
+                Ok(Ok(Err(ExceptionCode::ServerDeviceBusy | ExceptionCode::Acknowledge))) => {
+                    continue;
+                }
+                Ok(Ok(Err(e))) => {
+                    return Err(DeviceError::Refused {
+                        device: self.device.clone(),
+                        request: op.to_string(),
+                        reason: format!("Modbus exception {e:?}"),
+                    });
+                }
+                // A late or broken exchange leaves the session unusable: reopen.
+                Ok(Err(_)) | Err(_) => self.ctx = None,
+            }
+        }
+        Err(DeviceError::Timeout {
+            device: self.device.clone(),
+            request: op.to_string(),
+            timeout_s: self.policy.timeout.as_secs_f64(),
+            attempts,
+        })
+    }
+
+    async fn read_f32(&mut self, addr: u16, what: &'static str) -> Result<f64, DeviceError> {
+        let words = self.op(Op::Read(addr, 2)).await?;
+        let v = decode_f32(&words).map(f64::from);
+        match v {
+            Some(v) if super::espec::PLAUSIBLE_C.contains(&v) => Ok(v),
+            _ => Err(DeviceError::OutOfRange {
+                device: self.device.clone(),
+                what,
+                value: v.unwrap_or(f64::NAN),
+                range: "-100..300 degC, finite float32",
+            }),
+        }
+    }
+}
+
+#[async_trait]
+impl Chamber for WatlowChamber {
+    fn name(&self) -> &str {
+        &self.device
+    }
+
+    async fn read(&mut self) -> Result<ChamberReading, DeviceError> {
+        let air_c = self.read_f32(w::PV, "process value").await?;
+        let set_point_c = self.read_f32(w::SET_POINT, "set point").await?;
+        let m = self.op(Op::Read(w::CONTROL_MODE, 1)).await?;
+        // The F4T has no standby: a loop that is off (or in open-loop
+        // manual) is not controlling, which is what standby means here.
+        let mode = match m.first().copied() {
+            Some(mode::AUTO) => ChamberMode::Constant,
+            Some(mode::OFF | mode::MANUAL) => ChamberMode::Standby,
+            other => {
+                return Err(DeviceError::OutOfRange {
+                    device: self.device.clone(),
+                    what: "control mode",
+                    value: other.map_or(f64::NAN, f64::from),
+                    range: "62 off, 10 auto, 54 manual",
+                });
+            }
+        };
+        Ok(ChamberReading {
+            air_c,
+            set_point_c,
+            mode,
+            alarms: Vec::new(),
+        })
+    }
+
+    async fn set_point(&mut self, temp_c: f64) -> Result<(), DeviceError> {
+        self.op(Op::Write(w::SET_POINT, encode_f32(temp_c as f32).to_vec()))
+            .await
+            .map(drop)
+    }
+
+    async fn set_mode(&mut self, m: ChamberMode) -> Result<(), DeviceError> {
+        let v = match m {
+            ChamberMode::Off | ChamberMode::Standby => mode::OFF,
+            ChamberMode::Constant => mode::AUTO,
+        };
+        self.op(Op::Write(w::CONTROL_MODE, vec![v])).await.map(drop)
+    }
+}

@@ -1,0 +1,291 @@
+//! Every driver against its simulator, over loopback TCP and a real pty,
+//! with the simulators' fault injection.
+
+use std::sync::Arc;
+use std::sync::atomic::Ordering;
+use std::time::Duration;
+
+use gyrobench::driver::acl::AclTable;
+use gyrobench::driver::espec::EspecChamber;
+use gyrobench::driver::gyro::GyroReader;
+use gyrobench::driver::link::{Connector, LineLink};
+use gyrobench::driver::watlow::WatlowChamber;
+use gyrobench::driver::{Chamber, ChamberMode, DeviceError, InPosition, MotionTable, RetryPolicy};
+use gyrobench::geometry::TableAngles;
+use gyrobench::protocol::frame::FrameLayout;
+use gyrobench::sim::serve::{Serve, Served, start};
+use gyrobench::transport::{BoxTransport, DeviceSpec, open};
+
+const POLICY: RetryPolicy = RetryPolicy {
+    timeout: Duration::from_millis(300),
+    attempts: 3,
+};
+
+async fn serve(speed: f64) -> Served {
+    let mut s = Serve::load(None).expect("defaults");
+    s.config.speed = speed;
+    start(&s).await.expect("simulated bench starts")
+}
+
+fn spec(served: &Served, device: &str, protocol: &str, scheme: &str) -> DeviceSpec {
+    served
+        .endpoints
+        .iter()
+        .find(|e| e.device == device && e.protocol == protocol && e.address.starts_with(scheme))
+        .expect("endpoint served")
+        .address
+        .parse()
+        .expect("valid spec")
+}
+
+async fn connect(spec: &DeviceSpec) -> BoxTransport {
+    open(spec, Duration::from_secs(2))
+        .await
+        .expect("transport opens")
+}
+
+fn connector(spec: DeviceSpec) -> Connector {
+    Arc::new(move || {
+        let spec = spec.clone();
+        Box::pin(async move { open(&spec, Duration::from_secs(2)).await })
+    })
+}
+
+async fn espec(served: &Served, scheme: &str) -> EspecChamber {
+    let s = spec(served, "chamber", "espec-ascii", scheme);
+    let t = connect(&s).await;
+    EspecChamber::new(
+        LineLink::new("chamber", t, Some(connector(s)), POLICY),
+        None,
+    )
+}
+
+async fn acl(served: &Served, scheme: &str) -> AclTable {
+    let s = spec(served, "table", "acl", scheme);
+    let t = connect(&s).await;
+    AclTable::new(LineLink::new("table", t, Some(connector(s)), POLICY))
+}
+
+async fn chamber_round_trip(c: &mut dyn Chamber) {
+    let r = c.read().await.expect("reading");
+    assert_eq!(
+        (r.air_c, r.set_point_c, r.mode),
+        (20.0, 20.0, ChamberMode::Constant)
+    );
+    c.set_point(-10.0).await.expect("set point");
+    c.set_mode(ChamberMode::Standby).await.expect("mode");
+    let r = c.read().await.expect("reading");
+    assert_eq!((r.set_point_c, r.mode), (-10.0, ChamberMode::Standby));
+    assert!(r.alarms.is_empty());
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn espec_driver_against_its_simulator_over_tcp_and_pty() {
+    let served = serve(1.0).await;
+    for scheme in ["tcp://", "pty://"] {
+        let mut c = espec(&served, scheme).await;
+        chamber_round_trip(&mut c).await;
+        c.set_mode(ChamberMode::Constant)
+            .await
+            .expect("back to constant");
+        c.set_point(20.0).await.expect("back to 20");
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn watlow_driver_against_its_simulator_over_tcp() {
+    let served = serve(1.0).await;
+    let s = spec(&served, "chamber", "watlow-f4t-modbus", "tcp://");
+    let mut c = WatlowChamber::new("chamber", connect(&s).await, Some(connector(s)), POLICY);
+    chamber_round_trip(&mut c).await;
+    let err = c.set_point(900.0).await.expect_err("beyond the chamber");
+    assert!(err.to_string().contains("IllegalDataValue"), "{err}");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn acl_driver_moves_the_table_into_position_over_tcp_and_pty() {
+    let served = serve(20.0).await;
+    for (scheme, target) in [("tcp://", (0.0, 90.0)), ("pty://", (35.0, 180.0))] {
+        let mut t = acl(&served, scheme).await;
+        t.servo_on().await.expect("servo on");
+        let target = TableAngles {
+            outer_deg: target.0,
+            inner_deg: target.1,
+        };
+        t.move_to(target).await.expect("move accepted");
+        let mut ip = InPosition::new(0.01, 0.01, 1.0);
+        let clock = served.bench.clock().clone();
+        let mut settled = false;
+        for _ in 0..400 {
+            let r = t.read().await.expect("reading");
+            if ip.update(&r, target, clock.now_s()) {
+                settled = true;
+                break;
+            }
+            tokio::time::sleep(Duration::from_millis(10)).await;
+        }
+        assert!(settled, "{scheme}: table never settled on {target:?}");
+        let err = t
+            .rate(true, 500.0)
+            .await
+            .expect_err("beyond the rate limit");
+        assert!(err.to_string().contains("-222"), "{err}");
+    }
+}
+
+async fn frames(served: &Served, scheme: &str, n: usize) -> GyroReader<BoxTransport> {
+    let s = spec(served, "gyro", "rlg-frame", scheme);
+    let mut g = GyroReader::new(
+        "gyro",
+        connect(&s).await,
+        FrameLayout::default(),
+        Duration::from_secs(2),
+    );
+    let mut last: Option<u8> = None;
+    for _ in 0..n {
+        let f = g.next_frame().await.expect("frame").expect("stream open");
+        if let Some(l) = last {
+            assert_eq!(f.seq, l.wrapping_add(1), "{scheme}: consecutive frames");
+        }
+        last = Some(f.seq);
+        assert_eq!(f.status, 0x000F);
+    }
+    g
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn gyro_frames_arrive_complete_over_tcp_and_pty() {
+    let served = serve(1.0).await;
+    for scheme in ["tcp://", "pty://"] {
+        let g = frames(&served, scheme, 400).await;
+        let s = g.stats();
+        assert_eq!((s.crc_errors, s.duplicates), (0, 0), "{scheme}: {s:?}");
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn transient_chamber_faults_are_retried_and_the_run_goes_on() {
+    let served = serve(1.0).await;
+    let f = &served.bench.faults.chamber;
+    let mut c = espec(&served, "tcp://").await;
+    f.no_reply.store(1, Ordering::Relaxed);
+    c.read().await.expect("missed reply retried");
+    f.garble.store(1, Ordering::Relaxed);
+    c.read().await.expect("garbled reply retried");
+    f.disconnect.store(true, Ordering::Relaxed);
+    c.set_point(15.0).await.expect("reconnected");
+    let k = c.link().counters();
+    assert!(k.retries >= 3, "{k:?}");
+    assert_eq!(k.reconnects, 1);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn persistent_faults_end_in_errors_that_name_the_device() {
+    let served = serve(1.0).await;
+    let mut c = espec(&served, "tcp://").await;
+    served
+        .bench
+        .faults
+        .chamber
+        .silent
+        .store(true, Ordering::Relaxed);
+    let err = c.read().await.expect_err("silent chamber");
+    assert!(
+        matches!(err, DeviceError::Timeout { attempts: 3, .. }),
+        "{err}"
+    );
+    assert!(
+        err.to_string().starts_with("chamber: no reply to `TEMP?`"),
+        "{err}"
+    );
+    served
+        .bench
+        .faults
+        .chamber
+        .silent
+        .store(false, Ordering::Relaxed);
+
+    served.bench.lock().raise_chamber_alarm(12);
+    let r = c.read().await.expect("reading with alarm");
+    assert_eq!(r.alarms, vec![12]);
+
+    let mut t = acl(&served, "tcp://").await;
+    served.bench.lock().trip_interlock();
+    let err = t.stop().await.expect_err("tripped");
+    assert!(matches!(err, DeviceError::Interlock { .. }), "{err}");
+    t.servo_on().await.expect("reset and close");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn watlow_exception_and_missed_reply_are_retried() {
+    let served = serve(1.0).await;
+    let s = spec(&served, "chamber", "watlow-f4t-modbus", "tcp://");
+    let mut c = WatlowChamber::new("chamber", connect(&s).await, Some(connector(s)), POLICY);
+    served
+        .bench
+        .faults
+        .chamber
+        .error_reply
+        .store(1, Ordering::Relaxed);
+    c.read().await.expect("busy exception retried");
+    served
+        .bench
+        .faults
+        .chamber
+        .no_reply
+        .store(1, Ordering::Relaxed);
+    c.read()
+        .await
+        .expect("missed reply retried after reconnect");
+    assert!(c.counters().retries >= 2);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn gyro_link_trouble_is_counted_and_silence_is_an_error() {
+    let served = serve(1.0).await;
+    let s = spec(&served, "gyro", "rlg-frame", "tcp://");
+    let mut g = GyroReader::new(
+        "gyro",
+        connect(&s).await,
+        FrameLayout::default(),
+        Duration::from_millis(500),
+    );
+    g.next_frame().await.expect("frame").expect("open");
+    served
+        .bench
+        .faults
+        .gyro
+        .corrupt_every
+        .store(997, Ordering::Relaxed);
+    for _ in 0..800 {
+        g.next_frame().await.expect("frame").expect("open");
+    }
+    let st = g.stats();
+    assert!(st.crc_errors > 0 && st.lost_frames > 0, "{st:?}");
+    served
+        .bench
+        .faults
+        .gyro
+        .corrupt_every
+        .store(0, Ordering::Relaxed);
+    served
+        .bench
+        .faults
+        .gyro
+        .silent
+        .store(true, Ordering::Relaxed);
+    // Drain what was already in flight, then the silence shows.
+    let err = loop {
+        match g.next_frame().await {
+            Ok(Some(_)) => continue,
+            Ok(None) => panic!("stream closed"),
+            Err(e) => break e,
+        }
+    };
+    assert!(matches!(err, DeviceError::Silent { .. }), "{err}");
+    assert!(
+        err.to_string()
+            .starts_with("gyro: no valid frame for 0.5 s"),
+        "{err}"
+    );
+}

@@ -1,0 +1,10 @@
+//! gyrobench's whole-system tests, one binary: the CLI across the process
+//! boundary, and every driver against its simulator over real transports.
+
+#![expect(
+    clippy::expect_used,
+    reason = "a test helper that cannot run should fail the test loudly"
+)]
+
+mod bench_io;
+mod cli;
