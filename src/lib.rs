@@ -7,6 +7,7 @@
 //! `analysis` (pure math) <- `cli`. See `ARCHITECTURE.md`.
 
 pub mod analysis;
+pub mod bench;
 pub mod cli;
 pub mod clock;
 pub mod config;

@@ -15,6 +15,22 @@ pub enum SimCommand {
     /// Prints one line per endpoint, `<device> <protocol> <address>`, then
     /// serves until Ctrl-C or SIGTERM.
     Serve(ServeArgs),
+    /// Benchmark the gyro link: the simulated gyro streams frames into a pty
+    /// in real time and the driver decodes them; prints frames, losses and rate.
+    LinkBench(LinkBenchArgs),
+}
+
+#[derive(Debug, Args)]
+pub struct LinkBenchArgs {
+    /// Frame rate of the simulated gyro, Hz.
+    #[arg(long, default_value_t = 2000.0)]
+    rate_hz: f64,
+    /// Line speed set on the pty, baud.
+    #[arg(long, default_value_t = 921_600)]
+    baud: u32,
+    /// Duration, s of wall time.
+    #[arg(long, default_value_t = 600.0)]
+    seconds: f64,
 }
 
 #[derive(Debug, Args)]
@@ -25,17 +41,26 @@ pub struct ServeArgs {
     config: Option<PathBuf>,
 }
 
+fn runtime() -> Result<tokio::runtime::Runtime> {
+    tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .context("starting the async runtime")
+}
+
 pub fn run(cmd: SimCommand) -> Result<Outcome> {
     match cmd {
+        SimCommand::LinkBench(args) => {
+            anyhow::ensure!(args.rate_hz > 0.0 && args.seconds > 0.0, "--rate-hz and --seconds must be positive");
+            let r = runtime()?.block_on(link_bench(&args))?;
+            print!("{}", render_link_bench(&args, &r));
+            Ok(Outcome::Success)
+        }
         SimCommand::Serve(args) => {
             let serve = Serve::load(args.config.as_deref())
                 .context("loading the sim serve configuration")?;
-            let rt = tokio::runtime::Builder::new_multi_thread()
-                .worker_threads(2)
-                .enable_all()
-                .build()
-                .context("starting the async runtime")?;
-            rt.block_on(async {
+            runtime()?.block_on(async {
                 let served = start(&serve)
                     .await
                     .context("opening the simulated devices")?;
@@ -65,4 +90,77 @@ async fn wait_for_stop() -> Result<()> {
         _ = term.recv() => {}
     }
     Ok(())
+}
+
+/// What the link benchmark measured.
+#[derive(Debug)]
+pub struct LinkBenchResult {
+    /// Wall time measured, s.
+    pub elapsed_s: f64,
+    /// Frames decoded.
+    pub frames: u64,
+    /// Link figures from the decoder.
+    pub stats: crate::protocol::frame::LinkStats,
+}
+
+async fn link_bench(a: &LinkBenchArgs) -> Result<LinkBenchResult> {
+    use std::sync::Arc;
+    use std::time::Duration;
+
+    use crate::clock::{Clock, WallClock};
+    use crate::driver::gyro::GyroReader;
+    use crate::protocol::frame::FrameLayout;
+    use crate::sim::{SharedBench, SimBench, gyro::serve_gyro};
+    use crate::transport::{open_serial, pty_pair};
+    use crate::twin::TwinConfig;
+
+    let mut twin = TwinConfig::default_rl16();
+    twin.gyro.frame_rate_hz = a.rate_hz;
+    let clock: Arc<dyn Clock> = Arc::new(WallClock::start());
+    let bench = SharedBench::new(SimBench::new(twin, 1, FrameLayout::default()), clock.clone());
+    let pty = pty_pair().context("creating a pty pair")?;
+    let port = open_serial(&pty.path, a.baud, false).with_context(|| format!("opening {} at {} baud", pty.path, a.baud))?;
+    let mut reader = GyroReader::new("gyro", port, FrameLayout::default(), Duration::from_secs(2));
+    let _ticker = bench.spawn_ticker(Duration::from_millis(5));
+    tokio::spawn(serve_gyro(pty.master, bench.clone()));
+    let start = clock.now_s();
+    let mut frames = 0u64;
+    while clock.now_s() - start < a.seconds {
+        if reader.next_frame().await?.is_none() {
+            anyhow::bail!("the pty closed during the benchmark");
+        }
+        frames += 1;
+    }
+    drop(pty.slave);
+    Ok(LinkBenchResult {
+        elapsed_s: clock.now_s() - start,
+        frames,
+        stats: reader.stats(),
+    })
+}
+
+/// The benchmark's figures as text.
+pub fn render_link_bench(a: &LinkBenchArgs, r: &LinkBenchResult) -> String {
+    let s = &r.stats;
+    format!(
+        "gyro link over a pty at {baud} baud, {rate} Hz frames, {secs:.0} s\n\
+         frames decoded    {frames}\n\
+         decoded rate      {dec:.1} frames/s (expected {rate})\n\
+         lost frames       {lost}\n\
+         CRC errors        {crc}\n\
+         resyncs           {resync}\n\
+         duplicates        {dup}\n\
+         bytes             {bytes} ({bps:.0} bit/s at 10 bits a byte)\n",
+        baud = a.baud,
+        rate = a.rate_hz,
+        secs = r.elapsed_s,
+        frames = r.frames,
+        dec = r.frames as f64 / r.elapsed_s,
+        lost = s.lost_frames,
+        crc = s.crc_errors,
+        resync = s.resyncs,
+        dup = s.duplicates,
+        bytes = s.bytes,
+        bps = s.bytes as f64 * 10.0 / r.elapsed_s,
+    )
 }

@@ -289,3 +289,27 @@ async fn gyro_link_trouble_is_counted_and_silence_is_an_error() {
         "{err}"
     );
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_bench_file_opens_every_device_of_sim_serve() {
+    use gyrobench::bench::{BenchConfig, open_bench};
+    use gyrobench::config::Source;
+    let served = serve(1.0).await;
+    let addr = |device: &str, protocol: &str| spec(&served, device, protocol, "tcp://").to_string();
+    let text = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/fixtures/bench/sim-serve.toml"))
+        .expect("fixture")
+        .replace("tcp://127.0.0.1:5001", &addr("chamber", "espec-ascii"))
+        .replace("tcp://127.0.0.1:5003", &addr("table", "acl"))
+        .replace("tcp://127.0.0.1:5004", &addr("gyro", "rlg-frame"));
+    let cfg = BenchConfig::from_source(&Source::from_text("bench.toml", &text)).expect("valid bench");
+    let mut b = open_bench(&cfg).await.expect("every device opens");
+    assert_eq!(b.chamber.read().await.expect("chamber").air_c, 20.0);
+    b.table.servo_on().await.expect("servo on");
+    assert_eq!(b.table.read().await.expect("table").angles.outer_deg, 90.0);
+    assert!(b.gyro.next_frame().await.expect("gyro").is_some());
+
+    let mut dead = cfg.clone();
+    dead.devices.chamber.spec = "tcp://127.0.0.1:1".into();
+    let err = open_bench(&dead).await.expect_err("nothing listens on port 1");
+    assert!(err.to_string().starts_with("chamber: cannot open the link"), "{err}");
+}

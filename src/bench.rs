@@ -1,0 +1,311 @@
+//! The bench configuration (`bench.toml`, documented in `docs/bench.md`):
+//! site, table geometry, devices by spec string, timeouts, safety limits;
+//! and opening the configured devices.
+
+use std::path::Path;
+use std::sync::Arc;
+use std::time::Duration;
+
+use serde::{Deserialize, Serialize};
+
+use crate::config::{Checker, ConfigError, Source};
+use crate::driver::acl::AclTable;
+use crate::driver::espec::EspecChamber;
+use crate::driver::gyro::GyroReader;
+use crate::driver::link::{Connector, LineLink};
+use crate::driver::watlow::WatlowChamber;
+use crate::driver::{Chamber, DeviceError, MotionTable, RetryPolicy};
+use crate::geometry::{Site, TableGeometry};
+use crate::protocol::frame::FrameLayout;
+use crate::transport::{BoxTransport, DeviceSpec, open};
+
+/// A whole bench.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BenchConfig {
+    /// Where the bench stands.
+    pub site: Site,
+    /// Geometry of the motion simulator and the gyro mount.
+    pub table: TableSection,
+    /// The instruments.
+    pub devices: Devices,
+    /// Safety limits of the bench, enforced before any command is sent.
+    pub limits: Limits,
+}
+
+/// `[table]`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TableSection {
+    /// Axis directions and mount.
+    pub geometry: TableGeometry,
+}
+
+/// `[devices.*]`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Devices {
+    /// Climatic chamber.
+    pub chamber: ChamberDevice,
+    /// Two-axis motion simulator.
+    pub table: TableDevice,
+    /// Gyro digital output.
+    pub gyro: GyroDevice,
+}
+
+/// Chamber protocols.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ChamberProtocol {
+    /// Espec P300 / SCP-220 ASCII.
+    EspecAscii,
+    /// Watlow F4T over Modbus TCP.
+    WatlowF4tModbus,
+}
+
+/// `[devices.chamber]`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ChamberDevice {
+    /// Where it is: `serial://...`, `tcp://...`, `pty://...`, `sim://chamber`.
+    pub spec: String,
+    /// Which protocol it speaks.
+    pub protocol: ChamberProtocol,
+    /// RS-485 address (Espec only).
+    #[serde(default)]
+    pub address: Option<u8>,
+    /// Reply timeout per attempt, s.
+    pub timeout_s: f64,
+    /// Attempts per request before the device is declared failed.
+    pub attempts: u32,
+}
+
+/// `[devices.table]` (ACL language).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TableDevice {
+    /// Where it is.
+    pub spec: String,
+    /// Reply timeout per attempt, s.
+    pub timeout_s: f64,
+    /// Attempts per request.
+    pub attempts: u32,
+    /// In-position tolerance, deg.
+    pub in_position_deg: f64,
+    /// Time within tolerance before "in position", s.
+    pub settle_s: f64,
+}
+
+/// `[devices.gyro]`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GyroDevice {
+    /// Where it is.
+    pub spec: String,
+    /// Frames per second the unit sends, Hz.
+    pub frame_rate_hz: f64,
+    /// Angle per count, arcsec.
+    pub lsb_arcsec: f64,
+    /// No valid frame for this long is a failure, s.
+    pub silence_s: f64,
+    /// Frame layout (default: the documented 20-byte frame).
+    #[serde(default)]
+    pub frame: Option<FrameLayout>,
+}
+
+/// `[limits]`: what the bench must never be driven beyond.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Limits {
+    /// Lowest chamber set point, degC.
+    pub chamber_min_c: f64,
+    /// Highest chamber set point, degC.
+    pub chamber_max_c: f64,
+    /// Fastest chamber ramp, degC/min.
+    pub chamber_max_ramp_c_per_min: f64,
+    /// Outer axis travel, deg (`[min, max]`).
+    pub outer_range_deg: [f64; 2],
+    /// Inner axis travel, deg (`[min, max]`).
+    pub inner_range_deg: [f64; 2],
+    /// Fastest axis rate, deg/s.
+    pub table_max_rate_dps: f64,
+    /// Largest axis acceleration, deg/s^2.
+    pub table_max_acc_dps2: f64,
+    /// Hottest the gyro (any sensor) may get, degC.
+    pub dut_max_c: f64,
+}
+
+impl BenchConfig {
+    /// Read and validate a bench file.
+    pub fn load(path: &Path) -> Result<Self, ConfigError> {
+        Self::from_source(&Source::read(path)?)
+    }
+
+    /// Parse and validate bench text.
+    pub fn from_source(src: &Source) -> Result<Self, ConfigError> {
+        let cfg: Self = src.parse()?;
+        cfg.validate(src)?;
+        Ok(cfg)
+    }
+
+    fn validate(&self, src: &Source) -> Result<(), ConfigError> {
+        let c = Checker::new(src);
+        c.within(self.site.latitude_deg, -90.0, 90.0, "site.latitude_deg")?;
+        c.within(self.site.longitude_deg, -180.0, 360.0, "site.longitude_deg")?;
+        let d = &self.devices;
+        for (key, spec) in [
+            ("devices.chamber.spec", &d.chamber.spec),
+            ("devices.table.spec", &d.table.spec),
+            ("devices.gyro.spec", &d.gyro.spec),
+        ] {
+            spec.parse::<DeviceSpec>()
+                .map_err(|e| src.invalid(key, e.to_string()))?;
+        }
+        c.within(d.chamber.timeout_s, 0.01, 60.0, "devices.chamber.timeout_s")?;
+        c.ensure((1..=20).contains(&d.chamber.attempts), "devices.chamber.attempts", "must be 1 to 20")?;
+        c.within(d.table.timeout_s, 0.01, 60.0, "devices.table.timeout_s")?;
+        c.ensure((1..=20).contains(&d.table.attempts), "devices.table.attempts", "must be 1 to 20")?;
+        c.within(d.table.in_position_deg, 1e-6, 10.0, "devices.table.in_position_deg")?;
+        c.within(d.table.settle_s, 0.0, 600.0, "devices.table.settle_s")?;
+        c.within(d.gyro.frame_rate_hz, 1.0, 100_000.0, "devices.gyro.frame_rate_hz")?;
+        c.within(d.gyro.lsb_arcsec, 1e-6, 100.0, "devices.gyro.lsb_arcsec")?;
+        c.within(d.gyro.silence_s, 0.01, 600.0, "devices.gyro.silence_s")?;
+        if let Some(layout) = &d.gyro.frame {
+            layout
+                .validate()
+                .map_err(|e| src.invalid("devices.gyro.frame", e.to_string()))?;
+        }
+        let l = &self.limits;
+        c.within(l.chamber_min_c, -100.0, 300.0, "limits.chamber_min_c")?;
+        c.within(l.chamber_max_c, -100.0, 300.0, "limits.chamber_max_c")?;
+        c.ensure(l.chamber_max_c > l.chamber_min_c, "limits.chamber_max_c", "must be above limits.chamber_min_c")?;
+        c.positive(l.chamber_max_ramp_c_per_min, "limits.chamber_max_ramp_c_per_min")?;
+        for (r, key) in [(l.outer_range_deg, "limits.outer_range_deg"), (l.inner_range_deg, "limits.inner_range_deg")] {
+            c.ensure(
+                r.iter().all(|v| v.is_finite()) && r[0] < r[1],
+                key,
+                "must be [min, max] with min below max, deg",
+            )?;
+        }
+        c.positive(l.table_max_rate_dps, "limits.table_max_rate_dps")?;
+        c.positive(l.table_max_acc_dps2, "limits.table_max_acc_dps2")?;
+        c.within(l.dut_max_c, -100.0, 300.0, "limits.dut_max_c")?;
+        Ok(())
+    }
+
+    /// The gyro frame layout in use.
+    pub fn frame_layout(&self) -> FrameLayout {
+        self.devices.gyro.frame.clone().unwrap_or_default()
+    }
+}
+
+fn connector(spec: DeviceSpec, timeout: Duration) -> Connector {
+    Arc::new(move || {
+        let spec = spec.clone();
+        Box::pin(async move { open(&spec, timeout).await })
+    })
+}
+
+async fn open_device(name: &str, spec: &str, timeout: Duration) -> Result<(DeviceSpec, BoxTransport), DeviceError> {
+    let connect = |source| DeviceError::Connect {
+        device: name.to_owned(),
+        source,
+    };
+    let spec: DeviceSpec = spec
+        .parse()
+        .map_err(|e: crate::transport::SpecError| connect(std::io::Error::new(std::io::ErrorKind::InvalidInput, e)))?;
+    let t = open(&spec, timeout).await.map_err(connect)?;
+    Ok((spec, t))
+}
+
+/// The configured instruments, opened.
+pub struct OpenBench {
+    /// Chamber driver.
+    pub chamber: Box<dyn Chamber>,
+    /// Table driver.
+    pub table: AclTable,
+    /// Gyro link.
+    pub gyro: GyroReader<BoxTransport>,
+}
+
+impl std::fmt::Debug for OpenBench {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("OpenBench")
+            .field("chamber", &self.chamber.name())
+            .field("table", &self.table.name())
+            .finish_non_exhaustive()
+    }
+}
+
+/// Open every device of a bench whose specs are byte streams (not `sim://`).
+pub async fn open_bench(cfg: &BenchConfig) -> Result<OpenBench, DeviceError> {
+    let d = &cfg.devices;
+    let ct = Duration::from_secs_f64(d.chamber.timeout_s);
+    let (cs, t) = open_device("chamber", &d.chamber.spec, ct).await?;
+    let cpol = RetryPolicy {
+        timeout: ct,
+        attempts: d.chamber.attempts,
+    };
+    let chamber: Box<dyn Chamber> = match d.chamber.protocol {
+        ChamberProtocol::EspecAscii => Box::new(EspecChamber::new(
+            LineLink::new("chamber", t, Some(connector(cs, ct)), cpol),
+            d.chamber.address,
+        )),
+        ChamberProtocol::WatlowF4tModbus => Box::new(WatlowChamber::new("chamber", t, Some(connector(cs, ct)), cpol)),
+    };
+    let tt = Duration::from_secs_f64(d.table.timeout_s);
+    let (ts, t) = open_device("table", &d.table.spec, tt).await?;
+    let table = AclTable::new(LineLink::new(
+        "table",
+        t,
+        Some(connector(ts, tt)),
+        RetryPolicy {
+            timeout: tt,
+            attempts: d.table.attempts,
+        },
+    ));
+    let gt = Duration::from_secs_f64(d.gyro.silence_s);
+    let (_, t) = open_device("gyro", &d.gyro.spec, gt).await?;
+    let gyro = GyroReader::new("gyro", t, cfg.frame_layout(), gt);
+    Ok(OpenBench { chamber, table, gyro })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const SIM: &str = include_str!("../fixtures/bench/sim-serve.toml");
+
+    #[test]
+    fn shipped_bench_files_load() {
+        for (name, text) in [
+            ("sim-serve.toml", SIM),
+            ("embedded.toml", include_str!("../fixtures/bench/embedded.toml")),
+            ("lab-espec-serial.toml", include_str!("../fixtures/bench/lab-espec-serial.toml")),
+            ("lab-watlow-tcp.toml", include_str!("../fixtures/bench/lab-watlow-tcp.toml")),
+        ] {
+            BenchConfig::from_source(&Source::from_text(name, text))
+                .unwrap_or_else(|e| panic!("{name} must load: {e}"));
+        }
+    }
+
+    #[test]
+    fn a_bad_spec_is_refused_at_its_line() {
+        let text = SIM.replacen("tcp://127.0.0.1:5003", "tcp://nowhere", 1);
+        let err = BenchConfig::from_source(&Source::from_text("b.toml", &text)).expect_err("bad spec");
+        let line = text
+            .lines()
+            .position(|l| l.contains("tcp://nowhere"))
+            .expect("edited line")
+            + 1;
+        assert_eq!(err.line(), Some(line));
+        assert!(err.to_string().contains("`devices.table.spec` bad device spec"), "{err}");
+    }
+
+    #[test]
+    fn inverted_limits_are_refused() {
+        let text = SIM.replacen("outer_range_deg = [-180.0, 180.0]", "outer_range_deg = [10.0, -10.0]", 1);
+        let err = BenchConfig::from_source(&Source::from_text("b.toml", &text)).expect_err("inverted");
+        assert!(err.to_string().contains("limits.outer_range_deg"), "{err}");
+    }
+}
