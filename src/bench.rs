@@ -162,12 +162,30 @@ impl BenchConfig {
                 .map_err(|e| src.invalid(key, e.to_string()))?;
         }
         c.within(d.chamber.timeout_s, 0.01, 60.0, "devices.chamber.timeout_s")?;
-        c.ensure((1..=20).contains(&d.chamber.attempts), "devices.chamber.attempts", "must be 1 to 20")?;
+        c.ensure(
+            (1..=20).contains(&d.chamber.attempts),
+            "devices.chamber.attempts",
+            "must be 1 to 20",
+        )?;
         c.within(d.table.timeout_s, 0.01, 60.0, "devices.table.timeout_s")?;
-        c.ensure((1..=20).contains(&d.table.attempts), "devices.table.attempts", "must be 1 to 20")?;
-        c.within(d.table.in_position_deg, 1e-6, 10.0, "devices.table.in_position_deg")?;
+        c.ensure(
+            (1..=20).contains(&d.table.attempts),
+            "devices.table.attempts",
+            "must be 1 to 20",
+        )?;
+        c.within(
+            d.table.in_position_deg,
+            1e-6,
+            10.0,
+            "devices.table.in_position_deg",
+        )?;
         c.within(d.table.settle_s, 0.0, 600.0, "devices.table.settle_s")?;
-        c.within(d.gyro.frame_rate_hz, 1.0, 100_000.0, "devices.gyro.frame_rate_hz")?;
+        c.within(
+            d.gyro.frame_rate_hz,
+            1.0,
+            100_000.0,
+            "devices.gyro.frame_rate_hz",
+        )?;
         c.within(d.gyro.lsb_arcsec, 1e-6, 100.0, "devices.gyro.lsb_arcsec")?;
         c.within(d.gyro.silence_s, 0.01, 600.0, "devices.gyro.silence_s")?;
         if let Some(layout) = &d.gyro.frame {
@@ -178,9 +196,19 @@ impl BenchConfig {
         let l = &self.limits;
         c.within(l.chamber_min_c, -100.0, 300.0, "limits.chamber_min_c")?;
         c.within(l.chamber_max_c, -100.0, 300.0, "limits.chamber_max_c")?;
-        c.ensure(l.chamber_max_c > l.chamber_min_c, "limits.chamber_max_c", "must be above limits.chamber_min_c")?;
-        c.positive(l.chamber_max_ramp_c_per_min, "limits.chamber_max_ramp_c_per_min")?;
-        for (r, key) in [(l.outer_range_deg, "limits.outer_range_deg"), (l.inner_range_deg, "limits.inner_range_deg")] {
+        c.ensure(
+            l.chamber_max_c > l.chamber_min_c,
+            "limits.chamber_max_c",
+            "must be above limits.chamber_min_c",
+        )?;
+        c.positive(
+            l.chamber_max_ramp_c_per_min,
+            "limits.chamber_max_ramp_c_per_min",
+        )?;
+        for (r, key) in [
+            (l.outer_range_deg, "limits.outer_range_deg"),
+            (l.inner_range_deg, "limits.inner_range_deg"),
+        ] {
             c.ensure(
                 r.iter().all(|v| v.is_finite()) && r[0] < r[1],
                 key,
@@ -206,14 +234,18 @@ fn connector(spec: DeviceSpec, timeout: Duration) -> Connector {
     })
 }
 
-async fn open_device(name: &str, spec: &str, timeout: Duration) -> Result<(DeviceSpec, BoxTransport), DeviceError> {
+async fn open_device(
+    name: &str,
+    spec: &str,
+    timeout: Duration,
+) -> Result<(DeviceSpec, BoxTransport), DeviceError> {
     let connect = |source| DeviceError::Connect {
         device: name.to_owned(),
         source,
     };
-    let spec: DeviceSpec = spec
-        .parse()
-        .map_err(|e: crate::transport::SpecError| connect(std::io::Error::new(std::io::ErrorKind::InvalidInput, e)))?;
+    let spec: DeviceSpec = spec.parse().map_err(|e: crate::transport::SpecError| {
+        connect(std::io::Error::new(std::io::ErrorKind::InvalidInput, e))
+    })?;
     let t = open(&spec, timeout).await.map_err(connect)?;
     Ok((spec, t))
 }
@@ -251,7 +283,12 @@ pub async fn open_bench(cfg: &BenchConfig) -> Result<OpenBench, DeviceError> {
             LineLink::new("chamber", t, Some(connector(cs, ct)), cpol),
             d.chamber.address,
         )),
-        ChamberProtocol::WatlowF4tModbus => Box::new(WatlowChamber::new("chamber", t, Some(connector(cs, ct)), cpol)),
+        ChamberProtocol::WatlowF4tModbus => Box::new(WatlowChamber::new(
+            "chamber",
+            t,
+            Some(connector(cs, ct)),
+            cpol,
+        )),
     };
     let tt = Duration::from_secs_f64(d.table.timeout_s);
     let (ts, t) = open_device("table", &d.table.spec, tt).await?;
@@ -267,7 +304,11 @@ pub async fn open_bench(cfg: &BenchConfig) -> Result<OpenBench, DeviceError> {
     let gt = Duration::from_secs_f64(d.gyro.silence_s);
     let (_, t) = open_device("gyro", &d.gyro.spec, gt).await?;
     let gyro = GyroReader::new("gyro", t, cfg.frame_layout(), gt);
-    Ok(OpenBench { chamber, table, gyro })
+    Ok(OpenBench {
+        chamber,
+        table,
+        gyro,
+    })
 }
 
 #[cfg(test)]
@@ -280,9 +321,18 @@ mod tests {
     fn shipped_bench_files_load() {
         for (name, text) in [
             ("sim-serve.toml", SIM),
-            ("embedded.toml", include_str!("../fixtures/bench/embedded.toml")),
-            ("lab-espec-serial.toml", include_str!("../fixtures/bench/lab-espec-serial.toml")),
-            ("lab-watlow-tcp.toml", include_str!("../fixtures/bench/lab-watlow-tcp.toml")),
+            (
+                "embedded.toml",
+                include_str!("../fixtures/bench/embedded.toml"),
+            ),
+            (
+                "lab-espec-serial.toml",
+                include_str!("../fixtures/bench/lab-espec-serial.toml"),
+            ),
+            (
+                "lab-watlow-tcp.toml",
+                include_str!("../fixtures/bench/lab-watlow-tcp.toml"),
+            ),
         ] {
             BenchConfig::from_source(&Source::from_text(name, text))
                 .unwrap_or_else(|e| panic!("{name} must load: {e}"));
@@ -292,20 +342,30 @@ mod tests {
     #[test]
     fn a_bad_spec_is_refused_at_its_line() {
         let text = SIM.replacen("tcp://127.0.0.1:5003", "tcp://nowhere", 1);
-        let err = BenchConfig::from_source(&Source::from_text("b.toml", &text)).expect_err("bad spec");
+        let err =
+            BenchConfig::from_source(&Source::from_text("b.toml", &text)).expect_err("bad spec");
         let line = text
             .lines()
             .position(|l| l.contains("tcp://nowhere"))
             .expect("edited line")
             + 1;
         assert_eq!(err.line(), Some(line));
-        assert!(err.to_string().contains("`devices.table.spec` bad device spec"), "{err}");
+        assert!(
+            err.to_string()
+                .contains("`devices.table.spec` bad device spec"),
+            "{err}"
+        );
     }
 
     #[test]
     fn inverted_limits_are_refused() {
-        let text = SIM.replacen("outer_range_deg = [-180.0, 180.0]", "outer_range_deg = [10.0, -10.0]", 1);
-        let err = BenchConfig::from_source(&Source::from_text("b.toml", &text)).expect_err("inverted");
+        let text = SIM.replacen(
+            "outer_range_deg = [-180.0, 180.0]",
+            "outer_range_deg = [10.0, -10.0]",
+            1,
+        );
+        let err =
+            BenchConfig::from_source(&Source::from_text("b.toml", &text)).expect_err("inverted");
         assert!(err.to_string().contains("limits.outer_range_deg"), "{err}");
     }
 }

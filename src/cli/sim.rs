@@ -52,7 +52,10 @@ fn runtime() -> Result<tokio::runtime::Runtime> {
 pub fn run(cmd: SimCommand) -> Result<Outcome> {
     match cmd {
         SimCommand::LinkBench(args) => {
-            anyhow::ensure!(args.rate_hz > 0.0 && args.seconds > 0.0, "--rate-hz and --seconds must be positive");
+            anyhow::ensure!(
+                args.rate_hz > 0.0 && args.seconds > 0.0,
+                "--rate-hz and --seconds must be positive"
+            );
             let r = runtime()?.block_on(link_bench(&args))?;
             print!("{}", render_link_bench(&args, &r));
             Ok(Outcome::Success)
@@ -117,9 +120,13 @@ async fn link_bench(a: &LinkBenchArgs) -> Result<LinkBenchResult> {
     let mut twin = TwinConfig::default_rl16();
     twin.gyro.frame_rate_hz = a.rate_hz;
     let clock: Arc<dyn Clock> = Arc::new(WallClock::start());
-    let bench = SharedBench::new(SimBench::new(twin, 1, FrameLayout::default()), clock.clone());
+    let bench = SharedBench::new(
+        SimBench::new(twin, 1, FrameLayout::default()),
+        clock.clone(),
+    );
     let pty = pty_pair().context("creating a pty pair")?;
-    let port = open_serial(&pty.path, a.baud, false).with_context(|| format!("opening {} at {} baud", pty.path, a.baud))?;
+    let port = open_serial(&pty.path, a.baud, false)
+        .with_context(|| format!("opening {} at {} baud", pty.path, a.baud))?;
     let mut reader = GyroReader::new("gyro", port, FrameLayout::default(), Duration::from_secs(2));
     let _ticker = bench.spawn_ticker(Duration::from_millis(5));
     tokio::spawn(serve_gyro(pty.master, bench.clone()));

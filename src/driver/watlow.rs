@@ -184,3 +184,44 @@ impl Chamber for WatlowChamber {
         self.op(Op::Write(w::CONTROL_MODE, vec![v])).await.map(drop)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use std::time::Duration;
+
+    use tokio_test::io::Builder;
+
+    use super::*;
+
+    /// MBAP header + PDU of a request or response.
+    fn adu(tid: u16, pdu: &[u8]) -> Vec<u8> {
+        let mut v = tid.to_be_bytes().to_vec();
+        v.extend_from_slice(&[0, 0]);
+        v.extend_from_slice(&(pdu.len() as u16 + 1).to_be_bytes());
+        v.push(1);
+        v.extend_from_slice(pdu);
+        v
+    }
+
+    #[tokio::test]
+    async fn exact_bytes_of_reading_the_process_value_and_writing_the_set_point() {
+        // PV 20.0 = 0x41A00000: registers [0x0000, 0x41A0], low word first.
+        let mock = Builder::new()
+            .write(&adu(0, &[0x03, 0x0B, 0x04, 0x00, 0x02]))
+            .read(&adu(0, &[0x03, 0x04, 0x00, 0x00, 0x41, 0xA0]))
+            .write(&adu(
+                1,
+                &[0x10, 0x0A, 0xDE, 0x00, 0x02, 0x04, 0x00, 0x00, 0xC2, 0x20],
+            ))
+            .read(&adu(1, &[0x10, 0x0A, 0xDE, 0x00, 0x02]))
+            .build();
+        let policy = RetryPolicy {
+            timeout: Duration::from_millis(500),
+            attempts: 1,
+        };
+        let mut c = WatlowChamber::new("chamber", Box::new(mock), None, policy);
+        assert_eq!(c.read_f32(w::PV, "process value").await.expect("PV"), 20.0);
+        // -40.0 = 0xC2200000.
+        c.set_point(-40.0).await.expect("set point written");
+    }
+}

@@ -296,12 +296,16 @@ async fn a_bench_file_opens_every_device_of_sim_serve() {
     use gyrobench::config::Source;
     let served = serve(1.0).await;
     let addr = |device: &str, protocol: &str| spec(&served, device, protocol, "tcp://").to_string();
-    let text = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/fixtures/bench/sim-serve.toml"))
-        .expect("fixture")
-        .replace("tcp://127.0.0.1:5001", &addr("chamber", "espec-ascii"))
-        .replace("tcp://127.0.0.1:5003", &addr("table", "acl"))
-        .replace("tcp://127.0.0.1:5004", &addr("gyro", "rlg-frame"));
-    let cfg = BenchConfig::from_source(&Source::from_text("bench.toml", &text)).expect("valid bench");
+    let text = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/fixtures/bench/sim-serve.toml"
+    ))
+    .expect("fixture")
+    .replace("tcp://127.0.0.1:5001", &addr("chamber", "espec-ascii"))
+    .replace("tcp://127.0.0.1:5003", &addr("table", "acl"))
+    .replace("tcp://127.0.0.1:5004", &addr("gyro", "rlg-frame"));
+    let cfg =
+        BenchConfig::from_source(&Source::from_text("bench.toml", &text)).expect("valid bench");
     let mut b = open_bench(&cfg).await.expect("every device opens");
     assert_eq!(b.chamber.read().await.expect("chamber").air_c, 20.0);
     b.table.servo_on().await.expect("servo on");
@@ -310,6 +314,39 @@ async fn a_bench_file_opens_every_device_of_sim_serve() {
 
     let mut dead = cfg.clone();
     dead.devices.chamber.spec = "tcp://127.0.0.1:1".into();
-    let err = open_bench(&dead).await.expect_err("nothing listens on port 1");
-    assert!(err.to_string().starts_with("chamber: cannot open the link"), "{err}");
+    let err = open_bench(&dead)
+        .await
+        .expect_err("nothing listens on port 1");
+    assert!(
+        err.to_string().starts_with("chamber: cannot open the link"),
+        "{err}"
+    );
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn drivers_work_over_an_in_memory_duplex_too() {
+    use gyrobench::sim::{SharedBench, SimBench, acl::serve_acl, espec::serve_espec};
+    use gyrobench::twin::TwinConfig;
+    let clock: Arc<dyn gyrobench::clock::Clock> =
+        Arc::new(gyrobench::clock::WallClock::scaled(20.0));
+    let bench = SharedBench::new(
+        SimBench::new(TwinConfig::default_rl16(), 3, FrameLayout::default()),
+        clock,
+    );
+    let (a, b) = tokio::io::duplex(4096);
+    tokio::spawn(serve_espec(b, bench.clone()));
+    let mut c = EspecChamber::new(LineLink::new("chamber", Box::new(a), None, POLICY), None);
+    chamber_round_trip(&mut c).await;
+    let (a, b) = tokio::io::duplex(4096);
+    tokio::spawn(serve_acl(b, bench.clone()));
+    let mut t = AclTable::new(LineLink::new("table", Box::new(a), None, POLICY));
+    t.move_to(TableAngles {
+        outer_deg: 0.0,
+        inner_deg: 0.0,
+    })
+    .await
+    .expect("move");
+    // Same bench behind both: the table's move shows in the twin.
+    tokio::time::sleep(Duration::from_millis(100)).await;
+    assert!(bench.lock().twin.table_moving());
 }

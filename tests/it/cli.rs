@@ -101,3 +101,61 @@ fn missing_file_and_bad_usage_have_their_exit_codes() {
     let out = gyrobench(&["twin", "no-such-command"]);
     assert_eq!(out.status.code(), Some(2));
 }
+
+#[test]
+fn sim_serve_prints_its_endpoints_serves_and_exits_0_on_sigterm() {
+    use std::io::{BufRead, BufReader, Read, Write};
+    let mut child = Command::new(env!("CARGO_BIN_EXE_gyrobench"))
+        .args(["sim", "serve"])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .expect("sim serve starts");
+    let mut lines = BufReader::new(child.stdout.take().expect("stdout"));
+    let mut endpoints = Vec::new();
+    for _ in 0..7 {
+        let mut l = String::new();
+        lines.read_line(&mut l).expect("endpoint line");
+        endpoints.push(l.trim_end().to_owned());
+    }
+    for e in &endpoints {
+        let f: Vec<&str> = e.split(' ').collect();
+        assert_eq!(f.len(), 3, "`<device> <protocol> <address>`: {e}");
+        assert!(
+            f[2].starts_with("tcp://127.0.0.1:") || f[2].starts_with("pty:///dev/"),
+            "loopback or pty only: {e}"
+        );
+    }
+    for want in [
+        "chamber espec-ascii tcp://",
+        "chamber watlow-f4t-modbus tcp://",
+        "table acl tcp://",
+        "gyro rlg-frame pty://",
+    ] {
+        assert!(
+            endpoints.iter().any(|e| e.starts_with(want)),
+            "{want} missing: {endpoints:?}"
+        );
+    }
+    let espec = endpoints
+        .iter()
+        .find_map(|e| e.strip_prefix("chamber espec-ascii tcp://"))
+        .expect("espec endpoint");
+    let mut s = std::net::TcpStream::connect(espec).expect("connect");
+    s.write_all(b"TEMP?\r\n").expect("send");
+    let mut reply = [0u8; 64];
+    let n = s.read(&mut reply).expect("reply");
+    assert_eq!(&reply[..n], b"20.0,20.0,100.0,-60.0\r\n");
+
+    let status = Command::new("kill")
+        .args(["-TERM", &child.id().to_string()])
+        .status()
+        .expect("kill runs");
+    assert!(status.success());
+    let exit = child.wait().expect("sim serve ends");
+    assert_eq!(
+        exit.code(),
+        Some(0),
+        "SIGTERM must end sim serve with exit 0"
+    );
+}
