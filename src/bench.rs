@@ -150,8 +150,8 @@ impl BenchConfig {
 
     fn validate(&self, src: &Source) -> Result<(), ConfigError> {
         let c = Checker::new(src);
-        c.within(self.site.latitude_deg, -90.0, 90.0, "site.latitude_deg")?;
-        c.within(self.site.longitude_deg, -180.0, 360.0, "site.longitude_deg")?;
+        self.site.validate(&c, "site")?;
+        self.table.geometry.validate(&c, "table.geometry")?;
         let d = &self.devices;
         for (key, spec) in [
             ("devices.chamber.spec", &d.chamber.spec),
@@ -353,6 +353,22 @@ mod tests {
         assert!(
             err.to_string()
                 .contains("`devices.table.spec` bad device spec"),
+            "{err}"
+        );
+    }
+
+    #[test]
+    fn a_table_with_parallel_axes_is_refused() {
+        let text = SIM.replacen(
+            "inner_axis_ned = [0.0, 1.0, 0.0]",
+            "inner_axis_ned = [2.0, 0.0, 0.0]",
+            1,
+        );
+        let err =
+            BenchConfig::from_source(&Source::from_text("b.toml", &text)).expect_err("parallel");
+        assert!(
+            err.to_string()
+                .contains("`table.geometry.inner_axis_ned` must not be parallel"),
             "{err}"
         );
     }

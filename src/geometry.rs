@@ -6,6 +6,8 @@
 use nalgebra::{Rotation3, Unit, Vector3};
 use serde::{Deserialize, Serialize};
 
+use crate::config::{Checker, ConfigError};
+
 /// Earth rotation rate, rad/s.
 pub const EARTH_RATE_RAD_S: f64 = 7.292_115e-5;
 /// Earth rotation rate, deg/h (= arcsec/s).
@@ -28,6 +30,32 @@ pub struct Site {
 }
 
 impl Site {
+    /// Check the values, reporting bad ones under `prefix` (e.g. `site`).
+    pub fn validate(&self, c: &Checker<'_>, prefix: &str) -> Result<(), ConfigError> {
+        c.within(
+            self.latitude_deg,
+            -90.0,
+            90.0,
+            &format!("{prefix}.latitude_deg"),
+        )?;
+        c.within(
+            self.longitude_deg,
+            -180.0,
+            360.0,
+            &format!("{prefix}.longitude_deg"),
+        )?;
+        c.within(
+            self.height_m,
+            -500.0,
+            10_000.0,
+            &format!("{prefix}.height_m"),
+        )?;
+        for v in self.magnetic_field_ned_ut {
+            c.within(v, -100.0, 100.0, &format!("{prefix}.magnetic_field_ned_ut"))?;
+        }
+        Ok(())
+    }
+
     /// Earth-rate vector in NED, deg/h: `W (cos phi, 0, -sin phi)`.
     pub fn earth_rate_ned_dph(&self) -> Vector3<f64> {
         let phi = self.latitude_deg.to_radians();
@@ -146,6 +174,37 @@ pub struct Unreachable {
 pub const REACH_TOLERANCE_DEG: f64 = 0.01;
 
 impl TableGeometry {
+    /// Check the axes are directions, reporting under `prefix`.
+    pub fn validate(&self, c: &Checker<'_>, prefix: &str) -> Result<(), ConfigError> {
+        for (v, name) in [
+            (self.outer_axis_ned, "outer_axis_ned"),
+            (self.inner_axis_ned, "inner_axis_ned"),
+        ] {
+            let n = v.iter().map(|x| x * x).sum::<f64>().sqrt();
+            c.ensure(
+                n.is_finite() && n > 1e-6,
+                &format!("{prefix}.{name}"),
+                "must be a non-zero direction",
+            )?;
+        }
+        let a = Vector3::from(self.outer_axis_ned).normalize();
+        let b = Vector3::from(self.inner_axis_ned).normalize();
+        c.ensure(
+            a.cross(&b).norm() > 1e-3,
+            &format!("{prefix}.inner_axis_ned"),
+            "must not be parallel to the outer axis (a two-axis table needs two directions)",
+        )?;
+        let m = &self.mount;
+        for (v, name) in [
+            (m.azimuth_deg, "azimuth_deg"),
+            (m.elevation_deg, "elevation_deg"),
+            (m.roll_deg, "roll_deg"),
+        ] {
+            c.finite(v, &format!("{prefix}.mount.{name}"))?;
+        }
+        Ok(())
+    }
+
     /// The geometry of `docs/physics.md`: outer axis horizontal along north,
     /// inner axis perpendicular to it, sensitive axis along the inner axis.
     /// Outer 0 deg: axis horizontal (east); outer 90 deg: axis up;

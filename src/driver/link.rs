@@ -210,6 +210,24 @@ impl LineLink {
     }
 }
 
+/// Reopen a dropped link through its connector.
+pub async fn reopen(
+    device: &str,
+    connector: Option<&Connector>,
+) -> Result<BoxTransport, DeviceError> {
+    let err = |source| DeviceError::Connect {
+        device: device.to_owned(),
+        source,
+    };
+    let Some(connect) = connector else {
+        return Err(err(std::io::Error::new(
+            std::io::ErrorKind::NotConnected,
+            "link closed and no way to reopen it",
+        )));
+    };
+    connect().await.map_err(err)
+}
+
 /// The request as text for messages (terminator stripped).
 fn request_name(request: &[u8]) -> String {
     String::from_utf8_lossy(request).trim_end().to_owned()

@@ -7,7 +7,7 @@ use async_trait::async_trait;
 use tokio_modbus::client::{Context, Reader, Writer};
 use tokio_modbus::{ExceptionCode, Slave};
 
-use super::link::{Connector, LinkCounters};
+use super::link::{Connector, LinkCounters, reopen};
 use super::{Chamber, ChamberMode, ChamberReading, DeviceError, RetryPolicy};
 use crate::protocol::watlow::{self as w, decode_f32, encode_f32, mode};
 use crate::transport::BoxTransport;
@@ -74,18 +74,15 @@ impl WatlowChamber {
             if attempt > 1 {
                 self.counters.retries += 1;
             }
-            if self.ctx.is_none() {
-                let Some(connect) = &self.connector else {
-                    break;
-                };
-                let t = connect().await.map_err(|source| DeviceError::Connect {
-                    device: self.device.clone(),
-                    source,
-                })?;
-                self.counters.reconnects += 1;
-                self.ctx = Some(tokio_modbus::client::tcp::attach_slave(t, Slave(1)));
-            }
-            let Some(ctx) = self.ctx.as_mut() else { break };
+            let ctx = match &mut self.ctx {
+                Some(ctx) => ctx,
+                None => {
+                    let t = reopen(&self.device, self.connector.as_ref()).await?;
+                    self.counters.reconnects += 1;
+                    self.ctx
+                        .insert(tokio_modbus::client::tcp::attach_slave(t, Slave(1)))
+                }
+            };
             let call = async {
                 match &op {
                     Op::Read(a, n) => ctx.read_holding_registers(*a, *n).await,

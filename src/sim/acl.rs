@@ -2,12 +2,12 @@
 
 use std::sync::Arc;
 
-use tokio::io::{AsyncRead, AsyncWrite, AsyncWriteExt, BufReader};
+use tokio::io::{AsyncRead, AsyncWrite};
 
-use super::faults::{Action, garble};
+use super::faults::Action;
+use super::lines::serve_lines;
 use super::{SharedBench, SimBench};
 use crate::protocol::acl::{Axis, Command, NO_ERROR, ScpiError, ServoMode, parse_message, stb};
-use crate::transport::read_line;
 use crate::twin::AxisDemand;
 
 /// Longest message accepted, bytes.
@@ -153,34 +153,22 @@ pub async fn serve_acl<S>(stream: S, bench: Arc<SharedBench>) -> std::io::Result
 where
     S: AsyncRead + AsyncWrite + Unpin,
 {
-    let (r, mut w) = tokio::io::split(stream);
-    let mut r = BufReader::new(r);
-    let mut buf = Vec::new();
-    while read_line(&mut r, &mut buf, MAX_LINE).await? {
-        let line = String::from_utf8_lossy(&buf).into_owned();
-        let action = bench.faults.table.next_action();
-        let reply = match action {
-            Action::NoReply => continue,
-            Action::Disconnect => return Ok(()),
-            Action::ErrorReply => {
+    serve_lines(
+        stream,
+        bench,
+        |f| &f.table,
+        MAX_LINE,
+        |bench, action, line| {
+            let mut b = bench.lock();
+            if action == Action::ErrorReply {
                 // The instrument reports errors through its queue, never inline.
-                let mut b = bench.lock();
                 b.acl_error(ScpiError::SETTINGS_CONFLICT);
-                b.acl_message(&line)
             }
-            Action::Normal | Action::Garble => bench.lock().acl_message(&line),
-        };
-        if let Some(mut text) = reply {
-            text.push('\n');
-            let mut bytes = text.into_bytes();
-            if action == Action::Garble {
-                bytes = garble(&bytes);
-            }
-            w.write_all(&bytes).await?;
-            w.flush().await?;
-        }
-    }
-    Ok(())
+            b.acl_message(line)
+                .map(|text| format!("{text}\n").into_bytes())
+        },
+    )
+    .await
 }
 
 #[cfg(test)]

@@ -2,12 +2,12 @@
 
 use std::sync::Arc;
 
-use tokio::io::{AsyncRead, AsyncWrite, AsyncWriteExt, BufReader};
+use tokio::io::{AsyncRead, AsyncWrite};
 
-use super::faults::{Action, garble};
+use super::faults::Action;
+use super::lines::serve_lines;
 use super::{PASSIVE_DRIFT_C_PER_MIN, SharedBench, SimBench};
 use crate::protocol::espec::{Mode, Request, fmt_temp, na, parse_request, reply_line};
-use crate::transport::read_line;
 
 /// Longest request line accepted, bytes.
 pub const MAX_LINE: usize = 256;
@@ -101,26 +101,20 @@ pub async fn serve_espec<S>(stream: S, bench: Arc<SharedBench>) -> std::io::Resu
 where
     S: AsyncRead + AsyncWrite + Unpin,
 {
-    let (r, mut w) = tokio::io::split(stream);
-    let mut r = BufReader::new(r);
-    let mut buf = Vec::new();
-    while read_line(&mut r, &mut buf, MAX_LINE).await? {
-        let line = String::from_utf8_lossy(&buf).into_owned();
-        let action = bench.faults.chamber.next_action();
-        let reply = match action {
-            Action::NoReply => continue,
-            Action::Disconnect => return Ok(()),
-            Action::ErrorReply => "NA:CONT NOT READY-1".to_owned(),
-            Action::Normal | Action::Garble => bench.lock().espec_reply(&line),
-        };
-        let mut bytes = reply_line(&reply);
-        if action == Action::Garble {
-            bytes = garble(&bytes);
-        }
-        w.write_all(&bytes).await?;
-        w.flush().await?;
-    }
-    Ok(())
+    serve_lines(
+        stream,
+        bench,
+        |f| &f.chamber,
+        MAX_LINE,
+        |bench, action, line| {
+            let reply = match action {
+                Action::ErrorReply => "NA:CONT NOT READY-1".to_owned(),
+                _ => bench.lock().espec_reply(line),
+            };
+            Some(reply_line(&reply))
+        },
+    )
+    .await
 }
 
 #[cfg(test)]

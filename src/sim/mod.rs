@@ -11,6 +11,7 @@ pub mod acl;
 pub mod espec;
 pub mod faults;
 pub mod gyro;
+mod lines;
 pub mod serve;
 pub mod watlow;
 

@@ -282,13 +282,7 @@ impl TwinConfig {
     }
 
     fn validate(&self, c: &Checker<'_>) -> Result<(), ConfigError> {
-        let s = &self.site;
-        c.within(s.latitude_deg, -90.0, 90.0, "site.latitude_deg")?;
-        c.within(s.longitude_deg, -180.0, 360.0, "site.longitude_deg")?;
-        c.within(s.height_m, -500.0, 10_000.0, "site.height_m")?;
-        for v in s.magnetic_field_ned_ut {
-            c.within(v, -100.0, 100.0, "site.magnetic_field_ned_ut")?;
-        }
+        self.site.validate(c, "site")?;
 
         let ch = &self.chamber;
         c.within(ch.min_c, -100.0, 300.0, "chamber.min_c")?;
@@ -347,17 +341,7 @@ impl TwinConfig {
         let t = &self.table;
         c.positive(t.max_rate_dps, "table.max_rate_dps")?;
         c.positive(t.max_acc_dps2, "table.max_acc_dps2")?;
-        for (v, key) in [
-            (t.geometry.outer_axis_ned, "table.geometry.outer_axis_ned"),
-            (t.geometry.inner_axis_ned, "table.geometry.inner_axis_ned"),
-        ] {
-            let n = v.iter().map(|x| x * x).sum::<f64>().sqrt();
-            c.ensure(
-                n.is_finite() && n > 1e-6,
-                key,
-                "must be a non-zero direction",
-            )?;
-        }
+        t.geometry.validate(c, "table.geometry")?;
         c.finite(t.initial.outer_deg, "table.initial.outer_deg")?;
         c.finite(t.initial.inner_deg, "table.initial.inner_deg")?;
 
