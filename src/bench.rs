@@ -135,7 +135,33 @@ pub struct Limits {
     pub dut_max_c: f64,
 }
 
+/// The embedded simulated bench (`fixtures/bench/embedded.toml`).
+pub const EMBEDDED_BENCH_TOML: &str = include_str!("../fixtures/bench/embedded.toml");
+
 impl BenchConfig {
+    /// The embedded simulated bench, used when no bench file is given.
+    pub fn embedded() -> Self {
+        // A unit test loads the embedded file, so this cannot fail.
+        match Self::from_source(&Source::from_text(
+            "fixtures/bench/embedded.toml",
+            EMBEDDED_BENCH_TOML,
+        )) {
+            Ok(b) => b,
+            Err(e) => unreachable!("embedded bench is invalid: {e}"),
+        }
+    }
+
+    /// True when every device is the embedded simulator.
+    pub fn is_embedded(&self) -> bool {
+        [
+            &self.devices.chamber.spec,
+            &self.devices.table.spec,
+            &self.devices.gyro.spec,
+        ]
+        .iter()
+        .all(|s| s.starts_with("sim://"))
+    }
+
     /// Read and validate a bench file.
     pub fn load(path: &Path) -> Result<Self, ConfigError> {
         Self::from_source(&Source::read(path)?)

@@ -110,23 +110,36 @@ impl Source {
         }
     }
 
-    /// Line and column (1-based) of the value at a dotted key path.
+    /// Line and column (1-based) of the value at a dotted key path; numeric
+    /// parts index arrays (`main.3.set_c` = key `set_c` of the fourth
+    /// `[[main]]` table). Falls back to the deepest part found.
     pub fn locate(&self, key: &str) -> Option<(usize, usize)> {
         let doc = DeTable::parse(&self.text).ok()?;
-        let mut table = doc.get_ref();
+        let root = doc.get_ref();
         let mut best = None;
-        let mut parts = key.split('.').peekable();
-        while let Some(part) = parts.next() {
-            let (k, v) = table.iter().find(|(k, _)| k.get_ref().as_ref() == part)?;
-            best = Some(line_col(&self.text, k.span().start));
-            match v.get_ref() {
-                DeValue::Table(t) if parts.peek().is_some() => table = t,
-                _ => {
-                    if parts.peek().is_some() {
-                        return best;
-                    }
-                    return Some(line_col(&self.text, v.span().start));
-                }
+        let mut node: Option<&DeValue<'_>> = None;
+        for part in key.split('.') {
+            let next = match node {
+                None => root
+                    .iter()
+                    .find(|(k, _)| k.get_ref().as_ref() == part)
+                    .map(|(k, v)| (k.span().start, v)),
+                Some(DeValue::Table(t)) => t
+                    .iter()
+                    .find(|(k, _)| k.get_ref().as_ref() == part)
+                    .map(|(k, v)| (k.span().start, v)),
+                Some(DeValue::Array(a)) => part
+                    .parse::<usize>()
+                    .ok()
+                    .and_then(|i| a.get(i))
+                    .map(|v| (v.span().start, v)),
+                Some(_) => None,
+            };
+            let Some((at, v)) = next else { return best };
+            best = Some(line_col(&self.text, at));
+            node = Some(v.get_ref());
+            if !matches!(v.get_ref(), DeValue::Table(_) | DeValue::Array(_)) {
+                best = Some(line_col(&self.text, v.span().start));
             }
         }
         best
@@ -253,6 +266,18 @@ mod tests {
         assert_eq!(err.line(), Some(4));
         assert!(err.to_string().contains("`a.x` must be"), "{err}");
         assert!(err.to_string().contains("t.toml:4:5"), "{err}");
+    }
+
+    #[test]
+    fn locate_walks_arrays_of_tables() {
+        let src = Source::from_text("p.toml", "[[main]]\na = 1\n\n[[main]]\na = 2\nb = 3\n");
+        assert_eq!(src.locate("main.1.b"), Some((6, 5)));
+        assert_eq!(src.locate("main.1"), Some((4, 1)));
+        assert_eq!(
+            src.locate("main.7.b"),
+            Some((1, 3)),
+            "falls back to the deepest part found"
+        );
     }
 
     #[test]

@@ -14,6 +14,7 @@ pub mod config;
 pub mod driver;
 pub mod fsutil;
 pub mod geometry;
+pub mod procedure;
 pub mod protocol;
 pub mod sim;
 pub mod study;

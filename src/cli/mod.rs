@@ -4,6 +4,7 @@
 //! rendering (`render_*` -> String) is kept apart from printing so it can be
 //! unit tested. Results go to stdout, diagnostics to stderr.
 
+mod check;
 mod sim;
 mod twin;
 
@@ -50,6 +51,8 @@ struct Cli {
 
 #[derive(Debug, Subcommand)]
 enum Command {
+    /// Validate a procedure and print its plan with estimated device times.
+    Check(check::CheckArgs),
     /// The simulated RL-16 and its bench (digital twin).
     #[command(subcommand)]
     Twin(twin::TwinCommand),
@@ -68,6 +71,7 @@ pub fn main() -> ExitCode {
         }
     };
     let result = match cli.command {
+        Command::Check(args) => check::run(args),
         Command::Twin(cmd) => twin::run(cmd),
         Command::Sim(cmd) => sim::run(cmd),
     };

@@ -1,0 +1,596 @@
+//! Acceptance procedures in TOML (`docs/procedures.md`), loaded in two
+//! stages: [`raw`] mirrors the file; [`Procedure::load`] validates it
+//! against the bench (chamber limits, table reach) and expands `repeat`
+//! into plain steps. The sequencer only ever sees a validated procedure.
+
+pub mod estimate;
+pub mod raw;
+
+use std::path::Path;
+
+use serde::Serialize;
+
+use crate::bench::BenchConfig;
+use crate::config::{Checker, ConfigError, Source};
+use crate::geometry::{Orientation, TableAngles, TableGeometry};
+use raw::{RawPosition, RawProcedure, RawStep};
+
+/// Which group a step belongs to.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Group {
+    /// Brings the bench to its starting state.
+    Setup,
+    /// The measurement.
+    Main,
+    /// Always runs once setup has started.
+    Cleanup,
+}
+
+impl Group {
+    fn key(self) -> &'static str {
+        match self {
+            Self::Setup => "setup",
+            Self::Main => "main",
+            Self::Cleanup => "cleanup",
+        }
+    }
+}
+
+/// Figures a `measure` step can compute (`docs/figures.md`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Metric {
+    /// 1-sigma of `averaging_s` averages of the Earth-removed rate.
+    BiasStability,
+    /// Peak-to-peak of the Earth-removed rate smoothed over `averaging_s`.
+    DriftPp,
+    /// The same after model-4 compensation.
+    CompensatedDriftPp,
+    /// Self-heating transient over the first half hour after power-on.
+    SelfHeating,
+    /// Mean Earth-removed rate.
+    MeanBias,
+}
+
+impl Metric {
+    fn parse(s: &str) -> Option<Self> {
+        Some(match s {
+            "bias_stability" => Self::BiasStability,
+            "drift_pp" => Self::DriftPp,
+            "compensated_drift_pp" => Self::CompensatedDriftPp,
+            "self_heating" => Self::SelfHeating,
+            "mean_bias" => Self::MeanBias,
+            _ => return None,
+        })
+    }
+
+    fn needs_averaging(self) -> bool {
+        matches!(
+            self,
+            Self::BiasStability | Self::DriftPp | Self::CompensatedDriftPp
+        )
+    }
+}
+
+/// A validated measurement.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Measure {
+    /// Name in the report.
+    pub name: String,
+    /// Figure.
+    pub metric: Metric,
+    /// Record labels it is computed on.
+    pub records: Vec<String>,
+    /// Averaging time, s (0 where the metric has none).
+    pub averaging_s: f64,
+    /// Lower limit.
+    pub low: Option<f64>,
+    /// Upper limit.
+    pub high: Option<f64>,
+    /// Unit.
+    pub unit: String,
+}
+
+/// What a step does.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+#[serde(tag = "action", rename_all = "snake_case")]
+pub enum StepKind {
+    /// New chamber set point and ramp; returns at once (the chamber ramps
+    /// while the next steps run).
+    Chamber {
+        /// degC.
+        set_c: f64,
+        /// degC/min.
+        ramp_c_per_min: f64,
+    },
+    /// Wait until the chamber is within `band_c` of its set point and the
+    /// case temperature changes slower than `case_slope_c_per_min`, both
+    /// for `hold_s`; error after `timeout_s`.
+    Soak {
+        /// degC.
+        band_c: f64,
+        /// degC/min.
+        case_slope_c_per_min: f64,
+        /// s.
+        hold_s: f64,
+        /// s.
+        timeout_s: f64,
+    },
+    /// Move the table and wait until in position.
+    Move {
+        /// Table angles to go to.
+        angles: TableAngles,
+        /// The unit's orientation there.
+        orientation: Orientation,
+    },
+    /// Let time pass.
+    Wait {
+        /// s.
+        duration_s: f64,
+    },
+    /// Record the gyro under `label`.
+    Record {
+        /// Label.
+        label: String,
+        /// s.
+        duration_s: f64,
+    },
+    /// Compute and judge a figure.
+    Measure(Measure),
+    /// A note for the operator.
+    Note {
+        /// Text.
+        text: String,
+    },
+    /// Operator confirmation (automatic on simulated benches).
+    Prompt {
+        /// Text.
+        text: String,
+    },
+}
+
+/// One step with where it came from.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Step {
+    /// Group.
+    pub group: Group,
+    /// Dotted key of the step in the file (`main.3`, `main.2.steps.1`).
+    pub key: String,
+    /// Line in the file.
+    pub line: usize,
+    /// What it does.
+    #[serde(flatten)]
+    pub kind: StepKind,
+}
+
+impl Step {
+    /// A short human description.
+    pub fn describe(&self) -> String {
+        match &self.kind {
+            StepKind::Chamber {
+                set_c,
+                ramp_c_per_min,
+            } => {
+                format!("chamber to {set_c:+.1} degC at {ramp_c_per_min} degC/min")
+            }
+            StepKind::Soak { band_c, hold_s, .. } => {
+                format!("soak (within {band_c} degC, {hold_s:.0} s)")
+            }
+            StepKind::Move {
+                angles,
+                orientation,
+            } => format!(
+                "move to az {:.1} el {:.1} roll {:.1} (outer {:.2}, inner {:.2})",
+                orientation.azimuth_deg,
+                orientation.elevation_deg,
+                orientation.roll_deg,
+                angles.outer_deg,
+                angles.inner_deg
+            ),
+            StepKind::Wait { duration_s } => format!("wait {duration_s:.0} s"),
+            StepKind::Record { label, duration_s } => {
+                format!("record {label} for {duration_s:.0} s")
+            }
+            StepKind::Measure(m) => format!("measure {}", m.name),
+            StepKind::Note { text } => format!("note: {text}"),
+            StepKind::Prompt { text } => format!("prompt: {text}"),
+        }
+    }
+}
+
+/// Procedure metadata.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Meta {
+    /// Name.
+    pub name: String,
+    /// Description.
+    pub description: String,
+    /// Unit type.
+    pub dut_type: String,
+    /// Spec judged against.
+    pub spec: String,
+}
+
+/// A validated procedure.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Procedure {
+    /// Metadata.
+    pub meta: Meta,
+    /// The file's text (logged with the run).
+    #[serde(skip)]
+    pub text: String,
+    /// Setup steps.
+    pub setup: Vec<Step>,
+    /// Main steps.
+    pub main: Vec<Step>,
+    /// Cleanup steps.
+    pub cleanup: Vec<Step>,
+}
+
+/// What validation checks steps against.
+#[derive(Debug, Clone)]
+pub struct Context<'a> {
+    /// Bench limits and geometry.
+    pub bench: &'a BenchConfig,
+}
+
+impl Procedure {
+    /// Read and validate a procedure file against a bench.
+    pub fn load(path: &Path, bench: &BenchConfig) -> Result<Self, ConfigError> {
+        Self::from_source(&Source::read(path)?, bench)
+    }
+
+    /// Parse and validate procedure text against a bench.
+    pub fn from_source(src: &Source, bench: &BenchConfig) -> Result<Self, ConfigError> {
+        let raw: RawProcedure = src.parse()?;
+        let mut v = Validator {
+            src,
+            c: Checker::new(src),
+            bench,
+            records: Vec::new(),
+            measures: Vec::new(),
+        };
+        let meta = Meta {
+            name: raw.procedure.name.clone(),
+            description: raw.procedure.description.clone(),
+            dut_type: raw.procedure.dut_type.clone(),
+            spec: raw.procedure.spec.clone(),
+        };
+        v.c.ensure(
+            !meta.name.trim().is_empty(),
+            "procedure.name",
+            "must not be empty",
+        )?;
+        let setup = v.group(Group::Setup, &raw.setup)?;
+        let main = v.group(Group::Main, &raw.main)?;
+        v.c.ensure(
+            !main.is_empty(),
+            "procedure",
+            "needs at least one [[main]] step",
+        )?;
+        let cleanup = v.group(Group::Cleanup, &raw.cleanup)?;
+        Ok(Self {
+            meta,
+            text: src.text.clone(),
+            setup,
+            main,
+            cleanup,
+        })
+    }
+
+    /// Every step in run order.
+    pub fn steps(&self) -> impl Iterator<Item = &Step> {
+        self.setup.iter().chain(&self.main).chain(&self.cleanup)
+    }
+
+    /// Every measurement.
+    pub fn measures(&self) -> impl Iterator<Item = &Measure> {
+        self.steps().filter_map(|s| match &s.kind {
+            StepKind::Measure(m) => Some(m),
+            _ => None,
+        })
+    }
+}
+
+struct Validator<'a> {
+    src: &'a Source,
+    c: Checker<'a>,
+    bench: &'a BenchConfig,
+    records: Vec<String>,
+    measures: Vec<String>,
+}
+
+impl Validator<'_> {
+    fn group(&mut self, group: Group, raw: &[RawStep]) -> Result<Vec<Step>, ConfigError> {
+        let mut out = Vec::new();
+        for (i, step) in raw.iter().enumerate() {
+            let key = format!("{}.{i}", group.key());
+            self.step(group, &key, step, None, &mut out)?;
+        }
+        Ok(out)
+    }
+
+    fn line(&self, key: &str) -> usize {
+        self.src.locate(key).map_or(1, |(l, _)| l)
+    }
+
+    fn push(&self, out: &mut Vec<Step>, group: Group, key: &str, kind: StepKind) {
+        out.push(Step {
+            group,
+            key: key.to_owned(),
+            line: self.line(key),
+            kind,
+        });
+    }
+
+    fn step(
+        &mut self,
+        group: Group,
+        key: &str,
+        step: &RawStep,
+        label: Option<&str>,
+        out: &mut Vec<Step>,
+    ) -> Result<(), ConfigError> {
+        let c = &self.c;
+        let subst = |s: &str| match label {
+            Some(l) => s.replace("{label}", l),
+            None => s.to_owned(),
+        };
+        let k = |field: &str| format!("{key}.{field}");
+        let kind = match step {
+            RawStep::Chamber {
+                set_c,
+                ramp_c_per_min,
+            } => {
+                let l = &self.bench.limits;
+                c.within(*set_c, l.chamber_min_c, l.chamber_max_c, &k("set_c"))
+                    .map_err(|_| {
+                        self.src.invalid(
+                            &k("set_c"),
+                            format!(
+                                "{set_c} degC is beyond the bench's chamber limits {}..{} degC",
+                                l.chamber_min_c, l.chamber_max_c
+                            ),
+                        )
+                    })?;
+                c.ensure(
+                    ramp_c_per_min.is_finite() && *ramp_c_per_min > 0.0 && *ramp_c_per_min <= l.chamber_max_ramp_c_per_min,
+                    &k("ramp_c_per_min"),
+                    &format!(
+                        "{ramp_c_per_min} degC/min is beyond the chamber's capability (0 < ramp <= {} degC/min)",
+                        l.chamber_max_ramp_c_per_min
+                    ),
+                )?;
+                StepKind::Chamber {
+                    set_c: *set_c,
+                    ramp_c_per_min: *ramp_c_per_min,
+                }
+            }
+            RawStep::Soak {
+                band_c,
+                case_slope_c_per_min,
+                hold_s,
+                timeout_s,
+            } => {
+                c.positive(*band_c, &k("band_c"))?;
+                c.positive(*case_slope_c_per_min, &k("case_slope_c_per_min"))?;
+                c.non_negative(*hold_s, &k("hold_s"))?;
+                c.ensure(
+                    timeout_s.is_finite() && timeout_s > hold_s,
+                    &k("timeout_s"),
+                    "must be longer than hold_s, s",
+                )?;
+                StepKind::Soak {
+                    band_c: *band_c,
+                    case_slope_c_per_min: *case_slope_c_per_min,
+                    hold_s: *hold_s,
+                    timeout_s: *timeout_s,
+                }
+            }
+            RawStep::Move { orientation, table } => {
+                let (angles, orientation) =
+                    self.resolve(key, orientation.as_ref(), table.as_ref())?;
+                StepKind::Move {
+                    angles,
+                    orientation,
+                }
+            }
+            RawStep::Wait { duration_s } => StepKind::Wait {
+                duration_s: c.positive(*duration_s, &k("duration_s"))?,
+            },
+            RawStep::Record {
+                label: l,
+                duration_s,
+            } => {
+                let l = subst(l);
+                c.ensure(!l.trim().is_empty(), &k("label"), "must not be empty")?;
+                c.ensure(
+                    !self.records.contains(&l),
+                    &k("label"),
+                    &format!("record {l:?} is already used; labels must be unique"),
+                )?;
+                self.records.push(l.clone());
+                StepKind::Record {
+                    label: l,
+                    duration_s: c.positive(*duration_s, &k("duration_s"))?,
+                }
+            }
+            RawStep::Measure {
+                name,
+                metric,
+                records,
+                averaging_s,
+                low,
+                high,
+                unit,
+            } => {
+                let name = subst(name);
+                let metric = Metric::parse(metric).ok_or_else(|| {
+                    self.src.invalid(
+                        &k("metric"),
+                        format!(
+                            "{metric:?} is not a metric; expected bias_stability, drift_pp, \
+                             compensated_drift_pp, self_heating or mean_bias"
+                        ),
+                    )
+                })?;
+                c.ensure(
+                    !self.measures.contains(&name),
+                    &k("name"),
+                    &format!("measurement {name:?} is already used"),
+                )?;
+                self.measures.push(name.clone());
+                let records: Vec<String> = records.iter().map(|r| subst(r)).collect();
+                c.ensure(
+                    !records.is_empty(),
+                    &k("records"),
+                    "must name at least one record",
+                )?;
+                for r in &records {
+                    c.ensure(
+                        self.records.contains(r),
+                        &k("records"),
+                        &format!("names record {r:?}, which no earlier record step makes"),
+                    )?;
+                }
+                let averaging_s = match (metric.needs_averaging(), averaging_s) {
+                    (true, Some(a)) => c.positive(*a, &k("averaging_s"))?,
+                    (true, None) => {
+                        return Err(self
+                            .src
+                            .invalid(key, "needs averaging_s (s) for this metric"));
+                    }
+                    (false, _) => 0.0,
+                };
+                if let (Some(lo), Some(hi)) = (low, high) {
+                    c.ensure(lo <= hi, &k("low"), "must not be above high")?;
+                }
+                c.ensure(
+                    low.is_some() || high.is_some(),
+                    key,
+                    "needs a limit: low, high or both",
+                )?;
+                c.ensure(
+                    !unit.trim().is_empty(),
+                    &k("unit"),
+                    "must name the unit, e.g. \"deg/h\"",
+                )?;
+                StepKind::Measure(Measure {
+                    name,
+                    metric,
+                    records,
+                    averaging_s,
+                    low: *low,
+                    high: *high,
+                    unit: unit.clone(),
+                })
+            }
+            RawStep::Note { text } => StepKind::Note { text: subst(text) },
+            RawStep::Prompt { text } => StepKind::Prompt { text: subst(text) },
+            RawStep::Repeat { positions, steps } => {
+                c.ensure(label.is_none(), key, "a repeat cannot hold another repeat")?;
+                c.ensure(
+                    !positions.is_empty(),
+                    &k("positions"),
+                    "must list at least one position",
+                )?;
+                for (p, pos) in positions.iter().enumerate() {
+                    let pkey = format!("{key}.positions.{p}");
+                    let (angles, orientation) = self.position(&pkey, pos)?;
+                    self.push(
+                        out,
+                        group,
+                        &pkey,
+                        StepKind::Move {
+                            angles,
+                            orientation,
+                        },
+                    );
+                    for (j, s) in steps.iter().enumerate() {
+                        self.step(group, &format!("{key}.steps.{j}"), s, Some(&pos.label), out)?;
+                    }
+                }
+                return Ok(());
+            }
+        };
+        self.push(out, group, key, kind);
+        Ok(())
+    }
+
+    fn position(
+        &self,
+        key: &str,
+        p: &RawPosition,
+    ) -> Result<(TableAngles, Orientation), ConfigError> {
+        self.c.ensure(
+            !p.label.trim().is_empty(),
+            &format!("{key}.label"),
+            "must not be empty",
+        )?;
+        self.resolve(key, p.orientation.as_ref(), p.table.as_ref())
+    }
+
+    /// Table angles and orientation for a move given either.
+    fn resolve(
+        &self,
+        key: &str,
+        orientation: Option<&Orientation>,
+        table: Option<&TableAngles>,
+    ) -> Result<(TableAngles, Orientation), ConfigError> {
+        let g: &TableGeometry = &self.bench.table.geometry;
+        let l = &self.bench.limits;
+        // With the axis vertical, yaw and roll turn about the same line and
+        // the Euler split of a pose is arbitrary: keep the one asked for.
+        let (angles, asked, field) = match (orientation, table) {
+            (Some(o), None) => {
+                let a = g.angles_for(*o).map_err(|e| {
+                    self.src
+                        .invalid(&format!("{key}.orientation"), e.to_string())
+                })?;
+                (
+                    fit_range(a, l.outer_range_deg, l.inner_range_deg),
+                    Some(*o),
+                    "orientation",
+                )
+            }
+            (None, Some(t)) => (*t, None, "table"),
+            _ => {
+                return Err(self
+                    .src
+                    .invalid(key, "needs exactly one of `orientation` or `table`"));
+            }
+        };
+        for (v, r, axis) in [
+            (angles.outer_deg, l.outer_range_deg, "outer"),
+            (angles.inner_deg, l.inner_range_deg, "inner"),
+        ] {
+            self.c.ensure(
+                v.is_finite() && v >= r[0] && v <= r[1],
+                &format!("{key}.{field}"),
+                &format!(
+                    "needs the {axis} axis at {v:.2} deg, outside the bench's travel {}..{} deg",
+                    r[0], r[1]
+                ),
+            )?;
+        }
+        Ok((angles, asked.unwrap_or_else(|| g.orientation(angles))))
+    }
+}
+
+/// Bring each angle into its travel range by whole turns, where possible.
+fn fit_range(a: TableAngles, outer: [f64; 2], inner: [f64; 2]) -> TableAngles {
+    let fit = |v: f64, r: [f64; 2]| {
+        [v, v - 360.0, v + 360.0]
+            .into_iter()
+            .find(|x| *x >= r[0] && *x <= r[1])
+            .unwrap_or(v)
+    };
+    TableAngles {
+        outer_deg: fit(a.outer_deg, outer),
+        inner_deg: fit(a.inner_deg, inner),
+    }
+}
+
+#[cfg(test)]
+mod tests;

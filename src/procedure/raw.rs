@@ -1,0 +1,127 @@
+//! Stage one: serde structs that mirror the procedure TOML one-to-one.
+
+use serde::Deserialize;
+
+use crate::geometry::{Orientation, TableAngles};
+
+/// A whole procedure file.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RawProcedure {
+    /// Metadata.
+    pub procedure: RawMeta,
+    /// Steps that bring the bench to its starting state.
+    #[serde(default)]
+    pub setup: Vec<RawStep>,
+    /// The measurement itself.
+    #[serde(default)]
+    pub main: Vec<RawStep>,
+    /// Steps that always run once setup has started (safe state).
+    #[serde(default)]
+    pub cleanup: Vec<RawStep>,
+}
+
+/// `[procedure]`.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RawMeta {
+    /// Procedure name.
+    pub name: String,
+    /// What it is for.
+    #[serde(default)]
+    pub description: String,
+    /// Type of unit it tests (e.g. `RL-16`).
+    pub dut_type: String,
+    /// The specification it judges against, e.g. `0.05 deg/h bias stability`.
+    #[serde(default)]
+    pub spec: String,
+}
+
+/// A position of a `repeat` step.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RawPosition {
+    /// Label substituted for `{label}` in the repeated steps.
+    pub label: String,
+    /// Orientation of the unit (azimuth, elevation, roll).
+    pub orientation: Option<Orientation>,
+    /// Or table angles directly.
+    pub table: Option<TableAngles>,
+}
+
+/// One step; `action` says which fields apply.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(tag = "action", rename_all = "snake_case", deny_unknown_fields)]
+pub enum RawStep {
+    /// Chamber set point, reached at `ramp_c_per_min`.
+    Chamber {
+        /// Set point, degC.
+        set_c: f64,
+        /// Ramp, degC/min.
+        ramp_c_per_min: f64,
+    },
+    /// Wait for thermal soak.
+    Soak {
+        /// Chamber air within this of its set point, degC.
+        band_c: f64,
+        /// Case temperature slope below this, degC/min.
+        case_slope_c_per_min: f64,
+        /// Both conditions held this long, s.
+        hold_s: f64,
+        /// Give up (error) after this long, s.
+        timeout_s: f64,
+    },
+    /// Move the table.
+    Move {
+        /// By orientation of the unit.
+        orientation: Option<Orientation>,
+        /// Or by table angles.
+        table: Option<TableAngles>,
+    },
+    /// Let time pass.
+    Wait {
+        /// s.
+        duration_s: f64,
+    },
+    /// Record the gyro under a label.
+    Record {
+        /// Label (measurements refer to it).
+        label: String,
+        /// s.
+        duration_s: f64,
+    },
+    /// Compute a figure and judge it against limits.
+    Measure {
+        /// Name in the report (e.g. `bias_stability_dph:az000`).
+        name: String,
+        /// Which figure (see `docs/procedures.md`).
+        metric: String,
+        /// Records it is computed on.
+        records: Vec<String>,
+        /// Averaging time, s.
+        averaging_s: Option<f64>,
+        /// Lower limit.
+        low: Option<f64>,
+        /// Upper limit.
+        high: Option<f64>,
+        /// Unit of the value and limits.
+        unit: String,
+    },
+    /// A note for the operator (logged, shown).
+    Note {
+        /// Text.
+        text: String,
+    },
+    /// Ask the operator to confirm before going on.
+    Prompt {
+        /// Text.
+        text: String,
+    },
+    /// Run `steps` once per position, `{label}` replaced by its label.
+    Repeat {
+        /// Positions.
+        positions: Vec<RawPosition>,
+        /// Steps run at each position (after moving there).
+        steps: Vec<RawStep>,
+    },
+}

@@ -1,0 +1,159 @@
+use super::*;
+
+fn load(name: &str, text: &str) -> Result<Procedure, ConfigError> {
+    Procedure::from_source(&Source::from_text(name, text), &BenchConfig::embedded())
+}
+
+const SMOKE: &str = include_str!("../../procedures/smoke.toml");
+
+#[test]
+fn shipped_procedures_validate_against_the_embedded_bench() {
+    for (name, text) in [
+        ("smoke.toml", SMOKE),
+        (
+            "thermal_cycle.toml",
+            include_str!("../../procedures/thermal_cycle.toml"),
+        ),
+        (
+            "orientation.toml",
+            include_str!("../../procedures/orientation.toml"),
+        ),
+        (
+            "acceptance.toml",
+            include_str!("../../procedures/acceptance.toml"),
+        ),
+    ] {
+        let p = load(name, text).unwrap_or_else(|e| panic!("{name}: {e}"));
+        assert!(!p.main.is_empty(), "{name}");
+    }
+}
+
+#[test]
+fn orientation_run_reaches_the_nine_positions_of_the_study() {
+    let p = load(
+        "orientation.toml",
+        include_str!("../../procedures/orientation.toml"),
+    )
+    .expect("valid");
+    let moves: Vec<(TableAngles, Orientation)> = p
+        .main
+        .iter()
+        .filter_map(|s| match s.kind {
+            StepKind::Move {
+                angles,
+                orientation,
+            } => Some((angles, orientation)),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(moves.len(), 9);
+    for (a, o) in &moves[..4] {
+        assert!(
+            (a.outer_deg - 90.0).abs() < 1e-6 && (o.elevation_deg - 90.0).abs() < 1e-6,
+            "{a:?}"
+        );
+    }
+    for (a, o) in &moves[4..8] {
+        assert!(
+            a.outer_deg.abs() < 1e-6 && o.elevation_deg.abs() < 1e-6,
+            "{a:?}"
+        );
+    }
+    assert!((moves[8].0.outer_deg - 35.0).abs() < 1e-6);
+    let inner: Vec<f64> = moves[4..8]
+        .iter()
+        .map(|(a, _)| a.inner_deg.rem_euclid(360.0).round())
+        .collect();
+    assert_eq!(inner, vec![0.0, 90.0, 180.0, 270.0], "four rolls");
+    let measures: Vec<&str> = p.measures().map(|m| m.name.as_str()).collect();
+    assert!(measures.contains(&"bias_stability_dph:az000"));
+    assert!(measures.contains(&"bias_stability_dph:tilt55"));
+    assert_eq!(
+        measures
+            .iter()
+            .filter(|m| m.starts_with("bias_stability_dph:"))
+            .count(),
+        9
+    );
+}
+
+fn line_of(text: &str, needle: &str) -> usize {
+    text.lines()
+        .position(|l| l.contains(needle))
+        .expect("needle in text")
+        + 1
+}
+
+fn refused(text: &str, needle: &str, want: &str) {
+    let err = load("bad.toml", text).expect_err("must be refused");
+    let msg = err.to_string();
+    assert!(msg.contains(want), "{msg}");
+    assert_eq!(err.line(), Some(line_of(text, needle)), "{msg}");
+}
+
+#[test]
+fn set_point_beyond_the_chamber_limits_is_refused() {
+    let t = SMOKE.replacen("set_c = 20.0", "set_c = 95.0", 1);
+    refused(&t, "set_c = 95.0", "beyond the bench's chamber limits");
+}
+
+#[test]
+fn ramp_beyond_capability_is_refused() {
+    let t = SMOKE.replacen("ramp_c_per_min = 1.0", "ramp_c_per_min = 12.0", 1);
+    refused(
+        &t,
+        "ramp_c_per_min = 12.0",
+        "beyond the chamber's capability",
+    );
+}
+
+#[test]
+fn unreachable_orientation_is_refused() {
+    let t = SMOKE.replacen(
+        "azimuth_deg = 90.0, elevation_deg = 0.0",
+        "azimuth_deg = 0.0, elevation_deg = 0.0",
+        1,
+    );
+    refused(
+        &t,
+        "azimuth_deg = 0.0, elevation_deg = 0.0",
+        "the table cannot reach",
+    );
+}
+
+#[test]
+fn unknown_key_is_refused_with_its_line() {
+    let t = SMOKE.replacen("duration_s = 30.0", "duration_s = 30.0\nspeed = 2", 1);
+    let err = load("bad.toml", &t).expect_err("unknown key");
+    assert!(err.to_string().contains("unknown field `speed`"), "{err}");
+}
+
+#[test]
+fn measure_of_a_record_that_does_not_exist_is_refused() {
+    let t = SMOKE.replacen("records = [\"{label}\"]", "records = [\"nowhere\"]", 1);
+    refused(
+        &t,
+        "records = [\"nowhere\"]",
+        "no earlier record step makes",
+    );
+}
+
+#[test]
+fn unknown_metric_and_missing_limits_are_refused() {
+    let t = SMOKE.replacen("metric = \"bias_stability\"", "metric = \"vibes\"", 1);
+    refused(&t, "metric = \"vibes\"", "is not a metric");
+    let t = SMOKE.replacen("high = 0.2\n", "", 1);
+    let err = load("bad.toml", &t).expect_err("no limit");
+    assert!(err.to_string().contains("needs a limit"), "{err}");
+}
+
+#[test]
+fn empty_and_binary_files_are_refused() {
+    let err = load("empty.toml", "").expect_err("empty");
+    assert!(
+        err.to_string().contains("missing field `procedure`"),
+        "{err}"
+    );
+    let err = load("bin.toml", "\u{0}\u{1}\u{2}garbage").expect_err("binary");
+    assert_eq!(err.line(), Some(1));
+}
