@@ -144,6 +144,35 @@ impl Clock for WallClock {
     }
 }
 
+/// The current UTC date and time, for the start time logged with a run.
+pub fn utc_now() -> chrono::DateTime<chrono::Utc> {
+    chrono::Utc::now()
+}
+
+/// Wall time elapsed since it was started (for flushing logs every second
+/// of wall time whatever the device time does).
+#[derive(Debug, Clone, Copy)]
+pub struct Stopwatch(Instant);
+
+impl Stopwatch {
+    /// Start now.
+    pub fn start() -> Self {
+        Self(Instant::now())
+    }
+
+    /// Seconds since start.
+    pub fn elapsed_s(&self) -> f64 {
+        self.0.elapsed().as_secs_f64()
+    }
+
+    /// Seconds since start, and restart.
+    pub fn lap_s(&mut self) -> f64 {
+        let e = self.elapsed_s();
+        self.0 = Instant::now();
+        e
+    }
+}
+
 /// Wall-clock seconds taken by `f`, for benchmarks that report speed.
 pub fn time_it<T>(f: impl FnOnce() -> T) -> (T, f64) {
     let start = Instant::now();

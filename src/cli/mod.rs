@@ -5,6 +5,7 @@
 //! unit tested. Results go to stdout, diagnostics to stderr.
 
 mod check;
+mod run;
 mod sim;
 mod twin;
 
@@ -19,6 +20,8 @@ pub enum Outcome {
     Success,
     /// The unit failed its limits: exit 3.
     Fail,
+    /// A device or data failure ended the run (reported): exit 1.
+    Error,
     /// Interrupted by the operator: exit 130.
     Interrupted,
 }
@@ -33,6 +36,7 @@ impl Outcome {
         match self {
             Self::Success => 0,
             Self::Fail => 3,
+            Self::Error => EXIT_ERROR,
             Self::Interrupted => 130,
         }
     }
@@ -51,6 +55,8 @@ struct Cli {
 
 #[derive(Debug, Subcommand)]
 enum Command {
+    /// Run an acceptance procedure: log to MCAP, judge, report.
+    Run(run::RunArgs),
     /// Validate a procedure and print its plan with estimated device times.
     Check(check::CheckArgs),
     /// The simulated RL-16 and its bench (digital twin).
@@ -71,6 +77,7 @@ pub fn main() -> ExitCode {
         }
     };
     let result = match cli.command {
+        Command::Run(args) => run::run(args),
         Command::Check(args) => check::run(args),
         Command::Twin(cmd) => twin::run(cmd),
         Command::Sim(cmd) => sim::run(cmd),

@@ -1,0 +1,258 @@
+//! `gyrobench run PROCEDURE`: run an acceptance procedure, log it, judge it.
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+
+use anyhow::{Context, Result};
+use clap::Args;
+
+use super::Outcome;
+use super::check::load_bench;
+use crate::clock::{Pacing, VirtualClock, utc_now};
+use crate::coeffs::CoeffsFile;
+use crate::procedure::Procedure;
+use crate::recorder::{Recorder, RunMeta};
+use crate::report::{Report, render_html};
+use crate::sequencer::embedded::{EmbeddedBench, Fault, TEMP_LSB_C};
+use crate::sequencer::{self, BenchIo, BenchState, Options, Progress};
+use crate::twin::TwinConfig;
+
+#[derive(Debug, Args)]
+pub struct RunArgs {
+    /// Procedure file (TOML), e.g. procedures/acceptance.toml.
+    procedure: PathBuf,
+    /// Bench file (default: the embedded simulated bench, on virtual time).
+    #[arg(long)]
+    bench: Option<PathBuf>,
+    /// Run directory (default: runs/<procedure>-<UTC time>).
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Simulated bench speed: `max` or a factor over real time.
+    #[arg(long, default_value = "max")]
+    speed: String,
+    /// Seed of the simulated bench.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Model-4 coefficients for compensation (default: fitted on the run).
+    #[arg(long)]
+    coeffs: Option<PathBuf>,
+    /// Twin configuration of the simulated bench (default: the RL-16 twin).
+    #[arg(long)]
+    twin: Option<PathBuf>,
+    /// Serial number of the unit under test.
+    #[arg(long, default_value = "SIM-0001")]
+    dut: String,
+    /// Simulated bench only: play a fault, FAULT@SECONDS of device time
+    /// (chamber-alarm, chamber-silent, table-interlock, gyro-silent).
+    #[arg(long, value_name = "FAULT@SECONDS")]
+    inject: Vec<String>,
+}
+
+/// Plain progress lines on stderr.
+struct Lines {
+    last_print_s: f64,
+    step: String,
+}
+
+impl Progress for Lines {
+    fn step(&mut self, s: &crate::procedure::Step, i: usize, n: usize) {
+        self.step = format!("[{}/{n}] {}", i + 1, s.describe());
+        eprintln!("{}", self.step);
+    }
+
+    fn tick(&mut self, st: &BenchState) {
+        if st.t_s - self.last_print_s >= 3600.0 {
+            self.last_print_s = st.t_s;
+            eprintln!(
+                "  t = {:.2} h  chamber {:+.2} degC (set {:+.1})  table {:.1}/{:.1} deg",
+                st.t_s / 3600.0,
+                st.chamber.air_c,
+                st.chamber.set_point_c,
+                st.table.angles.outer_deg,
+                st.table.angles.inner_deg
+            );
+        }
+    }
+}
+
+fn parse_inject(s: &str) -> Result<(f64, Fault)> {
+    let (f, t) = s.split_once('@').with_context(|| {
+        format!("--inject {s:?}: expected FAULT@SECONDS, e.g. chamber-silent@600")
+    })?;
+    let fault: Fault = f.parse().map_err(anyhow::Error::msg)?;
+    let at: f64 = t
+        .parse()
+        .ok()
+        .filter(|v: &f64| v.is_finite() && *v >= 0.0)
+        .with_context(|| format!("--inject {s:?}: the time must be seconds of device time"))?;
+    Ok((at, fault))
+}
+
+fn pacing(speed: &str) -> Result<Pacing> {
+    if speed == "max" {
+        return Ok(Pacing::Max);
+    }
+    let f: f64 = speed
+        .parse()
+        .ok()
+        .filter(|v: &f64| v.is_finite() && *v > 0.0)
+        .with_context(|| format!("--speed {speed:?}: expected `max` or a positive factor"))?;
+    Ok(Pacing::Factor(f))
+}
+
+pub fn run(args: RunArgs) -> Result<Outcome> {
+    let bench_cfg = load_bench(args.bench.as_ref())?;
+    let procedure = Procedure::load(&args.procedure, &bench_cfg)
+        .with_context(|| format!("checking procedure {}", args.procedure.display()))?;
+    anyhow::ensure!(
+        bench_cfg.is_embedded(),
+        "running on device benches (serial/tcp/pty specs in {}) is not available in this version; \
+         use the embedded bench (no --bench) or fixtures/bench/embedded.toml",
+        args.bench
+            .as_ref()
+            .map_or("the bench file".into(), |p| p.display().to_string())
+    );
+    let twin = match &args.twin {
+        Some(p) => TwinConfig::load(p).with_context(|| format!("loading twin {}", p.display()))?,
+        None => TwinConfig::default_rl16(),
+    };
+    let coeffs = match &args.coeffs {
+        Some(p) => Some(
+            CoeffsFile::load(p)
+                .with_context(|| format!("loading coefficients {}", p.display()))?
+                .fit(),
+        ),
+        None => None,
+    };
+    let faults: Vec<(f64, Fault)> = args
+        .inject
+        .iter()
+        .map(|s| parse_inject(s))
+        .collect::<Result<_>>()?;
+    let pacing = pacing(&args.speed)?;
+
+    let start = utc_now();
+    let out = args.out.clone().unwrap_or_else(|| {
+        PathBuf::from("runs").join(format!(
+            "{}-{}",
+            procedure.meta.name,
+            start.format("%Y%m%dT%H%M%SZ")
+        ))
+    });
+    std::fs::create_dir_all(&out)
+        .with_context(|| format!("creating the run directory {}", out.display()))?;
+
+    let clock = Arc::new(VirtualClock::new(pacing));
+    let mut bench = EmbeddedBench::new(twin.clone(), args.seed, clock);
+    for (at, f) in faults {
+        bench.schedule(at, f);
+    }
+    let mut meta = RunMeta::default();
+    for (k, v) in [
+        ("procedure_toml", procedure.text.clone()),
+        ("procedure_path", args.procedure.display().to_string()),
+        (
+            "bench_toml",
+            toml::to_string_pretty(&bench_cfg).unwrap_or_default(),
+        ),
+        ("twin_toml", twin.to_toml()),
+        (
+            "site",
+            serde_json::to_string(&bench_cfg.site).unwrap_or_default(),
+        ),
+        ("dut_serial", args.dut.clone()),
+        ("dut_type", procedure.meta.dut_type.clone()),
+        ("software_version", env!("CARGO_PKG_VERSION").to_owned()),
+        ("start_time_utc", start.to_rfc3339()),
+        ("seed", args.seed.to_string()),
+        ("speed", args.speed.clone()),
+    ] {
+        meta.entries.insert(k.to_owned(), v);
+    }
+    let mcap_path = out.join("run.mcap");
+    let start_ns = start.timestamp_nanos_opt().unwrap_or(0).max(0) as u64;
+    let mut recorder = Recorder::create(
+        &mcap_path,
+        &meta,
+        start_ns,
+        bench.frame_dt_s(),
+        bench.lsb_arcsec(),
+        TEMP_LSB_C,
+    )
+    .with_context(|| format!("creating {}", mcap_path.display()))?;
+
+    let interrupt = Arc::new(AtomicBool::new(false));
+    let opts = Options {
+        coeffs,
+        interrupt: interrupt.clone(),
+        dut_max_c: bench_cfg.limits.dut_max_c,
+        in_position: (
+            bench_cfg.devices.table.in_position_deg,
+            bench_cfg.devices.table.settle_s,
+        ),
+        move_timeout_s: 600.0,
+    };
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .context("starting the async runtime")?;
+    eprintln!("running {} -> {}", procedure.meta.name, out.display());
+    let result = rt.block_on(async {
+        watch_ctrl_c(interrupt);
+        let mut progress = Lines {
+            last_print_s: 0.0,
+            step: String::new(),
+        };
+        sequencer::run(&procedure, &mut bench, &mut recorder, &mut progress, &opts).await
+    });
+    let link = bench.link_stats();
+    recorder
+        .link(result.device_time_s, &link)
+        .and_then(|()| recorder.finish())
+        .with_context(|| format!("finishing {}", mcap_path.display()))?;
+
+    let report = Report::new(
+        &procedure,
+        &result,
+        &args.dut,
+        &start.to_rfc3339(),
+        link,
+        Some(args.seed),
+        &args
+            .bench
+            .as_ref()
+            .map_or("embedded".into(), |p| p.display().to_string()),
+    );
+    write(&out.join("report.json"), report.to_json().as_bytes())?;
+    write(
+        &out.join("report.html"),
+        render_html(&report, &result.records).as_bytes(),
+    )?;
+    print!("{}", report.render_text());
+    eprintln!("log and report in {}", out.display());
+    Ok(match result.outcome {
+        sequencer::Outcome::Pass => Outcome::Success,
+        sequencer::Outcome::Fail => Outcome::Fail,
+        sequencer::Outcome::Error => Outcome::Error,
+        sequencer::Outcome::Aborted => Outcome::Interrupted,
+    })
+}
+
+fn write(path: &Path, bytes: &[u8]) -> Result<()> {
+    crate::fsutil::write_atomic(path, bytes).with_context(|| format!("writing {}", path.display()))
+}
+
+/// First Ctrl-C: stop and clean up. Second: abort at once.
+fn watch_ctrl_c(interrupt: Arc<AtomicBool>) {
+    tokio::spawn(async move {
+        if tokio::signal::ctrl_c().await.is_ok() {
+            eprintln!("interrupted: running cleanup (Ctrl-C again to abort without cleanup)");
+            interrupt.store(true, Ordering::Relaxed);
+        }
+        if tokio::signal::ctrl_c().await.is_ok() {
+            eprintln!("aborted without cleanup");
+            std::process::exit(130);
+        }
+    });
+}

@@ -1,0 +1,88 @@
+//! The compensation coefficients file (`--coeffs`, written by calibration):
+//!
+//! ```toml
+//! [model4]
+//! k1_dph_per_c = -0.12
+//! k2_dph_per_c2 = -0.01
+//! k3_dph_per_c_per_s = 20.0
+//! k4_dph_per_c = -0.007
+//! k5_dph = 0.36
+//! warmup_tau_s = 600.0
+//! offset_dph = 0.0
+//! ```
+
+use std::path::Path;
+
+use serde::{Deserialize, Serialize};
+
+use crate::analysis::model::{Fit, ModelKind};
+use crate::config::{Checker, ConfigError, Source};
+
+/// `[model4]` of a coefficients file.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Model4Coeffs {
+    /// K1, deg/h per degC of dT.
+    pub k1_dph_per_c: f64,
+    /// K2, deg/h per degC^2.
+    pub k2_dph_per_c2: f64,
+    /// K3, deg/h per degC/s.
+    pub k3_dph_per_c_per_s: f64,
+    /// K4, deg/h per degC of case temperature.
+    pub k4_dph_per_c: f64,
+    /// K5, deg/h.
+    pub k5_dph: f64,
+    /// tau_w, s.
+    pub warmup_tau_s: f64,
+    /// Constant, deg/h (drift figures do not depend on it).
+    #[serde(default)]
+    pub offset_dph: f64,
+}
+
+/// A coefficients file.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CoeffsFile {
+    /// The study's model 4.
+    pub model4: Model4Coeffs,
+}
+
+impl CoeffsFile {
+    /// Read and check a coefficients file.
+    pub fn load(path: &Path) -> Result<Self, ConfigError> {
+        let src = Source::read(path)?;
+        let f: Self = src.parse()?;
+        let c = Checker::new(&src);
+        let m = &f.model4;
+        for (v, k) in [
+            (m.k1_dph_per_c, "model4.k1_dph_per_c"),
+            (m.k2_dph_per_c2, "model4.k2_dph_per_c2"),
+            (m.k3_dph_per_c_per_s, "model4.k3_dph_per_c_per_s"),
+            (m.k4_dph_per_c, "model4.k4_dph_per_c"),
+            (m.k5_dph, "model4.k5_dph"),
+            (m.offset_dph, "model4.offset_dph"),
+        ] {
+            c.finite(v, k)?;
+        }
+        c.positive(m.warmup_tau_s, "model4.warmup_tau_s")?;
+        Ok(f)
+    }
+
+    /// As a fitted model.
+    pub fn fit(&self) -> Fit {
+        let m = &self.model4;
+        Fit {
+            kind: ModelKind::Model4,
+            coeffs: vec![
+                m.k1_dph_per_c,
+                m.k2_dph_per_c2,
+                m.k3_dph_per_c_per_s,
+                m.k4_dph_per_c,
+                m.k5_dph,
+                m.offset_dph,
+            ],
+            warmup_tau_s: Some(m.warmup_tau_s),
+            rms_dph: f64::NAN,
+        }
+    }
+}

@@ -1,0 +1,214 @@
+//! The embedded simulated bench: the twin itself behind [`BenchIo`], on
+//! virtual time (as fast as the machine allows, or paced at a speed
+//! factor). Faults can be scheduled to test failure handling end to end.
+
+use std::sync::Arc;
+
+use async_trait::async_trait;
+
+use super::{BenchIo, BenchState, FrameRecord, Tick};
+use crate::clock::{Clock, VirtualClock};
+use crate::driver::{ChamberMode, ChamberReading, DeviceError, TableReading};
+use crate::geometry::{Site, TableAngles, TableGeometry};
+use crate::protocol::frame::LinkStats;
+use crate::sim::PASSIVE_DRIFT_C_PER_MIN;
+use crate::twin::{AxisDemand, Twin, TwinConfig};
+
+/// Temperature resolution of the frames, degC (the documented layout).
+pub const TEMP_LSB_C: f64 = 0.01;
+
+/// A fault the embedded bench plays at a device time.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Fault {
+    /// The chamber raises alarm 9.
+    ChamberAlarm,
+    /// The chamber stops answering.
+    ChamberSilent,
+    /// The table's system interlock trips.
+    TableInterlock,
+    /// The gyro stops sending.
+    GyroSilent,
+}
+
+impl std::str::FromStr for Fault {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        Ok(match s {
+            "chamber-alarm" => Self::ChamberAlarm,
+            "chamber-silent" => Self::ChamberSilent,
+            "table-interlock" => Self::TableInterlock,
+            "gyro-silent" => Self::GyroSilent,
+            _ => {
+                return Err(format!(
+                    "unknown fault {s:?}; expected chamber-alarm, chamber-silent, table-interlock or gyro-silent"
+                ));
+            }
+        })
+    }
+}
+
+/// The twin as a bench.
+#[derive(Debug)]
+pub struct EmbeddedBench {
+    twin: Twin,
+    clock: Arc<VirtualClock>,
+    site: Site,
+    geometry: TableGeometry,
+    commanded: TableAngles,
+    mode: ChamberMode,
+    faults: Vec<(f64, Fault)>,
+    frames: u64,
+}
+
+impl EmbeddedBench {
+    /// A bench around a fresh twin (gyro powered at t = 0), paced by `clock`.
+    pub fn new(cfg: TwinConfig, seed: u64, clock: Arc<VirtualClock>) -> Self {
+        let commanded = cfg.table.initial;
+        Self {
+            site: cfg.site,
+            geometry: cfg.table.geometry,
+            twin: Twin::new(cfg, seed),
+            clock,
+            commanded,
+            mode: ChamberMode::Constant,
+            faults: Vec::new(),
+            frames: 0,
+        }
+    }
+
+    /// Play `fault` from device time `at_s` on.
+    pub fn schedule(&mut self, at_s: f64, fault: Fault) {
+        self.faults.push((at_s, fault));
+    }
+
+    fn active(&self, f: Fault) -> bool {
+        let now = self.twin.time_s();
+        self.faults.iter().any(|(t, g)| *g == f && now >= *t)
+    }
+
+    fn check(&self) -> Result<(), DeviceError> {
+        if self.active(Fault::ChamberSilent) {
+            return Err(DeviceError::Timeout {
+                device: "chamber".into(),
+                request: "TEMP?".into(),
+                timeout_s: 1.0,
+                attempts: 3,
+            });
+        }
+        if self.active(Fault::TableInterlock) {
+            return Err(DeviceError::Interlock {
+                device: "table".into(),
+            });
+        }
+        if self.active(Fault::GyroSilent) {
+            return Err(DeviceError::Silent {
+                device: "gyro".into(),
+                timeout_s: 1.0,
+            });
+        }
+        Ok(())
+    }
+
+    fn state(&self) -> BenchState {
+        let (air, target, _) = self.twin.chamber_state();
+        let angles = self.twin.table_angles();
+        let rates = self.twin.table_rates();
+        BenchState {
+            t_s: self.twin.time_s(),
+            chamber: ChamberReading {
+                air_c: air,
+                set_point_c: target,
+                mode: self.mode,
+                alarms: if self.active(Fault::ChamberAlarm) {
+                    vec![9]
+                } else {
+                    Vec::new()
+                },
+            },
+            table: TableReading { angles, rates },
+            commanded: self.commanded,
+            orientation: self.geometry.orientation(angles),
+            reference_dph: self.geometry.kinematic_rate_dph(&self.site, angles, rates),
+        }
+    }
+}
+
+#[async_trait]
+impl BenchIo for EmbeddedBench {
+    fn now_s(&self) -> f64 {
+        self.twin.time_s()
+    }
+
+    fn is_simulated(&self) -> bool {
+        true
+    }
+
+    fn frame_dt_s(&self) -> f64 {
+        self.twin.frame_dt_s()
+    }
+
+    fn lsb_arcsec(&self) -> f64 {
+        self.twin.config().gyro.lsb_arcsec
+    }
+
+    fn temp_lsb_c(&self) -> f64 {
+        TEMP_LSB_C
+    }
+
+    async fn set_chamber(&mut self, set_c: f64, ramp_c_per_min: f64) -> Result<(), DeviceError> {
+        self.check()?;
+        self.twin
+            .set_chamber(set_c, ramp_c_per_min)
+            .map_err(|e| DeviceError::Refused {
+                device: "chamber".into(),
+                request: format!("set point {set_c} degC at {ramp_c_per_min} degC/min"),
+                reason: e.to_string(),
+            })?;
+        self.mode = ChamberMode::Constant;
+        Ok(())
+    }
+
+    async fn move_table(&mut self, angles: TableAngles) -> Result<(), DeviceError> {
+        self.check()?;
+        self.commanded = angles;
+        self.twin.move_table(angles);
+        Ok(())
+    }
+
+    async fn safe_state(&mut self) -> Result<(), DeviceError> {
+        self.twin
+            .demand_table(Some(AxisDemand::Stop), Some(AxisDemand::Stop));
+        let room = self.twin.config().chamber.initial_c;
+        let _ = self.twin.set_chamber(room, PASSIVE_DRIFT_C_PER_MIN);
+        self.mode = ChamberMode::Standby;
+        Ok(())
+    }
+
+    async fn advance(&mut self, t_s: f64, tick: &mut Tick) -> Result<(), DeviceError> {
+        self.check()?;
+        self.clock.sleep_until(t_s);
+        tick.frames.clear();
+        tick.t0_s = self.twin.time_s() + self.twin.frame_dt_s();
+        let frames = &mut tick.frames;
+        let raw = |t: f64| (t / TEMP_LSB_C).round() as i16;
+        self.twin.run_until(t_s, |_, g| {
+            frames.push(FrameRecord {
+                seq: (g.index % 256) as u8,
+                counts: g.delta_counts,
+                temps_raw: [raw(g.t1_c), raw(g.t2_c), raw(g.tcase_c)],
+                status: g.status,
+            });
+        });
+        self.frames += tick.frames.len() as u64;
+        tick.state = Some(self.state());
+        Ok(())
+    }
+
+    fn link_stats(&self) -> LinkStats {
+        LinkStats {
+            frames: self.frames,
+            bytes: self.frames * 20,
+            ..LinkStats::default()
+        }
+    }
+}

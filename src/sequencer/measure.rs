@@ -1,0 +1,197 @@
+//! The 1 Hz record store and the figures `measure` steps compute on it.
+
+use std::collections::BTreeMap;
+
+use serde::Serialize;
+
+use super::{BenchState, Tick};
+use crate::analysis::figures::{bias_stability, drift_pp, mean};
+use crate::analysis::model::{self, Fit, ModelKind};
+use crate::analysis::series::Interval;
+use crate::analysis::study::self_heating_dph;
+use crate::procedure::{Measure, Metric};
+
+/// 1 Hz intervals of the whole run, and by record label.
+#[derive(Debug, Clone, Default)]
+pub struct Records {
+    /// Every interval of the run with the record it belongs to.
+    pub all: Vec<(Option<String>, Interval)>,
+    by_label: BTreeMap<String, Vec<Interval>>,
+    /// Labels in the order they were recorded.
+    pub order: Vec<String>,
+}
+
+impl Records {
+    /// A record starts.
+    pub fn start(&mut self, label: &str) {
+        self.by_label.entry(label.to_owned()).or_default();
+        self.order.push(label.to_owned());
+    }
+
+    /// Intervals of one record.
+    pub fn get(&self, label: &str) -> Option<&[Interval]> {
+        self.by_label.get(label).map(Vec::as_slice)
+    }
+
+    /// Reduce a tick to its interval mean and file it; returns it.
+    pub fn push_tick(
+        &mut self,
+        tick: &Tick,
+        state: &BenchState,
+        record: Option<&str>,
+        frame_dt_s: f64,
+        lsb_arcsec: f64,
+        temp_lsb_c: f64,
+    ) -> Option<Interval> {
+        let n = tick.frames.len();
+        if n == 0 {
+            return None;
+        }
+        let span = n as f64 * frame_dt_s;
+        let (mut counts, mut t) = (0i64, [0i64; 3]);
+        for f in &tick.frames {
+            counts += i64::from(f.counts);
+            for (acc, r) in t.iter_mut().zip(f.temps_raw) {
+                *acc += i64::from(r);
+            }
+        }
+        let temp = |i: usize| t[i] as f64 / n as f64 * temp_lsb_c;
+        let iv = Interval {
+            time_s: state.t_s - span / 2.0,
+            rate_dph: counts as f64 * lsb_arcsec / span,
+            reference_dph: state.reference_dph,
+            t1_c: temp(0),
+            t2_c: temp(1),
+            tcase_c: temp(2),
+            chamber_c: state.chamber.air_c,
+            frames: n as u32,
+        };
+        if let Some(label) = record {
+            self.by_label.entry(label.to_owned()).or_default().push(iv);
+        }
+        self.all.push((record.map(str::to_owned), iv));
+        Some(iv)
+    }
+}
+
+/// Verdict of one measurement.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum MeasureOutcome {
+    /// Within limits.
+    Pass,
+    /// Outside limits, or not computable.
+    Fail,
+}
+
+impl MeasureOutcome {
+    /// `pass` / `fail`.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Pass => "pass",
+            Self::Fail => "fail",
+        }
+    }
+}
+
+/// One measurement as the report gives it (`report.json` contract:
+/// `name`, `value`, `unit`, `low`, `high`, `outcome`, `step`).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Measurement {
+    /// Name from the procedure.
+    pub name: String,
+    /// Value (null when it could not be computed).
+    pub value: Option<f64>,
+    /// Unit.
+    pub unit: String,
+    /// Lower limit.
+    pub low: Option<f64>,
+    /// Upper limit.
+    pub high: Option<f64>,
+    /// Verdict.
+    pub outcome: MeasureOutcome,
+    /// Step key in the procedure.
+    pub step: String,
+    /// Figure computed.
+    pub metric: Metric,
+    /// Averaging time, s.
+    pub averaging_s: f64,
+    /// Records it was computed on.
+    pub records: Vec<String>,
+    /// How the value was obtained (compensation source, why it is missing).
+    pub note: String,
+}
+
+impl Measurement {
+    /// `low..high` as text.
+    pub fn limits_text(&self) -> String {
+        let f = |v: Option<f64>| v.map_or(String::new(), |v| format!("{v}"));
+        format!("{}..{}", f(self.low), f(self.high))
+    }
+}
+
+/// Compute a measure on the records; `coeffs` compensate when given.
+pub fn compute(m: &Measure, records: &Records, coeffs: Option<&Fit>, step: &str) -> Measurement {
+    let series: Vec<Interval> = m
+        .records
+        .iter()
+        .filter_map(|r| records.get(r))
+        .flat_map(|s| s.iter().copied())
+        .collect();
+    let bias: Vec<f64> = series.iter().map(Interval::bias_dph).collect();
+    let window = m.averaging_s.round().max(1.0) as usize;
+    let mut note = String::new();
+    let value = match m.metric {
+        Metric::BiasStability => Some(bias_stability(&bias, window)),
+        Metric::DriftPp => (bias.len() >= window).then(|| drift_pp(&bias, window)),
+        Metric::MeanBias => Some(mean(&bias)),
+        Metric::SelfHeating => self_heating_dph(&series).map(f64::abs),
+        Metric::CompensatedDriftPp => {
+            let fit = match coeffs {
+                Some(f) => {
+                    note = "model 4 with the coefficients given by --coeffs".into();
+                    Ok(f.clone())
+                }
+                None => {
+                    note = "model 4 fitted on these records (no --coeffs given)".into();
+                    model::fit(ModelKind::Model4, &series)
+                }
+            };
+            match fit {
+                Ok(f) if bias.len() >= window => Some(drift_pp(&f.residual(&series), window)),
+                Ok(_) => None,
+                Err(e) => {
+                    note = format!("cannot compensate: {e}");
+                    None
+                }
+            }
+        }
+    };
+    let value = value.filter(|v| v.is_finite());
+    if value.is_none() && note.is_empty() {
+        note = format!(
+            "not computable: {} s of data for an averaging of {} s",
+            series.len(),
+            m.averaging_s
+        );
+    }
+    let within =
+        value.is_some_and(|v| m.low.is_none_or(|lo| v >= lo) && m.high.is_none_or(|hi| v <= hi));
+    Measurement {
+        name: m.name.clone(),
+        value,
+        unit: m.unit.clone(),
+        low: m.low,
+        high: m.high,
+        outcome: if within {
+            MeasureOutcome::Pass
+        } else {
+            MeasureOutcome::Fail
+        },
+        step: step.to_owned(),
+        metric: m.metric,
+        averaging_s: m.averaging_s,
+        records: m.records.clone(),
+        note,
+    }
+}

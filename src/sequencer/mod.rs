@@ -1,0 +1,524 @@
+//! The sequencer: runs a validated procedure on a bench.
+//!
+//! Setup, main and cleanup as test sequencers have them: cleanup always
+//! runs once setup has started, also after a device failure or an
+//! interrupt. Time advances in one-second ticks of device time; every tick
+//! hands the frames and the device state to the [`Sink`] (the recorder)
+//! and to the record store that measure steps compute on.
+
+pub mod embedded;
+pub mod measure;
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+
+use async_trait::async_trait;
+use serde::Serialize;
+
+use crate::driver::{ChamberReading, DeviceError, InPosition, TableReading};
+use crate::geometry::{Orientation, TableAngles};
+use crate::procedure::{Procedure, Step, StepKind};
+use measure::{Measurement, Records};
+
+/// One gyro frame as received (wire units).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct FrameRecord {
+    /// Sequence counter.
+    pub seq: u8,
+    /// Delta-angle counts.
+    pub counts: i32,
+    /// T1, T2, TK in the frame's temperature LSB.
+    pub temps_raw: [i16; 3],
+    /// Status bits.
+    pub status: u16,
+}
+
+/// Device state at the end of a tick.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BenchState {
+    /// Device time, s since the run started.
+    pub t_s: f64,
+    /// Chamber.
+    pub chamber: ChamberReading,
+    /// Table (measured).
+    pub table: TableReading,
+    /// Table angles last commanded.
+    pub commanded: TableAngles,
+    /// Body orientation (from the measured angles and the geometry).
+    pub orientation: Orientation,
+    /// Earth + table rate on the nominal sensitive axis, deg/h.
+    pub reference_dph: f64,
+}
+
+/// What one tick brought.
+#[derive(Debug, Clone, Default)]
+pub struct Tick {
+    /// Device time of the first frame's end, s.
+    pub t0_s: f64,
+    /// Frames received during the tick.
+    pub frames: Vec<FrameRecord>,
+    /// State at the end of the tick.
+    pub state: Option<BenchState>,
+}
+
+/// A bench the sequencer can drive.
+#[async_trait]
+pub trait BenchIo: Send {
+    /// Device time now, s since the run started.
+    fn now_s(&self) -> f64;
+    /// True when the devices are simulated (prompts answer themselves).
+    fn is_simulated(&self) -> bool;
+    /// Frame period, s.
+    fn frame_dt_s(&self) -> f64;
+    /// Angle per count, arcsec.
+    fn lsb_arcsec(&self) -> f64;
+    /// Temperature per LSB in frames, degC.
+    fn temp_lsb_c(&self) -> f64;
+    /// New chamber set point reached at `ramp_c_per_min`.
+    async fn set_chamber(&mut self, set_c: f64, ramp_c_per_min: f64) -> Result<(), DeviceError>;
+    /// Move the table (position mode).
+    async fn move_table(&mut self, angles: TableAngles) -> Result<(), DeviceError>;
+    /// Safe state: table to a controlled stop, chamber to standby.
+    async fn safe_state(&mut self) -> Result<(), DeviceError>;
+    /// Advance to device time `t_s`, filling `tick`.
+    async fn advance(&mut self, t_s: f64, tick: &mut Tick) -> Result<(), DeviceError>;
+    /// Link figures of the gyro so far.
+    fn link_stats(&self) -> crate::protocol::frame::LinkStats;
+}
+
+/// Where the run's data goes (the recorder implements it).
+pub trait Sink {
+    /// Every tick, in order.
+    fn tick(&mut self, tick: &Tick, record: Option<&str>, step: &str) -> std::io::Result<()>;
+    /// A 1 Hz interval closed (for the quick-look channel).
+    fn interval(
+        &mut self,
+        iv: &crate::analysis::series::Interval,
+        record: Option<&str>,
+    ) -> std::io::Result<()>;
+    /// An event (step start/end, note, error), with a level 1..5 (foxglove.Log).
+    fn event(&mut self, t_s: f64, level: u8, message: &str) -> std::io::Result<()>;
+}
+
+/// How a run ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Outcome {
+    /// Every measurement within its limits.
+    Pass,
+    /// A measurement outside its limits.
+    Fail,
+    /// A device or data failure ended the run.
+    Error,
+    /// The operator interrupted the run.
+    Aborted,
+}
+
+/// The failure that ended a run.
+#[derive(Debug, Clone, Serialize)]
+pub struct RunError {
+    /// Device at fault, if any.
+    pub device: Option<String>,
+    /// Step key where it happened.
+    pub step: String,
+    /// What happened.
+    pub message: String,
+}
+
+/// Everything a run produced.
+#[derive(Debug, Clone)]
+pub struct RunResult {
+    /// Verdict.
+    pub outcome: Outcome,
+    /// Measurements made (in step order).
+    pub measurements: Vec<Measurement>,
+    /// The failure, when outcome is error.
+    pub error: Option<RunError>,
+    /// Whether cleanup ran to its end.
+    pub cleanup_completed: bool,
+    /// Device time at the end, s.
+    pub device_time_s: f64,
+    /// Frames received.
+    pub frames: u64,
+    /// The 1 Hz records.
+    pub records: Records,
+}
+
+/// Progress callbacks for the operator.
+pub trait Progress {
+    /// A step starts.
+    fn step(&mut self, step: &Step, index: usize, total: usize);
+    /// A tick passed.
+    fn tick(&mut self, state: &BenchState);
+}
+
+/// No progress display.
+#[derive(Debug)]
+pub struct Quiet;
+
+impl Progress for Quiet {
+    fn step(&mut self, _: &Step, _: usize, _: usize) {}
+    fn tick(&mut self, _: &BenchState) {}
+}
+
+/// Run options.
+#[derive(Debug, Clone)]
+pub struct Options {
+    /// Model-4 coefficients for compensation (else fitted on the run).
+    pub coeffs: Option<crate::analysis::model::Fit>,
+    /// Set to stop the run (cleanup still runs).
+    pub interrupt: Arc<AtomicBool>,
+    /// Bench limit on the gyro's temperatures, degC.
+    pub dut_max_c: f64,
+    /// In-position tolerance, deg, and settle time, s.
+    pub in_position: (f64, f64),
+    /// Longest a move may take, s.
+    pub move_timeout_s: f64,
+}
+
+enum Stop {
+    Device(DeviceError),
+    Data(String),
+    Interrupted,
+}
+
+struct Run<'a> {
+    bench: &'a mut dyn BenchIo,
+    sink: &'a mut dyn Sink,
+    progress: &'a mut dyn Progress,
+    opts: &'a Options,
+    records: Records,
+    tick: Tick,
+    last: Option<BenchState>,
+    frames: u64,
+    measurements: Vec<Measurement>,
+}
+
+impl Run<'_> {
+    /// Advance one tick (at most 1 s, never past `until_s`).
+    async fn tick(&mut self, until_s: f64, record: Option<&str>, step: &str) -> Result<(), Stop> {
+        if self.opts.interrupt.load(Ordering::Relaxed) {
+            return Err(Stop::Interrupted);
+        }
+        let t = (self.bench.now_s() + 1.0).min(until_s);
+        self.bench
+            .advance(t, &mut self.tick)
+            .await
+            .map_err(Stop::Device)?;
+        self.frames += self.tick.frames.len() as u64;
+        self.sink
+            .tick(&self.tick, record, step)
+            .map_err(|e| Stop::Data(format!("writing the log: {e}")))?;
+        let dt = self.bench.frame_dt_s();
+        let lsb = self.bench.lsb_arcsec();
+        let tl = self.bench.temp_lsb_c();
+        if let Some(state) = &self.tick.state {
+            self.progress.tick(state);
+            if !state.chamber.alarms.is_empty() {
+                return Err(Stop::Device(DeviceError::Alarm {
+                    device: "chamber".into(),
+                    codes: state.chamber.alarms.clone(),
+                }));
+            }
+            let hot = self
+                .tick
+                .frames
+                .iter()
+                .flat_map(|f| f.temps_raw)
+                .map(|r| f64::from(r) * tl)
+                .fold(f64::NEG_INFINITY, f64::max);
+            if hot > self.opts.dut_max_c {
+                return Err(Stop::Data(format!(
+                    "the gyro reads {hot:.2} degC, above the bench limit dut_max_c = {} degC",
+                    self.opts.dut_max_c
+                )));
+            }
+            if let Some(iv) = self
+                .records
+                .push_tick(&self.tick, state, record, dt, lsb, tl)
+            {
+                self.sink
+                    .interval(&iv, record)
+                    .map_err(|e| Stop::Data(format!("writing the log: {e}")))?;
+            }
+            self.last = Some(state.clone());
+        }
+        Ok(())
+    }
+
+    async fn run_for(
+        &mut self,
+        duration_s: f64,
+        record: Option<&str>,
+        step: &str,
+    ) -> Result<(), Stop> {
+        let end = self.bench.now_s() + duration_s;
+        while self.bench.now_s() < end - 1e-9 {
+            self.tick(end, record, step).await?;
+        }
+        Ok(())
+    }
+
+    async fn step(&mut self, s: &Step) -> Result<(), Stop> {
+        let key = s.key.as_str();
+        match &s.kind {
+            StepKind::Chamber {
+                set_c,
+                ramp_c_per_min,
+            } => self
+                .bench
+                .set_chamber(*set_c, *ramp_c_per_min)
+                .await
+                .map_err(Stop::Device),
+            StepKind::Move { angles, .. } => {
+                self.bench.move_table(*angles).await.map_err(Stop::Device)?;
+                let (tol, settle) = self.opts.in_position;
+                let mut ip = InPosition::new(tol, 0.01, settle);
+                let deadline = self.bench.now_s() + self.opts.move_timeout_s;
+                loop {
+                    self.tick(f64::INFINITY, None, key).await?;
+                    if let Some(st) = &self.last
+                        && ip.update(&st.table, *angles, st.t_s)
+                    {
+                        return Ok(());
+                    }
+                    if self.bench.now_s() > deadline {
+                        return Err(Stop::Data(format!(
+                            "the table did not settle on outer {:.3} / inner {:.3} deg within {} s; check the table",
+                            angles.outer_deg, angles.inner_deg, self.opts.move_timeout_s
+                        )));
+                    }
+                }
+            }
+            StepKind::Soak {
+                band_c,
+                case_slope_c_per_min,
+                hold_s,
+                timeout_s,
+            } => {
+                let start = self.bench.now_s();
+                let mut held_since: Option<f64> = None;
+                let mut case = std::collections::VecDeque::new();
+                loop {
+                    self.tick(f64::INFINITY, None, key).await?;
+                    let Some(st) = &self.last else { continue };
+                    let tk = self
+                        .tick
+                        .frames
+                        .last()
+                        .map(|f| f64::from(f.temps_raw[2]) * self.bench.temp_lsb_c());
+                    if let Some(tk) = tk {
+                        case.push_back((st.t_s, tk));
+                    }
+                    while case.len() > 120 {
+                        case.pop_front();
+                    }
+                    let slope = slope_per_min(&case);
+                    let ok = (st.chamber.air_c - st.chamber.set_point_c).abs() <= *band_c
+                        && case.len() >= 60
+                        && slope.abs() <= *case_slope_c_per_min;
+                    held_since = if ok {
+                        held_since.or(Some(st.t_s))
+                    } else {
+                        None
+                    };
+                    if held_since.is_some_and(|h| st.t_s - h >= *hold_s) {
+                        return Ok(());
+                    }
+                    if st.t_s - start > *timeout_s {
+                        return Err(Stop::Data(format!(
+                            "soak not reached within {timeout_s} s (air {:.2} degC for set point {:.2}, case slope {slope:.3} degC/min)",
+                            st.chamber.air_c, st.chamber.set_point_c
+                        )));
+                    }
+                }
+            }
+            StepKind::Wait { duration_s } => self.run_for(*duration_s, None, key).await,
+            StepKind::Record { label, duration_s } => {
+                self.records.start(label);
+                self.run_for(*duration_s, Some(label), key).await
+            }
+            StepKind::Measure(m) => {
+                let meas = measure::compute(m, &self.records, self.opts.coeffs.as_ref(), key);
+                let msg = format!(
+                    "{} = {} {} [{}] ({})",
+                    meas.name,
+                    meas.value.map_or("n/a".to_owned(), |v| format!("{v:.4}")),
+                    meas.unit,
+                    meas.limits_text(),
+                    meas.outcome.as_str()
+                );
+                let level = if meas.outcome == measure::MeasureOutcome::Pass {
+                    2
+                } else {
+                    3
+                };
+                self.sink
+                    .event(self.bench.now_s(), level, &msg)
+                    .map_err(|e| Stop::Data(e.to_string()))?;
+                self.measurements.push(meas);
+                Ok(())
+            }
+            StepKind::Note { text } | StepKind::Prompt { text } => self
+                .sink
+                .event(self.bench.now_s(), 2, text)
+                .map_err(|e| Stop::Data(e.to_string())),
+        }
+    }
+}
+
+/// Least-squares slope of (t s, value) pairs, per minute.
+fn slope_per_min(pts: &std::collections::VecDeque<(f64, f64)>) -> f64 {
+    let n = pts.len() as f64;
+    if n < 2.0 {
+        return f64::INFINITY;
+    }
+    let (mt, mv) = pts
+        .iter()
+        .fold((0.0, 0.0), |(a, b), (t, v)| (a + t / n, b + v / n));
+    let (sxy, sxx) = pts.iter().fold((0.0, 0.0), |(a, b), (t, v)| {
+        (a + (t - mt) * (v - mv), b + (t - mt) * (t - mt))
+    });
+    if sxx > 0.0 {
+        60.0 * sxy / sxx
+    } else {
+        f64::INFINITY
+    }
+}
+
+/// Run `p` on `bench`, logging to `sink`.
+pub async fn run(
+    p: &Procedure,
+    bench: &mut dyn BenchIo,
+    sink: &mut dyn Sink,
+    progress: &mut dyn Progress,
+    opts: &Options,
+) -> RunResult {
+    let mut r = Run {
+        bench,
+        sink,
+        progress,
+        opts,
+        records: Records::default(),
+        tick: Tick::default(),
+        last: None,
+        frames: 0,
+        measurements: Vec::new(),
+    };
+    let total = p.steps().count();
+    let mut stop: Option<(Stop, String)> = None;
+    for (i, s) in p.setup.iter().chain(&p.main).enumerate() {
+        r.progress.step(s, i, total);
+        let _ = r.sink.event(
+            r.bench.now_s(),
+            1,
+            &format!("step {} (line {}): {}", s.key, s.line, s.describe()),
+        );
+        if let Err(e) = r.step(s).await {
+            stop = Some((e, s.key.clone()));
+            break;
+        }
+    }
+    // Cleanup always runs once setup has started; a safe state comes first
+    // whenever the run did not end normally.
+    let mut cleanup_completed = true;
+    if stop.is_some() {
+        let _ = r.sink.event(
+            r.bench.now_s(),
+            3,
+            "run stopped: bringing the bench to a safe state",
+        );
+        if let Err(e) = r.bench.safe_state().await {
+            cleanup_completed = false;
+            let _ = r
+                .sink
+                .event(r.bench.now_s(), 4, &format!("safe state failed: {e}"));
+        }
+    }
+    let interrupted = matches!(stop, Some((Stop::Interrupted, _)));
+    r.opts.interrupt.store(false, Ordering::Relaxed);
+    for (i, s) in p.cleanup.iter().enumerate() {
+        r.progress.step(s, p.setup.len() + p.main.len() + i, total);
+        let _ = r.sink.event(
+            r.bench.now_s(),
+            1,
+            &format!("cleanup {} (line {}): {}", s.key, s.line, s.describe()),
+        );
+        if let Err(e) = r.step(s).await {
+            cleanup_completed = false;
+            let msg = match &e {
+                Stop::Device(d) => d.to_string(),
+                Stop::Data(m) => m.clone(),
+                Stop::Interrupted => "interrupted again".into(),
+            };
+            let _ = r.sink.event(
+                r.bench.now_s(),
+                4,
+                &format!("cleanup step {} failed: {msg}", s.key),
+            );
+            if stop.is_none() {
+                stop = Some((e, s.key.clone()));
+            }
+            break;
+        }
+    }
+    let (outcome, error) = match stop {
+        None => {
+            let failed = r
+                .measurements
+                .iter()
+                .any(|m| m.outcome != measure::MeasureOutcome::Pass);
+            (if failed { Outcome::Fail } else { Outcome::Pass }, None)
+        }
+        Some((Stop::Interrupted, step)) if interrupted => (
+            Outcome::Aborted,
+            Some(RunError {
+                device: None,
+                step,
+                message: "interrupted by the operator".into(),
+            }),
+        ),
+        Some((e, step)) => {
+            let (device, message) = match e {
+                Stop::Device(d) => (device_of(&d), d.to_string()),
+                Stop::Data(m) => (None, m),
+                Stop::Interrupted => (None, "interrupted".into()),
+            };
+            let _ = r.sink.event(
+                r.bench.now_s(),
+                4,
+                &format!("error in step {step}: {message}"),
+            );
+            (
+                Outcome::Error,
+                Some(RunError {
+                    device,
+                    step,
+                    message,
+                }),
+            )
+        }
+    };
+    RunResult {
+        outcome,
+        measurements: r.measurements,
+        error,
+        cleanup_completed,
+        device_time_s: r.bench.now_s(),
+        frames: r.frames,
+        records: r.records,
+    }
+}
+
+fn device_of(e: &DeviceError) -> Option<String> {
+    match e {
+        DeviceError::Timeout { device, .. }
+        | DeviceError::Refused { device, .. }
+        | DeviceError::Malformed { device, .. }
+        | DeviceError::OutOfRange { device, .. }
+        | DeviceError::Connect { device, .. }
+        | DeviceError::Alarm { device, .. }
+        | DeviceError::Interlock { device }
+        | DeviceError::Silent { device, .. } => Some(device.clone()),
+    }
+}
