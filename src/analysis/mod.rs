@@ -4,6 +4,7 @@
 //! merit, `model` fits the study's compensation models, `study` holds the
 //! definitions of the study's figures.
 
+pub mod allan;
 pub mod figures;
 pub mod model;
 pub mod series;
