@@ -193,19 +193,24 @@ pub fn run(args: RunArgs) -> Result<Outcome> {
         ),
         move_timeout_s: 600.0,
     };
-    let rt = tokio::runtime::Builder::new_current_thread()
+    // Two workers: the signal watcher must run while the sequencer (which
+    // may block its thread to pace virtual time) is busy.
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
         .enable_all()
         .build()
         .context("starting the async runtime")?;
     eprintln!("running {} -> {}", procedure.meta.name, out.display());
     let result = rt.block_on(async {
-        watch_ctrl_c(interrupt);
+        watch_ctrl_c(interrupt)?;
         let mut progress = Lines {
             last_print_s: 0.0,
             step: String::new(),
         };
-        sequencer::run(&procedure, &mut bench, &mut recorder, &mut progress, &opts).await
-    });
+        Ok::<_, anyhow::Error>(
+            sequencer::run(&procedure, &mut bench, &mut recorder, &mut progress, &opts).await,
+        )
+    })?;
     let link = bench.link_stats();
     recorder
         .link(result.device_time_s, &link)
@@ -243,16 +248,20 @@ fn write(path: &Path, bytes: &[u8]) -> Result<()> {
     crate::fsutil::write_atomic(path, bytes).with_context(|| format!("writing {}", path.display()))
 }
 
-/// First Ctrl-C: stop and clean up. Second: abort at once.
-fn watch_ctrl_c(interrupt: Arc<AtomicBool>) {
+/// First Ctrl-C: stop and clean up. Second: abort at once. The handler
+/// is installed before this returns, so no early signal kills the run.
+fn watch_ctrl_c(interrupt: Arc<AtomicBool>) -> Result<()> {
+    use tokio::signal::unix::{SignalKind, signal};
+    let mut sigint = signal(SignalKind::interrupt()).context("installing the Ctrl-C handler")?;
     tokio::spawn(async move {
-        if tokio::signal::ctrl_c().await.is_ok() {
+        if sigint.recv().await.is_some() {
             eprintln!("interrupted: running cleanup (Ctrl-C again to abort without cleanup)");
             interrupt.store(true, Ordering::Relaxed);
         }
-        if tokio::signal::ctrl_c().await.is_ok() {
+        if sigint.recv().await.is_some() {
             eprintln!("aborted without cleanup");
             std::process::exit(130);
         }
     });
+    Ok(())
 }

@@ -192,6 +192,8 @@ struct Run<'a> {
     last: Option<BenchState>,
     frames: u64,
     measurements: Vec<Measurement>,
+    /// Cleanup is running: alarms were already acted on.
+    cleaning_up: bool,
 }
 
 impl Run<'_> {
@@ -214,7 +216,7 @@ impl Run<'_> {
         let tl = self.bench.temp_lsb_c();
         if let Some(state) = &self.tick.state {
             self.progress.tick(state);
-            if !state.chamber.alarms.is_empty() {
+            if !state.chamber.alarms.is_empty() && !self.cleaning_up {
                 return Err(Stop::Device(DeviceError::Alarm {
                     device: "chamber".into(),
                     codes: state.chamber.alarms.clone(),
@@ -404,6 +406,7 @@ pub async fn run(
         last: None,
         frames: 0,
         measurements: Vec::new(),
+        cleaning_up: false,
     };
     let total = p.steps().count();
     let mut stop: Option<(Stop, String)> = None;
@@ -437,6 +440,7 @@ pub async fn run(
     }
     let interrupted = matches!(stop, Some((Stop::Interrupted, _)));
     r.opts.interrupt.store(false, Ordering::Relaxed);
+    r.cleaning_up = true;
     for (i, s) in p.cleanup.iter().enumerate() {
         r.progress.step(s, p.setup.len() + p.main.len() + i, total);
         let _ = r.sink.event(

@@ -8,3 +8,4 @@
 
 mod bench_io;
 mod cli;
+mod run;

@@ -1,0 +1,248 @@
+//! `gyrobench run` across the process boundary: verdicts, exit codes, the
+//! report contract and the MCAP log, on the embedded simulated bench.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use crate::cli::{gyrobench, temp_dir};
+
+fn report(dir: &Path) -> serde_json::Value {
+    let text = std::fs::read_to_string(dir.join("report.json")).expect("report.json written");
+    serde_json::from_str(&text).expect("report.json is JSON")
+}
+
+/// (topic, schema name, message JSON) of every message of a log.
+fn messages(path: &Path) -> Vec<(String, String, serde_json::Value)> {
+    let bytes = std::fs::read(path).expect("run.mcap written");
+    mcap::MessageStream::new(&bytes)
+        .expect("a readable MCAP file")
+        .map(|m| {
+            let m = m.expect("every message decodes");
+            let schema = m
+                .channel
+                .schema
+                .as_ref()
+                .expect("every channel has a schema");
+            assert_eq!(schema.encoding, "jsonschema");
+            assert_eq!(m.channel.message_encoding, "json");
+            let json = serde_json::from_slice(&m.data).expect("JSON message");
+            (m.channel.topic.clone(), schema.name.clone(), json)
+        })
+        .collect()
+}
+
+fn frames_logged(msgs: &[(String, String, serde_json::Value)]) -> u64 {
+    msgs.iter()
+        .filter(|(t, _, _)| t == "/gyro/frames")
+        .map(|(_, _, j)| j["counts"].as_array().expect("counts array").len() as u64)
+        .sum()
+}
+
+fn events(msgs: &[(String, String, serde_json::Value)]) -> Vec<String> {
+    msgs.iter()
+        .filter(|(t, s, _)| t == "/events" && s == "foxglove.Log")
+        .map(|(_, _, j)| j["message"].as_str().expect("message").to_owned())
+        .collect()
+}
+
+fn smoke() -> String {
+    concat!(env!("CARGO_MANIFEST_DIR"), "/procedures/smoke.toml").to_owned()
+}
+
+fn run(dir: &Path, extra: &[&str]) -> std::process::Output {
+    let out = dir.to_str().expect("utf-8 path");
+    let mut args = vec!["run", extra[0], "--out", out];
+    args.extend_from_slice(&extra[1..]);
+    gyrobench(&args)
+}
+
+#[test]
+fn smoke_passes_with_the_report_contract_and_a_complete_log() {
+    let dir = temp_dir("run-pass");
+    let out = run(&dir, &[&smoke(), "--dut", "RL16-0042"]);
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(String::from_utf8_lossy(&out.stdout).starts_with("PASS: smoke"));
+    let r = report(&dir);
+    assert_eq!(r["outcome"], "pass");
+    assert_eq!(r["procedure"], "smoke");
+    assert_eq!(r["dut"]["serial"], "RL16-0042");
+    let ms = r["measurements"].as_array().expect("measurements");
+    assert_eq!(ms.len(), 2);
+    for m in ms {
+        for key in ["name", "value", "unit", "low", "high", "outcome", "step"] {
+            assert!(m.get(key).is_some(), "measurement lacks {key}: {m}");
+        }
+        assert_eq!(m["outcome"], "pass");
+        assert!(m["value"].as_f64().expect("value") < m["high"].as_f64().expect("high"));
+    }
+    assert!(dir.join("report.html").exists());
+    let msgs = messages(&dir.join("run.mcap"));
+    assert_eq!(
+        frames_logged(&msgs),
+        r["frames"].as_u64().expect("frames"),
+        "every frame is kept"
+    );
+    for topic in [
+        "/gyro/rate_1hz",
+        "/chamber/state",
+        "/table/state",
+        "/gyro/link",
+    ] {
+        assert!(msgs.iter().any(|(t, _, _)| t == topic), "{topic} missing");
+    }
+    let size = std::fs::metadata(dir.join("run.mcap")).expect("log").len();
+    assert!(
+        size as f64 / (r["frames"].as_f64().expect("frames")) <= 12.0,
+        "{size} bytes"
+    );
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
+
+#[test]
+fn a_unit_beyond_its_limits_fails_with_exit_3() {
+    let dir = temp_dir("run-fail");
+    let twin = dir.join("noisy.toml");
+    let default = String::from_utf8(gyrobench(&["twin", "default-config"]).stdout).expect("utf-8");
+    let noisy = default.replacen("arw_deg_per_rt_h = 0.002", "arw_deg_per_rt_h = 0.05", 1);
+    assert_ne!(noisy, default);
+    std::fs::write(&twin, noisy).expect("write twin");
+    let out = run(
+        &dir.join("run"),
+        &[&smoke(), "--twin", twin.to_str().expect("utf-8")],
+    );
+    assert_eq!(
+        out.status.code(),
+        Some(3),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let r = report(&dir.join("run"));
+    assert_eq!(r["outcome"], "fail");
+    assert!(
+        r["measurements"]
+            .as_array()
+            .expect("list")
+            .iter()
+            .any(|m| m["outcome"] == "fail")
+    );
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
+
+#[test]
+fn an_unmodelled_effect_beyond_the_spec_fails_the_thermal_cycle() {
+    let dir = temp_dir("run-hysteresis");
+    let twin = dir.join("hysteresis.toml");
+    let default = String::from_utf8(gyrobench(&["twin", "default-config"]).stdout).expect("utf-8");
+    let with = default.replacen(
+        "[effects.hysteresis]\nenabled = false\namplitude_dph = 0.05",
+        "[effects.hysteresis]\nenabled = true\namplitude_dph = 0.1",
+        1,
+    );
+    assert_ne!(with, default);
+    std::fs::write(&twin, with).expect("write twin");
+    let proc_ = concat!(env!("CARGO_MANIFEST_DIR"), "/procedures/thermal_cycle.toml");
+    let out = run(
+        &dir.join("run"),
+        &[proc_, "--twin", twin.to_str().expect("utf-8")],
+    );
+    assert_eq!(
+        out.status.code(),
+        Some(3),
+        "{}",
+        String::from_utf8_lossy(&out.stdout)
+    );
+    let r = report(&dir.join("run"));
+    let comp = r["measurements"]
+        .as_array()
+        .expect("list")
+        .iter()
+        .find(|m| m["name"] == "compensated_drift_pp_dph")
+        .expect("compensated drift measured");
+    assert_eq!(comp["outcome"], "fail", "{comp}");
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
+
+#[test]
+fn a_device_failure_mid_run_is_an_error_after_cleanup_with_a_readable_log() {
+    let dir = temp_dir("run-error");
+    let out = run(&dir, &[&smoke(), "--inject", "chamber-alarm@200"]);
+    assert_eq!(
+        out.status.code(),
+        Some(1),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let r = report(&dir);
+    assert_eq!(r["outcome"], "error");
+    assert_eq!(r["error"]["device"], "chamber");
+    assert!(
+        r["error"]["step"]
+            .as_str()
+            .expect("step")
+            .starts_with("main."),
+        "{}",
+        r["error"]
+    );
+    assert_eq!(r["cleanup_completed"], true);
+    let msgs = messages(&dir.join("run.mcap"));
+    let ev = events(&msgs);
+    assert!(ev.iter().any(|e| e.contains("alarm [9]")), "{ev:?}");
+    assert!(
+        ev.iter().any(|e| e.starts_with("cleanup cleanup.0")),
+        "cleanup ran: {ev:?}"
+    );
+    assert_eq!(frames_logged(&msgs), r["frames"].as_u64().expect("frames"));
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
+
+#[test]
+fn ctrl_c_runs_cleanup_and_exits_130() {
+    let dir: PathBuf = temp_dir("run-sigint");
+    let child = Command::new(env!("CARGO_BIN_EXE_gyrobench"))
+        .args([
+            "run",
+            &smoke(),
+            "--speed",
+            "20",
+            "--out",
+            dir.to_str().expect("utf-8"),
+        ])
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("run starts");
+    // Wait until the run is under way (its run directory has a log).
+    for _ in 0..200 {
+        if dir.join("run.mcap").exists() {
+            break;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    std::thread::sleep(std::time::Duration::from_millis(1500));
+    let kill = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .expect("kill runs");
+    assert!(kill.success());
+    let out = child.wait_with_output().expect("run ends");
+    assert_eq!(
+        out.status.code(),
+        Some(130),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let r = report(&dir);
+    assert_eq!(r["outcome"], "aborted");
+    assert_eq!(r["cleanup_completed"], true);
+    let ev = events(&messages(&dir.join("run.mcap")));
+    assert!(
+        ev.iter().any(|e| e.starts_with("cleanup cleanup.0")),
+        "cleanup ran: {ev:?}"
+    );
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
