@@ -31,6 +31,14 @@ pub struct BenchConfig {
     pub devices: Devices,
     /// Safety limits of the bench, enforced before any command is sent.
     pub limits: Limits,
+    /// Device time per wall time: 1 for real instruments; N when the
+    /// devices are `sim serve --config` endpoints running at speed N.
+    #[serde(default = "unit_scale")]
+    pub time_scale: f64,
+}
+
+fn unit_scale() -> f64 {
+    1.0
 }
 
 /// `[table]`.
@@ -176,6 +184,7 @@ impl BenchConfig {
 
     fn validate(&self, src: &Source) -> Result<(), ConfigError> {
         let c = Checker::new(src);
+        c.within(self.time_scale, 0.001, 1e4, "time_scale")?;
         self.site.validate(&c, "site")?;
         self.table.geometry.validate(&c, "table.geometry")?;
         let d = &self.devices;

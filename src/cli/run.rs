@@ -9,12 +9,14 @@ use clap::Args;
 
 use super::Outcome;
 use super::check::load_bench;
+use crate::bench::open_bench;
 use crate::clock::{Pacing, VirtualClock, utc_now};
 use crate::coeffs::CoeffsFile;
 use crate::procedure::Procedure;
 use crate::recorder::{Recorder, RunMeta};
 use crate::report::{Report, render_html};
-use crate::sequencer::embedded::{EmbeddedBench, Fault, TEMP_LSB_C};
+use crate::sequencer::device::DeviceBench;
+use crate::sequencer::embedded::{EmbeddedBench, Fault};
 use crate::sequencer::{self, BenchIo, BenchState, Options, Progress};
 use crate::twin::TwinConfig;
 
@@ -105,13 +107,19 @@ pub fn run(args: RunArgs) -> Result<Outcome> {
     let bench_cfg = load_bench(args.bench.as_ref())?;
     let procedure = Procedure::load(&args.procedure, &bench_cfg)
         .with_context(|| format!("checking procedure {}", args.procedure.display()))?;
+    let embedded = bench_cfg.is_embedded();
+    let specs = [
+        &bench_cfg.devices.chamber.spec,
+        &bench_cfg.devices.table.spec,
+        &bench_cfg.devices.gyro.spec,
+    ];
     anyhow::ensure!(
-        bench_cfg.is_embedded(),
-        "running on device benches (serial/tcp/pty specs in {}) is not available in this version; \
-         use the embedded bench (no --bench) or fixtures/bench/embedded.toml",
-        args.bench
-            .as_ref()
-            .map_or("the bench file".into(), |p| p.display().to_string())
+        embedded || specs.iter().all(|s| !s.starts_with("sim://")),
+        "the bench file mixes sim:// and real devices; use all sim:// (the embedded bench) or none"
+    );
+    anyhow::ensure!(
+        embedded || (args.inject.is_empty() && args.twin.is_none()),
+        "--inject and --twin apply to the embedded simulated bench only"
     );
     let twin = match &args.twin {
         Some(p) => TwinConfig::load(p).with_context(|| format!("loading twin {}", p.display()))?,
@@ -143,11 +151,27 @@ pub fn run(args: RunArgs) -> Result<Outcome> {
     std::fs::create_dir_all(&out)
         .with_context(|| format!("creating the run directory {}", out.display()))?;
 
-    let clock = Arc::new(VirtualClock::new(pacing));
-    let mut bench = EmbeddedBench::new(twin.clone(), args.seed, clock);
-    for (at, f) in faults {
-        bench.schedule(at, f);
-    }
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .context("starting the async runtime")?;
+    let mut bench: Box<dyn BenchIo> = if embedded {
+        let clock = Arc::new(VirtualClock::new(pacing));
+        let mut b = EmbeddedBench::new(twin.clone(), args.seed, clock);
+        for (at, f) in faults {
+            b.schedule(at, f);
+        }
+        Box::new(b)
+    } else {
+        let open = rt
+            .block_on(open_bench(&bench_cfg))
+            .context("opening the bench's devices")?;
+        Box::new(
+            rt.block_on(DeviceBench::start(&bench_cfg, open))
+                .context("bringing the bench up (servo on, first reading)")?,
+        )
+    };
     let mut meta = RunMeta::default();
     for (k, v) in [
         ("procedure_toml", procedure.text.clone()),
@@ -156,7 +180,14 @@ pub fn run(args: RunArgs) -> Result<Outcome> {
             "bench_toml",
             toml::to_string_pretty(&bench_cfg).unwrap_or_default(),
         ),
-        ("twin_toml", twin.to_toml()),
+        (
+            "twin_toml",
+            if embedded {
+                twin.to_toml()
+            } else {
+                String::new()
+            },
+        ),
         (
             "site",
             serde_json::to_string(&bench_cfg.site).unwrap_or_default(),
@@ -178,7 +209,7 @@ pub fn run(args: RunArgs) -> Result<Outcome> {
         start_ns,
         bench.frame_dt_s(),
         bench.lsb_arcsec(),
-        TEMP_LSB_C,
+        bench.temp_lsb_c(),
     )
     .with_context(|| format!("creating {}", mcap_path.display()))?;
 
@@ -193,13 +224,6 @@ pub fn run(args: RunArgs) -> Result<Outcome> {
         ),
         move_timeout_s: 600.0,
     };
-    // Two workers: the signal watcher must run while the sequencer (which
-    // may block its thread to pace virtual time) is busy.
-    let rt = tokio::runtime::Builder::new_multi_thread()
-        .worker_threads(2)
-        .enable_all()
-        .build()
-        .context("starting the async runtime")?;
     eprintln!("running {} -> {}", procedure.meta.name, out.display());
     let result = rt.block_on(async {
         watch_ctrl_c(interrupt)?;
@@ -208,7 +232,14 @@ pub fn run(args: RunArgs) -> Result<Outcome> {
             step: String::new(),
         };
         Ok::<_, anyhow::Error>(
-            sequencer::run(&procedure, &mut bench, &mut recorder, &mut progress, &opts).await,
+            sequencer::run(
+                &procedure,
+                bench.as_mut(),
+                &mut recorder,
+                &mut progress,
+                &opts,
+            )
+            .await,
         )
     })?;
     let link = bench.link_stats();
@@ -223,7 +254,7 @@ pub fn run(args: RunArgs) -> Result<Outcome> {
         &args.dut,
         &start.to_rfc3339(),
         link,
-        Some(args.seed),
+        embedded.then_some(args.seed),
         &args
             .bench
             .as_ref()

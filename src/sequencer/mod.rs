@@ -6,6 +6,7 @@
 //! hands the frames and the device state to the [`Sink`] (the recorder)
 //! and to the record store that measure steps compute on.
 
+pub mod device;
 pub mod embedded;
 pub mod measure;
 

@@ -246,3 +246,132 @@ fn ctrl_c_runs_cleanup_and_exits_130() {
     );
     std::fs::remove_dir_all(&dir).expect("cleanup");
 }
+
+/// A short procedure: one move, two minutes recorded, a loose limit.
+const QUICK: &str = r#"
+[procedure]
+name = "quick"
+dut_type = "RL-16"
+
+[[setup]]
+action = "chamber"
+set_c = 20.0
+ramp_c_per_min = 1.0
+
+[[main]]
+action = "move"
+orientation = { azimuth_deg = 90.0, elevation_deg = 0.0, roll_deg = 0.0 }
+
+[[main]]
+action = "record"
+label = "east"
+duration_s = 120.0
+
+[[main]]
+action = "measure"
+name = "bias_stability_dph:east"
+metric = "bias_stability"
+records = ["east"]
+averaging_s = 10.0
+high = 0.5
+unit = "deg/h"
+
+[[cleanup]]
+action = "move"
+table = { outer_deg = 90.0, inner_deg = 0.0 }
+"#;
+
+#[test]
+fn a_procedure_through_sim_serve_over_tcp_and_ptys_gives_the_embedded_verdict() {
+    use std::io::BufRead;
+    let dir = temp_dir("run-served");
+    let proc_path = dir.join("quick.toml");
+    std::fs::write(&proc_path, QUICK).expect("procedure");
+    std::fs::write(dir.join("serve.toml"), "speed = 60.0\nseed = 1\n").expect("serve config");
+    let mut serve = Command::new(env!("CARGO_BIN_EXE_gyrobench"))
+        .args([
+            "sim",
+            "serve",
+            "--config",
+            dir.join("serve.toml").to_str().expect("utf-8"),
+        ])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .expect("sim serve starts");
+    let mut lines = std::io::BufReader::new(serve.stdout.take().expect("stdout"));
+    let mut endpoints = Vec::new();
+    for _ in 0..7 {
+        let mut l = String::new();
+        lines.read_line(&mut l).expect("endpoint");
+        endpoints.push(l.trim().to_owned());
+    }
+    let addr = |device: &str, protocol: &str, scheme: &str| {
+        endpoints
+            .iter()
+            .find_map(|e| {
+                e.strip_prefix(&format!("{device} {protocol} "))
+                    .filter(|a| a.starts_with(scheme))
+            })
+            .expect("endpoint")
+            .to_owned()
+    };
+    let fixture = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/fixtures/bench/sim-serve.toml"
+    ))
+    .expect("fixture");
+    let p = proc_path.to_str().expect("utf-8");
+    let embedded = dir.join("embedded");
+    let out = run(&embedded, &[p]);
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let want = report(&embedded);
+    for scheme in ["tcp://", "pty://"] {
+        let bench = format!(
+            "time_scale = 60.0\n{}",
+            fixture
+                .replace(
+                    "tcp://127.0.0.1:5001",
+                    &addr("chamber", "espec-ascii", scheme)
+                )
+                .replace("tcp://127.0.0.1:5003", &addr("table", "acl", scheme))
+                .replace("tcp://127.0.0.1:5004", &addr("gyro", "rlg-frame", scheme))
+        );
+        let name = scheme.trim_end_matches("://");
+        let bench_path = dir.join(format!("bench-{name}.toml"));
+        std::fs::write(&bench_path, bench).expect("bench file");
+        let run_dir = dir.join(name);
+        let out = run(
+            &run_dir,
+            &[p, "--bench", bench_path.to_str().expect("utf-8")],
+        );
+        assert_eq!(
+            out.status.code(),
+            Some(0),
+            "{scheme}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let got = report(&run_dir);
+        assert_eq!(got["outcome"], want["outcome"], "{scheme}");
+        let frames = got["frames"].as_f64().expect("frames");
+        assert!(
+            frames > 0.9 * want["frames"].as_f64().expect("frames"),
+            "{scheme}: {frames} frames"
+        );
+        assert_eq!(got["link"]["crc_errors"], 0, "{scheme}");
+        let msgs = messages(&run_dir.join("run.mcap"));
+        assert_eq!(
+            frames_logged(&msgs),
+            frames as u64,
+            "{scheme}: every frame received is logged"
+        );
+    }
+    let _ = serve.kill();
+    let _ = serve.wait();
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}

@@ -1,0 +1,225 @@
+//! A bench of real drivers (serial, TCP, ptys): instruments or `sim serve`
+//! endpoints, on wall time (scaled by the bench file's `time_scale` when
+//! the devices are a sped-up simulator).
+//!
+//! The gyro is read continuously by a background task; every tick reads
+//! the chamber and the table. Chambers ramp by the set point being stepped
+//! here (the drivers' constant set point has no ramp of its own).
+
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+use async_trait::async_trait;
+use tokio::sync::mpsc;
+
+use super::{BenchIo, BenchState, FrameRecord, Tick};
+use crate::bench::{BenchConfig, OpenBench};
+use crate::clock::{Clock, WallClock};
+use crate::driver::acl::AclTable;
+use crate::driver::{Chamber, ChamberMode, DeviceError, MotionTable};
+use crate::geometry::{Site, TableAngles, TableGeometry};
+use crate::protocol::frame::LinkStats;
+
+/// Smallest set-point change sent while ramping, degC.
+pub const RAMP_STEP_C: f64 = 0.05;
+
+#[derive(Debug, Clone, Copy)]
+struct Ramp {
+    from_c: f64,
+    to_c: f64,
+    rate_c_per_s: f64,
+    start_s: f64,
+    sent_c: f64,
+}
+
+impl Ramp {
+    fn at(&self, t_s: f64) -> f64 {
+        let d = self.to_c - self.from_c;
+        let moved = (self.rate_c_per_s * (t_s - self.start_s)).min(d.abs());
+        self.from_c + moved * d.signum()
+    }
+}
+
+/// Real drivers behind [`BenchIo`].
+pub struct DeviceBench {
+    chamber: Box<dyn Chamber>,
+    table: AclTable,
+    frames: mpsc::Receiver<Result<FrameRecord, DeviceError>>,
+    stats: Arc<Mutex<LinkStats>>,
+    clock: WallClock,
+    time_scale: f64,
+    site: Site,
+    geometry: TableGeometry,
+    commanded: TableAngles,
+    ramp: Option<Ramp>,
+    last_air_c: f64,
+    frame_dt_s: f64,
+    lsb_arcsec: f64,
+    temp_lsb_c: f64,
+}
+
+impl std::fmt::Debug for DeviceBench {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("DeviceBench")
+            .field("time_scale", &self.time_scale)
+            .finish_non_exhaustive()
+    }
+}
+
+impl DeviceBench {
+    /// Take over opened devices; the run's time starts now.
+    pub async fn start(cfg: &BenchConfig, open: OpenBench) -> Result<Self, DeviceError> {
+        let OpenBench {
+            mut chamber,
+            mut table,
+            mut gyro,
+        } = open;
+        table.servo_on().await?;
+        let reading = chamber.read().await?;
+        let stats = Arc::new(Mutex::new(LinkStats::default()));
+        let (tx, rx) = mpsc::channel(1 << 16);
+        let shared = stats.clone();
+        tokio::spawn(async move {
+            loop {
+                let next = gyro.next_frame().await;
+                if let Ok(mut s) = shared.lock() {
+                    *s = gyro.stats();
+                }
+                let msg = match next {
+                    Ok(Some(f)) => Ok(FrameRecord {
+                        seq: f.seq,
+                        counts: f.delta_counts,
+                        temps_raw: f.temps_raw,
+                        status: f.status,
+                    }),
+                    Ok(None) => Err(DeviceError::Silent {
+                        device: "gyro".into(),
+                        timeout_s: 0.0,
+                    }),
+                    Err(e) => Err(e),
+                };
+                let stop = msg.is_err();
+                if tx.send(msg).await.is_err() || stop {
+                    return;
+                }
+            }
+        });
+        let layout = cfg.frame_layout();
+        Ok(Self {
+            chamber,
+            table,
+            frames: rx,
+            stats,
+            clock: WallClock::scaled(cfg.time_scale),
+            time_scale: cfg.time_scale,
+            site: cfg.site,
+            geometry: cfg.table.geometry,
+            commanded: TableAngles::default(),
+            ramp: None,
+            last_air_c: reading.set_point_c,
+            frame_dt_s: 1.0 / cfg.devices.gyro.frame_rate_hz,
+            lsb_arcsec: cfg.devices.gyro.lsb_arcsec,
+            temp_lsb_c: layout.temp_lsb_c,
+        })
+    }
+
+    async fn step_ramp(&mut self, t_s: f64) -> Result<(), DeviceError> {
+        let Some(mut r) = self.ramp else {
+            return Ok(());
+        };
+        let sp = r.at(t_s);
+        if (sp - r.sent_c).abs() >= RAMP_STEP_C || (sp == r.to_c && r.sent_c != r.to_c) {
+            self.chamber.set_point(sp).await?;
+            r.sent_c = sp;
+        }
+        self.ramp = (r.sent_c != r.to_c).then_some(r);
+        Ok(())
+    }
+}
+
+#[async_trait]
+impl BenchIo for DeviceBench {
+    fn now_s(&self) -> f64 {
+        self.clock.now_s()
+    }
+
+    fn is_simulated(&self) -> bool {
+        false
+    }
+
+    fn frame_dt_s(&self) -> f64 {
+        self.frame_dt_s
+    }
+
+    fn lsb_arcsec(&self) -> f64 {
+        self.lsb_arcsec
+    }
+
+    fn temp_lsb_c(&self) -> f64 {
+        self.temp_lsb_c
+    }
+
+    async fn set_chamber(&mut self, set_c: f64, ramp_c_per_min: f64) -> Result<(), DeviceError> {
+        let now = self.now_s();
+        let from = self.ramp.map_or(self.last_air_c, |r| r.at(now));
+        self.chamber.set_mode(ChamberMode::Constant).await?;
+        self.ramp = Some(Ramp {
+            from_c: from,
+            to_c: set_c,
+            rate_c_per_s: ramp_c_per_min / 60.0,
+            start_s: now,
+            sent_c: f64::NAN,
+        });
+        self.step_ramp(now).await
+    }
+
+    async fn move_table(&mut self, angles: TableAngles) -> Result<(), DeviceError> {
+        self.commanded = angles;
+        self.table.move_to(angles).await
+    }
+
+    async fn safe_state(&mut self) -> Result<(), DeviceError> {
+        self.ramp = None;
+        let table = self.table.stop().await;
+        let chamber = self.chamber.set_mode(ChamberMode::Standby).await;
+        table.and(chamber)
+    }
+
+    async fn advance(&mut self, t_s: f64, tick: &mut Tick) -> Result<(), DeviceError> {
+        tick.frames.clear();
+        tick.t0_s = self.now_s();
+        let wall = ((t_s - self.now_s()) / self.time_scale).max(0.0);
+        let deadline = tokio::time::sleep(Duration::from_secs_f64(wall));
+        tokio::pin!(deadline);
+        loop {
+            tokio::select! {
+                f = self.frames.recv() => match f {
+                    Some(Ok(f)) => tick.frames.push(f),
+                    Some(Err(e)) => return Err(e),
+                    None => return Err(DeviceError::Silent { device: "gyro".into(), timeout_s: 0.0 }),
+                },
+                () = &mut deadline => break,
+            }
+        }
+        let now = self.now_s();
+        self.step_ramp(now).await?;
+        let chamber = self.chamber.read().await?;
+        self.last_air_c = chamber.air_c;
+        let table = self.table.read().await?;
+        tick.state = Some(BenchState {
+            t_s: now,
+            orientation: self.geometry.orientation(table.angles),
+            reference_dph: self
+                .geometry
+                .kinematic_rate_dph(&self.site, table.angles, table.rates),
+            chamber,
+            table,
+            commanded: self.commanded,
+        });
+        Ok(())
+    }
+
+    fn link_stats(&self) -> LinkStats {
+        self.stats.lock().map_or_else(|p| *p.into_inner(), |s| *s)
+    }
+}
