@@ -37,7 +37,7 @@ pub mod topics {
 const FRAMES_SCHEMA: &str = r#"{"type":"object","title":"gyrobench.GyroFrames","description":"Consecutive gyro frames; element i of every array is frame i","properties":{"t0_s":{"type":"number","description":"device time of the first frame, s since the run started"},"dt_s":{"type":"number","description":"frame period, s"},"lsb_arcsec":{"type":"number"},"temp_lsb_c":{"type":"number"},"seq":{"type":"array","items":{"type":"integer"}},"counts":{"type":"array","items":{"type":"integer"},"description":"delta-angle counts"},"t1_raw":{"type":"array","items":{"type":"integer"}},"t2_raw":{"type":"array","items":{"type":"integer"}},"tcase_raw":{"type":"array","items":{"type":"integer"}},"status":{"type":"array","items":{"type":"integer"}}},"required":["t0_s","dt_s","lsb_arcsec","temp_lsb_c","seq","counts","t1_raw","t2_raw","tcase_raw","status"]}"#;
 const RATE_SCHEMA: &str = r#"{"type":"object","title":"gyrobench.Rate1Hz","properties":{"t_s":{"type":"number"},"rate_dph":{"type":"number","description":"measured rate, Earth rate included"},"reference_dph":{"type":"number","description":"Earth + table rate on the nominal axis"},"bias_dph":{"type":"number","description":"rate minus reference"},"t1_c":{"type":"number"},"t2_c":{"type":"number"},"tcase_c":{"type":"number"},"chamber_c":{"type":"number"},"frames":{"type":"integer"},"record":{"type":["string","null"]}},"required":["t_s","rate_dph","reference_dph","bias_dph","t1_c","t2_c","tcase_c","chamber_c","frames"]}"#;
 const CHAMBER_SCHEMA: &str = r#"{"type":"object","title":"gyrobench.ChamberState","properties":{"t_s":{"type":"number"},"air_c":{"type":"number"},"set_point_c":{"type":"number"},"mode":{"type":"string"},"alarms":{"type":"array","items":{"type":"integer"}}},"required":["t_s","air_c","set_point_c","mode","alarms"]}"#;
-const TABLE_SCHEMA: &str = r#"{"type":"object","title":"gyrobench.TableState","properties":{"t_s":{"type":"number"},"outer_deg":{"type":"number"},"inner_deg":{"type":"number"},"outer_rate_dps":{"type":"number"},"inner_rate_dps":{"type":"number"},"commanded_outer_deg":{"type":"number"},"commanded_inner_deg":{"type":"number"},"azimuth_deg":{"type":"number"},"elevation_deg":{"type":"number"},"roll_deg":{"type":"number"},"earth_rate_dph":{"type":"number"},"step":{"type":"string"}},"required":["t_s","outer_deg","inner_deg","outer_rate_dps","inner_rate_dps","commanded_outer_deg","commanded_inner_deg","azimuth_deg","elevation_deg","roll_deg","earth_rate_dph","step"]}"#;
+const TABLE_SCHEMA: &str = r#"{"type":"object","title":"gyrobench.TableState","properties":{"t_s":{"type":"number"},"outer_deg":{"type":"number"},"inner_deg":{"type":"number"},"outer_rate_dps":{"type":"number"},"inner_rate_dps":{"type":"number"},"commanded_outer_deg":{"type":"number"},"commanded_inner_deg":{"type":"number"},"azimuth_deg":{"type":"number"},"elevation_deg":{"type":"number"},"roll_deg":{"type":"number"},"earth_rate_dph":{"type":"number"},"in_position":{"type":"boolean"},"step":{"type":"string"}},"required":["t_s","outer_deg","inner_deg","outer_rate_dps","inner_rate_dps","commanded_outer_deg","commanded_inner_deg","azimuth_deg","elevation_deg","roll_deg","earth_rate_dph","step"]}"#;
 const LOG_SCHEMA: &str = r#"{"type":"object","title":"foxglove.Log","properties":{"timestamp":{"type":"object","properties":{"sec":{"type":"integer","minimum":0},"nsec":{"type":"integer","minimum":0}}},"level":{"type":"integer","description":"1 debug, 2 info, 3 warning, 4 error, 5 fatal"},"message":{"type":"string"},"name":{"type":"string"},"file":{"type":"string"},"line":{"type":"integer"}},"required":["timestamp","level","message","name","file","line"]}"#;
 const LINK_SCHEMA: &str = r#"{"type":"object","title":"gyrobench.LinkStats","properties":{"t_s":{"type":"number"},"bytes":{"type":"integer"},"frames":{"type":"integer"},"resyncs":{"type":"integer"},"skipped_bytes":{"type":"integer"},"crc_errors":{"type":"integer"},"lost_frames":{"type":"integer"},"duplicates":{"type":"integer"}},"required":["t_s","frames","lost_frames","crc_errors"]}"#;
 
@@ -170,17 +170,6 @@ impl Recorder {
         Ok(())
     }
 
-    /// Link statistics (written every tick that has state, and at the end).
-    pub fn link(&mut self, t_s: f64, s: &crate::protocol::frame::LinkStats) -> std::io::Result<()> {
-        #[derive(Serialize)]
-        struct L<'a> {
-            t_s: f64,
-            #[serde(flatten)]
-            s: &'a crate::protocol::frame::LinkStats,
-        }
-        self.write_json(topics::LINK, t_s, &L { t_s, s })
-    }
-
     /// Messages written per topic.
     pub fn message_counts(&self) -> &BTreeMap<&'static str, u64> {
         &self.messages
@@ -194,6 +183,16 @@ impl Recorder {
 }
 
 impl Sink for Recorder {
+    fn link(&mut self, t_s: f64, s: &crate::protocol::frame::LinkStats) -> std::io::Result<()> {
+        #[derive(Serialize)]
+        struct L<'a> {
+            t_s: f64,
+            #[serde(flatten)]
+            s: &'a crate::protocol::frame::LinkStats,
+        }
+        self.write_json(topics::LINK, t_s, &L { t_s, s })
+    }
+
     fn tick(&mut self, tick: &Tick, _record: Option<&str>, step: &str) -> std::io::Result<()> {
         if !tick.frames.is_empty() {
             let f = &tick.frames;
@@ -244,6 +243,7 @@ impl Sink for Recorder {
                 elevation_deg: f64,
                 roll_deg: f64,
                 earth_rate_dph: f64,
+                in_position: bool,
                 step: &'a str,
             }
             self.write_json(
@@ -261,6 +261,7 @@ impl Sink for Recorder {
                     elevation_deg: s.orientation.elevation_deg,
                     roll_deg: s.orientation.roll_deg,
                     earth_rate_dph: s.reference_dph,
+                    in_position: s.in_position,
                     step,
                 },
             )?;

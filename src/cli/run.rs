@@ -9,15 +9,17 @@ use clap::Args;
 
 use super::Outcome;
 use super::check::load_bench;
+use crate::analysis::series::Interval;
 use crate::bench::open_bench;
 use crate::clock::{Pacing, VirtualClock, utc_now};
 use crate::coeffs::CoeffsFile;
 use crate::procedure::Procedure;
+use crate::procedure::estimate::estimate;
 use crate::recorder::{Recorder, RunMeta};
 use crate::report::{Report, render_html};
 use crate::sequencer::device::DeviceBench;
 use crate::sequencer::embedded::{EmbeddedBench, Fault};
-use crate::sequencer::{self, BenchIo, BenchState, Options, Progress};
+use crate::sequencer::{self, BenchIo, BenchState, Options, Progress, Sink};
 use crate::twin::TwinConfig;
 
 #[derive(Debug, Args)]
@@ -51,29 +53,65 @@ pub struct RunArgs {
     inject: Vec<String>,
 }
 
-/// Plain progress lines on stderr.
-struct Lines {
-    last_print_s: f64,
-    step: String,
+/// Progress on stderr: a live bar on a terminal, plain lines otherwise.
+struct Live {
+    bar: Option<indicatif::ProgressBar>,
+    last_line_s: f64,
 }
 
-impl Progress for Lines {
+impl Live {
+    fn new(total_s: f64) -> Self {
+        use std::io::IsTerminal;
+        let bar = std::io::stderr().is_terminal().then(|| {
+            let b = indicatif::ProgressBar::new(total_s.max(1.0) as u64);
+            b.set_style(
+                indicatif::ProgressStyle::with_template(
+                    "{bar:30} {pos}/{len} s device time  {msg}",
+                )
+                .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+            );
+            b
+        });
+        Self {
+            bar,
+            last_line_s: 0.0,
+        }
+    }
+}
+
+impl Progress for Live {
     fn step(&mut self, s: &crate::procedure::Step, i: usize, n: usize) {
-        self.step = format!("[{}/{n}] {}", i + 1, s.describe());
-        eprintln!("{}", self.step);
+        let line = format!("[{}/{n}] {}", i + 1, s.describe());
+        match &self.bar {
+            Some(b) => b.println(line),
+            None => eprintln!("{line}"),
+        }
     }
 
-    fn tick(&mut self, st: &BenchState) {
-        if st.t_s - self.last_print_s >= 3600.0 {
-            self.last_print_s = st.t_s;
-            eprintln!(
-                "  t = {:.2} h  chamber {:+.2} degC (set {:+.1})  table {:.1}/{:.1} deg",
-                st.t_s / 3600.0,
-                st.chamber.air_c,
-                st.chamber.set_point_c,
-                st.table.angles.outer_deg,
-                st.table.angles.inner_deg
-            );
+    fn tick(&mut self, st: &BenchState, iv: Option<&Interval>) {
+        let rate = iv.map_or(String::new(), |iv| {
+            format!(
+                "  rate {:+.3} deg/h  T1/T2/TK {:.2}/{:.2}/{:.2} degC",
+                iv.bias_dph(),
+                iv.t1_c,
+                iv.t2_c,
+                iv.tcase_c
+            )
+        });
+        let msg = format!(
+            "chamber {:+.2} degC (set {:+.1}){rate}",
+            st.chamber.air_c, st.chamber.set_point_c
+        );
+        match &self.bar {
+            Some(b) => {
+                b.set_position(st.t_s as u64);
+                b.set_message(msg);
+            }
+            None if st.t_s - self.last_line_s >= 3600.0 => {
+                self.last_line_s = st.t_s;
+                eprintln!("  t = {:.2} h  {msg}", st.t_s / 3600.0);
+            }
+            None => {}
         }
     }
 }
@@ -227,10 +265,11 @@ pub fn run(args: RunArgs) -> Result<Outcome> {
     eprintln!("running {} -> {}", procedure.meta.name, out.display());
     let result = rt.block_on(async {
         watch_ctrl_c(interrupt)?;
-        let mut progress = Lines {
-            last_print_s: 0.0,
-            step: String::new(),
-        };
+        let total: f64 = estimate(&procedure, &bench_cfg)
+            .iter()
+            .map(|(_, e)| e.min_s)
+            .sum();
+        let mut progress = Live::new(total);
         Ok::<_, anyhow::Error>(
             sequencer::run(
                 &procedure,

@@ -137,6 +137,16 @@ impl DeviceBench {
     }
 }
 
+/// At rest within 0.01 deg of the commanded angles (the sequencer's
+/// in-position judgement adds the settle time).
+fn at_rest_on(t: &crate::driver::TableReading, c: TableAngles) -> bool {
+    let near = |a: f64, b: f64| crate::geometry::wrap_deg(a - b).abs() <= 0.01;
+    near(t.angles.outer_deg, c.outer_deg)
+        && near(t.angles.inner_deg, c.inner_deg)
+        && t.rates.outer_deg == 0.0
+        && t.rates.inner_deg == 0.0
+}
+
 #[async_trait]
 impl BenchIo for DeviceBench {
     fn now_s(&self) -> f64 {
@@ -212,6 +222,7 @@ impl BenchIo for DeviceBench {
             reference_dph: self
                 .geometry
                 .kinematic_rate_dph(&self.site, table.angles, table.rates),
+            in_position: at_rest_on(&table, self.commanded),
             chamber,
             table,
             commanded: self.commanded,

@@ -129,6 +129,7 @@ impl EmbeddedBench {
             commanded: self.commanded,
             orientation: self.geometry.orientation(angles),
             reference_dph: self.geometry.kinematic_rate_dph(&self.site, angles, rates),
+            in_position: !self.twin.table_moving(),
         }
     }
 }

@@ -49,6 +49,8 @@ pub struct BenchState {
     pub orientation: Orientation,
     /// Earth + table rate on the nominal sensitive axis, deg/h.
     pub reference_dph: f64,
+    /// Both axes at their commanded angles and at rest (as last judged).
+    pub in_position: bool,
 }
 
 /// What one tick brought.
@@ -99,6 +101,8 @@ pub trait Sink {
     ) -> std::io::Result<()>;
     /// An event (step start/end, note, error), with a level 1..5 (foxglove.Log).
     fn event(&mut self, t_s: f64, level: u8, message: &str) -> std::io::Result<()>;
+    /// The gyro link's figures so far (every minute of device time and at the end).
+    fn link(&mut self, t_s: f64, stats: &crate::protocol::frame::LinkStats) -> std::io::Result<()>;
 }
 
 /// How a run ended.
@@ -149,8 +153,8 @@ pub struct RunResult {
 pub trait Progress {
     /// A step starts.
     fn step(&mut self, step: &Step, index: usize, total: usize);
-    /// A tick passed.
-    fn tick(&mut self, state: &BenchState);
+    /// A tick passed; `interval` is its 1 Hz mean (rate, temperatures).
+    fn tick(&mut self, state: &BenchState, interval: Option<&crate::analysis::series::Interval>);
 }
 
 /// No progress display.
@@ -159,7 +163,7 @@ pub struct Quiet;
 
 impl Progress for Quiet {
     fn step(&mut self, _: &Step, _: usize, _: usize) {}
-    fn tick(&mut self, _: &BenchState) {}
+    fn tick(&mut self, _: &BenchState, _: Option<&crate::analysis::series::Interval>) {}
 }
 
 /// Run options.
@@ -195,6 +199,7 @@ struct Run<'a> {
     measurements: Vec<Measurement>,
     /// Cleanup is running: alarms were already acted on.
     cleaning_up: bool,
+    last_link_s: f64,
 }
 
 impl Run<'_> {
@@ -216,7 +221,6 @@ impl Run<'_> {
         let lsb = self.bench.lsb_arcsec();
         let tl = self.bench.temp_lsb_c();
         if let Some(state) = &self.tick.state {
-            self.progress.tick(state);
             if !state.chamber.alarms.is_empty() && !self.cleaning_up {
                 return Err(Stop::Device(DeviceError::Alarm {
                     device: "chamber".into(),
@@ -236,12 +240,20 @@ impl Run<'_> {
                     self.opts.dut_max_c
                 )));
             }
-            if let Some(iv) = self
+            let iv = self
                 .records
-                .push_tick(&self.tick, state, record, dt, lsb, tl)
-            {
+                .push_tick(&self.tick, state, record, dt, lsb, tl);
+            self.progress.tick(state, iv.as_ref());
+            if let Some(iv) = iv {
                 self.sink
                     .interval(&iv, record)
+                    .map_err(|e| Stop::Data(format!("writing the log: {e}")))?;
+            }
+            if state.t_s - self.last_link_s >= 60.0 {
+                self.last_link_s = state.t_s;
+                let stats = self.bench.link_stats();
+                self.sink
+                    .link(state.t_s, &stats)
                     .map_err(|e| Stop::Data(format!("writing the log: {e}")))?;
             }
             self.last = Some(state.clone());
@@ -408,6 +420,7 @@ pub async fn run(
         frames: 0,
         measurements: Vec::new(),
         cleaning_up: false,
+        last_link_s: 0.0,
     };
     let total = p.steps().count();
     let mut stop: Option<(Stop, String)> = None;
@@ -422,6 +435,9 @@ pub async fn run(
             stop = Some((e, s.key.clone()));
             break;
         }
+        let _ = r
+            .sink
+            .event(r.bench.now_s(), 1, &format!("end of step {}", s.key));
     }
     // Cleanup always runs once setup has started; a safe state comes first
     // whenever the run did not end normally.
