@@ -174,12 +174,7 @@ where
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::protocol::frame::FrameLayout;
-    use crate::twin::TwinConfig;
-
-    fn bench() -> SimBench {
-        SimBench::new(TwinConfig::default_rl16(), 1, FrameLayout::default())
-    }
+    use crate::sim::test_bench as bench;
 
     #[test]
     fn moves_with_its_limits_and_reports_position() {

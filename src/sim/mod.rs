@@ -167,6 +167,12 @@ impl SimBench {
     }
 }
 
+/// The default RL-16 bench with seed 1, for the simulators' unit tests.
+#[cfg(test)]
+pub(crate) fn test_bench() -> SimBench {
+    SimBench::new(TwinConfig::default_rl16(), 1, FrameLayout::default())
+}
+
 /// A [`SimBench`] shared by the servers, kept at the clock's time.
 pub struct SharedBench {
     bench: Mutex<SimBench>,

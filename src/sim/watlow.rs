@@ -129,12 +129,11 @@ impl tokio_modbus::server::Service for WatlowService {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::protocol::frame::FrameLayout;
-    use crate::twin::TwinConfig;
+    use crate::sim::test_bench;
 
     #[test]
     fn registers_hold_the_chamber_state() {
-        let mut b = SimBench::new(TwinConfig::default_rl16(), 1, FrameLayout::default());
+        let mut b = test_bench();
         let pv = b.watlow_read(w::PV, 2).expect("readable");
         assert_eq!(w::decode_f32(&pv), Some(20.0));
         b.watlow_write(w::SET_POINT, &encode_f32(-40.0))
