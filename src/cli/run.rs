@@ -88,6 +88,21 @@ impl Progress for Live {
         }
     }
 
+    fn prompt(&mut self, text: &str) {
+        use std::io::IsTerminal;
+        if !std::io::stdin().is_terminal() {
+            eprintln!("prompt (no terminal, going on): {text}");
+            return;
+        }
+        let ask = format!("{text} -- press Enter to continue");
+        match &self.bar {
+            Some(b) => b.suspend(|| eprintln!("{ask}")),
+            None => eprintln!("{ask}"),
+        }
+        let mut line = String::new();
+        let _ = std::io::stdin().read_line(&mut line);
+    }
+
     fn tick(&mut self, st: &BenchState, iv: Option<&Interval>) {
         let rate = iv.map_or(String::new(), |iv| {
             format!(

@@ -155,6 +155,9 @@ pub trait Progress {
     fn step(&mut self, step: &Step, index: usize, total: usize);
     /// A tick passed; `interval` is its 1 Hz mean (rate, temperatures).
     fn tick(&mut self, state: &BenchState, interval: Option<&crate::analysis::series::Interval>);
+    /// Ask the operator to confirm `text`; returns when confirmed. The
+    /// default confirms at once (no operator).
+    fn prompt(&mut self, _text: &str) {}
 }
 
 /// No progress display.
@@ -374,10 +377,23 @@ impl Run<'_> {
                 self.measurements.push(meas);
                 Ok(())
             }
-            StepKind::Note { text } | StepKind::Prompt { text } => self
+            StepKind::Note { text } => self
                 .sink
                 .event(self.bench.now_s(), 2, text)
                 .map_err(|e| Stop::Data(e.to_string())),
+            StepKind::Prompt { text } => {
+                self.sink
+                    .event(self.bench.now_s(), 2, &format!("prompt: {text}"))
+                    .map_err(|e| Stop::Data(e.to_string()))?;
+                // Simulated benches have no operator to wait for.
+                if !self.bench.is_simulated() {
+                    self.progress.prompt(text);
+                    self.sink
+                        .event(self.bench.now_s(), 2, "operator confirmed")
+                        .map_err(|e| Stop::Data(e.to_string()))?;
+                }
+                Ok(())
+            }
         }
     }
 }
