@@ -173,6 +173,61 @@ pub trait Chamber: Send {
     async fn set_mode(&mut self, mode: ChamberMode) -> Result<(), DeviceError>;
 }
 
+/// Ramps a chamber whose controller has no ramp of its own by stepping its
+/// constant set point: `due` says which set point to send now, if any.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SetPointRamp {
+    from_c: f64,
+    to_c: f64,
+    rate_c_per_s: f64,
+    start_s: f64,
+    sent_c: Option<f64>,
+}
+
+impl SetPointRamp {
+    /// Smallest set-point change worth sending, degC.
+    pub const STEP_C: f64 = 0.05;
+
+    /// A ramp from `from_c` to `to_c` at `rate_c_per_min`, starting at `now_s`.
+    pub fn new(from_c: f64, to_c: f64, rate_c_per_min: f64, now_s: f64) -> Self {
+        Self {
+            from_c,
+            to_c,
+            rate_c_per_s: rate_c_per_min / 60.0,
+            start_s: now_s,
+            sent_c: None,
+        }
+    }
+
+    /// The ramped set point at `t_s`, degC.
+    pub fn at(&self, t_s: f64) -> f64 {
+        let d = self.to_c - self.from_c;
+        let moved = (self.rate_c_per_s * (t_s - self.start_s)).clamp(0.0, d.abs());
+        self.from_c + moved * d.signum()
+    }
+
+    /// The set point to send at `t_s`, if it moved by at least [`Self::STEP_C`]
+    /// since the last one sent (or reached the target); marks it sent.
+    pub fn due(&mut self, t_s: f64) -> Option<f64> {
+        let sp = self.at(t_s);
+        let send = match self.sent_c {
+            None => true,
+            Some(last) => {
+                (sp - last).abs() >= Self::STEP_C || (sp == self.to_c && last != self.to_c)
+            }
+        };
+        send.then(|| {
+            self.sent_c = Some(sp);
+            sp
+        })
+    }
+
+    /// True once the target has been sent.
+    pub fn done(&self) -> bool {
+        self.sent_c == Some(self.to_c)
+    }
+}
+
 /// What a motion simulator reports.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct TableReading {
@@ -239,6 +294,20 @@ impl InPosition {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn set_point_ramp_steps_at_the_rate_and_ends_on_the_target() {
+        let mut r = SetPointRamp::new(20.0, 50.0, 1.0, 100.0);
+        assert_eq!(r.due(100.0), Some(20.0));
+        assert_eq!(r.due(101.0), None, "1/60 degC is below the step");
+        assert_eq!(r.due(103.0), Some(20.05));
+        assert!((r.at(100.0 + 900.0) - 35.0).abs() < 1e-12);
+        assert_eq!(r.due(100.0 + 1800.0), Some(50.0));
+        assert!(r.done());
+        assert_eq!(r.due(100.0 + 4000.0), None);
+        let down = SetPointRamp::new(20.0, -40.0, 2.0, 0.0);
+        assert!((down.at(600.0) - 0.0).abs() < 1e-12);
+    }
 
     #[test]
     fn in_position_needs_the_settle_time() {

@@ -16,29 +16,9 @@ use super::{BenchIo, BenchState, FrameRecord, Tick};
 use crate::bench::{BenchConfig, OpenBench};
 use crate::clock::{Clock, WallClock};
 use crate::driver::acl::AclTable;
-use crate::driver::{Chamber, ChamberMode, DeviceError, MotionTable};
+use crate::driver::{Chamber, ChamberMode, DeviceError, MotionTable, SetPointRamp};
 use crate::geometry::{Site, TableAngles, TableGeometry};
 use crate::protocol::frame::LinkStats;
-
-/// Smallest set-point change sent while ramping, degC.
-pub const RAMP_STEP_C: f64 = 0.05;
-
-#[derive(Debug, Clone, Copy)]
-struct Ramp {
-    from_c: f64,
-    to_c: f64,
-    rate_c_per_s: f64,
-    start_s: f64,
-    sent_c: f64,
-}
-
-impl Ramp {
-    fn at(&self, t_s: f64) -> f64 {
-        let d = self.to_c - self.from_c;
-        let moved = (self.rate_c_per_s * (t_s - self.start_s)).min(d.abs());
-        self.from_c + moved * d.signum()
-    }
-}
 
 /// Real drivers behind [`BenchIo`].
 pub struct DeviceBench {
@@ -51,7 +31,7 @@ pub struct DeviceBench {
     site: Site,
     geometry: TableGeometry,
     commanded: TableAngles,
-    ramp: Option<Ramp>,
+    ramp: Option<SetPointRamp>,
     last_air_c: f64,
     frame_dt_s: f64,
     lsb_arcsec: f64,
@@ -127,12 +107,10 @@ impl DeviceBench {
         let Some(mut r) = self.ramp else {
             return Ok(());
         };
-        let sp = r.at(t_s);
-        if (sp - r.sent_c).abs() >= RAMP_STEP_C || (sp == r.to_c && r.sent_c != r.to_c) {
+        if let Some(sp) = r.due(t_s) {
             self.chamber.set_point(sp).await?;
-            r.sent_c = sp;
         }
-        self.ramp = (r.sent_c != r.to_c).then_some(r);
+        self.ramp = (!r.done()).then_some(r);
         Ok(())
     }
 }
@@ -173,13 +151,7 @@ impl BenchIo for DeviceBench {
         let now = self.now_s();
         let from = self.ramp.map_or(self.last_air_c, |r| r.at(now));
         self.chamber.set_mode(ChamberMode::Constant).await?;
-        self.ramp = Some(Ramp {
-            from_c: from,
-            to_c: set_c,
-            rate_c_per_s: ramp_c_per_min / 60.0,
-            start_s: now,
-            sent_c: f64::NAN,
-        });
+        self.ramp = Some(SetPointRamp::new(from, set_c, ramp_c_per_min, now));
         self.step_ramp(now).await
     }
 
