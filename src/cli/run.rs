@@ -19,6 +19,7 @@ use crate::recorder::{Recorder, RunMeta};
 use crate::report::{Report, render_html};
 use crate::sequencer::device::DeviceBench;
 use crate::sequencer::embedded::{EmbeddedBench, Fault};
+use crate::sequencer::guard::Guarded;
 use crate::sequencer::{self, BenchIo, BenchState, Options, Progress, Sink};
 use crate::twin::TwinConfig;
 
@@ -209,21 +210,22 @@ pub fn run(args: RunArgs) -> Result<Outcome> {
         .enable_all()
         .build()
         .context("starting the async runtime")?;
+    let limits = bench_cfg.limits.clone();
     let mut bench: Box<dyn BenchIo> = if embedded {
         let clock = Arc::new(VirtualClock::new(pacing));
         let mut b = EmbeddedBench::new(twin.clone(), args.seed, clock);
         for (at, f) in faults {
             b.schedule(at, f);
         }
-        Box::new(b)
+        Box::new(Guarded::new(b, limits))
     } else {
         let open = rt
             .block_on(open_bench(&bench_cfg))
             .context("opening the bench's devices")?;
-        Box::new(
-            rt.block_on(DeviceBench::start(&bench_cfg, open))
-                .context("bringing the bench up (servo on, first reading)")?,
-        )
+        let device = rt
+            .block_on(DeviceBench::start(&bench_cfg, open))
+            .context("bringing the bench up (servo on, first reading)")?;
+        Box::new(Guarded::new(device, limits))
     };
     let mut meta = RunMeta::default();
     for (k, v) in [

@@ -8,6 +8,7 @@
 
 pub mod device;
 pub mod embedded;
+pub mod guard;
 pub mod measure;
 
 use std::sync::Arc;

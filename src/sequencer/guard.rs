@@ -1,0 +1,168 @@
+//! The bench limits, enforced in one place below the sequencer: every
+//! chamber and table command of any [`BenchIo`] passes through [`Guarded`],
+//! which refuses what the bench file's `[limits]` forbid before a byte is
+//! sent.
+
+use async_trait::async_trait;
+
+use super::{BenchIo, Tick};
+use crate::bench::Limits;
+use crate::driver::DeviceError;
+use crate::geometry::TableAngles;
+use crate::protocol::frame::LinkStats;
+
+/// A bench whose commands are checked against the limits.
+#[derive(Debug)]
+pub struct Guarded<B> {
+    inner: B,
+    limits: Limits,
+}
+
+impl<B: BenchIo> Guarded<B> {
+    /// Guard `inner` with `limits`.
+    pub fn new(inner: B, limits: Limits) -> Self {
+        Self { inner, limits }
+    }
+
+    fn refuse(device: &str, request: String, reason: String) -> DeviceError {
+        DeviceError::Refused {
+            device: device.to_owned(),
+            request,
+            reason: format!("beyond the bench limits: {reason}"),
+        }
+    }
+}
+
+#[async_trait]
+impl<B: BenchIo> BenchIo for Guarded<B> {
+    fn now_s(&self) -> f64 {
+        self.inner.now_s()
+    }
+
+    fn is_simulated(&self) -> bool {
+        self.inner.is_simulated()
+    }
+
+    fn frame_dt_s(&self) -> f64 {
+        self.inner.frame_dt_s()
+    }
+
+    fn lsb_arcsec(&self) -> f64 {
+        self.inner.lsb_arcsec()
+    }
+
+    fn temp_lsb_c(&self) -> f64 {
+        self.inner.temp_lsb_c()
+    }
+
+    async fn set_chamber(&mut self, set_c: f64, ramp_c_per_min: f64) -> Result<(), DeviceError> {
+        let l = &self.limits;
+        let request = format!("set point {set_c} degC at {ramp_c_per_min} degC/min");
+        if !(set_c.is_finite() && (l.chamber_min_c..=l.chamber_max_c).contains(&set_c)) {
+            let why = format!(
+                "set point outside {}..{} degC",
+                l.chamber_min_c, l.chamber_max_c
+            );
+            return Err(Self::refuse("chamber", request, why));
+        }
+        if !(ramp_c_per_min.is_finite()
+            && ramp_c_per_min > 0.0
+            && ramp_c_per_min <= l.chamber_max_ramp_c_per_min)
+        {
+            let why = format!(
+                "ramp not within 0..{} degC/min",
+                l.chamber_max_ramp_c_per_min
+            );
+            return Err(Self::refuse("chamber", request, why));
+        }
+        self.inner.set_chamber(set_c, ramp_c_per_min).await
+    }
+
+    async fn move_table(&mut self, a: TableAngles) -> Result<(), DeviceError> {
+        let l = &self.limits;
+        for (v, r, axis) in [
+            (a.outer_deg, l.outer_range_deg, "outer"),
+            (a.inner_deg, l.inner_range_deg, "inner"),
+        ] {
+            if !(v.is_finite() && v >= r[0] && v <= r[1]) {
+                let request = format!("move to outer {} / inner {} deg", a.outer_deg, a.inner_deg);
+                let why = format!("{axis} axis outside {}..{} deg", r[0], r[1]);
+                return Err(Self::refuse("table", request, why));
+            }
+        }
+        self.inner.move_table(a).await
+    }
+
+    async fn safe_state(&mut self) -> Result<(), DeviceError> {
+        self.inner.safe_state().await
+    }
+
+    async fn advance(&mut self, t_s: f64, tick: &mut Tick) -> Result<(), DeviceError> {
+        self.inner.advance(t_s, tick).await
+    }
+
+    fn link_stats(&self) -> LinkStats {
+        self.inner.link_stats()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::sync::Arc;
+
+    use super::*;
+    use crate::bench::BenchConfig;
+    use crate::clock::{Pacing, VirtualClock};
+    use crate::sequencer::embedded::EmbeddedBench;
+    use crate::twin::TwinConfig;
+
+    fn guarded() -> Guarded<EmbeddedBench> {
+        let clock = Arc::new(VirtualClock::new(Pacing::Max));
+        let bench = EmbeddedBench::new(TwinConfig::default_rl16(), 1, clock);
+        Guarded::new(bench, BenchConfig::embedded().limits)
+    }
+
+    #[tokio::test]
+    async fn chamber_commands_beyond_the_limits_never_reach_the_chamber() {
+        let mut b = guarded();
+        // The twin's chamber could do +100 degC and 5 degC/min; the bench forbids it.
+        for (sp, ramp) in [
+            (100.0, 1.0),
+            (-60.0, 1.0),
+            (20.0, 4.0),
+            (20.0, 0.0),
+            (f64::NAN, 1.0),
+        ] {
+            let err = b
+                .set_chamber(sp, ramp)
+                .await
+                .expect_err("beyond the limits");
+            assert!(err.to_string().contains("beyond the bench limits"), "{err}");
+        }
+        let mut tick = Tick::default();
+        b.advance(600.0, &mut tick).await.expect("advance");
+        let st = tick.state.expect("state");
+        assert_eq!(st.chamber.set_point_c, 20.0, "nothing was sent");
+        b.set_chamber(50.0, 1.0).await.expect("within limits");
+    }
+
+    #[tokio::test]
+    async fn table_moves_beyond_the_travel_are_refused() {
+        let mut b = guarded();
+        let err = b
+            .move_table(TableAngles {
+                outer_deg: 190.0,
+                inner_deg: 0.0,
+            })
+            .await
+            .expect_err("outer beyond its travel");
+        assert!(err.to_string().contains("outer axis outside"), "{err}");
+        let mut tick = Tick::default();
+        b.advance(30.0, &mut tick).await.expect("advance");
+        assert_eq!(
+            tick.state.expect("state").commanded.outer_deg,
+            90.0,
+            "nothing was sent"
+        );
+    }
+}
