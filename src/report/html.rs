@@ -22,6 +22,20 @@ fn esc(s: &str) -> String {
         .replace('"', "&quot;")
 }
 
+/// The legend box every chart uses.
+fn legend<'a, DB, CT>(c: &mut ChartContext<'a, DB, CT>) -> Result<(), Box<dyn std::error::Error>>
+where
+    DB: DrawingBackend + 'a,
+    DB::ErrorType: 'static,
+    CT: CoordTranslate,
+{
+    c.configure_series_labels()
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .draw()?;
+    Ok(())
+}
+
 /// Draw into an SVG string; a drawing error becomes a note instead.
 fn svg(draw: impl FnOnce(&mut String) -> Result<(), Box<dyn std::error::Error>>) -> String {
     let mut s = String::new();
@@ -84,10 +98,7 @@ fn rate_chart(records: &Records, compensated: &[(f64, f64)]) -> String {
                 .label("model-4 compensated")
                 .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], RED));
         }
-        c.configure_series_labels()
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .draw()?;
+        legend(&mut c)?;
         root.present()?;
         Ok(())
     })
@@ -146,10 +157,7 @@ fn temperature_chart(records: &Records) -> String {
             .label(*name)
             .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], color));
         }
-        c.configure_series_labels()
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .draw()?;
+        legend(&mut c)?;
         root.present()?;
         Ok(())
     })
@@ -206,10 +214,7 @@ fn position_chart(r: &Report) -> Option<String> {
             ))?
             .label(format!("spec {spec} deg/h"))
             .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], RED));
-            c.configure_series_labels()
-                .background_style(WHITE.mix(0.8))
-                .border_style(BLACK)
-                .draw()?;
+            legend(&mut c)?;
         }
         root.present()?;
         Ok(())
@@ -277,10 +282,7 @@ fn allan_chart(r: &Report, records: &Records) -> Option<String> {
             .label(format!("spec {spec} deg/h"))
             .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], RED));
         }
-        c.configure_series_labels()
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .draw()?;
+        legend(&mut c)?;
         root.present()?;
         Ok(())
     }))
