@@ -62,9 +62,20 @@ pub struct Source {
 impl Source {
     /// Read a file from disk.
     pub fn read(path: &Path) -> Result<Self, ConfigError> {
-        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
-            path: path.to_owned(),
-            source,
+        let text = std::fs::read_to_string(path).map_err(|source| {
+            if source.kind() == std::io::ErrorKind::InvalidData {
+                ConfigError::Parse {
+                    path: path.to_owned(),
+                    line: 1,
+                    column: 1,
+                    message: "the file is not UTF-8 text; expected a TOML file".into(),
+                }
+            } else {
+                ConfigError::Read {
+                    path: path.to_owned(),
+                    source,
+                }
+            }
         })?;
         Ok(Self {
             path: path.to_owned(),
@@ -83,10 +94,8 @@ impl Source {
     /// Stage one: deserialize the raw structure.
     pub fn parse<T: DeserializeOwned>(&self) -> Result<T, ConfigError> {
         toml::from_str(&self.text).map_err(|e| {
-            let (line, column) = e
-                .span()
-                .map(|s| line_col(&self.text, s.start))
-                .unwrap_or((1, 1));
+            let at = e.span().map(|s| self.refine(s, e.message())).unwrap_or(0);
+            let (line, column) = line_col(&self.text, at);
             ConfigError::Parse {
                 path: self.path.clone(),
                 line,
@@ -94,6 +103,30 @@ impl Source {
                 message: e.message().trim().to_owned(),
             }
         })
+    }
+
+    /// Where in `span` an error really is: serde reports unknown keys of
+    /// internally tagged tables (procedure steps) at the whole table; the
+    /// key's own line inside it is more use to the reader.
+    fn refine(&self, span: std::ops::Range<usize>, message: &str) -> usize {
+        let key = message
+            .strip_prefix("unknown field `")
+            .and_then(|m| m.split('`').next());
+        // The span may cover only the table's header: search on from it.
+        let (Some(key), Some(region)) = (key, self.text.get(span.start..)) else {
+            return span.start;
+        };
+        let mut offset = span.start;
+        for line in region.split_inclusive('\n') {
+            let t = line.trim_start();
+            if t.strip_prefix(key)
+                .is_some_and(|rest| rest.trim_start().starts_with('='))
+            {
+                return offset + (line.len() - t.len());
+            }
+            offset += line.len();
+        }
+        span.start
     }
 
     /// An error about the value at dotted `key` (e.g. `thermal.tau_case_s`,

@@ -6,6 +6,7 @@
     reason = "a test helper that cannot run should fail the test loudly"
 )]
 
+mod bad_input;
 mod bench_io;
 mod cli;
 mod run;
