@@ -334,3 +334,79 @@ impl Sink for Recorder {
         )
     }
 }
+
+/// What [`recover`] salvaged.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct Recovered {
+    /// Messages copied.
+    pub messages: u64,
+    /// Gyro frames inside the copied `/gyro/frames` messages.
+    pub frames: u64,
+    /// Bytes of the input after the last complete record (lost).
+    pub bytes_lost: u64,
+    /// Whether the input was complete already (had its footer).
+    pub was_complete: bool,
+}
+
+/// Rewrite a possibly truncated log (a run killed mid-way) as a complete,
+/// indexed file: every message of every complete chunk and the run
+/// metadata are copied; what follows the last complete record is lost.
+pub fn recover(input: &[u8], out: &Path) -> std::io::Result<Recovered> {
+    use mcap::read::{LinearReader, MessageStream, Options};
+    let lenient = || Options::IgnoreEndMagic.into();
+    let mut r = Recovered {
+        was_complete: input.ends_with(mcap::MAGIC) && input.len() > 2 * mcap::MAGIC.len(),
+        ..Recovered::default()
+    };
+    let opts = mcap::WriteOptions::new()
+        .compression(Some(mcap::Compression::Zstd))
+        .chunk_size(Some(4 * 1024 * 1024))
+        .profile("")
+        .library(format!(
+            "gyrobench {} (recovered)",
+            env!("CARGO_PKG_VERSION")
+        ));
+    let mut w = opts
+        .create(BufWriter::new(File::create(out)?))
+        .map_err(mcap_err)?;
+
+    // The run metadata (top-level records, outside chunks).
+    let records = LinearReader::new_with_options(input, lenient()).map_err(mcap_err)?;
+    for rec in records {
+        let Ok(rec) = rec else { break };
+        if let mcap::records::Record::Metadata(m) = &rec {
+            w.write_metadata(m).map_err(mcap_err)?;
+        }
+    }
+
+    let stream = MessageStream::new_with_options(input, lenient()).map_err(mcap_err)?;
+    for m in stream {
+        let Ok(m) = m else { break };
+        if m.channel.topic == topics::FRAMES
+            && let Ok(v) = serde_json::from_slice::<serde_json::Value>(&m.data)
+        {
+            r.frames += v["counts"].as_array().map_or(0, |a| a.len() as u64);
+        }
+        w.write(&m).map_err(mcap_err)?;
+        r.messages += 1;
+    }
+    w.finish().map_err(mcap_err)?;
+    let kept = recovered_bytes(input);
+    r.bytes_lost = (input.len() as u64).saturating_sub(kept);
+    Ok(r)
+}
+
+/// Offset just past the last record that reads whole.
+fn recovered_bytes(input: &[u8]) -> u64 {
+    let magic = mcap::MAGIC.len();
+    let mut at = magic;
+    while at + 9 <= input.len() {
+        let len = u64::from_le_bytes(input[at + 1..at + 9].try_into().unwrap_or([0; 8]));
+        let end = (at as u64).saturating_add(9).saturating_add(len);
+        if end > input.len() as u64 {
+            break;
+        }
+        at = end as usize;
+    }
+    at as u64
+}

@@ -5,6 +5,7 @@
 //! unit tested. Results go to stdout, diagnostics to stderr.
 
 mod check;
+mod recover;
 mod run;
 mod sim;
 mod twin;
@@ -57,6 +58,8 @@ struct Cli {
 enum Command {
     /// Run an acceptance procedure: log to MCAP, judge, report.
     Run(run::RunArgs),
+    /// Rewrite the log of a killed run as a complete, indexed file.
+    Recover(recover::RecoverArgs),
     /// Validate a procedure and print its plan with estimated device times.
     Check(check::CheckArgs),
     /// The simulated RL-16 and its bench (digital twin).
@@ -79,6 +82,7 @@ pub fn main() -> ExitCode {
     let result = match cli.command {
         Command::Run(args) => run::run(args),
         Command::Check(args) => check::run(args),
+        Command::Recover(args) => recover::run(args),
         Command::Twin(cmd) => twin::run(cmd),
         Command::Sim(cmd) => sim::run(cmd),
     };

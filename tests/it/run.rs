@@ -375,3 +375,124 @@ fn a_procedure_through_sim_serve_over_tcp_and_ptys_gives_the_embedded_verdict() 
     let _ = serve.wait();
     std::fs::remove_dir_all(&dir).expect("cleanup");
 }
+
+/// The `counts` of every frame in a log, in order, read leniently (a
+/// truncated file is read up to its last complete chunk).
+fn counts_and_seqs(path: &Path) -> (Vec<i64>, Vec<u8>) {
+    let bytes = std::fs::read(path).expect("log");
+    let stream =
+        mcap::MessageStream::new_with_options(&bytes, mcap::read::Options::IgnoreEndMagic.into())
+            .expect("the start of a log reads");
+    let (mut counts, mut seqs) = (Vec::new(), Vec::new());
+    for m in stream {
+        let Ok(m) = m else { break };
+        if m.channel.topic == "/gyro/frames" {
+            let j: serde_json::Value = serde_json::from_slice(&m.data).expect("JSON");
+            counts.extend(
+                j["counts"]
+                    .as_array()
+                    .expect("counts")
+                    .iter()
+                    .map(|v| v.as_i64().expect("int")),
+            );
+            seqs.extend(
+                j["seq"]
+                    .as_array()
+                    .expect("seq")
+                    .iter()
+                    .map(|v| v.as_u64().expect("int") as u8),
+            );
+        }
+    }
+    (counts, seqs)
+}
+
+#[test]
+fn a_run_killed_with_sigkill_is_recovered_to_what_was_flushed() {
+    let dir = temp_dir("run-sigkill");
+    let killed = dir.join("killed");
+    let proc_ = concat!(env!("CARGO_MANIFEST_DIR"), "/procedures/thermal_cycle.toml");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_gyrobench"))
+        .args([
+            "run",
+            proc_,
+            "--speed",
+            "1000",
+            "--out",
+            killed.to_str().expect("utf-8"),
+        ])
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .expect("run starts");
+    // Kill once a few chunks are on disk (the log grows by about 0.5 MB a
+    // wall second at this speed), whatever the machine's pace.
+    let log = killed.join("run.mcap");
+    for _ in 0..600 {
+        if std::fs::metadata(&log).map_or(0, |m| m.len()) > 1_000_000 {
+            break;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    child.kill().expect("SIGKILL");
+    let status = child.wait().expect("reaped");
+    assert_eq!(
+        status.code(),
+        None,
+        "the run must have been killed, not finished"
+    );
+    assert!(!killed.join("report.json").exists());
+
+    let flushed = counts_and_seqs(&log);
+    assert!(
+        flushed.0.len() > 100_000,
+        "{} frames flushed",
+        flushed.0.len()
+    );
+    let recovered_path = dir.join("recovered.mcap");
+    let out = gyrobench(&[
+        "recover",
+        log.to_str().expect("utf-8"),
+        "-o",
+        recovered_path.to_str().expect("utf-8"),
+    ]);
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    // Complete and indexed: the strict reader (footer, summary) takes it.
+    let bytes = std::fs::read(&recovered_path).expect("recovered log");
+    let summary = mcap::Summary::read(&bytes)
+        .expect("summary reads")
+        .expect("has a summary");
+    assert_eq!(summary.channels.len(), 6);
+    let recovered = counts_and_seqs(&recovered_path);
+    assert_eq!(
+        recovered.0.len(),
+        flushed.0.len(),
+        "every flushed frame is recovered"
+    );
+    assert!(
+        String::from_utf8_lossy(&out.stdout).contains(&format!("{} gyro frames", flushed.0.len()))
+    );
+    for w in recovered.1.windows(2) {
+        assert_eq!(
+            w[1],
+            w[0].wrapping_add(1),
+            "no hole in the recovered frames"
+        );
+    }
+    // Exactly the start of the same run carried to its end (same seed).
+    let full = dir.join("full");
+    let out = run(&full, &[proc_]);
+    assert_eq!(out.status.code(), Some(0));
+    let whole = counts_and_seqs(&full.join("run.mcap"));
+    assert_eq!(
+        &whole.0[..recovered.0.len()],
+        &recovered.0[..],
+        "recovered frames are the run's own"
+    );
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}

@@ -1,0 +1,47 @@
+//! `gyrobench recover RUN.mcap [-o OUT]`: a complete, indexed log from
+//! what a killed run had flushed.
+
+use std::path::PathBuf;
+
+use anyhow::{Context, Result};
+use clap::Args;
+
+use super::Outcome;
+use crate::recorder::recover;
+
+#[derive(Debug, Args)]
+pub struct RecoverArgs {
+    /// The log of a run that did not finish (or any MCAP log).
+    log: PathBuf,
+    /// Where to write the recovered log (default: <log>-recovered.mcap).
+    #[arg(short, long)]
+    out: Option<PathBuf>,
+}
+
+pub fn run(args: RecoverArgs) -> Result<Outcome> {
+    let input =
+        std::fs::read(&args.log).with_context(|| format!("reading {}", args.log.display()))?;
+    let out = args.out.unwrap_or_else(|| {
+        let stem = args
+            .log
+            .file_stem()
+            .map_or("run".into(), |s| s.to_string_lossy().into_owned());
+        args.log.with_file_name(format!("{stem}-recovered.mcap"))
+    });
+    let tmp = out.with_extension("mcap.partial");
+    let r = recover(&input, &tmp).with_context(|| format!("recovering {}", args.log.display()))?;
+    std::fs::rename(&tmp, &out).with_context(|| format!("writing {}", out.display()))?;
+    println!(
+        "recovered {} messages ({} gyro frames) into {}; {} bytes after the last complete record were lost{}",
+        r.messages,
+        r.frames,
+        out.display(),
+        r.bytes_lost,
+        if r.was_complete {
+            " (the log was complete)"
+        } else {
+            ""
+        }
+    );
+    Ok(Outcome::Success)
+}
