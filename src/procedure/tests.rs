@@ -157,3 +157,24 @@ fn empty_and_binary_files_are_refused() {
     let err = load("bin.toml", "\u{0}\u{1}\u{2}garbage").expect_err("binary");
     assert_eq!(err.line(), Some(1));
 }
+
+proptest::proptest! {
+    #![proptest_config(proptest::prelude::ProptestConfig::with_cases(512))]
+
+    /// Arbitrary text, and the smoke procedure with arbitrary bytes spliced
+    /// in, never panic the loader: every input is accepted or refused with
+    /// a located error.
+    #[test]
+    fn the_loader_never_panics(text in "\\PC{0,400}", at in 0usize..2000, splice in "\\PC{0,40}") {
+        let _ = load("fuzz.toml", &text);
+        let mut s = SMOKE.to_owned();
+        let mut i = at.min(s.len());
+        while !s.is_char_boundary(i) {
+            i -= 1;
+        }
+        s.insert_str(i, &splice);
+        if let Err(e) = load("fuzz.toml", &s) {
+            proptest::prop_assert!(e.line().is_some(), "{}", e);
+        }
+    }
+}

@@ -496,3 +496,34 @@ fn a_run_killed_with_sigkill_is_recovered_to_what_was_flushed() {
     );
     std::fs::remove_dir_all(&dir).expect("cleanup");
 }
+
+#[test]
+fn a_table_interlock_or_a_silent_gyro_ends_the_run_in_error_naming_the_device() {
+    for (fault, device) in [
+        ("table-interlock@300", "table"),
+        ("gyro-silent@300", "gyro"),
+    ] {
+        let dir = temp_dir(&format!("run-{device}"));
+        let out = run(&dir, &[&smoke(), "--inject", fault]);
+        assert_eq!(
+            out.status.code(),
+            Some(1),
+            "{fault}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let r = report(&dir);
+        assert_eq!(r["outcome"], "error", "{fault}");
+        assert_eq!(r["error"]["device"], device, "{fault}: {}", r["error"]);
+        let msgs = messages(&dir.join("run.mcap"));
+        assert_eq!(
+            frames_logged(&msgs),
+            r["frames"].as_u64().expect("frames"),
+            "{fault}: log complete"
+        );
+        assert!(
+            events(&msgs).iter().any(|e| e.contains("safe state")),
+            "{fault}: safe state attempted"
+        );
+        std::fs::remove_dir_all(&dir).expect("cleanup");
+    }
+}
