@@ -7,7 +7,7 @@ use clap::{Args, Subcommand};
 
 use super::Outcome;
 use crate::clock::time_it;
-use crate::study::{StudyReport, interchange_csv, run_study, thermal_cycle};
+use crate::study::{StudyReport, interchange_csv, run_study};
 use crate::twin::{Twin, TwinConfig};
 
 #[derive(Debug, Subcommand)]
@@ -67,7 +67,7 @@ pub fn run(cmd: TwinCommand) -> Result<Outcome> {
             let (report, wall_s) = time_it(|| run_study(&cfg, args.seed));
             let (report, series) = report.context("running the study on the twin")?;
             if let Some(path) = &args.csv {
-                let text = interchange_csv(&series, &thermal_cycle());
+                let text = interchange_csv(&series);
                 crate::fsutil::write_atomic(path, text.as_bytes())
                     .with_context(|| format!("writing {}", path.display()))?;
                 eprintln!("wrote {}", path.display());

@@ -195,3 +195,62 @@ pub fn compute(m: &Measure, records: &Records, coeffs: Option<&Fit>, step: &str)
         note,
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::driver::{ChamberMode, ChamberReading, TableReading};
+    use crate::geometry::{Orientation, TableAngles};
+    use crate::sequencer::FrameRecord;
+
+    #[test]
+    fn a_tick_becomes_one_interval_of_means_and_is_filed_under_its_record() {
+        let frames: Vec<FrameRecord> = (0..400)
+            .map(|i| FrameRecord {
+                seq: (i % 256) as u8,
+                counts: if i % 2 == 0 { 1 } else { 2 },
+                temps_raw: [if i % 2 == 0 { 2000 } else { 2100 }, 1900, 1800],
+                status: 0x000F,
+            })
+            .collect();
+        let tick = Tick {
+            t0_s: 10.0025,
+            frames,
+            state: None,
+        };
+        let state = BenchState {
+            t_s: 11.0,
+            chamber: ChamberReading {
+                air_c: 17.0,
+                set_point_c: 17.0,
+                mode: ChamberMode::Constant,
+                alarms: Vec::new(),
+            },
+            table: TableReading {
+                angles: TableAngles::default(),
+                rates: TableAngles::default(),
+            },
+            commanded: TableAngles::default(),
+            orientation: Orientation::new(0.0, 90.0, 0.0),
+            reference_dph: 10.0,
+            in_position: true,
+        };
+        let mut r = Records::default();
+        r.start("up");
+        let iv = r
+            .push_tick(&tick, &state, Some("up"), 1.0 / 400.0, 0.1, 0.01)
+            .expect("an interval");
+        // 600 counts of 0.1 arcsec in 1 s = 60 arcsec/s = 60 deg/h.
+        assert!((iv.rate_dph - 60.0).abs() < 1e-9, "{iv:?}");
+        assert!((iv.bias_dph() - 50.0).abs() < 1e-9);
+        assert!((iv.t1_c - 20.5).abs() < 1e-12 && (iv.tcase_c - 18.0).abs() < 1e-12);
+        assert!((iv.time_s - 10.5).abs() < 1e-9);
+        assert_eq!(iv.frames, 400);
+        assert_eq!(r.get("up").map(<[Interval]>::len), Some(1));
+        assert!(
+            r.push_tick(&Tick::default(), &state, None, 0.0025, 0.1, 0.01)
+                .is_none()
+        );
+        assert_eq!(r.all.len(), 1);
+    }
+}
