@@ -50,9 +50,13 @@ pub struct CoeffsFile {
 impl CoeffsFile {
     /// Read and check a coefficients file.
     pub fn load(path: &Path) -> Result<Self, ConfigError> {
-        let src = Source::read(path)?;
+        Self::from_source(&Source::read(path)?)
+    }
+
+    /// Parse and check coefficients text.
+    pub fn from_source(src: &Source) -> Result<Self, ConfigError> {
         let f: Self = src.parse()?;
-        let c = Checker::new(&src);
+        let c = Checker::new(src);
         let m = &f.model4;
         for (v, k) in [
             (m.k1_dph_per_c, "model4.k1_dph_per_c"),
@@ -66,6 +70,11 @@ impl CoeffsFile {
         }
         c.positive(m.warmup_tau_s, "model4.warmup_tau_s")?;
         Ok(f)
+    }
+
+    /// The file's text.
+    pub fn to_toml(&self) -> String {
+        toml::to_string_pretty(self).unwrap_or_default()
     }
 
     /// As a fitted model.

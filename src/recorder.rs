@@ -175,6 +175,21 @@ impl Recorder {
         &self.messages
     }
 
+    /// Write a metadata record (`result` at the end of a run: how it ended,
+    /// which a replay cannot recompute from the data).
+    pub fn metadata(
+        &mut self,
+        name: &str,
+        entries: BTreeMap<String, String>,
+    ) -> std::io::Result<()> {
+        self.w
+            .write_metadata(&mcap::records::Metadata {
+                name: name.into(),
+                metadata: entries,
+            })
+            .map_err(mcap_err)
+    }
+
     /// Write the summary, indexes and footer; the file is complete.
     pub fn finish(mut self) -> std::io::Result<()> {
         self.w.finish().map_err(mcap_err)?;

@@ -6,6 +6,7 @@
 
 mod check;
 mod recover;
+mod replay;
 mod run;
 mod sim;
 mod twin;
@@ -60,6 +61,8 @@ enum Command {
     Run(run::RunArgs),
     /// Rewrite the log of a killed run as a complete, indexed file.
     Recover(recover::RecoverArgs),
+    /// Recompute a run's measurements and verdict from its log alone.
+    Replay(replay::ReplayArgs),
     /// Validate a procedure and print its plan with estimated device times.
     Check(check::CheckArgs),
     /// The simulated RL-16 and its bench (digital twin).
@@ -83,6 +86,7 @@ pub fn main() -> ExitCode {
         Command::Run(args) => run::run(args),
         Command::Check(args) => check::run(args),
         Command::Recover(args) => recover::run(args),
+        Command::Replay(args) => replay::run(args),
         Command::Twin(cmd) => twin::run(cmd),
         Command::Sim(cmd) => sim::run(cmd),
     };

@@ -16,6 +16,7 @@ use crate::coeffs::CoeffsFile;
 use crate::procedure::Procedure;
 use crate::procedure::estimate::estimate;
 use crate::recorder::{Recorder, RunMeta};
+use crate::replay::{RESULT_META, result_entries};
 use crate::report::{Report, render_html};
 use crate::sequencer::device::DeviceBench;
 use crate::sequencer::embedded::{EmbeddedBench, Fault};
@@ -179,14 +180,17 @@ pub fn run(args: RunArgs) -> Result<Outcome> {
         Some(p) => TwinConfig::load(p).with_context(|| format!("loading twin {}", p.display()))?,
         None => TwinConfig::default_rl16(),
     };
-    let coeffs = match &args.coeffs {
+    let coeffs_file = match &args.coeffs {
         Some(p) => Some(
-            CoeffsFile::load(p)
-                .with_context(|| format!("loading coefficients {}", p.display()))?
-                .fit(),
+            CoeffsFile::load(p).with_context(|| format!("loading coefficients {}", p.display()))?,
         ),
         None => None,
     };
+    let coeffs = coeffs_file.as_ref().map(CoeffsFile::fit);
+    let bench_label = args
+        .bench
+        .as_ref()
+        .map_or("embedded".into(), |p| p.display().to_string());
     let faults: Vec<(f64, Fault)> = args
         .inject
         .iter()
@@ -253,6 +257,14 @@ pub fn run(args: RunArgs) -> Result<Outcome> {
         ("start_time_utc", start.to_rfc3339()),
         ("seed", args.seed.to_string()),
         ("speed", args.speed.clone()),
+        ("bench", bench_label.clone()),
+        (
+            "coeffs_toml",
+            coeffs_file
+                .as_ref()
+                .map(CoeffsFile::to_toml)
+                .unwrap_or_default(),
+        ),
     ] {
         meta.entries.insert(k.to_owned(), v);
     }
@@ -301,6 +313,7 @@ pub fn run(args: RunArgs) -> Result<Outcome> {
     let link = bench.link_stats();
     recorder
         .link(result.device_time_s, &link)
+        .and_then(|()| recorder.metadata(RESULT_META, result_entries(&result)))
         .and_then(|()| recorder.finish())
         .with_context(|| format!("finishing {}", mcap_path.display()))?;
 
@@ -311,10 +324,7 @@ pub fn run(args: RunArgs) -> Result<Outcome> {
         &start.to_rfc3339(),
         link,
         embedded.then_some(args.seed),
-        &args
-            .bench
-            .as_ref()
-            .map_or("embedded".into(), |p| p.display().to_string()),
+        &bench_label,
     );
     write(&out.join("report.json"), report.to_json().as_bytes())?;
     write(

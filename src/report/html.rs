@@ -66,7 +66,7 @@ fn rate_chart(records: &Records, compensated: &[(f64, f64)]) -> String {
     let all: Vec<&Interval> = records
         .all
         .iter()
-        .filter(|(r, _)| r.is_some())
+        .filter(|(recorded, _)| *recorded)
         .map(|(_, iv)| iv)
         .collect();
     let t: Vec<f64> = block_means(

@@ -14,8 +14,9 @@ use crate::procedure::{Measure, Metric};
 /// 1 Hz intervals of the whole run, and by record label.
 #[derive(Debug, Clone, Default)]
 pub struct Records {
-    /// Every interval of the run with the record it belongs to.
-    pub all: Vec<(Option<String>, Interval)>,
+    /// Every interval of the run, and whether it belongs to a record
+    /// (the table at rest); labels are in `by_label`.
+    pub all: Vec<(bool, Interval)>,
     by_label: BTreeMap<String, Vec<Interval>>,
     /// Labels in the order they were recorded.
     pub order: Vec<String>,
@@ -43,34 +44,86 @@ impl Records {
         lsb_arcsec: f64,
         temp_lsb_c: f64,
     ) -> Option<Interval> {
-        let n = tick.frames.len();
-        if n == 0 {
-            return None;
-        }
-        let span = n as f64 * frame_dt_s;
-        let (mut counts, mut t) = (0i64, [0i64; 3]);
+        let mut sums = TickSums::default();
         for f in &tick.frames {
-            counts += i64::from(f.counts);
-            for (acc, r) in t.iter_mut().zip(f.temps_raw) {
-                *acc += i64::from(r);
-            }
+            sums.add(f.counts, f.temps_raw);
         }
-        let temp = |i: usize| t[i] as f64 / n as f64 * temp_lsb_c;
-        let iv = Interval {
-            time_s: state.t_s - span / 2.0,
-            rate_dph: counts as f64 * lsb_arcsec / span,
+        let at = IntervalState {
+            t_s: state.t_s,
             reference_dph: state.reference_dph,
-            t1_c: temp(0),
-            t2_c: temp(1),
-            tcase_c: temp(2),
             chamber_c: state.chamber.air_c,
-            frames: n as u32,
         };
+        let iv = sums.interval(&at, frame_dt_s, lsb_arcsec, temp_lsb_c)?;
+        self.push(iv, record);
+        Some(iv)
+    }
+
+    /// File an interval under `record` (and in the whole run).
+    pub fn push(&mut self, iv: Interval, record: Option<&str>) {
         if let Some(label) = record {
             self.by_label.entry(label.to_owned()).or_default().push(iv);
         }
-        self.all.push((record.map(str::to_owned), iv));
-        Some(iv)
+        self.all.push((record.is_some(), iv));
+    }
+}
+
+/// Integer sums of one tick's frames (exact, in any order).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct TickSums {
+    /// Frames.
+    pub n: u64,
+    /// Sum of delta-angle counts.
+    pub counts: i64,
+    /// Sums of the raw T1, T2, TK readings.
+    pub temps: [i64; 3],
+}
+
+/// The bench state an interval is stamped with.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct IntervalState {
+    /// Device time at the end of the tick, s.
+    pub t_s: f64,
+    /// Earth (+ table) rate on the axis, deg/h.
+    pub reference_dph: f64,
+    /// Chamber air, degC.
+    pub chamber_c: f64,
+}
+
+impl TickSums {
+    /// Add one frame.
+    pub fn add(&mut self, counts: i32, temps_raw: [i16; 3]) {
+        self.n += 1;
+        self.counts += i64::from(counts);
+        for (acc, r) in self.temps.iter_mut().zip(temps_raw) {
+            *acc += i64::from(r);
+        }
+    }
+
+    /// The interval mean these frames make (none without frames). The
+    /// live run and replay both reduce ticks here, so they agree bit for bit.
+    pub fn interval(
+        &self,
+        at: &IntervalState,
+        frame_dt_s: f64,
+        lsb_arcsec: f64,
+        temp_lsb_c: f64,
+    ) -> Option<Interval> {
+        if self.n == 0 {
+            return None;
+        }
+        let n = self.n as f64;
+        let span = n * frame_dt_s;
+        let temp = |i: usize| self.temps[i] as f64 / n * temp_lsb_c;
+        Some(Interval {
+            time_s: at.t_s - span / 2.0,
+            rate_dph: self.counts as f64 * lsb_arcsec / span,
+            reference_dph: at.reference_dph,
+            t1_c: temp(0),
+            t2_c: temp(1),
+            tcase_c: temp(2),
+            chamber_c: at.chamber_c,
+            frames: u32::try_from(self.n).unwrap_or(u32::MAX),
+        })
     }
 }
 

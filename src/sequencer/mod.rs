@@ -107,7 +107,7 @@ pub trait Sink {
 }
 
 /// How a run ended.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Outcome {
     /// Every measurement within its limits.
@@ -121,7 +121,7 @@ pub enum Outcome {
 }
 
 /// The failure that ended a run.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct RunError {
     /// Device at fault, if any.
     pub device: Option<String>,

@@ -9,4 +9,5 @@
 mod bad_input;
 mod bench_io;
 mod cli;
+mod replay;
 mod run;

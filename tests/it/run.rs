@@ -484,6 +484,19 @@ fn a_run_killed_with_sigkill_is_recovered_to_what_was_flushed() {
             "no hole in the recovered frames"
         );
     }
+    // Replay takes the recovered log: every recovered frame, and an error
+    // outcome saying where the log ends (the run never finished).
+    let replayed = dir.join("replayed");
+    let out = gyrobench(&[
+        "replay",
+        recovered_path.to_str().expect("utf-8"),
+        "--out",
+        replayed.to_str().expect("utf-8"),
+    ]);
+    assert_eq!(out.status.code(), Some(1));
+    let r = report(&replayed);
+    assert_eq!(r["frames"].as_u64(), Some(flushed.0.len() as u64));
+    assert_eq!(r["outcome"], "error");
     // Exactly the start of the same run carried to its end (same seed).
     let full = dir.join("full");
     let out = run(&full, &[proc_]);

@@ -1,0 +1,94 @@
+//! `gyrobench replay RUN.mcap [--coeffs FILE] [--out DIR]`: every
+//! measurement and the verdict recomputed from a run's log alone.
+
+use std::path::PathBuf;
+
+use anyhow::{Context, Result};
+use clap::Args;
+
+use super::Outcome;
+use crate::clock::Stopwatch;
+use crate::coeffs::CoeffsFile;
+use crate::replay::replay;
+use crate::report::{Report, render_html};
+use crate::sequencer;
+
+#[derive(Debug, Args)]
+pub struct ReplayArgs {
+    /// The run's log (live, recovered, truncated or imported).
+    log: PathBuf,
+    /// Model-4 coefficients to compensate with instead of the run's.
+    #[arg(long)]
+    coeffs: Option<PathBuf>,
+    /// Where to write report.json and report.html (default: beside the log,
+    /// in <log dir>/replay).
+    #[arg(long)]
+    out: Option<PathBuf>,
+}
+
+pub fn run(args: ReplayArgs) -> Result<Outcome> {
+    let coeffs = match &args.coeffs {
+        Some(p) => Some(
+            CoeffsFile::load(p)
+                .with_context(|| format!("loading coefficients {}", p.display()))?
+                .fit(),
+        ),
+        None => None,
+    };
+    let watch = Stopwatch::start();
+    let r = replay(&args.log, coeffs.as_ref())?;
+    let secs = watch.elapsed_s();
+    if !r.read.complete {
+        eprintln!(
+            "warning: {} is incomplete (the run did not finish writing it): read up to {:.0} s of device time, {} bytes after the last complete chunk are missing",
+            args.log.display(),
+            r.last_state_s,
+            r.read.bytes_lost
+        );
+    }
+    eprintln!(
+        "replayed {} frames in {secs:.2} s ({:.1} M frames/s)",
+        r.result.frames,
+        r.result.frames as f64 / secs.max(1e-9) / 1e6
+    );
+    let meta = |k: &str| r.meta.get(k).cloned().unwrap_or_default();
+    let bench = r
+        .meta
+        .get("bench")
+        .cloned()
+        .unwrap_or_else(|| "embedded".into());
+    let seed = (bench == "embedded")
+        .then(|| meta("seed").parse().ok())
+        .flatten();
+    let report = Report::new(
+        &r.procedure,
+        &r.result,
+        &meta("dut_serial"),
+        &meta("start_time_utc"),
+        r.link,
+        seed,
+        &bench,
+    );
+    let out = args.out.unwrap_or_else(|| {
+        args.log
+            .parent()
+            .map_or_else(|| PathBuf::from("replay"), |d| d.join("replay"))
+    });
+    std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
+    for (name, bytes) in [
+        ("report.json", report.to_json()),
+        ("report.html", render_html(&report, &r.result.records)),
+    ] {
+        let path = out.join(name);
+        crate::fsutil::write_atomic(&path, bytes.as_bytes())
+            .with_context(|| format!("writing {}", path.display()))?;
+    }
+    print!("{}", report.render_text());
+    eprintln!("report in {}", out.display());
+    Ok(match r.result.outcome {
+        sequencer::Outcome::Pass => Outcome::Success,
+        sequencer::Outcome::Fail => Outcome::Fail,
+        sequencer::Outcome::Error => Outcome::Error,
+        sequencer::Outcome::Aborted => Outcome::Interrupted,
+    })
+}

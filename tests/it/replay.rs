@@ -1,0 +1,259 @@
+//! `gyrobench replay`: the verdict and every measurement recomputed from
+//! the log alone, identical to the live run's; truncated logs read to their
+//! last complete chunk.
+
+use std::path::Path;
+
+use crate::cli::{gyrobench, temp_dir};
+
+/// A short procedure with every metric, a repeat (steps sharing keys) and
+/// a temperature ramp, so compensation has something to fit.
+const MINI: &str = r#"
+[procedure]
+name = "mini"
+description = "every metric in an hour of device time"
+dut_type = "RL-16"
+spec = "test"
+
+[[setup]]
+action = "chamber"
+set_c = 20.0
+ramp_c_per_min = 1.0
+
+[[main]]
+action = "record"
+label = "warm"
+duration_s = 1800.0
+
+[[main]]
+action = "repeat"
+positions = [
+  { label = "up", table = { outer_deg = 90.0, inner_deg = 0.0 } },
+  { label = "east", table = { outer_deg = 0.0, inner_deg = 0.0 } },
+]
+
+[[main.steps]]
+action = "record"
+label = "{label}"
+duration_s = 120.0
+
+[[main.steps]]
+action = "measure"
+name = "bias_dph:{label}"
+metric = "mean_bias"
+records = ["{label}"]
+low = -5.0
+high = 5.0
+unit = "deg/h"
+
+[[main]]
+action = "move"
+table = { outer_deg = 90.0, inner_deg = 0.0 }
+
+[[main]]
+action = "chamber"
+set_c = 30.0
+ramp_c_per_min = 1.0
+
+[[main]]
+action = "record"
+label = "ramp"
+duration_s = 1200.0
+
+[[main]]
+action = "measure"
+name = "self_heating_dph"
+metric = "self_heating"
+records = ["warm"]
+high = 1.0
+unit = "deg/h"
+
+[[main]]
+action = "measure"
+name = "stability"
+metric = "bias_stability"
+records = ["up"]
+averaging_s = 10.0
+high = 0.2
+unit = "deg/h"
+
+[[main]]
+action = "measure"
+name = "raw"
+metric = "drift_pp"
+records = ["warm", "ramp"]
+averaging_s = 600.0
+high = 1.0
+unit = "deg/h"
+
+[[main]]
+action = "measure"
+name = "compensated"
+metric = "compensated_drift_pp"
+records = ["warm", "ramp"]
+averaging_s = 600.0
+high = 0.1
+unit = "deg/h"
+
+[[cleanup]]
+action = "chamber"
+set_c = 20.0
+ramp_c_per_min = 2.0
+"#;
+
+const COEFFS: &str = "[model4]
+k1_dph_per_c = -0.12
+k2_dph_per_c2 = -0.01
+k3_dph_per_c_per_s = 20.0
+k4_dph_per_c = -0.007
+k5_dph = 0.36
+warmup_tau_s = 600.0
+";
+
+fn s(p: &Path) -> &str {
+    p.to_str().expect("utf-8 path")
+}
+
+fn read(p: &Path) -> String {
+    std::fs::read_to_string(p).unwrap_or_else(|e| panic!("{}: {e}", p.display()))
+}
+
+fn json(p: &Path) -> serde_json::Value {
+    serde_json::from_str(&read(p)).expect("JSON")
+}
+
+/// Live run, then replay of its log: both reports byte for byte.
+fn live_then_replay(dir: &Path, extra: &[&str]) -> (std::process::Output, std::process::Output) {
+    let procedure = dir.join("mini.toml");
+    std::fs::write(&procedure, MINI).expect("procedure");
+    let live = dir.join("live");
+    let mut args = vec!["run", s(&procedure), "--out", s(&live)];
+    args.extend_from_slice(extra);
+    let run = gyrobench(&args);
+    let replayed = dir.join("replayed");
+    let replay = gyrobench(&["replay", s(&live.join("run.mcap")), "--out", s(&replayed)]);
+    assert_eq!(
+        replay.status.code(),
+        run.status.code(),
+        "{}",
+        String::from_utf8_lossy(&replay.stderr)
+    );
+    for name in ["report.json", "report.html"] {
+        assert!(
+            read(&live.join(name)) == read(&replayed.join(name)),
+            "{name} differs between the live run and its replay"
+        );
+    }
+    assert_eq!(run.stdout, replay.stdout, "the same verdict text");
+    (run, replay)
+}
+
+#[test]
+fn replay_of_an_unchanged_log_is_identical_to_the_live_run() {
+    let dir = temp_dir("replay-same");
+    let (run, _) = live_then_replay(&dir, &["--seed", "3"]);
+    assert_eq!(run.status.code(), Some(0));
+    let r = json(&dir.join("replayed/report.json"));
+    let names: Vec<&str> = r["measurements"]
+        .as_array()
+        .expect("measurements")
+        .iter()
+        .map(|m| m["name"].as_str().expect("name"))
+        .collect();
+    assert_eq!(
+        names,
+        [
+            "bias_dph:up",
+            "bias_dph:east",
+            "self_heating_dph",
+            "stability",
+            "raw",
+            "compensated"
+        ]
+    );
+    assert!(
+        r["measurements"][5]["note"]
+            .as_str()
+            .expect("note")
+            .contains("fitted on these records")
+    );
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
+
+#[test]
+fn the_run_coefficients_travel_in_the_log_and_replay_can_swap_them() {
+    let dir = temp_dir("replay-coeffs");
+    let coeffs = dir.join("coeffs.toml");
+    std::fs::write(&coeffs, COEFFS).expect("coeffs");
+    live_then_replay(&dir, &["--coeffs", s(&coeffs)]);
+    let live = json(&dir.join("live/report.json"));
+    assert!(
+        live["measurements"][5]["note"]
+            .as_str()
+            .expect("note")
+            .contains("--coeffs")
+    );
+    // Without the run's coefficients, the same log gives another figure.
+    let other = dir.join("other.toml");
+    std::fs::write(&other, COEFFS.replace("k5_dph = 0.36", "k5_dph = 3.6")).expect("coeffs");
+    let out = dir.join("swapped");
+    gyrobench(&[
+        "replay",
+        s(&dir.join("live/run.mcap")),
+        "--coeffs",
+        s(&other),
+        "--out",
+        s(&out),
+    ]);
+    let swapped = json(&out.join("report.json"));
+    assert_ne!(
+        swapped["measurements"][5]["value"],
+        live["measurements"][5]["value"]
+    );
+    assert_eq!(
+        swapped["measurements"][4]["value"], live["measurements"][4]["value"],
+        "uncompensated figures do not depend on the coefficients"
+    );
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
+
+#[test]
+fn a_run_ended_by_a_device_fault_replays_to_the_same_error() {
+    let dir = temp_dir("replay-error");
+    let (run, _) = live_then_replay(&dir, &["--inject", "chamber-alarm@2500"]);
+    assert_eq!(run.status.code(), Some(1));
+    let r = json(&dir.join("replayed/report.json"));
+    assert_eq!(r["error"]["device"], "chamber");
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
+
+#[test]
+fn a_truncated_log_is_read_to_its_last_complete_chunk_and_says_so() {
+    let dir = temp_dir("replay-truncated");
+    let procedure = dir.join("mini.toml");
+    std::fs::write(&procedure, MINI).expect("procedure");
+    let live = dir.join("live");
+    gyrobench(&["run", s(&procedure), "--out", s(&live)]);
+    let bytes = std::fs::read(live.join("run.mcap")).expect("log");
+    let cut = dir.join("cut.mcap");
+    std::fs::write(&cut, &bytes[..bytes.len() * 2 / 3]).expect("cut log");
+    let out = gyrobench(&["replay", s(&cut), "--out", s(&dir.join("r"))]);
+    assert_eq!(out.status.code(), Some(1), "a run that did not finish");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("incomplete") && err.contains("bytes"), "{err}");
+    let r = json(&dir.join("r/report.json"));
+    let full = json(&live.join("report.json"));
+    assert_eq!(r["outcome"], "error");
+    assert!(
+        r["error"]["message"]
+            .as_str()
+            .expect("message")
+            .contains("log ends")
+    );
+    let (got, all) = (
+        r["frames"].as_u64().expect("frames"),
+        full["frames"].as_u64().expect("frames"),
+    );
+    assert!(got > all / 3 && got < all, "{got} of {all} frames");
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
