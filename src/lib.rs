@@ -15,6 +15,7 @@ pub mod config;
 pub mod driver;
 pub mod fsutil;
 pub mod geometry;
+pub mod interchange;
 pub mod procedure;
 pub mod protocol;
 pub mod recorder;

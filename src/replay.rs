@@ -420,3 +420,98 @@ pub fn result_entries(r: &RunResult) -> BTreeMap<String, String> {
     }
     m
 }
+
+/// Per-frame rates of one record of a log, deg/h (Earth rate included).
+#[derive(Debug, Clone)]
+pub struct RecordRates {
+    /// Record label.
+    pub record: String,
+    /// Frame period, s.
+    pub dt_s: f64,
+    /// Rate of each frame, deg/h.
+    pub rate_dph: Vec<f64>,
+}
+
+#[derive(Deserialize)]
+struct FrameCounts {
+    dt_s: f64,
+    lsb_arcsec: f64,
+    counts: Vec<i32>,
+}
+
+/// The frames of record `label` (default: the longest record of the
+/// logged procedure) as a rate series at the frame rate.
+pub fn record_rates(path: &Path, label: Option<&str>) -> Result<RecordRates, ReplayError> {
+    let log_err = |message: String| ReplayError::Log {
+        path: path.display().to_string(),
+        message,
+    };
+    let mut want: Option<String> = label.map(str::to_owned);
+    let mut labels: Vec<String> = Vec::new();
+    let mut pending: Option<FrameCounts> = None;
+    let mut out = RecordRates {
+        record: String::new(),
+        dt_s: f64::NAN,
+        rate_dph: Vec::new(),
+    };
+    runlog::read(path, |item| {
+        match item {
+            Item::Meta { name, entries } if name == RUN_META => {
+                let bench = BenchConfig::embedded();
+                let p = entries.get("procedure_toml").and_then(|t| {
+                    Procedure::from_source(&Source::from_text("procedure", t), &bench).ok()
+                });
+                if let Some(p) = p {
+                    let records = p.steps().filter_map(|s| match &s.kind {
+                        StepKind::Record { label, duration_s } => {
+                            Some((label.clone(), *duration_s))
+                        }
+                        _ => None,
+                    });
+                    let mut longest: Option<(String, f64)> = None;
+                    for (l, d) in records {
+                        labels.push(l.clone());
+                        if longest.as_ref().is_none_or(|(_, best)| d > *best) {
+                            longest = Some((l, d));
+                        }
+                    }
+                    if want.is_none() {
+                        want = longest.map(|(l, _)| l);
+                    }
+                }
+            }
+            Item::Message { topic, data, .. } if topic == topics::FRAMES => {
+                pending = serde_json::from_slice(data).ok();
+            }
+            Item::Message { topic, data, .. } if topic == topics::RATE_1HZ => {
+                let m: RateMsg = serde_json::from_slice(data)
+                    .map_err(|e| format!("a {topic} message does not parse: {e}"))?;
+                if let (Some(f), Some(w)) = (pending.take(), &want)
+                    && m.record.as_deref() == Some(w.as_str())
+                {
+                    out.dt_s = f.dt_s;
+                    let k = f.lsb_arcsec / f.dt_s;
+                    out.rate_dph
+                        .extend(f.counts.iter().map(|&c| f64::from(c) * k));
+                }
+            }
+            _ => {}
+        }
+        Ok(())
+    })?;
+    let Some(want) = want else {
+        return Err(log_err("the log has no record steps to analyse".into()));
+    };
+    if out.rate_dph.is_empty() {
+        return Err(log_err(format!(
+            "no frames recorded under `{want}`; records in this log: {}",
+            if labels.is_empty() {
+                "none".to_owned()
+            } else {
+                labels.join(", ")
+            }
+        )));
+    }
+    out.record = want;
+    Ok(out)
+}

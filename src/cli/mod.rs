@@ -4,6 +4,7 @@
 //! rendering (`render_*` -> String) is kept apart from printing so it can be
 //! unit tested. Results go to stdout, diagnostics to stderr.
 
+mod allan;
 mod check;
 mod recover;
 mod replay;
@@ -61,6 +62,8 @@ enum Command {
     Run(run::RunArgs),
     /// Rewrite the log of a killed run as a complete, indexed file.
     Recover(recover::RecoverArgs),
+    /// Allan deviation, confidence intervals and noise terms of a log or CSV.
+    Allan(allan::AllanArgs),
     /// Recompute a run's measurements and verdict from its log alone.
     Replay(replay::ReplayArgs),
     /// Validate a procedure and print its plan with estimated device times.
@@ -87,6 +90,7 @@ pub fn main() -> ExitCode {
         Command::Check(args) => check::run(args),
         Command::Recover(args) => recover::run(args),
         Command::Replay(args) => replay::run(args),
+        Command::Allan(args) => allan::run(args),
         Command::Twin(cmd) => twin::run(cmd),
         Command::Sim(cmd) => sim::run(cmd),
     };

@@ -4,7 +4,6 @@
 use plotters::prelude::*;
 
 use super::Report;
-use crate::analysis::allan::{oadev, octave_factors};
 use crate::analysis::figures::block_means;
 use crate::analysis::model::{ModelKind, fit};
 use crate::analysis::series::Interval;
@@ -221,23 +220,16 @@ fn position_chart(r: &Report) -> Option<String> {
     }))
 }
 
-/// Allan deviation of the longest record, with the spec line.
-fn allan_chart(r: &Report, records: &Records) -> Option<String> {
-    let (label, series) = records
-        .order
+/// Allan deviation of the longest record judged for bias stability, with
+/// its one-sigma intervals and the spec line.
+fn allan_chart(r: &Report) -> Option<String> {
+    let n = r.noise.as_ref()?;
+    let dev: Vec<(f64, f64)> = n
+        .tau_s
         .iter()
-        .filter_map(|l| Some((l, records.get(l)?)))
-        .filter(|(l, _)| {
-            r.measurements
-                .iter()
-                .any(|m| m.metric == Metric::BiasStability && m.records.contains(l))
-        })
-        .max_by_key(|(_, s)| s.len())?;
-    let bias: Vec<f64> = series.iter().map(Interval::bias_dph).collect();
-    let dev = oadev(&bias, 1.0, &octave_factors(bias.len()));
-    if dev.len() < 2 {
-        return None;
-    }
+        .copied()
+        .zip(n.adev_dph.iter().copied())
+        .collect();
     let spec = r
         .measurements
         .iter()
@@ -247,17 +239,26 @@ fn allan_chart(r: &Report, records: &Records) -> Option<String> {
     Some(svg(|s| {
         let root = SVGBackend::with_string(s, (W, H)).into_drawing_area();
         root.fill(&WHITE)?;
-        let (t0, t1) = (dev[0].0, dev[dev.len() - 1].0);
-        let lo = dev
+        let (t0, t1) = (dev[0].0 / 1.2, dev[dev.len() - 1].0 * 1.2);
+        let lo = n
+            .lo_dph
             .iter()
-            .map(|d| d.1)
+            .copied()
+            .filter(|v| v.is_finite())
             .fold(f64::INFINITY, f64::min)
             .min(spec)
             * 0.5;
-        let hi = dev.iter().map(|d| d.1).fold(0.0, f64::max).max(spec) * 2.0;
+        let hi = n
+            .hi_dph
+            .iter()
+            .copied()
+            .filter(|v| v.is_finite())
+            .fold(0.0, f64::max)
+            .max(spec)
+            * 2.0;
         let mut c = ChartBuilder::on(&root)
             .caption(
-                format!("Overlapping Allan deviation, record {label}"),
+                format!("Overlapping Allan deviation, record {}", n.record),
                 ("sans-serif", 16),
             )
             .margin(8)
@@ -271,9 +272,16 @@ fn allan_chart(r: &Report, records: &Records) -> Option<String> {
             .y_label_formatter(&|v| format!("{v:.3}"))
             .draw()?;
         c.draw_series(LineSeries::new(dev.iter().copied(), &BLUE))?
-            .label("ADEV")
+            .label("ADEV, 1-sigma interval (Greenhall EDF)")
             .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], BLUE));
         c.draw_series(dev.iter().map(|&p| Circle::new(p, 3, BLUE.filled())))?;
+        c.draw_series(
+            n.tau_s
+                .iter()
+                .zip(n.lo_dph.iter().zip(&n.hi_dph))
+                .filter(|(_, (l, h))| l.is_finite() && h.is_finite())
+                .map(|(&t, (&l, &h))| PathElement::new(vec![(t, l), (t, h)], BLUE)),
+        )?;
         if spec.is_finite() {
             c.draw_series(LineSeries::new(
                 vec![(t0, spec), (t1, spec)],
@@ -286,6 +294,26 @@ fn allan_chart(r: &Report, records: &Records) -> Option<String> {
         root.present()?;
         Ok(())
     }))
+}
+
+/// The three "bias instability" figures, the judged one named.
+fn noise_table(r: &Report) -> String {
+    let Some(n) = &r.noise else {
+        return String::new();
+    };
+    let f = |v: Option<f64>| v.map_or("n/a".to_owned(), |v| format!("{v:.4}"));
+    format!(
+        "<h2>Bias instability: three figures</h2>\n<p>Record {rec}. Judged: {judged}.</p>\n<table><tr><th>figure</th><th>deg/h</th><th></th></tr>\n<tr><td>bias stability, 1-sigma of {avg} s averages (GJB 2426A)</td><td class=num>{bs}</td><td>judged</td></tr>\n<tr><td>IEEE Std 952 coefficient B = ADEV floor / 0.664 (noise fit)</td><td class=num>{b}</td><td>shown</td></tr>\n<tr><td>raw ADEV minimum (at {tmin:.0} s)</td><td class=num>{min}</td><td>shown</td></tr></table>\n<p class=note>Noise fit on the same curve: ARW {arw:.5} deg/sqrt(h), rate random walk {rrw:.4} deg/h/sqrt(h) (from 1 Hz means).</p>\n",
+        rec = esc(&n.record),
+        judged = esc(&n.judged),
+        avg = n.bias_stability_averaging_s,
+        bs = f(n.bias_stability_dph),
+        b = f(Some(n.ieee_b_dph)),
+        min = f(Some(n.adev_min_dph)),
+        tmin = n.adev_min_tau_s,
+        arw = n.arw_deg_per_rt_h,
+        rrw = n.rate_random_walk_dph_per_rt_h,
+    )
 }
 
 /// Model-4 residual (60 s means, hours) over the records of the first
@@ -357,9 +385,10 @@ pub fn render_html(r: &Report, records: &Records) -> String {
     if let Some(c) = position_chart(r) {
         charts.push_str(&c);
     }
-    if let Some(c) = allan_chart(r, records) {
+    if let Some(c) = allan_chart(r) {
         charts.push_str(&c);
     }
+    let noise = noise_table(r);
     let l = &r.link;
     format!(
         r#"<!doctype html>
@@ -378,6 +407,7 @@ td.num{{text-align:right;font-family:monospace}} tr.fail td{{background:#fde7e6}
 <h2>Measurements</h2>
 <table><tr><th>name</th><th>value</th><th>unit</th><th>low</th><th>high</th><th>outcome</th><th>step</th><th>note</th></tr>
 {rows}</table>
+{noise}
 <p class=note>Definitions: bias stability = 1-sigma of the averages over the averaging time of the Earth-removed rate; drift = peak-to-peak of the Earth-removed rate smoothed by a centred moving average of the averaging time; compensated = the same after the study's model 4; self-heating = mean of the first 120 s after power-on minus the mean of 1680..1800 s. See docs/figures.md.</p>
 <h2>Charts</h2>
 {charts}
@@ -385,6 +415,7 @@ td.num{{text-align:right;font-family:monospace}} tr.fail td{{background:#fde7e6}
 <p>{lf} frames, {lost} lost, {crc} CRC errors, {res} resyncs, {dup} duplicates.{cleanup}</p>
 </body></html>
 "#,
+        noise = noise,
         proc = esc(&r.procedure),
         serial = esc(&r.dut.serial),
         dut_type = esc(&r.dut.kind),

@@ -5,9 +5,11 @@ mod html;
 
 use serde::Serialize;
 
-use crate::procedure::Procedure;
+use crate::analysis::allan::{Taus, analyse};
+use crate::analysis::series::Interval;
+use crate::procedure::{Metric, Procedure};
 use crate::protocol::frame::LinkStats;
-use crate::sequencer::measure::Measurement;
+use crate::sequencer::measure::{Measurement, Records};
 use crate::sequencer::{Outcome, RunError, RunResult};
 
 pub use html::render_html;
@@ -53,6 +55,84 @@ pub struct Report {
     pub bench: String,
     /// Software version.
     pub software_version: String,
+    /// The three "bias instability" figures of the longest record judged
+    /// for bias stability, and its Allan deviation (none without one).
+    pub noise: Option<NoiseFigures>,
+}
+
+/// Which "bias instability" the report judges, with the others beside it
+/// (physics.md), and the Allan deviation they come from (1 Hz means of
+/// the Earth-removed rate).
+#[derive(Debug, Clone, Serialize)]
+pub struct NoiseFigures {
+    /// Record analysed.
+    pub record: String,
+    /// The figure the limits judge, by name.
+    pub judged: String,
+    /// Judged: 1-sigma of the tau-averaged output (GJB 2426A), deg/h.
+    pub bias_stability_dph: Option<f64>,
+    /// Its averaging time, s.
+    pub bias_stability_averaging_s: f64,
+    /// IEEE Std 952 coefficient B = ADEV floor / 0.664 (noise fit), deg/h.
+    pub ieee_b_dph: f64,
+    /// Raw minimum of the ADEV, deg/h.
+    pub adev_min_dph: f64,
+    /// Where it lies, s.
+    pub adev_min_tau_s: f64,
+    /// Angle random walk from the fit, deg/sqrt(h).
+    pub arw_deg_per_rt_h: f64,
+    /// Rate random walk from the fit, deg/h/sqrt(h).
+    pub rate_random_walk_dph_per_rt_h: f64,
+    /// Averaging times, s.
+    pub tau_s: Vec<f64>,
+    /// Overlapping ADEV, deg/h.
+    pub adev_dph: Vec<f64>,
+    /// One-sigma lower bounds (Greenhall EDF), deg/h.
+    pub lo_dph: Vec<f64>,
+    /// One-sigma upper bounds, deg/h.
+    pub hi_dph: Vec<f64>,
+}
+
+impl NoiseFigures {
+    /// Figures of the longest record a bias-stability measurement judges.
+    pub fn of(measurements: &[Measurement], records: &Records) -> Option<Self> {
+        let (label, series) = records
+            .order
+            .iter()
+            .filter_map(|l| Some((l, records.get(l)?)))
+            .filter(|(l, _)| {
+                measurements
+                    .iter()
+                    .any(|m| m.metric == Metric::BiasStability && m.records.contains(l))
+            })
+            .max_by_key(|(_, s)| s.len())?;
+        let bias: Vec<f64> = series.iter().map(Interval::bias_dph).collect();
+        let a = analyse(&bias, 1.0, Taus::Octave);
+        if a.points.len() < 2 {
+            return None;
+        }
+        let judged = measurements
+            .iter()
+            .find(|m| m.metric == Metric::BiasStability && m.records.contains(label))?;
+        Some(Self {
+            record: label.clone(),
+            judged: format!(
+                "bias stability: 1-sigma of {} s averages (GJB 2426A), measurement {}",
+                judged.averaging_s, judged.name
+            ),
+            bias_stability_dph: judged.value,
+            bias_stability_averaging_s: judged.averaging_s,
+            ieee_b_dph: a.bias_instability.ieee_b_dph,
+            adev_min_dph: a.bias_instability.adev_min_dph,
+            adev_min_tau_s: a.bias_instability.adev_min_tau_s,
+            arw_deg_per_rt_h: a.noise.arw_deg_per_rt_h,
+            rate_random_walk_dph_per_rt_h: a.noise.rate_random_walk_dph_per_rt_h,
+            tau_s: a.points.iter().map(|p| p.tau_s).collect(),
+            adev_dph: a.points.iter().map(|p| p.adev).collect(),
+            lo_dph: a.points.iter().map(|p| p.lo).collect(),
+            hi_dph: a.points.iter().map(|p| p.hi).collect(),
+        })
+    }
 }
 
 impl Report {
@@ -84,6 +164,7 @@ impl Report {
             seed,
             bench: bench.to_owned(),
             software_version: env!("CARGO_PKG_VERSION").to_owned(),
+            noise: NoiseFigures::of(&r.measurements, &r.records),
         }
     }
 

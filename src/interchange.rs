@@ -1,0 +1,243 @@
+//! The interchange CSV of runs recorded elsewhere (`docs/interchange.md`,
+//! from the diagnosis notes): a header row, then one row per sample,
+//!
+//! `time_s,rate_dph,t1_c,t2_c,tcase_c,chamber_c,azimuth_deg,elevation_deg,roll_deg,step`
+//!
+//! time in s since power-on (gaps allowed, never backwards), rate in deg/h
+//! with Earth rate included, temperatures in degC, orientation as NED
+//! yaw/pitch/roll in degrees, and the label of the step the sample belongs
+//! to. Read with the `csv` crate; every bad row is refused with its line.
+
+use std::path::Path;
+
+use serde::Deserialize;
+
+/// The header, exactly.
+pub const HEADER: [&str; 10] = [
+    "time_s",
+    "rate_dph",
+    "t1_c",
+    "t2_c",
+    "tcase_c",
+    "chamber_c",
+    "azimuth_deg",
+    "elevation_deg",
+    "roll_deg",
+    "step",
+];
+
+/// One sample.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+pub struct Row {
+    /// s since power-on.
+    pub time_s: f64,
+    /// Measured rate, Earth rate included, deg/h.
+    pub rate_dph: f64,
+    /// Block sensor 1, degC.
+    pub t1_c: f64,
+    /// Block sensor 2, degC.
+    pub t2_c: f64,
+    /// Case sensor, degC.
+    pub tcase_c: f64,
+    /// Chamber air, degC.
+    pub chamber_c: f64,
+    /// Yaw of the body in NED, deg.
+    pub azimuth_deg: f64,
+    /// Pitch (elevation of the sensitive axis), deg.
+    pub elevation_deg: f64,
+    /// Roll about the sensitive axis, deg.
+    pub roll_deg: f64,
+    /// Step label.
+    pub step: String,
+}
+
+/// What is wrong with a CSV, and where.
+#[derive(Debug, thiserror::Error)]
+pub enum CsvError {
+    /// Cannot read the file.
+    #[error("{path}: {source}")]
+    Io {
+        /// File.
+        path: String,
+        /// Cause.
+        source: std::io::Error,
+    },
+    /// A bad header or row.
+    #[error("{path}:{line}: {message}")]
+    Row {
+        /// File.
+        path: String,
+        /// 1-based line.
+        line: u64,
+        /// What is wrong.
+        message: String,
+    },
+}
+
+/// Read and check a whole interchange CSV.
+pub fn read(path: &Path) -> Result<Vec<Row>, CsvError> {
+    let file = std::fs::File::open(path).map_err(|source| CsvError::Io {
+        path: path.display().to_string(),
+        source,
+    })?;
+    parse(file, &path.display().to_string())
+}
+
+/// Parse interchange CSV from any reader; `name` labels errors.
+pub fn parse(input: impl std::io::Read, name: &str) -> Result<Vec<Row>, CsvError> {
+    let err = |line: u64, message: String| CsvError::Row {
+        path: name.to_owned(),
+        line,
+        message,
+    };
+    let mut rdr = csv::ReaderBuilder::new()
+        .has_headers(true)
+        .trim(csv::Trim::All)
+        .from_reader(input);
+    let header = rdr
+        .headers()
+        .map_err(|e| err(1, format!("unreadable header: {e}")))?
+        .clone();
+    let got: Vec<&str> = header.iter().collect();
+    if got != HEADER {
+        return Err(err(
+            1,
+            format!(
+                "the header must be `{}`; found `{}`",
+                HEADER.join(","),
+                got.join(",")
+            ),
+        ));
+    }
+    let mut rows: Vec<Row> = Vec::new();
+    for rec in rdr.records() {
+        let rec = rec.map_err(|e| {
+            let line = e.position().map_or(0, csv::Position::line);
+            err(line, format!("unreadable row: {e}"))
+        })?;
+        let line = rec.position().map_or(0, csv::Position::line);
+        let row: Row = rec.deserialize(Some(&header)).map_err(|e| {
+            let message = match e.kind() {
+                csv::ErrorKind::Deserialize { err: d, .. } => {
+                    let field = d
+                        .field()
+                        .and_then(|i| HEADER.get(i as usize))
+                        .map_or(String::new(), |h| format!("field {h}: "));
+                    format!("{field}{}", d.kind())
+                }
+                _ => e.to_string(),
+            };
+            err(line, message)
+        })?;
+        for (v, name) in [
+            (row.time_s, "time_s"),
+            (row.rate_dph, "rate_dph"),
+            (row.t1_c, "t1_c"),
+            (row.t2_c, "t2_c"),
+            (row.tcase_c, "tcase_c"),
+            (row.chamber_c, "chamber_c"),
+            (row.azimuth_deg, "azimuth_deg"),
+            (row.elevation_deg, "elevation_deg"),
+            (row.roll_deg, "roll_deg"),
+        ] {
+            if !v.is_finite() {
+                return Err(err(
+                    line,
+                    format!("field {name}: {v} is not a finite number"),
+                ));
+            }
+        }
+        if !(-90.0..=90.0).contains(&row.elevation_deg) {
+            return Err(err(
+                line,
+                format!(
+                    "field elevation_deg: {} is outside -90..90",
+                    row.elevation_deg
+                ),
+            ));
+        }
+        if let Some(prev) = rows.last()
+            && row.time_s <= prev.time_s
+        {
+            return Err(err(
+                line,
+                format!(
+                    "field time_s: {} does not follow {} (time must increase)",
+                    row.time_s, prev.time_s
+                ),
+            ));
+        }
+        rows.push(row);
+    }
+    if rows.is_empty() {
+        return Err(err(2, "no samples after the header".into()));
+    }
+    Ok(rows)
+}
+
+/// The longest stretch of evenly spaced samples (no gap over 1.5 sample
+/// times), as (first index, length, sample time s).
+pub fn longest_even_run(rows: &[Row]) -> (usize, usize, f64) {
+    if rows.len() < 2 {
+        return (0, rows.len(), 1.0);
+    }
+    let mut dts: Vec<f64> = rows.windows(2).map(|w| w[1].time_s - w[0].time_s).collect();
+    dts.sort_by(f64::total_cmp);
+    let dt = dts[dts.len() / 2];
+    let (mut best, mut start) = ((0, 1), 0);
+    for i in 1..rows.len() {
+        if rows[i].time_s - rows[i - 1].time_s > 1.5 * dt {
+            start = i;
+        }
+        if i + 1 - start > best.1 {
+            best = (start, i + 1 - start);
+        }
+    }
+    (best.0, best.1, dt)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const HEAD: &str =
+        "time_s,rate_dph,t1_c,t2_c,tcase_c,chamber_c,azimuth_deg,elevation_deg,roll_deg,step\n";
+
+    #[test]
+    fn good_rows_parse_and_the_longest_even_stretch_is_found() {
+        let text = format!(
+            "{HEAD}0.5,12.1,20,20,20,20,0,90,0,a\n1.5,12.2,20,20,20,20,0,90,0,a\n2.5,12.0,20,20,20,20,0,90,0,a\n10.5,1,20,20,20,20,90,0,0,b\n"
+        );
+        let rows = parse(text.as_bytes(), "t.csv").expect("parses");
+        assert_eq!(rows.len(), 4);
+        assert_eq!(rows[3].step, "b");
+        assert_eq!(longest_even_run(&rows), (0, 3, 1.0));
+    }
+
+    #[test]
+    fn bad_rows_are_refused_with_their_line_and_field() {
+        for (body, want) in [
+            ("0.5,abc,20,20,20,20,0,90,0,a\n", "t.csv:2: field rate_dph"),
+            (
+                "0.5,1,20,20,20,20,0,90,0,a\n0.5,1,20,20,20,20,0,90,0,a\n",
+                "t.csv:3: field time_s",
+            ),
+            (
+                "0.5,1,20,20,20,20,0,91,0,a\n",
+                "t.csv:2: field elevation_deg",
+            ),
+            ("0.5,1,20,20,20,20,0,90\n", "t.csv:2:"),
+            ("0.5,NaN,20,20,20,20,0,90,0,a\n", "t.csv:2: field rate_dph"),
+            ("", "t.csv:2: no samples"),
+        ] {
+            let e = parse(format!("{HEAD}{body}").as_bytes(), "t.csv")
+                .expect_err(body)
+                .to_string();
+            assert!(e.starts_with(want), "{body}: {e}");
+        }
+        let e = parse("time,rate\n1,2\n".as_bytes(), "t.csv")
+            .expect_err("header")
+            .to_string();
+        assert!(e.starts_with("t.csv:1: the header must be"), "{e}");
+    }
+}
