@@ -39,12 +39,53 @@ pub struct Model4Coeffs {
     pub offset_dph: f64,
 }
 
-/// A coefficients file.
+/// `[model3]`: the study's model 3 (no case-temperature or warm-up term).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Model3Coeffs {
+    /// K1, deg/h per degC of dT.
+    pub k1_dph_per_c: f64,
+    /// K2, deg/h per degC^2.
+    pub k2_dph_per_c2: f64,
+    /// K3, deg/h per degC/s.
+    pub k3_dph_per_c_per_s: f64,
+    /// Constant, deg/h.
+    #[serde(default)]
+    pub offset_dph: f64,
+}
+
+/// `[model1]`: the classic cubic in the case temperature.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Model1Coeffs {
+    /// deg/h per degC^3.
+    pub k1_dph_per_c3: f64,
+    /// deg/h per degC^2.
+    pub k2_dph_per_c2: f64,
+    /// deg/h per degC.
+    pub k3_dph_per_c: f64,
+    /// Constant, deg/h.
+    #[serde(default)]
+    pub offset_dph: f64,
+}
+
+/// A coefficients file. `run --coeffs` compensates with `[model4]`; the
+/// other models and `[calibration]` (how the file was made: runs,
+/// validation, uncertainties) are for the engineer.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct CoeffsFile {
     /// The study's model 4.
     pub model4: Model4Coeffs,
+    /// Model 3.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub model3: Option<Model3Coeffs>,
+    /// Model 1.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub model1: Option<Model1Coeffs>,
+    /// Provenance written by `gyrobench calibrate`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub calibration: Option<toml::Table>,
 }
 
 impl CoeffsFile {

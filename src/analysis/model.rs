@@ -114,10 +114,23 @@ fn spacing_s(series: &[Interval]) -> f64 {
     }
 }
 
-/// Least squares with a constant column; returns coefficients and RSS.
-fn solve(kind: ModelKind, cols: &[Vec<f64>], y: &[f64]) -> Result<(Vec<f64>, f64), FitError> {
+/// Least squares with one constant per run; returns the coefficients (the
+/// run constants last), the RSS, and the coefficients' standard errors.
+struct Solved {
+    coeffs: Vec<f64>,
+    rss: f64,
+    stderr: Vec<f64>,
+}
+
+fn solve(
+    kind: ModelKind,
+    cols: &[Vec<f64>],
+    y: &[f64],
+    run_of: &[usize],
+    runs: usize,
+) -> Result<Solved, FitError> {
     let n = y.len();
-    let p = cols.len() + 1;
+    let p = cols.len() + runs;
     if n < p + 1 {
         return Err(FitError::TooShort {
             kind,
@@ -136,8 +149,10 @@ fn solve(kind: ModelKind, cols: &[Vec<f64>], y: &[f64]) -> Result<(Vec<f64>, f64
     let x = DMatrix::from_fn(n, p, |i, j| {
         if j < cols.len() {
             cols[j][i] / scales[j]
-        } else {
+        } else if run_of[i] == j - cols.len() {
             1.0
+        } else {
+            0.0
         }
     });
     let b = DVector::from_column_slice(y);
@@ -154,34 +169,109 @@ fn solve(kind: ModelKind, cols: &[Vec<f64>], y: &[f64]) -> Result<(Vec<f64>, f64
             reason: "non-finite residual (NaN in the data?)".into(),
         });
     }
+    // Standard errors: sigma^2 (X'X)^-1 from the SVD, inflated by
+    // (1 + r1)/(1 - r1) for the lag-1 autocorrelation r1 of the residual
+    // (1 Hz residuals are far from independent).
+    let r1 = {
+        let num: f64 = resid.as_slice().windows(2).map(|w| w[0] * w[1]).sum();
+        (num / rss.max(f64::MIN_POSITIVE)).clamp(0.0, 0.99)
+    };
+    let sigma2 = rss / (n - p) as f64 * (1.0 + r1) / (1.0 - r1);
+    let smax = svd.singular_values.max();
+    let v_t = svd.v_t.as_ref();
+    let stderr = (0..p)
+        .map(|j| {
+            let Some(v_t) = v_t else { return f64::NAN };
+            let var: f64 = (0..svd.singular_values.len())
+                .filter(|&k| svd.singular_values[k] > 1e-12 * smax)
+                .map(|k| (v_t[(k, j)] / svd.singular_values[k]).powi(2))
+                .sum();
+            (sigma2 * var).sqrt() / scales.get(j).copied().unwrap_or(1.0)
+        })
+        .collect();
     let coeffs = (0..p)
         .map(|j| beta[j] / scales.get(j).copied().unwrap_or(1.0))
         .collect();
-    Ok((coeffs, rss))
+    Ok(Solved {
+        coeffs,
+        rss,
+        stderr,
+    })
+}
+
+/// A fit over several runs: shared coefficients, one offset per run.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MultiFit {
+    /// The shared model (its offset is the mean of the run offsets).
+    pub fit: Fit,
+    /// Offset of each run (turn-on bias, a nuisance), deg/h.
+    pub offsets: Vec<f64>,
+    /// Standard errors of the shared coefficients, in the order of
+    /// [`ModelKind::terms`] without the offset; tau_w's comes separately.
+    pub stderr: Vec<f64>,
 }
 
 /// Fit `kind` to the Earth-removed bias of `series`.
 pub fn fit(kind: ModelKind, series: &[Interval]) -> Result<Fit, FitError> {
-    let y: Vec<f64> = series.iter().map(Interval::bias_dph).collect();
-    let ddt = gradient_rate(series);
+    fit_runs(kind, &[series]).map(|m| m.fit)
+}
+
+/// Fit `kind` jointly to several runs (each with its own constant).
+pub fn fit_runs(kind: ModelKind, runs: &[&[Interval]]) -> Result<MultiFit, FitError> {
+    let y: Vec<f64> = runs
+        .iter()
+        .flat_map(|r| r.iter().map(Interval::bias_dph))
+        .collect();
+    let run_of: Vec<usize> = runs
+        .iter()
+        .enumerate()
+        .flat_map(|(k, r)| std::iter::repeat_n(k, r.len()))
+        .collect();
+    let ddt: Vec<Vec<f64>> = runs.iter().map(|r| gradient_rate(r)).collect();
     let n = y.len().max(1) as f64;
+    let design_all = |tau_w: f64| -> Vec<Vec<f64>> {
+        let per_run: Vec<Vec<Vec<f64>>> = runs
+            .iter()
+            .zip(&ddt)
+            .map(|(r, d)| design(kind, r, d, tau_w))
+            .collect();
+        let ncols = per_run.first().map_or(0, Vec::len);
+        (0..ncols)
+            .map(|c| {
+                per_run
+                    .iter()
+                    .flat_map(|cols| cols[c].iter().copied())
+                    .collect()
+            })
+            .collect()
+    };
+    let eval = |log_tau: f64| solve(kind, &design_all(log_tau.exp()), &y, &run_of, runs.len());
+    let finish = |s: Solved, tau: Option<f64>| {
+        let nt = kind.terms().len() - 1;
+        let offsets = s.coeffs[nt..].to_vec();
+        let mut coeffs = s.coeffs[..nt].to_vec();
+        coeffs.push(offsets.iter().sum::<f64>() / offsets.len().max(1) as f64);
+        MultiFit {
+            fit: Fit {
+                kind,
+                coeffs,
+                warmup_tau_s: tau,
+                rms_dph: (s.rss / n).sqrt(),
+            },
+            offsets,
+            stderr: s.stderr[..nt].to_vec(),
+        }
+    };
     if kind != ModelKind::Model4 {
-        let (coeffs, rss) = solve(kind, &design(kind, series, &ddt, 1.0), &y)?;
-        return Ok(Fit {
-            kind,
-            coeffs,
-            warmup_tau_s: None,
-            rms_dph: (rss / n).sqrt(),
-        });
+        return Ok(finish(eval(0.0)?, None));
     }
     // tau_w: coarse log grid, then golden-section refinement in log tau.
-    let eval = |log_tau: f64| solve(kind, &design(kind, series, &ddt, log_tau.exp()), &y);
     let grid: Vec<f64> = (0..=40)
         .map(|i| (30f64).ln() + f64::from(i) / 40.0 * ((30_000f64).ln() - (30f64).ln()))
         .collect();
     let mut best = (grid[0], f64::INFINITY);
     for &g in &grid {
-        let (_, rss) = eval(g)?;
+        let rss = eval(g)?.rss;
         if rss < best.1 {
             best = (g, rss);
         }
@@ -192,20 +282,51 @@ pub fn fit(kind: ModelKind, series: &[Interval]) -> Result<Fit, FitError> {
     for _ in 0..40 {
         let c = b - phi * (b - a);
         let d = a + phi * (b - a);
-        if eval(c)?.1 < eval(d)?.1 {
+        if eval(c)?.rss < eval(d)?.rss {
             b = d;
         } else {
             a = c;
         }
     }
     let log_tau = 0.5 * (a + b);
-    let (coeffs, rss) = eval(log_tau)?;
-    Ok(Fit {
-        kind,
-        coeffs,
-        warmup_tau_s: Some(log_tau.exp()),
-        rms_dph: (rss / n).sqrt(),
-    })
+    Ok(finish(eval(log_tau)?, Some(log_tau.exp())))
+}
+
+/// Pairs of regressors whose correlation over `runs` exceeds `limit`
+/// (they cannot be told apart from these runs), with the correlation.
+pub fn collinear(
+    kind: ModelKind,
+    runs: &[&[Interval]],
+    tau_w: f64,
+    limit: f64,
+) -> Vec<(&'static str, &'static str, f64)> {
+    let names = kind.terms();
+    let mut cols: Vec<Vec<f64>> = Vec::new();
+    for r in runs {
+        let d = gradient_rate(r);
+        for (c, v) in design(kind, r, &d, tau_w).into_iter().enumerate() {
+            if cols.len() <= c {
+                cols.push(Vec::new());
+            }
+            // Each run's own mean removed: the per-run offsets absorb it.
+            let m = v.iter().sum::<f64>() / v.len().max(1) as f64;
+            cols[c].extend(v.iter().map(|x| x - m));
+        }
+    }
+    let mut out = Vec::new();
+    for i in 0..cols.len() {
+        for j in i + 1..cols.len() {
+            let (a, b) = (&cols[i], &cols[j]);
+            let sab: f64 = a.iter().zip(b).map(|(x, y)| x * y).sum();
+            let saa: f64 = a.iter().map(|x| x * x).sum();
+            let sbb: f64 = b.iter().map(|x| x * x).sum();
+            let r = sab / (saa * sbb).sqrt();
+            if r.abs() > limit {
+                out.push((names[i], names[j], r));
+            }
+        }
+    }
+    out
 }
 
 impl Fit {

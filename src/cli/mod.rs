@@ -5,6 +5,7 @@
 //! unit tested. Results go to stdout, diagnostics to stderr.
 
 mod allan;
+mod calibrate;
 mod check;
 mod recover;
 mod replay;
@@ -64,6 +65,8 @@ enum Command {
     Recover(recover::RecoverArgs),
     /// Allan deviation, confidence intervals and noise terms of a log or CSV.
     Allan(allan::AllanArgs),
+    /// Fit the thermal compensation on recorded runs and write coefficients.
+    Calibrate(calibrate::CalibrateArgs),
     /// Recompute a run's measurements and verdict from its log alone.
     Replay(replay::ReplayArgs),
     /// Validate a procedure and print its plan with estimated device times.
@@ -91,6 +94,7 @@ pub fn main() -> ExitCode {
         Command::Recover(args) => recover::run(args),
         Command::Replay(args) => replay::run(args),
         Command::Allan(args) => allan::run(args),
+        Command::Calibrate(args) => calibrate::run(args),
         Command::Twin(cmd) => twin::run(cmd),
         Command::Sim(cmd) => sim::run(cmd),
     };

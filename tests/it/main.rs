@@ -8,6 +8,7 @@
 
 mod bad_input;
 mod bench_io;
+mod calibrate;
 mod cli;
 mod replay;
 mod run;

@@ -1,0 +1,385 @@
+//! Calibration of the thermal compensation from recorded runs: models 1, 3
+//! and 4 of the study fitted jointly over the runs (one turn-on offset per
+//! run, a nuisance), scored on held-out runs, written as a coefficients
+//! file `run --coeffs` uses.
+//!
+//! Data: the 1 Hz intervals of each run rebuilt from its log (as replay
+//! does), restricted to the records its compensated-drift measurements use
+//! (the thermal records), or every recorded interval when it has none.
+
+use std::path::Path;
+
+use serde::Serialize;
+
+use crate::analysis::figures::drift_pp;
+use crate::analysis::model::{Fit, FitError, ModelKind, MultiFit, collinear, fit_runs};
+use crate::analysis::series::Interval;
+use crate::analysis::study::DRIFT_SMOOTHING_S;
+use crate::coeffs::{CoeffsFile, Model1Coeffs, Model3Coeffs, Model4Coeffs};
+use crate::procedure::{Metric, StepKind};
+use crate::replay::{ReplayError, replay};
+
+/// Correlation above which two regressors are reported as collinear.
+pub const COLLINEAR_ABOVE: f64 = 0.9;
+
+/// One run's series.
+#[derive(Debug, Clone)]
+pub struct RunSeries {
+    /// File name.
+    pub name: String,
+    /// 1 Hz intervals used for calibration.
+    pub series: Vec<Interval>,
+}
+
+/// Load the calibration series of a run from its log.
+pub fn load(path: &Path) -> Result<RunSeries, ReplayError> {
+    let r = replay(path, None)?;
+    let thermal: Vec<String> = r
+        .procedure
+        .steps()
+        .filter_map(|s| match &s.kind {
+            StepKind::Measure(m) if m.metric == Metric::CompensatedDriftPp => {
+                Some(m.records.clone())
+            }
+            _ => None,
+        })
+        .flatten()
+        .collect();
+    let series: Vec<Interval> = if thermal.is_empty() {
+        r.result
+            .records
+            .all
+            .iter()
+            .filter(|(rec, _)| *rec)
+            .map(|(_, iv)| *iv)
+            .collect()
+    } else {
+        let mut seen = Vec::new();
+        thermal
+            .iter()
+            .filter(|l| {
+                let new = !seen.contains(l);
+                seen.push(l);
+                new
+            })
+            .filter_map(|l| r.result.records.get(l))
+            .flat_map(|s| s.iter().copied())
+            .collect()
+    };
+    Ok(RunSeries {
+        name: path.display().to_string(),
+        series,
+    })
+}
+
+/// Residual figures of one model on one run (its own offset removed).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Score {
+    /// Peak-to-peak of the residual smoothed over 600 s, deg/h.
+    pub drift_pp_dph: f64,
+    /// RMS of the 1 Hz residual, deg/h.
+    pub rms_dph: f64,
+}
+
+fn score(residual: &[f64]) -> Score {
+    let n = residual.len().max(1) as f64;
+    let mean = residual.iter().sum::<f64>() / n;
+    let centred: Vec<f64> = residual.iter().map(|r| r - mean).collect();
+    let window = DRIFT_SMOOTHING_S as usize;
+    Score {
+        drift_pp_dph: if centred.len() >= window {
+            drift_pp(&centred, window)
+        } else {
+            f64::NAN
+        },
+        rms_dph: (centred.iter().map(|r| r * r).sum::<f64>() / n).sqrt(),
+    }
+}
+
+fn model_score(fit: Option<&Fit>, series: &[Interval]) -> Score {
+    match fit {
+        Some(f) => score(&f.residual(series)),
+        None => score(&series.iter().map(Interval::bias_dph).collect::<Vec<_>>()),
+    }
+}
+
+/// Mean of scores over folds.
+fn mean_score(s: &[Score]) -> Score {
+    let n = s.len().max(1) as f64;
+    Score {
+        drift_pp_dph: s.iter().map(|x| x.drift_pp_dph).sum::<f64>() / n,
+        rms_dph: (s.iter().map(|x| x.rms_dph * x.rms_dph).sum::<f64>() / n).sqrt(),
+    }
+}
+
+/// One line of the comparison table.
+#[derive(Debug, Clone, Serialize)]
+pub struct Row {
+    /// `raw`, `model1`, `model3` or `model4`.
+    pub model: &'static str,
+    /// On runs it was not fitted to (leave one run out); none with one run.
+    pub held_out: Option<Score>,
+    /// On the runs it was fitted to.
+    pub in_sample: Score,
+}
+
+/// One fitted model with its uncertainties.
+#[derive(Debug, Clone, Serialize)]
+pub struct Fitted {
+    /// Which model.
+    pub model: &'static str,
+    /// Coefficient name, value and standard error.
+    pub coefficients: Vec<(String, f64, f64)>,
+    /// Warm-up time constant (model 4), s.
+    pub warmup_tau_s: Option<f64>,
+    /// Offset of each run, deg/h.
+    pub run_offsets_dph: Vec<f64>,
+}
+
+/// Regressors the runs cannot separate.
+#[derive(Debug, Clone, Serialize)]
+pub struct Collinear {
+    /// The two coefficients.
+    pub terms: [&'static str; 2],
+    /// Their correlation over the runs.
+    pub correlation: f64,
+    /// The extra run that would separate them.
+    pub separate_with: String,
+}
+
+/// The whole calibration.
+#[derive(Debug, Clone, Serialize)]
+pub struct Calibration {
+    /// Runs used.
+    pub runs: Vec<String>,
+    /// How the held-out figures were obtained.
+    pub validation: String,
+    /// raw, model 1, model 3, model 4 (the study's progression).
+    pub table: Vec<Row>,
+    /// The models fitted on all runs.
+    pub models: Vec<Fitted>,
+    /// Collinear regressors (model 4).
+    pub collinear: Vec<Collinear>,
+    /// Warnings for the engineer.
+    pub warnings: Vec<String>,
+    #[serde(skip)]
+    fits: Vec<MultiFit>,
+}
+
+const MODELS: [(ModelKind, &str); 3] = [
+    (ModelKind::Model1, "model1"),
+    (ModelKind::Model3, "model3"),
+    (ModelKind::Model4, "model4"),
+];
+
+fn separate_with(a: &str, b: &str) -> String {
+    let pair = |x: &str, y: &str| (a == x && b == y) || (a == y && b == x);
+    if pair("k4_tk", "k5_f") {
+        "a run powered on at another chamber temperature (a cold start after a soak at -20 degC, say), so the case temperature moves while the warm-up does not".into()
+    } else if pair("k1_dt", "k2_dt2") {
+        "a run that drives the block gradient over a wider range and through zero (faster ramps in both directions, or heating from one side)".into()
+    } else if a.starts_with("k1_dt") || b.starts_with("k1_dt") || a.starts_with("k2_dt") {
+        "a run with another ramp rate (0.5 or 2 degC/min), so the block gradient and its rate change apart".into()
+    } else {
+        "a run with another temperature profile (a different range or ramp rate)".into()
+    }
+}
+
+/// Fit every model on `runs` and validate by leaving one run out.
+pub fn calibrate(runs: &[RunSeries]) -> Result<Calibration, FitError> {
+    let all: Vec<&[Interval]> = runs.iter().map(|r| r.series.as_slice()).collect();
+    let mut fits = Vec::new();
+    for (kind, _) in MODELS {
+        fits.push(fit_runs(kind, &all)?);
+    }
+    // In-sample: the joint fit, each run scored with its own offset removed.
+    let in_sample = |fit: Option<&Fit>| {
+        mean_score(&all.iter().map(|s| model_score(fit, s)).collect::<Vec<_>>())
+    };
+    let mut held: Vec<Option<Score>> = vec![None; 4];
+    if runs.len() >= 2 {
+        let mut folds: Vec<Vec<Score>> = vec![Vec::new(); 4];
+        for k in 0..runs.len() {
+            let train: Vec<&[Interval]> = all
+                .iter()
+                .enumerate()
+                .filter(|(i, _)| *i != k)
+                .map(|(_, s)| *s)
+                .collect();
+            folds[0].push(model_score(None, all[k]));
+            for (i, (kind, _)) in MODELS.iter().enumerate() {
+                let f = fit_runs(*kind, &train)?;
+                folds[i + 1].push(model_score(Some(&f.fit), all[k]));
+            }
+        }
+        held = folds.iter().map(|f| Some(mean_score(f))).collect();
+    }
+    let mut table = vec![Row {
+        model: "raw",
+        held_out: held[0],
+        in_sample: in_sample(None),
+    }];
+    for (i, (_, name)) in MODELS.iter().enumerate() {
+        table.push(Row {
+            model: name,
+            held_out: held[i + 1],
+            in_sample: in_sample(Some(&fits[i].fit)),
+        });
+    }
+    let models = MODELS
+        .iter()
+        .zip(&fits)
+        .map(|((kind, name), f)| Fitted {
+            model: name,
+            coefficients: kind
+                .terms()
+                .iter()
+                .zip(
+                    f.fit
+                        .coeffs
+                        .iter()
+                        .zip(f.stderr.iter().chain([f64::NAN].iter())),
+                )
+                .map(|(t, (v, e))| ((*t).to_owned(), *v, *e))
+                .collect(),
+            warmup_tau_s: f.fit.warmup_tau_s,
+            run_offsets_dph: f.offsets.clone(),
+        })
+        .collect();
+    let tau_w = fits[2].fit.warmup_tau_s.unwrap_or(600.0);
+    let collinear: Vec<Collinear> = collinear(ModelKind::Model4, &all, tau_w, COLLINEAR_ABOVE)
+        .into_iter()
+        .map(|(a, b, r)| Collinear {
+            terms: [a, b],
+            correlation: r,
+            separate_with: separate_with(a, b),
+        })
+        .collect();
+    let mut warnings = Vec::new();
+    if runs.len() < 2 {
+        warnings.push(
+            "one run: the figures are in-sample only; calibrate on two or more runs to score the models on a run they were not fitted to".into(),
+        );
+    }
+    for c in &collinear {
+        warnings.push(format!(
+            "{} and {} are collinear in these runs (r = {:.3}): their split is not determined; add {}",
+            c.terms[0], c.terms[1], c.correlation, c.separate_with
+        ));
+    }
+    Ok(Calibration {
+        runs: runs.iter().map(|r| r.name.clone()).collect(),
+        validation: if runs.len() >= 2 {
+            format!("leave one run out over {} runs", runs.len())
+        } else {
+            "in-sample only (one run)".into()
+        },
+        table,
+        models,
+        collinear,
+        warnings,
+        fits,
+    })
+}
+
+impl Calibration {
+    /// The coefficients file: model 4 for `run --coeffs`, models 3 and 1
+    /// beside it, and where they came from.
+    pub fn coeffs_file(&self) -> CoeffsFile {
+        let c = |i: usize| &self.fits[i].fit.coeffs;
+        let (m1, m3, m4) = (c(0), c(1), c(2));
+        let mut info = toml::Table::new();
+        info.insert(
+            "runs".into(),
+            toml::Value::Array(self.runs.iter().cloned().map(toml::Value::String).collect()),
+        );
+        info.insert("validation".into(), self.validation.clone().into());
+        for (i, (_, name)) in MODELS.iter().enumerate() {
+            let f = &self.fits[i];
+            let mut se = toml::Table::new();
+            for (t, e) in MODELS[i].0.terms().iter().zip(&f.stderr) {
+                if e.is_finite() {
+                    se.insert((*t).into(), (*e).into());
+                }
+            }
+            info.insert(format!("{name}_stderr"), toml::Value::Table(se));
+        }
+        if let Some(r) = self.table.iter().find(|r| r.model == "model4") {
+            let s = r.held_out.unwrap_or(r.in_sample);
+            info.insert("model4_drift_pp_dph".into(), s.drift_pp_dph.into());
+        }
+        CoeffsFile {
+            model4: Model4Coeffs {
+                k1_dph_per_c: m4[0],
+                k2_dph_per_c2: m4[1],
+                k3_dph_per_c_per_s: m4[2],
+                k4_dph_per_c: m4[3],
+                k5_dph: m4[4],
+                warmup_tau_s: self.fits[2].fit.warmup_tau_s.unwrap_or(600.0),
+                offset_dph: m4[5],
+            },
+            model3: Some(Model3Coeffs {
+                k1_dph_per_c: m3[0],
+                k2_dph_per_c2: m3[1],
+                k3_dph_per_c_per_s: m3[2],
+                offset_dph: m3[3],
+            }),
+            model1: Some(Model1Coeffs {
+                k1_dph_per_c3: m1[0],
+                k2_dph_per_c2: m1[1],
+                k3_dph_per_c: m1[2],
+                offset_dph: m1[3],
+            }),
+            calibration: Some(info),
+        }
+    }
+
+    /// The comparison table and the model-4 coefficients as text.
+    pub fn render_text(&self) -> String {
+        let f = |v: f64| {
+            if v.is_finite() {
+                format!("{v:.4}")
+            } else {
+                "n/a".into()
+            }
+        };
+        let mut s = format!(
+            "calibration on {} run(s), validation: {}\n\n  {:<8} {:>18} {:>14} {:>18} {:>14}\n",
+            self.runs.len(),
+            self.validation,
+            "model",
+            "held-out drift pp",
+            "held-out rms",
+            "in-sample drift pp",
+            "in-sample rms"
+        );
+        for r in &self.table {
+            let h = r.held_out.map_or(("-".to_owned(), "-".to_owned()), |h| {
+                (f(h.drift_pp_dph), f(h.rms_dph))
+            });
+            s.push_str(&format!(
+                "  {:<8} {:>18} {:>14} {:>18} {:>14}\n",
+                r.model,
+                h.0,
+                h.1,
+                f(r.in_sample.drift_pp_dph),
+                f(r.in_sample.rms_dph)
+            ));
+        }
+        s.push_str("  (deg/h; drift = p-p of the residual smoothed over 600 s, each run's offset removed)\n\nmodel 4 on all runs:\n");
+        if let Some(m) = self.models.iter().find(|m| m.model == "model4") {
+            for (name, v, e) in &m.coefficients {
+                if e.is_finite() {
+                    s.push_str(&format!("  {name:<10} {v:>12.6} +- {e:.6}\n"));
+                }
+            }
+            if let Some(t) = m.warmup_tau_s {
+                s.push_str(&format!("  tau_w      {t:>12.1} s\n"));
+            }
+        }
+        for w in &self.warnings {
+            s.push_str(&format!("warning: {w}\n"));
+        }
+        s
+    }
+}
