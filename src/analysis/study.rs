@@ -92,3 +92,74 @@ fn spacing(series: &[Interval]) -> f64 {
         _ => 1.0,
     }
 }
+
+/// Temperature and temperature-rate sensitivity of the Earth-removed rate:
+/// least squares of `bias = c + a TK + b dTK/dt` over the series (TK the
+/// case temperature, dTK/dt by local regression over +-30 s), returning
+/// (a deg/h per degC, b deg/h per degC/min). Fitted jointly so a ramp's
+/// rate does not leak into the temperature slope. `None` when the
+/// temperature does not move enough to tell (or too few samples).
+pub fn temperature_sensitivity(series: &[Interval]) -> Option<(f64, f64)> {
+    if series.len() < 10 {
+        return None;
+    }
+    let dt = spacing(series);
+    let tk: Vec<f64> = series.iter().map(|s| s.tcase_c).collect();
+    let half = (30.0 / dt).round().max(1.0) as usize;
+    let rate = super::figures::smoothed_derivative(&tk, dt, half);
+    let y: Vec<f64> = series.iter().map(Interval::bias_dph).collect();
+    let n = series.len();
+    let x = nalgebra::DMatrix::from_fn(n, 3, |i, j| match j {
+        0 => 1.0,
+        1 => tk[i],
+        _ => rate[i] * 60.0,
+    });
+    let spread = tk.iter().copied().fold(f64::NEG_INFINITY, f64::max)
+        - tk.iter().copied().fold(f64::INFINITY, f64::min);
+    if spread < 0.5 {
+        return None;
+    }
+    let b = nalgebra::DVector::from_column_slice(&y);
+    let beta = x.svd(true, true).solve(&b, 1e-12).ok()?;
+    (beta[1].is_finite() && beta[2].is_finite()).then(|| (beta[1], beta[2]))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn temperature_and_its_rate_are_separated() {
+        // A triangle in temperature with two ramp rates: the bias holds a
+        // known slope in each.
+        let series: Vec<Interval> = (0..20_000)
+            .map(|i| {
+                let t = f64::from(i);
+                let tk = if t < 6000.0 {
+                    20.0 + t / 200.0
+                } else {
+                    50.0 - (t - 6000.0) / 400.0
+                };
+                let rate_per_min = if t < 6000.0 { 0.3 } else { -0.15 };
+                Interval {
+                    time_s: t,
+                    rate_dph: 0.5 - 0.007 * tk + 0.2 * rate_per_min + 9.0,
+                    reference_dph: 9.0,
+                    tcase_c: tk,
+                    ..Interval::default()
+                }
+            })
+            .collect();
+        let (a, b) = temperature_sensitivity(&series).expect("computable");
+        assert!((a + 0.007).abs() < 1e-5, "{a}");
+        assert!((b - 0.2).abs() < 2e-3, "{b}");
+        let flat: Vec<Interval> = series
+            .iter()
+            .map(|s| Interval {
+                tcase_c: 20.0,
+                ..*s
+            })
+            .collect();
+        assert_eq!(temperature_sensitivity(&flat), None);
+    }
+}

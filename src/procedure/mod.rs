@@ -51,6 +51,12 @@ pub enum Metric {
     SelfHeating,
     /// Mean Earth-removed rate.
     MeanBias,
+    /// Slope of the Earth-removed rate against the case temperature,
+    /// deg/h per degC (jointly with the temperature rate).
+    TemperatureSensitivity,
+    /// Slope against the rate of change of the case temperature, deg/h
+    /// per degC/min (jointly with the temperature).
+    TemperatureRateSensitivity,
 }
 
 impl Metric {
@@ -61,6 +67,8 @@ impl Metric {
             "compensated_drift_pp" => Self::CompensatedDriftPp,
             "self_heating" => Self::SelfHeating,
             "mean_bias" => Self::MeanBias,
+            "temperature_sensitivity" => Self::TemperatureSensitivity,
+            "temperature_rate_sensitivity" => Self::TemperatureRateSensitivity,
             _ => return None,
         })
     }
@@ -431,7 +439,8 @@ impl Validator<'_> {
                         &k("metric"),
                         format!(
                             "{metric:?} is not a metric; expected bias_stability, drift_pp, \
-                             compensated_drift_pp, self_heating or mean_bias"
+                             compensated_drift_pp, self_heating, mean_bias, \
+                             temperature_sensitivity or temperature_rate_sensitivity"
                         ),
                     )
                 })?;

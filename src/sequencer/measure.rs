@@ -8,7 +8,7 @@ use super::{BenchState, Tick};
 use crate::analysis::figures::{bias_stability, drift_pp, mean};
 use crate::analysis::model::{self, Fit, ModelKind};
 use crate::analysis::series::Interval;
-use crate::analysis::study::self_heating_dph;
+use crate::analysis::study::{self_heating_dph, temperature_sensitivity};
 use crate::procedure::{Measure, Metric};
 
 /// 1 Hz intervals of the whole run, and by record label.
@@ -199,6 +199,8 @@ pub fn compute(m: &Measure, records: &Records, coeffs: Option<&Fit>, step: &str)
         Metric::DriftPp => (bias.len() >= window).then(|| drift_pp(&bias, window)),
         Metric::MeanBias => Some(mean(&bias)),
         Metric::SelfHeating => self_heating_dph(&series).map(f64::abs),
+        Metric::TemperatureSensitivity => temperature_sensitivity(&series).map(|(a, _)| a),
+        Metric::TemperatureRateSensitivity => temperature_sensitivity(&series).map(|(_, b)| b),
         Metric::CompensatedDriftPp => {
             let fit = match coeffs {
                 Some(f) => {
