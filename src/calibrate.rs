@@ -334,6 +334,66 @@ impl Calibration {
         }
     }
 
+    /// A self-contained page: the comparison table, every model's
+    /// coefficients with their errors, the warnings.
+    pub fn render_html(&self) -> String {
+        let esc = |t: &str| {
+            t.replace('&', "&amp;")
+                .replace('<', "&lt;")
+                .replace('>', "&gt;")
+        };
+        let f = |v: f64| {
+            if v.is_finite() {
+                format!("{v:.4}")
+            } else {
+                "n/a".into()
+            }
+        };
+        let mut rows = String::new();
+        for r in &self.table {
+            let (hd, hr) = r.held_out.map_or(("-".into(), "-".into()), |h| {
+                (f(h.drift_pp_dph), f(h.rms_dph))
+            });
+            rows.push_str(&format!(
+                "<tr><td>{}</td><td class=num>{hd}</td><td class=num>{hr}</td><td class=num>{}</td><td class=num>{}</td></tr>\n",
+                r.model,
+                f(r.in_sample.drift_pp_dph),
+                f(r.in_sample.rms_dph)
+            ));
+        }
+        let mut coeffs = String::new();
+        for m in &self.models {
+            for (name, v, e) in &m.coefficients {
+                coeffs.push_str(&format!(
+                    "<tr><td>{}</td><td>{}</td><td class=num>{v:.6e}</td><td class=num>{}</td></tr>\n",
+                    m.model,
+                    esc(name),
+                    if e.is_finite() { format!("{e:.2e}") } else { "(per-run mean)".into() }
+                ));
+            }
+            if let Some(t) = m.warmup_tau_s {
+                coeffs.push_str(&format!(
+                    "<tr><td>{}</td><td>tau_w, s</td><td class=num>{t:.1}</td><td></td></tr>\n",
+                    m.model
+                ));
+            }
+        }
+        let warnings: String = self
+            .warnings
+            .iter()
+            .map(|w| format!("<p class=warn>{}</p>\n", esc(w)))
+            .collect();
+        let runs: String = self
+            .runs
+            .iter()
+            .map(|r| format!("<li>{}</li>", esc(r)))
+            .collect();
+        format!(
+            "<!doctype html>\n<html lang=en><head><meta charset=utf-8><title>Calibration</title><style>body{{font-family:sans-serif;margin:2em;max-width:960px}} table{{border-collapse:collapse;margin:1em 0}} td,th{{border:1px solid #ccc;padding:.25em .5em}} td.num{{text-align:right;font-family:monospace}} .warn{{background:#fff4e0;border-left:4px solid #8a5a00;padding:.5em}}</style></head><body>\n<h1>Thermal compensation calibration</h1>\n<p>Runs:</p><ul>{runs}</ul><p>Validation: {}.</p>\n<h2>The study's progression</h2>\n<table><tr><th>model</th><th>held-out drift p-p, deg/h</th><th>held-out RMS</th><th>in-sample drift p-p</th><th>in-sample RMS</th></tr>\n{rows}</table>\n<p>Drift = peak-to-peak of the residual smoothed over 600 s; each run's own offset (turn-on bias) removed.</p>\n{warnings}<h2>Coefficients (all runs)</h2>\n<table><tr><th>model</th><th>term</th><th>value</th><th>standard error</th></tr>\n{coeffs}</table>\n</body></html>\n",
+            esc(&self.validation)
+        )
+    }
+
     /// The comparison table and the model-4 coefficients as text.
     pub fn render_text(&self) -> String {
         let f = |v: f64| {

@@ -35,11 +35,15 @@ pub fn run(args: CalibrateArgs) -> Result<Outcome> {
     let json_path = args.out.with_extension("calibration.json");
     crate::fsutil::write_atomic(&json_path, serde_json::to_string_pretty(&cal)?.as_bytes())
         .with_context(|| format!("writing {}", json_path.display()))?;
+    let html_path = args.out.with_extension("calibration.html");
+    crate::fsutil::write_atomic(&html_path, cal.render_html().as_bytes())
+        .with_context(|| format!("writing {}", html_path.display()))?;
     print!("{}", cal.render_text());
     eprintln!(
-        "coefficients in {}, details in {}",
+        "coefficients in {}, details in {} and {}",
         args.out.display(),
-        json_path.display()
+        json_path.display(),
+        html_path.display()
     );
     Ok(Outcome::Success)
 }

@@ -85,6 +85,8 @@ fn calibration_recovers_the_twin_and_its_file_compensates_a_new_run() {
     );
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(text.contains("leave one run out over 2 runs"), "{text}");
+    let html = std::fs::read_to_string(dir.join("coeffs.calibration.html")).expect("html");
+    assert!(html.contains("<td>model4</td>") && html.contains("held-out drift"));
 
     let cal: serde_json::Value = serde_json::from_str(
         &std::fs::read_to_string(dir.join("coeffs.calibration.json")).expect("calibration.json"),

@@ -63,6 +63,66 @@ fn twin_study_writes_the_interchange_csv() {
         .filter_map(|l| l.split(',').nth(5)?.parse::<f64>().ok())
         .fold(f64::NEG_INFINITY, f64::max);
     assert!((hot - 50.0).abs() < 0.1, "chamber reaches +50 degC: {hot}");
+
+    // allan takes the CSV: one step's rows, the --json contract.
+    let out = gyrobench(&[
+        "allan",
+        csv.to_str().expect("utf-8 path"),
+        "--record",
+        "soak_hot",
+        "--taus",
+        "dense",
+        "--json",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let j: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON");
+    let arr = |k: &str| -> Vec<f64> {
+        j[k].as_array()
+            .unwrap_or_else(|| panic!("{k} is an array"))
+            .iter()
+            .map(|v| v.as_f64().expect("number"))
+            .collect()
+    };
+    let (tau, adev, lo, hi) = (arr("tau_s"), arr("adev_dph"), arr("lo_dph"), arr("hi_dph"));
+    assert!(tau.len() >= 20, "dense taus: {}", tau.len());
+    assert_eq!(j["tau0_s"], 1.0);
+    for i in 0..tau.len() {
+        assert!(
+            lo[i] < adev[i] && adev[i] < hi[i],
+            "tau {}: {} {} {}",
+            tau[i],
+            lo[i],
+            adev[i],
+            hi[i]
+        );
+    }
+    assert!(tau.windows(2).all(|w| w[0] < w[1]));
+    for k in [
+        "quantization_arcsec",
+        "arw_deg_per_rt_h",
+        "bias_instability_dph",
+        "rate_random_walk_dph_per_rt_h",
+    ] {
+        assert!(
+            j["noise"][k].as_f64().is_some_and(|v| v >= 0.0),
+            "noise.{k}: {}",
+            j["noise"]
+        );
+    }
+    // A bad row is refused with its line.
+    let bad = dir.join("bad.csv");
+    std::fs::write(&bad, text.replacen(",soak_hot", ",soak_hot,extra", 1)).expect("bad csv");
+    let out = gyrobench(&["allan", bad.to_str().expect("utf-8 path")]);
+    assert_eq!(out.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("bad.csv:") && err.contains("unreadable row"),
+        "{err}"
+    );
     std::fs::remove_dir_all(&dir).expect("cleanup");
 }
 

@@ -181,6 +181,42 @@ fn replay_of_an_unchanged_log_is_identical_to_the_live_run() {
 }
 
 #[test]
+fn allan_reads_a_record_of_a_log_at_the_frame_rate() {
+    let dir = temp_dir("allan-log");
+    let procedure = dir.join("mini.toml");
+    std::fs::write(&procedure, MINI).expect("procedure");
+    let live = dir.join("live");
+    gyrobench(&["run", s(&procedure), "--out", s(&live)]);
+    let log = live.join("run.mcap");
+    let out = gyrobench(&["allan", s(&log), "--record", "up", "--json"]);
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let j: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON");
+    assert_eq!(j["record"], "up");
+    assert_eq!(j["tau0_s"], 0.0025);
+    assert_eq!(j["samples"], 120 * 400);
+    // Default: the longest record; text output names the three figures.
+    let out = gyrobench(&["allan", s(&log)]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        text.contains(", warm:") && text.contains("IEEE coefficient B"),
+        "{text}"
+    );
+    let out = gyrobench(&["allan", s(&log), "--record", "nowhere"]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(
+        String::from_utf8_lossy(&out.stderr).contains("records in this log: warm, up, east, ramp"),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
+
+#[test]
 fn the_run_coefficients_travel_in_the_log_and_replay_can_swap_them() {
     let dir = temp_dir("replay-coeffs");
     let coeffs = dir.join("coeffs.toml");
