@@ -24,7 +24,7 @@ use crate::protocol::frame::LinkStats;
 use crate::recorder::topics;
 use crate::runlog::{self, Item, ReadSummary};
 use crate::sequencer::measure::{self, IntervalState, MeasureOutcome, Records, TickSums};
-use crate::sequencer::{Outcome, RunError, RunResult};
+use crate::sequencer::{Outcome, Resume, RunError, RunResult, resume_plan};
 
 /// Name of the metadata record with the run's configuration.
 pub const RUN_META: &str = "run";
@@ -46,6 +46,11 @@ pub struct Replayed {
     pub read: ReadSummary,
     /// Device time of the last state in the log, s.
     pub last_state_s: f64,
+    /// Steps completed, counted in setup + main run order over every part
+    /// (where a resume picks up).
+    pub completed_steps: usize,
+    /// Which part of the run this file is (1 for a run never resumed).
+    pub part: u32,
 }
 
 /// Why a log cannot be replayed.
@@ -156,6 +161,10 @@ struct State<'a> {
     last_step: Option<String>,
     /// Index of the next step in run order.
     cursor: usize,
+    /// Steps completed ("end of step" seen), in run order.
+    completed: usize,
+    /// What earlier parts of the run left (a resumed run's later part).
+    earlier: Option<Box<Replayed>>,
 }
 
 impl State<'_> {
@@ -192,6 +201,29 @@ impl State<'_> {
                         CoeffsFile::from_source(&Source::from_text("coeffs_toml (in the log)", t))
                             .map_err(|e| self.log_err(format!("the logged coefficients: {e}")))?;
                     self.coeffs = Some(c.fit());
+                }
+                if let Some(prev) = entries.get("previous_part").filter(|p| !p.is_empty()) {
+                    let prev_path = self.path.with_file_name(prev);
+                    let earlier = replay(&prev_path, self.coeffs_override)
+                        .map_err(|e| self.log_err(format!("its earlier part {prev}: {e}")))?;
+                    let completed = entries
+                        .get("resume_completed_steps")
+                        .and_then(|v| v.parse().ok())
+                        .unwrap_or(earlier.completed_steps);
+                    let p = self
+                        .procedure
+                        .as_ref()
+                        .ok_or_else(|| self.log_err("no procedure"))?;
+                    let (start_at, _) = resume_plan(p, completed);
+                    let mut records = earlier.result.records.clone();
+                    let mut measurements = earlier.result.measurements.clone();
+                    Resume::trim(p, start_at, &mut records, &mut measurements);
+                    self.records = records;
+                    self.measurements = measurements;
+                    self.frames = earlier.result.frames;
+                    self.cursor = start_at;
+                    self.completed = start_at;
+                    self.earlier = Some(Box::new(earlier));
                 }
             }
             RESULT_META => self.result_meta = Some(entries.clone()),
@@ -266,6 +298,17 @@ impl State<'_> {
     /// `step KEY (line N): ...` or `cleanup KEY (line N): ...`: a step
     /// started; a measure step is computed here, as in the live run.
     fn step_event(&mut self, message: &str) {
+        if let Some(key) = message.strip_prefix("end of step ") {
+            let done = self
+                .procedure
+                .as_ref()
+                .and_then(|p| p.steps().nth(self.cursor.checked_sub(1)?))
+                .is_some_and(|s| s.key == key);
+            if done {
+                self.completed = self.cursor;
+            }
+            return;
+        }
         let Some(rest) = message
             .strip_prefix("step ")
             .or_else(|| message.strip_prefix("cleanup "))
@@ -316,6 +359,8 @@ pub fn replay(path: &Path, coeffs: Option<&Fit>) -> Result<Replayed, ReplayError
         frames: 0,
         last_step: None,
         cursor: 0,
+        completed: 0,
+        earlier: None,
     };
     let read = runlog::read(path, |item| match item {
         Item::Meta { name, entries } => st.meta(name, entries),
@@ -339,6 +384,7 @@ pub fn replay(path: &Path, coeffs: Option<&Fit>) -> Result<Replayed, ReplayError
         log_err("no run metadata (procedure, bench) in the log; is this a gyrobench log?".into())
     })?;
     let last_state_s = st.table.map_or(0.0, |(t, _)| t);
+    let earlier_s = st.earlier.as_ref().map_or(0.0, |e| e.result.device_time_s);
     let failed = st
         .measurements
         .iter()
@@ -363,7 +409,7 @@ pub fn replay(path: &Path, coeffs: Option<&Fit>) -> Result<Replayed, ReplayError
                 r.get("cleanup_completed").is_some_and(|v| v == "true"),
                 r.get("device_time_s")
                     .and_then(|v| v.parse().ok())
-                    .unwrap_or(last_state_s),
+                    .unwrap_or(earlier_s + last_state_s),
             )
         }
         None => (
@@ -379,9 +425,14 @@ pub fn replay(path: &Path, coeffs: Option<&Fit>) -> Result<Replayed, ReplayError
                 ),
             }),
             false,
-            last_state_s,
+            earlier_s + last_state_s,
         ),
     };
+    let link = match &st.earlier {
+        Some(e) => add_link(&e.link, &st.link),
+        None => st.link,
+    };
+    let part = st.earlier.as_ref().map_or(1, |e| e.part + 1);
     Ok(Replayed {
         meta: st.meta,
         procedure,
@@ -394,10 +445,25 @@ pub fn replay(path: &Path, coeffs: Option<&Fit>) -> Result<Replayed, ReplayError
             frames: st.frames,
             records: st.records,
         },
-        link: st.link,
+        link,
         read,
         last_state_s,
+        completed_steps: st.completed,
+        part,
     })
+}
+
+/// Link figures of two parts of a run, added.
+pub fn add_link(a: &LinkStats, b: &LinkStats) -> LinkStats {
+    LinkStats {
+        bytes: a.bytes + b.bytes,
+        frames: a.frames + b.frames,
+        resyncs: a.resyncs + b.resyncs,
+        skipped_bytes: a.skipped_bytes + b.skipped_bytes,
+        crc_errors: a.crc_errors + b.crc_errors,
+        lost_frames: a.lost_frames + b.lost_frames,
+        duplicates: a.duplicates + b.duplicates,
+    }
 }
 
 /// The `result` metadata record of a run.

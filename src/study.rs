@@ -134,6 +134,7 @@ pub fn run_study(cfg: &TwinConfig, seed: u64) -> Result<(StudyReport, Vec<Sample
     let clock = Arc::new(VirtualClock::new(Pacing::Max));
     let mut bench = EmbeddedBench::new(cfg.clone(), seed, clock);
     let opts = Options {
+        resume: None,
         coeffs: None,
         interrupt: Arc::new(AtomicBool::new(false)),
         dut_max_c: bench_cfg.limits.dut_max_c,

@@ -10,24 +10,34 @@ use clap::Args;
 use super::Outcome;
 use super::check::load_bench;
 use crate::analysis::series::Interval;
+use crate::bench::BenchConfig;
 use crate::bench::open_bench;
 use crate::clock::{Pacing, VirtualClock, utc_now};
 use crate::coeffs::CoeffsFile;
+use crate::config::Source;
 use crate::procedure::Procedure;
 use crate::procedure::estimate::estimate;
+use crate::protocol::frame::LinkStats;
 use crate::recorder::{Recorder, RunMeta};
-use crate::replay::{RESULT_META, result_entries};
+use crate::replay::{RESULT_META, add_link, replay, result_entries};
 use crate::report::{Report, render_html};
 use crate::sequencer::device::DeviceBench;
 use crate::sequencer::embedded::{EmbeddedBench, Fault};
 use crate::sequencer::guard::Guarded;
 use crate::sequencer::{self, BenchIo, BenchState, Options, Progress, Sink};
+use crate::sequencer::{Resume, resume_plan};
 use crate::twin::TwinConfig;
 
 #[derive(Debug, Args)]
 pub struct RunArgs {
     /// Procedure file (TOML), e.g. procedures/acceptance.toml.
-    procedure: PathBuf,
+    #[arg(required_unless_present = "resume")]
+    procedure: Option<PathBuf>,
+    /// Continue the interrupted run in DIR from its last completed step,
+    /// logging into a new part file beside the first (procedure, bench,
+    /// twin, coefficients, seed and unit come from its log).
+    #[arg(long, value_name = "DIR", conflicts_with_all = ["procedure", "bench", "out", "seed", "coeffs", "twin", "dut"])]
+    resume: Option<PathBuf>,
     /// Bench file (default: the embedded simulated bench, on virtual time).
     #[arg(long)]
     bench: Option<PathBuf>,
@@ -158,10 +168,192 @@ fn pacing(speed: &str) -> Result<Pacing> {
     Ok(Pacing::Factor(f))
 }
 
-pub fn run(args: RunArgs) -> Result<Outcome> {
+/// What a run (or a resumed part of one) works with.
+struct Setup {
+    procedure: Procedure,
+    procedure_path: String,
+    bench_cfg: BenchConfig,
+    bench_label: String,
+    twin: TwinConfig,
+    coeffs_file: Option<CoeffsFile>,
+    /// The run's seed (reported); a resumed part seeds its twin with
+    /// `seed + part - 1` (a new power-on, fresh noise).
+    seed: u64,
+    dut: String,
+    out: Option<PathBuf>,
+    /// UTC start of the run (of its first part).
+    start_time_utc: Option<String>,
+    resume: Option<Resumed>,
+}
+
+struct Resumed {
+    state: Resume,
+    previous_file: String,
+    link: LinkStats,
+}
+
+fn fresh(args: &RunArgs, procedure_path: &Path) -> Result<Setup> {
     let bench_cfg = load_bench(args.bench.as_ref())?;
-    let procedure = Procedure::load(&args.procedure, &bench_cfg)
-        .with_context(|| format!("checking procedure {}", args.procedure.display()))?;
+    let procedure = Procedure::load(procedure_path, &bench_cfg)
+        .with_context(|| format!("checking procedure {}", procedure_path.display()))?;
+    let twin = match &args.twin {
+        Some(p) => TwinConfig::load(p).with_context(|| format!("loading twin {}", p.display()))?,
+        None => TwinConfig::default_rl16(),
+    };
+    let coeffs_file = match &args.coeffs {
+        Some(p) => Some(
+            CoeffsFile::load(p).with_context(|| format!("loading coefficients {}", p.display()))?,
+        ),
+        None => None,
+    };
+    anyhow::ensure!(
+        bench_cfg.is_embedded() || args.twin.is_none(),
+        "--twin applies to the embedded simulated bench only"
+    );
+    Ok(Setup {
+        procedure,
+        procedure_path: procedure_path.display().to_string(),
+        bench_label: args
+            .bench
+            .as_ref()
+            .map_or("embedded".into(), |p| p.display().to_string()),
+        bench_cfg,
+        twin,
+        coeffs_file,
+        seed: args.seed,
+        dut: args.dut.clone(),
+        out: args.out.clone(),
+        start_time_utc: None,
+        resume: None,
+    })
+}
+
+/// The newest part of the run in `dir`: `run.mcap`, `run.part2.mcap`, ...
+fn last_part(dir: &Path) -> Result<(PathBuf, u32)> {
+    let first = dir.join("run.mcap");
+    anyhow::ensure!(
+        first.exists(),
+        "{} holds no run.mcap: not a run directory",
+        dir.display()
+    );
+    let mut n = 1;
+    while dir.join(format!("run.part{}.mcap", n + 1)).exists() {
+        n += 1;
+    }
+    let path = if n == 1 {
+        first
+    } else {
+        dir.join(format!("run.part{n}.mcap"))
+    };
+    Ok((path, n))
+}
+
+fn resumed(dir: &Path) -> Result<Setup> {
+    let (last, n) = last_part(dir)?;
+    let prev = replay(&last, None).with_context(|| format!("reading {}", last.display()))?;
+    anyhow::ensure!(
+        matches!(
+            prev.result.outcome,
+            sequencer::Outcome::Error | sequencer::Outcome::Aborted
+        ),
+        "the run in {} finished (outcome {:?}); there is nothing to resume",
+        dir.display(),
+        prev.result.outcome
+    );
+    let meta = |k: &str| prev.meta.get(k).cloned().unwrap_or_default();
+    let bench_toml = meta("bench_toml");
+    let bench_cfg = if bench_toml.trim().is_empty() {
+        BenchConfig::embedded()
+    } else {
+        BenchConfig::from_source(&Source::from_text("bench_toml (in the log)", &bench_toml))?
+    };
+    let twin_toml = meta("twin_toml");
+    let twin = if twin_toml.trim().is_empty() {
+        TwinConfig::default_rl16()
+    } else {
+        TwinConfig::from_source(&Source::from_text("twin_toml (in the log)", &twin_toml))?
+    };
+    let coeffs_toml = meta("coeffs_toml");
+    let coeffs_file = if coeffs_toml.trim().is_empty() {
+        None
+    } else {
+        Some(CoeffsFile::from_source(&Source::from_text(
+            "coeffs_toml (in the log)",
+            &coeffs_toml,
+        ))?)
+    };
+    let completed = prev.completed_steps;
+    let (start_at, _) = resume_plan(&prev.procedure, completed);
+    let mut records = prev.result.records.clone();
+    let mut measurements = prev.result.measurements.clone();
+    Resume::trim(&prev.procedure, start_at, &mut records, &mut measurements);
+    eprintln!(
+        "resuming {}: {} of {} steps completed, going on from step {} (last part {}, ended: {})",
+        dir.display(),
+        completed,
+        prev.procedure.setup.len() + prev.procedure.main.len(),
+        start_at + 1,
+        last.display(),
+        prev.result
+            .error
+            .as_ref()
+            .map_or("-".to_owned(), |e| format!(
+                "{} in step {}",
+                e.message, e.step
+            ))
+    );
+    Ok(Setup {
+        procedure: prev.procedure.clone(),
+        procedure_path: meta("procedure_path"),
+        bench_label: prev
+            .meta
+            .get("bench")
+            .cloned()
+            .unwrap_or_else(|| "embedded".into()),
+        bench_cfg,
+        twin,
+        coeffs_file,
+        seed: meta("seed").parse().unwrap_or(1),
+        dut: meta("dut_serial"),
+        out: Some(dir.to_path_buf()),
+        start_time_utc: Some(meta("start_time_utc")),
+        resume: Some(Resumed {
+            state: Resume {
+                start_at,
+                completed,
+                part: n + 1,
+                records,
+                measurements,
+                frames: prev.result.frames,
+                device_time_s: prev.result.device_time_s,
+            },
+            previous_file: last
+                .file_name()
+                .map_or(String::new(), |f| f.to_string_lossy().into_owned()),
+            link: prev.link,
+        }),
+    })
+}
+
+pub fn run(args: RunArgs) -> Result<Outcome> {
+    let setup = match (&args.resume, &args.procedure) {
+        (Some(dir), _) => resumed(dir)?,
+        (None, Some(p)) => fresh(&args, p)?,
+        (None, None) => anyhow::bail!("give a procedure file or --resume DIR"),
+    };
+    let Setup {
+        procedure,
+        procedure_path,
+        bench_cfg,
+        bench_label,
+        twin,
+        coeffs_file,
+        seed,
+        dut,
+        out,
+        start_time_utc,
+        resume,
+    } = setup;
     let embedded = bench_cfg.is_embedded();
     let specs = [
         &bench_cfg.devices.chamber.spec,
@@ -173,24 +365,11 @@ pub fn run(args: RunArgs) -> Result<Outcome> {
         "the bench file mixes sim:// and real devices; use all sim:// (the embedded bench) or none"
     );
     anyhow::ensure!(
-        embedded || (args.inject.is_empty() && args.twin.is_none()),
-        "--inject and --twin apply to the embedded simulated bench only"
+        embedded || args.inject.is_empty(),
+        "--inject applies to the embedded simulated bench only"
     );
-    let twin = match &args.twin {
-        Some(p) => TwinConfig::load(p).with_context(|| format!("loading twin {}", p.display()))?,
-        None => TwinConfig::default_rl16(),
-    };
-    let coeffs_file = match &args.coeffs {
-        Some(p) => Some(
-            CoeffsFile::load(p).with_context(|| format!("loading coefficients {}", p.display()))?,
-        ),
-        None => None,
-    };
     let coeffs = coeffs_file.as_ref().map(CoeffsFile::fit);
-    let bench_label = args
-        .bench
-        .as_ref()
-        .map_or("embedded".into(), |p| p.display().to_string());
+    let part = resume.as_ref().map_or(1, |r| r.state.part);
     let faults: Vec<(f64, Fault)> = args
         .inject
         .iter()
@@ -199,7 +378,8 @@ pub fn run(args: RunArgs) -> Result<Outcome> {
     let pacing = pacing(&args.speed)?;
 
     let start = utc_now();
-    let out = args.out.clone().unwrap_or_else(|| {
+    let run_start = start_time_utc.unwrap_or_else(|| start.to_rfc3339());
+    let out = out.unwrap_or_else(|| {
         PathBuf::from("runs").join(format!(
             "{}-{}",
             procedure.meta.name,
@@ -217,7 +397,7 @@ pub fn run(args: RunArgs) -> Result<Outcome> {
     let limits = bench_cfg.limits.clone();
     let mut bench: Box<dyn BenchIo> = if embedded {
         let clock = Arc::new(VirtualClock::new(pacing));
-        let mut b = EmbeddedBench::new(twin.clone(), args.seed, clock);
+        let mut b = EmbeddedBench::new(twin.clone(), seed.wrapping_add(u64::from(part) - 1), clock);
         for (at, f) in faults {
             b.schedule(at, f);
         }
@@ -234,7 +414,7 @@ pub fn run(args: RunArgs) -> Result<Outcome> {
     let mut meta = RunMeta::default();
     for (k, v) in [
         ("procedure_toml", procedure.text.clone()),
-        ("procedure_path", args.procedure.display().to_string()),
+        ("procedure_path", procedure_path.clone()),
         (
             "bench_toml",
             toml::to_string_pretty(&bench_cfg).unwrap_or_default(),
@@ -251,11 +431,25 @@ pub fn run(args: RunArgs) -> Result<Outcome> {
             "site",
             serde_json::to_string(&bench_cfg.site).unwrap_or_default(),
         ),
-        ("dut_serial", args.dut.clone()),
+        ("dut_serial", dut.clone()),
         ("dut_type", procedure.meta.dut_type.clone()),
         ("software_version", env!("CARGO_PKG_VERSION").to_owned()),
-        ("start_time_utc", start.to_rfc3339()),
-        ("seed", args.seed.to_string()),
+        ("start_time_utc", run_start.clone()),
+        ("part_start_time_utc", start.to_rfc3339()),
+        ("seed", seed.to_string()),
+        ("part", part.to_string()),
+        (
+            "previous_part",
+            resume
+                .as_ref()
+                .map_or(String::new(), |r| r.previous_file.clone()),
+        ),
+        (
+            "resume_completed_steps",
+            resume
+                .as_ref()
+                .map_or(String::new(), |r| r.state.completed.to_string()),
+        ),
         ("speed", args.speed.clone()),
         ("bench", bench_label.clone()),
         (
@@ -268,7 +462,16 @@ pub fn run(args: RunArgs) -> Result<Outcome> {
     ] {
         meta.entries.insert(k.to_owned(), v);
     }
-    let mcap_path = out.join("run.mcap");
+    let mcap_path = if part == 1 {
+        out.join("run.mcap")
+    } else {
+        out.join(format!("run.part{part}.mcap"))
+    };
+    anyhow::ensure!(
+        !mcap_path.exists() || resume.is_none(),
+        "{} exists already",
+        mcap_path.display()
+    );
     let start_ns = start.timestamp_nanos_opt().unwrap_or(0).max(0) as u64;
     let mut recorder = Recorder::create(
         &mcap_path,
@@ -290,6 +493,7 @@ pub fn run(args: RunArgs) -> Result<Outcome> {
             bench_cfg.devices.table.settle_s,
         ),
         move_timeout_s: 600.0,
+        resume: resume.as_ref().map(|r| r.state.clone()),
     };
     eprintln!("running {} -> {}", procedure.meta.name, out.display());
     let result = rt.block_on(async {
@@ -310,9 +514,13 @@ pub fn run(args: RunArgs) -> Result<Outcome> {
             .await,
         )
     })?;
-    let link = bench.link_stats();
+    let part_link = bench.link_stats();
+    let link = match &resume {
+        Some(r) => add_link(&r.link, &part_link),
+        None => part_link,
+    };
     recorder
-        .link(result.device_time_s, &link)
+        .link(bench.now_s(), &part_link)
         .and_then(|()| recorder.metadata(RESULT_META, result_entries(&result)))
         .and_then(|()| recorder.finish())
         .with_context(|| format!("finishing {}", mcap_path.display()))?;
@@ -320,10 +528,10 @@ pub fn run(args: RunArgs) -> Result<Outcome> {
     let report = Report::new(
         &procedure,
         &result,
-        &args.dut,
-        &start.to_rfc3339(),
+        &dut,
+        &run_start,
         link,
-        embedded.then_some(args.seed),
+        embedded.then_some(seed),
         &bench_label,
     );
     write(&out.join("report.json"), report.to_json().as_bytes())?;

@@ -29,6 +29,13 @@ impl Records {
         self.order.push(label.to_owned());
     }
 
+    /// Forget what a record holds (it is recorded again from its start).
+    pub fn discard(&mut self, label: &str) {
+        if let Some(v) = self.by_label.get_mut(label) {
+            v.clear();
+        }
+    }
+
     /// Intervals of one record.
     pub fn get(&self, label: &str) -> Option<&[Interval]> {
         self.by_label.get(label).map(Vec::as_slice)

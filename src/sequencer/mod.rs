@@ -183,6 +183,108 @@ pub struct Options {
     pub in_position: (f64, f64),
     /// Longest a move may take, s.
     pub move_timeout_s: f64,
+    /// Continue an interrupted run instead of starting from the top.
+    pub resume: Option<Resume>,
+}
+
+/// Where a resumed run picks up, and what the earlier parts left.
+#[derive(Debug, Clone, Default)]
+pub struct Resume {
+    /// Index, in setup + main run order, of the first step to run
+    /// ([`resume_plan`]).
+    pub start_at: usize,
+    /// Steps the earlier parts completed.
+    pub completed: usize,
+    /// Which part this is (2 for the first resume).
+    pub part: u32,
+    /// Records of the earlier parts ([`Resume::trim`]med).
+    pub records: Records,
+    /// Measurements the earlier parts made (trimmed).
+    pub measurements: Vec<Measurement>,
+    /// Frames of the earlier parts.
+    pub frames: u64,
+    /// Device time of the earlier parts, s.
+    pub device_time_s: f64,
+}
+
+/// Soak criteria of a resume when the procedure has no soak step (ours).
+pub const RESUME_SOAK: StepKind = StepKind::Soak {
+    band_c: 1.0,
+    case_slope_c_per_min: 0.05,
+    hold_s: 600.0,
+    timeout_s: 6.0 * 3600.0,
+};
+
+/// Where a resume picks up after `completed` steps (setup + main, run
+/// order), and the steps that first bring the bench back.
+///
+/// A thermal segment is whole: if no soak step stands between the last
+/// chamber step and the resume point, the records since that chamber step
+/// (and the one cut short) were taken while the chamber ramped or settled,
+/// and are taken again:
+/// the resume starts at that chamber step, after restoring the set point
+/// before it. The restore is the last table move, the last chamber set
+/// point, and a soak that re-checks its conditions (the procedure's own
+/// criteria when it has a soak step, else [`RESUME_SOAK`]).
+pub fn resume_plan(p: &Procedure, completed: usize) -> (usize, Vec<Step>) {
+    let steps: Vec<&Step> = p.setup.iter().chain(&p.main).collect();
+    let completed = completed.min(steps.len());
+    let last_before =
+        |end: usize, f: &dyn Fn(&StepKind) -> bool| steps[..end].iter().rposition(|s| f(&s.kind));
+    let is_chamber = |k: &StepKind| matches!(k, StepKind::Chamber { .. });
+    let is_soak = |k: &StepKind| matches!(k, StepKind::Soak { .. });
+    let mut start_at = completed;
+    if let Some(c) = last_before(completed, &is_chamber)
+        && last_before(completed, &is_soak).is_none_or(|s| s < c)
+        && steps[c + 1..(completed + 1).min(steps.len())]
+            .iter()
+            .any(|s| matches!(s.kind, StepKind::Record { .. }))
+    {
+        start_at = c;
+    }
+    let mut restore: Vec<Step> = Vec::new();
+    if let Some(m) = last_before(start_at, &|k| matches!(k, StepKind::Move { .. })) {
+        restore.push(steps[m].clone());
+    }
+    if let Some(c) = last_before(start_at, &is_chamber) {
+        restore.push(steps[c].clone());
+        let soak = p
+            .steps()
+            .find(|s| is_soak(&s.kind))
+            .map_or(RESUME_SOAK, |s| s.kind.clone());
+        restore.push(Step {
+            group: steps[c].group,
+            key: format!("{}.resume_soak", steps[c].key),
+            line: steps[c].line,
+            kind: soak,
+        });
+    }
+    (start_at, restore)
+}
+
+impl Resume {
+    /// What the earlier parts leave for a resume at `start_at`: records and
+    /// measurements of the steps before it; records that will be taken
+    /// again are emptied.
+    pub fn trim(
+        p: &Procedure,
+        start_at: usize,
+        records: &mut Records,
+        measurements: &mut Vec<Measurement>,
+    ) {
+        let steps: Vec<&Step> = p.setup.iter().chain(&p.main).collect();
+        let kept = steps
+            .iter()
+            .take(start_at)
+            .filter(|s| matches!(s.kind, StepKind::Measure(_)))
+            .count();
+        measurements.truncate(kept);
+        for s in steps.iter().skip(start_at) {
+            if let StepKind::Record { label, .. } = &s.kind {
+                records.discard(label);
+            }
+        }
+    }
 }
 
 enum Stop {
@@ -441,7 +543,46 @@ pub async fn run(
     };
     let total = p.steps().count();
     let mut stop: Option<(Stop, String)> = None;
+    let start_at = opts.resume.as_ref().map_or(0, |res| res.start_at);
+    if let Some(res) = &opts.resume {
+        r.records = res.records.clone();
+        r.measurements = res.measurements.clone();
+        let (_, restore) = resume_plan(p, res.completed);
+        let _ = r.sink.event(
+            r.bench.now_s(),
+            2,
+            &format!(
+                "resume: part {} continues at step {} of {}; restoring {}",
+                res.part,
+                start_at + 1,
+                p.setup.len() + p.main.len(),
+                if restore.is_empty() {
+                    "nothing".to_owned()
+                } else {
+                    restore
+                        .iter()
+                        .map(Step::describe)
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                }
+            ),
+        );
+        for s in &restore {
+            let _ = r.sink.event(
+                r.bench.now_s(),
+                1,
+                &format!("restore {} (line {}): {}", s.key, s.line, s.describe()),
+            );
+            if let Err(e) = r.step(s).await {
+                stop = Some((e, s.key.clone()));
+                break;
+            }
+        }
+    }
     for (i, s) in p.setup.iter().chain(&p.main).enumerate() {
+        if i < start_at || stop.is_some() {
+            continue;
+        }
         r.progress.step(s, i, total);
         let _ = r.sink.event(
             r.bench.now_s(),
@@ -542,8 +683,8 @@ pub async fn run(
         measurements: r.measurements,
         error,
         cleanup_completed,
-        device_time_s: r.bench.now_s(),
-        frames: r.frames,
+        device_time_s: r.bench.now_s() + opts.resume.as_ref().map_or(0.0, |res| res.device_time_s),
+        frames: r.frames + opts.resume.as_ref().map_or(0, |res| res.frames),
         records: r.records,
     }
 }

@@ -11,4 +11,5 @@ mod bench_io;
 mod calibrate;
 mod cli;
 mod replay;
+mod resume;
 mod run;

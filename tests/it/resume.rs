@@ -1,0 +1,196 @@
+//! `gyrobench run --resume DIR`: an interrupted run goes on from its last
+//! completed step in a new part file; the report covers every part.
+
+use std::path::Path;
+
+use crate::cli::{gyrobench, temp_dir};
+
+/// Warm-up record, two positions with a measurement each, a chamber step
+/// and a record during its ramp, then measurements over both parts.
+const PROCEDURE: &str = r#"
+[procedure]
+name = "resumable"
+description = "a run that a chamber alarm interrupts"
+dut_type = "RL-16"
+spec = "test"
+
+[[setup]]
+action = "chamber"
+set_c = 20.0
+ramp_c_per_min = 1.0
+
+[[main]]
+action = "record"
+label = "warm"
+duration_s = 1800.0
+
+[[main]]
+action = "repeat"
+positions = [
+  { label = "up", table = { outer_deg = 90.0, inner_deg = 0.0 } },
+  { label = "east", table = { outer_deg = 0.0, inner_deg = 0.0 } },
+]
+
+[[main.steps]]
+action = "record"
+label = "{label}"
+duration_s = 120.0
+
+[[main.steps]]
+action = "measure"
+name = "bias_dph:{label}"
+metric = "mean_bias"
+records = ["{label}"]
+low = -5.0
+high = 5.0
+unit = "deg/h"
+
+[[main]]
+action = "move"
+table = { outer_deg = 90.0, inner_deg = 0.0 }
+
+[[main]]
+action = "chamber"
+set_c = 30.0
+ramp_c_per_min = 1.0
+
+[[main]]
+action = "record"
+label = "ramp"
+duration_s = 1200.0
+
+[[main]]
+action = "measure"
+name = "self_heating_dph"
+metric = "self_heating"
+records = ["warm"]
+high = 1.0
+unit = "deg/h"
+
+[[main]]
+action = "measure"
+name = "compensated"
+metric = "compensated_drift_pp"
+records = ["warm", "ramp"]
+averaging_s = 600.0
+high = 0.1
+unit = "deg/h"
+
+[[cleanup]]
+action = "chamber"
+set_c = 20.0
+ramp_c_per_min = 2.0
+"#;
+
+fn s(p: &Path) -> &str {
+    p.to_str().expect("utf-8 path")
+}
+
+fn json(p: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(p).expect("file")).expect("JSON")
+}
+
+/// (frames, event messages) of one log.
+fn frames_and_events(path: &Path) -> (u64, Vec<String>) {
+    let bytes = std::fs::read(path).expect("log");
+    let (mut frames, mut events) = (0, Vec::new());
+    for m in mcap::MessageStream::new(&bytes).expect("complete log") {
+        let m = m.expect("message");
+        let j: serde_json::Value = serde_json::from_slice(&m.data).expect("JSON");
+        match m.channel.topic.as_str() {
+            "/gyro/frames" => frames += j["counts"].as_array().expect("counts").len() as u64,
+            "/events" => events.push(j["message"].as_str().expect("text").to_owned()),
+            _ => {}
+        }
+    }
+    (frames, events)
+}
+
+#[test]
+fn an_interrupted_run_resumes_from_its_last_completed_step() {
+    let dir = temp_dir("resume");
+    let procedure = dir.join("p.toml");
+    std::fs::write(&procedure, PROCEDURE).expect("procedure");
+    let run = dir.join("run");
+    // A chamber alarm during the ramp record ends the first part in error.
+    let out = gyrobench(&[
+        "run",
+        s(&procedure),
+        "--out",
+        s(&run),
+        "--inject",
+        "chamber-alarm@2500",
+    ]);
+    assert_eq!(out.status.code(), Some(1));
+    let first = json(&run.join("report.json"));
+    assert_eq!(first["outcome"], "error");
+    assert_eq!(first["measurements"].as_array().expect("list").len(), 2);
+
+    let out = gyrobench(&["run", "--resume", s(&run)]);
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("10 of 13 steps completed"), "{err}");
+    // The report covers both parts: every measurement once, in order, and
+    // the frames of both logs.
+    let r = json(&run.join("report.json"));
+    assert_eq!(r["outcome"], "pass");
+    let names: Vec<&str> = r["measurements"]
+        .as_array()
+        .expect("list")
+        .iter()
+        .map(|m| m["name"].as_str().expect("name"))
+        .collect();
+    assert_eq!(
+        names,
+        [
+            "bias_dph:up",
+            "bias_dph:east",
+            "self_heating_dph",
+            "compensated"
+        ]
+    );
+    assert_eq!(r["measurements"][0], first["measurements"][0]);
+    let (f1, _) = frames_and_events(&run.join("run.mcap"));
+    let (f2, events) = frames_and_events(&run.join("run.part2.mcap"));
+    assert_eq!(r["frames"].as_u64(), Some(f1 + f2));
+    // The ramp record was cut short, so its thermal segment is taken again
+    // from the set point before it, after a soak re-checks the conditions.
+    for want in [
+        "restore setup.0",
+        "resume_soak",
+        "step main.4 (line",
+        "step main.5 (line",
+    ] {
+        assert!(
+            events.iter().any(|e| e.contains(want)),
+            "{want}: {events:?}"
+        );
+    }
+    assert!(
+        !events.iter().any(|e| e.starts_with("step main.0 ")),
+        "{events:?}"
+    );
+    // Replaying the last part gives the same report (it reads the first).
+    let replayed = dir.join("replayed");
+    gyrobench(&[
+        "replay",
+        s(&run.join("run.part2.mcap")),
+        "--out",
+        s(&replayed),
+    ]);
+    assert!(
+        std::fs::read(run.join("report.json")).expect("report")
+            == std::fs::read(replayed.join("report.json")).expect("replayed report"),
+        "replay of the resumed run differs"
+    );
+    // A finished run has nothing to resume.
+    let out = gyrobench(&["run", "--resume", s(&run)]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("nothing to resume"));
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
