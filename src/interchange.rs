@@ -203,6 +203,37 @@ mod tests {
     const HEAD: &str =
         "time_s,rate_dph,t1_c,t2_c,tcase_c,chamber_c,azimuth_deg,elevation_deg,roll_deg,step\n";
 
+    proptest::proptest! {
+        /// Arbitrary bytes, and arbitrary text after a good header: an
+        /// error or rows, never a panic.
+        #[test]
+        fn arbitrary_input_never_panics(bytes in proptest::collection::vec(proptest::num::u8::ANY, 0..2000)) {
+            let _ = parse(bytes.as_slice(), "fuzz.csv");
+            let mut text = HEAD.as_bytes().to_vec();
+            text.extend_from_slice(&bytes);
+            let _ = parse(text.as_slice(), "fuzz.csv");
+        }
+
+        /// Well-formed rows always parse back to the same numbers.
+        #[test]
+        fn written_rows_parse_back(
+            rows in proptest::collection::vec((-1e6f64..1e6, -40.0f64..60.0, -90.0f64..90.0, "[a-z_0-9]{1,12}"), 1..50)
+        ) {
+            let mut text = HEAD.to_owned();
+            for (i, (rate, t, el, step)) in rows.iter().enumerate() {
+                text.push_str(&format!("{},{rate},{t},{t},{t},{t},0,{el},0,{step}\n", i as f64 + 0.5));
+            }
+            let got = parse(text.as_bytes(), "p.csv").expect("well-formed rows parse");
+            proptest::prop_assert_eq!(got.len(), rows.len());
+            for (g, (rate, t, el, step)) in got.iter().zip(&rows) {
+                proptest::prop_assert_eq!(g.rate_dph, *rate);
+                proptest::prop_assert_eq!(g.tcase_c, *t);
+                proptest::prop_assert_eq!(g.elevation_deg, *el);
+                proptest::prop_assert_eq!(&g.step, step);
+            }
+        }
+    }
+
     #[test]
     fn good_rows_parse_and_the_longest_even_stretch_is_found() {
         let text = format!(
