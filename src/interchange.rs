@@ -1,4 +1,4 @@
-//! The interchange CSV of runs recorded elsewhere (`docs/interchange.md`,
+//! The interchange CSV of runs recorded elsewhere (`docs/analysis.md`,
 //! from the diagnosis notes): a header row, then one row per sample,
 //!
 //! `time_s,rate_dph,t1_c,t2_c,tcase_c,chamber_c,azimuth_deg,elevation_deg,roll_deg,step`

@@ -16,6 +16,7 @@ pub mod config;
 pub mod driver;
 pub mod fsutil;
 pub mod geometry;
+pub mod import;
 pub mod interchange;
 pub mod procedure;
 pub mod protocol;

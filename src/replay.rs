@@ -16,6 +16,7 @@ use serde::Deserialize;
 use serde::de::{IgnoredAny, SeqAccess, Visitor};
 
 use crate::analysis::model::Fit;
+use crate::analysis::series::Interval;
 use crate::bench::BenchConfig;
 use crate::coeffs::CoeffsFile;
 use crate::config::Source;
@@ -128,6 +129,36 @@ struct ChamberMsg {
 struct RateMsg {
     #[serde(default)]
     record: Option<String>,
+    #[serde(default)]
+    t_s: Option<f64>,
+    #[serde(default)]
+    rate_dph: Option<f64>,
+    #[serde(default)]
+    reference_dph: Option<f64>,
+    #[serde(default)]
+    t1_c: Option<f64>,
+    #[serde(default)]
+    t2_c: Option<f64>,
+    #[serde(default)]
+    tcase_c: Option<f64>,
+    #[serde(default)]
+    chamber_c: Option<f64>,
+}
+
+impl RateMsg {
+    /// The interval as logged (imported runs, which have no frames).
+    fn interval(&self) -> Option<Interval> {
+        Some(Interval {
+            time_s: self.t_s?,
+            rate_dph: self.rate_dph?,
+            reference_dph: self.reference_dph?,
+            t1_c: self.t1_c?,
+            t2_c: self.t2_c?,
+            tcase_c: self.tcase_c?,
+            chamber_c: self.chamber_c?,
+            frames: 0,
+        })
+    }
 }
 
 #[derive(Deserialize)]
@@ -265,12 +296,16 @@ impl State<'_> {
             topics::RATE_1HZ => {
                 // The live run wrote this interval from the tick just logged.
                 let m: RateMsg = serde_json::from_slice(data).map_err(|e| bad(topic, e))?;
-                let (Some((sums, sc)), Some((t_s, reference_dph))) =
-                    (self.pending.take(), self.table)
-                else {
-                    return Err(
-                        self.log_err("a 1 Hz interval without the frames and state before it")
-                    );
+                let Some((sums, sc)) = self.pending.take() else {
+                    // No frames before it: an imported run; take the interval as logged.
+                    let iv = m.interval().ok_or_else(|| {
+                        self.log_err("a 1 Hz interval with neither frames before it nor its values")
+                    })?;
+                    self.records.push(iv, m.record.as_deref());
+                    return Ok(());
+                };
+                let Some((t_s, reference_dph)) = self.table else {
+                    return Err(self.log_err("a 1 Hz interval without the state before it"));
                 };
                 let at = IntervalState {
                     t_s,
@@ -506,7 +541,8 @@ struct FrameCounts {
 }
 
 /// The frames of record `label` (default: the longest record of the
-/// logged procedure) as a rate series at the frame rate.
+/// logged procedure) as a rate series at the frame rate; for an imported
+/// run (no frames), its 1 Hz means.
 pub fn record_rates(path: &Path, label: Option<&str>) -> Result<RecordRates, ReplayError> {
     let log_err = |message: String| ReplayError::Log {
         path: path.display().to_string(),
@@ -552,13 +588,24 @@ pub fn record_rates(path: &Path, label: Option<&str>) -> Result<RecordRates, Rep
             Item::Message { topic, data, .. } if topic == topics::RATE_1HZ => {
                 let m: RateMsg = serde_json::from_slice(data)
                     .map_err(|e| format!("a {topic} message does not parse: {e}"))?;
-                if let (Some(f), Some(w)) = (pending.take(), &want)
-                    && m.record.as_deref() == Some(w.as_str())
-                {
-                    out.dt_s = f.dt_s;
-                    let k = f.lsb_arcsec / f.dt_s;
-                    out.rate_dph
-                        .extend(f.counts.iter().map(|&c| f64::from(c) * k));
+                let mine = want
+                    .as_deref()
+                    .is_some_and(|w| m.record.as_deref() == Some(w));
+                match pending.take() {
+                    Some(f) if mine => {
+                        out.dt_s = f.dt_s;
+                        let k = f.lsb_arcsec / f.dt_s;
+                        out.rate_dph
+                            .extend(f.counts.iter().map(|&c| f64::from(c) * k));
+                    }
+                    // No frames (an imported run): the 1 Hz means.
+                    None if mine => {
+                        if let Some(r) = m.rate_dph {
+                            out.dt_s = 1.0;
+                            out.rate_dph.push(r);
+                        }
+                    }
+                    _ => {}
                 }
             }
             _ => {}

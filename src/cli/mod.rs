@@ -7,6 +7,7 @@
 mod allan;
 mod calibrate;
 mod check;
+mod import;
 mod recover;
 mod replay;
 mod run;
@@ -67,6 +68,10 @@ enum Command {
     Allan(allan::AllanArgs),
     /// Fit the thermal compensation on recorded runs and write coefficients.
     Calibrate(calibrate::CalibrateArgs),
+    /// A run recorded elsewhere (interchange CSV) as a log.
+    Import(import::ImportArgs),
+    /// A log as interchange CSV at 1 Hz.
+    Export(import::ExportArgs),
     /// Recompute a run's measurements and verdict from its log alone.
     Replay(replay::ReplayArgs),
     /// Validate a procedure and print its plan with estimated device times.
@@ -94,6 +99,8 @@ pub fn main() -> ExitCode {
         Command::Recover(args) => recover::run(args),
         Command::Replay(args) => replay::run(args),
         Command::Allan(args) => allan::run(args),
+        Command::Import(args) => import::run_import(args),
+        Command::Export(args) => import::run_export(args),
         Command::Calibrate(args) => calibrate::run(args),
         Command::Twin(cmd) => twin::run(cmd),
         Command::Sim(cmd) => sim::run(cmd),

@@ -46,11 +46,18 @@ pub fn run(args: ReplayArgs) -> Result<Outcome> {
             r.read.bytes_lost
         );
     }
-    eprintln!(
-        "replayed {} frames in {secs:.2} s ({:.1} M frames/s)",
-        r.result.frames,
-        r.result.frames as f64 / secs.max(1e-9) / 1e6
-    );
+    if r.result.frames == 0 {
+        eprintln!(
+            "replayed {} intervals in {secs:.2} s (no frames: an imported run)",
+            r.result.records.all.len()
+        );
+    } else {
+        eprintln!(
+            "replayed {} frames in {secs:.2} s ({:.1} M frames/s)",
+            r.result.frames,
+            r.result.frames as f64 / secs.max(1e-9) / 1e6
+        );
+    }
     let meta = |k: &str| r.meta.get(k).cloned().unwrap_or_default();
     let bench = r
         .meta

@@ -1,0 +1,64 @@
+//! `gyrobench import RUN.csv --site SITE.toml -o RUN.mcap` and
+//! `gyrobench export RUN.mcap -o RUN.csv`: runs recorded elsewhere, in the
+//! interchange CSV, in and out.
+
+use std::path::PathBuf;
+
+use anyhow::{Context, Result};
+use clap::Args;
+
+use super::Outcome;
+use crate::import::{export, import, load_site};
+
+#[derive(Debug, Args)]
+pub struct ImportArgs {
+    /// Interchange CSV (docs/analysis.md, "Interchange CSV").
+    csv: PathBuf,
+    /// Where the run stood: a TOML file with a `[site]` table.
+    #[arg(long)]
+    site: PathBuf,
+    /// The log to write.
+    #[arg(short, long)]
+    out: PathBuf,
+}
+
+#[derive(Debug, Args)]
+pub struct ExportArgs {
+    /// Any run log (live, simulated or imported).
+    log: PathBuf,
+    /// The CSV to write.
+    #[arg(short, long)]
+    out: PathBuf,
+}
+
+pub fn run_import(args: ImportArgs) -> Result<Outcome> {
+    let site = load_site(&args.site).with_context(|| format!("reading {}", args.site.display()))?;
+    let r = import(&args.csv, site, &args.out)?;
+    println!(
+        "imported {} s of 1 Hz data in {} record(s) into {}; judged by the acceptance's limits: {}",
+        r.intervals,
+        r.records.len(),
+        args.out.display(),
+        match r.outcome {
+            crate::sequencer::Outcome::Pass => "PASS",
+            _ => "FAIL",
+        }
+    );
+    for m in &r.measurements {
+        println!(
+            "  {:<32} {:>10} {:<6} [{}]  {}",
+            m.name,
+            m.value.map_or("n/a".to_owned(), |v| format!("{v:.4}")),
+            m.unit,
+            m.limits_text(),
+            m.outcome.as_str().to_uppercase()
+        );
+    }
+    Ok(Outcome::Success)
+}
+
+pub fn run_export(args: ExportArgs) -> Result<Outcome> {
+    let rows = export(&args.log, &args.out)?;
+    println!("exported {rows} rows (1 Hz) to {}", args.out.display());
+    Ok(Outcome::Success)
+}

@@ -1,0 +1,515 @@
+//! Runs recorded elsewhere, in and out: the interchange CSV becomes a log
+//! with the channels of a live run (`import`), and any log becomes the
+//! interchange CSV at 1 Hz (`export`). Both write to a temporary name and
+//! rename when complete.
+//!
+//! An imported log has no `/gyro/frames` (the CSV holds interval means,
+//! not frames); its `/gyro/rate_1hz`, `/chamber/state`, `/table/state`,
+//! `/events` and `run` metadata are those of a live run, with a procedure
+//! made from the CSV's steps: one `record` step per stretch of rows with
+//! the same step label, then the figures the shipped acceptance judges, at
+//! its limits. `replay`, `calibrate`, `allan` and `diagnose` take it.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use serde::Deserialize;
+
+use crate::analysis::series::Interval;
+use crate::bench::BenchConfig;
+use crate::config::{Checker, ConfigError, Source};
+use crate::driver::{ChamberMode, ChamberReading, TableReading};
+use crate::geometry::{Orientation, Site, TableAngles};
+use crate::interchange::{self, CsvError, Row};
+use crate::procedure::{Procedure, StepKind};
+use crate::recorder::{Recorder, RunMeta, topics};
+use crate::replay::{RESULT_META, RUN_META};
+use crate::runlog::{self, Item};
+use crate::sequencer::measure::{self, MeasureOutcome, Records};
+use crate::sequencer::{BenchState, Outcome, RunResult, Sink, Tick};
+
+/// `SITE.toml`: the `[site]` of a bench file alone.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SiteFile {
+    site: Site,
+}
+
+/// Read and check a site file.
+pub fn load_site(path: &Path) -> Result<Site, ConfigError> {
+    let src = Source::read(path)?;
+    let f: SiteFile = src.parse()?;
+    f.site.validate(&Checker::new(&src), "site")?;
+    Ok(f.site)
+}
+
+/// Why an import or export failed.
+#[derive(Debug, thiserror::Error)]
+pub enum ImportError {
+    /// A bad CSV.
+    #[error(transparent)]
+    Csv(#[from] CsvError),
+    /// A bad site file.
+    #[error(transparent)]
+    Config(#[from] ConfigError),
+    /// The log cannot be read.
+    #[error(transparent)]
+    Read(#[from] runlog::ReadError),
+    /// Something else, with its file.
+    #[error("{0}")]
+    Other(String),
+}
+
+/// What an import made.
+#[derive(Debug, Clone)]
+pub struct Imported {
+    /// 1 Hz intervals written.
+    pub intervals: usize,
+    /// Records (stretches of one step label).
+    pub records: Vec<String>,
+    /// The verdict of the generated procedure on the data.
+    pub outcome: Outcome,
+    /// The measurements behind it.
+    pub measurements: Vec<measure::Measurement>,
+}
+
+/// Rows reduced to 1 s means (rows finer than 1 s are averaged per whole
+/// second of `time_s`; 1 s rows pass through).
+fn to_one_hz(rows: &[Row], name: &str) -> Result<Vec<Row>, ImportError> {
+    let (_, _, dt) = interchange::longest_even_run(rows);
+    if dt > 1.01 {
+        return Err(ImportError::Other(format!(
+            "{name}: samples every {dt} s; the importer needs 1 s or finer (the figures work on 1 s means)"
+        )));
+    }
+    if dt > 0.99 {
+        return Ok(rows.to_vec());
+    }
+    let mut out: Vec<Row> = Vec::new();
+    let mut acc: Vec<&Row> = Vec::new();
+    let flush = |acc: &mut Vec<&Row>, out: &mut Vec<Row>| {
+        if let Some(first) = acc.first() {
+            let n = acc.len() as f64;
+            let m = |f: fn(&Row) -> f64| acc.iter().map(|r| f(r)).sum::<f64>() / n;
+            out.push(Row {
+                time_s: first.time_s.floor() + 0.5,
+                rate_dph: m(|r| r.rate_dph),
+                t1_c: m(|r| r.t1_c),
+                t2_c: m(|r| r.t2_c),
+                tcase_c: m(|r| r.tcase_c),
+                chamber_c: m(|r| r.chamber_c),
+                azimuth_deg: first.azimuth_deg,
+                elevation_deg: first.elevation_deg,
+                roll_deg: first.roll_deg,
+                step: first.step.clone(),
+            });
+        }
+        acc.clear();
+    };
+    for r in rows {
+        if let Some(first) = acc.first()
+            && (r.time_s.floor() != first.time_s.floor() || r.step != first.step)
+        {
+            flush(&mut acc, &mut out);
+        }
+        acc.push(r);
+    }
+    flush(&mut acc, &mut out);
+    Ok(out)
+}
+
+/// Stretches of rows with one step label: (label made unique, first, end).
+fn stretches(rows: &[Row]) -> Vec<(String, usize, usize)> {
+    let mut out: Vec<(String, usize, usize)> = Vec::new();
+    let mut seen: BTreeMap<String, usize> = BTreeMap::new();
+    let mut start = 0;
+    for i in 1..=rows.len() {
+        if i == rows.len() || rows[i].step != rows[start].step {
+            let base = if rows[start].step.is_empty() {
+                "unlabelled".to_owned()
+            } else {
+                rows[start].step.clone()
+            };
+            let n = seen.entry(base.clone()).or_insert(0);
+            *n += 1;
+            let label = if *n == 1 { base } else { format!("{base}#{n}") };
+            out.push((label, start, i));
+            start = i;
+        }
+    }
+    out
+}
+
+fn toml_str(s: &str) -> String {
+    toml::Value::String(s.to_owned()).to_string()
+}
+
+/// The procedure an imported run is judged by: its records, then the
+/// acceptance's figures where the data allow them.
+fn procedure_text(name: &str, parts: &[(String, usize, usize)], rows: &[Row]) -> String {
+    let mut t = format!(
+        "# Made by gyrobench import from {name}: one record per stretch of rows with\n# one step label, judged with the limits of procedures/acceptance.toml.\n\n[procedure]\nname = {}\ndescription = {}\ndut_type = \"gyro\"\nspec = \"model-4 compensated drift 0.05 deg/h (p-p of 600 s averages); bias stability 0.05 deg/h (1-sigma of 100 s averages)\"\n",
+        toml_str("imported"),
+        toml_str(&format!("run imported from {name}"))
+    );
+    let measure = |t: &mut String,
+                   name: &str,
+                   metric: &str,
+                   records: &[&str],
+                   avg: Option<f64>,
+                   lim: &str| {
+        let recs: Vec<String> = records.iter().map(|r| toml_str(r)).collect();
+        t.push_str(&format!(
+            "\n[[main]]\naction = \"measure\"\nname = {}\nmetric = \"{metric}\"\nrecords = [{}]\n{}{lim}\nunit = \"deg/h\"\n",
+            toml_str(name),
+            recs.join(", "),
+            avg.map_or(String::new(), |a| format!("averaging_s = {a:.1}\n"))
+        ));
+    };
+    for (label, a, b) in parts {
+        t.push_str(&format!(
+            "\n[[main]]\naction = \"record\"\nlabel = {}\nduration_s = {:.1}\n",
+            toml_str(label),
+            (b - a) as f64
+        ));
+    }
+    let all: Vec<&str> = parts.iter().map(|p| p.0.as_str()).collect();
+    if let Some((first, a, b)) = parts.first()
+        && rows[*a].time_s < 60.0
+        && rows[b - 1].time_s >= 1800.0
+    {
+        measure(
+            &mut t,
+            "self_heating_dph",
+            "self_heating",
+            &[first],
+            None,
+            "high = 1.0",
+        );
+    }
+    if rows.len() >= 1200 {
+        measure(
+            &mut t,
+            "raw_drift_pp_dph",
+            "drift_pp",
+            &all,
+            Some(600.0),
+            "high = 1.0",
+        );
+        measure(
+            &mut t,
+            "compensated_drift_pp_dph",
+            "compensated_drift_pp",
+            &all,
+            Some(600.0),
+            "high = 0.05",
+        );
+    }
+    // Bias stability where it means something: records after the warm-up
+    // with the chamber steady (within 1 degC), as the acceptance's positions.
+    for (label, a, b) in parts {
+        let air = rows[*a..*b].iter().map(|r| r.chamber_c);
+        let spread =
+            air.clone().fold(f64::NEG_INFINITY, f64::max) - air.fold(f64::INFINITY, f64::min);
+        if b - a >= 300 && rows[*a].time_s >= 1800.0 && spread <= 1.0 {
+            measure(
+                &mut t,
+                &format!("bias_stability_dph:{label}"),
+                "bias_stability",
+                &[label],
+                Some(100.0),
+                "high = 0.05",
+            );
+        }
+    }
+    t
+}
+
+/// Import the interchange CSV at `csv` (site from `site`) as a log at `out`.
+pub fn import(csv: &Path, site: Site, out: &Path) -> Result<Imported, ImportError> {
+    let name = csv.display().to_string();
+    let rows = to_one_hz(&interchange::read(csv)?, &name)?;
+    let parts = stretches(&rows);
+    let mut bench = BenchConfig::embedded();
+    bench.site = site;
+    let text = procedure_text(&name, &parts, &rows);
+    let procedure = Procedure::from_source(&Source::from_text("imported procedure", &text), &bench)
+        .map_err(|e| {
+            ImportError::Other(format!("{name}: the procedure made from its steps: {e}"))
+        })?;
+    let mut meta = RunMeta::default();
+    for (k, v) in [
+        ("procedure_toml", text.clone()),
+        ("procedure_path", format!("{name} (imported)")),
+        (
+            "bench_toml",
+            toml::to_string_pretty(&bench).unwrap_or_default(),
+        ),
+        ("bench", format!("imported from {name}")),
+        ("site", serde_json::to_string(&site).unwrap_or_default()),
+        (
+            "dut_serial",
+            csv.file_stem()
+                .map_or(String::new(), |s| s.to_string_lossy().into_owned()),
+        ),
+        ("dut_type", "gyro".into()),
+        ("software_version", env!("CARGO_PKG_VERSION").to_owned()),
+        ("start_time_utc", String::new()),
+        ("imported_from", name.clone()),
+    ] {
+        meta.entries.insert(k.to_owned(), v);
+    }
+    let tmp = partial(out);
+    let written = write_log(&tmp, &meta, &bench, site, &procedure, &parts, &rows);
+    let (outcome, measurements) = match written {
+        Ok(v) => v,
+        Err(e) => {
+            let _ = std::fs::remove_file(&tmp);
+            return Err(e);
+        }
+    };
+    std::fs::rename(&tmp, out)
+        .map_err(|e| ImportError::Other(format!("writing {}: {e}", out.display())))?;
+    Ok(Imported {
+        intervals: rows.len(),
+        records: parts.into_iter().map(|p| p.0).collect(),
+        outcome,
+        measurements,
+    })
+}
+
+/// Write the imported run's log to `tmp`; returns the verdict.
+fn write_log(
+    tmp: &Path,
+    meta: &RunMeta,
+    bench: &BenchConfig,
+    site: Site,
+    procedure: &Procedure,
+    parts: &[(String, usize, usize)],
+    rows: &[Row],
+) -> Result<(Outcome, Vec<measure::Measurement>), ImportError> {
+    let mut rec = Recorder::create(tmp, meta, 0, 1.0, 1.0, 0.01)
+        .map_err(|e| ImportError::Other(format!("{}: {e}", tmp.display())))?;
+    let io = |e: std::io::Error| ImportError::Other(format!("writing {}: {e}", tmp.display()));
+    let geometry = &bench.table.geometry;
+    let mut records = Records::default();
+    let steps: Vec<_> = procedure.main.iter().collect();
+    let mut step_at = 0;
+    for (label, a, b) in parts {
+        let Some(step) = steps.get(step_at) else {
+            break;
+        };
+        step_at += 1;
+        rec.event(
+            rows[*a].time_s - 0.5,
+            1,
+            &format!(
+                "step {} (line {}): {}",
+                step.key,
+                step.line,
+                step.describe()
+            ),
+        )
+        .map_err(io)?;
+        records.start(label);
+        for r in &rows[*a..*b] {
+            let o = Orientation::new(r.azimuth_deg, r.elevation_deg, r.roll_deg);
+            let angles = geometry.angles_for(o).unwrap_or_default();
+            let state = BenchState {
+                t_s: r.time_s + 0.5,
+                chamber: ChamberReading {
+                    air_c: r.chamber_c,
+                    set_point_c: r.chamber_c,
+                    mode: ChamberMode::Constant,
+                    alarms: Vec::new(),
+                },
+                table: TableReading {
+                    angles,
+                    rates: TableAngles::default(),
+                },
+                commanded: angles,
+                orientation: o,
+                reference_dph: o.earth_rate_dph(&site),
+                in_position: true,
+            };
+            let tick = Tick {
+                t0_s: r.time_s - 0.5,
+                frames: Vec::new(),
+                state: Some(state.clone()),
+            };
+            rec.tick(&tick, Some(label), &step.key).map_err(io)?;
+            let iv = Interval {
+                time_s: r.time_s,
+                rate_dph: r.rate_dph,
+                reference_dph: state.reference_dph,
+                t1_c: r.t1_c,
+                t2_c: r.t2_c,
+                tcase_c: r.tcase_c,
+                chamber_c: r.chamber_c,
+                frames: 0,
+            };
+            records.push(iv, Some(label));
+            rec.interval(&iv, Some(label)).map_err(io)?;
+        }
+        rec.event(
+            rows[b - 1].time_s + 0.5,
+            1,
+            &format!("end of step {}", step.key),
+        )
+        .map_err(io)?;
+    }
+    let end_s = rows.last().map_or(0.0, |r| r.time_s + 0.5);
+    let mut measurements = Vec::new();
+    for step in &steps[step_at..] {
+        if let StepKind::Measure(m) = &step.kind {
+            rec.event(
+                end_s,
+                1,
+                &format!(
+                    "step {} (line {}): {}",
+                    step.key,
+                    step.line,
+                    step.describe()
+                ),
+            )
+            .map_err(io)?;
+            let meas = measure::compute(m, &records, None, &step.key);
+            rec.event(
+                end_s,
+                if meas.outcome == MeasureOutcome::Pass {
+                    2
+                } else {
+                    3
+                },
+                &format!(
+                    "{} = {}",
+                    meas.name,
+                    meas.value.map_or("n/a".into(), |v| format!("{v:.4}"))
+                ),
+            )
+            .map_err(io)?;
+            rec.event(end_s, 1, &format!("end of step {}", step.key))
+                .map_err(io)?;
+            measurements.push(meas);
+        }
+    }
+    let failed = measurements
+        .iter()
+        .any(|m| m.outcome != MeasureOutcome::Pass);
+    let outcome = if failed { Outcome::Fail } else { Outcome::Pass };
+    let result = RunResult {
+        outcome,
+        measurements: measurements.clone(),
+        error: None,
+        cleanup_completed: true,
+        device_time_s: end_s,
+        frames: 0,
+        records,
+    };
+    rec.metadata(RESULT_META, crate::replay::result_entries(&result))
+        .and_then(|()| rec.finish())
+        .map_err(io)?;
+    Ok((outcome, measurements))
+}
+
+/// `OUT.partial` beside `out`: where a file is written before its rename.
+fn partial(out: &Path) -> PathBuf {
+    let mut name = out
+        .file_name()
+        .map_or_else(Default::default, std::ffi::OsStr::to_os_string);
+    name.push(".partial");
+    out.with_file_name(name)
+}
+
+#[derive(Deserialize)]
+struct RateRow {
+    t_s: f64,
+    rate_dph: f64,
+    t1_c: f64,
+    t2_c: f64,
+    tcase_c: f64,
+    chamber_c: f64,
+    #[serde(default)]
+    record: Option<String>,
+}
+
+#[derive(Deserialize)]
+struct TableRow {
+    azimuth_deg: f64,
+    elevation_deg: f64,
+    roll_deg: f64,
+    #[serde(default)]
+    step: String,
+}
+
+/// Write every 1 Hz interval of the log at `log` as interchange CSV at
+/// `out`; `step` is the record label, or the procedure step while not
+/// recording. Returns the rows written.
+pub fn export(log: &Path, out: &Path) -> Result<usize, ImportError> {
+    let tmp = partial(out);
+    let file = std::fs::File::create(&tmp)
+        .map_err(|e| ImportError::Other(format!("{}: {e}", tmp.display())))?;
+    let mut w = csv::Writer::from_writer(std::io::BufWriter::new(file));
+    let err = |e: &dyn std::fmt::Display| format!("writing {}: {e}", tmp.display());
+    w.write_record(interchange::HEADER)
+        .map_err(|e| ImportError::Other(err(&e)))?;
+    let mut table: Option<TableRow> = None;
+    let mut rows = 0usize;
+    let mut saw_run = false;
+    let read = runlog::read(log, |item| {
+        match item {
+            Item::Meta { name, .. } if name == RUN_META => saw_run = true,
+            Item::Message { topic, data, .. } if topic == topics::TABLE => {
+                table = Some(serde_json::from_slice(data).map_err(|e| format!("{topic}: {e}"))?);
+            }
+            Item::Message { topic, data, .. } if topic == topics::RATE_1HZ => {
+                let r: RateRow =
+                    serde_json::from_slice(data).map_err(|e| format!("{topic}: {e}"))?;
+                let Some(t) = &table else {
+                    return Err("a 1 Hz interval before any table state".into());
+                };
+                let step = r.record.clone().unwrap_or_else(|| t.step.clone());
+                w.write_record([
+                    format!("{:.3}", r.t_s),
+                    format!("{}", r.rate_dph),
+                    format!("{}", r.t1_c),
+                    format!("{}", r.t2_c),
+                    format!("{}", r.tcase_c),
+                    format!("{}", r.chamber_c),
+                    format!("{}", t.azimuth_deg),
+                    format!("{}", t.elevation_deg),
+                    format!("{}", t.roll_deg),
+                    step,
+                ])
+                .map_err(|e| err(&e))?;
+                rows += 1;
+            }
+            _ => {}
+        }
+        Ok(())
+    });
+    let fail = |m: String| {
+        let _ = std::fs::remove_file(&tmp);
+        ImportError::Other(m)
+    };
+    let read = match read {
+        Ok(r) => r,
+        Err(e) => {
+            let _ = std::fs::remove_file(&tmp);
+            return Err(e.into());
+        }
+    };
+    if !saw_run {
+        return Err(fail(format!(
+            "{}: not a gyrobench log (no run metadata)",
+            log.display()
+        )));
+    }
+    if let Some(why) = read.stopped.as_ref().filter(|_| read.complete) {
+        return Err(fail(format!("{}: {why}", log.display())));
+    }
+    w.flush().map_err(|e| fail(err(&e)))?;
+    drop(w);
+    std::fs::rename(&tmp, out).map_err(|e| fail(format!("writing {}: {e}", out.display())))?;
+    Ok(rows)
+}

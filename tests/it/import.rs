@@ -1,0 +1,170 @@
+//! `gyrobench import` and `export`: runs recorded elsewhere, in the
+//! interchange CSV, in and out, and the commands that take the result.
+
+use std::path::Path;
+
+use crate::cli::{gyrobench, temp_dir};
+
+const SITE: &str = "[site]
+latitude_deg = 50.45
+longitude_deg = 30.52
+height_m = 180.0
+magnetic_field_ned_ut = [19.5, 2.7, 46.5]
+";
+
+fn s(p: &Path) -> &str {
+    p.to_str().expect("utf-8 path")
+}
+
+fn rows(p: &Path) -> Vec<Vec<String>> {
+    std::fs::read_to_string(p)
+        .expect("csv")
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').map(str::to_owned).collect())
+        .collect()
+}
+
+#[test]
+fn a_csv_run_imports_replays_calibrates_and_exports_back() {
+    let dir = temp_dir("import");
+    let csv = dir.join("cycle.csv");
+    let site = dir.join("site.toml");
+    std::fs::write(&site, SITE).expect("site");
+    let out = gyrobench(&["twin", "study", "--csv", s(&csv), "--json"]);
+    assert!(out.status.success());
+    let study: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON");
+
+    let log = dir.join("cycle.mcap");
+    let out = gyrobench(&["import", s(&csv), "--site", s(&site), "-o", s(&log)]);
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(!dir.join("cycle.mcap.partial").exists());
+
+    // replay judges it like a live run; the figures are the study's own.
+    let rep = dir.join("replay");
+    let out = gyrobench(&["replay", s(&log), "--out", s(&rep)]);
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stdout)
+    );
+    let r: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(rep.join("report.json")).expect("report"))
+            .expect("JSON");
+    let value = |name: &str| {
+        r["measurements"]
+            .as_array()
+            .expect("list")
+            .iter()
+            .find(|m| m["name"] == name)
+            .and_then(|m| m["value"].as_f64())
+            .unwrap_or_else(|| panic!("{name} measured"))
+    };
+    let fig = |k: &str| {
+        study["thermal"][k]
+            .as_f64()
+            .unwrap_or_else(|| panic!("{k}: {study}"))
+    };
+    assert!((value("raw_drift_pp_dph") - fig("raw_drift_pp_dph")).abs() < 1e-4);
+    assert!((value("compensated_drift_pp_dph") - fig("compensated_drift_pp_dph")).abs() < 1e-4);
+
+    // calibrate and allan take it too.
+    let out = gyrobench(&["calibrate", s(&log), "-o", s(&dir.join("c.toml"))]);
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let out = gyrobench(&["allan", s(&log), "--record", "soak_end", "--json"]);
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+
+    // export gives the same rows back.
+    let back = dir.join("back.csv");
+    let out = gyrobench(&["export", s(&log), "-o", s(&back)]);
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let (a, b) = (rows(&csv), rows(&back));
+    assert_eq!(a.len(), b.len());
+    for (x, y) in a.iter().zip(&b) {
+        assert_eq!(x[9], y[9], "step label");
+        for c in 0..9 {
+            let (u, v): (f64, f64) = (x[c].parse().expect("number"), y[c].parse().expect("number"));
+            assert!((u - v).abs() < 1e-9, "column {c}: {u} vs {v}");
+        }
+    }
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
+
+#[test]
+fn a_live_log_exports_at_1_hz_with_its_orientation() {
+    let dir = temp_dir("export");
+    let run = dir.join("run");
+    let smoke = concat!(env!("CARGO_MANIFEST_DIR"), "/procedures/smoke.toml");
+    gyrobench(&["run", smoke, "--out", s(&run)]);
+    let csv = dir.join("smoke.csv");
+    let out = gyrobench(&["export", s(&run.join("run.mcap")), "-o", s(&csv)]);
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let rows = rows(&csv);
+    let east: Vec<&Vec<String>> = rows.iter().filter(|r| r[9] == "east").collect();
+    assert_eq!(east.len(), 180, "the 180 s record at 1 Hz");
+    assert!(
+        east.iter()
+            .all(|r| r[7].parse::<f64>().expect("el").abs() < 1e-6
+                && (r[6].parse::<f64>().expect("az") - 90.0).abs() < 1e-6)
+    );
+    // Not a log: an error, and no file left behind.
+    let bad = dir.join("bad.csv");
+    let out = gyrobench(&["export", s(&csv), "-o", s(&bad)]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(!bad.exists() && !dir.join("bad.csv.partial").exists());
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
+
+#[test]
+fn a_bad_row_is_refused_with_its_line_and_leaves_no_file() {
+    let dir = temp_dir("import-bad");
+    let site = dir.join("site.toml");
+    std::fs::write(&site, SITE).expect("site");
+    let csv = dir.join("bad.csv");
+    let mut text = String::from(
+        "time_s,rate_dph,t1_c,t2_c,tcase_c,chamber_c,azimuth_deg,elevation_deg,roll_deg,step\n",
+    );
+    for i in 0..100 {
+        text.push_str(&format!("{i}.5,12.0,20,20,20,20,0,90,0,a\n"));
+    }
+    text.push_str("100.5,12.0,20,twenty,20,20,0,90,0,a\n");
+    std::fs::write(&csv, text).expect("csv");
+    let log = dir.join("bad.mcap");
+    let out = gyrobench(&["import", s(&csv), "--site", s(&site), "-o", s(&log)]);
+    assert_eq!(out.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("bad.csv:102: field t2_c"), "{err}");
+    assert!(!log.exists() && !dir.join("bad.mcap.partial").exists());
+    // A bad site file is refused with its key.
+    std::fs::write(&site, SITE.replace("50.45", "95.0")).expect("site");
+    let out = gyrobench(&["import", s(&csv), "--site", s(&site), "-o", s(&log)]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("site.latitude_deg"));
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
