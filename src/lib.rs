@@ -13,6 +13,7 @@ pub mod cli;
 pub mod clock;
 pub mod coeffs;
 pub mod config;
+pub mod diagnose;
 pub mod driver;
 pub mod fsutil;
 pub mod geometry;

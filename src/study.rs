@@ -24,6 +24,8 @@ use crate::twin::TwinConfig;
 
 /// The study's thermal cycle, as shipped.
 pub const THERMAL_CYCLE_TOML: &str = include_str!("../procedures/thermal_cycle.toml");
+/// The study's orientation run, as shipped.
+pub const ORIENTATION_TOML: &str = include_str!("../procedures/orientation.toml");
 
 /// One recorded 1 Hz interval with its record label and the orientation.
 #[derive(Debug, Clone)]
@@ -123,14 +125,16 @@ pub enum StudyError {
     Fit(#[from] FitError),
 }
 
-/// Run the shipped thermal cycle on a twin built from `cfg` and compute the
-/// figures; also returns the recorded 1 Hz samples.
-pub fn run_study(cfg: &TwinConfig, seed: u64) -> Result<(StudyReport, Vec<Sample>), StudyError> {
+/// Run a procedure (`text`, labelled `name`) on a twin built from `cfg`,
+/// keeping the recorded 1 Hz samples with their orientation (no log).
+pub fn simulate(
+    text: &str,
+    name: &str,
+    cfg: &TwinConfig,
+    seed: u64,
+) -> Result<(crate::sequencer::RunResult, Vec<Sample>), StudyError> {
     let bench_cfg = BenchConfig::embedded();
-    let procedure = Procedure::from_source(
-        &Source::from_text("procedures/thermal_cycle.toml", THERMAL_CYCLE_TOML),
-        &bench_cfg,
-    )?;
+    let procedure = Procedure::from_source(&Source::from_text(name, text), &bench_cfg)?;
     let clock = Arc::new(VirtualClock::new(Pacing::Max));
     let mut bench = EmbeddedBench::new(cfg.clone(), seed, clock);
     let opts = Options {
@@ -158,9 +162,25 @@ pub fn run_study(cfg: &TwinConfig, seed: u64) -> Result<(StudyReport, Vec<Sample
     let result = rt.block_on(sequencer::run(
         &procedure, &mut bench, &mut sink, &mut Quiet, &opts,
     ));
-    if let Some(e) = result.error {
+    if let Some(e) = result.error.clone() {
         return Err(StudyError::Run(e));
     }
+    Ok((result, sink.samples))
+}
+
+/// Run the shipped thermal cycle on a twin built from `cfg` and compute the
+/// figures; also returns the recorded 1 Hz samples.
+pub fn run_study(cfg: &TwinConfig, seed: u64) -> Result<(StudyReport, Vec<Sample>), StudyError> {
+    let (result, samples) = simulate(
+        THERMAL_CYCLE_TOML,
+        "procedures/thermal_cycle.toml",
+        cfg,
+        seed,
+    )?;
+    let sink = Collect {
+        orientation: None,
+        samples,
+    };
     let series: Vec<Interval> = sink.samples.iter().map(|s| s.interval).collect();
     let report = StudyReport {
         seed,

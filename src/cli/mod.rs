@@ -7,6 +7,7 @@
 mod allan;
 mod calibrate;
 mod check;
+mod diagnose;
 mod import;
 mod recover;
 mod replay;
@@ -72,6 +73,8 @@ enum Command {
     Import(import::ImportArgs),
     /// A log as interchange CSV at 1 Hz.
     Export(import::ExportArgs),
+    /// Where the simulator and recorded runs disagree, and which effect explains it.
+    Diagnose(diagnose::DiagnoseArgs),
     /// Recompute a run's measurements and verdict from its log alone.
     Replay(replay::ReplayArgs),
     /// Validate a procedure and print its plan with estimated device times.
@@ -99,6 +102,7 @@ pub fn main() -> ExitCode {
         Command::Recover(args) => recover::run(args),
         Command::Replay(args) => replay::run(args),
         Command::Allan(args) => allan::run(args),
+        Command::Diagnose(args) => diagnose::run(args),
         Command::Import(args) => import::run_import(args),
         Command::Export(args) => import::run_export(args),
         Command::Calibrate(args) => calibrate::run(args),

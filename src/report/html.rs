@@ -14,7 +14,7 @@ use crate::sequencer::measure::{MeasureOutcome, Records};
 const W: u32 = 900;
 const H: u32 = 320;
 
-fn esc(s: &str) -> String {
+pub(crate) fn esc(s: &str) -> String {
     s.replace('&', "&amp;")
         .replace('<', "&lt;")
         .replace('>', "&gt;")
@@ -22,7 +22,9 @@ fn esc(s: &str) -> String {
 }
 
 /// The legend box every chart uses.
-fn legend<'a, DB, CT>(c: &mut ChartContext<'a, DB, CT>) -> Result<(), Box<dyn std::error::Error>>
+pub(crate) fn legend<'a, DB, CT>(
+    c: &mut ChartContext<'a, DB, CT>,
+) -> Result<(), Box<dyn std::error::Error>>
 where
     DB: DrawingBackend + 'a,
     DB::ErrorType: 'static,
@@ -36,7 +38,9 @@ where
 }
 
 /// Draw into an SVG string; a drawing error becomes a note instead.
-fn svg(draw: impl FnOnce(&mut String) -> Result<(), Box<dyn std::error::Error>>) -> String {
+pub(crate) fn svg(
+    draw: impl FnOnce(&mut String) -> Result<(), Box<dyn std::error::Error>>,
+) -> String {
     let mut s = String::new();
     let drawn = draw(&mut s).map_err(|e| e.to_string());
     match drawn {
@@ -45,7 +49,7 @@ fn svg(draw: impl FnOnce(&mut String) -> Result<(), Box<dyn std::error::Error>>)
     }
 }
 
-fn range(v: impl Iterator<Item = f64>) -> (f64, f64) {
+pub(crate) fn range(v: impl Iterator<Item = f64>) -> (f64, f64) {
     let (lo, hi) = v
         .filter(|x| x.is_finite())
         .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), x| {

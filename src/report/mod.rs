@@ -1,7 +1,7 @@
 //! The run report: `report.json` (a contract other tools read, see
 //! `docs/report.md`) and a self-contained `report.html`.
 
-mod html;
+pub(crate) mod html;
 
 use serde::Serialize;
 

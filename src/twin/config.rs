@@ -177,6 +177,10 @@ pub struct EffectsConfig {
     pub axis_misalignment: Option<AxisMisalignment>,
     /// Scale factor drifting with block temperature.
     pub scale_factor_temperature: Option<ScaleFactorTemperature>,
+    /// A slow periodic disturbance of the bias, outside the diagnosis
+    /// library (its self-check uses it as the effect it must not name).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub periodic: Option<Periodic>,
 }
 
 /// `amplitude * (y - T_K) / width`, y the play (backlash) operator of T_K
@@ -248,6 +252,18 @@ pub struct ScaleFactorTemperature {
     pub ppm_per_c: f64,
     /// Temperature of the nominal scale factor, degC.
     pub reference_c: f64,
+}
+
+/// `[effects.periodic]`: `amplitude_dph * sin(2 pi t / period_s)`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Periodic {
+    /// On or off.
+    pub enabled: bool,
+    /// Amplitude, deg/h.
+    pub amplitude_dph: f64,
+    /// Period, s.
+    pub period_s: f64,
 }
 
 impl TwinConfig {
@@ -391,6 +407,10 @@ impl EffectsConfig {
                 "effects.scale_factor_temperature.reference_c",
             )?;
         }
+        if let Some(p) = &self.periodic {
+            c.finite(p.amplitude_dph, "effects.periodic.amplitude_dph")?;
+            c.positive(p.period_s, "effects.periodic.period_s")?;
+        }
         Ok(())
     }
 
@@ -415,6 +435,9 @@ impl EffectsConfig {
         }
         if on(self.scale_factor_temperature.as_ref().map(|e| e.enabled)) {
             out.push("scale_factor_temperature");
+        }
+        if on(self.periodic.as_ref().map(|e| e.enabled)) {
+            out.push("periodic (outside the library)");
         }
         out
     }

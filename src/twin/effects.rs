@@ -10,6 +10,8 @@ use super::config::EffectsConfig;
 pub struct EffectInputs {
     /// Step length, s.
     pub dt_s: f64,
+    /// Time since power-on, s.
+    pub t_s: f64,
     /// Case temperature T_K, degC.
     pub case_c: f64,
     /// Gravity in the body frame, g.
@@ -43,7 +45,8 @@ impl Effects {
             g_sensitivity,
             magnetic_sensitivity,
             axis_misalignment,
-            scale_factor_temperature
+            scale_factor_temperature,
+            periodic
         );
         Self {
             cfg,
@@ -95,6 +98,9 @@ impl Effects {
         if let Some(m) = &self.cfg.magnetic_sensitivity {
             bias += Vector3::from(m.coeff_dph_per_ut).dot(&x.magnetic_body_ut);
         }
+        if let Some(p) = &self.cfg.periodic {
+            bias += p.amplitude_dph * (std::f64::consts::TAU * x.t_s / p.period_s).sin();
+        }
         bias
     }
 }
@@ -107,6 +113,7 @@ mod tests {
     fn inputs(case_c: f64) -> EffectInputs {
         EffectInputs {
             dt_s: 1.0,
+            t_s: 0.0,
             case_c,
             gravity_body_g: Vector3::zeros(),
             magnetic_body_ut: Vector3::zeros(),

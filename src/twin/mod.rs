@@ -379,8 +379,10 @@ impl Twin {
             .step(dt, self.chamber.air_c(), powered, self.convection);
         let th = &self.thermal;
         self.scale_factor = self.effects.scale_factor(0.5 * (th.t1_c + th.t2_c));
+        let t_s = self.time_s();
         self.effect_dph = self.effects.step_bias_dph(&EffectInputs {
             dt_s: dt,
+            t_s,
             case_c: th.case_c,
             gravity_body_g: self.gravity_body_g,
             magnetic_body_ut: self.magnetic_body_ut,

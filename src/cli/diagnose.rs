@@ -1,0 +1,172 @@
+//! `gyrobench diagnose RUN.mcap... [--twin TWIN.toml] --out DIR` and
+//! `gyrobench diagnose selfcheck [--runs N] [--seed S] --out DIR`.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result};
+use clap::{Args, Subcommand};
+
+use super::Outcome;
+use crate::diagnose::library::Effect;
+use crate::diagnose::{self, Options, data, html, selfcheck};
+use crate::twin::TwinConfig;
+
+#[derive(Debug, Args)]
+#[command(args_conflicts_with_subcommands = true)]
+pub struct DiagnoseArgs {
+    #[command(subcommand)]
+    command: Option<DiagnoseCommand>,
+    /// Run logs (live, simulated or imported) of one unit.
+    runs: Vec<PathBuf>,
+    /// Reference simulator: this twin configuration (default: the study's
+    /// model 4 fitted on held-out records).
+    #[arg(long)]
+    twin: Option<PathBuf>,
+    /// Where to write diagnosis.json, diagnosis.html, twin-updated.toml.
+    #[arg(long)]
+    out: Option<PathBuf>,
+}
+
+#[derive(Debug, Subcommand)]
+enum DiagnoseCommand {
+    /// The withheld-effect experiment on the twin (proves the diagnosis).
+    Selfcheck(SelfcheckArgs),
+}
+
+#[derive(Debug, Args)]
+struct SelfcheckArgs {
+    /// Runs per case (effect and amplitude, null, outside the library).
+    #[arg(long, default_value_t = 10)]
+    runs: usize,
+    /// First seed.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Only these library effects (comma-separated names; default: all).
+    #[arg(long, value_delimiter = ',')]
+    effects: Vec<String>,
+    /// Where to write selfcheck.json and selfcheck.html.
+    #[arg(long)]
+    out: PathBuf,
+}
+
+fn write(path: &Path, text: &str) -> Result<()> {
+    crate::fsutil::write_atomic(path, text.as_bytes())
+        .with_context(|| format!("writing {}", path.display()))
+}
+
+pub fn run(args: DiagnoseArgs) -> Result<Outcome> {
+    if let Some(DiagnoseCommand::Selfcheck(a)) = args.command {
+        return run_selfcheck(a);
+    }
+    anyhow::ensure!(
+        !args.runs.is_empty(),
+        "give one or more run logs (RUN.mcap...)"
+    );
+    let out = args.out.context(
+        "--out DIR is required: where diagnosis.json, diagnosis.html and twin-updated.toml go",
+    )?;
+    let twin = match &args.twin {
+        Some(p) => {
+            Some(TwinConfig::load(p).with_context(|| format!("loading twin {}", p.display()))?)
+        }
+        None => None,
+    };
+    let runs = args
+        .runs
+        .iter()
+        .map(|p| data::load(p).with_context(|| format!("reading {}", p.display())))
+        .collect::<Result<Vec<_>>>()?;
+    let d = diagnose::diagnose(&runs, &Options { twin: twin.clone() });
+    std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
+    write(
+        &out.join("diagnosis.json"),
+        &serde_json::to_string_pretty(&d)?,
+    )?;
+    write(&out.join("diagnosis.html"), &html::render(&d))?;
+    let base = twin.unwrap_or_else(TwinConfig::default_rl16);
+    write(
+        &out.join("twin-updated.toml"),
+        &format!(
+            "# The twin with the effects gyrobench diagnose accepted enabled and fitted.\n{}",
+            diagnose::updated_twin(&base, &d).to_toml()
+        ),
+    )?;
+    println!(
+        "rate layer: held-out gap {:.5} deg/h -> {:.5} deg/h; thermal layer: {:.4} degC",
+        d.layers.rate.gap_dph, d.layers.rate.gap_after_dph, d.layers.thermal.gap_c
+    );
+    if d.effects.is_empty() {
+        println!("no library effect is significant");
+    }
+    for e in &d.effects {
+        println!(
+            "  {:<26} gap {:.5} -> {:.5} deg/h (shrink {:.0} %, p = {:.1e})",
+            e.name,
+            e.held_out_gap_before_dph,
+            e.held_out_gap_after_dph,
+            100.0 * e.shrink,
+            e.p_value
+        );
+    }
+    for c in &d.confounded {
+        println!(
+            "  confounded: {} / {}: separate with {}",
+            c.effects[0], c.effects[1], c.separate_with
+        );
+    }
+    if let Some(s) = d.r#where.first() {
+        println!(
+            "  the gap lies most in {} {} ({}, {:.0} % of it)",
+            s.run,
+            s.record,
+            s.regime,
+            100.0 * s.share
+        );
+    }
+    if let Some(p) = d.unexplained.period_s {
+        println!("  unexplained: periodic, period {p:.0} s");
+    }
+    eprintln!("diagnosis in {}", out.display());
+    Ok(Outcome::Success)
+}
+
+fn run_selfcheck(a: SelfcheckArgs) -> Result<Outcome> {
+    let effects: Vec<Effect> = if a.effects.is_empty() {
+        selfcheck::all_effects()
+    } else {
+        a.effects
+            .iter()
+            .map(|n| {
+                Effect::from_name(n)
+                    .with_context(|| format!("--effects: {n:?} is not a library effect"))
+            })
+            .collect::<Result<_>>()?
+    };
+    anyhow::ensure!(a.runs >= 1, "--runs must be 1 or more");
+    let s = selfcheck::run(a.runs, a.seed, &effects, &|line| eprintln!("  {line}"))
+        .context("running the self-check")?;
+    std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
+    write(
+        &a.out.join("selfcheck.json"),
+        &serde_json::to_string_pretty(&s)?,
+    )?;
+    write(&a.out.join("selfcheck.html"), &selfcheck::render_html(&s))?;
+    println!(
+        "noise unit {:.5} deg/h; false positives {:.0} %; outside effect attributed {:.0} %, period found {:.0} %",
+        s.noise_dph,
+        100.0 * s.false_positive_rate,
+        100.0 * s.periodic_attributed,
+        100.0 * s.periodic_period_found
+    );
+    for p in &s.power {
+        println!(
+            "  {:<26} {:>4}x  named first {:>4.0} %  excess closed {:>4.0} %",
+            p.effect,
+            p.amplitude,
+            100.0 * p.named_first,
+            100.0 * p.excess_closed
+        );
+    }
+    eprintln!("self-check in {}", a.out.display());
+    Ok(Outcome::Success)
+}

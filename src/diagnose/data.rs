@@ -1,0 +1,138 @@
+//! A run as the diagnosis sees it: every 1 Hz interval with the
+//! orientation, record and step it belongs to, read from the log.
+
+use std::path::Path;
+
+use nalgebra::Vector3;
+use serde::Deserialize;
+
+use crate::analysis::series::Interval;
+use crate::geometry::{Orientation, Site, gravity_ned_g};
+use crate::recorder::topics;
+use crate::replay::{RUN_META, ReplayError};
+use crate::runlog::{self, Item};
+
+/// One 1 Hz interval with its context.
+#[derive(Debug, Clone)]
+pub struct Sample {
+    /// The means.
+    pub iv: Interval,
+    /// Body orientation.
+    pub orientation: Orientation,
+    /// Record label.
+    pub record: String,
+    /// Procedure step key.
+    pub step: String,
+}
+
+/// A run.
+#[derive(Debug, Clone)]
+pub struct RunData {
+    /// File name.
+    pub name: String,
+    /// Where it ran.
+    pub site: Site,
+    /// The recorded (static) intervals, in time order.
+    pub samples: Vec<Sample>,
+}
+
+impl Sample {
+    /// Gravity in the body frame, g.
+    pub fn gravity_body(&self) -> Vector3<f64> {
+        self.orientation.rotation().inverse() * gravity_ned_g()
+    }
+
+    /// The Earth's magnetic field in the body frame, uT.
+    pub fn magnetic_body(&self, site: &Site) -> Vector3<f64> {
+        self.orientation.rotation().inverse() * site.magnetic_ned_ut()
+    }
+
+    /// The Earth rate in the body frame, deg/h.
+    pub fn earth_rate_body(&self, site: &Site) -> Vector3<f64> {
+        self.orientation.rotation().inverse() * site.earth_rate_ned_dph()
+    }
+}
+
+#[derive(Deserialize)]
+struct Rate {
+    t_s: f64,
+    rate_dph: f64,
+    reference_dph: f64,
+    t1_c: f64,
+    t2_c: f64,
+    tcase_c: f64,
+    chamber_c: f64,
+    #[serde(default)]
+    frames: u32,
+    #[serde(default)]
+    record: Option<String>,
+}
+
+#[derive(Deserialize)]
+struct Table {
+    azimuth_deg: f64,
+    elevation_deg: f64,
+    roll_deg: f64,
+    #[serde(default)]
+    step: String,
+}
+
+/// Load a run's log (live, simulated or imported).
+pub fn load(path: &Path) -> Result<RunData, ReplayError> {
+    let log_err = |message: String| ReplayError::Log {
+        path: path.display().to_string(),
+        message,
+    };
+    let mut site: Option<Site> = None;
+    let mut table: Option<Table> = None;
+    let mut samples = Vec::new();
+    runlog::read(path, |item| {
+        match item {
+            Item::Meta { name, entries } if name == RUN_META => {
+                site = entries
+                    .get("site")
+                    .and_then(|s| serde_json::from_str(s).ok());
+            }
+            Item::Message { topic, data, .. } if topic == topics::TABLE => {
+                table = Some(serde_json::from_slice(data).map_err(|e| format!("{topic}: {e}"))?);
+            }
+            Item::Message { topic, data, .. } if topic == topics::RATE_1HZ => {
+                let r: Rate = serde_json::from_slice(data).map_err(|e| format!("{topic}: {e}"))?;
+                let Some(t) = &table else {
+                    return Err("a 1 Hz interval before any table state".into());
+                };
+                let Some(record) = r.record else {
+                    return Ok(());
+                };
+                samples.push(Sample {
+                    iv: Interval {
+                        time_s: r.t_s,
+                        rate_dph: r.rate_dph,
+                        reference_dph: r.reference_dph,
+                        t1_c: r.t1_c,
+                        t2_c: r.t2_c,
+                        tcase_c: r.tcase_c,
+                        chamber_c: r.chamber_c,
+                        frames: r.frames,
+                    },
+                    orientation: Orientation::new(t.azimuth_deg, t.elevation_deg, t.roll_deg),
+                    record,
+                    step: t.step.clone(),
+                });
+            }
+            _ => {}
+        }
+        Ok(())
+    })?;
+    let site = site.ok_or_else(|| log_err("no site in the run metadata".into()))?;
+    if samples.len() < 60 {
+        return Err(log_err(
+            "fewer than 60 recorded seconds: nothing to diagnose".into(),
+        ));
+    }
+    Ok(RunData {
+        name: path.display().to_string(),
+        site,
+        samples,
+    })
+}

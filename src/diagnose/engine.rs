@@ -1,0 +1,378 @@
+//! Held-out fitting of the rate layer: a model is a set of library effects
+//! (each with its nonlinear parameter) plus one offset per run, fitted by
+//! least squares and scored by blocked cross-validation, one fold per
+//! record (a block of procedure steps, never random samples). Scores are
+//! the residual's 60 s means, so white noise does not drown the slow
+//! effects and neighbouring samples do not count as independent.
+//!
+//! Each fold's sums (Gram matrix, right-hand side, block means) are made
+//! once, so leaving a fold out costs one small solve.
+
+use nalgebra::{DMatrix, DVector};
+
+use super::data::RunData;
+use super::library::Effect;
+
+/// Averaging time of the scores, s (samples are 1 Hz).
+pub const AVERAGING_S: usize = 60;
+
+/// One fold: a record of one run.
+#[derive(Debug, Clone)]
+pub struct Fold {
+    /// Run index.
+    pub run: usize,
+    /// Record label.
+    pub record: String,
+    /// Step key.
+    pub step: String,
+    /// Rows `start..end` of the stacked design.
+    pub start: usize,
+    /// End row (exclusive).
+    pub end: usize,
+}
+
+/// The stacked data of all runs.
+#[derive(Debug)]
+pub struct Data<'a> {
+    /// The runs.
+    pub runs: &'a [RunData],
+    /// Earth-removed bias, deg/h, all runs stacked.
+    pub y: Vec<f64>,
+    /// Run of each row.
+    pub run_of: Vec<usize>,
+    /// The folds, in row order.
+    pub folds: Vec<Fold>,
+}
+
+impl<'a> Data<'a> {
+    /// Stack the recorded samples of `runs`.
+    pub fn new(runs: &'a [RunData]) -> Self {
+        let mut y = Vec::new();
+        let mut run_of = Vec::new();
+        let mut folds: Vec<Fold> = Vec::new();
+        for (r, run) in runs.iter().enumerate() {
+            for s in &run.samples {
+                let row = y.len();
+                y.push(s.iv.bias_dph());
+                run_of.push(r);
+                match folds.last_mut() {
+                    Some(f) if f.run == r && f.record == s.record => f.end = row + 1,
+                    _ => folds.push(Fold {
+                        run: r,
+                        record: s.record.clone(),
+                        step: s.step.clone(),
+                        start: row,
+                        end: row + 1,
+                    }),
+                }
+            }
+        }
+        Self {
+            runs,
+            y,
+            run_of,
+            folds,
+        }
+    }
+
+    /// Stacked regressor columns of a model.
+    pub fn columns(&self, model: &[(Effect, f64)]) -> Vec<Vec<f64>> {
+        let mut cols: Vec<Vec<f64>> = Vec::new();
+        for &(e, p) in model {
+            let per_run: Vec<Vec<Vec<f64>>> = self.runs.iter().map(|r| e.columns(r, p)).collect();
+            for c in 0..e.terms().len() {
+                cols.push(
+                    per_run
+                        .iter()
+                        .flat_map(|cs| cs[c].iter().copied())
+                        .collect(),
+                );
+            }
+        }
+        cols
+    }
+}
+
+/// A model scored and fitted.
+#[derive(Debug, Clone)]
+pub struct Scored {
+    /// The effects and their parameters.
+    pub model: Vec<(Effect, f64)>,
+    /// Held-out sum of squares of the 60 s means, per fold.
+    pub fold_sse: Vec<f64>,
+    /// 60 s means per fold.
+    pub fold_blocks: Vec<usize>,
+    /// Coefficients on all data: effect terms in order, then run offsets.
+    pub coeffs: Vec<f64>,
+    /// Their standard errors (autocorrelation-inflated).
+    pub stderr: Vec<f64>,
+    /// In-sample residual, per row.
+    pub residual: Vec<f64>,
+    /// Held-out residual, per row (each fold predicted without itself).
+    pub held_out: Vec<f64>,
+    /// In-sample residual's 60 s means, fold by fold, with the run of each.
+    pub block_residual: Vec<(usize, f64)>,
+    /// Parameters fitted (terms and run offsets).
+    pub parameters: usize,
+}
+
+impl Scored {
+    /// Held-out gap: RMS of the held-out residual's 60 s means, deg/h.
+    pub fn gap(&self) -> f64 {
+        let n: usize = self.fold_blocks.iter().sum();
+        (self.fold_sse.iter().sum::<f64>() / n.max(1) as f64).sqrt()
+    }
+
+    /// Total held-out sum of squares.
+    pub fn sse(&self) -> f64 {
+        self.fold_sse.iter().sum()
+    }
+}
+
+fn solve(g: &DMatrix<f64>, h: &DVector<f64>) -> DVector<f64> {
+    let p = g.nrows();
+    let ridge = 1e-10 * (0..p).map(|i| g[(i, i)]).sum::<f64>() / p.max(1) as f64;
+    let gr = g + DMatrix::identity(p, p) * ridge;
+    match gr.clone().cholesky() {
+        Some(c) => c.solve(h),
+        None => gr
+            .svd(true, true)
+            .solve(h, 1e-12)
+            .unwrap_or_else(|_| DVector::zeros(p)),
+    }
+}
+
+/// Fit `model` on all data and score it fold by fold.
+pub fn score(data: &Data<'_>, model: &[(Effect, f64)]) -> Scored {
+    let cols = data.columns(model);
+    let q = cols.len();
+    let nruns = data.runs.len();
+    let p = q + nruns;
+    let n = data.y.len();
+    let scales: Vec<f64> = cols
+        .iter()
+        .map(|c| {
+            let m = c.iter().sum::<f64>() / n.max(1) as f64;
+            let r = (c.iter().map(|v| (v - m) * (v - m)).sum::<f64>() / n.max(1) as f64).sqrt();
+            if r > 1e-300 && r.is_finite() { r } else { 1.0 }
+        })
+        .collect();
+    let row = |i: usize| -> DVector<f64> {
+        DVector::from_fn(p, |j, _| {
+            if j < q {
+                cols[j][i] / scales[j]
+            } else if data.run_of[i] == j - q {
+                1.0
+            } else {
+                0.0
+            }
+        })
+    };
+    // Per fold: Gram matrix, right-hand side, and the 60 s block means.
+    let mut grams = Vec::with_capacity(data.folds.len());
+    let mut blocks = Vec::with_capacity(data.folds.len());
+    let mut g_all = DMatrix::zeros(p, p);
+    let mut h_all = DVector::zeros(p);
+    for f in &data.folds {
+        let mut g = DMatrix::zeros(p, p);
+        let mut h = DVector::zeros(p);
+        let mut means: Vec<(DVector<f64>, f64)> = Vec::new();
+        let mut acc = (DVector::zeros(p), 0.0, 0usize);
+        for i in f.start..f.end {
+            let x = row(i);
+            g.ger(1.0, &x, &x, 1.0);
+            h.axpy(data.y[i], &x, 1.0);
+            acc.0 += &x;
+            acc.1 += data.y[i];
+            acc.2 += 1;
+            if acc.2 == AVERAGING_S {
+                let k = AVERAGING_S as f64;
+                means.push((&acc.0 / k, acc.1 / k));
+                acc = (DVector::zeros(p), 0.0, 0);
+            }
+        }
+        g_all += &g;
+        h_all += &h;
+        grams.push((g, h));
+        blocks.push(means);
+    }
+    let beta_all = solve(&g_all, &h_all);
+    // Runs with a single fold: their offset cannot come from other folds;
+    // the held-out residual then has its own mean removed (a nuisance).
+    let folds_of_run = |r: usize| data.folds.iter().filter(|f| f.run == r).count();
+    let mut fold_sse = Vec::with_capacity(data.folds.len());
+    let mut fold_blocks = Vec::with_capacity(data.folds.len());
+    let mut held_out = vec![0.0; n];
+    for (k, f) in data.folds.iter().enumerate() {
+        let beta = solve(&(&g_all - &grams[k].0), &(&h_all - &grams[k].1));
+        let alone = folds_of_run(f.run) < 2;
+        let mut r: Vec<f64> = blocks[k].iter().map(|(x, y)| y - x.dot(&beta)).collect();
+        let mut rows: Vec<f64> = (f.start..f.end)
+            .map(|i| data.y[i] - row(i).dot(&beta))
+            .collect();
+        if alone {
+            let m = rows.iter().sum::<f64>() / rows.len().max(1) as f64;
+            rows.iter_mut().for_each(|v| *v -= m);
+            let mb = r.iter().sum::<f64>() / r.len().max(1) as f64;
+            r.iter_mut().for_each(|v| *v -= mb);
+        }
+        held_out[f.start..f.end].copy_from_slice(&rows);
+        fold_sse.push(r.iter().map(|v| v * v).sum());
+        fold_blocks.push(r.len());
+    }
+    let residual: Vec<f64> = (0..n).map(|i| data.y[i] - row(i).dot(&beta_all)).collect();
+    let rss: f64 = residual.iter().map(|v| v * v).sum();
+    let r1 = {
+        let num: f64 = residual.windows(2).map(|w| w[0] * w[1]).sum();
+        (num / rss.max(f64::MIN_POSITIVE)).clamp(0.0, 0.99)
+    };
+    let sigma2 = rss / (n.saturating_sub(p)).max(1) as f64 * (1.0 + r1) / (1.0 - r1);
+    let inv = g_all.clone().try_inverse();
+    let stderr = (0..p)
+        .map(|j| {
+            let s = if j < q { scales[j] } else { 1.0 };
+            inv.as_ref()
+                .map_or(f64::NAN, |m| (sigma2 * m[(j, j)]).sqrt() / s)
+        })
+        .collect();
+    let coeffs = (0..p)
+        .map(|j| beta_all[j] / if j < q { scales[j] } else { 1.0 })
+        .collect();
+    let block_residual = data
+        .folds
+        .iter()
+        .flat_map(|f| {
+            residual[f.start..f.end]
+                .chunks_exact(AVERAGING_S)
+                .map(move |c| (f.run, c.iter().sum::<f64>() / c.len() as f64))
+                .collect::<Vec<_>>()
+        })
+        .collect();
+    Scored {
+        model: model.to_vec(),
+        fold_sse,
+        fold_blocks,
+        coeffs,
+        stderr,
+        residual,
+        held_out,
+        block_residual,
+        parameters: p,
+    }
+}
+
+/// In-sample sum of squares of a model (to choose nonlinear parameters).
+fn in_sample_sse(data: &Data<'_>, model: &[(Effect, f64)]) -> f64 {
+    score(data, model).residual.iter().map(|v| v * v).sum()
+}
+
+/// `model` plus `effect`, its parameter chosen on the in-sample fit.
+pub fn with_best_parameter(
+    data: &Data<'_>,
+    model: &[(Effect, f64)],
+    effect: Effect,
+) -> Vec<(Effect, f64)> {
+    let mut best: Option<(f64, Vec<(Effect, f64)>)> = None;
+    for &p in effect.grid() {
+        let mut m = model.to_vec();
+        m.push((effect, p));
+        let sse = if effect.grid().len() > 1 {
+            in_sample_sse(data, &m)
+        } else {
+            0.0
+        };
+        if best.as_ref().is_none_or(|(b, _)| sse < *b) {
+            best = Some((sse, m));
+        }
+    }
+    best.map_or_else(|| model.to_vec(), |(_, m)| m)
+}
+
+/// Long-run variance factor of a residual series (runs kept apart):
+/// 1 + 2 sum_l (1 - l/(L+1)) r_l, Bartlett weights (Newey-West), L lags.
+fn long_run_factor(r: &[(usize, f64)], lags: usize) -> f64 {
+    let g0: f64 = r.iter().map(|(_, v)| v * v).sum();
+    if g0 <= 0.0 {
+        return 1.0;
+    }
+    let mut f = 1.0;
+    for l in 1..=lags {
+        let gl: f64 = r
+            .iter()
+            .zip(r.iter().skip(l))
+            .filter(|(a, b)| a.0 == b.0)
+            .map(|(a, b)| a.1 * b.1)
+            .sum();
+        f += 2.0 * (1.0 - l as f64 / (lags as f64 + 1.0)) * gl / g0;
+    }
+    f.max(1.0)
+}
+
+/// Upper tail of a nested F-test of `q` more parameters.
+fn f_test(rss0: f64, rss1: f64, q: f64, dof: f64) -> f64 {
+    use statrs::distribution::{ContinuousCDF, FisherSnedecor};
+    if dof < 1.0 || rss1 <= 0.0 || rss0 <= rss1 {
+        return 1.0;
+    }
+    let f = ((rss0 - rss1) / q) / (rss1 / dof);
+    FisherSnedecor::new(q, dof).map_or(1.0, |d| 1.0 - d.cdf(f))
+}
+
+/// Lags of the long-run variance, in 60 s means (ours: 20 min).
+pub const NEWEY_WEST_LAGS: usize = 20;
+
+/// Does `better` (base plus a candidate) beat `base`? Returns the held-out
+/// improvement (reduction of the held-out sum of squares of 60 s means)
+/// and a p-value that respects autocorrelated residuals. The in-sample 60 s
+/// means are split into their record (fold) means and the deviations from
+/// them; each part gets a nested F-test and the smaller p-value, doubled
+/// (Bonferroni over the two), is returned:
+/// - between records: one value per record, since the slow part of the
+///   noise (flicker) moves whole records;
+/// - within records: the sample size cut by the deviations' long-run
+///   variance (Newey-West, Bartlett weights, [`NEWEY_WEST_LAGS`]).
+pub fn improvement(base: &Scored, better: &Scored) -> (f64, f64) {
+    let gain = base.sse() - better.sse();
+    let q = better.parameters.saturating_sub(base.parameters).max(1) as f64;
+    let rss = |r: &[(usize, f64)]| r.iter().map(|(_, v)| v * v).sum::<f64>();
+    let (f0, f1) = (fold_means(base), fold_means(better));
+    let (w0, w1) = (within(base, &f0), within(better, &f1));
+    let n_eff = (w1.len() as f64 - f1.len() as f64) / long_run_factor(&w1, NEWEY_WEST_LAGS);
+    let p_within = f_test(rss(&w0), rss(&w1), q, n_eff - q);
+    let p_between = f_test(
+        rss(&f0),
+        rss(&f1),
+        q,
+        f1.len() as f64 - better.parameters as f64,
+    );
+    (gain, (2.0 * p_within.min(p_between)).min(1.0))
+}
+
+/// Block residuals minus their fold's mean.
+fn within(s: &Scored, means: &[(usize, f64)]) -> Vec<(usize, f64)> {
+    let mut out = Vec::with_capacity(s.block_residual.len());
+    let mut at = 0;
+    for (k, &n) in s.fold_blocks.iter().enumerate() {
+        let m = means.get(k).map_or(0.0, |x| x.1);
+        out.extend(
+            s.block_residual[at..at + n]
+                .iter()
+                .map(|&(r, v)| (r, v - m)),
+        );
+        at += n;
+    }
+    out
+}
+
+/// Mean of the in-sample block residual of each fold.
+fn fold_means(s: &Scored) -> Vec<(usize, f64)> {
+    let mut out = Vec::new();
+    let mut at = 0;
+    for &n in &s.fold_blocks {
+        let part = &s.block_residual[at..at + n];
+        let run = part.first().map_or(usize::MAX, |x| x.0);
+        out.push((run, part.iter().map(|x| x.1).sum::<f64>() / n.max(1) as f64));
+        at += n;
+    }
+    out
+}

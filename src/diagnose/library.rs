@@ -1,0 +1,220 @@
+//! The candidate library: each effect of diagnosis.md as a named group of
+//! regressors built from the logged inputs (temperatures, time, the
+//! orientation and the site), mirroring how the twin produces it so a
+//! fitted coefficient maps back to a twin parameter.
+
+use super::data::{RunData, Sample};
+use crate::analysis::figures::smoothed_derivative;
+use crate::analysis::model::DERIVATIVE_HALF_WINDOW_S;
+
+/// Every effect the diagnosis knows, by its library name.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub enum Effect {
+    /// Warm-up transient exp(-t/tau_w).
+    SelfHeating,
+    /// d(dT)/dt.
+    GradientRate,
+    /// dT^2.
+    GradientQuadratic,
+    /// Case temperature T_K.
+    CaseTemperature,
+    /// Block gradient dT (model 4's first term; in the base, not a candidate).
+    Gradient,
+    /// Play operator on the case temperature.
+    Hysteresis,
+    /// The case temperature through a first-order lag.
+    ThermalLag,
+    /// Gravity in the body frame.
+    GSensitivity,
+    /// The Earth's magnetic field in the body frame.
+    MagneticSensitivity,
+    /// Earth rate on the body's transverse axes (the sensitive axis off by
+    /// small angles).
+    AxisMisalignment,
+    /// Scale factor drifting with the block temperature (times the input rate).
+    ScaleFactorTemperature,
+}
+
+/// The candidates named in diagnosis.md, in its order.
+pub const LIBRARY: [Effect; 10] = [
+    Effect::SelfHeating,
+    Effect::GradientRate,
+    Effect::GradientQuadratic,
+    Effect::CaseTemperature,
+    Effect::Hysteresis,
+    Effect::ThermalLag,
+    Effect::GSensitivity,
+    Effect::MagneticSensitivity,
+    Effect::AxisMisalignment,
+    Effect::ScaleFactorTemperature,
+];
+
+/// Model 4's terms (the base of the reference simulator).
+pub const MODEL4: [Effect; 5] = [
+    Effect::Gradient,
+    Effect::GradientQuadratic,
+    Effect::GradientRate,
+    Effect::CaseTemperature,
+    Effect::SelfHeating,
+];
+
+/// Grids of the one nonlinear parameter some effects have (ours: spans
+/// the time constants and play widths a gyro on a -40..+50 cycle shows).
+const SELF_HEATING_TAU_S: [f64; 6] = [150.0, 300.0, 600.0, 1200.0, 2400.0, 4800.0];
+const HYSTERESIS_WIDTH_C: [f64; 5] = [0.5, 1.0, 2.0, 4.0, 8.0];
+const THERMAL_LAG_TAU_S: [f64; 5] = [300.0, 900.0, 1800.0, 3600.0, 7200.0];
+
+impl Effect {
+    /// Library name (diagnosis.md).
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::SelfHeating => "self_heating",
+            Self::GradientRate => "gradient_rate",
+            Self::GradientQuadratic => "gradient_quadratic",
+            Self::CaseTemperature => "case_temperature",
+            Self::Gradient => "gradient",
+            Self::Hysteresis => "hysteresis",
+            Self::ThermalLag => "thermal_lag",
+            Self::GSensitivity => "g_sensitivity",
+            Self::MagneticSensitivity => "magnetic_sensitivity",
+            Self::AxisMisalignment => "axis_misalignment",
+            Self::ScaleFactorTemperature => "scale_factor_temperature",
+        }
+    }
+
+    /// By library name.
+    pub fn from_name(name: &str) -> Option<Self> {
+        LIBRARY
+            .iter()
+            .chain(&[Self::Gradient])
+            .copied()
+            .find(|e| e.name() == name)
+    }
+
+    /// Values of the nonlinear parameter to try (one `NaN` when none).
+    pub fn grid(self) -> &'static [f64] {
+        match self {
+            Self::SelfHeating => &SELF_HEATING_TAU_S,
+            Self::Hysteresis => &HYSTERESIS_WIDTH_C,
+            Self::ThermalLag => &THERMAL_LAG_TAU_S,
+            _ => &[f64::NAN],
+        }
+    }
+
+    /// Names of the regressors (the fitted coefficients).
+    pub fn terms(self) -> &'static [&'static str] {
+        match self {
+            Self::SelfHeating => &["k5_dph"],
+            Self::GradientRate => &["k3_dph_per_c_per_s"],
+            Self::GradientQuadratic => &["k2_dph_per_c2"],
+            Self::CaseTemperature => &["k4_dph_per_c"],
+            Self::Gradient => &["k1_dph_per_c"],
+            Self::Hysteresis => &["amplitude_dph"],
+            Self::ThermalLag => &["coeff_dph_per_c"],
+            Self::GSensitivity => &["x_dph_per_g", "y_dph_per_g", "z_dph_per_g"],
+            Self::MagneticSensitivity => &["x_dph_per_ut", "y_dph_per_ut", "z_dph_per_ut"],
+            Self::AxisMisalignment => &["earth_y", "earth_z"],
+            Self::ScaleFactorTemperature => &["per_c"],
+        }
+    }
+
+    /// The nonlinear parameter's name, when there is one.
+    pub fn parameter(self) -> Option<&'static str> {
+        match self {
+            Self::SelfHeating => Some("warmup_tau_s"),
+            Self::Hysteresis => Some("width_c"),
+            Self::ThermalLag => Some("tau_s"),
+            _ => None,
+        }
+    }
+
+    /// Regressor columns over one run's samples, for parameter `p`.
+    pub fn columns(self, run: &RunData, p: f64) -> Vec<Vec<f64>> {
+        let s = &run.samples;
+        let col = |f: &dyn Fn(&Sample) -> f64| -> Vec<f64> { s.iter().map(f).collect() };
+        match self {
+            Self::Gradient => vec![col(&|x| x.iv.gradient_c())],
+            Self::GradientQuadratic => vec![col(&|x| x.iv.gradient_c().powi(2))],
+            Self::GradientRate => vec![gradient_rate(s)],
+            Self::CaseTemperature => vec![col(&|x| x.iv.tcase_c)],
+            Self::SelfHeating => vec![col(&|x| (-x.iv.time_s / p).exp())],
+            Self::Hysteresis => vec![play(s, p)],
+            Self::ThermalLag => vec![lag(s, p)],
+            Self::GSensitivity => (0..3).map(|i| col(&|x| x.gravity_body()[i])).collect(),
+            Self::MagneticSensitivity => (0..3)
+                .map(|i| col(&|x| x.magnetic_body(&run.site)[i]))
+                .collect(),
+            Self::AxisMisalignment => (1..3)
+                .map(|i| col(&|x| x.earth_rate_body(&run.site)[i]))
+                .collect(),
+            Self::ScaleFactorTemperature => vec![col(&|x| {
+                x.iv.reference_dph * (0.5 * (x.iv.t1_c + x.iv.t2_c) - 20.0)
+            })],
+        }
+    }
+}
+
+/// d(dT)/dt by local regression, as model 4 uses it, over the samples'
+/// own times (records may have gaps between them).
+fn gradient_rate(s: &[Sample]) -> Vec<f64> {
+    let dt = match s {
+        [a, .., b] => ((b.iv.time_s - a.iv.time_s) / (s.len() - 1) as f64).max(1e-3),
+        _ => 1.0,
+    };
+    let half = (DERIVATIVE_HALF_WINDOW_S / dt).round().max(1.0) as usize;
+    let g: Vec<f64> = s.iter().map(|x| x.iv.gradient_c()).collect();
+    smoothed_derivative(&g, dt, half)
+}
+
+/// Play (backlash) operator of width `w` on the case temperature,
+/// normalised as the twin's hysteresis: (y - T_K) / w, in -1..1.
+fn play(s: &[Sample], w: f64) -> Vec<f64> {
+    let mut y: Option<f64> = None;
+    s.iter()
+        .map(|x| {
+            let t = x.iv.tcase_c;
+            let v = y.get_or_insert(t);
+            *v = v.clamp(t - w, t + w);
+            (*v - t) / w
+        })
+        .collect()
+}
+
+/// The case temperature through a first-order lag of `tau` s.
+fn lag(s: &[Sample], tau: f64) -> Vec<f64> {
+    let mut y: Option<f64> = None;
+    let mut last_t: Option<f64> = None;
+    s.iter()
+        .map(|x| {
+            let t = x.iv.tcase_c;
+            let dt = last_t.map_or(1.0, |l| (x.iv.time_s - l).max(0.0));
+            last_t = Some(x.iv.time_s);
+            let v = y.get_or_insert(t);
+            *v += (t - *v) * (-(-dt / tau).exp_m1());
+            *v
+        })
+        .collect()
+}
+
+/// Which extra position or run would tell two effects apart (ours, from
+/// the geometry of physics.md: Earth rate, gravity and the magnetic field
+/// lie nearly in the north-down plane).
+pub fn separate_with(a: Effect, b: Effect) -> String {
+    use Effect::*;
+    let pair = |x: Effect, y: Effect| (a == x && b == y) || (a == y && b == x);
+    if pair(AxisMisalignment, GSensitivity) || pair(AxisMisalignment, MagneticSensitivity) {
+        "positions with the sensitive axis horizontal pointing north and south (Earth rate along the axis changes sign, gravity does not), or the same positions at another latitude".into()
+    } else if pair(GSensitivity, MagneticSensitivity) {
+        "a run with the magnetic field changed (a Helmholtz coil or a mu-metal shield), or roll positions about a north-pointing axis".into()
+    } else if pair(Hysteresis, ThermalLag) {
+        "a thermal cycle with a pause mid-ramp (lag decays at constant temperature, hysteresis does not), or ramps at two rates".into()
+    } else if pair(ThermalLag, CaseTemperature) || pair(ThermalLag, GradientRate) {
+        "ramps at two rates (0.5 and 2 degC/min): a lag separates from the temperature and its rate only when the rate changes".into()
+    } else if pair(ScaleFactorTemperature, CaseTemperature) {
+        "the thermal cycle repeated with the table turning at a constant rate (scale factor multiplies the input rate)".into()
+    } else if pair(SelfHeating, CaseTemperature) || pair(SelfHeating, ThermalLag) {
+        "a power-on at another chamber temperature (a cold start after a soak at -20 degC)".into()
+    } else {
+        "a run with another temperature profile and more positions".into()
+    }
+}

@@ -1,0 +1,603 @@
+//! Sim-to-real diagnosis (`docs/diagnosis.md`): where the gap between the
+//! reference simulator and recorded runs lies, which library effect
+//! explains it, and how far it shrinks once that effect is added, all on
+//! held-out records.
+//!
+//! - `data`: a run's recorded 1 Hz samples with orientation and record;
+//! - `library`: the candidate effects as regressors;
+//! - `engine`: held-out fitting and the paired significance test;
+//! - `thermal`: the thermal layer (chamber air -> sensor temperatures);
+//! - `selfcheck`: the withheld-effect experiment on the twin;
+//! - `html`: the page.
+
+pub mod data;
+pub mod engine;
+pub mod html;
+pub mod library;
+pub mod selfcheck;
+pub mod thermal;
+
+use std::collections::BTreeMap;
+
+use serde::Serialize;
+
+use crate::twin::TwinConfig;
+use data::RunData;
+use engine::{Data, Scored, improvement, score, with_best_parameter};
+use library::{Effect, LIBRARY, MODEL4, separate_with};
+
+/// Family-wise significance level of the selection (ours): each step
+/// tests every remaining candidate at 0.05 / their number (Bonferroni).
+pub const ALPHA: f64 = 0.05;
+/// Smallest held-out improvement an effect must bring, as a fraction of
+/// the held-out sum of squares (ours: below it, a "significant" effect is
+/// too small to matter to a simulator).
+pub const MIN_GAIN: f64 = 0.03;
+/// At most this many effects are added.
+pub const MAX_EFFECTS: usize = 3;
+
+/// `layers.thermal` / `layers.rate`.
+#[derive(Debug, Clone, Serialize)]
+pub struct Layers {
+    /// Thermal layer.
+    pub thermal: ThermalLayer,
+    /// Rate layer.
+    pub rate: RateLayer,
+}
+
+/// Sensor temperatures from the chamber air.
+#[derive(Debug, Clone, Serialize)]
+pub struct ThermalLayer {
+    /// Held-out RMS of the 60 s means of measured minus simulated T1, T2, TK, degC.
+    pub gap_c: f64,
+    /// Per sensor, degC.
+    pub per_sensor_c: BTreeMap<String, f64>,
+    /// How the layer's simulator was made.
+    pub reference: String,
+}
+
+/// Rate from measured temperatures, orientation and run time.
+#[derive(Debug, Clone, Serialize)]
+pub struct RateLayer {
+    /// Held-out RMS of the rate residual's 60 s means, reference simulator, deg/h.
+    pub gap_dph: f64,
+    /// The same with the accepted effects added, deg/h.
+    pub gap_after_dph: f64,
+    /// The reference simulator's terms.
+    pub reference: Vec<String>,
+}
+
+/// One segment of the gap.
+#[derive(Debug, Clone, Serialize)]
+pub struct Segment {
+    /// Run file.
+    pub run: String,
+    /// Step key (and record label).
+    pub step: String,
+    /// Record label.
+    pub record: String,
+    /// Start, s since power-on.
+    pub start_s: f64,
+    /// End, s.
+    pub end_s: f64,
+    /// warm-up, heating, cooling or soak.
+    pub regime: String,
+    /// Share of the held-out sum of squares, 0..1.
+    pub share: f64,
+    /// Mean case temperature, degC.
+    pub temperature_c: f64,
+    /// Orientation: azimuth, elevation, roll, deg.
+    pub orientation_deg: [f64; 3],
+    /// RMS of the held-out residual's 60 s means over the segment, deg/h.
+    pub rms_dph: f64,
+}
+
+/// An accepted effect.
+#[derive(Debug, Clone, Serialize)]
+pub struct Accepted {
+    /// Library name.
+    pub name: String,
+    /// Fitted parameters (coefficients and the nonlinear parameter).
+    pub parameters: BTreeMap<String, f64>,
+    /// Standard errors of the coefficients.
+    pub uncertainties: BTreeMap<String, f64>,
+    /// Held-out gap before adding it, deg/h.
+    pub held_out_gap_before_dph: f64,
+    /// After, deg/h.
+    pub held_out_gap_after_dph: f64,
+    /// Fraction of the gap closed, 0..1.
+    pub shrink: f64,
+    /// One-sided p-value of the fold-by-fold improvement.
+    pub p_value: f64,
+}
+
+/// Two effects the runs cannot tell apart.
+#[derive(Debug, Clone, Serialize)]
+pub struct Confounded {
+    /// The pair (library names).
+    pub effects: [String; 2],
+    /// The position or run that would separate them.
+    pub separate_with: String,
+}
+
+/// What is left.
+#[derive(Debug, Clone, Serialize)]
+pub struct Unexplained {
+    /// Held-out gap after the accepted effects, deg/h.
+    pub gap_dph: f64,
+    /// Segments holding most of it.
+    pub r#where: Vec<Segment>,
+    /// Period of a periodic residual, s (none when not periodic).
+    pub period_s: Option<f64>,
+    /// Fraction of the residual's variance the periodic fit explains.
+    pub periodic_fraction: f64,
+}
+
+/// A candidate's score at the first selection step.
+#[derive(Debug, Clone, Serialize)]
+pub struct CandidateScore {
+    /// Library name.
+    pub name: String,
+    /// Held-out gap with it added to the reference, deg/h.
+    pub held_out_gap_dph: f64,
+    /// p-value of the improvement.
+    pub p_value: f64,
+}
+
+/// `diagnosis.json`.
+#[derive(Debug, Clone, Serialize)]
+pub struct Diagnosis {
+    /// Runs diagnosed.
+    pub runs: Vec<String>,
+    /// How the held-out figures were made.
+    pub protocol: String,
+    /// Both layers.
+    pub layers: Layers,
+    /// Segments ranked by their share of the reference's held-out gap.
+    pub r#where: Vec<Segment>,
+    /// Accepted effects, strongest first.
+    pub effects: Vec<Accepted>,
+    /// Pairs the runs cannot tell apart.
+    pub confounded: Vec<Confounded>,
+    /// What is left.
+    pub unexplained: Unexplained,
+    /// Every candidate against the reference.
+    pub candidates: Vec<CandidateScore>,
+    /// The reference and final fits (for the page).
+    #[serde(skip)]
+    pub fits: Option<(Scored, Scored)>,
+    /// Run and time of each row of the fits (for the page).
+    #[serde(skip)]
+    pub data: Option<Rows>,
+}
+
+/// Run and time of each stacked row.
+#[derive(Debug, Clone)]
+pub struct Rows {
+    /// Run index.
+    pub run_of: Vec<usize>,
+    /// Time since power-on, s.
+    pub time_s: Vec<f64>,
+}
+
+/// Options of a diagnosis.
+#[derive(Debug, Clone)]
+pub struct Options {
+    /// The twin whose configuration is the reference (else model 4).
+    pub twin: Option<TwinConfig>,
+}
+
+/// The reference model: model 4, or the twin's enabled terms and effects.
+fn reference(twin: Option<&TwinConfig>) -> Vec<(Effect, Option<f64>)> {
+    let Some(t) = twin else {
+        return MODEL4.iter().map(|&e| (e, None)).collect();
+    };
+    let terms = &t.bias.terms;
+    let mut m = Vec::new();
+    for (on, e, p) in [
+        (terms.gradient, Effect::Gradient, None),
+        (terms.gradient_quadratic, Effect::GradientQuadratic, None),
+        (terms.gradient_rate, Effect::GradientRate, None),
+        (terms.case_temperature, Effect::CaseTemperature, None),
+        (
+            terms.self_heating,
+            Effect::SelfHeating,
+            Some(t.bias.warmup_tau_s),
+        ),
+    ] {
+        if on {
+            m.push((e, p));
+        }
+    }
+    let fx = &t.effects;
+    let on = |x: Option<bool>| x.unwrap_or(false);
+    if on(fx.hysteresis.as_ref().map(|h| h.enabled)) {
+        m.push((
+            Effect::Hysteresis,
+            fx.hysteresis.as_ref().map(|h| h.width_c),
+        ));
+    }
+    if on(fx.thermal_lag.as_ref().map(|h| h.enabled)) {
+        m.push((Effect::ThermalLag, fx.thermal_lag.as_ref().map(|h| h.tau_s)));
+    }
+    for (x, e) in [
+        (
+            fx.g_sensitivity.as_ref().map(|x| x.enabled),
+            Effect::GSensitivity,
+        ),
+        (
+            fx.magnetic_sensitivity.as_ref().map(|x| x.enabled),
+            Effect::MagneticSensitivity,
+        ),
+        (
+            fx.axis_misalignment.as_ref().map(|x| x.enabled),
+            Effect::AxisMisalignment,
+        ),
+        (
+            fx.scale_factor_temperature.as_ref().map(|x| x.enabled),
+            Effect::ScaleFactorTemperature,
+        ),
+    ] {
+        if on(x) {
+            m.push((e, None));
+        }
+    }
+    m
+}
+
+/// Build a model from the reference list, choosing free parameters.
+fn build(data: &Data<'_>, spec: &[(Effect, Option<f64>)]) -> Vec<(Effect, f64)> {
+    let mut m: Vec<(Effect, f64)> = spec
+        .iter()
+        .filter_map(|&(e, p)| match p {
+            Some(v) => Some((e, v)),
+            None if e.grid().len() == 1 => Some((e, f64::NAN)),
+            None => None,
+        })
+        .collect();
+    for &(e, p) in spec {
+        if p.is_none() && e.grid().len() > 1 {
+            m = with_best_parameter(data, &m, e);
+        }
+    }
+    m
+}
+
+fn parameters(s: &Scored, effect: Effect) -> (BTreeMap<String, f64>, BTreeMap<String, f64>) {
+    let mut at = 0;
+    let (mut vals, mut errs) = (BTreeMap::new(), BTreeMap::new());
+    for &(e, p) in &s.model {
+        let n = e.terms().len();
+        if e == effect {
+            for (i, t) in e.terms().iter().enumerate() {
+                vals.insert((*t).to_owned(), s.coeffs[at + i]);
+                errs.insert((*t).to_owned(), s.stderr[at + i]);
+            }
+            if let Some(name) = e.parameter() {
+                vals.insert(name.to_owned(), p);
+            }
+        }
+        at += n;
+    }
+    (vals, errs)
+}
+
+fn segments(data: &Data<'_>, residual_sse: &[f64], blocks: &[usize]) -> Vec<Segment> {
+    let total: f64 = residual_sse.iter().sum::<f64>().max(f64::MIN_POSITIVE);
+    let mut out: Vec<Segment> = data
+        .folds
+        .iter()
+        .zip(residual_sse.iter().zip(blocks))
+        .map(|(f, (sse, nb))| {
+            let run = &data.runs[f.run];
+            let first_row = data
+                .folds
+                .iter()
+                .take_while(|g| g.run < f.run)
+                .map(|g| g.end - g.start)
+                .sum::<usize>();
+            let s = &run.samples[f.start - first_row..f.end - first_row];
+            let (a, b) = (&s[0], &s[s.len() - 1]);
+            let span_min = ((b.iv.time_s - a.iv.time_s) / 60.0).max(1.0 / 60.0);
+            let slope = (b.iv.tcase_c - a.iv.tcase_c) / span_min;
+            let regime = if a.iv.time_s < 1800.0 {
+                "warm-up"
+            } else if slope > 0.1 {
+                "heating"
+            } else if slope < -0.1 {
+                "cooling"
+            } else {
+                "soak"
+            };
+            let o = a.orientation;
+            Segment {
+                run: run.name.clone(),
+                step: f.step.clone(),
+                record: f.record.clone(),
+                start_s: a.iv.time_s - 0.5,
+                end_s: b.iv.time_s + 0.5,
+                regime: regime.into(),
+                share: sse / total,
+                temperature_c: s.iter().map(|x| x.iv.tcase_c).sum::<f64>() / s.len() as f64,
+                orientation_deg: [o.azimuth_deg, o.elevation_deg, o.roll_deg],
+                rms_dph: (sse / (*nb).max(1) as f64).sqrt(),
+            }
+        })
+        .collect();
+    out.sort_by(|a, b| b.share.total_cmp(&a.share));
+    out
+}
+
+/// The strongest slow periodic component of a residual (60 s means of each
+/// run, its own mean removed): period and explained fraction.
+fn periodicity(data: &Data<'_>, residual: &[f64]) -> (Option<f64>, f64) {
+    let mut series: Vec<Vec<(f64, f64)>> = vec![Vec::new(); data.runs.len()];
+    let mut row = 0;
+    for (r, run) in data.runs.iter().enumerate() {
+        for chunk in run.samples.chunks(engine::AVERAGING_S) {
+            let n = chunk.len() as f64;
+            let t = chunk.iter().map(|s| s.iv.time_s).sum::<f64>() / n;
+            let v = residual[row..row + chunk.len()].iter().sum::<f64>() / n;
+            series[r].push((t, v));
+            row += chunk.len();
+        }
+    }
+    for s in &mut series {
+        let m = s.iter().map(|p| p.1).sum::<f64>() / s.len().max(1) as f64;
+        s.iter_mut().for_each(|p| p.1 -= m);
+    }
+    let total: f64 = series.iter().flatten().map(|p| p.1 * p.1).sum();
+    let span = series
+        .iter()
+        .filter_map(|s| Some(s.last()?.0 - s.first()?.0))
+        .fold(0.0, f64::max);
+    let mut best = (None, 0.0);
+    if total <= 0.0 || span < 1800.0 {
+        return best;
+    }
+    let mut period = 600.0;
+    while period <= span / 2.0 {
+        let w = std::f64::consts::TAU / period;
+        let mut explained = 0.0;
+        for s in &series {
+            let (mut ss, mut cc, mut sc, mut ys, mut yc) = (0.0, 0.0, 0.0, 0.0, 0.0);
+            for &(t, v) in s {
+                let (si, co) = (w * t).sin_cos();
+                ss += si * si;
+                cc += co * co;
+                sc += si * co;
+                ys += v * si;
+                yc += v * co;
+            }
+            let det = ss * cc - sc * sc;
+            if det.abs() > 1e-12 {
+                let a = (ys * cc - yc * sc) / det;
+                let b = (yc * ss - ys * sc) / det;
+                explained += a * ys + b * yc;
+            }
+        }
+        let frac = explained / total;
+        if frac > best.1 {
+            best = (Some(period), frac);
+        }
+        period *= 1.05;
+    }
+    best
+}
+
+/// Share of the total above which a periodic fit is reported (ours).
+pub const PERIODIC_ABOVE: f64 = 0.3;
+
+/// Diagnose `runs` against the reference (model 4, or `opts.twin`).
+pub fn diagnose(runs: &[RunData], opts: &Options) -> Diagnosis {
+    let data = Data::new(runs);
+    let spec = reference(opts.twin.as_ref());
+    let base_model = build(&data, &spec);
+    let base = score(&data, &base_model);
+    let in_base: Vec<Effect> = base_model.iter().map(|m| m.0).collect();
+    let mut remaining: Vec<Effect> = LIBRARY
+        .iter()
+        .copied()
+        .filter(|e| !in_base.contains(e))
+        .collect();
+
+    // First step: every candidate against the reference.
+    let first: Vec<(Effect, Scored, f64, f64)> = remaining
+        .iter()
+        .map(|&e| {
+            let s = score(&data, &with_best_parameter(&data, &base_model, e));
+            let (gain, p) = improvement(&base, &s);
+            (e, s, gain, p)
+        })
+        .collect();
+    let candidates = first
+        .iter()
+        .map(|(e, s, _, p)| CandidateScore {
+            name: e.name().into(),
+            held_out_gap_dph: s.gap(),
+            p_value: *p,
+        })
+        .collect();
+
+    let mut current = base.clone();
+    let mut effects: Vec<Accepted> = Vec::new();
+    let mut accepted: Vec<Effect> = Vec::new();
+    let mut confounded: Vec<Confounded> = Vec::new();
+    let mut step_scores: Vec<(Effect, Scored, f64, f64)> = first;
+    while effects.len() < MAX_EFFECTS && !remaining.is_empty() {
+        let level = ALPHA / remaining.len() as f64;
+        let best = step_scores
+            .iter()
+            .filter(|(_, _, gain, p)| *p < level && *gain > MIN_GAIN * current.sse())
+            .max_by(|a, b| a.2.total_cmp(&b.2))
+            .cloned();
+        let Some((e, s, _, p)) = best else { break };
+        let before = current.gap();
+        let after = s.gap();
+        let (parameters, uncertainties) = parameters(&s, e);
+        effects.push(Accepted {
+            name: e.name().into(),
+            parameters,
+            uncertainties,
+            held_out_gap_before_dph: before,
+            held_out_gap_after_dph: after,
+            shrink: ((before - after) / before).clamp(0.0, 1.0),
+            p_value: p,
+        });
+        // Candidates that were as good alone but add nothing now explain
+        // the same thing with these runs: confounded with the accepted one.
+        let rivals: Vec<(Effect, f64)> = step_scores
+            .iter()
+            .filter(|(o, _, gain, p)| {
+                *o != e
+                    && *p < level
+                    && *gain > 0.5 * step_scores.iter().find(|x| x.0 == e).map_or(0.0, |x| x.2)
+            })
+            .map(|(o, _, g, _)| (*o, *g))
+            .collect();
+        accepted.push(e);
+        remaining.retain(|x| *x != e);
+        current = s;
+        step_scores = remaining
+            .iter()
+            .map(|&o| {
+                let s = score(&data, &with_best_parameter(&data, &current.model, o));
+                let (gain, p) = improvement(&current, &s);
+                (o, s, gain, p)
+            })
+            .collect();
+        let level = ALPHA / remaining.len().max(1) as f64;
+        for (o, _) in rivals {
+            let still = step_scores
+                .iter()
+                .find(|x| x.0 == o)
+                .is_some_and(|x| x.3 < level && x.2 > MIN_GAIN * current.sse());
+            if !still {
+                confounded.push(Confounded {
+                    effects: [e.name().into(), o.name().into()],
+                    separate_with: separate_with(e, o),
+                });
+            }
+        }
+    }
+    let where_ = segments(&data, &base.fold_sse, &base.fold_blocks);
+    let left = segments(&data, &current.fold_sse, &current.fold_blocks);
+    let (period, frac) = periodicity(&data, &current.residual);
+    let thermal = thermal::layer(runs, opts.twin.as_ref());
+    Diagnosis {
+        runs: runs.iter().map(|r| r.name.clone()).collect(),
+        protocol: format!(
+            "blocked cross-validation, one fold per record ({} folds over {} run(s)); scores on 60 s means; a per-run offset is a nuisance fitted on the other folds of the run",
+            data.folds.len(),
+            runs.len()
+        ),
+        layers: Layers {
+            thermal,
+            rate: RateLayer {
+                gap_dph: base.gap(),
+                gap_after_dph: current.gap(),
+                reference: base_model.iter().map(|m| m.0.name().to_owned()).collect(),
+            },
+        },
+        r#where: where_,
+        effects,
+        confounded,
+        unexplained: Unexplained {
+            gap_dph: current.gap(),
+            r#where: left.into_iter().take(3).collect(),
+            period_s: period.filter(|_| frac >= PERIODIC_ABOVE),
+            periodic_fraction: frac,
+        },
+        candidates,
+        fits: Some((base, current)),
+        data: Some(Rows {
+            run_of: data.run_of.clone(),
+            time_s: runs
+                .iter()
+                .flat_map(|r| r.samples.iter().map(|s| s.iv.time_s))
+                .collect(),
+        }),
+    }
+}
+
+/// The twin with the accepted effects enabled and fitted.
+pub fn updated_twin(base: &TwinConfig, d: &Diagnosis) -> TwinConfig {
+    use crate::twin::config as tc;
+    let mut t = base.clone();
+    let get = |a: &Accepted, k: &str| a.parameters.get(k).copied().unwrap_or(0.0);
+    for a in &d.effects {
+        match Effect::from_name(&a.name) {
+            Some(Effect::Hysteresis) => {
+                t.effects.hysteresis = Some(tc::Hysteresis {
+                    enabled: true,
+                    amplitude_dph: get(a, "amplitude_dph"),
+                    width_c: get(a, "width_c"),
+                });
+            }
+            Some(Effect::ThermalLag) => {
+                t.effects.thermal_lag = Some(tc::ThermalLag {
+                    enabled: true,
+                    coeff_dph_per_c: get(a, "coeff_dph_per_c"),
+                    tau_s: get(a, "tau_s"),
+                    reference_c: 20.0,
+                });
+            }
+            Some(Effect::GSensitivity) => {
+                t.effects.g_sensitivity = Some(tc::GSensitivity {
+                    enabled: true,
+                    coeff_dph_per_g: [
+                        get(a, "x_dph_per_g"),
+                        get(a, "y_dph_per_g"),
+                        get(a, "z_dph_per_g"),
+                    ],
+                });
+            }
+            Some(Effect::MagneticSensitivity) => {
+                t.effects.magnetic_sensitivity = Some(tc::MagneticSensitivity {
+                    enabled: true,
+                    coeff_dph_per_ut: [
+                        get(a, "x_dph_per_ut"),
+                        get(a, "y_dph_per_ut"),
+                        get(a, "z_dph_per_ut"),
+                    ],
+                });
+            }
+            Some(Effect::AxisMisalignment) => {
+                // Axis x + theta_z y - theta_y z: the coefficients on the
+                // Earth rate's y and z body components are theta_z, -theta_y.
+                let arcmin = |rad: f64| rad.to_degrees() * 60.0;
+                t.effects.axis_misalignment = Some(tc::AxisMisalignment {
+                    enabled: true,
+                    about_y_arcmin: arcmin(-get(a, "earth_z")),
+                    about_z_arcmin: arcmin(get(a, "earth_y")),
+                });
+            }
+            Some(Effect::ScaleFactorTemperature) => {
+                t.effects.scale_factor_temperature = Some(tc::ScaleFactorTemperature {
+                    enabled: true,
+                    ppm_per_c: get(a, "per_c") * 1e6,
+                    reference_c: 20.0,
+                });
+            }
+            Some(Effect::SelfHeating) => {
+                t.bias.terms.self_heating = true;
+                t.bias.k5_dph = get(a, "k5_dph");
+                t.bias.warmup_tau_s = get(a, "warmup_tau_s");
+            }
+            Some(Effect::GradientRate) => {
+                t.bias.terms.gradient_rate = true;
+                t.bias.k3_dph_per_c_per_s = get(a, "k3_dph_per_c_per_s");
+            }
+            Some(Effect::GradientQuadratic) => {
+                t.bias.terms.gradient_quadratic = true;
+                t.bias.k2_dph_per_c2 = get(a, "k2_dph_per_c2");
+            }
+            Some(Effect::CaseTemperature) => {
+                t.bias.terms.case_temperature = true;
+                t.bias.k4_dph_per_c = get(a, "k4_dph_per_c");
+            }
+            Some(Effect::Gradient) | None => {}
+        }
+    }
+    t
+}

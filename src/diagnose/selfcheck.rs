@@ -1,0 +1,498 @@
+//! The withheld-effect experiment: runs of the twin with one library effect
+//! added (at amplitudes in units of the noise), diagnosed against a
+//! reference without it; null runs with nothing added; runs with an effect
+//! outside the library (a slow periodic disturbance). Says how often each
+//! effect is named first, how much of its gap closes, how often a null run
+//! gets an effect, and whether the outsider is ever attributed.
+
+use std::collections::BTreeMap;
+
+use serde::Serialize;
+
+use super::data::{RunData, Sample};
+use super::library::{Effect, LIBRARY};
+use super::{Diagnosis, Options, diagnose};
+use crate::study::{ORIENTATION_TOML, StudyError, THERMAL_CYCLE_TOML, simulate};
+use crate::twin::TwinConfig;
+use crate::twin::config as tc;
+
+/// Amplitudes, in units of the noise at the averaging time.
+pub const AMPLITUDES: [f64; 2] = [1.5, 3.0];
+/// Period of the out-of-library disturbance, s (ours).
+pub const PERIODIC_PERIOD_S: f64 = 5400.0;
+/// Its amplitude, in units of the noise.
+pub const PERIODIC_AMPLITUDE: f64 = 3.0;
+
+/// What one experiment injected.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub enum Injected {
+    /// Nothing.
+    Null,
+    /// A library effect at an amplitude (noise units).
+    Effect(String, f64),
+    /// The out-of-library periodic disturbance.
+    Periodic,
+}
+
+impl Injected {
+    fn label(&self) -> String {
+        match self {
+            Self::Null => "null".into(),
+            Self::Effect(n, a) => format!("{n}@{a}"),
+            Self::Periodic => "periodic (outside)".into(),
+        }
+    }
+}
+
+/// One experiment's outcome.
+#[derive(Debug, Clone, Serialize)]
+pub struct Trial {
+    /// What was injected.
+    pub injected: String,
+    /// Seed of its runs.
+    pub seed: u64,
+    /// The first accepted effect (none when nothing was significant).
+    pub attributed: Option<String>,
+    /// Every accepted effect.
+    pub accepted: Vec<String>,
+    /// Reference gap, deg/h.
+    pub gap_before_dph: f64,
+    /// Gap after the accepted effects, deg/h.
+    pub gap_after_dph: f64,
+    /// Fraction of the injected effect's excess gap (over the null runs'
+    /// gap) closed: (before^2 - after^2) / (before^2 - null^2).
+    pub excess_closed: Option<f64>,
+    /// Period reported as unexplained, s.
+    pub period_s: Option<f64>,
+    /// Every candidate against the reference: name, held-out gap, p-value.
+    pub candidates: Vec<(String, f64, f64)>,
+}
+
+/// Per effect and amplitude.
+#[derive(Debug, Clone, Serialize)]
+pub struct Power {
+    /// Library name.
+    pub effect: String,
+    /// Amplitude, noise units.
+    pub amplitude: f64,
+    /// Runs.
+    pub runs: usize,
+    /// Fraction named first.
+    pub named_first: f64,
+    /// Mean fraction of the excess gap closed when named first.
+    pub excess_closed: f64,
+    /// Fraction of the runs where a confounded pair included it.
+    pub confounded: f64,
+}
+
+/// The self-check's result.
+#[derive(Debug, Clone, Serialize)]
+pub struct SelfCheck {
+    /// Runs per case.
+    pub runs: usize,
+    /// First seed.
+    pub seed: u64,
+    /// Noise unit: the reference's held-out gap on null runs (RMS of the
+    /// 60 s means), deg/h.
+    pub noise_dph: f64,
+    /// Detection power per effect and amplitude.
+    pub power: Vec<Power>,
+    /// Injected (rows) against attributed first (columns), counts.
+    pub confusion: BTreeMap<String, BTreeMap<String, usize>>,
+    /// Fraction of null runs with any effect accepted.
+    pub false_positive_rate: f64,
+    /// Fraction of periodic runs with any effect accepted.
+    pub periodic_attributed: f64,
+    /// Fraction of periodic runs whose unexplained part named a period
+    /// within 20 % of the true one.
+    pub periodic_period_found: f64,
+    /// Every trial.
+    pub trials: Vec<Trial>,
+}
+
+fn to_run(samples: Vec<crate::study::Sample>, name: &str, twin: &TwinConfig) -> RunData {
+    RunData {
+        name: name.into(),
+        site: twin.site,
+        samples: samples
+            .into_iter()
+            .map(|s| Sample {
+                iv: s.interval,
+                orientation: s.orientation,
+                step: s.record.clone(),
+                record: s.record,
+            })
+            .collect(),
+    }
+}
+
+/// The study's two procedures on `twin`: thermal cycle and orientation run.
+fn runs_of(twin: &TwinConfig, seed: u64) -> Result<Vec<RunData>, StudyError> {
+    let (_, a) = simulate(THERMAL_CYCLE_TOML, "thermal_cycle", twin, seed)?;
+    let (_, b) = simulate(
+        ORIENTATION_TOML,
+        "orientation",
+        twin,
+        seed.wrapping_add(1_000_000),
+    )?;
+    Ok(vec![
+        to_run(a, &format!("thermal_cycle (seed {seed})"), twin),
+        to_run(
+            b,
+            &format!("orientation (seed {})", seed.wrapping_add(1_000_000)),
+            twin,
+        ),
+    ])
+}
+
+/// Unit direction of the multi-term effects (ours).
+const DIRECTION: [f64; 3] = [0.0, 0.8, 0.6];
+
+/// RMS, over the runs' 60 s means (each run's mean removed), of an
+/// effect's contribution with coefficient 1 along [`DIRECTION`].
+fn unit_rms(runs: &[RunData], e: Effect, p: f64) -> f64 {
+    let (mut ss, mut n) = (0.0, 0usize);
+    for run in runs {
+        let cols = e.columns(run, p);
+        let dir: &[f64] = match cols.len() {
+            3 => &DIRECTION,
+            2 => &DIRECTION[1..],
+            _ => &[1.0],
+        };
+        let v: Vec<f64> = (0..run.samples.len())
+            .map(|i| cols.iter().zip(dir).map(|(c, d)| c[i] * d).sum())
+            .collect();
+        let means: Vec<f64> = v
+            .chunks_exact(super::engine::AVERAGING_S)
+            .map(|c| c.iter().sum::<f64>() / c.len() as f64)
+            .collect();
+        let m = means.iter().sum::<f64>() / means.len().max(1) as f64;
+        ss += means.iter().map(|x| (x - m).powi(2)).sum::<f64>();
+        n += means.len();
+    }
+    (ss / n.max(1) as f64).sqrt()
+}
+
+/// The twin with effect `e` added at coefficient `a` (along [`DIRECTION`]),
+/// and the reference twin without it.
+fn inject(base: &TwinConfig, e: Effect, a: f64) -> (TwinConfig, TwinConfig) {
+    let mut data = base.clone();
+    let mut reference = base.clone();
+    let d = DIRECTION;
+    match e {
+        Effect::Hysteresis => {
+            data.effects.hysteresis = Some(tc::Hysteresis {
+                enabled: true,
+                amplitude_dph: a,
+                width_c: 2.0,
+            });
+        }
+        Effect::ThermalLag => {
+            data.effects.thermal_lag = Some(tc::ThermalLag {
+                enabled: true,
+                coeff_dph_per_c: a,
+                tau_s: 1800.0,
+                reference_c: 20.0,
+            });
+        }
+        Effect::GSensitivity => {
+            data.effects.g_sensitivity = Some(tc::GSensitivity {
+                enabled: true,
+                coeff_dph_per_g: d.map(|x| x * a),
+            });
+        }
+        Effect::MagneticSensitivity => {
+            data.effects.magnetic_sensitivity = Some(tc::MagneticSensitivity {
+                enabled: true,
+                coeff_dph_per_ut: d.map(|x| x * a),
+            });
+        }
+        Effect::AxisMisalignment => {
+            // Coefficients (theta_z, -theta_y) = a (0.8, 0.6), in rad.
+            let arcmin = |rad: f64| rad.to_degrees() * 60.0;
+            data.effects.axis_misalignment = Some(tc::AxisMisalignment {
+                enabled: true,
+                about_y_arcmin: arcmin(-a * d[2]),
+                about_z_arcmin: arcmin(a * d[1]),
+            });
+        }
+        Effect::ScaleFactorTemperature => {
+            data.effects.scale_factor_temperature = Some(tc::ScaleFactorTemperature {
+                enabled: true,
+                ppm_per_c: a * 1e6,
+                reference_c: 20.0,
+            });
+        }
+        Effect::SelfHeating => {
+            data.bias.k5_dph = a;
+            reference.bias.terms.self_heating = false;
+        }
+        Effect::GradientRate => {
+            data.bias.k3_dph_per_c_per_s = a;
+            reference.bias.terms.gradient_rate = false;
+        }
+        Effect::GradientQuadratic => {
+            data.bias.k2_dph_per_c2 = a;
+            reference.bias.terms.gradient_quadratic = false;
+        }
+        Effect::CaseTemperature => {
+            data.bias.k4_dph_per_c = a;
+            reference.bias.terms.case_temperature = false;
+        }
+        Effect::Gradient => {}
+    }
+    (data, reference)
+}
+
+fn trial(
+    injected: &Injected,
+    seed: u64,
+    data_twin: &TwinConfig,
+    reference: &TwinConfig,
+    null_gap: f64,
+) -> Result<(Trial, Diagnosis), StudyError> {
+    let runs = runs_of(data_twin, seed)?;
+    let d = diagnose(
+        &runs,
+        &Options {
+            twin: Some(reference.clone()),
+        },
+    );
+    let accepted: Vec<String> = d.effects.iter().map(|e| e.name.clone()).collect();
+    let (before, after) = (d.layers.rate.gap_dph, d.layers.rate.gap_after_dph);
+    let excess_closed = match injected {
+        Injected::Effect(..) if before * before > null_gap * null_gap => Some(
+            ((before * before - after * after) / (before * before - null_gap * null_gap))
+                .clamp(0.0, 1.0),
+        ),
+        _ => None,
+    };
+    Ok((
+        Trial {
+            injected: injected.label(),
+            seed,
+            attributed: accepted.first().cloned(),
+            accepted,
+            gap_before_dph: before,
+            gap_after_dph: after,
+            excess_closed,
+            period_s: d.unexplained.period_s,
+            candidates: d
+                .candidates
+                .iter()
+                .map(|c| (c.name.clone(), c.held_out_gap_dph, c.p_value))
+                .collect(),
+        },
+        d,
+    ))
+}
+
+/// Run the self-check: `runs` runs per case from `seed`, on the effects
+/// `effects` (default: the whole library).
+pub fn run(
+    runs: usize,
+    seed: u64,
+    effects: &[Effect],
+    progress: &(dyn Fn(&str) + Sync),
+) -> Result<SelfCheck, StudyError> {
+    let base = TwinConfig::default_rl16();
+    // Null runs first: they give the noise unit.
+    let mut trials: Vec<(Injected, Trial, Vec<[String; 2]>)> = Vec::new();
+    let mut null_gaps = Vec::new();
+    let mut null_runs: Option<Vec<RunData>> = None;
+    for k in 0..runs {
+        let s = seed + k as u64;
+        let (t, d) = trial(&Injected::Null, s, &base, &base, 0.0)?;
+        progress(&format!("null seed {s}: {:?}", t.attributed));
+        null_gaps.push(t.gap_before_dph);
+        trials.push((Injected::Null, t, pairs(&d)));
+        if null_runs.is_none() {
+            null_runs = Some(runs_of(&base, s)?);
+        }
+    }
+    let noise = null_gaps.iter().sum::<f64>() / null_gaps.len().max(1) as f64;
+    let probe = null_runs.unwrap_or_default();
+
+    let mut cases: Vec<(Injected, TwinConfig, TwinConfig)> = Vec::new();
+    for &e in effects {
+        let p = match e {
+            Effect::SelfHeating => base.bias.warmup_tau_s,
+            Effect::Hysteresis => 2.0,
+            Effect::ThermalLag => 1800.0,
+            _ => f64::NAN,
+        };
+        let unit = unit_rms(&probe, e, p);
+        for &amp in &AMPLITUDES {
+            let a = if unit > 0.0 { amp * noise / unit } else { 0.0 };
+            let (data, reference) = inject(&base, e, a);
+            cases.push((Injected::Effect(e.name().into(), amp), data, reference));
+        }
+    }
+    let mut periodic = base.clone();
+    periodic.effects.periodic = Some(tc::Periodic {
+        enabled: true,
+        // A sine of amplitude A has RMS A / sqrt(2).
+        amplitude_dph: PERIODIC_AMPLITUDE * noise * std::f64::consts::SQRT_2,
+        period_s: PERIODIC_PERIOD_S,
+    });
+    cases.push((Injected::Periodic, periodic, base.clone()));
+
+    // Two workers over the (case, seed) pairs.
+    let jobs: Vec<(usize, u64)> = (0..cases.len())
+        .flat_map(|c| (0..runs).map(move |k| (c, seed + 1000 * (c as u64 + 1) + k as u64)))
+        .collect();
+    let results = std::sync::Mutex::new(Vec::new());
+    let next = std::sync::atomic::AtomicUsize::new(0);
+    let workers = std::thread::available_parallelism()
+        .map_or(1, usize::from)
+        .min(4);
+    std::thread::scope(|scope| {
+        for _ in 0..workers {
+            scope.spawn(|| {
+                loop {
+                    let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                    let Some(&(c, s)) = jobs.get(i) else { break };
+                    let (inj, data, reference) = &cases[c];
+                    let r = trial(inj, s, data, reference, noise);
+                    if let Ok((t, _)) = &r {
+                        progress(&format!("{} seed {s}: {:?}", inj.label(), t.attributed));
+                    }
+                    if let Ok(mut v) = results.lock() {
+                        v.push((i, inj.clone(), r.map(|(t, d)| (t, pairs(&d)))));
+                    }
+                }
+            });
+        }
+    });
+    let mut done = results.into_inner().unwrap_or_default();
+    done.sort_by_key(|(i, _, _)| *i);
+    for (_, inj, r) in done {
+        let (t, p) = r?;
+        trials.push((inj, t, p));
+    }
+
+    let mut confusion: BTreeMap<String, BTreeMap<String, usize>> = BTreeMap::new();
+    for (inj, t, _) in &trials {
+        *confusion
+            .entry(inj.label())
+            .or_default()
+            .entry(t.attributed.clone().unwrap_or_else(|| "none".into()))
+            .or_default() += 1;
+    }
+    let mut power = Vec::new();
+    for &e in effects {
+        for &amp in &AMPLITUDES {
+            let mine: Vec<&(Injected, Trial, Vec<[String; 2]>)> = trials
+                .iter()
+                .filter(|(i, _, _)| *i == Injected::Effect(e.name().into(), amp))
+                .collect();
+            let n = mine.len().max(1) as f64;
+            let first: Vec<&Trial> = mine
+                .iter()
+                .filter(|(_, t, _)| t.attributed.as_deref() == Some(e.name()))
+                .map(|(_, t, _)| t)
+                .collect();
+            power.push(Power {
+                effect: e.name().into(),
+                amplitude: amp,
+                runs: mine.len(),
+                named_first: first.len() as f64 / n,
+                excess_closed: if first.is_empty() {
+                    0.0
+                } else {
+                    first.iter().filter_map(|t| t.excess_closed).sum::<f64>() / first.len() as f64
+                },
+                confounded: mine
+                    .iter()
+                    .filter(|(_, _, p)| p.iter().any(|pair| pair.contains(&e.name().to_owned())))
+                    .count() as f64
+                    / n,
+            });
+        }
+    }
+    let rate = |label: &Injected, f: &dyn Fn(&Trial) -> bool| {
+        let v: Vec<&Trial> = trials
+            .iter()
+            .filter(|(i, _, _)| i == label)
+            .map(|(_, t, _)| t)
+            .collect();
+        v.iter().filter(|t| f(t)).count() as f64 / v.len().max(1) as f64
+    };
+    Ok(SelfCheck {
+        runs,
+        seed,
+        noise_dph: noise,
+        power,
+        confusion,
+        false_positive_rate: rate(&Injected::Null, &|t| t.attributed.is_some()),
+        periodic_attributed: rate(&Injected::Periodic, &|t| t.attributed.is_some()),
+        periodic_period_found: rate(&Injected::Periodic, &|t| {
+            t.period_s
+                .is_some_and(|p| (p / PERIODIC_PERIOD_S - 1.0).abs() < 0.2)
+        }),
+        trials: trials.into_iter().map(|(_, t, _)| t).collect(),
+    })
+}
+
+fn pairs(d: &Diagnosis) -> Vec<[String; 2]> {
+    d.confounded.iter().map(|c| c.effects.clone()).collect()
+}
+
+/// Every library effect.
+pub fn all_effects() -> Vec<Effect> {
+    LIBRARY.to_vec()
+}
+
+/// The page: power table, confusion matrix, rates.
+pub fn render_html(s: &SelfCheck) -> String {
+    let mut power = String::new();
+    for p in &s.power {
+        power.push_str(&format!(
+            "<tr><td>{}</td><td class=num>{}</td><td class=num>{}</td><td class=num>{:.0} %</td><td class=num>{:.0} %</td><td class=num>{:.0} %</td></tr>\n",
+            p.effect,
+            p.amplitude,
+            p.runs,
+            100.0 * p.named_first,
+            100.0 * p.excess_closed,
+            100.0 * p.confounded
+        ));
+    }
+    let cols: Vec<String> = {
+        let mut c: Vec<String> = s
+            .confusion
+            .values()
+            .flat_map(|m| m.keys().cloned())
+            .collect();
+        c.sort();
+        c.dedup();
+        c
+    };
+    let mut conf = format!(
+        "<tr><th>injected \\ named first</th>{}</tr>\n",
+        cols.iter()
+            .map(|c| format!("<th>{c}</th>"))
+            .collect::<String>()
+    );
+    for (row, m) in &s.confusion {
+        conf.push_str(&format!(
+            "<tr><td>{row}</td>{}</tr>\n",
+            cols.iter()
+                .map(|c| format!(
+                    "<td class=num>{}</td>",
+                    m.get(c).map_or(String::new(), |n| n.to_string())
+                ))
+                .collect::<String>()
+        ));
+    }
+    format!(
+        "<!doctype html>\n<html lang=en><head><meta charset=utf-8><title>Diagnosis self-check</title><style>body{{font-family:sans-serif;margin:2em}} table{{border-collapse:collapse;margin:1em 0}} td,th{{border:1px solid #ccc;padding:.25em .5em;font-size:.9em}} td.num{{text-align:right;font-family:monospace}}</style></head><body>\n<h1>Diagnosis self-check</h1>\n<p>{} run(s) per case from seed {}, each case the study's thermal cycle and orientation run on the twin. Noise unit: {:.5} deg/h (the reference's held-out gap on null runs, RMS of 60 s means).</p>\n<p>False-positive rate on null runs: <b>{:.0} %</b>. Out-of-library periodic disturbance ({} s, {}x noise): attributed in {:.0} % of runs; its period reported within 20 % in {:.0} %.</p>\n<h2>Detection power</h2>\n<table><tr><th>effect</th><th>amplitude (noise units)</th><th>runs</th><th>named first</th><th>excess gap closed</th><th>in a confounded pair</th></tr>\n{power}</table>\n<h2>Confusion matrix</h2>\n<table>{conf}</table>\n</body></html>\n",
+        s.runs,
+        s.seed,
+        s.noise_dph,
+        100.0 * s.false_positive_rate,
+        PERIODIC_PERIOD_S,
+        PERIODIC_AMPLITUDE,
+        100.0 * s.periodic_attributed,
+        100.0 * s.periodic_period_found,
+    )
+}
