@@ -1,7 +1,8 @@
 //! Held-out fitting of the rate layer: a model is a set of library effects
 //! (each with its nonlinear parameter) plus one offset per run, fitted by
 //! least squares and scored by blocked cross-validation, one fold per
-//! record (a block of procedure steps, never random samples). Scores are
+//! block of a record of at most [`FOLD_MAX_S`] (contiguous, never random
+//! samples). Scores are
 //! the residual's 60 s means, so white noise does not drown the slow
 //! effects and neighbouring samples do not count as independent.
 //!
@@ -15,6 +16,11 @@ use super::library::Effect;
 
 /// Averaging time of the scores, s (samples are 1 Hz).
 pub const AVERAGING_S: usize = 60;
+
+/// Longest fold, s (ours): records are cut into blocks of at most 15 min,
+/// so that leaving one out still leaves its neighbours in the same regime
+/// (a warm-up or a cold soak held out whole would have to be extrapolated).
+pub const FOLD_MAX_S: usize = 900;
 
 /// One fold: a record of one run.
 #[derive(Debug, Clone)]
@@ -56,7 +62,11 @@ impl<'a> Data<'a> {
                 y.push(s.iv.bias_dph());
                 run_of.push(r);
                 match folds.last_mut() {
-                    Some(f) if f.run == r && f.record == s.record => f.end = row + 1,
+                    Some(f)
+                        if f.run == r && f.record == s.record && f.end - f.start < FOLD_MAX_S =>
+                    {
+                        f.end = row + 1;
+                    }
                     _ => folds.push(Fold {
                         run: r,
                         record: s.record.clone(),
@@ -114,6 +124,8 @@ pub struct Scored {
     pub block_residual: Vec<(usize, f64)>,
     /// Parameters fitted (terms and run offsets).
     pub parameters: usize,
+    /// Record of each fold (folds cut from one record share it).
+    pub fold_record: Vec<usize>,
 }
 
 impl Scored {
@@ -258,6 +270,21 @@ pub fn score(data: &Data<'_>, model: &[(Effect, f64)]) -> Scored {
         held_out,
         block_residual,
         parameters: p,
+        fold_record: {
+            let mut id = 0;
+            data.folds
+                .iter()
+                .enumerate()
+                .map(|(k, f)| {
+                    if k > 0
+                        && (data.folds[k - 1].run != f.run || data.folds[k - 1].record != f.record)
+                    {
+                        id += 1;
+                    }
+                    id
+                })
+                .collect()
+        },
     }
 }
 
@@ -266,7 +293,10 @@ fn in_sample_sse(data: &Data<'_>, model: &[(Effect, f64)]) -> f64 {
     score(data, model).residual.iter().map(|v| v * v).sum()
 }
 
-/// `model` plus `effect`, its parameter chosen on the in-sample fit.
+/// `model` plus `effect`, its parameter chosen on the in-sample fit (the
+/// model's other parameters stay: re-choosing them with every candidate
+/// let a lag and a long warm-up fit a slow periodic disturbance outside the
+/// library, measured by the self-check).
 pub fn with_best_parameter(
     data: &Data<'_>,
     model: &[(Effect, f64)],
@@ -286,6 +316,21 @@ pub fn with_best_parameter(
         }
     }
     best.map_or_else(|| model.to_vec(), |(_, m)| m)
+}
+
+/// Whether an effect's regressors vary within a run at all (relative to
+/// their size): a regressor constant in every run is the run offset again,
+/// and the runs cannot say anything about it.
+pub fn identifiable(data: &Data<'_>, effect: Effect, p: f64) -> bool {
+    data.runs.iter().any(|run| {
+        effect.columns(run, p).iter().any(|c| {
+            let n = c.len().max(1) as f64;
+            let m = c.iter().sum::<f64>() / n;
+            let var = c.iter().map(|v| (v - m).powi(2)).sum::<f64>() / n;
+            let size = c.iter().map(|v| v * v).sum::<f64>() / n;
+            var > 1e-12 * size.max(1e-300)
+        })
+    })
 }
 
 /// Long-run variance factor of a residual series (runs kept apart):
@@ -320,6 +365,9 @@ fn f_test(rss0: f64, rss1: f64, q: f64, dof: f64) -> f64 {
 
 /// Lags of the long-run variance, in 60 s means (ours: 20 min).
 pub const NEWEY_WEST_LAGS: usize = 20;
+/// Lags of the long-run variance of the record means (ours: 2 records: a
+/// slow disturbance moves neighbouring records together).
+pub const BETWEEN_LAGS: usize = 2;
 
 /// Does `better` (base plus a candidate) beat `base`? Returns the held-out
 /// improvement (reduction of the held-out sum of squares of 60 s means)
@@ -327,8 +375,10 @@ pub const NEWEY_WEST_LAGS: usize = 20;
 /// means are split into their record (fold) means and the deviations from
 /// them; each part gets a nested F-test and the smaller p-value, doubled
 /// (Bonferroni over the two), is returned:
-/// - between records: one value per record, since the slow part of the
-///   noise (flicker) moves whole records;
+/// - between records: one value per record (a position's or a thermal
+///   segment's mean: the slow part of the noise, flicker, moves whole
+///   records), their number cut by the record means' own long-run
+///   variance ([`BETWEEN_LAGS`]);
 /// - within records: the sample size cut by the deviations' long-run
 ///   variance (Newey-West, Bartlett weights, [`NEWEY_WEST_LAGS`]).
 pub fn improvement(base: &Scored, better: &Scored) -> (f64, f64) {
@@ -339,12 +389,9 @@ pub fn improvement(base: &Scored, better: &Scored) -> (f64, f64) {
     let (w0, w1) = (within(base, &f0), within(better, &f1));
     let n_eff = (w1.len() as f64 - f1.len() as f64) / long_run_factor(&w1, NEWEY_WEST_LAGS);
     let p_within = f_test(rss(&w0), rss(&w1), q, n_eff - q);
-    let p_between = f_test(
-        rss(&f0),
-        rss(&f1),
-        q,
-        f1.len() as f64 - better.parameters as f64,
-    );
+    let (g0, g1) = (record_means(base), record_means(better));
+    let n_records = g1.len() as f64 / long_run_factor(&g1, BETWEEN_LAGS);
+    let p_between = f_test(rss(&g0), rss(&g1), q, n_records - better.parameters as f64);
     (gain, (2.0 * p_within.min(p_between)).min(1.0))
 }
 
@@ -375,4 +422,26 @@ fn fold_means(s: &Scored) -> Vec<(usize, f64)> {
         at += n;
     }
     out
+}
+
+/// Mean of the in-sample block residual of each record (its folds together).
+fn record_means(s: &Scored) -> Vec<(usize, f64)> {
+    let mut out: Vec<(usize, f64, usize)> = Vec::new();
+    let mut at = 0;
+    for (k, &n) in s.fold_blocks.iter().enumerate() {
+        let part = &s.block_residual[at..at + n];
+        at += n;
+        let Some(first) = part.first() else { continue };
+        let sum: f64 = part.iter().map(|x| x.1).sum();
+        match out.last_mut() {
+            Some(last) if k > 0 && s.fold_record[k - 1] == s.fold_record[k] => {
+                last.1 += sum;
+                last.2 += n;
+            }
+            _ => out.push((first.0, sum, n)),
+        }
+    }
+    out.into_iter()
+        .map(|(r, sum, n)| (r, sum / n as f64))
+        .collect()
 }

@@ -163,6 +163,9 @@ pub struct Diagnosis {
     pub unexplained: Unexplained,
     /// Every candidate against the reference.
     pub candidates: Vec<CandidateScore>,
+    /// Effects whose regressors do not vary within any run (e.g. gravity in
+    /// a run at one position): these runs cannot say anything about them.
+    pub not_identifiable: Vec<String>,
     /// The reference and final fits (for the page).
     #[serde(skip)]
     pub fits: Option<(Scored, Scored)>,
@@ -395,11 +398,11 @@ pub fn diagnose(runs: &[RunData], opts: &Options) -> Diagnosis {
     let base_model = build(&data, &spec);
     let base = score(&data, &base_model);
     let in_base: Vec<Effect> = base_model.iter().map(|m| m.0).collect();
-    let mut remaining: Vec<Effect> = LIBRARY
+    let (mut remaining, not_identifiable): (Vec<Effect>, Vec<Effect>) = LIBRARY
         .iter()
         .copied()
         .filter(|e| !in_base.contains(e))
-        .collect();
+        .partition(|&e| engine::identifiable(&data, e, e.grid()[0]));
 
     // First step: every candidate against the reference.
     let first: Vec<(Effect, Scored, f64, f64)> = remaining
@@ -487,7 +490,7 @@ pub fn diagnose(runs: &[RunData], opts: &Options) -> Diagnosis {
     Diagnosis {
         runs: runs.iter().map(|r| r.name.clone()).collect(),
         protocol: format!(
-            "blocked cross-validation, one fold per record ({} folds over {} run(s)); scores on 60 s means; a per-run offset is a nuisance fitted on the other folds of the run",
+            "blocked cross-validation, one fold per block of a record of at most 15 min ({} folds over {} run(s)); scores on 60 s means; a per-run offset is a nuisance fitted on the other folds of the run",
             data.folds.len(),
             runs.len()
         ),
@@ -509,6 +512,10 @@ pub fn diagnose(runs: &[RunData], opts: &Options) -> Diagnosis {
             periodic_fraction: frac,
         },
         candidates,
+        not_identifiable: not_identifiable
+            .iter()
+            .map(|e| e.name().to_owned())
+            .collect(),
         fits: Some((base, current)),
         data: Some(Rows {
             run_of: data.run_of.clone(),

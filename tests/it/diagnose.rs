@@ -1,0 +1,161 @@
+//! `gyrobench diagnose`: a withheld effect is found in recorded runs, the
+//! updated twin closes the gap, and the quick self-check holds its targets.
+
+use std::path::Path;
+
+use crate::cli::{gyrobench, temp_dir};
+
+fn s(p: &Path) -> &str {
+    p.to_str().expect("utf-8 path")
+}
+
+fn json(p: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(p).expect("file")).expect("JSON")
+}
+
+#[test]
+fn a_withheld_effect_is_found_and_the_updated_twin_closes_the_gap() {
+    let dir = temp_dir("diagnose");
+    let default = String::from_utf8(gyrobench(&["twin", "default-config"]).stdout).expect("utf-8");
+    let with = default.replacen(
+        "[effects.hysteresis]\nenabled = false\namplitude_dph = 0.05",
+        "[effects.hysteresis]\nenabled = true\namplitude_dph = 0.05",
+        1,
+    );
+    assert_ne!(with, default);
+    let twin = dir.join("hysteresis.toml");
+    std::fs::write(&twin, with).expect("twin");
+    // The study's two procedures on the unit with the effect.
+    let mut logs = Vec::new();
+    for p in ["thermal_cycle", "orientation"] {
+        let procedure = format!("{}/procedures/{p}.toml", env!("CARGO_MANIFEST_DIR"));
+        let run = dir.join(p);
+        gyrobench(&["run", &procedure, "--twin", s(&twin), "--out", s(&run)]);
+        logs.push(run.join("run.mcap"));
+    }
+    let (a, b) = (s(&logs[0]), s(&logs[1]));
+
+    let out = dir.join("d1");
+    let r = gyrobench(&["diagnose", a, b, "--out", s(&out)]);
+    assert_eq!(
+        r.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&r.stderr)
+    );
+    let d = json(&out.join("diagnosis.json"));
+    // The contract.
+    assert!(
+        d["layers"]["thermal"]["gap_c"].as_f64().is_some(),
+        "{}",
+        d["layers"]
+    );
+    let gap = d["layers"]["rate"]["gap_dph"].as_f64().expect("gap_dph");
+    let segs = d["where"].as_array().expect("where");
+    assert!(!segs.is_empty());
+    for k in ["run", "step", "start_s", "end_s", "regime", "share"] {
+        assert!(!segs[0][k].is_null(), "where[0].{k}");
+    }
+    assert!(d["confounded"].is_array());
+    assert!(d["unexplained"]["gap_dph"].as_f64().is_some());
+    let e = &d["effects"][0];
+    assert_eq!(e["name"], "hysteresis", "{}", d["effects"]);
+    for k in [
+        "parameters",
+        "held_out_gap_before_dph",
+        "held_out_gap_after_dph",
+        "shrink",
+        "p_value",
+    ] {
+        assert!(!e[k].is_null(), "effects[0].{k}");
+    }
+    assert!(e["shrink"].as_f64().expect("shrink") > 0.35, "{e}");
+    assert!(e["p_value"].as_f64().expect("p") < 0.01, "{e}");
+    let width = e["parameters"]["width_c"].as_f64().expect("width");
+    assert!((1.0..=4.0).contains(&width), "play width {width} (twin: 2)");
+    assert!(
+        std::fs::read_to_string(out.join("diagnosis.html"))
+            .expect("html")
+            .contains("<svg")
+    );
+
+    // The updated twin as the reference: the gap is closed.
+    let updated = out.join("twin-updated.toml");
+    let text = std::fs::read_to_string(&updated).expect("twin-updated.toml");
+    assert!(
+        text.contains("[effects.hysteresis]\nenabled = true"),
+        "{text}"
+    );
+    let again = dir.join("d2");
+    let r = gyrobench(&["diagnose", a, b, "--twin", s(&updated), "--out", s(&again)]);
+    assert_eq!(
+        r.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&r.stderr)
+    );
+    let d2 = json(&again.join("diagnosis.json"));
+    let gap2 = d2["layers"]["rate"]["gap_dph"].as_f64().expect("gap_dph");
+    assert!(gap2 < 0.7 * gap, "{gap} -> {gap2}");
+    assert_eq!(
+        d2["effects"].as_array().map(Vec::len),
+        Some(0),
+        "{}",
+        d2["effects"]
+    );
+    // The twin's own thermal network reproduces the sensors it made.
+    assert!(d2["layers"]["thermal"]["gap_c"].as_f64().expect("gap_c") < 0.05);
+
+    // Bad input: a clear error.
+    std::fs::write(dir.join("junk.mcap"), b"junk").expect("junk");
+    let r = gyrobench(&[
+        "diagnose",
+        s(&dir.join("junk.mcap")),
+        "--out",
+        s(&dir.join("d3")),
+    ]);
+    assert_eq!(r.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&r.stderr).contains("not an MCAP log"));
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
+
+/// The quick version of the self-check: one run per case, one effect.
+#[test]
+fn the_quick_selfcheck_finds_the_effect_and_nothing_in_null_or_outside_runs() {
+    let dir = temp_dir("selfcheck");
+    let r = gyrobench(&[
+        "diagnose",
+        "selfcheck",
+        "--runs",
+        "1",
+        "--effects",
+        "hysteresis",
+        "--out",
+        s(&dir),
+    ]);
+    assert_eq!(
+        r.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&r.stderr)
+    );
+    let sc = json(&dir.join("selfcheck.json"));
+    assert_eq!(sc["false_positive_rate"], 0.0, "{}", sc["trials"]);
+    assert_eq!(sc["periodic_attributed"], 0.0, "{}", sc["trials"]);
+    assert_eq!(sc["periodic_period_found"], 1.0, "{}", sc["trials"]);
+    let p3 = sc["power"]
+        .as_array()
+        .expect("power")
+        .iter()
+        .find(|p| p["amplitude"] == 3.0)
+        .expect("3x row");
+    assert_eq!(p3["named_first"], 1.0, "{p3}");
+    assert!(p3["excess_closed"].as_f64().expect("closed") >= 0.5, "{p3}");
+    assert!(sc["confusion"]["hysteresis@3"]["hysteresis"].as_u64() == Some(1));
+    assert!(
+        std::fs::read_to_string(dir.join("selfcheck.html"))
+            .expect("html")
+            .contains("Confusion matrix")
+    );
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
