@@ -300,17 +300,8 @@ fn write_log(
             break;
         };
         step_at += 1;
-        rec.event(
-            rows[*a].time_s - 0.5,
-            1,
-            &format!(
-                "step {} (line {}): {}",
-                step.key,
-                step.line,
-                step.describe()
-            ),
-        )
-        .map_err(io)?;
+        rec.event(rows[*a].time_s - 0.5, 1, &step.start_message())
+            .map_err(io)?;
         records.start(label);
         for r in &rows[*a..*b] {
             let o = Orientation::new(r.azimuth_deg, r.elevation_deg, r.roll_deg);
@@ -362,17 +353,7 @@ fn write_log(
     let mut measurements = Vec::new();
     for step in &steps[step_at..] {
         if let StepKind::Measure(m) = &step.kind {
-            rec.event(
-                end_s,
-                1,
-                &format!(
-                    "step {} (line {}): {}",
-                    step.key,
-                    step.line,
-                    step.describe()
-                ),
-            )
-            .map_err(io)?;
+            rec.event(end_s, 1, &step.start_message()).map_err(io)?;
             let meas = measure::compute(m, &records, None, &step.key);
             rec.event(
                 end_s,

@@ -173,6 +173,22 @@ pub struct Step {
 }
 
 impl Step {
+    /// The `/events` line that starts it: `step KEY (line N): description`
+    /// (`cleanup KEY ...` in cleanup). Replay finds steps by this line.
+    pub fn start_message(&self) -> String {
+        let word = if self.group == Group::Cleanup {
+            "cleanup"
+        } else {
+            "step"
+        };
+        format!(
+            "{word} {} (line {}): {}",
+            self.key,
+            self.line,
+            self.describe()
+        )
+    }
+
     /// A short human description.
     pub fn describe(&self) -> String {
         match &self.kind {

@@ -584,11 +584,7 @@ pub async fn run(
             continue;
         }
         r.progress.step(s, i, total);
-        let _ = r.sink.event(
-            r.bench.now_s(),
-            1,
-            &format!("step {} (line {}): {}", s.key, s.line, s.describe()),
-        );
+        let _ = r.sink.event(r.bench.now_s(), 1, &s.start_message());
         if let Err(e) = r.step(s).await {
             stop = Some((e, s.key.clone()));
             break;
@@ -618,11 +614,7 @@ pub async fn run(
     r.cleaning_up = true;
     for (i, s) in p.cleanup.iter().enumerate() {
         r.progress.step(s, p.setup.len() + p.main.len() + i, total);
-        let _ = r.sink.event(
-            r.bench.now_s(),
-            1,
-            &format!("cleanup {} (line {}): {}", s.key, s.line, s.describe()),
-        );
+        let _ = r.sink.event(r.bench.now_s(), 1, &s.start_message());
         if let Err(e) = r.step(s).await {
             cleanup_completed = false;
             let msg = match &e {

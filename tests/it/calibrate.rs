@@ -2,9 +2,8 @@
 //! back the twin's own coefficients, validate on a held-out run, and the
 //! file they write compensates a fresh run through `run --coeffs`.
 
-use std::path::Path;
-
 use crate::cli::{gyrobench, temp_dir};
+use crate::common::s;
 
 /// A two-hour thermal excursion at power-on: enough to tell the model-4
 /// terms apart, quick to simulate.
@@ -58,10 +57,6 @@ averaging_s = 600.0
 high = 0.05
 unit = "deg/h"
 "#;
-
-fn s(p: &Path) -> &str {
-    p.to_str().expect("utf-8 path")
-}
 
 #[test]
 fn calibration_recovers_the_twin_and_its_file_compensates_a_new_run() {

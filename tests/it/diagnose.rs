@@ -1,17 +1,8 @@
 //! `gyrobench diagnose`: a withheld effect is found in recorded runs, the
 //! updated twin closes the gap, and the quick self-check holds its targets.
 
-use std::path::Path;
-
 use crate::cli::{gyrobench, temp_dir};
-
-fn s(p: &Path) -> &str {
-    p.to_str().expect("utf-8 path")
-}
-
-fn json(p: &Path) -> serde_json::Value {
-    serde_json::from_str(&std::fs::read_to_string(p).expect("file")).expect("JSON")
-}
+use crate::common::{json, s};
 
 #[test]
 fn a_withheld_effect_is_found_and_the_updated_twin_closes_the_gap() {

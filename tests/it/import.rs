@@ -4,6 +4,7 @@
 use std::path::Path;
 
 use crate::cli::{gyrobench, temp_dir};
+use crate::common::s;
 
 const SITE: &str = "[site]
 latitude_deg = 50.45
@@ -11,10 +12,6 @@ longitude_deg = 30.52
 height_m = 180.0
 magnetic_field_ned_ut = [19.5, 2.7, 46.5]
 ";
-
-fn s(p: &Path) -> &str {
-    p.to_str().expect("utf-8 path")
-}
 
 fn rows(p: &Path) -> Vec<Vec<String>> {
     std::fs::read_to_string(p)

@@ -10,6 +10,7 @@ mod bad_input;
 mod bench_io;
 mod calibrate;
 mod cli;
+mod common;
 mod diagnose;
 mod import;
 mod replay;

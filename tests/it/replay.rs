@@ -5,101 +5,7 @@
 use std::path::Path;
 
 use crate::cli::{gyrobench, temp_dir};
-
-/// A short procedure with every metric, a repeat (steps sharing keys) and
-/// a temperature ramp, so compensation has something to fit.
-const MINI: &str = r#"
-[procedure]
-name = "mini"
-description = "every metric in an hour of device time"
-dut_type = "RL-16"
-spec = "test"
-
-[[setup]]
-action = "chamber"
-set_c = 20.0
-ramp_c_per_min = 1.0
-
-[[main]]
-action = "record"
-label = "warm"
-duration_s = 1800.0
-
-[[main]]
-action = "repeat"
-positions = [
-  { label = "up", table = { outer_deg = 90.0, inner_deg = 0.0 } },
-  { label = "east", table = { outer_deg = 0.0, inner_deg = 0.0 } },
-]
-
-[[main.steps]]
-action = "record"
-label = "{label}"
-duration_s = 120.0
-
-[[main.steps]]
-action = "measure"
-name = "bias_dph:{label}"
-metric = "mean_bias"
-records = ["{label}"]
-low = -5.0
-high = 5.0
-unit = "deg/h"
-
-[[main]]
-action = "move"
-table = { outer_deg = 90.0, inner_deg = 0.0 }
-
-[[main]]
-action = "chamber"
-set_c = 30.0
-ramp_c_per_min = 1.0
-
-[[main]]
-action = "record"
-label = "ramp"
-duration_s = 1200.0
-
-[[main]]
-action = "measure"
-name = "self_heating_dph"
-metric = "self_heating"
-records = ["warm"]
-high = 1.0
-unit = "deg/h"
-
-[[main]]
-action = "measure"
-name = "stability"
-metric = "bias_stability"
-records = ["up"]
-averaging_s = 10.0
-high = 0.2
-unit = "deg/h"
-
-[[main]]
-action = "measure"
-name = "raw"
-metric = "drift_pp"
-records = ["warm", "ramp"]
-averaging_s = 600.0
-high = 1.0
-unit = "deg/h"
-
-[[main]]
-action = "measure"
-name = "compensated"
-metric = "compensated_drift_pp"
-records = ["warm", "ramp"]
-averaging_s = 600.0
-high = 0.1
-unit = "deg/h"
-
-[[cleanup]]
-action = "chamber"
-set_c = 20.0
-ramp_c_per_min = 2.0
-"#;
+use crate::common::{MINI, json, s};
 
 const COEFFS: &str = "[model4]
 k1_dph_per_c = -0.12
@@ -110,16 +16,8 @@ k5_dph = 0.36
 warmup_tau_s = 600.0
 ";
 
-fn s(p: &Path) -> &str {
-    p.to_str().expect("utf-8 path")
-}
-
 fn read(p: &Path) -> String {
     std::fs::read_to_string(p).unwrap_or_else(|e| panic!("{}: {e}", p.display()))
-}
-
-fn json(p: &Path) -> serde_json::Value {
-    serde_json::from_str(&read(p)).expect("JSON")
 }
 
 /// Live run, then replay of its log: both reports byte for byte.

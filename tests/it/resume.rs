@@ -4,91 +4,7 @@
 use std::path::Path;
 
 use crate::cli::{gyrobench, temp_dir};
-
-/// Warm-up record, two positions with a measurement each, a chamber step
-/// and a record during its ramp, then measurements over both parts.
-const PROCEDURE: &str = r#"
-[procedure]
-name = "resumable"
-description = "a run that a chamber alarm interrupts"
-dut_type = "RL-16"
-spec = "test"
-
-[[setup]]
-action = "chamber"
-set_c = 20.0
-ramp_c_per_min = 1.0
-
-[[main]]
-action = "record"
-label = "warm"
-duration_s = 1800.0
-
-[[main]]
-action = "repeat"
-positions = [
-  { label = "up", table = { outer_deg = 90.0, inner_deg = 0.0 } },
-  { label = "east", table = { outer_deg = 0.0, inner_deg = 0.0 } },
-]
-
-[[main.steps]]
-action = "record"
-label = "{label}"
-duration_s = 120.0
-
-[[main.steps]]
-action = "measure"
-name = "bias_dph:{label}"
-metric = "mean_bias"
-records = ["{label}"]
-low = -5.0
-high = 5.0
-unit = "deg/h"
-
-[[main]]
-action = "move"
-table = { outer_deg = 90.0, inner_deg = 0.0 }
-
-[[main]]
-action = "chamber"
-set_c = 30.0
-ramp_c_per_min = 1.0
-
-[[main]]
-action = "record"
-label = "ramp"
-duration_s = 1200.0
-
-[[main]]
-action = "measure"
-name = "self_heating_dph"
-metric = "self_heating"
-records = ["warm"]
-high = 1.0
-unit = "deg/h"
-
-[[main]]
-action = "measure"
-name = "compensated"
-metric = "compensated_drift_pp"
-records = ["warm", "ramp"]
-averaging_s = 600.0
-high = 0.1
-unit = "deg/h"
-
-[[cleanup]]
-action = "chamber"
-set_c = 20.0
-ramp_c_per_min = 2.0
-"#;
-
-fn s(p: &Path) -> &str {
-    p.to_str().expect("utf-8 path")
-}
-
-fn json(p: &Path) -> serde_json::Value {
-    serde_json::from_str(&std::fs::read_to_string(p).expect("file")).expect("JSON")
-}
+use crate::common::{MINI, json, s};
 
 /// (frames, event messages) of one log.
 fn frames_and_events(path: &Path) -> (u64, Vec<String>) {
@@ -110,7 +26,7 @@ fn frames_and_events(path: &Path) -> (u64, Vec<String>) {
 fn an_interrupted_run_resumes_from_its_last_completed_step() {
     let dir = temp_dir("resume");
     let procedure = dir.join("p.toml");
-    std::fs::write(&procedure, PROCEDURE).expect("procedure");
+    std::fs::write(&procedure, MINI).expect("procedure");
     let run = dir.join("run");
     // A chamber alarm during the ramp record ends the first part in error.
     let out = gyrobench(&[
@@ -134,7 +50,7 @@ fn an_interrupted_run_resumes_from_its_last_completed_step() {
         String::from_utf8_lossy(&out.stderr)
     );
     let err = String::from_utf8_lossy(&out.stderr);
-    assert!(err.contains("10 of 13 steps completed"), "{err}");
+    assert!(err.contains("10 of 15 steps completed"), "{err}");
     // The report covers both parts: every measurement once, in order, and
     // the frames of both logs.
     let r = json(&run.join("report.json"));
@@ -151,6 +67,8 @@ fn an_interrupted_run_resumes_from_its_last_completed_step() {
             "bias_dph:up",
             "bias_dph:east",
             "self_heating_dph",
+            "stability",
+            "raw",
             "compensated"
         ]
     );
