@@ -30,9 +30,10 @@ use library::{Effect, LIBRARY, MODEL4, separate_with};
 /// tests every remaining candidate at 0.05 / their number (Bonferroni).
 pub const ALPHA: f64 = 0.05;
 /// Smallest held-out improvement an effect must bring, as a fraction of
-/// the held-out sum of squares (ours: below it, a "significant" effect is
-/// too small to matter to a simulator).
-pub const MIN_GAIN: f64 = 0.03;
+/// the held-out sum of squares (ours: an effect at 1.5x the noise removes
+/// about 70 %; in 40 null and 40 outside-effect self-check runs, spurious
+/// acceptances removed 5-13 %, so 15 % keeps them out).
+pub const MIN_GAIN: f64 = 0.15;
 /// At most this many effects are added.
 pub const MAX_EFFECTS: usize = 3;
 
