@@ -26,6 +26,7 @@ use crate::recorder::topics;
 use crate::runlog::{self, Item, ReadSummary};
 use crate::sequencer::measure::{self, IntervalState, MeasureOutcome, Records, TickSums};
 use crate::sequencer::{Outcome, Resume, RunError, RunResult, resume_plan};
+use crate::twin::TwinConfig;
 
 /// Name of the metadata record with the run's configuration.
 pub const RUN_META: &str = "run";
@@ -198,6 +199,71 @@ struct State<'a> {
     earlier: Option<Box<Replayed>>,
 }
 
+/// The configuration a run logged in its `run` metadata.
+#[derive(Debug, Clone)]
+pub struct Logged {
+    /// Bench (`bench_toml`; the embedded bench when empty).
+    pub bench: BenchConfig,
+    /// Procedure (`procedure_toml`), checked against that bench.
+    pub procedure: Procedure,
+    /// Coefficients the run compensated with (`coeffs_toml`).
+    pub coeffs: Option<CoeffsFile>,
+    /// Twin of a simulated run (`twin_toml`).
+    pub twin: Option<TwinConfig>,
+}
+
+/// Parse the `run` metadata's configuration; errors say which part.
+pub fn logged(entries: &BTreeMap<String, String>) -> Result<Logged, String> {
+    let text = |k: &str| entries.get(k).filter(|t| !t.trim().is_empty());
+    let src = |k: &str, t: &str| Source::from_text(&format!("{k} (in the log)"), t);
+    let bench = match text("bench_toml") {
+        Some(t) => BenchConfig::from_source(&src("bench_toml", t))
+            .map_err(|e| format!("the logged bench configuration: {e}"))?,
+        None => BenchConfig::embedded(),
+    };
+    let procedure_text = text("procedure_toml")
+        .ok_or_else(|| "no procedure in the log's run metadata".to_owned())?;
+    let name = entries
+        .get("procedure_path")
+        .map_or("procedure (in the log)".to_owned(), |p| {
+            format!("{p} (in the log)")
+        });
+    let procedure = Procedure::from_source(&Source::from_text(&name, procedure_text), &bench)
+        .map_err(|e| format!("the logged procedure: {e}"))?;
+    let coeffs = text("coeffs_toml")
+        .map(|t| CoeffsFile::from_source(&src("coeffs_toml", t)))
+        .transpose()
+        .map_err(|e| format!("the logged coefficients: {e}"))?;
+    let twin = text("twin_toml")
+        .map(|t| TwinConfig::from_source(&src("twin_toml", t)))
+        .transpose()
+        .map_err(|e| format!("the logged twin: {e}"))?;
+    Ok(Logged {
+        bench,
+        procedure,
+        coeffs,
+        twin,
+    })
+}
+
+/// Where a resume of the run `prev` picks up after `completed` steps, with
+/// what its parts leave (records and measurements trimmed).
+pub fn resume_from(prev: &Replayed, completed: usize) -> Resume {
+    let (start_at, _) = resume_plan(&prev.procedure, completed);
+    let mut records = prev.result.records.clone();
+    let mut measurements = prev.result.measurements.clone();
+    Resume::trim(&prev.procedure, start_at, &mut records, &mut measurements);
+    Resume {
+        start_at,
+        completed,
+        part: prev.part + 1,
+        records,
+        measurements,
+        frames: prev.result.frames,
+        device_time_s: prev.result.device_time_s,
+    }
+}
+
 impl State<'_> {
     fn log_err(&self, message: impl Into<String>) -> String {
         format!("{}: {}", self.path.display(), message.into())
@@ -207,32 +273,9 @@ impl State<'_> {
         match name {
             RUN_META => {
                 self.meta = entries.clone();
-                let bench = match entries.get("bench_toml").filter(|t| !t.trim().is_empty()) {
-                    Some(t) => BenchConfig::from_source(&Source::from_text(
-                        "bench_toml (in the log)",
-                        t,
-                    ))
-                    .map_err(|e| self.log_err(format!("the logged bench configuration: {e}")))?,
-                    None => BenchConfig::embedded(),
-                };
-                let text = entries
-                    .get("procedure_toml")
-                    .ok_or_else(|| self.log_err("no procedure in the log's run metadata"))?;
-                let name = entries
-                    .get("procedure_path")
-                    .map_or("procedure (in the log)".to_owned(), |p| {
-                        format!("{p} (in the log)")
-                    });
-                self.procedure = Some(
-                    Procedure::from_source(&Source::from_text(&name, text), &bench)
-                        .map_err(|e| self.log_err(format!("the logged procedure: {e}")))?,
-                );
-                if let Some(t) = entries.get("coeffs_toml").filter(|t| !t.trim().is_empty()) {
-                    let c =
-                        CoeffsFile::from_source(&Source::from_text("coeffs_toml (in the log)", t))
-                            .map_err(|e| self.log_err(format!("the logged coefficients: {e}")))?;
-                    self.coeffs = Some(c.fit());
-                }
+                let l = logged(entries).map_err(|e| self.log_err(e))?;
+                self.coeffs = l.coeffs.as_ref().map(CoeffsFile::fit);
+                self.procedure = Some(l.procedure);
                 if let Some(prev) = entries.get("previous_part").filter(|p| !p.is_empty()) {
                     let prev_path = self.path.with_file_name(prev);
                     let earlier = replay(&prev_path, self.coeffs_override)
@@ -241,19 +284,12 @@ impl State<'_> {
                         .get("resume_completed_steps")
                         .and_then(|v| v.parse().ok())
                         .unwrap_or(earlier.completed_steps);
-                    let p = self
-                        .procedure
-                        .as_ref()
-                        .ok_or_else(|| self.log_err("no procedure"))?;
-                    let (start_at, _) = resume_plan(p, completed);
-                    let mut records = earlier.result.records.clone();
-                    let mut measurements = earlier.result.measurements.clone();
-                    Resume::trim(p, start_at, &mut records, &mut measurements);
-                    self.records = records;
-                    self.measurements = measurements;
-                    self.frames = earlier.result.frames;
-                    self.cursor = start_at;
-                    self.completed = start_at;
+                    let r = resume_from(&earlier, completed);
+                    self.records = r.records;
+                    self.measurements = r.measurements;
+                    self.frames = r.frames;
+                    self.cursor = r.start_at;
+                    self.completed = r.start_at;
                     self.earlier = Some(Box::new(earlier));
                 }
             }
@@ -559,11 +595,8 @@ pub fn record_rates(path: &Path, label: Option<&str>) -> Result<RecordRates, Rep
     runlog::read(path, |item| {
         match item {
             Item::Meta { name, entries } if name == RUN_META => {
-                let bench = BenchConfig::embedded();
-                let p = entries.get("procedure_toml").and_then(|t| {
-                    Procedure::from_source(&Source::from_text("procedure", t), &bench).ok()
-                });
-                if let Some(p) = p {
+                // The procedure as logged, checked against the logged bench.
+                if let Ok(Logged { procedure: p, .. }) = logged(entries) {
                     let records = p.steps().filter_map(|s| match &s.kind {
                         StepKind::Record { label, duration_s } => {
                             Some((label.clone(), *duration_s))

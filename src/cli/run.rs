@@ -14,18 +14,17 @@ use crate::bench::BenchConfig;
 use crate::bench::open_bench;
 use crate::clock::{Pacing, VirtualClock, utc_now};
 use crate::coeffs::CoeffsFile;
-use crate::config::Source;
 use crate::procedure::Procedure;
 use crate::procedure::estimate::estimate;
 use crate::protocol::frame::LinkStats;
 use crate::recorder::{Recorder, RunMeta};
-use crate::replay::{RESULT_META, add_link, replay, result_entries};
+use crate::replay::{RESULT_META, add_link, logged, replay, result_entries, resume_from};
 use crate::report::{Report, render_html};
+use crate::sequencer::Resume;
 use crate::sequencer::device::DeviceBench;
 use crate::sequencer::embedded::{EmbeddedBench, Fault};
 use crate::sequencer::guard::Guarded;
 use crate::sequencer::{self, BenchIo, BenchState, Options, Progress, Sink};
-use crate::sequencer::{Resume, resume_plan};
 use crate::twin::TwinConfig;
 
 #[derive(Debug, Args)]
@@ -229,7 +228,7 @@ fn fresh(args: &RunArgs, procedure_path: &Path) -> Result<Setup> {
 }
 
 /// The newest part of the run in `dir`: `run.mcap`, `run.part2.mcap`, ...
-fn last_part(dir: &Path) -> Result<(PathBuf, u32)> {
+fn last_part(dir: &Path) -> Result<PathBuf> {
     let first = dir.join("run.mcap");
     anyhow::ensure!(
         first.exists(),
@@ -240,16 +239,15 @@ fn last_part(dir: &Path) -> Result<(PathBuf, u32)> {
     while dir.join(format!("run.part{}.mcap", n + 1)).exists() {
         n += 1;
     }
-    let path = if n == 1 {
+    Ok(if n == 1 {
         first
     } else {
         dir.join(format!("run.part{n}.mcap"))
-    };
-    Ok((path, n))
+    })
 }
 
 fn resumed(dir: &Path) -> Result<Setup> {
-    let (last, n) = last_part(dir)?;
+    let last = last_part(dir)?;
     let prev = replay(&last, None).with_context(|| format!("reading {}", last.display()))?;
     anyhow::ensure!(
         matches!(
@@ -261,32 +259,10 @@ fn resumed(dir: &Path) -> Result<Setup> {
         prev.result.outcome
     );
     let meta = |k: &str| prev.meta.get(k).cloned().unwrap_or_default();
-    let bench_toml = meta("bench_toml");
-    let bench_cfg = if bench_toml.trim().is_empty() {
-        BenchConfig::embedded()
-    } else {
-        BenchConfig::from_source(&Source::from_text("bench_toml (in the log)", &bench_toml))?
-    };
-    let twin_toml = meta("twin_toml");
-    let twin = if twin_toml.trim().is_empty() {
-        TwinConfig::default_rl16()
-    } else {
-        TwinConfig::from_source(&Source::from_text("twin_toml (in the log)", &twin_toml))?
-    };
-    let coeffs_toml = meta("coeffs_toml");
-    let coeffs_file = if coeffs_toml.trim().is_empty() {
-        None
-    } else {
-        Some(CoeffsFile::from_source(&Source::from_text(
-            "coeffs_toml (in the log)",
-            &coeffs_toml,
-        ))?)
-    };
+    let config = logged(&prev.meta).map_err(|e| anyhow::anyhow!("{}: {e}", last.display()))?;
     let completed = prev.completed_steps;
-    let (start_at, _) = resume_plan(&prev.procedure, completed);
-    let mut records = prev.result.records.clone();
-    let mut measurements = prev.result.measurements.clone();
-    Resume::trim(&prev.procedure, start_at, &mut records, &mut measurements);
+    let state = resume_from(&prev, completed);
+    let start_at = state.start_at;
     eprintln!(
         "resuming {}: {} of {} steps completed, going on from step {} (last part {}, ended: {})",
         dir.display(),
@@ -310,23 +286,15 @@ fn resumed(dir: &Path) -> Result<Setup> {
             .get("bench")
             .cloned()
             .unwrap_or_else(|| "embedded".into()),
-        bench_cfg,
-        twin,
-        coeffs_file,
+        bench_cfg: config.bench,
+        twin: config.twin.unwrap_or_else(TwinConfig::default_rl16),
+        coeffs_file: config.coeffs,
         seed: meta("seed").parse().unwrap_or(1),
         dut: meta("dut_serial"),
         out: Some(dir.to_path_buf()),
         start_time_utc: Some(meta("start_time_utc")),
         resume: Some(Resumed {
-            state: Resume {
-                start_at,
-                completed,
-                part: n + 1,
-                records,
-                measurements,
-                frames: prev.result.frames,
-                device_time_s: prev.result.device_time_s,
-            },
+            state,
             previous_file: last
                 .file_name()
                 .map_or(String::new(), |f| f.to_string_lossy().into_owned()),
