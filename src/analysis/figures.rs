@@ -94,6 +94,31 @@ pub fn smoothed_derivative(x: &[f64], dt: f64, half: usize) -> Vec<f64> {
         .collect()
 }
 
+/// Slope by local linear regression over `±half_s` seconds at the
+/// samples' times `t_s`, never across a gap: the series is cut where the
+/// spacing exceeds 1.5 times its median (the moves between records), and
+/// each piece is differentiated on its own. Records concatenated into one
+/// series (a measure over several records, a run's recorded intervals)
+/// would otherwise see each jump between records as a steep slope.
+pub fn derivative_by_time(t_s: &[f64], x: &[f64], half_s: f64) -> Vec<f64> {
+    let mut spacing: Vec<f64> = t_s.windows(2).map(|w| w[1] - w[0]).collect();
+    if spacing.is_empty() {
+        return vec![0.0; x.len()];
+    }
+    spacing.sort_by(f64::total_cmp);
+    let dt = spacing[spacing.len() / 2].max(1e-6);
+    let half = (half_s / dt).round().max(1.0) as usize;
+    let mut out = Vec::with_capacity(x.len());
+    let mut start = 0;
+    for i in 1..=x.len() {
+        if i == x.len() || t_s[i] - t_s[i - 1] > 1.5 * dt {
+            out.extend(smoothed_derivative(&x[start..i], dt, half));
+            start = i;
+        }
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -123,5 +148,22 @@ mod tests {
         for d in smoothed_derivative(&x, 2.0, 10) {
             assert!((d - 0.125).abs() < 1e-12);
         }
+    }
+
+    #[test]
+    fn derivative_by_time_does_not_bridge_gaps() {
+        // Two records of a slope 0.01 per s with a jump of 5 and a 120 s
+        // gap between them: the jump must not show as a slope.
+        let t: Vec<f64> = (0..100).chain(220..320).map(f64::from).collect();
+        let x: Vec<f64> = t
+            .iter()
+            .map(|&t| 0.01 * t + if t > 200.0 { 5.0 } else { 0.0 })
+            .collect();
+        let d = derivative_by_time(&t, &x, 30.0);
+        assert_eq!(d.len(), t.len());
+        for v in d {
+            assert!((v - 0.01).abs() < 1e-12, "{v}");
+        }
+        assert_eq!(derivative_by_time(&[1.0], &[2.0], 30.0), vec![0.0]);
     }
 }

@@ -13,7 +13,7 @@
 use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 
-use super::figures::smoothed_derivative;
+use super::figures::derivative_by_time;
 use super::series::Interval;
 
 /// Half-width of the window over which d(dT)/dt is estimated, s (ours).
@@ -99,19 +99,12 @@ fn design(kind: ModelKind, series: &[Interval], ddt: &[f64], tau_w: f64) -> Vec<
     }
 }
 
-/// d(dT)/dt for a series of evenly spaced intervals, degC/s.
+/// d(dT)/dt of a series of intervals, degC/s (never across a gap between
+/// records: [`derivative_by_time`]).
 pub fn gradient_rate(series: &[Interval]) -> Vec<f64> {
-    let dt = spacing_s(series);
-    let half = (DERIVATIVE_HALF_WINDOW_S / dt).round().max(1.0) as usize;
+    let t: Vec<f64> = series.iter().map(|s| s.time_s).collect();
     let grad: Vec<f64> = series.iter().map(Interval::gradient_c).collect();
-    smoothed_derivative(&grad, dt, half)
-}
-
-fn spacing_s(series: &[Interval]) -> f64 {
-    match series {
-        [a, .., b] => (b.time_s - a.time_s) / (series.len() - 1) as f64,
-        _ => 1.0,
-    }
+    derivative_by_time(&t, &grad, DERIVATIVE_HALF_WINDOW_S)
 }
 
 /// Least squares with one constant per run; returns the coefficients (the

@@ -103,10 +103,9 @@ pub fn temperature_sensitivity(series: &[Interval]) -> Option<(f64, f64)> {
     if series.len() < 10 {
         return None;
     }
-    let dt = spacing(series);
+    let t: Vec<f64> = series.iter().map(|s| s.time_s).collect();
     let tk: Vec<f64> = series.iter().map(|s| s.tcase_c).collect();
-    let half = (30.0 / dt).round().max(1.0) as usize;
-    let rate = super::figures::smoothed_derivative(&tk, dt, half);
+    let rate = super::figures::derivative_by_time(&t, &tk, 30.0);
     let y: Vec<f64> = series.iter().map(Interval::bias_dph).collect();
     let n = series.len();
     let x = nalgebra::DMatrix::from_fn(n, 3, |i, j| match j {
