@@ -26,6 +26,9 @@ use crate::twin::TwinConfig;
 pub const THERMAL_CYCLE_TOML: &str = include_str!("../procedures/thermal_cycle.toml");
 /// The study's orientation run, as shipped.
 pub const ORIENTATION_TOML: &str = include_str!("../procedures/orientation.toml");
+/// The run that separates what those two cannot (thermal lag,
+/// scale-factor drift), as shipped.
+pub const SEPARATING_TOML: &str = include_str!("../procedures/separating.toml");
 
 /// One recorded 1 Hz interval with its record label and the orientation.
 #[derive(Debug, Clone)]

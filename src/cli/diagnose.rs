@@ -44,6 +44,11 @@ struct SelfcheckArgs {
     /// Only these library effects (comma-separated names; default: all).
     #[arg(long, value_delimiter = ',')]
     effects: Vec<String>,
+    /// Add procedures/separating.toml (axis down, two ramp rates, a pause
+    /// mid-ramp) to each trial: the run that makes thermal_lag and
+    /// scale_factor_temperature identifiable.
+    #[arg(long)]
+    separating: bool,
     /// Where to write selfcheck.json and selfcheck.html.
     #[arg(long)]
     out: PathBuf,
@@ -143,8 +148,14 @@ fn run_selfcheck(a: SelfcheckArgs) -> Result<Outcome> {
             .collect::<Result<_>>()?
     };
     anyhow::ensure!(a.runs >= 1, "--runs must be 1 or more");
-    let s = selfcheck::run(a.runs, a.seed, &effects, &|line| eprintln!("  {line}"))
-        .context("running the self-check")?;
+    let plan = selfcheck::Plan {
+        runs: a.runs,
+        seed: a.seed,
+        effects,
+        separating: a.separating,
+    };
+    let s =
+        selfcheck::run(&plan, &|line| eprintln!("  {line}")).context("running the self-check")?;
     std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
     write(
         &a.out.join("selfcheck.json"),
@@ -159,12 +170,19 @@ fn run_selfcheck(a: SelfcheckArgs) -> Result<Outcome> {
         100.0 * s.periodic_period_found
     );
     for p in &s.power {
+        let shows = s
+            .sizes
+            .iter()
+            .find(|z| z.effect == p.effect)
+            .map_or(f64::NAN, |z| z.gap_per_rms);
         println!(
-            "  {:<26} {:>4}x  named first {:>4.0} %  excess closed {:>4.0} %",
+            "  {:<26} {:>4}x  named first {:>4.0} %  excess closed {:>4.0} %  (coefficient {:.3e}; gap/RMS {:.2})",
             p.effect,
             p.amplitude,
             100.0 * p.named_first,
-            100.0 * p.excess_closed
+            100.0 * p.excess_closed,
+            p.coefficient,
+            shows
         );
     }
     eprintln!("self-check in {}", a.out.display());

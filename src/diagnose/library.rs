@@ -4,7 +4,7 @@
 //! fitted coefficient maps back to a twin parameter.
 
 use super::data::{RunData, Sample};
-use crate::analysis::figures::smoothed_derivative;
+use crate::analysis::figures::derivative_by_time;
 use crate::analysis::model::DERIVATIVE_HALF_WINDOW_S;
 
 /// Every effect the diagnosis knows, by its library name.
@@ -118,6 +118,11 @@ impl Effect {
         }
     }
 
+    /// Fitted quantities: the regressors plus the nonlinear parameter.
+    pub fn complexity(self) -> usize {
+        self.terms().len() + usize::from(self.parameter().is_some())
+    }
+
     /// The nonlinear parameter's name, when there is one.
     pub fn parameter(self) -> Option<&'static str> {
         match self {
@@ -155,15 +160,11 @@ impl Effect {
 }
 
 /// d(dT)/dt by local regression, as model 4 uses it, over the samples'
-/// own times (records may have gaps between them).
+/// own times (never across the gap between two records).
 fn gradient_rate(s: &[Sample]) -> Vec<f64> {
-    let dt = match s {
-        [a, .., b] => ((b.iv.time_s - a.iv.time_s) / (s.len() - 1) as f64).max(1e-3),
-        _ => 1.0,
-    };
-    let half = (DERIVATIVE_HALF_WINDOW_S / dt).round().max(1.0) as usize;
+    let t: Vec<f64> = s.iter().map(|x| x.iv.time_s).collect();
     let g: Vec<f64> = s.iter().map(|x| x.iv.gradient_c()).collect();
-    smoothed_derivative(&g, dt, half)
+    derivative_by_time(&t, &g, DERIVATIVE_HALF_WINDOW_S)
 }
 
 /// Play (backlash) operator of width `w` on the case temperature,
@@ -207,11 +208,14 @@ pub fn separate_with(a: Effect, b: Effect) -> String {
     } else if pair(GSensitivity, MagneticSensitivity) {
         "a run with the magnetic field changed (a Helmholtz coil or a mu-metal shield), or roll positions about a north-pointing axis".into()
     } else if pair(Hysteresis, ThermalLag) {
-        "a thermal cycle with a pause mid-ramp (lag decays at constant temperature, hysteresis does not), or ramps at two rates".into()
-    } else if pair(ThermalLag, CaseTemperature) || pair(ThermalLag, GradientRate) {
-        "ramps at two rates (0.5 and 2 degC/min): a lag separates from the temperature and its rate only when the rate changes".into()
-    } else if pair(ScaleFactorTemperature, CaseTemperature) {
-        "the thermal cycle repeated with the table turning at a constant rate (scale factor multiplies the input rate)".into()
+        "a long soak after a temperature step (a lag decays at constant temperature, hysteresis does not)".into()
+    } else if pair(ThermalLag, CaseTemperature)
+        || pair(ThermalLag, GradientRate)
+        || pair(ThermalLag, GradientQuadratic)
+    {
+        "no temperature profile alone: only the part of a case-temperature lag that model 4's block-gradient terms cannot follow tells them apart (a fifth of it in the study's thermal cycle; ramps at two rates and a pause mid-ramp did not add to it in the self-check); a temperature measured where the lag acts would".into()
+    } else if a == ScaleFactorTemperature || b == ScaleFactorTemperature {
+        "the thermal cycle repeated axis down (procedures/separating.toml): the Earth rate on the axis changes sign and a scale-factor drift with it, a bias drift does not".into()
     } else if pair(SelfHeating, CaseTemperature) || pair(SelfHeating, ThermalLag) {
         "a power-on at another chamber temperature (a cold start after a soak at -20 degC)".into()
     } else {

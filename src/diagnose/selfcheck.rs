@@ -11,8 +11,8 @@ use serde::Serialize;
 
 use super::data::{RunData, Sample};
 use super::library::{Effect, LIBRARY};
-use super::{Diagnosis, Options, diagnose};
-use crate::study::{ORIENTATION_TOML, StudyError, THERMAL_CYCLE_TOML, simulate};
+use super::{Options, diagnose};
+use crate::study::{ORIENTATION_TOML, SEPARATING_TOML, StudyError, THERMAL_CYCLE_TOML, simulate};
 use crate::twin::TwinConfig;
 use crate::twin::config as tc;
 
@@ -66,6 +66,8 @@ pub struct Trial {
     pub period_s: Option<f64>,
     /// Every candidate against the reference: name, held-out gap, p-value.
     pub candidates: Vec<(String, f64, f64)>,
+    /// Pairs reported as confounded.
+    pub confounded: Vec<[String; 2]>,
 }
 
 /// Per effect and amplitude.
@@ -75,6 +77,9 @@ pub struct Power {
     pub effect: String,
     /// Amplitude, noise units.
     pub amplitude: f64,
+    /// The coefficient injected for it (the effect's own unit: deg/h per
+    /// degC, per g, ..., along the self-check's direction).
+    pub coefficient: f64,
     /// Runs.
     pub runs: usize,
     /// Fraction named first.
@@ -85,6 +90,27 @@ pub struct Power {
     pub confounded: f64,
 }
 
+/// How much of an effect the procedures let show, per unit coefficient
+/// (the coefficient along [`DIRECTION`] for multi-term effects).
+#[derive(Debug, Clone, Serialize)]
+pub struct EffectSize {
+    /// Library name.
+    pub effect: String,
+    /// RMS of its contribution's 60 s means (each run's mean removed),
+    /// deg/h per unit coefficient.
+    pub rms_dph: f64,
+    /// The held-out gap the effect alone opens against the reference
+    /// (noise-free), deg/h per unit coefficient: the unit its amplitudes
+    /// are stated in. What the reference's refitted terms reproduce does
+    /// not count.
+    pub gap_dph: f64,
+    /// `gap_dph / rms_dph`: near 0, the reference's terms reproduce the
+    /// effect (it hides in them with these runs); about 1, none of it can
+    /// be absorbed (above 1 when the reference's terms, refitted to it,
+    /// extrapolate badly into the held-out blocks).
+    pub gap_per_rms: f64,
+}
+
 /// The self-check's result.
 #[derive(Debug, Clone, Serialize)]
 pub struct SelfCheck {
@@ -92,9 +118,13 @@ pub struct SelfCheck {
     pub runs: usize,
     /// First seed.
     pub seed: u64,
+    /// The procedures of each trial (names).
+    pub procedures: Vec<String>,
     /// Noise unit: the reference's held-out gap on null runs (RMS of the
     /// 60 s means), deg/h.
     pub noise_dph: f64,
+    /// How much of each effect these procedures let show.
+    pub sizes: Vec<EffectSize>,
     /// Detection power per effect and amplitude.
     pub power: Vec<Power>,
     /// Injected (rows) against attributed first (columns), counts.
@@ -126,32 +156,34 @@ fn to_run(samples: Vec<crate::study::Sample>, name: &str, twin: &TwinConfig) -> 
     }
 }
 
-/// The study's two procedures on `twin`: thermal cycle and orientation run.
-fn runs_of(twin: &TwinConfig, seed: u64) -> Result<Vec<RunData>, StudyError> {
-    let (_, a) = simulate(THERMAL_CYCLE_TOML, "thermal_cycle", twin, seed)?;
-    let (_, b) = simulate(
-        ORIENTATION_TOML,
-        "orientation",
-        twin,
-        seed.wrapping_add(1_000_000),
-    )?;
-    Ok(vec![
-        to_run(a, &format!("thermal_cycle (seed {seed})"), twin),
-        to_run(
-            b,
-            &format!("orientation (seed {})", seed.wrapping_add(1_000_000)),
-            twin,
-        ),
-    ])
+/// The runs of one trial on `twin`: the study's thermal cycle and
+/// orientation run, and with `separating` also `procedures/separating.toml`.
+fn runs_of(twin: &TwinConfig, seed: u64, separating: bool) -> Result<Vec<RunData>, StudyError> {
+    let mut procedures = vec![
+        (THERMAL_CYCLE_TOML, "thermal_cycle"),
+        (ORIENTATION_TOML, "orientation"),
+    ];
+    if separating {
+        procedures.push((SEPARATING_TOML, "separating"));
+    }
+    procedures
+        .into_iter()
+        .enumerate()
+        .map(|(k, (text, name))| {
+            let s = seed.wrapping_add(1_000_000 * k as u64);
+            let (_, samples) = simulate(text, name, twin, s)?;
+            Ok(to_run(samples, &format!("{name} (seed {s})"), twin))
+        })
+        .collect()
 }
 
 /// Unit direction of the multi-term effects (ours).
 const DIRECTION: [f64; 3] = [0.0, 0.8, 0.6];
 
-/// RMS, over the runs' 60 s means (each run's mean removed), of an
-/// effect's contribution with coefficient 1 along [`DIRECTION`].
-fn unit_rms(runs: &[RunData], e: Effect, p: f64) -> f64 {
-    let (mut ss, mut n) = (0.0, 0usize);
+/// An effect's contribution with coefficient 1 along [`DIRECTION`], per
+/// sample, runs in order.
+fn contribution(runs: &[RunData], e: Effect, p: f64) -> Vec<f64> {
+    let mut out = Vec::new();
     for run in runs {
         let cols = e.columns(run, p);
         let dir: &[f64] = match cols.len() {
@@ -159,18 +191,48 @@ fn unit_rms(runs: &[RunData], e: Effect, p: f64) -> f64 {
             2 => &DIRECTION[1..],
             _ => &[1.0],
         };
-        let v: Vec<f64> = (0..run.samples.len())
-            .map(|i| cols.iter().zip(dir).map(|(c, d)| c[i] * d).sum())
-            .collect();
-        let means: Vec<f64> = v
+        out.extend(
+            (0..run.samples.len())
+                .map(|i| cols.iter().zip(dir).map(|(c, d)| c[i] * d).sum::<f64>()),
+        );
+    }
+    out
+}
+
+/// RMS over the runs' 60 s means (each run's mean removed) of `v`.
+fn rms_of_means(runs: &[RunData], v: &[f64]) -> f64 {
+    let (mut ss, mut n, mut at) = (0.0, 0usize, 0);
+    for run in runs {
+        let means: Vec<f64> = v[at..at + run.samples.len()]
             .chunks_exact(super::engine::AVERAGING_S)
             .map(|c| c.iter().sum::<f64>() / c.len() as f64)
             .collect();
+        at += run.samples.len();
         let m = means.iter().sum::<f64>() / means.len().max(1) as f64;
         ss += means.iter().map(|x| (x - m).powi(2)).sum::<f64>();
         n += means.len();
     }
     (ss / n.max(1) as f64).sqrt()
+}
+
+/// How big an effect is, with coefficient 1: the held-out gap it opens
+/// against `reference` (what the reference's refitted terms reproduce
+/// does not count), and its plain RMS.
+#[derive(Debug, Clone, Copy)]
+struct Size {
+    visible: f64,
+    rms: f64,
+}
+
+fn size(runs: &[RunData], e: Effect, p: f64, reference: &TwinConfig) -> Size {
+    let c = contribution(runs, e, p);
+    let opts = Options {
+        twin: Some(reference.clone()),
+    };
+    Size {
+        visible: super::visible_gap(runs, &opts, &c),
+        rms: rms_of_means(runs, &c),
+    }
 }
 
 /// The twin with effect `e` added at coefficient `a` (along [`DIRECTION`]),
@@ -247,11 +309,12 @@ fn inject(base: &TwinConfig, e: Effect, a: f64) -> (TwinConfig, TwinConfig) {
 fn trial(
     injected: &Injected,
     seed: u64,
+    separating: bool,
     data_twin: &TwinConfig,
     reference: &TwinConfig,
     null_gap: f64,
-) -> Result<(Trial, Diagnosis), StudyError> {
-    let runs = runs_of(data_twin, seed)?;
+) -> Result<Trial, StudyError> {
+    let runs = runs_of(data_twin, seed, separating)?;
     let d = diagnose(
         &runs,
         &Options {
@@ -267,53 +330,66 @@ fn trial(
         ),
         _ => None,
     };
-    Ok((
-        Trial {
-            injected: injected.label(),
-            seed,
-            attributed: accepted.first().cloned(),
-            accepted,
-            gap_before_dph: before,
-            gap_after_dph: after,
-            excess_closed,
-            period_s: d.unexplained.period_s,
-            candidates: d
-                .candidates
-                .iter()
-                .map(|c| (c.name.clone(), c.held_out_gap_dph, c.p_value))
-                .collect(),
-        },
-        d,
-    ))
+    Ok(Trial {
+        injected: injected.label(),
+        seed,
+        attributed: accepted.first().cloned(),
+        accepted,
+        gap_before_dph: before,
+        gap_after_dph: after,
+        excess_closed,
+        period_s: d.unexplained.period_s,
+        candidates: d
+            .candidates
+            .iter()
+            .map(|c| (c.name.clone(), c.held_out_gap_dph, c.p_value))
+            .collect(),
+        confounded: d.confounded.iter().map(|c| c.effects.clone()).collect(),
+    })
 }
 
-/// Run the self-check: `runs` runs per case from `seed`, on the effects
-/// `effects` (default: the whole library).
-pub fn run(
-    runs: usize,
-    seed: u64,
-    effects: &[Effect],
-    progress: &(dyn Fn(&str) + Sync),
-) -> Result<SelfCheck, StudyError> {
+/// What to run.
+#[derive(Debug, Clone)]
+pub struct Plan {
+    /// Runs per case.
+    pub runs: usize,
+    /// First seed.
+    pub seed: u64,
+    /// The library effects to inject.
+    pub effects: Vec<Effect>,
+    /// Add `procedures/separating.toml` to each trial's runs.
+    pub separating: bool,
+}
+
+/// Run the self-check.
+pub fn run(plan: &Plan, progress: &(dyn Fn(&str) + Sync)) -> Result<SelfCheck, StudyError> {
+    let (runs, seed, effects, separating) = (
+        plan.runs,
+        plan.seed,
+        plan.effects.as_slice(),
+        plan.separating,
+    );
     let base = TwinConfig::default_rl16();
     // Null runs first: they give the noise unit.
-    let mut trials: Vec<(Injected, Trial, Vec<[String; 2]>)> = Vec::new();
+    let mut trials: Vec<(Injected, Trial)> = Vec::new();
     let mut null_gaps = Vec::new();
     let mut null_runs: Option<Vec<RunData>> = None;
     for k in 0..runs {
         let s = seed + k as u64;
-        let (t, d) = trial(&Injected::Null, s, &base, &base, 0.0)?;
+        let t = trial(&Injected::Null, s, separating, &base, &base, 0.0)?;
         progress(&format!("null seed {s}: {:?}", t.attributed));
         null_gaps.push(t.gap_before_dph);
-        trials.push((Injected::Null, t, pairs(&d)));
+        trials.push((Injected::Null, t));
         if null_runs.is_none() {
-            null_runs = Some(runs_of(&base, s)?);
+            null_runs = Some(runs_of(&base, s, separating)?);
         }
     }
     let noise = null_gaps.iter().sum::<f64>() / null_gaps.len().max(1) as f64;
     let probe = null_runs.unwrap_or_default();
 
     let mut cases: Vec<(Injected, TwinConfig, TwinConfig)> = Vec::new();
+    let mut sizes = Vec::new();
+    let mut coefficients: BTreeMap<(String, u64), f64> = BTreeMap::new();
     for &e in effects {
         let p = match e {
             Effect::SelfHeating => base.bias.warmup_tau_s,
@@ -321,9 +397,20 @@ pub fn run(
             Effect::ThermalLag => 1800.0,
             _ => f64::NAN,
         };
-        let unit = unit_rms(&probe, e, p);
+        let unit = size(&probe, e, p, &inject(&base, e, 1.0).1);
+        sizes.push(EffectSize {
+            effect: e.name().into(),
+            rms_dph: unit.rms,
+            gap_dph: unit.visible,
+            gap_per_rms: unit.visible / unit.rms,
+        });
         for &amp in &AMPLITUDES {
-            let a = if unit > 0.0 { amp * noise / unit } else { 0.0 };
+            let a = if unit.visible > 0.0 {
+                amp * noise / unit.visible
+            } else {
+                0.0
+            };
+            coefficients.insert((e.name().to_owned(), amp.to_bits()), a);
             let (data, reference) = inject(&base, e, a);
             cases.push((Injected::Effect(e.name().into(), amp), data, reference));
         }
@@ -353,12 +440,12 @@ pub fn run(
                     let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
                     let Some(&(c, s)) = jobs.get(i) else { break };
                     let (inj, data, reference) = &cases[c];
-                    let r = trial(inj, s, data, reference, noise);
-                    if let Ok((t, _)) = &r {
+                    let r = trial(inj, s, separating, data, reference, noise);
+                    if let Ok(t) = &r {
                         progress(&format!("{} seed {s}: {:?}", inj.label(), t.attributed));
                     }
                     if let Ok(mut v) = results.lock() {
-                        v.push((i, inj.clone(), r.map(|(t, d)| (t, pairs(&d)))));
+                        v.push((i, inj.clone(), r));
                     }
                 }
             });
@@ -367,12 +454,11 @@ pub fn run(
     let mut done = results.into_inner().unwrap_or_default();
     done.sort_by_key(|(i, _, _)| *i);
     for (_, inj, r) in done {
-        let (t, p) = r?;
-        trials.push((inj, t, p));
+        trials.push((inj, r?));
     }
 
     let mut confusion: BTreeMap<String, BTreeMap<String, usize>> = BTreeMap::new();
-    for (inj, t, _) in &trials {
+    for (inj, t) in &trials {
         *confusion
             .entry(inj.label())
             .or_default()
@@ -382,19 +468,23 @@ pub fn run(
     let mut power = Vec::new();
     for &e in effects {
         for &amp in &AMPLITUDES {
-            let mine: Vec<&(Injected, Trial, Vec<[String; 2]>)> = trials
+            let mine: Vec<&(Injected, Trial)> = trials
                 .iter()
-                .filter(|(i, _, _)| *i == Injected::Effect(e.name().into(), amp))
+                .filter(|(i, _)| *i == Injected::Effect(e.name().into(), amp))
                 .collect();
             let n = mine.len().max(1) as f64;
             let first: Vec<&Trial> = mine
                 .iter()
-                .filter(|(_, t, _)| t.attributed.as_deref() == Some(e.name()))
-                .map(|(_, t, _)| t)
+                .filter(|(_, t)| t.attributed.as_deref() == Some(e.name()))
+                .map(|(_, t)| t)
                 .collect();
             power.push(Power {
                 effect: e.name().into(),
                 amplitude: amp,
+                coefficient: coefficients
+                    .get(&(e.name().to_owned(), amp.to_bits()))
+                    .copied()
+                    .unwrap_or(f64::NAN),
                 runs: mine.len(),
                 named_first: first.len() as f64 / n,
                 excess_closed: if first.is_empty() {
@@ -404,7 +494,11 @@ pub fn run(
                 },
                 confounded: mine
                     .iter()
-                    .filter(|(_, _, p)| p.iter().any(|pair| pair.contains(&e.name().to_owned())))
+                    .filter(|(_, t)| {
+                        t.confounded
+                            .iter()
+                            .any(|pair| pair.contains(&e.name().to_owned()))
+                    })
                     .count() as f64
                     / n,
             });
@@ -413,15 +507,21 @@ pub fn run(
     let rate = |label: &Injected, f: &dyn Fn(&Trial) -> bool| {
         let v: Vec<&Trial> = trials
             .iter()
-            .filter(|(i, _, _)| i == label)
-            .map(|(_, t, _)| t)
+            .filter(|(i, _)| i == label)
+            .map(|(_, t)| t)
             .collect();
         v.iter().filter(|t| f(t)).count() as f64 / v.len().max(1) as f64
     };
+    let mut procedures = vec!["thermal_cycle".to_owned(), "orientation".to_owned()];
+    if separating {
+        procedures.push("separating".into());
+    }
     Ok(SelfCheck {
         runs,
         seed,
+        procedures,
         noise_dph: noise,
+        sizes,
         power,
         confusion,
         false_positive_rate: rate(&Injected::Null, &|t| t.attributed.is_some()),
@@ -430,12 +530,8 @@ pub fn run(
             t.period_s
                 .is_some_and(|p| (p / PERIODIC_PERIOD_S - 1.0).abs() < 0.2)
         }),
-        trials: trials.into_iter().map(|(_, t, _)| t).collect(),
+        trials: trials.into_iter().map(|(_, t)| t).collect(),
     })
-}
-
-fn pairs(d: &Diagnosis) -> Vec<[String; 2]> {
-    d.confounded.iter().map(|c| c.effects.clone()).collect()
 }
 
 /// Every library effect.
@@ -448,15 +544,26 @@ pub fn render_html(s: &SelfCheck) -> String {
     let mut power = String::new();
     for p in &s.power {
         power.push_str(&format!(
-            "<tr><td>{}</td><td class=num>{}</td><td class=num>{}</td><td class=num>{:.0} %</td><td class=num>{:.0} %</td><td class=num>{:.0} %</td></tr>\n",
+            "<tr><td>{}</td><td class=num>{}</td><td class=num>{:.4e}</td><td class=num>{}</td><td class=num>{:.0} %</td><td class=num>{:.0} %</td><td class=num>{:.0} %</td></tr>\n",
             p.effect,
             p.amplitude,
+            p.coefficient,
             p.runs,
             100.0 * p.named_first,
             100.0 * p.excess_closed,
             100.0 * p.confounded
         ));
     }
+    let sizes: String = s
+        .sizes
+        .iter()
+        .map(|z| {
+            format!(
+                "<tr><td>{}</td><td class=num>{:.4e}</td><td class=num>{:.4e}</td><td class=num>{:.2}</td></tr>\n",
+                z.effect, z.rms_dph, z.gap_dph, z.gap_per_rms
+            )
+        })
+        .collect();
     let cols: Vec<String> = {
         let mut c: Vec<String> = s
             .confusion
@@ -485,9 +592,10 @@ pub fn render_html(s: &SelfCheck) -> String {
         ));
     }
     format!(
-        "<!doctype html>\n<html lang=en><head><meta charset=utf-8><title>Diagnosis self-check</title><style>body{{font-family:sans-serif;margin:2em}} table{{border-collapse:collapse;margin:1em 0}} td,th{{border:1px solid #ccc;padding:.25em .5em;font-size:.9em}} td.num{{text-align:right;font-family:monospace}}</style></head><body>\n<h1>Diagnosis self-check</h1>\n<p>{} run(s) per case from seed {}, each case the study's thermal cycle and orientation run on the twin. Noise unit: {:.5} deg/h (the reference's held-out gap on null runs, RMS of 60 s means).</p>\n<p>False-positive rate on null runs: <b>{:.0} %</b>. Out-of-library periodic disturbance ({} s, {}x noise): attributed in {:.0} % of runs; its period reported within 20 % in {:.0} %.</p>\n<h2>Detection power</h2>\n<table><tr><th>effect</th><th>amplitude (noise units)</th><th>runs</th><th>named first</th><th>excess gap closed</th><th>in a confounded pair</th></tr>\n{power}</table>\n<h2>Confusion matrix</h2>\n<table>{conf}</table>\n</body></html>\n",
+        "<!doctype html>\n<html lang=en><head><meta charset=utf-8><title>Diagnosis self-check</title><style>body{{font-family:sans-serif;margin:2em}} table{{border-collapse:collapse;margin:1em 0}} td,th{{border:1px solid #ccc;padding:.25em .5em;font-size:.9em}} td.num{{text-align:right;font-family:monospace}}</style></head><body>\n<h1>Diagnosis self-check</h1>\n<p>{} run(s) per case from seed {}, each case these procedures on the twin: {}. Noise unit: {:.5} deg/h (the reference's held-out gap on null runs, RMS of 60 s means).</p>\n<p>False-positive rate on null runs: <b>{:.0} %</b>. Out-of-library periodic disturbance ({} s, {}x noise): attributed in {:.0} % of runs; its period reported within 20 % in {:.0} %.</p>\n<h2>Detection power</h2>\n<table><tr><th>effect</th><th>amplitude (noise units)</th><th>coefficient</th><th>runs</th><th>named first</th><th>excess gap closed</th><th>in a confounded pair</th></tr>\n{power}</table>\n<h2>Confusion matrix</h2>\n<table>{conf}</table>\n<h2>How much of each effect these runs show</h2>\n<p>Per unit coefficient: the RMS of its contribution (60 s means) and the held-out gap it alone opens against the reference (what the reference's refitted terms reproduce does not count). Amplitudes are in units of that gap; a small ratio means the effect hides in the reference's terms with these runs.</p>\n<table><tr><th>effect</th><th>RMS (deg/h per unit)</th><th>gap (deg/h per unit)</th><th>gap / RMS</th></tr>\n{sizes}</table>\n</body></html>\n",
         s.runs,
         s.seed,
+        crate::report::html::esc(&s.procedures.join(", ")),
         s.noise_dph,
         100.0 * s.false_positive_rate,
         PERIODIC_PERIOD_S,

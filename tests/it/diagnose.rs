@@ -120,7 +120,7 @@ fn the_quick_selfcheck_finds_the_effect_and_nothing_in_null_or_outside_runs() {
         "--runs",
         "1",
         "--effects",
-        "hysteresis",
+        "hysteresis,case_temperature",
         "--out",
         s(&dir),
     ]);
@@ -134,19 +134,92 @@ fn the_quick_selfcheck_finds_the_effect_and_nothing_in_null_or_outside_runs() {
     assert_eq!(sc["false_positive_rate"], 0.0, "{}", sc["trials"]);
     assert_eq!(sc["periodic_attributed"], 0.0, "{}", sc["trials"]);
     assert_eq!(sc["periodic_period_found"], 1.0, "{}", sc["trials"]);
-    let p3 = sc["power"]
-        .as_array()
-        .expect("power")
-        .iter()
-        .find(|p| p["amplitude"] == 3.0)
-        .expect("3x row");
-    assert_eq!(p3["named_first"], 1.0, "{p3}");
-    assert!(p3["excess_closed"].as_f64().expect("closed") >= 0.5, "{p3}");
+    for effect in ["hysteresis", "case_temperature"] {
+        let p3 = sc["power"]
+            .as_array()
+            .expect("power")
+            .iter()
+            .find(|p| p["amplitude"] == 3.0 && p["effect"] == effect)
+            .expect("3x row");
+        assert_eq!(p3["named_first"], 1.0, "{p3}");
+        assert!(p3["excess_closed"].as_f64().expect("closed") >= 0.5, "{p3}");
+    }
     assert!(sc["confusion"]["hysteresis@3"]["hysteresis"].as_u64() == Some(1));
+    // Axis up, a case-temperature term and a short lag of it explain the
+    // same thing: the simpler is named, the pair reported as confounded;
+    // hysteresis is told apart from everything.
+    let trial = |label: &str| {
+        sc["trials"]
+            .as_array()
+            .expect("trials")
+            .iter()
+            .find(|t| t["injected"] == label)
+            .expect("trial")
+            .clone()
+    };
+    let case = trial("case_temperature@3");
+    assert!(
+        case["confounded"]
+            .as_array()
+            .expect("pairs")
+            .iter()
+            .any(|p| p[0] == "case_temperature" && p[1] == "thermal_lag"),
+        "{case}"
+    );
+    assert_eq!(trial("hysteresis@3")["confounded"], serde_json::json!([]));
     assert!(
         std::fs::read_to_string(dir.join("selfcheck.html"))
             .expect("html")
             .contains("Confusion matrix")
     );
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
+
+/// With the study's runs a scale-factor drift hides in the temperature
+/// terms; the axis-down run of `procedures/separating.toml` shows it.
+#[test]
+fn the_separating_run_shows_a_scale_factor_drift() {
+    let dir = temp_dir("selfcheck-separating");
+    let mut shown = Vec::new();
+    for extra in [&[][..], &["--separating"][..]] {
+        let out = dir.join(format!("sc{}", extra.len()));
+        let mut args = vec![
+            "diagnose",
+            "selfcheck",
+            "--runs",
+            "1",
+            "--effects",
+            "scale_factor_temperature",
+            "--out",
+            s(&out),
+        ];
+        args.extend_from_slice(extra);
+        let r = gyrobench(&args);
+        assert_eq!(
+            r.status.code(),
+            Some(0),
+            "{}",
+            String::from_utf8_lossy(&r.stderr)
+        );
+        let sc = json(&out.join("selfcheck.json"));
+        assert_eq!(sc["false_positive_rate"], 0.0, "{}", sc["trials"]);
+        let p3 = sc["power"]
+            .as_array()
+            .expect("power")
+            .iter()
+            .find(|p| p["amplitude"] == 3.0)
+            .expect("3x row")
+            .clone();
+        assert_eq!(p3["named_first"], 1.0, "{p3}");
+        shown.push((
+            sc["sizes"][0]["gap_per_rms"].as_f64().expect("gap_per_rms"),
+            p3["coefficient"].as_f64().expect("coefficient"),
+        ));
+    }
+    let ((study, c_study), (separating, c_separating)) = (shown[0], shown[1]);
+    assert!(study < 0.3, "axis up only: {study} of the drift shows");
+    assert!(separating > 0.8, "with the axis-down run: {separating}");
+    // The smallest drift found at 3x the noise is several times smaller.
+    assert!(c_separating < 0.25 * c_study, "{c_study} -> {c_separating}");
     std::fs::remove_dir_all(&dir).expect("cleanup");
 }
