@@ -62,6 +62,10 @@ pub struct ThermalLayer {
     pub per_sensor_c: BTreeMap<String, f64>,
     /// How the layer's simulator was made.
     pub reference: String,
+    /// Without a twin: the thermal network fitted to the runs (it goes
+    /// into `twin-updated.toml`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub fitted: Option<crate::twin::config::ThermalConfig>,
 }
 
 /// Rate from measured temperatures, orientation and run time.
@@ -574,6 +578,9 @@ pub fn diagnose(runs: &[RunData], opts: &Options) -> Diagnosis {
 pub fn updated_twin(base: &TwinConfig, d: &Diagnosis) -> TwinConfig {
     use crate::twin::config as tc;
     let mut t = base.clone();
+    if let Some(fitted) = &d.layers.thermal.fitted {
+        t.thermal = fitted.clone();
+    }
     let get = |a: &Accepted, k: &str| a.parameters.get(k).copied().unwrap_or(0.0);
     for a in &d.effects {
         match Effect::from_name(&a.name) {

@@ -41,6 +41,16 @@ fn a_withheld_effect_is_found_and_the_updated_twin_closes_the_gap() {
         "{}",
         d["layers"]
     );
+    // Without a twin the thermal network is fitted: on the twin's own runs
+    // nothing is left but the sensors' resolution, and the fit finds the
+    // twin's time constants.
+    let thermal = &d["layers"]["thermal"];
+    assert!(
+        thermal["gap_c"].as_f64().expect("gap_c") < 0.05,
+        "{thermal}"
+    );
+    let case_tau = thermal["fitted"]["case_tau_s"].as_f64().expect("fitted");
+    assert!((case_tau / 1200.0 - 1.0).abs() < 0.05, "{thermal}");
     let gap = d["layers"]["rate"]["gap_dph"].as_f64().expect("gap_dph");
     let segs = d["where"].as_array().expect("where");
     assert!(!segs.is_empty());
