@@ -120,20 +120,21 @@ fn a_withheld_effect_is_found_and_the_updated_twin_closes_the_gap() {
     std::fs::remove_dir_all(&dir).expect("cleanup");
 }
 
-/// The quick version of the self-check: one run per case, one effect.
-#[test]
-fn the_quick_selfcheck_finds_the_effect_and_nothing_in_null_or_outside_runs() {
-    let dir = temp_dir("selfcheck");
-    let r = gyrobench(&[
+/// `diagnose selfcheck --runs 1 --effects EFFECTS [extra] --out DIR`:
+/// its selfcheck.json, after checking it ran and found nothing in null runs.
+fn quick_selfcheck(dir: &std::path::Path, effects: &str, extra: &[&str]) -> serde_json::Value {
+    let mut args = vec![
         "diagnose",
         "selfcheck",
         "--runs",
         "1",
         "--effects",
-        "hysteresis,case_temperature",
+        effects,
         "--out",
-        s(&dir),
-    ]);
+        s(dir),
+    ];
+    args.extend_from_slice(extra);
+    let r = gyrobench(&args);
     assert_eq!(
         r.status.code(),
         Some(0),
@@ -142,15 +143,29 @@ fn the_quick_selfcheck_finds_the_effect_and_nothing_in_null_or_outside_runs() {
     );
     let sc = json(&dir.join("selfcheck.json"));
     assert_eq!(sc["false_positive_rate"], 0.0, "{}", sc["trials"]);
+    sc
+}
+
+/// The 3x row of `effect` in a self-check's power table.
+fn power_at_3x(sc: &serde_json::Value, effect: &str) -> serde_json::Value {
+    sc["power"]
+        .as_array()
+        .expect("power")
+        .iter()
+        .find(|p| p["amplitude"] == 3.0 && p["effect"] == effect)
+        .expect("3x row")
+        .clone()
+}
+
+/// The quick version of the self-check: one run per case, one effect.
+#[test]
+fn the_quick_selfcheck_finds_the_effect_and_nothing_in_null_or_outside_runs() {
+    let dir = temp_dir("selfcheck");
+    let sc = quick_selfcheck(&dir, "hysteresis,case_temperature", &[]);
     assert_eq!(sc["periodic_attributed"], 0.0, "{}", sc["trials"]);
     assert_eq!(sc["periodic_period_found"], 1.0, "{}", sc["trials"]);
     for effect in ["hysteresis", "case_temperature"] {
-        let p3 = sc["power"]
-            .as_array()
-            .expect("power")
-            .iter()
-            .find(|p| p["amplitude"] == 3.0 && p["effect"] == effect)
-            .expect("3x row");
+        let p3 = power_at_3x(&sc, effect);
         assert_eq!(p3["named_first"], 1.0, "{p3}");
         assert!(p3["excess_closed"].as_f64().expect("closed") >= 0.5, "{p3}");
     }
@@ -193,33 +208,8 @@ fn the_separating_run_shows_a_scale_factor_drift() {
     let mut shown = Vec::new();
     for extra in [&[][..], &["--separating"][..]] {
         let out = dir.join(format!("sc{}", extra.len()));
-        let mut args = vec![
-            "diagnose",
-            "selfcheck",
-            "--runs",
-            "1",
-            "--effects",
-            "scale_factor_temperature",
-            "--out",
-            s(&out),
-        ];
-        args.extend_from_slice(extra);
-        let r = gyrobench(&args);
-        assert_eq!(
-            r.status.code(),
-            Some(0),
-            "{}",
-            String::from_utf8_lossy(&r.stderr)
-        );
-        let sc = json(&out.join("selfcheck.json"));
-        assert_eq!(sc["false_positive_rate"], 0.0, "{}", sc["trials"]);
-        let p3 = sc["power"]
-            .as_array()
-            .expect("power")
-            .iter()
-            .find(|p| p["amplitude"] == 3.0)
-            .expect("3x row")
-            .clone();
+        let sc = quick_selfcheck(&out, "scale_factor_temperature", extra);
+        let p3 = power_at_3x(&sc, "scale_factor_temperature");
         assert_eq!(p3["named_first"], 1.0, "{p3}");
         shown.push((
             sc["sizes"][0]["gap_per_rms"].as_f64().expect("gap_per_rms"),
