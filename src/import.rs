@@ -22,7 +22,7 @@ use crate::driver::{ChamberMode, ChamberReading, TableReading};
 use crate::geometry::{Orientation, Site, TableAngles};
 use crate::interchange::{self, CsvError, Row};
 use crate::procedure::{Procedure, StepKind};
-use crate::recorder::{Recorder, RunMeta, topics};
+use crate::recorder::{Rate1Hz, Recorder, RunMeta, TablePose, topics};
 use crate::replay::{RESULT_META, RUN_META};
 use crate::runlog::{self, Item};
 use crate::sequencer::measure::{self, MeasureOutcome, Records};
@@ -402,27 +402,6 @@ fn partial(out: &Path) -> PathBuf {
     out.with_file_name(name)
 }
 
-#[derive(Deserialize)]
-struct RateRow {
-    t_s: f64,
-    rate_dph: f64,
-    t1_c: f64,
-    t2_c: f64,
-    tcase_c: f64,
-    chamber_c: f64,
-    #[serde(default)]
-    record: Option<String>,
-}
-
-#[derive(Deserialize)]
-struct TableRow {
-    azimuth_deg: f64,
-    elevation_deg: f64,
-    roll_deg: f64,
-    #[serde(default)]
-    step: String,
-}
-
 /// Write every 1 Hz interval of the log at `log` as interchange CSV at
 /// `out`; `step` is the record label, or the procedure step while not
 /// recording. Returns the rows written.
@@ -434,7 +413,7 @@ pub fn export(log: &Path, out: &Path) -> Result<usize, ImportError> {
     let err = |e: &dyn std::fmt::Display| format!("writing {}: {e}", tmp.display());
     w.write_record(interchange::HEADER)
         .map_err(|e| ImportError::Other(err(&e)))?;
-    let mut table: Option<TableRow> = None;
+    let mut table: Option<TablePose> = None;
     let mut rows = 0usize;
     let mut saw_run = false;
     let read = runlog::read(log, |item| {
@@ -444,7 +423,7 @@ pub fn export(log: &Path, out: &Path) -> Result<usize, ImportError> {
                 table = Some(serde_json::from_slice(data).map_err(|e| format!("{topic}: {e}"))?);
             }
             Item::Message { topic, data, .. } if topic == topics::RATE_1HZ => {
-                let r: RateRow =
+                let r: Rate1Hz =
                     serde_json::from_slice(data).map_err(|e| format!("{topic}: {e}"))?;
                 let Some(t) = &table else {
                     return Err("a 1 Hz interval before any table state".into());

@@ -12,7 +12,7 @@ use std::io::BufWriter;
 use std::path::Path;
 
 use mcap::records::MessageHeader;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use crate::analysis::series::Interval;
 use crate::clock::Stopwatch;
@@ -40,6 +40,82 @@ const CHAMBER_SCHEMA: &str = r#"{"type":"object","title":"gyrobench.ChamberState
 const TABLE_SCHEMA: &str = r#"{"type":"object","title":"gyrobench.TableState","properties":{"t_s":{"type":"number"},"outer_deg":{"type":"number"},"inner_deg":{"type":"number"},"outer_rate_dps":{"type":"number"},"inner_rate_dps":{"type":"number"},"commanded_outer_deg":{"type":"number"},"commanded_inner_deg":{"type":"number"},"azimuth_deg":{"type":"number"},"elevation_deg":{"type":"number"},"roll_deg":{"type":"number"},"earth_rate_dph":{"type":"number"},"in_position":{"type":"boolean"},"step":{"type":"string"}},"required":["t_s","outer_deg","inner_deg","outer_rate_dps","inner_rate_dps","commanded_outer_deg","commanded_inner_deg","azimuth_deg","elevation_deg","roll_deg","earth_rate_dph","step"]}"#;
 const LOG_SCHEMA: &str = r#"{"type":"object","title":"foxglove.Log","properties":{"timestamp":{"type":"object","properties":{"sec":{"type":"integer","minimum":0},"nsec":{"type":"integer","minimum":0}}},"level":{"type":"integer","description":"1 debug, 2 info, 3 warning, 4 error, 5 fatal"},"message":{"type":"string"},"name":{"type":"string"},"file":{"type":"string"},"line":{"type":"integer"}},"required":["timestamp","level","message","name","file","line"]}"#;
 const LINK_SCHEMA: &str = r#"{"type":"object","title":"gyrobench.LinkStats","properties":{"t_s":{"type":"number"},"bytes":{"type":"integer"},"frames":{"type":"integer"},"resyncs":{"type":"integer"},"skipped_bytes":{"type":"integer"},"crc_errors":{"type":"integer"},"lost_frames":{"type":"integer"},"duplicates":{"type":"integer"}},"required":["t_s","frames","lost_frames","crc_errors"]}"#;
+
+/// One `/gyro/rate_1hz` message: the 1 Hz interval as the recorder writes
+/// it and every reader (replay, export, diagnose) reads it back.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Rate1Hz {
+    /// Device time at the end of the interval, s.
+    pub t_s: f64,
+    /// Mean rate, deg/h (Earth rate included).
+    pub rate_dph: f64,
+    /// Earth (+ table) rate on the axis, deg/h.
+    pub reference_dph: f64,
+    /// `rate_dph - reference_dph`.
+    #[serde(default)]
+    pub bias_dph: f64,
+    /// Block sensor 1, degC.
+    pub t1_c: f64,
+    /// Block sensor 2, degC.
+    pub t2_c: f64,
+    /// Case, degC.
+    pub tcase_c: f64,
+    /// Chamber air, degC.
+    pub chamber_c: f64,
+    /// Frames in the interval (0 for an imported run).
+    #[serde(default)]
+    pub frames: u32,
+    /// Record label while recording.
+    #[serde(default)]
+    pub record: Option<String>,
+}
+
+impl Rate1Hz {
+    /// The message of an interval.
+    pub fn new(iv: &Interval, record: Option<&str>) -> Self {
+        Self {
+            t_s: iv.time_s,
+            rate_dph: iv.rate_dph,
+            reference_dph: iv.reference_dph,
+            bias_dph: iv.bias_dph(),
+            t1_c: iv.t1_c,
+            t2_c: iv.t2_c,
+            tcase_c: iv.tcase_c,
+            chamber_c: iv.chamber_c,
+            frames: iv.frames,
+            record: record.map(str::to_owned),
+        }
+    }
+
+    /// The interval as logged.
+    pub fn interval(&self) -> Interval {
+        Interval {
+            time_s: self.t_s,
+            rate_dph: self.rate_dph,
+            reference_dph: self.reference_dph,
+            t1_c: self.t1_c,
+            t2_c: self.t2_c,
+            tcase_c: self.tcase_c,
+            chamber_c: self.chamber_c,
+            frames: self.frames,
+        }
+    }
+}
+
+/// The parts of a `/table/state` message the readers of a run's
+/// orientation use.
+#[derive(Debug, Clone, Deserialize)]
+pub struct TablePose {
+    /// Body azimuth, deg.
+    pub azimuth_deg: f64,
+    /// Body elevation, deg.
+    pub elevation_deg: f64,
+    /// Body roll, deg.
+    pub roll_deg: f64,
+    /// Procedure step key.
+    #[serde(default)]
+    pub step: String,
+}
 
 /// Run metadata stored in the file (an MCAP metadata record named `run`).
 #[derive(Debug, Clone, Default)]
@@ -285,35 +361,7 @@ impl Sink for Recorder {
     }
 
     fn interval(&mut self, iv: &Interval, record: Option<&str>) -> std::io::Result<()> {
-        #[derive(Serialize)]
-        struct R<'a> {
-            t_s: f64,
-            rate_dph: f64,
-            reference_dph: f64,
-            bias_dph: f64,
-            t1_c: f64,
-            t2_c: f64,
-            tcase_c: f64,
-            chamber_c: f64,
-            frames: u32,
-            record: Option<&'a str>,
-        }
-        self.write_json(
-            topics::RATE_1HZ,
-            iv.time_s,
-            &R {
-                t_s: iv.time_s,
-                rate_dph: iv.rate_dph,
-                reference_dph: iv.reference_dph,
-                bias_dph: iv.bias_dph(),
-                t1_c: iv.t1_c,
-                t2_c: iv.t2_c,
-                tcase_c: iv.tcase_c,
-                chamber_c: iv.chamber_c,
-                frames: iv.frames,
-                record,
-            },
-        )
+        self.write_json(topics::RATE_1HZ, iv.time_s, &Rate1Hz::new(iv, record))
     }
 
     fn event(&mut self, t_s: f64, level: u8, message: &str) -> std::io::Result<()> {

@@ -16,13 +16,12 @@ use serde::Deserialize;
 use serde::de::{IgnoredAny, SeqAccess, Visitor};
 
 use crate::analysis::model::Fit;
-use crate::analysis::series::Interval;
 use crate::bench::BenchConfig;
 use crate::coeffs::CoeffsFile;
 use crate::config::Source;
 use crate::procedure::{Procedure, StepKind};
 use crate::protocol::frame::LinkStats;
-use crate::recorder::topics;
+use crate::recorder::{Rate1Hz, topics};
 use crate::runlog::{self, Item, ReadSummary};
 use crate::sequencer::measure::{self, IntervalState, MeasureOutcome, Records, TickSums};
 use crate::sequencer::{Outcome, Resume, RunError, RunResult, resume_plan};
@@ -124,42 +123,6 @@ struct TableMsg {
 #[derive(Deserialize)]
 struct ChamberMsg {
     air_c: f64,
-}
-
-#[derive(Deserialize)]
-struct RateMsg {
-    #[serde(default)]
-    record: Option<String>,
-    #[serde(default)]
-    t_s: Option<f64>,
-    #[serde(default)]
-    rate_dph: Option<f64>,
-    #[serde(default)]
-    reference_dph: Option<f64>,
-    #[serde(default)]
-    t1_c: Option<f64>,
-    #[serde(default)]
-    t2_c: Option<f64>,
-    #[serde(default)]
-    tcase_c: Option<f64>,
-    #[serde(default)]
-    chamber_c: Option<f64>,
-}
-
-impl RateMsg {
-    /// The interval as logged (imported runs, which have no frames).
-    fn interval(&self) -> Option<Interval> {
-        Some(Interval {
-            time_s: self.t_s?,
-            rate_dph: self.rate_dph?,
-            reference_dph: self.reference_dph?,
-            t1_c: self.t1_c?,
-            t2_c: self.t2_c?,
-            tcase_c: self.tcase_c?,
-            chamber_c: self.chamber_c?,
-            frames: 0,
-        })
-    }
 }
 
 #[derive(Deserialize)]
@@ -331,13 +294,10 @@ impl State<'_> {
             }
             topics::RATE_1HZ => {
                 // The live run wrote this interval from the tick just logged.
-                let m: RateMsg = serde_json::from_slice(data).map_err(|e| bad(topic, e))?;
+                let m: Rate1Hz = serde_json::from_slice(data).map_err(|e| bad(topic, e))?;
                 let Some((sums, sc)) = self.pending.take() else {
                     // No frames before it: an imported run; take the interval as logged.
-                    let iv = m.interval().ok_or_else(|| {
-                        self.log_err("a 1 Hz interval with neither frames before it nor its values")
-                    })?;
-                    self.records.push(iv, m.record.as_deref());
+                    self.records.push(m.interval(), m.record.as_deref());
                     return Ok(());
                 };
                 let Some((t_s, reference_dph)) = self.table else {
@@ -619,7 +579,7 @@ pub fn record_rates(path: &Path, label: Option<&str>) -> Result<RecordRates, Rep
                 pending = serde_json::from_slice(data).ok();
             }
             Item::Message { topic, data, .. } if topic == topics::RATE_1HZ => {
-                let m: RateMsg = serde_json::from_slice(data)
+                let m: Rate1Hz = serde_json::from_slice(data)
                     .map_err(|e| format!("a {topic} message does not parse: {e}"))?;
                 let mine = want
                     .as_deref()
@@ -633,10 +593,8 @@ pub fn record_rates(path: &Path, label: Option<&str>) -> Result<RecordRates, Rep
                     }
                     // No frames (an imported run): the 1 Hz means.
                     None if mine => {
-                        if let Some(r) = m.rate_dph {
-                            out.dt_s = 1.0;
-                            out.rate_dph.push(r);
-                        }
+                        out.dt_s = 1.0;
+                        out.rate_dph.push(m.rate_dph);
                     }
                     _ => {}
                 }

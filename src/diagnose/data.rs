@@ -4,11 +4,10 @@
 use std::path::Path;
 
 use nalgebra::Vector3;
-use serde::Deserialize;
 
 use crate::analysis::series::Interval;
 use crate::geometry::{Orientation, Site, gravity_ned_g};
-use crate::recorder::topics;
+use crate::recorder::{Rate1Hz, TablePose, topics};
 use crate::replay::{RUN_META, ReplayError};
 use crate::runlog::{self, Item};
 
@@ -53,30 +52,6 @@ impl Sample {
     }
 }
 
-#[derive(Deserialize)]
-struct Rate {
-    t_s: f64,
-    rate_dph: f64,
-    reference_dph: f64,
-    t1_c: f64,
-    t2_c: f64,
-    tcase_c: f64,
-    chamber_c: f64,
-    #[serde(default)]
-    frames: u32,
-    #[serde(default)]
-    record: Option<String>,
-}
-
-#[derive(Deserialize)]
-struct Table {
-    azimuth_deg: f64,
-    elevation_deg: f64,
-    roll_deg: f64,
-    #[serde(default)]
-    step: String,
-}
-
 /// Load a run's log (live, simulated or imported).
 pub fn load(path: &Path) -> Result<RunData, ReplayError> {
     let log_err = |message: String| ReplayError::Log {
@@ -84,7 +59,7 @@ pub fn load(path: &Path) -> Result<RunData, ReplayError> {
         message,
     };
     let mut site: Option<Site> = None;
-    let mut table: Option<Table> = None;
+    let mut table: Option<TablePose> = None;
     let mut samples = Vec::new();
     runlog::read(path, |item| {
         match item {
@@ -94,27 +69,22 @@ pub fn load(path: &Path) -> Result<RunData, ReplayError> {
                     .and_then(|s| serde_json::from_str(s).ok());
             }
             Item::Message { topic, data, .. } if topic == topics::TABLE => {
-                table = Some(serde_json::from_slice(data).map_err(|e| format!("{topic}: {e}"))?);
+                table = Some(
+                    serde_json::from_slice::<TablePose>(data)
+                        .map_err(|e| format!("{topic}: {e}"))?,
+                );
             }
             Item::Message { topic, data, .. } if topic == topics::RATE_1HZ => {
-                let r: Rate = serde_json::from_slice(data).map_err(|e| format!("{topic}: {e}"))?;
+                let r: Rate1Hz =
+                    serde_json::from_slice(data).map_err(|e| format!("{topic}: {e}"))?;
                 let Some(t) = &table else {
                     return Err("a 1 Hz interval before any table state".into());
                 };
-                let Some(record) = r.record else {
+                let Some(record) = r.record.clone() else {
                     return Ok(());
                 };
                 samples.push(Sample {
-                    iv: Interval {
-                        time_s: r.t_s,
-                        rate_dph: r.rate_dph,
-                        reference_dph: r.reference_dph,
-                        t1_c: r.t1_c,
-                        t2_c: r.t2_c,
-                        tcase_c: r.tcase_c,
-                        chamber_c: r.chamber_c,
-                        frames: r.frames,
-                    },
+                    iv: r.interval(),
                     orientation: Orientation::new(t.azimuth_deg, t.elevation_deg, t.roll_deg),
                     record,
                     step: t.step.clone(),
