@@ -1,6 +1,7 @@
 //! `diagnosis.html`: the layers' gaps, where the gap lies, the accepted
-//! effects before and after, the residual against time with the segments
-//! marked, and the residual's Allan deviation against the noise floor.
+//! effects before and after, the rate and thermal residuals against time
+//! (segments marked on the rate's), the residual per position, and the
+//! residual's Allan deviation against the noise floor.
 
 use plotters::prelude::*;
 
@@ -73,6 +74,147 @@ fn residual_chart(d: &Diagnosis, run: usize) -> String {
         c.draw_series(LineSeries::new(s.iter().map(|p| (p.0, p.2)), BLUE))?
             .label("with the accepted effects")
             .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], BLUE));
+        legend(&mut c)?;
+        root.present()?;
+        Ok(())
+    })
+}
+
+/// Thermal residual of one run against time: T1, T2, TK.
+fn thermal_chart(d: &Diagnosis, run: usize) -> String {
+    let Some(s) = d.layers.thermal.series.get(run).filter(|s| s.len() >= 2) else {
+        return String::new();
+    };
+    let name = d.runs.get(run).cloned().unwrap_or_default();
+    svg(|out| {
+        let root = SVGBackend::with_string(out, (W, H)).into_drawing_area();
+        root.fill(&WHITE)?;
+        let (t0, t1) = range(s.iter().map(|p| p.0 / 3600.0));
+        let (y0, y1) = range(s.iter().flat_map(|p| p.1));
+        let mut c = ChartBuilder::on(&root)
+            .caption(
+                format!("Thermal residual, measured - simulated (60 s means): {name}"),
+                ("sans-serif", 15),
+            )
+            .margin(8)
+            .x_label_area_size(30)
+            .y_label_area_size(56)
+            .build_cartesian_2d(t0..t1, y0..y1)?;
+        c.configure_mesh()
+            .x_desc("time since power-on, h")
+            .y_desc("degC")
+            .draw()?;
+        for (k, (label, colour)) in [("T1", RED), ("T2", BLUE), ("TK", BLACK)]
+            .into_iter()
+            .enumerate()
+        {
+            c.draw_series(LineSeries::new(
+                s.iter().map(|p| (p.0 / 3600.0, p.1[k])),
+                colour,
+            ))?
+            .label(label)
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], colour));
+        }
+        legend(&mut c)?;
+        root.present()?;
+        Ok(())
+    })
+}
+
+/// Mean held-out rate residual at one body orientation.
+struct Position {
+    /// (azimuth, elevation, roll), deg.
+    angles: [f64; 3],
+    seconds: usize,
+    /// Reference simulator, deg/h.
+    reference: f64,
+    /// With the accepted effects, deg/h.
+    accepted: f64,
+}
+
+/// The residual per position, in the order the runs visit them.
+fn per_position(d: &Diagnosis) -> Vec<Position> {
+    let (Some((base, fin)), Some(data)) = (&d.fits, &d.data) else {
+        return Vec::new();
+    };
+    let key = |o: &[f64; 3]| o.map(|v| (v * 10.0).round() as i64);
+    let mut keys: Vec<[i64; 3]> = Vec::new();
+    let mut out: Vec<Position> = Vec::new();
+    for (i, o) in data.orientation.iter().enumerate() {
+        let k = key(o);
+        let at = keys.iter().position(|x| *x == k).unwrap_or_else(|| {
+            keys.push(k);
+            out.push(Position {
+                angles: *o,
+                seconds: 0,
+                reference: 0.0,
+                accepted: 0.0,
+            });
+            out.len() - 1
+        });
+        let p = &mut out[at];
+        p.seconds += 1;
+        p.reference += base.held_out[i];
+        p.accepted += fin.held_out[i];
+    }
+    for p in &mut out {
+        p.reference /= p.seconds as f64;
+        p.accepted /= p.seconds as f64;
+    }
+    out
+}
+
+/// "az/el/roll" in whole degrees (no "-0").
+fn angles(o: &[f64; 3]) -> String {
+    let [a, e, r] = o.map(|v| v.round() + 0.0);
+    format!("{a:.0}/{e:.0}/{r:.0}")
+}
+
+fn position_chart(rows: &[Position]) -> String {
+    if rows.len() < 2 {
+        return String::new();
+    }
+    let labels: Vec<String> = rows.iter().map(|p| angles(&p.angles)).collect();
+    svg(|out| {
+        let root = SVGBackend::with_string(out, (W, H)).into_drawing_area();
+        root.fill(&WHITE)?;
+        let (y0, y1) = range(rows.iter().flat_map(|r| [r.reference, r.accepted, 0.0]));
+        let n = rows.len() as f64;
+        let mut c = ChartBuilder::on(&root)
+            .caption(
+                "Mean held-out rate residual per position (az/el/roll, deg)",
+                ("sans-serif", 15),
+            )
+            .margin(8)
+            .x_label_area_size(40)
+            .y_label_area_size(56)
+            .build_cartesian_2d(-0.5..n - 0.5, y0..y1)?;
+        c.configure_mesh()
+            .x_labels(rows.len())
+            .x_label_formatter(&|x| {
+                let i = x.round();
+                if (x - i).abs() < 1e-6 && i >= 0.0 {
+                    labels.get(i as usize).cloned().unwrap_or_default()
+                } else {
+                    String::new()
+                }
+            })
+            .y_desc("deg/h")
+            .draw()?;
+        c.draw_series(
+            rows.iter()
+                .enumerate()
+                .map(|(i, r)| Circle::new((i as f64 - 0.1, r.reference), 4, RED.filled())),
+        )?
+        .label("reference simulator")
+        .legend(|(x, y)| Circle::new((x + 8, y), 4, RED.filled()));
+        c.draw_series(
+            rows.iter()
+                .enumerate()
+                .map(|(i, r)| Circle::new((i as f64 + 0.1, r.accepted), 4, BLUE.filled())),
+        )?
+        .label("with the accepted effects")
+        .legend(|(x, y)| Circle::new((x + 8, y), 4, BLUE.filled()));
         legend(&mut c)?;
         root.present()?;
         Ok(())
@@ -197,13 +339,27 @@ pub fn render(d: &Diagnosis) -> String {
             )
         })
         .collect();
+    let positions = per_position(d);
+    let position_rows: String = positions
+        .iter()
+        .map(|p| {
+            format!(
+                "<tr><td class=num>{}</td><td class=num>{}</td><td class=num>{:+.5}</td><td class=num>{:+.5}</td></tr>",
+                angles(&p.angles),
+                p.seconds,
+                p.reference,
+                p.accepted
+            )
+        })
+        .collect();
     let charts: String = (0..d.runs.len())
-        .map(|r| residual_chart(d, r))
+        .map(|r| residual_chart(d, r) + &thermal_chart(d, r))
         .collect::<String>()
+        + &position_chart(&positions)
         + &allan_chart(d);
     let u = &d.unexplained;
     format!(
-        "<!doctype html>\n<html lang=en><head><meta charset=utf-8><title>Diagnosis</title><style>body{{font-family:sans-serif;margin:2em;max-width:1000px}} table{{border-collapse:collapse;margin:1em 0}} td,th{{border:1px solid #ccc;padding:.25em .5em;font-size:.85em}} td.num{{text-align:right;font-family:monospace}} svg{{display:block;margin:1em 0}}</style></head><body>\n<h1>Sim-to-real diagnosis</h1>\n<p>Runs: {runs}. {protocol}.</p>\n<h2>Layers</h2>\n<table><tr><th>layer</th><th>held-out gap</th><th>reference</th></tr><tr><td>thermal</td><td class=num>{tg:.4} degC</td><td>{tref}</td></tr><tr><td>rate</td><td class=num>{rg:.5} deg/h &rarr; {ra:.5} deg/h</td><td>{rref}</td></tr></table>\n<h2>Accepted effects</h2>\n<table><tr><th>effect</th><th>gap before</th><th>gap after</th><th>shrink</th><th>p</th><th>parameters</th></tr>\n{effects}</table>\n<h2>Confounded</h2><ul>{confounded}</ul>\n<h2>Unexplained</h2><p>Held-out gap {ug:.5} deg/h{period}.</p>\n<h2>Where the gap lies (reference simulator)</h2>\n<table><tr><th>run</th><th>record</th><th>step</th><th>s</th><th>regime</th><th>TK degC</th><th>az/el/roll</th><th>RMS deg/h</th><th>share</th></tr>\n{where_}</table>\n<h2>Candidates against the reference</h2><table><tr><th>effect</th><th>held-out gap</th><th>p</th></tr>{candidates}</table>\n<h2>Charts</h2>{charts}\n</body></html>\n",
+        "<!doctype html>\n<html lang=en><head><meta charset=utf-8><title>Diagnosis</title><style>body{{font-family:sans-serif;margin:2em;max-width:1000px}} table{{border-collapse:collapse;margin:1em 0}} td,th{{border:1px solid #ccc;padding:.25em .5em;font-size:.85em}} td.num{{text-align:right;font-family:monospace}} svg{{display:block;margin:1em 0}}</style></head><body>\n<h1>Sim-to-real diagnosis</h1>\n<p>Runs: {runs}. {protocol}.</p>\n<h2>Layers</h2>\n<table><tr><th>layer</th><th>held-out gap</th><th>reference</th></tr><tr><td>thermal</td><td class=num>{tg:.4} degC</td><td>{tref}</td></tr><tr><td>rate</td><td class=num>{rg:.5} deg/h &rarr; {ra:.5} deg/h</td><td>{rref}</td></tr></table>\n<h2>Accepted effects</h2>\n<table><tr><th>effect</th><th>gap before</th><th>gap after</th><th>shrink</th><th>p</th><th>parameters</th></tr>\n{effects}</table>\n<h2>Confounded</h2><ul>{confounded}</ul>\n<h2>Unexplained</h2><p>Held-out gap {ug:.5} deg/h{period}.</p>\n<h2>Where the gap lies (reference simulator)</h2>\n<table><tr><th>run</th><th>record</th><th>step</th><th>s</th><th>regime</th><th>TK degC</th><th>az/el/roll</th><th>RMS deg/h</th><th>share</th></tr>\n{where_}</table>\n<h2>Residual per position</h2>\n<table><tr><th>az/el/roll, deg</th><th>seconds</th><th>mean, reference (deg/h)</th><th>mean, with the accepted effects</th></tr>{position_rows}</table>\n<h2>Candidates against the reference</h2><table><tr><th>effect</th><th>held-out gap</th><th>p</th></tr>{candidates}</table>\n<h2>Charts</h2>{charts}\n</body></html>\n",
         runs = esc(&d.runs.join(", ")),
         protocol = esc(&d.protocol),
         tg = d.layers.thermal.gap_c,

@@ -66,6 +66,9 @@ pub struct ThermalLayer {
     /// into `twin-updated.toml`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub fitted: Option<crate::twin::config::ThermalConfig>,
+    /// Held-out residual per run (for the page).
+    #[serde(skip)]
+    pub series: Vec<thermal::Series>,
 }
 
 /// Rate from measured temperatures, orientation and run time.
@@ -193,6 +196,8 @@ pub struct Rows {
     pub run_of: Vec<usize>,
     /// Time since power-on, s.
     pub time_s: Vec<f64>,
+    /// Body orientation (azimuth, elevation, roll), deg.
+    pub orientation: Vec<[f64; 3]>,
 }
 
 /// Options of a diagnosis.
@@ -569,6 +574,15 @@ pub fn diagnose(runs: &[RunData], opts: &Options) -> Diagnosis {
             time_s: runs
                 .iter()
                 .flat_map(|r| r.samples.iter().map(|s| s.iv.time_s))
+                .collect(),
+            orientation: runs
+                .iter()
+                .flat_map(|r| {
+                    r.samples.iter().map(|s| {
+                        let o = &s.orientation;
+                        [o.azimuth_deg, o.elevation_deg, o.roll_deg]
+                    })
+                })
                 .collect(),
         }),
     }

@@ -22,6 +22,10 @@ use crate::twin::TwinConfig;
 use crate::twin::config::ThermalConfig;
 use crate::twin::thermal::ThermalNetwork;
 
+/// A run's thermal residual: (time since power-on s, measured - simulated
+/// T1, T2, TK) per 60 s block.
+pub type Series = Vec<(f64, [f64; 3])>;
+
 /// Held-out stretches per run (ours: contiguous, never random samples).
 pub const FOLDS: usize = 4;
 /// Integration step of the fitted network, s (ours: a tenth of the
@@ -220,7 +224,7 @@ fn fit(cost: Cost<'_>, start: &[f64]) -> Vec<f64> {
 /// The network fitted to all the runs, and the held-out RMS of the 60 s
 /// means per sensor (each stretch predicted with parameters fitted on the
 /// others).
-pub fn fitted_network(runs: &[RunData]) -> (ThermalConfig, BTreeMap<String, f64>) {
+pub fn fitted_network(runs: &[RunData]) -> (ThermalConfig, BTreeMap<String, f64>, Vec<Series>) {
     let base = TwinConfig::default_rl16().thermal;
     let axis = Vector3::from(base.sensor_axis_body).normalize();
     let data = blocks(runs, axis);
@@ -234,6 +238,10 @@ pub fn fitted_network(runs: &[RunData]) -> (ThermalConfig, BTreeMap<String, f64>
         &start,
     );
     let (mut sse, mut n) = ([0.0; 3], 0usize);
+    let mut series: Vec<Series> = data
+        .iter()
+        .map(|r| vec![(0.0, [0.0; 3]); r.len()])
+        .collect();
     for k in 0..FOLDS {
         let cost = Cost {
             base: &base,
@@ -249,9 +257,10 @@ pub fn fitted_network(runs: &[RunData]) -> (ThermalConfig, BTreeMap<String, f64>
             &all,
         );
         let res = cost.residuals(&to_config(&base, &p));
-        for (run, r) in data.iter().zip(&res) {
-            for (b, v) in run.iter().zip(r) {
+        for ((run, r), out) in data.iter().zip(&res).zip(&mut series) {
+            for ((b, v), o) in run.iter().zip(r).zip(out.iter_mut()) {
                 if b.fold == k {
+                    *o = (0.5 * (b.start_s + b.end_s), *v);
                     for j in 0..3 {
                         sse[j] += v[j].powi(2);
                     }
@@ -265,21 +274,24 @@ pub fn fitted_network(runs: &[RunData]) -> (ThermalConfig, BTreeMap<String, f64>
         .into_iter()
         .map(|(name, j)| (name.to_owned(), rms(j)))
         .collect();
-    (to_config(&base, &all), per_sensor)
+    (to_config(&base, &all), per_sensor, series)
 }
 
 /// The twin's network driven by the measured air: held-out is moot (nothing
-/// is fitted); RMS of the 60 s means of measured minus simulated.
-fn twin_sensor_rms(runs: &[RunData], twin: &TwinConfig) -> BTreeMap<String, f64> {
-    let mut sums: BTreeMap<String, (f64, usize)> = BTreeMap::new();
+/// is fitted); RMS of the 60 s means of measured minus simulated, and the
+/// residual series.
+fn twin_sensor_rms(runs: &[RunData], twin: &TwinConfig) -> (BTreeMap<String, f64>, Vec<Series>) {
     let axis = Vector3::from(twin.thermal.sensor_axis_body).normalize();
+    let mut series = Vec::new();
+    let (mut sse, mut n) = ([0.0; 3], 0usize);
     for run in runs {
         let Some(first) = run.samples.first() else {
+            series.push(Vec::new());
             continue;
         };
         let mut net = ThermalNetwork::soaked(&twin.thermal, first.iv.chamber_c);
         let mut t = 0.0;
-        let mut sim = Vec::with_capacity(run.samples.len());
+        let mut res = Vec::with_capacity(run.samples.len());
         for s in &run.samples {
             let convection = 1.0 + twin.thermal.convection_gain * s.gravity_body().dot(&axis).abs();
             while t < s.iv.time_s {
@@ -287,47 +299,60 @@ fn twin_sensor_rms(runs: &[RunData], twin: &TwinConfig) -> BTreeMap<String, f64>
                 net.step(dt, s.iv.chamber_c, true, convection);
                 t += dt;
             }
-            sim.push((net.t1_c, net.t2_c, net.case_c));
+            res.push((
+                s.iv.time_s,
+                [
+                    s.iv.t1_c - net.t1_c,
+                    s.iv.t2_c - net.t2_c,
+                    s.iv.tcase_c - net.case_c,
+                ],
+            ));
         }
-        for (name, k) in [("t1_c", 0), ("t2_c", 1), ("tcase_c", 2)] {
-            let e = sums.entry(name.into()).or_insert((0.0, 0));
-            for c in (0..run.samples.len())
-                .collect::<Vec<_>>()
-                .chunks_exact(AVERAGING_S)
-            {
-                let r = c
-                    .iter()
-                    .map(|&i| {
-                        let m = &run.samples[i].iv;
-                        let (a, b, cc) = sim[i];
-                        [m.t1_c - a, m.t2_c - b, m.tcase_c - cc][k]
-                    })
-                    .sum::<f64>()
-                    / c.len() as f64;
-                e.0 += r * r;
-                e.1 += 1;
+        let blocks: Series = res
+            .chunks_exact(AVERAGING_S)
+            .map(|c| {
+                let k = c.len() as f64;
+                let t = c.iter().map(|p| p.0).sum::<f64>() / k;
+                (
+                    t,
+                    [0, 1, 2].map(|j| c.iter().map(|p| p.1[j]).sum::<f64>() / k),
+                )
+            })
+            .collect();
+        for (_, v) in &blocks {
+            for j in 0..3 {
+                sse[j] += v[j] * v[j];
             }
+            n += 1;
         }
+        series.push(blocks);
     }
-    sums.into_iter()
-        .map(|(k, (s, n))| (k, (s / n.max(1) as f64).sqrt()))
-        .collect()
+    let per_sensor = [("t1_c", 0), ("t2_c", 1), ("tcase_c", 2)]
+        .into_iter()
+        .map(|(name, j)| (name.to_owned(), (sse[j] / n.max(1) as f64).sqrt()))
+        .collect();
+    (per_sensor, series)
 }
 
 /// The thermal layer's gap.
 pub fn layer(runs: &[RunData], twin: Option<&TwinConfig>) -> ThermalLayer {
     let mut network = None;
-    let (per_sensor_c, reference) = match twin {
-        Some(t) => (
-            twin_sensor_rms(runs, t),
-            "the twin's thermal network driven by the measured chamber air and orientation"
-                .to_owned(),
-        ),
+    let (per_sensor_c, series, reference) = match twin {
+        Some(t) => {
+            let (per_sensor, series) = twin_sensor_rms(runs, t);
+            (
+                per_sensor,
+                series,
+                "the twin's thermal network driven by the measured chamber air and orientation"
+                    .to_owned(),
+            )
+        }
         None => {
-            let (fitted, per_sensor) = fitted_network(runs);
+            let (fitted, per_sensor, series) = fitted_network(runs);
             network = Some(fitted);
             (
                 per_sensor,
+                series,
                 "the twin's thermal network form (case, two coupled blocks, self-heating rises, convection) with its time constants, rises and convection gain fitted to the runs (Nelder-Mead from the RL-16 defaults); each quarter of a run predicted with parameters fitted on the rest".to_owned(),
             )
         }
@@ -338,5 +363,6 @@ pub fn layer(runs: &[RunData], twin: Option<&TwinConfig>) -> ThermalLayer {
         per_sensor_c,
         reference,
         fitted: network,
+        series,
     }
 }

@@ -74,11 +74,19 @@ fn a_withheld_effect_is_found_and_the_updated_twin_closes_the_gap() {
     assert!(e["p_value"].as_f64().expect("p") < 0.01, "{e}");
     let width = e["parameters"]["width_c"].as_f64().expect("width");
     assert!((1.0..=4.0).contains(&width), "play width {width} (twin: 2)");
-    assert!(
-        std::fs::read_to_string(out.join("diagnosis.html"))
-            .expect("html")
-            .contains("<svg")
-    );
+    let html = std::fs::read_to_string(out.join("diagnosis.html")).expect("html");
+    for part in [
+        "Rate residual, held out",
+        "Thermal residual",
+        "Residual per position",
+        "Residual Allan deviation",
+    ] {
+        assert!(html.contains(part), "diagnosis.html lacks {part}");
+    }
+    // A row per position: the orientation run's nine (the thermal cycle
+    // sits at one of them).
+    let rows = html.matches("<tr><td class=num>").count();
+    assert!(rows >= 9, "{rows} position rows");
 
     // The updated twin as the reference: the gap is closed.
     let updated = out.join("twin-updated.toml");
