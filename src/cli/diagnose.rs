@@ -33,6 +33,12 @@ enum DiagnoseCommand {
     Selfcheck(SelfcheckArgs),
 }
 
+#[derive(Debug, Clone, Copy, clap::ValueEnum)]
+enum UnitArg {
+    Gap,
+    Rms,
+}
+
 #[derive(Debug, Args)]
 struct SelfcheckArgs {
     /// Runs per case (effect and amplitude, null, outside the library).
@@ -49,6 +55,11 @@ struct SelfcheckArgs {
     /// scale_factor_temperature identifiable.
     #[arg(long)]
     separating: bool,
+    /// What an amplitude of 1 is: the held-out gap the effect alone opens
+    /// against the reference (`gap`), or its plain RMS (`rms`); both at
+    /// 60 s means, in units of the null runs' gap.
+    #[arg(long, value_enum, default_value = "gap")]
+    unit: UnitArg,
     /// Where to write selfcheck.json and selfcheck.html.
     #[arg(long)]
     out: PathBuf,
@@ -153,6 +164,10 @@ fn run_selfcheck(a: SelfcheckArgs) -> Result<Outcome> {
         seed: a.seed,
         effects,
         separating: a.separating,
+        unit: match a.unit {
+            UnitArg::Gap => selfcheck::Unit::Gap,
+            UnitArg::Rms => selfcheck::Unit::Rms,
+        },
     };
     let s =
         selfcheck::run(&plan, &|line| eprintln!("  {line}")).context("running the self-check")?;

@@ -120,6 +120,8 @@ pub struct SelfCheck {
     pub seed: u64,
     /// The procedures of each trial (names).
     pub procedures: Vec<String>,
+    /// What an amplitude of 1 is.
+    pub unit: Unit,
     /// Noise unit: the reference's held-out gap on null runs (RMS of the
     /// 60 s means), deg/h.
     pub noise_dph: f64,
@@ -359,6 +361,19 @@ pub struct Plan {
     pub effects: Vec<Effect>,
     /// Add `procedures/separating.toml` to each trial's runs.
     pub separating: bool,
+    /// What an amplitude of 1 is.
+    pub unit: Unit,
+}
+
+/// How an effect's amplitude is stated in units of the noise.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Unit {
+    /// The held-out gap the effect alone opens against the reference
+    /// (what the reference's terms reproduce does not count).
+    Gap,
+    /// The plain RMS of its contribution's 60 s means.
+    Rms,
 }
 
 /// Run the self-check.
@@ -404,9 +419,13 @@ pub fn run(plan: &Plan, progress: &(dyn Fn(&str) + Sync)) -> Result<SelfCheck, S
             gap_dph: unit.visible,
             gap_per_rms: unit.visible / unit.rms,
         });
+        let per_unit = match plan.unit {
+            Unit::Gap => unit.visible,
+            Unit::Rms => unit.rms,
+        };
         for &amp in &AMPLITUDES {
-            let a = if unit.visible > 0.0 {
-                amp * noise / unit.visible
+            let a = if per_unit > 0.0 {
+                amp * noise / per_unit
             } else {
                 0.0
             };
@@ -520,6 +539,7 @@ pub fn run(plan: &Plan, progress: &(dyn Fn(&str) + Sync)) -> Result<SelfCheck, S
         runs,
         seed,
         procedures,
+        unit: plan.unit,
         noise_dph: noise,
         sizes,
         power,
@@ -554,6 +574,10 @@ pub fn render_html(s: &SelfCheck) -> String {
             100.0 * p.confounded
         ));
     }
+    let unit = match s.unit {
+        Unit::Gap => "that gap (--unit gap)",
+        Unit::Rms => "that RMS (--unit rms)",
+    };
     let sizes: String = s
         .sizes
         .iter()
@@ -592,7 +616,7 @@ pub fn render_html(s: &SelfCheck) -> String {
         ));
     }
     format!(
-        "<!doctype html>\n<html lang=en><head><meta charset=utf-8><title>Diagnosis self-check</title><style>body{{font-family:sans-serif;margin:2em}} table{{border-collapse:collapse;margin:1em 0}} td,th{{border:1px solid #ccc;padding:.25em .5em;font-size:.9em}} td.num{{text-align:right;font-family:monospace}}</style></head><body>\n<h1>Diagnosis self-check</h1>\n<p>{} run(s) per case from seed {}, each case these procedures on the twin: {}. Noise unit: {:.5} deg/h (the reference's held-out gap on null runs, RMS of 60 s means).</p>\n<p>False-positive rate on null runs: <b>{:.0} %</b>. Out-of-library periodic disturbance ({} s, {}x noise): attributed in {:.0} % of runs; its period reported within 20 % in {:.0} %.</p>\n<h2>Detection power</h2>\n<table><tr><th>effect</th><th>amplitude (noise units)</th><th>coefficient</th><th>runs</th><th>named first</th><th>excess gap closed</th><th>in a confounded pair</th></tr>\n{power}</table>\n<h2>Confusion matrix</h2>\n<table>{conf}</table>\n<h2>How much of each effect these runs show</h2>\n<p>Per unit coefficient: the RMS of its contribution (60 s means) and the held-out gap it alone opens against the reference (what the reference's refitted terms reproduce does not count). Amplitudes are in units of that gap; a small ratio means the effect hides in the reference's terms with these runs.</p>\n<table><tr><th>effect</th><th>RMS (deg/h per unit)</th><th>gap (deg/h per unit)</th><th>gap / RMS</th></tr>\n{sizes}</table>\n</body></html>\n",
+        "<!doctype html>\n<html lang=en><head><meta charset=utf-8><title>Diagnosis self-check</title><style>body{{font-family:sans-serif;margin:2em}} table{{border-collapse:collapse;margin:1em 0}} td,th{{border:1px solid #ccc;padding:.25em .5em;font-size:.9em}} td.num{{text-align:right;font-family:monospace}}</style></head><body>\n<h1>Diagnosis self-check</h1>\n<p>{} run(s) per case from seed {}, each case these procedures on the twin: {}. Noise unit: {:.5} deg/h (the reference's held-out gap on null runs, RMS of 60 s means).</p>\n<p>False-positive rate on null runs: <b>{:.0} %</b>. Out-of-library periodic disturbance ({} s, {}x noise): attributed in {:.0} % of runs; its period reported within 20 % in {:.0} %.</p>\n<h2>Detection power</h2>\n<table><tr><th>effect</th><th>amplitude (noise units)</th><th>coefficient</th><th>runs</th><th>named first</th><th>excess gap closed</th><th>in a confounded pair</th></tr>\n{power}</table>\n<h2>Confusion matrix</h2>\n<table>{conf}</table>\n<h2>How much of each effect these runs show</h2>\n<p>Per unit coefficient: the RMS of its contribution (60 s means) and the held-out gap it alone opens against the reference (what the reference's refitted terms reproduce does not count). Amplitudes are in units of {unit}; a small ratio means the effect hides in the reference's terms with these runs.</p>\n<table><tr><th>effect</th><th>RMS (deg/h per unit)</th><th>gap (deg/h per unit)</th><th>gap / RMS</th></tr>\n{sizes}</table>\n</body></html>\n",
         s.runs,
         s.seed,
         crate::report::html::esc(&s.procedures.join(", ")),
