@@ -474,7 +474,8 @@ pub fn diagnose(runs: &[RunData], opts: &Options) -> Diagnosis {
         let top = passing.iter().map(|x| x.2).fold(0.0, f64::max);
         // Tied candidates (within TIE of the best gain) are the same
         // explanation with these runs: name the simplest, the library's
-        // order next; the others are reported as confounded with it.
+        // order next (the pair is reported below when neither adds over
+        // the other).
         let best = passing
             .iter()
             .filter(|x| x.2 >= (1.0 - TIE) * top)
