@@ -3,12 +3,13 @@
 //! (segments marked on the rate's), the residual per position, and the
 //! residual's Allan deviation against the noise floor.
 
+use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 
 use super::Diagnosis;
 use super::engine::AVERAGING_S;
 use crate::analysis::allan::{oadev, octave_factors};
-use crate::report::html::{esc, legend, range, svg};
+use crate::report::html::{esc, label_at, legend, range, svg};
 
 const W: u32 = 900;
 const H: u32 = 300;
@@ -35,6 +36,38 @@ fn run_series(d: &Diagnosis, run: usize) -> Vec<(f64, f64, f64)> {
         .collect()
 }
 
+type TimeChart<'a, 'b> =
+    ChartContext<'a, SVGBackend<'b>, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
+
+/// A chart against time since power-on (h) over `t` and `y`, its series
+/// added by `draw`, with a legend.
+fn time_chart(
+    caption: &str,
+    unit: &str,
+    (t0, t1): (f64, f64),
+    (y0, y1): (f64, f64),
+    draw: impl FnOnce(&mut TimeChart<'_, '_>) -> Result<(), Box<dyn std::error::Error>>,
+) -> String {
+    svg(|out| {
+        let root = SVGBackend::with_string(out, (W, H)).into_drawing_area();
+        root.fill(&WHITE)?;
+        let mut c = ChartBuilder::on(&root)
+            .caption(caption, ("sans-serif", 15))
+            .margin(8)
+            .x_label_area_size(30)
+            .y_label_area_size(56)
+            .build_cartesian_2d(t0..t1, y0..y1)?;
+        c.configure_mesh()
+            .x_desc("time since power-on, h")
+            .y_desc(unit)
+            .draw()?;
+        draw(&mut c)?;
+        legend(&mut c)?;
+        root.present()?;
+        Ok(())
+    })
+}
+
 fn residual_chart(d: &Diagnosis, run: usize) -> String {
     let s = run_series(d, run);
     if s.len() < 2 {
@@ -47,37 +80,25 @@ fn residual_chart(d: &Diagnosis, run: usize) -> String {
         .filter(|g| g.run == name)
         .map(|g| g.start_s / 3600.0)
         .collect();
-    svg(|out| {
-        let root = SVGBackend::with_string(out, (W, H)).into_drawing_area();
-        root.fill(&WHITE)?;
-        let (t0, t1) = range(s.iter().map(|p| p.0));
-        let (y0, y1) = range(s.iter().flat_map(|p| [p.1, p.2]));
-        let mut c = ChartBuilder::on(&root)
-            .caption(
-                format!("Rate residual, held out (60 s means): {name}"),
-                ("sans-serif", 15),
-            )
-            .margin(8)
-            .x_label_area_size(30)
-            .y_label_area_size(56)
-            .build_cartesian_2d(t0..t1, y0..y1)?;
-        c.configure_mesh()
-            .x_desc("time since power-on, h")
-            .y_desc("deg/h")
-            .draw()?;
-        for m in marks {
-            c.draw_series(LineSeries::new(vec![(m, y0), (m, y1)], BLACK.mix(0.15)))?;
-        }
-        c.draw_series(LineSeries::new(s.iter().map(|p| (p.0, p.1)), RED))?
-            .label("reference simulator")
-            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], RED));
-        c.draw_series(LineSeries::new(s.iter().map(|p| (p.0, p.2)), BLUE))?
-            .label("with the accepted effects")
-            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], BLUE));
-        legend(&mut c)?;
-        root.present()?;
-        Ok(())
-    })
+    let (y0, y1) = range(s.iter().flat_map(|p| [p.1, p.2]));
+    time_chart(
+        &format!("Rate residual, held out (60 s means): {name}"),
+        "deg/h",
+        range(s.iter().map(|p| p.0)),
+        (y0, y1),
+        |c| {
+            for m in marks {
+                c.draw_series(LineSeries::new(vec![(m, y0), (m, y1)], BLACK.mix(0.15)))?;
+            }
+            c.draw_series(LineSeries::new(s.iter().map(|p| (p.0, p.1)), RED))?
+                .label("reference simulator")
+                .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], RED));
+            c.draw_series(LineSeries::new(s.iter().map(|p| (p.0, p.2)), BLUE))?
+                .label("with the accepted effects")
+                .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], BLUE));
+            Ok(())
+        },
+    )
 }
 
 /// Thermal residual of one run against time: T1, T2, TK.
@@ -86,39 +107,26 @@ fn thermal_chart(d: &Diagnosis, run: usize) -> String {
         return String::new();
     };
     let name = d.runs.get(run).cloned().unwrap_or_default();
-    svg(|out| {
-        let root = SVGBackend::with_string(out, (W, H)).into_drawing_area();
-        root.fill(&WHITE)?;
-        let (t0, t1) = range(s.iter().map(|p| p.0 / 3600.0));
-        let (y0, y1) = range(s.iter().flat_map(|p| p.1));
-        let mut c = ChartBuilder::on(&root)
-            .caption(
-                format!("Thermal residual, measured - simulated (60 s means): {name}"),
-                ("sans-serif", 15),
-            )
-            .margin(8)
-            .x_label_area_size(30)
-            .y_label_area_size(56)
-            .build_cartesian_2d(t0..t1, y0..y1)?;
-        c.configure_mesh()
-            .x_desc("time since power-on, h")
-            .y_desc("degC")
-            .draw()?;
-        for (k, (label, colour)) in [("T1", RED), ("T2", BLUE), ("TK", BLACK)]
-            .into_iter()
-            .enumerate()
-        {
-            c.draw_series(LineSeries::new(
-                s.iter().map(|p| (p.0 / 3600.0, p.1[k])),
-                colour,
-            ))?
-            .label(label)
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], colour));
-        }
-        legend(&mut c)?;
-        root.present()?;
-        Ok(())
-    })
+    time_chart(
+        &format!("Thermal residual, measured - simulated (60 s means): {name}"),
+        "degC",
+        range(s.iter().map(|p| p.0 / 3600.0)),
+        range(s.iter().flat_map(|p| p.1)),
+        |c| {
+            for (k, (label, colour)) in [("T1", RED), ("T2", BLUE), ("TK", BLACK)]
+                .into_iter()
+                .enumerate()
+            {
+                c.draw_series(LineSeries::new(
+                    s.iter().map(|p| (p.0 / 3600.0, p.1[k])),
+                    colour,
+                ))?
+                .label(label)
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], colour));
+            }
+            Ok(())
+        },
+    )
 }
 
 /// Mean held-out rate residual at one body orientation.
@@ -191,14 +199,7 @@ fn position_chart(rows: &[Position]) -> String {
             .build_cartesian_2d(-0.5..n - 0.5, y0..y1)?;
         c.configure_mesh()
             .x_labels(rows.len())
-            .x_label_formatter(&|x| {
-                let i = x.round();
-                if (x - i).abs() < 1e-6 && i >= 0.0 {
-                    labels.get(i as usize).cloned().unwrap_or_default()
-                } else {
-                    String::new()
-                }
-            })
+            .x_label_formatter(&|x| label_at(&labels, *x))
             .y_desc("deg/h")
             .draw()?;
         c.draw_series(

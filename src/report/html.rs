@@ -49,6 +49,16 @@ pub(crate) fn svg(
     }
 }
 
+/// Tick label of a category axis: `labels[i]` at x = i, nothing between.
+pub(crate) fn label_at(labels: &[String], x: f64) -> String {
+    let i = x.round();
+    if (x - i).abs() < 0.01 && i >= 0.0 {
+        labels.get(i as usize).cloned().unwrap_or_default()
+    } else {
+        String::new()
+    }
+}
+
 pub(crate) fn range(v: impl Iterator<Item = f64>) -> (f64, f64) {
     let (lo, hi) = v
         .filter(|x| x.is_finite())
@@ -195,14 +205,7 @@ fn position_chart(r: &Report) -> Option<String> {
         let labels: Vec<String> = pts.iter().map(|p| p.0.clone()).collect();
         c.configure_mesh()
             .x_labels(n)
-            .x_label_formatter(&|x| {
-                let i = x.round();
-                if (x - i).abs() < 0.01 && i >= 0.0 {
-                    labels.get(i as usize).cloned().unwrap_or_default()
-                } else {
-                    String::new()
-                }
-            })
+            .x_label_formatter(&|x| label_at(&labels, *x))
             .y_desc("deg/h")
             .draw()?;
         c.draw_series(
