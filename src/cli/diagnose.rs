@@ -92,7 +92,13 @@ pub fn run(args: DiagnoseArgs) -> Result<Outcome> {
         .iter()
         .map(|p| data::load(p).with_context(|| format!("reading {}", p.display())))
         .collect::<Result<Vec<_>>>()?;
-    let d = diagnose::diagnose(&runs, &Options { twin: twin.clone() });
+    let d = diagnose::diagnose(
+        &runs,
+        &Options {
+            twin: twin.clone(),
+            fit_thermal: true,
+        },
+    );
     std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
     write(
         &out.join("diagnosis.json"),
@@ -103,13 +109,21 @@ pub fn run(args: DiagnoseArgs) -> Result<Outcome> {
     write(
         &out.join("twin-updated.toml"),
         &format!(
-            "# The twin with the effects gyrobench diagnose accepted enabled and fitted.\n{}",
+            "# The twin with the effects gyrobench diagnose accepted enabled and fitted,\n# and its thermal network fitted to the runs.\n{}",
             diagnose::updated_twin(&base, &d).to_toml()
         ),
     )?;
     println!(
-        "rate layer: held-out gap {:.5} deg/h -> {:.5} deg/h; thermal layer: {:.4} degC",
-        d.layers.rate.gap_dph, d.layers.rate.gap_after_dph, d.layers.thermal.gap_c
+        "rate layer: held-out gap {:.5} deg/h -> {:.5} deg/h; thermal layer: {:.4} degC{}",
+        d.layers.rate.gap_dph,
+        d.layers.rate.gap_after_dph,
+        d.layers.thermal.gap_c,
+        d.layers
+            .thermal
+            .fitted_gap_c
+            .map_or(String::new(), |g| format!(
+                " ({g:.4} degC with the network fitted to the runs, in twin-updated.toml)"
+            ))
     );
     if d.effects.is_empty() {
         println!("no library effect is significant");

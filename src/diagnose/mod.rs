@@ -62,10 +62,15 @@ pub struct ThermalLayer {
     pub per_sensor_c: BTreeMap<String, f64>,
     /// How the layer's simulator was made.
     pub reference: String,
-    /// Without a twin: the thermal network fitted to the runs (it goes
-    /// into `twin-updated.toml`).
+    /// The thermal network fitted to the runs (it goes into
+    /// `twin-updated.toml`): the reference without a twin; with one, fitted
+    /// from the twin's values.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub fitted: Option<crate::twin::config::ThermalConfig>,
+    /// With a twin, the fitted network's held-out gap, degC (what adopting
+    /// it would leave).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub fitted_gap_c: Option<f64>,
     /// Held-out residual per run (for the page).
     #[serde(skip)]
     pub series: Vec<thermal::Series>,
@@ -205,6 +210,10 @@ pub struct Rows {
 pub struct Options {
     /// The twin whose configuration is the reference (else model 4).
     pub twin: Option<TwinConfig>,
+    /// Fit the thermal network to the runs also when a twin is given (its
+    /// values as the start), for `twin-updated.toml`. Without a twin the
+    /// fitted network is the thermal reference and is always fitted.
+    pub fit_thermal: bool,
 }
 
 /// The reference model: model 4, or the twin's enabled terms and effects.
@@ -539,7 +548,7 @@ pub fn diagnose(runs: &[RunData], opts: &Options) -> Diagnosis {
     let where_ = segments(&data, &base.fold_sse, &base.fold_blocks);
     let left = segments(&data, &current.fold_sse, &current.fold_blocks);
     let (period, frac) = periodicity(&data, &current.residual);
-    let thermal = thermal::layer(runs, opts.twin.as_ref());
+    let thermal = thermal::layer(runs, opts.twin.as_ref(), opts.fit_thermal);
     Diagnosis {
         runs: runs.iter().map(|r| r.name.clone()).collect(),
         protocol: format!(

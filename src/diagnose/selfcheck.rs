@@ -230,6 +230,7 @@ fn size(runs: &[RunData], e: Effect, p: f64, reference: &TwinConfig) -> Size {
     let c = contribution(runs, e, p);
     let opts = Options {
         twin: Some(reference.clone()),
+        fit_thermal: false,
     };
     Size {
         visible: super::visible_gap(runs, &opts, &c),
@@ -320,7 +321,9 @@ fn trial(
     let d = diagnose(
         &runs,
         &Options {
+            // The self-check is about the rate layer.
             twin: Some(reference.clone()),
+            fit_thermal: false,
         },
     );
     let accepted: Vec<String> = d.effects.iter().map(|e| e.name.clone()).collect();

@@ -154,6 +154,7 @@ fn from_config(c: &ThermalConfig) -> Vec<f64> {
 /// Sum of squares of the block residuals outside `held_out` (no sensor
 /// offsets: the self-heating rises would trade against them, and a stretch
 /// without the warm-up could not tell them apart).
+#[derive(Clone, Copy)]
 struct Cost<'a> {
     base: &'a ThermalConfig,
     runs: &'a [Vec<Block>],
@@ -224,38 +225,31 @@ fn fit(cost: Cost<'_>, start: &[f64]) -> Vec<f64> {
 /// The network fitted to all the runs, and the held-out RMS of the 60 s
 /// means per sensor (each stretch predicted with parameters fitted on the
 /// others).
-pub fn fitted_network(runs: &[RunData]) -> (ThermalConfig, BTreeMap<String, f64>, Vec<Series>) {
-    let base = TwinConfig::default_rl16().thermal;
+pub fn fitted_network(
+    runs: &[RunData],
+    base: &ThermalConfig,
+) -> (ThermalConfig, BTreeMap<String, f64>, Vec<Series>) {
+    let base = base.clone();
     let axis = Vector3::from(base.sensor_axis_body).normalize();
     let data = blocks(runs, axis);
     let start = from_config(&base);
-    let all = fit(
-        Cost {
-            base: &base,
-            runs: &data,
-            held_out: None,
-        },
-        &start,
-    );
+    let cost = |held_out| Cost {
+        base: &base,
+        runs: &data,
+        held_out,
+    };
+    let all = fit(cost(None), &start);
     let (mut sse, mut n) = ([0.0; 3], 0usize);
     let mut series: Vec<Series> = data
         .iter()
         .map(|r| vec![(0.0, [0.0; 3]); r.len()])
         .collect();
     for k in 0..FOLDS {
-        let cost = Cost {
-            base: &base,
-            runs: &data,
-            held_out: Some(k),
-        };
-        let p = fit(
-            Cost {
-                base: &base,
-                runs: &data,
-                held_out: Some(k),
-            },
-            &all,
-        );
+        // From the defaults, not from the fit on all data: a quantity the
+        // other stretches cannot pin down must not keep the held-out
+        // stretch's value.
+        let cost = cost(Some(k));
+        let p = fit(cost, &start);
         let res = cost.residuals(&to_config(&base, &p));
         for ((run, r), out) in data.iter().zip(&res).zip(&mut series) {
             for ((b, v), o) in run.iter().zip(r).zip(out.iter_mut()) {
@@ -334,12 +328,24 @@ fn twin_sensor_rms(runs: &[RunData], twin: &TwinConfig) -> (BTreeMap<String, f64
     (per_sensor, series)
 }
 
+/// RMS over the sensors.
+fn quadratic_mean(per_sensor: &BTreeMap<String, f64>) -> f64 {
+    let n = per_sensor.len().max(1) as f64;
+    (per_sensor.values().map(|v| v * v).sum::<f64>() / n).sqrt()
+}
+
 /// The thermal layer's gap.
-pub fn layer(runs: &[RunData], twin: Option<&TwinConfig>) -> ThermalLayer {
+pub fn layer(runs: &[RunData], twin: Option<&TwinConfig>, fit_with_twin: bool) -> ThermalLayer {
     let mut network = None;
+    let mut fitted_gap_c = None;
     let (per_sensor_c, series, reference) = match twin {
         Some(t) => {
             let (per_sensor, series) = twin_sensor_rms(runs, t);
+            if fit_with_twin {
+                let (fitted, fitted_sensor, _) = fitted_network(runs, &t.thermal);
+                network = Some(fitted);
+                fitted_gap_c = Some(quadratic_mean(&fitted_sensor));
+            }
             (
                 per_sensor,
                 series,
@@ -348,7 +354,8 @@ pub fn layer(runs: &[RunData], twin: Option<&TwinConfig>) -> ThermalLayer {
             )
         }
         None => {
-            let (fitted, per_sensor, series) = fitted_network(runs);
+            let (fitted, per_sensor, series) =
+                fitted_network(runs, &TwinConfig::default_rl16().thermal);
             network = Some(fitted);
             (
                 per_sensor,
@@ -357,12 +364,12 @@ pub fn layer(runs: &[RunData], twin: Option<&TwinConfig>) -> ThermalLayer {
             )
         }
     };
-    let n = per_sensor_c.len().max(1) as f64;
     ThermalLayer {
-        gap_c: (per_sensor_c.values().map(|v| v * v).sum::<f64>() / n).sqrt(),
+        gap_c: quadratic_mean(&per_sensor_c),
         per_sensor_c,
         reference,
         fitted: network,
+        fitted_gap_c,
         series,
     }
 }

@@ -115,13 +115,47 @@ fn a_withheld_effect_is_found_and_the_updated_twin_closes_the_gap() {
     // The twin's own thermal network reproduces the sensors it made.
     assert!(d2["layers"]["thermal"]["gap_c"].as_f64().expect("gap_c") < 0.05);
 
+    // A twin whose thermal network is wrong (case time constant 1800 s,
+    // the unit's is 1200 s): the thermal layer carries the gap, and the
+    // network fitted from the twin's values closes it in twin-updated.toml.
+    let slow = dir.join("slow-case.toml");
+    let wrong = std::fs::read_to_string(&twin).expect("twin").replacen(
+        "case_tau_s = 1200.0",
+        "case_tau_s = 1800.0",
+        1,
+    );
+    assert!(wrong.contains("case_tau_s = 1800.0"));
+    std::fs::write(&slow, wrong).expect("twin");
+    let third = dir.join("d3");
+    let r = gyrobench(&["diagnose", a, b, "--twin", s(&slow), "--out", s(&third)]);
+    assert_eq!(
+        r.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&r.stderr)
+    );
+    let t3 = json(&third.join("diagnosis.json"))["layers"]["thermal"].clone();
+    assert!(t3["gap_c"].as_f64().expect("gap_c") > 0.3, "{t3}");
+    assert!(
+        t3["fitted_gap_c"].as_f64().expect("fitted_gap_c") < 0.05,
+        "{t3}"
+    );
+    let fitted_tau = t3["fitted"]["case_tau_s"].as_f64().expect("fitted");
+    assert!((fitted_tau / 1200.0 - 1.0).abs() < 0.05, "{t3}");
+    let updated: toml::Table = std::fs::read_to_string(third.join("twin-updated.toml"))
+        .expect("twin-updated.toml")
+        .parse()
+        .expect("toml");
+    let tau = updated["thermal"]["case_tau_s"].as_float().expect("tau");
+    assert!((tau - fitted_tau).abs() < 1e-6, "{tau}");
+
     // Bad input: a clear error.
     std::fs::write(dir.join("junk.mcap"), b"junk").expect("junk");
     let r = gyrobench(&[
         "diagnose",
         s(&dir.join("junk.mcap")),
         "--out",
-        s(&dir.join("d3")),
+        s(&dir.join("d4")),
     ]);
     assert_eq!(r.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&r.stderr).contains("not an MCAP log"));
