@@ -17,7 +17,7 @@ use crate::analysis::series::Interval;
 use crate::analysis::study::DRIFT_SMOOTHING_S;
 use crate::coeffs::{CoeffsFile, Model1Coeffs, Model3Coeffs, Model4Coeffs};
 use crate::procedure::{Metric, StepKind};
-use crate::replay::{ReplayError, replay};
+use crate::runlog::replay::{ReplayError, replay};
 
 /// Correlation above which two regressors are reported as collinear.
 pub const COLLINEAR_ABOVE: f64 = 0.9;

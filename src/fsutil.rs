@@ -1,47 +1,195 @@
-//! File output that is never half-written.
+//! Files that are never half-written, never written through a planted
+//! link, and never written over the file they were made from.
+//!
+//! Output goes to a new file with a random name in the target's directory,
+//! created exclusively (`O_EXCL`, by the `tempfile` crate), synced, then
+//! renamed over the target: readers see the old file or the whole new one,
+//! and a symlink planted under a predictable temporary name is never
+//! followed. A temporary left by a crash is removed when its handle drops.
 
+use std::fs::File;
 use std::io::Write;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
-/// Write `bytes` to a temporary file beside `path`, sync it, then rename it
-/// over `path`: readers see the old file or the whole new one, never a part.
+/// A file being written beside `target`; [`Pending::commit`] puts it in
+/// place, dropping it removes it.
+#[derive(Debug)]
+pub struct Pending {
+    file: Option<File>,
+    temp: tempfile::TempPath,
+    target: PathBuf,
+}
+
+impl Pending {
+    /// An exclusively created temporary beside `target`.
+    pub fn new(target: &Path) -> std::io::Result<Self> {
+        let dir = match target.parent() {
+            Some(d) if !d.as_os_str().is_empty() => d,
+            _ => Path::new("."),
+        };
+        let name = target.file_name().ok_or_else(|| {
+            std::io::Error::new(std::io::ErrorKind::InvalidInput, "path has no file name")
+        })?;
+        let mut prefix = std::ffi::OsString::from(".");
+        prefix.push(name);
+        prefix.push(".");
+        let named = tempfile::Builder::new()
+            .prefix(&prefix)
+            .suffix(".partial")
+            .tempfile_in(dir)?;
+        let (file, temp) = named.into_parts();
+        Ok(Self {
+            file: Some(file),
+            temp,
+            target: target.to_owned(),
+        })
+    }
+
+    /// The temporary's path (for messages).
+    pub fn path(&self) -> &Path {
+        &self.temp
+    }
+
+    /// Take the open file to write through (once).
+    pub fn take_file(&mut self) -> std::io::Result<File> {
+        self.file
+            .take()
+            .ok_or_else(|| std::io::Error::other("the temporary file was taken already"))
+    }
+
+    /// Sync the written file and rename it over the target.
+    pub fn commit(self) -> std::io::Result<()> {
+        File::open(&self.temp)?.sync_all()?;
+        self.temp
+            .persist(&self.target)
+            .map_err(|e| std::io::Error::new(e.error.kind(), e.error))
+    }
+}
+
+/// Write `bytes` to `path` through a [`Pending`] file.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
-    let dir = match path.parent() {
+    let mut p = Pending::new(path)?;
+    let mut f = p.take_file()?;
+    f.write_all(bytes)?;
+    f.sync_all()?;
+    drop(f);
+    p.commit()
+}
+
+/// An output that would destroy an input.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error(
+    "the output {output} is the input {input}: writing it would destroy the input; choose another output path"
+)]
+pub struct SamePath {
+    /// The output as given.
+    pub output: String,
+    /// The input it names.
+    pub input: String,
+}
+
+/// Refuse an `output` that is one of `inputs` (the same path, through
+/// `..` or a symlink, or the same file by another hard link).
+pub fn ensure_distinct(output: &Path, inputs: &[&Path]) -> Result<(), SamePath> {
+    use std::os::unix::fs::MetadataExt;
+    let out_id = std::fs::metadata(output).ok().map(|m| (m.dev(), m.ino()));
+    let out_canon = canonical(output);
+    for input in inputs {
+        let same_file =
+            out_id.is_some() && std::fs::metadata(input).ok().map(|m| (m.dev(), m.ino())) == out_id;
+        if same_file || (out_canon.is_some() && canonical(input) == out_canon) {
+            return Err(SamePath {
+                output: output.display().to_string(),
+                input: input.display().to_string(),
+            });
+        }
+    }
+    Ok(())
+}
+
+/// The path with its directory resolved, even when the file itself does
+/// not exist yet.
+fn canonical(p: &Path) -> Option<PathBuf> {
+    if let Ok(c) = p.canonicalize() {
+        return Some(c);
+    }
+    let name = p.file_name()?;
+    let dir = match p.parent() {
         Some(d) if !d.as_os_str().is_empty() => d,
         _ => Path::new("."),
     };
-    let name = path.file_name().ok_or_else(|| {
-        std::io::Error::new(std::io::ErrorKind::InvalidInput, "path has no file name")
-    })?;
-    let mut tmp_name = std::ffi::OsString::from(".");
-    tmp_name.push(name);
-    tmp_name.push(format!(".tmp{}", std::process::id()));
-    let tmp = dir.join(tmp_name);
-    let result = (|| {
-        let mut f = std::fs::File::create(&tmp)?;
-        f.write_all(bytes)?;
-        f.sync_all()?;
-        std::fs::rename(&tmp, path)
-    })();
-    if result.is_err() {
-        let _ = std::fs::remove_file(&tmp);
-    }
-    result
+    Some(dir.canonicalize().ok()?.join(name))
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
 
+    fn temp_dir(tag: &str) -> PathBuf {
+        let dir =
+            std::env::temp_dir().join(format!("gyrobench-fsutil-{tag}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).expect("temp dir");
+        dir
+    }
+
     #[test]
     fn writes_whole_file_and_leaves_no_temporary() {
-        let dir = std::env::temp_dir().join(format!("gyrobench-fsutil-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).expect("temp dir");
+        let dir = temp_dir("whole");
         let p = dir.join("out.csv");
         write_atomic(&p, b"a,b\n1,2\n").expect("write");
         assert_eq!(std::fs::read(&p).expect("read back"), b"a,b\n1,2\n");
         let names: Vec<_> = std::fs::read_dir(&dir).expect("list").collect();
         assert_eq!(names.len(), 1, "temporary left behind");
+        std::fs::remove_dir_all(&dir).expect("cleanup");
+    }
+
+    #[test]
+    fn a_planted_symlink_at_the_old_temporary_name_is_not_followed() {
+        let dir = temp_dir("symlink");
+        let victim = dir.join("victim.txt");
+        std::fs::write(&victim, b"keep me").expect("victim");
+        let pid = std::process::id();
+        for name in [
+            format!(".report.json.tmp{pid}"),
+            "report.json.partial".to_owned(),
+        ] {
+            std::os::unix::fs::symlink(&victim, dir.join(name)).expect("plant");
+        }
+        write_atomic(&dir.join("report.json"), b"{}").expect("write");
+        assert_eq!(std::fs::read(&victim).expect("victim"), b"keep me");
+        assert_eq!(std::fs::read(dir.join("report.json")).expect("out"), b"{}");
+        std::fs::remove_dir_all(&dir).expect("cleanup");
+    }
+
+    #[test]
+    fn a_dropped_pending_file_leaves_nothing() {
+        let dir = temp_dir("drop");
+        let mut p = Pending::new(&dir.join("x.mcap")).expect("pending");
+        p.take_file()
+            .expect("file")
+            .write_all(b"half")
+            .expect("write");
+        drop(p);
+        assert_eq!(std::fs::read_dir(&dir).expect("list").count(), 0);
+        std::fs::remove_dir_all(&dir).expect("cleanup");
+    }
+
+    #[test]
+    fn an_output_naming_an_input_is_refused_however_it_is_spelled() {
+        let dir = temp_dir("same");
+        let a = dir.join("a.mcap");
+        std::fs::write(&a, b"log").expect("a");
+        std::fs::create_dir_all(dir.join("sub")).expect("sub");
+        let dotted = dir.join("sub").join("..").join("a.mcap");
+        let link = dir.join("b.mcap");
+        std::fs::hard_link(&a, &link).expect("hard link");
+        let sym = dir.join("c.mcap");
+        std::os::unix::fs::symlink(&a, &sym).expect("symlink");
+        for out in [&a, &dotted, &link, &sym] {
+            assert!(ensure_distinct(out, &[&a]).is_err(), "{}", out.display());
+        }
+        assert!(ensure_distinct(&dir.join("new.mcap"), &[&a]).is_ok());
         std::fs::remove_dir_all(&dir).expect("cleanup");
     }
 }

@@ -65,7 +65,11 @@ impl Sink for Collect {
         Ok(())
     }
 
-    fn event(&mut self, _: f64, _: u8, _: &str) -> std::io::Result<()> {
+    fn event(&mut self, _: f64, _: crate::sequencer::Level, _: &str) -> std::io::Result<()> {
+        Ok(())
+    }
+
+    fn step(&mut self, _: &crate::sequencer::StepEvent) -> std::io::Result<()> {
         Ok(())
     }
 

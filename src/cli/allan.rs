@@ -11,8 +11,8 @@ use serde::Serialize;
 use super::Outcome;
 use crate::analysis::allan::{Allan, Taus, analyse};
 use crate::analysis::figures::bias_stability;
-use crate::interchange;
-use crate::replay::record_rates;
+use crate::runlog::interchange;
+use crate::runlog::replay::record_rates;
 
 #[derive(Debug, Clone, Copy, ValueEnum)]
 enum TauSet {
@@ -132,12 +132,12 @@ pub fn run(args: AllanArgs) -> Result<Outcome> {
             noise: &a.noise,
             bias_instability: bi,
         };
-        println!("{}", serde_json::to_string_pretty(&out)?);
+        outln!("{}", serde_json::to_string_pretty(&out)?)?;
     } else {
-        print!(
+        outf!(
             "{}",
             render_text(&args.file.display().to_string(), &record, &a, &bi)
-        );
+        )?;
     }
     Ok(Outcome::Success)
 }

@@ -38,7 +38,7 @@ pub fn run(args: CalibrateArgs) -> Result<Outcome> {
     let html_path = args.out.with_extension("calibration.html");
     crate::fsutil::write_atomic(&html_path, cal.render_html().as_bytes())
         .with_context(|| format!("writing {}", html_path.display()))?;
-    print!("{}", cal.render_text());
+    outf!("{}", cal.render_text())?;
     eprintln!(
         "coefficients in {}, details in {} and {}",
         args.out.display(),

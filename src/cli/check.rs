@@ -31,7 +31,7 @@ pub fn run(args: CheckArgs) -> Result<Outcome> {
     let bench = load_bench(args.bench.as_ref())?;
     let p = Procedure::load(&args.procedure, &bench)
         .with_context(|| format!("checking procedure {}", args.procedure.display()))?;
-    print!("{}", render_plan(&p, &estimate(&p, &bench)));
+    outf!("{}", render_plan(&p, &estimate(&p, &bench)))?;
     Ok(Outcome::Success)
 }
 

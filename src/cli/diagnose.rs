@@ -113,7 +113,7 @@ pub fn run(args: DiagnoseArgs) -> Result<Outcome> {
             diagnose::updated_twin(&base, &d).to_toml()
         ),
     )?;
-    println!(
+    outln!(
         "rate layer: held-out gap {:.5} deg/h -> {:.5} deg/h; thermal layer: {:.4} degC{}",
         d.layers.rate.gap_dph,
         d.layers.rate.gap_after_dph,
@@ -124,37 +124,39 @@ pub fn run(args: DiagnoseArgs) -> Result<Outcome> {
             .map_or(String::new(), |g| format!(
                 " ({g:.4} degC with the network fitted to the runs, in twin-updated.toml)"
             ))
-    );
+    )?;
     if d.effects.is_empty() {
-        println!("no library effect is significant");
+        outln!("no library effect is significant")?;
     }
     for e in &d.effects {
-        println!(
+        outln!(
             "  {:<26} gap {:.5} -> {:.5} deg/h (shrink {:.0} %, p = {:.1e})",
             e.name,
             e.held_out_gap_before_dph,
             e.held_out_gap_after_dph,
             100.0 * e.shrink,
             e.p_value
-        );
+        )?;
     }
     for c in &d.confounded {
-        println!(
+        outln!(
             "  confounded: {} / {}: separate with {}",
-            c.effects[0], c.effects[1], c.separate_with
-        );
+            c.effects[0],
+            c.effects[1],
+            c.separate_with
+        )?;
     }
     if let Some(s) = d.r#where.first() {
-        println!(
+        outln!(
             "  the gap lies most in {} {} ({}, {:.0} % of it)",
             s.run,
             s.record,
             s.regime,
             100.0 * s.share
-        );
+        )?;
     }
     if let Some(p) = d.unexplained.period_s {
-        println!("  unexplained: periodic, period {p:.0} s");
+        outln!("  unexplained: periodic, period {p:.0} s")?;
     }
     eprintln!("diagnosis in {}", out.display());
     Ok(Outcome::Success)
@@ -191,20 +193,20 @@ fn run_selfcheck(a: SelfcheckArgs) -> Result<Outcome> {
         &serde_json::to_string_pretty(&s)?,
     )?;
     write(&a.out.join("selfcheck.html"), &selfcheck::render_html(&s))?;
-    println!(
+    outln!(
         "noise unit {:.5} deg/h; false positives {:.0} %; outside effect attributed {:.0} %, period found {:.0} %",
         s.noise_dph,
         100.0 * s.false_positive_rate,
         100.0 * s.periodic_attributed,
         100.0 * s.periodic_period_found
-    );
+    )?;
     for p in &s.power {
         let shows = s
             .sizes
             .iter()
             .find(|z| z.effect == p.effect)
             .map_or(f64::NAN, |z| z.gap_per_rms);
-        println!(
+        outln!(
             "  {:<26} {:>4}x  named first {:>4.0} %  excess closed {:>4.0} %  (coefficient {:.3e}; gap/RMS {:.2})",
             p.effect,
             p.amplitude,
@@ -212,7 +214,7 @@ fn run_selfcheck(a: SelfcheckArgs) -> Result<Outcome> {
             100.0 * p.excess_closed,
             p.coefficient,
             shows
-        );
+        )?;
     }
     eprintln!("self-check in {}", a.out.display());
     Ok(Outcome::Success)

@@ -8,7 +8,7 @@ use anyhow::{Context, Result};
 use clap::Args;
 
 use super::Outcome;
-use crate::import::{export, import, load_site};
+use crate::runlog::exchange::{export, import, load_site};
 
 #[derive(Debug, Args)]
 pub struct ImportArgs {
@@ -34,7 +34,7 @@ pub struct ExportArgs {
 pub fn run_import(args: ImportArgs) -> Result<Outcome> {
     let site = load_site(&args.site).with_context(|| format!("reading {}", args.site.display()))?;
     let r = import(&args.csv, site, &args.out)?;
-    println!(
+    outln!(
         "imported {} s of 1 Hz data in {} record(s) into {}; judged by the acceptance's limits: {}",
         r.intervals,
         r.records.len(),
@@ -43,22 +43,37 @@ pub fn run_import(args: ImportArgs) -> Result<Outcome> {
             crate::sequencer::Outcome::Pass => "PASS",
             _ => "FAIL",
         }
-    );
+    )?;
     for m in &r.measurements {
-        println!(
+        outln!(
             "  {:<32} {:>10} {:<6} [{}]  {}",
             m.name,
             m.value.map_or("n/a".to_owned(), |v| format!("{v:.4}")),
             m.unit,
             m.limits_text(),
             m.outcome.as_str().to_uppercase()
-        );
+        )?;
     }
     Ok(Outcome::Success)
 }
 
 pub fn run_export(args: ExportArgs) -> Result<Outcome> {
-    let rows = export(&args.log, &args.out)?;
-    println!("exported {rows} rows (1 Hz) to {}", args.out.display());
+    let done = export(&args.log, &args.out)?;
+    if !done.read.complete {
+        eprintln!(
+            "warning: {} is incomplete ({}); exported what it holds, {} bytes after the last complete chunk are missing",
+            args.log.display(),
+            done.read
+                .stopped
+                .as_deref()
+                .unwrap_or("the run did not finish writing it"),
+            done.read.bytes_lost
+        );
+    }
+    outln!(
+        "exported {} rows (1 Hz) to {}",
+        done.rows,
+        args.out.display()
+    )?;
     Ok(Outcome::Success)
 }

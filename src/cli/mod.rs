@@ -4,6 +4,16 @@
 //! rendering (`render_*` -> String) is kept apart from printing so it can be
 //! unit tested. Results go to stdout, diagnostics to stderr.
 
+/// `print!` to stdout through [`out`].
+macro_rules! outf {
+    ($($t:tt)*) => { $crate::cli::out(&format!($($t)*)) };
+}
+
+/// `println!` to stdout through [`out`].
+macro_rules! outln {
+    ($($t:tt)*) => { $crate::cli::out(&format!("{}\n", format_args!($($t)*))) };
+}
+
 mod allan;
 mod calibrate;
 mod check;
@@ -15,9 +25,32 @@ mod run;
 mod sim;
 mod twin;
 
+use std::io::Write;
 use std::process::ExitCode;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 use clap::{Parser, Subcommand};
+
+/// Set once stdout's reader went away.
+static STDOUT_CLOSED: AtomicBool = AtomicBool::new(false);
+
+/// Write `text` to stdout. A reader that went away (`gyrobench ... | head
+/// -1`) is not an error: the rest of the output is dropped quietly and the
+/// command goes on to its end, so its files are complete and its exit code
+/// is its own.
+pub fn out(text: &str) -> std::io::Result<()> {
+    if STDOUT_CLOSED.load(Ordering::Relaxed) {
+        return Ok(());
+    }
+    let mut o = std::io::stdout().lock();
+    match o.write_all(text.as_bytes()).and_then(|()| o.flush()) {
+        Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => {
+            STDOUT_CLOSED.store(true, Ordering::Relaxed);
+            Ok(())
+        }
+        r => r,
+    }
+}
 
 /// How a command ended, mapped to the process exit code.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -31,6 +64,12 @@ pub enum Outcome {
     /// Interrupted by the operator: exit 130.
     Interrupted,
 }
+
+/// A usage error found after parsing (a bad value, a run directory that
+/// is taken): exit 2, like clap's own.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("{0}")]
+pub struct Usage(pub String);
 
 /// Exit code for an error (bad input, device or I/O failure).
 pub const EXIT_ERROR: u8 = 1;
@@ -113,7 +152,8 @@ pub fn main() -> ExitCode {
         Ok(outcome) => ExitCode::from(outcome.code()),
         Err(e) => {
             eprintln!("error: {e:#}");
-            ExitCode::from(EXIT_ERROR)
+            let usage = e.chain().any(|c| c.is::<Usage>());
+            ExitCode::from(if usage { EXIT_USAGE } else { EXIT_ERROR })
         }
     }
 }

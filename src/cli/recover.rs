@@ -7,7 +7,8 @@ use anyhow::{Context, Result};
 use clap::Args;
 
 use super::Outcome;
-use crate::recorder::recover;
+use crate::fsutil::ensure_distinct;
+use crate::runlog::recover::recover;
 
 #[derive(Debug, Args)]
 pub struct RecoverArgs {
@@ -19,8 +20,6 @@ pub struct RecoverArgs {
 }
 
 pub fn run(args: RecoverArgs) -> Result<Outcome> {
-    let input =
-        std::fs::read(&args.log).with_context(|| format!("reading {}", args.log.display()))?;
     let out = args.out.unwrap_or_else(|| {
         let stem = args
             .log
@@ -28,11 +27,17 @@ pub fn run(args: RecoverArgs) -> Result<Outcome> {
             .map_or("run".into(), |s| s.to_string_lossy().into_owned());
         args.log.with_file_name(format!("{stem}-recovered.mcap"))
     });
-    let tmp = out.with_extension("mcap.partial");
-    let r = recover(&input, &tmp).with_context(|| format!("recovering {}", args.log.display()))?;
-    std::fs::rename(&tmp, &out).with_context(|| format!("writing {}", out.display()))?;
-    println!(
-        "recovered {} messages ({} gyro frames) into {}; {} bytes after the last complete record were lost{}",
+    ensure_distinct(&out, &[&args.log])?;
+    let r =
+        recover(&args.log, &out).with_context(|| format!("recovering {}", args.log.display()))?;
+    if let Some(why) = &r.stopped {
+        eprintln!(
+            "warning: the read of {} stopped early: {why}",
+            args.log.display()
+        );
+    }
+    super::out(&format!(
+        "recovered {} messages ({} gyro frames) into {}; {} bytes after the last complete record were lost{}\n",
         r.messages,
         r.frames,
         out.display(),
@@ -42,6 +47,6 @@ pub fn run(args: RecoverArgs) -> Result<Outcome> {
         } else {
             ""
         }
-    );
+    ))?;
     Ok(Outcome::Success)
 }

@@ -9,8 +9,8 @@ use clap::Args;
 use super::Outcome;
 use crate::clock::Stopwatch;
 use crate::coeffs::CoeffsFile;
-use crate::replay::replay;
 use crate::report::{Report, render_html};
+use crate::runlog::replay::replay;
 use crate::sequencer;
 
 #[derive(Debug, Args)]
@@ -58,23 +58,15 @@ pub fn run(args: ReplayArgs) -> Result<Outcome> {
             r.result.frames as f64 / secs.max(1e-9) / 1e6
         );
     }
-    let meta = |k: &str| r.meta.get(k).cloned().unwrap_or_default();
-    let bench = r
-        .meta
-        .get("bench")
-        .cloned()
-        .unwrap_or_else(|| "embedded".into());
-    let seed = (bench == "embedded")
-        .then(|| meta("seed").parse().ok())
-        .flatten();
+    let seed = r.meta.seed.filter(|_| r.meta.is_embedded());
     let report = Report::new(
         &r.procedure,
         &r.result,
-        &meta("dut_serial"),
-        &meta("start_time_utc"),
+        &r.meta.dut_serial,
+        &r.meta.start_time_utc,
         r.link,
         seed,
-        &bench,
+        &r.meta.bench,
     );
     let out = args.out.unwrap_or_else(|| {
         args.log
@@ -90,7 +82,7 @@ pub fn run(args: ReplayArgs) -> Result<Outcome> {
         crate::fsutil::write_atomic(&path, bytes.as_bytes())
             .with_context(|| format!("writing {}", path.display()))?;
     }
-    print!("{}", report.render_text());
+    outf!("{}", report.render_text())?;
     eprintln!("report in {}", out.display());
     Ok(match r.result.outcome {
         sequencer::Outcome::Pass => Outcome::Success,

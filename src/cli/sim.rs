@@ -57,7 +57,7 @@ pub fn run(cmd: SimCommand) -> Result<Outcome> {
                 "--rate-hz and --seconds must be positive"
             );
             let r = runtime()?.block_on(link_bench(&args))?;
-            print!("{}", render_link_bench(&args, &r));
+            outf!("{}", render_link_bench(&args, &r))?;
             Ok(Outcome::Success)
         }
         SimCommand::Serve(args) => {

@@ -73,9 +73,9 @@ pub fn run(cmd: TwinCommand) -> Result<Outcome> {
                 eprintln!("wrote {}", path.display());
             }
             if args.json {
-                println!("{}", serde_json::to_string_pretty(&report)?);
+                outln!("{}", serde_json::to_string_pretty(&report)?)?;
             } else {
-                print!("{}", render_study(&report));
+                outf!("{}", render_study(&report))?;
             }
             eprintln!("done in {wall_s:.1} s of wall time");
             Ok(Outcome::Success)
@@ -91,7 +91,7 @@ pub fn run(cmd: TwinCommand) -> Result<Outcome> {
             let mut sum: i64 = 0;
             let ((), wall_s) =
                 time_it(|| twin.run_until(device_s, |_, g| sum += i64::from(g.delta_counts)));
-            print!(
+            outf!(
                 "{}",
                 render_bench(
                     device_s,
@@ -99,12 +99,12 @@ pub fn run(cmd: TwinCommand) -> Result<Outcome> {
                     wall_s,
                     peak_rss_kib()
                 )
-            );
+            )?;
             eprintln!("(checksum of counts: {sum})");
             Ok(Outcome::Success)
         }
         TwinCommand::DefaultConfig => {
-            print!("{}", crate::twin::config::DEFAULT_TWIN_TOML);
+            outf!("{}", crate::twin::config::DEFAULT_TWIN_TOML)?;
             Ok(Outcome::Success)
         }
     }

@@ -7,8 +7,9 @@ use nalgebra::Vector3;
 
 use crate::analysis::series::Interval;
 use crate::geometry::{Orientation, Site, gravity_ned_g};
-use crate::recorder::{Rate1Hz, TablePose, topics};
-use crate::replay::{RUN_META, ReplayError};
+use crate::runlog::meta::RunMeta;
+use crate::runlog::replay::ReplayError;
+use crate::runlog::schema::{RUN_META, Rate1Hz, TableState, topics};
 use crate::runlog::{self, Item};
 
 /// One 1 Hz interval with its context.
@@ -59,18 +60,20 @@ pub fn load(path: &Path) -> Result<RunData, ReplayError> {
         message,
     };
     let mut site: Option<Site> = None;
-    let mut table: Option<TablePose> = None;
+    let mut table: Option<TableState> = None;
     let mut samples = Vec::new();
     runlog::read(path, |item| {
         match item {
             Item::Meta { name, entries } if name == RUN_META => {
-                site = entries
-                    .get("site")
-                    .and_then(|s| serde_json::from_str(s).ok());
+                let meta = RunMeta::from_entries(entries).map_err(|e| e.to_string())?;
+                site = Some(
+                    serde_json::from_str(&meta.site_json)
+                        .map_err(|e| format!("the run metadata's site: {e}"))?,
+                );
             }
             Item::Message { topic, data, .. } if topic == topics::TABLE => {
                 table = Some(
-                    serde_json::from_slice::<TablePose>(data)
+                    serde_json::from_slice::<TableState>(data)
                         .map_err(|e| format!("{topic}: {e}"))?,
                 );
             }

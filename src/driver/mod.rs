@@ -147,6 +147,17 @@ pub enum ChamberMode {
     Constant,
 }
 
+impl ChamberMode {
+    /// `off`, `standby` or `constant` (as logged).
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Off => "off",
+            Self::Standby => "standby",
+            Self::Constant => "constant",
+        }
+    }
+}
+
 /// What a chamber reports.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ChamberReading {

@@ -16,7 +16,7 @@ use crate::geometry::{Orientation, TableAngles, TableGeometry};
 use raw::{RawPosition, RawProcedure, RawStep};
 
 /// Which group a step belongs to.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Group {
     /// Brings the bench to its starting state.
@@ -156,6 +156,22 @@ pub enum StepKind {
         /// Text.
         text: String,
     },
+}
+
+impl StepKind {
+    /// The `action` of the procedure file that makes this step.
+    pub fn action(&self) -> &'static str {
+        match self {
+            Self::Chamber { .. } => "chamber",
+            Self::Soak { .. } => "soak",
+            Self::Move { .. } => "move",
+            Self::Wait { .. } => "wait",
+            Self::Record { .. } => "record",
+            Self::Measure(_) => "measure",
+            Self::Note { .. } => "note",
+            Self::Prompt { .. } => "prompt",
+        }
+    }
 }
 
 /// One step with where it came from.

@@ -8,6 +8,7 @@
 
 pub mod device;
 pub mod embedded;
+pub mod events;
 pub mod guard;
 pub mod measure;
 
@@ -20,6 +21,7 @@ use serde::Serialize;
 use crate::driver::{ChamberReading, DeviceError, InPosition, TableReading};
 use crate::geometry::{Orientation, TableAngles};
 use crate::procedure::{Procedure, Step, StepKind};
+pub use events::{Level, StepEvent, StepPhase};
 use measure::{Measurement, Records};
 
 /// One gyro frame as received (wire units).
@@ -100,8 +102,11 @@ pub trait Sink {
         iv: &crate::analysis::series::Interval,
         record: Option<&str>,
     ) -> std::io::Result<()>;
-    /// An event (step start/end, note, error), with a level 1..5 (foxglove.Log).
-    fn event(&mut self, t_s: f64, level: u8, message: &str) -> std::io::Result<()>;
+    /// A line for people (note, measurement, error; step starts and ends
+    /// in words at [`Level::Debug`]).
+    fn event(&mut self, t_s: f64, level: Level, message: &str) -> std::io::Result<()>;
+    /// A step started, ended or was run to restore a resumed run.
+    fn step(&mut self, event: &StepEvent) -> std::io::Result<()>;
     /// The gyro link's figures so far (every minute of device time and at the end).
     fn link(&mut self, t_s: f64, stats: &crate::protocol::frame::LinkStats) -> std::io::Result<()>;
 }
@@ -118,6 +123,25 @@ pub enum Outcome {
     Error,
     /// The operator interrupted the run.
     Aborted,
+}
+
+impl Outcome {
+    /// `pass`, `fail`, `error` or `aborted`.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Pass => "pass",
+            Self::Fail => "fail",
+            Self::Error => "error",
+            Self::Aborted => "aborted",
+        }
+    }
+
+    /// The outcome named by [`Outcome::as_str`].
+    pub fn parse(s: &str) -> Option<Self> {
+        [Self::Pass, Self::Fail, Self::Error, Self::Aborted]
+            .into_iter()
+            .find(|o| o.as_str() == s)
+    }
 }
 
 /// The failure that ended a run.
@@ -148,6 +172,30 @@ pub struct RunResult {
     pub frames: u64,
     /// The 1 Hz records.
     pub records: Records,
+    /// The state the bench was left in, as read back at the end.
+    pub bench_left: Option<BenchLeft>,
+}
+
+/// The state a run left the bench in, read back from the devices.
+#[derive(Debug, Clone, PartialEq, Serialize, serde::Deserialize)]
+pub struct BenchLeft {
+    /// What the end of the run asked for: `cleanup` (the procedure's
+    /// cleanup steps) or `safe_state` (the bench's safe state).
+    pub intended: String,
+    /// Chamber mode read back (`off`, `standby`, `constant`), or `unknown`.
+    pub chamber_mode: String,
+    /// Chamber set point read back, degC.
+    pub chamber_set_point_c: Option<f64>,
+    /// Chamber air read back, degC.
+    pub chamber_air_c: Option<f64>,
+    /// Table angles read back (outer, inner), deg.
+    pub table_deg: Option<[f64; 2]>,
+    /// Both table axes at rest.
+    pub table_at_rest: Option<bool>,
+    /// The state read back is the one asked for.
+    pub verified: bool,
+    /// In words, for the report and the operator.
+    pub summary: String,
 }
 
 /// Progress callbacks for the operator.
@@ -226,7 +274,7 @@ pub const RESUME_SOAK: StepKind = StepKind::Soak {
 /// before it. The restore is the last table move, the last chamber set
 /// point, and a soak that re-checks its conditions (the procedure's own
 /// criteria when it has a soak step, else [`RESUME_SOAK`]).
-pub fn resume_plan(p: &Procedure, completed: usize) -> (usize, Vec<Step>) {
+pub fn resume_plan(p: &Procedure, completed: usize) -> (usize, Vec<(usize, Step)>) {
     let steps: Vec<&Step> = p.setup.iter().chain(&p.main).collect();
     let completed = completed.min(steps.len());
     let last_before =
@@ -242,22 +290,25 @@ pub fn resume_plan(p: &Procedure, completed: usize) -> (usize, Vec<Step>) {
     {
         start_at = c;
     }
-    let mut restore: Vec<Step> = Vec::new();
+    let mut restore: Vec<(usize, Step)> = Vec::new();
     if let Some(m) = last_before(start_at, &|k| matches!(k, StepKind::Move { .. })) {
-        restore.push(steps[m].clone());
+        restore.push((m, steps[m].clone()));
     }
     if let Some(c) = last_before(start_at, &is_chamber) {
-        restore.push(steps[c].clone());
+        restore.push((c, steps[c].clone()));
         let soak = p
             .steps()
             .find(|s| is_soak(&s.kind))
             .map_or(RESUME_SOAK, |s| s.kind.clone());
-        restore.push(Step {
-            group: steps[c].group,
-            key: format!("{}.resume_soak", steps[c].key),
-            line: steps[c].line,
-            kind: soak,
-        });
+        restore.push((
+            c,
+            Step {
+                group: steps[c].group,
+                key: format!("{}.resume_soak", steps[c].key),
+                line: steps[c].line,
+                kind: soak,
+            },
+        ));
     }
     (start_at, restore)
 }
@@ -293,6 +344,16 @@ enum Stop {
     Interrupted,
 }
 
+impl Stop {
+    fn message(&self) -> String {
+        match self {
+            Self::Device(d) => d.to_string(),
+            Self::Data(m) => m.clone(),
+            Self::Interrupted => "interrupted".into(),
+        }
+    }
+}
+
 struct Run<'a> {
     bench: &'a mut dyn BenchIo,
     sink: &'a mut dyn Sink,
@@ -309,6 +370,27 @@ struct Run<'a> {
 }
 
 impl Run<'_> {
+    /// Write a line for people; a log that cannot be written stops the run.
+    fn log(&mut self, level: Level, message: &str) -> Result<(), Stop> {
+        self.sink
+            .event(self.bench.now_s(), level, message)
+            .map_err(|e| Stop::Data(format!("writing the log: {e}")))
+    }
+
+    /// Write a step event (and its line in words).
+    fn log_step(&mut self, phase: StepPhase, index: usize, s: &Step) -> Result<(), Stop> {
+        let e = StepEvent::new(self.bench.now_s(), phase, index, s);
+        self.sink
+            .step(&e)
+            .map_err(|e| Stop::Data(format!("writing the log: {e}")))?;
+        let words = match phase {
+            StepPhase::Start => s.start_message(),
+            StepPhase::End => format!("end of step {}", s.key),
+            StepPhase::Restore => format!("restore {} (line {}): {}", s.key, s.line, s.describe()),
+        };
+        self.log(Level::Debug, &words)
+    }
+
     /// Advance one tick (at most 1 s, never past `until_s`).
     async fn tick(&mut self, until_s: f64, record: Option<&str>, step: &str) -> Result<(), Stop> {
         if self.opts.interrupt.load(Ordering::Relaxed) {
@@ -470,30 +552,21 @@ impl Run<'_> {
                     meas.outcome.as_str()
                 );
                 let level = if meas.outcome == measure::MeasureOutcome::Pass {
-                    2
+                    Level::Info
                 } else {
-                    3
+                    Level::Warning
                 };
-                self.sink
-                    .event(self.bench.now_s(), level, &msg)
-                    .map_err(|e| Stop::Data(e.to_string()))?;
+                self.log(level, &msg)?;
                 self.measurements.push(meas);
                 Ok(())
             }
-            StepKind::Note { text } => self
-                .sink
-                .event(self.bench.now_s(), 2, text)
-                .map_err(|e| Stop::Data(e.to_string())),
+            StepKind::Note { text } => self.log(Level::Info, text),
             StepKind::Prompt { text } => {
-                self.sink
-                    .event(self.bench.now_s(), 2, &format!("prompt: {text}"))
-                    .map_err(|e| Stop::Data(e.to_string()))?;
+                self.log(Level::Info, &format!("prompt: {text}"))?;
                 // Simulated benches have no operator to wait for.
                 if !self.bench.is_simulated() {
                     self.progress.prompt(text);
-                    self.sink
-                        .event(self.bench.now_s(), 2, "operator confirmed")
-                        .map_err(|e| Stop::Data(e.to_string()))?;
+                    self.log(Level::Info, "operator confirmed")?;
                 }
                 Ok(())
             }
@@ -547,84 +620,50 @@ pub async fn run(
     if let Some(res) = &opts.resume {
         r.records = res.records.clone();
         r.measurements = res.measurements.clone();
-        let (_, restore) = resume_plan(p, res.completed);
-        let _ = r.sink.event(
-            r.bench.now_s(),
-            2,
-            &format!(
-                "resume: part {} continues at step {} of {}; restoring {}",
-                res.part,
-                start_at + 1,
-                p.setup.len() + p.main.len(),
-                if restore.is_empty() {
-                    "nothing".to_owned()
-                } else {
-                    restore
-                        .iter()
-                        .map(Step::describe)
-                        .collect::<Vec<_>>()
-                        .join(", ")
-                }
-            ),
-        );
-        for s in &restore {
-            let _ = r.sink.event(
-                r.bench.now_s(),
-                1,
-                &format!("restore {} (line {}): {}", s.key, s.line, s.describe()),
-            );
-            if let Err(e) = r.step(s).await {
-                stop = Some((e, s.key.clone()));
-                break;
-            }
-        }
+        stop = restore(&mut r, p, res).await.err();
     }
-    for (i, s) in p.setup.iter().chain(&p.main).enumerate() {
-        if i < start_at || stop.is_some() {
-            continue;
-        }
-        r.progress.step(s, i, total);
-        let _ = r.sink.event(r.bench.now_s(), 1, &s.start_message());
-        if let Err(e) = r.step(s).await {
-            stop = Some((e, s.key.clone()));
+    let run_order = p.setup.iter().chain(&p.main).enumerate();
+    for (i, s) in run_order.skip(start_at) {
+        if stop.is_some() {
             break;
         }
-        let _ = r
-            .sink
-            .event(r.bench.now_s(), 1, &format!("end of step {}", s.key));
+        r.progress.step(s, i, total);
+        let done = async {
+            r.log_step(StepPhase::Start, i, s)?;
+            r.step(s).await?;
+            r.log_step(StepPhase::End, i, s)
+        };
+        if let Err(e) = done.await {
+            stop = Some((e, s.key.clone()));
+        }
     }
     // Cleanup always runs once setup has started; a safe state comes first
-    // whenever the run did not end normally.
+    // whenever the run did not end normally. Failing log writes no longer
+    // stop anything here: the bench comes first.
     let mut cleanup_completed = true;
     if stop.is_some() {
-        let _ = r.sink.event(
-            r.bench.now_s(),
-            3,
+        let _ignored = r.log(
+            Level::Warning,
             "run stopped: bringing the bench to a safe state",
         );
         if let Err(e) = r.bench.safe_state().await {
             cleanup_completed = false;
-            let _ = r
-                .sink
-                .event(r.bench.now_s(), 4, &format!("safe state failed: {e}"));
+            let _ignored = r.log(Level::Error, &format!("safe state failed: {e}"));
         }
     }
     let interrupted = matches!(stop, Some((Stop::Interrupted, _)));
     r.opts.interrupt.store(false, Ordering::Relaxed);
     r.cleaning_up = true;
+    let first_cleanup = p.setup.len() + p.main.len();
     for (i, s) in p.cleanup.iter().enumerate() {
-        r.progress.step(s, p.setup.len() + p.main.len() + i, total);
-        let _ = r.sink.event(r.bench.now_s(), 1, &s.start_message());
+        let index = first_cleanup + i;
+        r.progress.step(s, index, total);
+        let _ignored = r.log_step(StepPhase::Start, index, s);
         if let Err(e) = r.step(s).await {
             cleanup_completed = false;
-            let msg = match &e {
-                Stop::Device(d) => d.to_string(),
-                Stop::Data(m) => m.clone(),
-                Stop::Interrupted => "interrupted again".into(),
-            };
-            let _ = r.sink.event(
-                r.bench.now_s(),
-                4,
+            let msg = e.message();
+            let _ignored = r.log(
+                Level::Error,
                 &format!("cleanup step {} failed: {msg}", s.key),
             );
             if stop.is_none() {
@@ -632,6 +671,7 @@ pub async fn run(
             }
             break;
         }
+        let _ignored = r.log_step(StepPhase::End, index, s);
     }
     let (outcome, error) = match stop {
         None => {
@@ -650,16 +690,12 @@ pub async fn run(
             }),
         ),
         Some((e, step)) => {
-            let (device, message) = match e {
-                Stop::Device(d) => (device_of(&d), d.to_string()),
-                Stop::Data(m) => (None, m),
-                Stop::Interrupted => (None, "interrupted".into()),
+            let device = match &e {
+                Stop::Device(d) => device_of(d),
+                _ => None,
             };
-            let _ = r.sink.event(
-                r.bench.now_s(),
-                4,
-                &format!("error in step {step}: {message}"),
-            );
+            let message = e.message();
+            let _ignored = r.log(Level::Error, &format!("error in step {step}: {message}"));
             (
                 Outcome::Error,
                 Some(RunError {
@@ -678,7 +714,39 @@ pub async fn run(
         device_time_s: r.bench.now_s() + opts.resume.as_ref().map_or(0.0, |res| res.device_time_s),
         frames: r.frames + opts.resume.as_ref().map_or(0, |res| res.frames),
         records: r.records,
+        bench_left: None,
     }
+}
+
+/// Bring the bench back to the conditions a resumed run needs
+/// ([`resume_plan`]); the error names the restore step that failed.
+async fn restore(r: &mut Run<'_>, p: &Procedure, res: &Resume) -> Result<(), (Stop, String)> {
+    let (start_at, restore) = resume_plan(p, res.completed);
+    let what = if restore.is_empty() {
+        "nothing".to_owned()
+    } else {
+        restore
+            .iter()
+            .map(|(_, s)| s.describe())
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    let at = |e| (e, "resume".to_owned());
+    r.log(
+        Level::Info,
+        &format!(
+            "resume: part {} continues at step {} of {}; restoring {what}",
+            res.part,
+            start_at + 1,
+            p.setup.len() + p.main.len(),
+        ),
+    )
+    .map_err(at)?;
+    for (index, s) in &restore {
+        r.log_step(StepPhase::Restore, *index, s).map_err(at)?;
+        r.step(s).await.map_err(|e| (e, s.key.clone()))?;
+    }
+    Ok(())
 }
 
 fn device_of(e: &DeviceError) -> Option<String> {

@@ -104,10 +104,10 @@ pub fn mangle_stream(f: &GyroFaults, chunk: &[u8], position: &mut u64) -> Vec<u8
     let mut out = Vec::with_capacity(chunk.len());
     for &b in chunk {
         *position += 1;
-        if drop > 0 && *position % drop == 0 {
+        if drop > 0 && (*position).is_multiple_of(drop) {
             continue;
         }
-        out.push(if corrupt > 0 && *position % corrupt == 0 {
+        out.push(if corrupt > 0 && (*position).is_multiple_of(corrupt) {
             b ^ 0x20
         } else {
             b

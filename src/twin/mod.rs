@@ -314,7 +314,7 @@ impl Twin {
             self.inner.step(self.frame_dt_s);
             self.update_orientation();
         }
-        if self.tick % self.frames_per_step == 0 {
+        if self.tick.is_multiple_of(self.frames_per_step) {
             self.slow_step();
         }
         self.power_on_tick?;

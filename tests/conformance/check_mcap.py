@@ -3,7 +3,9 @@
 Usage: check_mcap.py RUN_DIR
 Checks: the file opens and has a summary; every channel has a schema;
 message counts match the summary statistics; the gyro frames logged match
-the frame count the run reports; the run metadata is there.
+the frame count the run reports; the run metadata is there; every step
+starts and ends on /steps; the procedure and the report travel in the log
+as attachments; the result record lists the report's measurements.
 """
 import json
 import os
@@ -36,14 +38,21 @@ def main():
               str({c.topic: c.schema_id for c in channels.values()}))
         check("schemas are jsonschema", all(s.encoding == "jsonschema" for s in summary.schemas.values()))
         topics = {c.topic for c in channels.values()}
-        for t in ["/gyro/frames", "/gyro/rate_1hz", "/chamber/state", "/table/state", "/events", "/gyro/link"]:
+        for t in ["/gyro/frames", "/gyro/rate_1hz", "/chamber/state", "/table/state", "/events", "/gyro/link", "/steps"]:
             check(f"channel {t}", t in topics)
         counts = {}
         frames = 0
+        steps = []
         for schema, channel, message in reader.iter_messages():
             counts[channel.topic] = counts.get(channel.topic, 0) + 1
             if channel.topic == "/gyro/frames":
                 frames += len(json.loads(message.data)["counts"])
+            if channel.topic == "/steps":
+                steps.append(json.loads(message.data))
+        starts = [s["index"] for s in steps if s["phase"] == "start"]
+        ends = [s["index"] for s in steps if s["phase"] == "end"]
+        check("every step starts once, in run order, and ends", starts == sorted(set(starts)) and starts == ends and len(starts) > 0,
+              f"{len(starts)} starts, {len(ends)} ends")
         stats = summary.statistics
         check("message count matches the statistics", sum(counts.values()) == stats.message_count,
               f"{sum(counts.values())} vs {stats.message_count}")
@@ -54,6 +63,16 @@ def main():
         check("run metadata holds the procedure, bench, twin and start time",
               all(k in run for k in ["procedure_toml", "bench_toml", "twin_toml", "start_time_utc", "dut_serial", "software_version"]),
               str(sorted(run)))
+        attachments = {a.name: a.data for a in reader.iter_attachments()}
+        check("the procedure is attached as run", attachments.get("procedure.toml", b"").decode() == run.get("procedure_toml"))
+        on_disk = open(f"{run_dir}/report.json", "rb").read()
+        check("report.json is attached, as written", attachments.get("report.json") == on_disk)
+        result = meta.get("result", {})
+        listed = json.loads(result.get("measurements", "[]"))
+        check("the result record lists every measurement with the report's values",
+              [(m["name"], m["value"], m["outcome"]) for m in listed]
+              == [(m["name"], m["value"], m["outcome"]) for m in report["measurements"]],
+              f"{len(listed)} listed")
     per_frame = os.path.getsize(f"{run_dir}/run.mcap") / max(report["frames"], 1)
     check("at most 12 bytes a frame on disk", per_frame <= 12.0, f"{per_frame:.2f}")
     print(f"{passed} passed, {failed} failed")

@@ -191,3 +191,38 @@ fn a_truncated_log_is_read_to_its_last_complete_chunk_and_says_so() {
     assert!(got > all / 3 && got < all, "{got} of {all} frames");
     std::fs::remove_dir_all(&dir).expect("cleanup");
 }
+
+/// Logs of the first format (steps only as `/events` lines, no `/steps`,
+/// no attachments) replay to the figures their run reported, a resumed
+/// run across both of its parts.
+#[test]
+fn logs_of_the_first_format_still_replay_to_their_figures() {
+    let dir = temp_dir("replay-format1");
+    let fixtures = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/logs/format1");
+    for (run, log) in [("whole", "run.mcap"), ("resumed", "run.part2.mcap")] {
+        let out = dir.join(run);
+        let r = gyrobench(&["replay", s(&fixtures.join(run).join(log)), "--out", s(&out)]);
+        assert_eq!(
+            r.status.code(),
+            Some(0),
+            "{run}: {}",
+            String::from_utf8_lossy(&r.stderr)
+        );
+        let then = json(&fixtures.join(run).join("report.json"));
+        let now = json(&out.join("report.json"));
+        for field in [
+            "outcome",
+            "measurements",
+            "frames",
+            "device_time_s",
+            "link",
+            "dut",
+            "seed",
+            "noise",
+        ] {
+            assert_eq!(now[field], then[field], "{run}: {field}");
+        }
+        assert_eq!(now["measurements"].as_array().map(Vec::len), Some(2));
+    }
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}

@@ -467,7 +467,11 @@ fn a_run_killed_with_sigkill_is_recovered_to_what_was_flushed() {
     let summary = mcap::Summary::read(&bytes)
         .expect("summary reads")
         .expect("has a summary");
-    assert_eq!(summary.channels.len(), 6);
+    assert_eq!(
+        summary.channels.len(),
+        7,
+        "every channel of the log, /steps included"
+    );
     let recovered = counts_and_seqs(&recovered_path);
     assert_eq!(
         recovered.0.len(),

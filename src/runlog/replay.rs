@@ -4,10 +4,14 @@
 //! The procedure, bench and coefficients come from the log's `run`
 //! metadata; the 1 Hz intervals are rebuilt from the gyro frames and the
 //! 1 Hz bench state through the same reduction the live run uses
-//! ([`TickSums`]), and each measure step is computed where its start event
-//! sits in the log, on the records recorded up to then. How the run ended
-//! (error, interrupt) is a fact of the run, read from the `result` record.
-//! The log streams through: memory holds the 1 Hz intervals, never frames.
+//! ([`TickSums`]), and each measure step is computed where its `/steps`
+//! start sits in the log, on the records recorded up to then. How the run
+//! ended (error, interrupt, the bench state) is a fact of the run, read
+//! from the `result` record. The log streams through: memory holds the
+//! 1 Hz intervals, never frames.
+//!
+//! Logs of format 1 (no `/steps`) are read by their `/events` lines, in
+//! [`format1`], and give the same figures.
 
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -15,28 +19,27 @@ use std::path::Path;
 use serde::Deserialize;
 use serde::de::{IgnoredAny, SeqAccess, Visitor};
 
+use super::meta::{ResultMeta, RunMeta};
+use super::reader::{self, Item, ReadSummary};
+use super::schema::{
+    ChamberState, LinkSample, LogLine, RESULT_META, RUN_META, Rate1Hz, StepEvent, StepPhase,
+    TableState, topics,
+};
 use crate::analysis::model::Fit;
 use crate::bench::BenchConfig;
 use crate::coeffs::CoeffsFile;
 use crate::config::Source;
 use crate::procedure::{Procedure, StepKind};
 use crate::protocol::frame::LinkStats;
-use crate::recorder::{Rate1Hz, topics};
-use crate::runlog::{self, Item, ReadSummary};
 use crate::sequencer::measure::{self, IntervalState, MeasureOutcome, Records, TickSums};
 use crate::sequencer::{Outcome, Resume, RunError, RunResult, resume_plan};
 use crate::twin::TwinConfig;
 
-/// Name of the metadata record with the run's configuration.
-pub const RUN_META: &str = "run";
-/// Name of the metadata record that says how the run ended.
-pub const RESULT_META: &str = "result";
-
 /// What a replay rebuilt.
 #[derive(Debug)]
 pub struct Replayed {
-    /// The run's metadata (`procedure_toml`, `dut_serial`, ...).
-    pub meta: BTreeMap<String, String>,
+    /// The run's metadata (of this part).
+    pub meta: RunMeta,
     /// The procedure read from the log.
     pub procedure: Procedure,
     /// Measurements, records and verdict.
@@ -59,7 +62,7 @@ pub struct Replayed {
 pub enum ReplayError {
     /// The file could not be read.
     #[error(transparent)]
-    Read(#[from] runlog::ReadError),
+    Read(#[from] reader::ReadError),
     /// Something the replay needs is not in the log.
     #[error("{path}: {message}")]
     Log {
@@ -114,23 +117,6 @@ struct FramesMsg {
     _status: IgnoredAny,
 }
 
-#[derive(Deserialize)]
-struct TableMsg {
-    t_s: f64,
-    earth_rate_dph: f64,
-}
-
-#[derive(Deserialize)]
-struct ChamberMsg {
-    air_c: f64,
-}
-
-#[derive(Deserialize)]
-struct LogMsg {
-    level: u8,
-    message: String,
-}
-
 /// Scale factors of the frames seen so far.
 #[derive(Debug, Clone, Copy)]
 struct Scales {
@@ -142,8 +128,8 @@ struct Scales {
 struct State<'a> {
     path: &'a Path,
     coeffs_override: Option<&'a Fit>,
-    meta: BTreeMap<String, String>,
-    result_meta: Option<BTreeMap<String, String>>,
+    meta: Option<RunMeta>,
+    result_meta: Option<ResultMeta>,
     procedure: Option<Procedure>,
     coeffs: Option<Fit>,
     records: Records,
@@ -176,28 +162,40 @@ pub struct Logged {
 }
 
 /// Parse the `run` metadata's configuration; errors say which part.
-pub fn logged(entries: &BTreeMap<String, String>) -> Result<Logged, String> {
-    let text = |k: &str| entries.get(k).filter(|t| !t.trim().is_empty());
+pub fn logged(meta: &RunMeta) -> Result<Logged, String> {
     let src = |k: &str, t: &str| Source::from_text(&format!("{k} (in the log)"), t);
-    let bench = match text("bench_toml") {
-        Some(t) => BenchConfig::from_source(&src("bench_toml", t))
-            .map_err(|e| format!("the logged bench configuration: {e}"))?,
-        None => BenchConfig::embedded(),
+    // Format 1 logs of the embedded bench left bench_toml empty.
+    let bench = if meta.bench_toml.trim().is_empty() {
+        if meta.format >= 2 || !meta.is_embedded() {
+            return Err(format!(
+                "no bench configuration in the log's run metadata (bench {:?})",
+                meta.bench
+            ));
+        }
+        BenchConfig::embedded()
+    } else {
+        BenchConfig::from_source(&src("bench_toml", &meta.bench_toml))
+            .map_err(|e| format!("the logged bench configuration: {e}"))?
     };
-    let procedure_text = text("procedure_toml")
-        .ok_or_else(|| "no procedure in the log's run metadata".to_owned())?;
-    let name = entries
-        .get("procedure_path")
-        .map_or("procedure (in the log)".to_owned(), |p| {
-            format!("{p} (in the log)")
-        });
-    let procedure = Procedure::from_source(&Source::from_text(&name, procedure_text), &bench)
+    if meta.procedure_toml.trim().is_empty() {
+        return Err("no procedure in the log's run metadata".to_owned());
+    }
+    let name = if meta.procedure_path.is_empty() {
+        "procedure (in the log)".to_owned()
+    } else {
+        format!("{} (in the log)", meta.procedure_path)
+    };
+    let procedure = Procedure::from_source(&Source::from_text(&name, &meta.procedure_toml), &bench)
         .map_err(|e| format!("the logged procedure: {e}"))?;
-    let coeffs = text("coeffs_toml")
+    let coeffs = meta
+        .coeffs_toml
+        .as_deref()
         .map(|t| CoeffsFile::from_source(&src("coeffs_toml", t)))
         .transpose()
         .map_err(|e| format!("the logged coefficients: {e}"))?;
-    let twin = text("twin_toml")
+    let twin = meta
+        .twin_toml
+        .as_deref()
         .map(|t| TwinConfig::from_source(&src("twin_toml", t)))
         .transpose()
         .map_err(|e| format!("the logged twin: {e}"))?;
@@ -235,17 +233,22 @@ impl State<'_> {
     fn meta(&mut self, name: &str, entries: &BTreeMap<String, String>) -> Result<(), String> {
         match name {
             RUN_META => {
-                self.meta = entries.clone();
-                let l = logged(entries).map_err(|e| self.log_err(e))?;
+                let meta =
+                    RunMeta::from_entries(entries).map_err(|e| self.log_err(e.to_string()))?;
+                let l = logged(&meta).map_err(|e| self.log_err(e))?;
                 self.coeffs = l.coeffs.as_ref().map(CoeffsFile::fit);
                 self.procedure = Some(l.procedure);
-                if let Some(prev) = entries.get("previous_part").filter(|p| !p.is_empty()) {
+                if let Some(prev) = &meta.previous_part {
+                    if prev.contains('/') || prev.contains('\\') || prev.starts_with('.') {
+                        return Err(self.log_err(format!(
+                            "previous_part {prev:?} is not a file name beside the log"
+                        )));
+                    }
                     let prev_path = self.path.with_file_name(prev);
                     let earlier = replay(&prev_path, self.coeffs_override)
                         .map_err(|e| self.log_err(format!("its earlier part {prev}: {e}")))?;
-                    let completed = entries
-                        .get("resume_completed_steps")
-                        .and_then(|v| v.parse().ok())
+                    let completed = meta
+                        .resume_completed_steps
                         .unwrap_or(earlier.completed_steps);
                     let r = resume_from(&earlier, completed);
                     self.records = r.records;
@@ -255,8 +258,13 @@ impl State<'_> {
                     self.completed = r.start_at;
                     self.earlier = Some(Box::new(earlier));
                 }
+                self.meta = Some(meta);
             }
-            RESULT_META => self.result_meta = Some(entries.clone()),
+            RESULT_META => {
+                self.result_meta = Some(
+                    ResultMeta::from_entries(entries).map_err(|e| self.log_err(e.to_string()))?,
+                );
+            }
             _ => {}
         }
         Ok(())
@@ -285,11 +293,11 @@ impl State<'_> {
                 self.pending = Some((sums, scales));
             }
             topics::CHAMBER => {
-                let m: ChamberMsg = serde_json::from_slice(data).map_err(|e| bad(topic, e))?;
+                let m: ChamberState = serde_json::from_slice(data).map_err(|e| bad(topic, e))?;
                 self.chamber_c = m.air_c;
             }
             topics::TABLE => {
-                let m: TableMsg = serde_json::from_slice(data).map_err(|e| bad(topic, e))?;
+                let m: TableState = serde_json::from_slice(data).map_err(|e| bad(topic, e))?;
                 self.table = Some((m.t_s, m.earth_rate_dph));
             }
             topics::RATE_1HZ => {
@@ -313,12 +321,17 @@ impl State<'_> {
                 }
             }
             topics::LINK => {
-                self.link = serde_json::from_slice(data).map_err(|e| bad(topic, e))?;
+                let m: LinkSample = serde_json::from_slice(data).map_err(|e| bad(topic, e))?;
+                self.link = m.stats;
             }
-            topics::EVENTS => {
-                let m: LogMsg = serde_json::from_slice(data).map_err(|e| bad(topic, e))?;
-                if m.level == 1 {
-                    self.step_event(&m.message);
+            topics::STEPS => {
+                let e: StepEvent = serde_json::from_slice(data).map_err(|e| bad(topic, e))?;
+                self.step_event(&e)?;
+            }
+            topics::EVENTS if self.meta.as_ref().is_some_and(|m| m.format < 2) => {
+                let m: LogLine = serde_json::from_slice(data).map_err(|e| bad(topic, e))?;
+                if let Some(e) = format1::step_event(&m, self.procedure.as_ref(), self.cursor) {
+                    self.step_event(&e)?;
                 }
             }
             _ => {}
@@ -326,49 +339,88 @@ impl State<'_> {
         Ok(())
     }
 
-    /// `step KEY (line N): ...` or `cleanup KEY (line N): ...`: a step
-    /// started; a measure step is computed here, as in the live run.
-    fn step_event(&mut self, message: &str) {
-        if let Some(key) = message.strip_prefix("end of step ") {
-            let done = self
-                .procedure
-                .as_ref()
-                .and_then(|p| p.steps().nth(self.cursor.checked_sub(1)?))
-                .is_some_and(|s| s.key == key);
-            if done {
-                self.completed = self.cursor;
-            }
-            return;
+    /// A step started or ended; a measure step is computed at its start,
+    /// on the records so far, as in the live run.
+    fn step_event(&mut self, e: &StepEvent) -> Result<(), String> {
+        if e.phase == StepPhase::Restore {
+            return Ok(());
         }
-        let Some(rest) = message
+        let Some(p) = self.procedure.as_ref() else {
+            return Ok(());
+        };
+        let Some(step) = p.steps().nth(e.index).filter(|s| s.key == e.key) else {
+            return Err(self.log_err(format!(
+                "a /steps event names step {} ({}), which is not step {} of the logged procedure",
+                e.key, e.description, e.index
+            )));
+        };
+        match e.phase {
+            StepPhase::End => {
+                // Steps completed count in setup + main run order.
+                if e.index < p.setup.len() + p.main.len() {
+                    self.completed = self.completed.max(e.index + 1);
+                }
+            }
+            StepPhase::Start => {
+                self.last_step = Some(e.key.clone());
+                self.cursor = e.index + 1;
+                match &step.kind {
+                    StepKind::Record { label, .. } => self.records.start(label),
+                    StepKind::Measure(m) => {
+                        let coeffs = self.coeffs_override.or(self.coeffs.as_ref());
+                        self.measurements
+                            .push(measure::compute(m, &self.records, coeffs, &e.key));
+                    }
+                    _ => {}
+                }
+            }
+            StepPhase::Restore => {}
+        }
+        Ok(())
+    }
+}
+
+/// Format 1 logs: steps are known only by their `/events` lines,
+/// `step KEY (line N): ...` / `cleanup KEY (line N): ...` at the start and
+/// `end of step KEY` at the end (level 1).
+mod format1 {
+    use super::{LogLine, StepEvent, StepPhase};
+    use crate::procedure::Procedure;
+    use crate::runlog::schema::Level;
+
+    /// The step event an `/events` line of a format 1 log stands for;
+    /// `cursor` is the run-order position after the last step started
+    /// (steps of a repeat share their key: the next one matches).
+    pub(super) fn step_event(
+        m: &LogLine,
+        p: Option<&Procedure>,
+        cursor: usize,
+    ) -> Option<StepEvent> {
+        if m.level != Level::Debug {
+            return None;
+        }
+        let p = p?;
+        let ev = |phase, index: usize| {
+            let s = p.steps().nth(index)?;
+            Some(StepEvent::new(0.0, phase, index, s))
+        };
+        if let Some(key) = m.message.strip_prefix("end of step ") {
+            let index = cursor.checked_sub(1)?;
+            return (p.steps().nth(index)?.key == key)
+                .then(|| ev(StepPhase::End, index))
+                .flatten();
+        }
+        let rest = m
+            .message
             .strip_prefix("step ")
-            .or_else(|| message.strip_prefix("cleanup "))
-        else {
-            return;
-        };
-        let Some((key, _)) = rest.split_once(" (line ") else {
-            return;
-        };
-        self.last_step = Some(key.to_owned());
-        // Steps of a repeat share a key: match the next one in run order.
-        let Some((at, step)) = self.procedure.as_ref().and_then(|p| {
-            p.steps()
-                .enumerate()
-                .skip(self.cursor)
-                .find(|(_, s)| s.key == key)
-        }) else {
-            return;
-        };
-        self.cursor = at + 1;
-        match &step.kind {
-            StepKind::Record { label, .. } => self.records.start(label),
-            StepKind::Measure(m) => {
-                let coeffs = self.coeffs_override.or(self.coeffs.as_ref());
-                self.measurements
-                    .push(measure::compute(m, &self.records, coeffs, key));
-            }
-            _ => {}
-        }
+            .or_else(|| m.message.strip_prefix("cleanup "))?;
+        let (key, _) = rest.split_once(" (line ")?;
+        let (index, _) = p
+            .steps()
+            .enumerate()
+            .skip(cursor)
+            .find(|(_, s)| s.key == key)?;
+        ev(StepPhase::Start, index)
     }
 }
 
@@ -377,7 +429,7 @@ pub fn replay(path: &Path, coeffs: Option<&Fit>) -> Result<Replayed, ReplayError
     let mut st = State {
         path,
         coeffs_override: coeffs,
-        meta: BTreeMap::new(),
+        meta: None,
         result_meta: None,
         procedure: None,
         coeffs: None,
@@ -393,7 +445,7 @@ pub fn replay(path: &Path, coeffs: Option<&Fit>) -> Result<Replayed, ReplayError
         completed: 0,
         earlier: None,
     };
-    let read = runlog::read(path, |item| match item {
+    let read = reader::read(path, |item| match item {
         Item::Meta { name, entries } => st.meta(name, entries),
         Item::Message { topic, data, .. } => {
             if st.procedure.is_none() && topic != topics::EVENTS {
@@ -403,6 +455,7 @@ pub fn replay(path: &Path, coeffs: Option<&Fit>) -> Result<Replayed, ReplayError
             }
             st.message(topic, data)
         }
+        Item::Attachment { .. } => Ok(()),
     })?;
     let log_err = |message: String| ReplayError::Log {
         path: path.display().to_string(),
@@ -411,9 +464,14 @@ pub fn replay(path: &Path, coeffs: Option<&Fit>) -> Result<Replayed, ReplayError
     if let Some(why) = read.stopped.as_ref().filter(|_| read.complete) {
         return Err(log_err(why.clone()));
     }
-    let procedure = st.procedure.take().ok_or_else(|| {
-        log_err("no run metadata (procedure, bench) in the log; is this a gyrobench log?".into())
-    })?;
+    let (Some(procedure), Some(meta)) = (st.procedure.take(), st.meta.take()) else {
+        return Err(log_err(format!(
+            "no run metadata (procedure, bench) in the log{}; is this a gyrobench log?",
+            read.stopped
+                .as_ref()
+                .map_or(String::new(), |s| format!(" (the read stopped: {s})"))
+        )));
+    };
     let last_state_s = st.table.map_or(0.0, |(t, _)| t);
     let earlier_s = st.earlier.as_ref().map_or(0.0, |e| e.result.device_time_s);
     let failed = st
@@ -421,26 +479,19 @@ pub fn replay(path: &Path, coeffs: Option<&Fit>) -> Result<Replayed, ReplayError
         .iter()
         .any(|m| m.outcome != MeasureOutcome::Pass);
     let verdict = if failed { Outcome::Fail } else { Outcome::Pass };
-    let (outcome, error, cleanup_completed, device_time_s) = match &st.result_meta {
+    let (outcome, error, cleanup_completed, device_time_s, bench_left) = match st.result_meta {
         Some(r) => {
-            let outcome = match r.get("outcome").map(String::as_str) {
-                Some("error") => Outcome::Error,
-                Some("aborted") => Outcome::Aborted,
+            let outcome = match r.outcome {
+                Outcome::Error | Outcome::Aborted => r.outcome,
                 // pass or fail: the verdict is the recomputed one.
-                _ => verdict,
+                Outcome::Pass | Outcome::Fail => verdict,
             };
-            let error = r.get("error_step").map(|step| RunError {
-                device: r.get("error_device").cloned(),
-                step: step.clone(),
-                message: r.get("error_message").cloned().unwrap_or_default(),
-            });
             (
                 outcome,
-                error,
-                r.get("cleanup_completed").is_some_and(|v| v == "true"),
-                r.get("device_time_s")
-                    .and_then(|v| v.parse().ok())
-                    .unwrap_or(earlier_s + last_state_s),
+                r.error,
+                r.cleanup_completed,
+                r.device_time_s.unwrap_or(earlier_s + last_state_s),
+                r.bench_left,
             )
         }
         None => (
@@ -457,6 +508,7 @@ pub fn replay(path: &Path, coeffs: Option<&Fit>) -> Result<Replayed, ReplayError
             }),
             false,
             earlier_s + last_state_s,
+            None,
         ),
     };
     let link = match &st.earlier {
@@ -465,7 +517,7 @@ pub fn replay(path: &Path, coeffs: Option<&Fit>) -> Result<Replayed, ReplayError
     };
     let part = st.earlier.as_ref().map_or(1, |e| e.part + 1);
     Ok(Replayed {
-        meta: st.meta,
+        meta,
         procedure,
         result: RunResult {
             outcome,
@@ -475,6 +527,7 @@ pub fn replay(path: &Path, coeffs: Option<&Fit>) -> Result<Replayed, ReplayError
             device_time_s,
             frames: st.frames,
             records: st.records,
+            bench_left,
         },
         link,
         read,
@@ -497,27 +550,6 @@ pub fn add_link(a: &LinkStats, b: &LinkStats) -> LinkStats {
     }
 }
 
-/// The `result` metadata record of a run.
-pub fn result_entries(r: &RunResult) -> BTreeMap<String, String> {
-    let mut m = BTreeMap::new();
-    let outcome = serde_json::to_value(r.outcome)
-        .ok()
-        .and_then(|v| v.as_str().map(str::to_owned))
-        .unwrap_or_default();
-    m.insert("outcome".into(), outcome);
-    m.insert("cleanup_completed".into(), r.cleanup_completed.to_string());
-    m.insert("device_time_s".into(), format!("{:?}", r.device_time_s));
-    m.insert("frames".into(), r.frames.to_string());
-    if let Some(e) = &r.error {
-        m.insert("error_step".into(), e.step.clone());
-        m.insert("error_message".into(), e.message.clone());
-        if let Some(d) = &e.device {
-            m.insert("error_device".into(), d.clone());
-        }
-    }
-    m
-}
-
 /// Per-frame rates of one record of a log, deg/h (Earth rate included).
 #[derive(Debug, Clone)]
 pub struct RecordRates {
@@ -527,6 +559,8 @@ pub struct RecordRates {
     pub dt_s: f64,
     /// Rate of each frame, deg/h.
     pub rate_dph: Vec<f64>,
+    /// How the read of the log went (complete or truncated).
+    pub read: ReadSummary,
 }
 
 #[derive(Deserialize)]
@@ -551,12 +585,14 @@ pub fn record_rates(path: &Path, label: Option<&str>) -> Result<RecordRates, Rep
         record: String::new(),
         dt_s: f64::NAN,
         rate_dph: Vec::new(),
+        read: ReadSummary::default(),
     };
-    runlog::read(path, |item| {
+    let read = reader::read(path, |item| {
         match item {
             Item::Meta { name, entries } if name == RUN_META => {
                 // The procedure as logged, checked against the logged bench.
-                if let Ok(Logged { procedure: p, .. }) = logged(entries) {
+                let meta = RunMeta::from_entries(entries).map_err(|e| e.to_string())?;
+                if let Ok(Logged { procedure: p, .. }) = logged(&meta) {
                     let records = p.steps().filter_map(|s| match &s.kind {
                         StepKind::Record { label, duration_s } => {
                             Some((label.clone(), *duration_s))
@@ -576,7 +612,10 @@ pub fn record_rates(path: &Path, label: Option<&str>) -> Result<RecordRates, Rep
                 }
             }
             Item::Message { topic, data, .. } if topic == topics::FRAMES => {
-                pending = serde_json::from_slice(data).ok();
+                pending = Some(
+                    serde_json::from_slice(data)
+                        .map_err(|e| format!("a {topic} message does not parse: {e}"))?,
+                );
             }
             Item::Message { topic, data, .. } if topic == topics::RATE_1HZ => {
                 let m: Rate1Hz = serde_json::from_slice(data)
@@ -603,6 +642,10 @@ pub fn record_rates(path: &Path, label: Option<&str>) -> Result<RecordRates, Rep
         }
         Ok(())
     })?;
+    if let Some(why) = read.stopped.as_ref().filter(|_| read.complete) {
+        return Err(log_err(why.clone()));
+    }
+    out.read = read;
     let Some(want) = want else {
         return Err(log_err("the log has no record steps to analyse".into()));
     };

@@ -11,20 +11,22 @@
 //! its limits. `replay`, `calibrate`, `allan` and `diagnose` take it.
 
 use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use serde::Deserialize;
 
+use super::interchange::{self, CsvError, Row};
+use super::meta::{ResultMeta, RunMeta};
+use super::reader::{self, Item, ReadSummary};
+use super::schema::{FORMAT, Level, RUN_META, Rate1Hz, StepEvent, StepPhase, TableState, topics};
+use super::writer::{FrameScales, Recorder};
 use crate::analysis::series::Interval;
 use crate::bench::BenchConfig;
 use crate::config::{Checker, ConfigError, Source};
 use crate::driver::{ChamberMode, ChamberReading, TableReading};
+use crate::fsutil::{Pending, ensure_distinct};
 use crate::geometry::{Orientation, Site, TableAngles};
-use crate::interchange::{self, CsvError, Row};
 use crate::procedure::{Procedure, StepKind};
-use crate::recorder::{Rate1Hz, Recorder, RunMeta, TablePose, topics};
-use crate::replay::{RESULT_META, RUN_META};
-use crate::runlog::{self, Item};
 use crate::sequencer::measure::{self, MeasureOutcome, Records};
 use crate::sequencer::{BenchState, Outcome, RunResult, Sink, Tick};
 
@@ -54,7 +56,10 @@ pub enum ImportError {
     Config(#[from] ConfigError),
     /// The log cannot be read.
     #[error(transparent)]
-    Read(#[from] runlog::ReadError),
+    Read(#[from] reader::ReadError),
+    /// The output would destroy the input.
+    #[error(transparent)]
+    SamePath(#[from] crate::fsutil::SamePath),
     /// Something else, with its file.
     #[error("{0}")]
     Other(String),
@@ -227,6 +232,7 @@ fn procedure_text(name: &str, parts: &[(String, usize, usize)], rows: &[Row]) ->
 
 /// Import the interchange CSV at `csv` (site from `site`) as a log at `out`.
 pub fn import(csv: &Path, site: Site, out: &Path) -> Result<Imported, ImportError> {
+    ensure_distinct(out, &[csv])?;
     let name = csv.display().to_string();
     let rows = to_one_hz(&interchange::read(csv)?, &name)?;
     let parts = stretches(&rows);
@@ -237,38 +243,32 @@ pub fn import(csv: &Path, site: Site, out: &Path) -> Result<Imported, ImportErro
         .map_err(|e| {
             ImportError::Other(format!("{name}: the procedure made from its steps: {e}"))
         })?;
-    let mut meta = RunMeta::default();
-    for (k, v) in [
-        ("procedure_toml", text.clone()),
-        ("procedure_path", format!("{name} (imported)")),
-        (
-            "bench_toml",
-            toml::to_string_pretty(&bench).unwrap_or_default(),
-        ),
-        ("bench", format!("imported from {name}")),
-        ("site", serde_json::to_string(&site).unwrap_or_default()),
-        (
-            "dut_serial",
-            csv.file_stem()
-                .map_or(String::new(), |s| s.to_string_lossy().into_owned()),
-        ),
-        ("dut_type", "gyro".into()),
-        ("software_version", env!("CARGO_PKG_VERSION").to_owned()),
-        ("start_time_utc", String::new()),
-        ("imported_from", name.clone()),
-    ] {
-        meta.entries.insert(k.to_owned(), v);
-    }
-    let tmp = partial(out);
-    let written = write_log(&tmp, &meta, &bench, site, &procedure, &parts, &rows);
-    let (outcome, measurements) = match written {
-        Ok(v) => v,
-        Err(e) => {
-            let _ = std::fs::remove_file(&tmp);
-            return Err(e);
-        }
+    let other = |what: &str, e: &dyn std::fmt::Display| {
+        ImportError::Other(format!("{name}: writing the {what} into the log: {e}"))
     };
-    std::fs::rename(&tmp, out)
+    let meta = RunMeta {
+        format: FORMAT,
+        run_id: crate::session::new_run_id(),
+        procedure_toml: text.clone(),
+        procedure_path: format!("{name} (imported)"),
+        bench_toml: toml::to_string_pretty(&bench).map_err(|e| other("bench", &e))?,
+        bench: format!("imported from {name}"),
+        site_json: serde_json::to_string(&site).map_err(|e| other("site", &e))?,
+        dut_serial: csv
+            .file_stem()
+            .map_or(String::new(), |s| s.to_string_lossy().into_owned()),
+        dut_type: "gyro".into(),
+        software_version: env!("CARGO_PKG_VERSION").to_owned(),
+        part: 1,
+        imported_from: Some(name.clone()),
+        ..RunMeta::default()
+    };
+    let mut pending =
+        Pending::new(out).map_err(|e| ImportError::Other(format!("{}: {e}", out.display())))?;
+    let (outcome, measurements) =
+        write_log(&mut pending, &meta, &bench, site, &procedure, &parts, &rows)?;
+    pending
+        .commit()
         .map_err(|e| ImportError::Other(format!("writing {}: {e}", out.display())))?;
     Ok(Imported {
         intervals: rows.len(),
@@ -280,7 +280,7 @@ pub fn import(csv: &Path, site: Site, out: &Path) -> Result<Imported, ImportErro
 
 /// Write the imported run's log to `tmp`; returns the verdict.
 fn write_log(
-    tmp: &Path,
+    tmp: &mut Pending,
     meta: &RunMeta,
     bench: &BenchConfig,
     site: Site,
@@ -288,24 +288,42 @@ fn write_log(
     parts: &[(String, usize, usize)],
     rows: &[Row],
 ) -> Result<(Outcome, Vec<measure::Measurement>), ImportError> {
-    let mut rec = Recorder::create(tmp, meta, 0, 1.0, 1.0, 0.01)
-        .map_err(|e| ImportError::Other(format!("{}: {e}", tmp.display())))?;
-    let io = |e: std::io::Error| ImportError::Other(format!("writing {}: {e}", tmp.display()));
+    let scales = FrameScales {
+        dt_s: 1.0,
+        lsb_arcsec: 1.0,
+        temp_lsb_c: 0.01,
+    };
+    let file = tmp
+        .take_file()
+        .map_err(|e| ImportError::Other(format!("writing {}: {e}", tmp.path().display())))?;
+    let tmp_path = tmp.path().to_owned();
+    let io = |e: std::io::Error| ImportError::Other(format!("writing {}: {e}", tmp_path.display()));
+    let mut rec = Recorder::from_file(file, &tmp_path, meta, 0, scales).map_err(io)?;
     let geometry = &bench.table.geometry;
     let mut records = Records::default();
     let steps: Vec<_> = procedure.main.iter().collect();
     let mut step_at = 0;
+    let setup = procedure.setup.len();
     for (label, a, b) in parts {
         let Some(step) = steps.get(step_at) else {
             break;
         };
+        let index = setup + step_at;
         step_at += 1;
-        rec.event(rows[*a].time_s - 0.5, 1, &step.start_message())
+        let t0 = rows[*a].time_s - 0.5;
+        rec.step(&StepEvent::new(t0, StepPhase::Start, index, step))
+            .map_err(io)?;
+        rec.event(t0, Level::Debug, &step.start_message())
             .map_err(io)?;
         records.start(label);
         for r in &rows[*a..*b] {
             let o = Orientation::new(r.azimuth_deg, r.elevation_deg, r.roll_deg);
-            let angles = geometry.angles_for(o).unwrap_or_default();
+            let angles = geometry.angles_for(o).map_err(|e| {
+                ImportError::Other(format!(
+                    "the row at time_s = {} (step {:?}): {e}; the embedded bench's two-axis table cannot take this pose",
+                    r.time_s, r.step
+                ))
+            })?;
             let state = BenchState {
                 t_s: r.time_s + 0.5,
                 chamber: ChamberReading {
@@ -342,25 +360,28 @@ fn write_log(
             records.push(iv, Some(label));
             rec.interval(&iv, Some(label)).map_err(io)?;
         }
-        rec.event(
-            rows[b - 1].time_s + 0.5,
-            1,
-            &format!("end of step {}", step.key),
-        )
-        .map_err(io)?;
+        let t1 = rows[b - 1].time_s + 0.5;
+        rec.step(&StepEvent::new(t1, StepPhase::End, index, step))
+            .map_err(io)?;
+        rec.event(t1, Level::Debug, &format!("end of step {}", step.key))
+            .map_err(io)?;
     }
     let end_s = rows.last().map_or(0.0, |r| r.time_s + 0.5);
     let mut measurements = Vec::new();
-    for step in &steps[step_at..] {
+    for (i, step) in steps.iter().enumerate().skip(step_at) {
         if let StepKind::Measure(m) = &step.kind {
-            rec.event(end_s, 1, &step.start_message()).map_err(io)?;
+            let index = setup + i;
+            rec.step(&StepEvent::new(end_s, StepPhase::Start, index, step))
+                .map_err(io)?;
+            rec.event(end_s, Level::Debug, &step.start_message())
+                .map_err(io)?;
             let meas = measure::compute(m, &records, None, &step.key);
             rec.event(
                 end_s,
                 if meas.outcome == MeasureOutcome::Pass {
-                    2
+                    Level::Info
                 } else {
-                    3
+                    Level::Warning
                 },
                 &format!(
                     "{} = {}",
@@ -369,7 +390,9 @@ fn write_log(
                 ),
             )
             .map_err(io)?;
-            rec.event(end_s, 1, &format!("end of step {}", step.key))
+            rec.step(&StepEvent::new(end_s, StepPhase::End, index, step))
+                .map_err(io)?;
+            rec.event(end_s, Level::Debug, &format!("end of step {}", step.key))
                 .map_err(io)?;
             measurements.push(meas);
         }
@@ -386,37 +409,41 @@ fn write_log(
         device_time_s: end_s,
         frames: 0,
         records,
+        bench_left: None,
     };
-    rec.metadata(RESULT_META, crate::replay::result_entries(&result))
-        .and_then(|()| rec.finish())
+    rec.finish_run(&ResultMeta::new(&result), None, end_s)
         .map_err(io)?;
     Ok((outcome, measurements))
 }
 
-/// `OUT.partial` beside `out`: where a file is written before its rename.
-fn partial(out: &Path) -> PathBuf {
-    let mut name = out
-        .file_name()
-        .map_or_else(Default::default, std::ffi::OsStr::to_os_string);
-    name.push(".partial");
-    out.with_file_name(name)
+/// What an export wrote.
+#[derive(Debug, Clone)]
+pub struct Exported {
+    /// Rows written.
+    pub rows: usize,
+    /// How the read of the log went (complete or truncated).
+    pub read: ReadSummary,
 }
 
 /// Write every 1 Hz interval of the log at `log` as interchange CSV at
 /// `out`; `step` is the record label, or the procedure step while not
-/// recording. Returns the rows written.
-pub fn export(log: &Path, out: &Path) -> Result<usize, ImportError> {
-    let tmp = partial(out);
-    let file = std::fs::File::create(&tmp)
-        .map_err(|e| ImportError::Other(format!("{}: {e}", tmp.display())))?;
-    let mut w = csv::Writer::from_writer(std::io::BufWriter::new(file));
+/// recording. A log with no interval at all is an error, and leaves no file.
+pub fn export(log: &Path, out: &Path) -> Result<Exported, ImportError> {
+    ensure_distinct(out, &[log])?;
+    let mut pending =
+        Pending::new(out).map_err(|e| ImportError::Other(format!("{}: {e}", out.display())))?;
+    let tmp = pending.path().to_owned();
     let err = |e: &dyn std::fmt::Display| format!("writing {}: {e}", tmp.display());
+    let file = pending
+        .take_file()
+        .map_err(|e| ImportError::Other(err(&e)))?;
+    let mut w = csv::Writer::from_writer(std::io::BufWriter::new(file));
     w.write_record(interchange::HEADER)
         .map_err(|e| ImportError::Other(err(&e)))?;
-    let mut table: Option<TablePose> = None;
+    let mut table: Option<TableState> = None;
     let mut rows = 0usize;
     let mut saw_run = false;
-    let read = runlog::read(log, |item| {
+    let read = reader::read(log, |item| {
         match item {
             Item::Meta { name, .. } if name == RUN_META => saw_run = true,
             Item::Message { topic, data, .. } if topic == topics::TABLE => {
@@ -447,29 +474,31 @@ pub fn export(log: &Path, out: &Path) -> Result<usize, ImportError> {
             _ => {}
         }
         Ok(())
-    });
-    let fail = |m: String| {
-        let _ = std::fs::remove_file(&tmp);
-        ImportError::Other(m)
-    };
-    let read = match read {
-        Ok(r) => r,
-        Err(e) => {
-            let _ = std::fs::remove_file(&tmp);
-            return Err(e.into());
-        }
-    };
+    })?;
+    let fail = |m: String| ImportError::Other(m);
     if !saw_run {
         return Err(fail(format!(
-            "{}: not a gyrobench log (no run metadata)",
-            log.display()
+            "{}: not a gyrobench log (no run metadata{})",
+            log.display(),
+            read.stopped
+                .as_ref()
+                .map_or(String::new(), |s| format!("; the read stopped: {s}"))
         )));
     }
     if let Some(why) = read.stopped.as_ref().filter(|_| read.complete) {
         return Err(fail(format!("{}: {why}", log.display())));
     }
+    if rows == 0 {
+        return Err(fail(format!(
+            "{}: no 1 Hz interval in the log{}; nothing to export",
+            log.display(),
+            read.stopped
+                .as_ref()
+                .map_or(String::new(), |s| format!(" (the read stopped: {s})"))
+        )));
+    }
     w.flush().map_err(|e| fail(err(&e)))?;
     drop(w);
-    std::fs::rename(&tmp, out).map_err(|e| fail(format!("writing {}: {e}", out.display())))?;
-    Ok(rows)
+    pending.commit().map_err(|e| fail(err(&e)))?;
+    Ok(Exported { rows, read })
 }

@@ -1,7 +1,12 @@
-//! Streaming reader of a run's MCAP log: every message in file order and
-//! the metadata records, with memory bounded by one chunk (4 MiB), however
-//! long the log. A log cut short (a run killed mid-way) is read up to its
-//! last complete chunk; [`ReadSummary`] says what was missing.
+//! Streaming reader of a run's MCAP log: every message in file order, the
+//! metadata records and the attachments, with memory bounded by one chunk,
+//! however long the log. A log cut short (a run killed mid-way) is read up
+//! to its last complete chunk; [`ReadSummary`] says what was missing.
+//!
+//! Built on the mcap crate's sans-IO reader with a record length limit, so
+//! a corrupt length (a record "of 2^64 bytes", a chunk that claims to
+//! inflate to terabytes) ends the read with an error instead of an
+//! allocation.
 
 use std::collections::{BTreeMap, HashMap};
 use std::fs::File;
@@ -10,6 +15,37 @@ use std::path::Path;
 
 use mcap::records::Record;
 use mcap::sans_io::linear_reader::{LinearReadEvent, LinearReader, LinearReaderOptions};
+
+/// Longest record the reader accepts, bytes. gyrobench writes chunks of
+/// 4 MiB; this leaves room for other writers without trusting a length
+/// read from a damaged file.
+pub const RECORD_LENGTH_LIMIT: usize = 64 * 1024 * 1024;
+
+/// A schema as the log declares it.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct SchemaInfo {
+    /// Schema name.
+    pub name: String,
+    /// Schema encoding (`jsonschema`).
+    pub encoding: String,
+    /// Schema text.
+    pub data: Vec<u8>,
+}
+
+/// A channel as the log declares it.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ChannelInfo {
+    /// Channel id in the file.
+    pub id: u16,
+    /// Topic.
+    pub topic: String,
+    /// Message encoding (`json`).
+    pub message_encoding: String,
+    /// Channel metadata.
+    pub metadata: BTreeMap<String, String>,
+    /// Its schema, when it has one.
+    pub schema: Option<SchemaInfo>,
+}
 
 /// One item of a log, in file order.
 #[derive(Debug)]
@@ -25,9 +61,26 @@ pub enum Item<'a> {
     Message {
         /// Channel topic.
         topic: &'a str,
+        /// The channel it was written on.
+        channel: &'a ChannelInfo,
+        /// Sequence number.
+        sequence: u32,
         /// Log time, ns since the epoch.
         log_time_ns: u64,
+        /// Publish time, ns since the epoch.
+        publish_time_ns: u64,
         /// Payload (JSON for every gyrobench topic).
+        data: &'a [u8],
+    },
+    /// An attachment (the procedure, the report).
+    Attachment {
+        /// Its name (`procedure.toml`, `report.json`).
+        name: &'a str,
+        /// Media type.
+        media_type: &'a str,
+        /// Log time, ns since the epoch.
+        log_time_ns: u64,
+        /// Contents.
         data: &'a [u8],
     },
 }
@@ -95,9 +148,17 @@ pub fn read(
             // A chunk is checked whole before any of its messages is used,
             // so a chunk cut by a crash is dropped, not half-read.
             .with_prevalidate_chunk_crcs(true)
-            .with_record_length_limit(256 * 1024 * 1024),
+            .with_record_length_limit(RECORD_LENGTH_LIMIT),
     );
-    let mut channels: HashMap<u16, String> = HashMap::new();
+    let mut schemas: HashMap<u16, SchemaInfo> = HashMap::new();
+    let mut channels: HashMap<u16, ChannelInfo> = HashMap::new();
+    let unknown = ChannelInfo {
+        id: u16::MAX,
+        topic: String::new(),
+        message_encoding: String::new(),
+        metadata: BTreeMap::new(),
+        schema: None,
+    };
     let mut summary = ReadSummary {
         file_bytes,
         ..ReadSummary::default()
@@ -132,20 +193,52 @@ pub fn read(
                     }
                 };
                 let res = match rec {
+                    Record::Schema { header, data } => {
+                        schemas.insert(
+                            header.id,
+                            SchemaInfo {
+                                name: header.name,
+                                encoding: header.encoding,
+                                data: data.into_owned(),
+                            },
+                        );
+                        Ok(())
+                    }
                     Record::Channel(c) => {
-                        channels.insert(c.id, c.topic);
+                        let schema = schemas.get(&c.schema_id).cloned();
+                        channels.insert(
+                            c.id,
+                            ChannelInfo {
+                                id: c.id,
+                                topic: c.topic,
+                                message_encoding: c.message_encoding,
+                                metadata: c.metadata,
+                                schema,
+                            },
+                        );
                         Ok(())
                     }
                     Record::Message { header, data } if !in_summary_section => {
                         summary.messages += 1;
-                        let topic = channels.get(&header.channel_id).map_or("", String::as_str);
+                        let channel = channels.get(&header.channel_id).unwrap_or(&unknown);
                         f(Item::Message {
-                            topic,
+                            topic: &channel.topic,
+                            channel,
+                            sequence: header.sequence,
+                            log_time_ns: header.log_time,
+                            publish_time_ns: header.publish_time,
+                            data: &data,
+                        })
+                    }
+                    Record::Attachment { header, data, .. } if !in_summary_section => {
+                        f(Item::Attachment {
+                            name: &header.name,
+                            media_type: &header.media_type,
                             log_time_ns: header.log_time,
                             data: &data,
                         })
                     }
-                    Record::Metadata(m) => f(Item::Meta {
+                    Record::Metadata(m) if !in_summary_section => f(Item::Meta {
                         name: &m.name,
                         entries: &m.metadata,
                     }),

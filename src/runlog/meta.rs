@@ -1,0 +1,389 @@
+//! The run's metadata records, typed: `run` (the configuration a part of
+//! a run started with) and `result` (how it ended). MCAP metadata is
+//! string to string; these types are the only place that knows the keys,
+//! and reading one back says which key is wrong instead of guessing.
+
+use std::collections::BTreeMap;
+
+use serde::Serialize;
+
+use crate::sequencer::measure::Measurement;
+use crate::sequencer::{BenchLeft, Outcome, RunError, RunResult};
+
+/// A metadata value that does not parse.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("the `{record}` metadata has {key} = {value:?}: {why}")]
+pub struct MetaError {
+    /// `run` or `result`.
+    pub record: &'static str,
+    /// The key.
+    pub key: String,
+    /// Its value.
+    pub value: String,
+    /// What was expected.
+    pub why: String,
+}
+
+/// The `run` metadata of one part of a run.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct RunMeta {
+    /// Log layout version (1 when absent: logs written before the key).
+    pub format: u32,
+    /// Identity of the run, the same in every part (empty in format 1).
+    pub run_id: String,
+    /// The procedure's text, exactly as run.
+    pub procedure_toml: String,
+    /// Where the procedure was read from.
+    pub procedure_path: String,
+    /// The bench configuration (empty: the embedded bench, format 1).
+    pub bench_toml: String,
+    /// The bench as the operator named it (`embedded`, a bench file path).
+    pub bench: String,
+    /// Twin of a simulated run.
+    pub twin_toml: Option<String>,
+    /// Coefficients the run compensated with.
+    pub coeffs_toml: Option<String>,
+    /// The site as JSON (informative; the bench holds it too).
+    pub site_json: String,
+    /// Serial number of the unit under test.
+    pub dut_serial: String,
+    /// Unit type.
+    pub dut_type: String,
+    /// Who ran it (empty when not given).
+    pub operator: String,
+    /// gyrobench version that wrote the log.
+    pub software_version: String,
+    /// UTC start of the run (of its first part), RFC 3339.
+    pub start_time_utc: String,
+    /// UTC start of this part, RFC 3339.
+    pub part_start_time_utc: String,
+    /// Seed of a simulated bench.
+    pub seed: Option<u64>,
+    /// Which part of the run this file is (1 for the first).
+    pub part: u32,
+    /// File name of the part before this one.
+    pub previous_part: Option<String>,
+    /// Steps the earlier parts completed (run order), where a resume picked up.
+    pub resume_completed_steps: Option<usize>,
+    /// Speed of a simulated bench (`max` or a factor).
+    pub speed: String,
+    /// The CSV an imported run came from.
+    pub imported_from: Option<String>,
+    /// Keys this build does not know (kept, never dropped).
+    pub other: BTreeMap<String, String>,
+}
+
+fn take(m: &mut BTreeMap<String, String>, k: &str) -> String {
+    m.remove(k).unwrap_or_default()
+}
+
+fn take_opt(m: &mut BTreeMap<String, String>, k: &str) -> Option<String> {
+    m.remove(k).filter(|v| !v.trim().is_empty())
+}
+
+fn parse<T: std::str::FromStr>(
+    record: &'static str,
+    m: &mut BTreeMap<String, String>,
+    k: &str,
+    why: &str,
+) -> Result<Option<T>, MetaError> {
+    match take_opt(m, k) {
+        None => Ok(None),
+        Some(v) => v.trim().parse().map(Some).map_err(|_| MetaError {
+            record,
+            key: k.to_owned(),
+            why: why.to_owned(),
+            value: v,
+        }),
+    }
+}
+
+impl RunMeta {
+    /// Read the `run` record's entries; unknown keys are kept in `other`.
+    pub fn from_entries(entries: &BTreeMap<String, String>) -> Result<Self, MetaError> {
+        let m = &mut entries.clone();
+        let r = "run";
+        Ok(Self {
+            format: parse(r, m, "format", "expected a format number")?.unwrap_or(1),
+            run_id: take(m, "run_id"),
+            procedure_toml: take(m, "procedure_toml"),
+            procedure_path: take(m, "procedure_path"),
+            bench_toml: take(m, "bench_toml"),
+            bench: take_opt(m, "bench").unwrap_or_else(|| "embedded".into()),
+            twin_toml: take_opt(m, "twin_toml"),
+            coeffs_toml: take_opt(m, "coeffs_toml"),
+            site_json: take(m, "site"),
+            dut_serial: take(m, "dut_serial"),
+            dut_type: take(m, "dut_type"),
+            operator: take(m, "operator"),
+            software_version: take(m, "software_version"),
+            start_time_utc: take(m, "start_time_utc"),
+            part_start_time_utc: take(m, "part_start_time_utc"),
+            seed: parse(
+                r,
+                m,
+                "seed",
+                "expected the simulated bench's seed, an integer",
+            )?,
+            part: parse(r, m, "part", "expected the part number, 1 or more")?
+                .filter(|p| *p >= 1)
+                .unwrap_or(1),
+            previous_part: take_opt(m, "previous_part"),
+            resume_completed_steps: parse(
+                r,
+                m,
+                "resume_completed_steps",
+                "expected a number of steps",
+            )?,
+            speed: take(m, "speed"),
+            imported_from: take_opt(m, "imported_from"),
+            other: std::mem::take(m),
+        })
+    }
+
+    /// The entries as written to the log.
+    pub fn to_entries(&self) -> BTreeMap<String, String> {
+        let mut m = self.other.clone();
+        let mut put = |k: &str, v: &str| {
+            m.insert(k.to_owned(), v.to_owned());
+        };
+        put("format", &self.format.to_string());
+        put("run_id", &self.run_id);
+        put("procedure_toml", &self.procedure_toml);
+        put("procedure_path", &self.procedure_path);
+        put("bench_toml", &self.bench_toml);
+        put("bench", &self.bench);
+        put("twin_toml", self.twin_toml.as_deref().unwrap_or(""));
+        put("coeffs_toml", self.coeffs_toml.as_deref().unwrap_or(""));
+        put("site", &self.site_json);
+        put("dut_serial", &self.dut_serial);
+        put("dut_type", &self.dut_type);
+        put("operator", &self.operator);
+        put("software_version", &self.software_version);
+        put("start_time_utc", &self.start_time_utc);
+        put("part_start_time_utc", &self.part_start_time_utc);
+        put("seed", &self.seed.map_or(String::new(), |s| s.to_string()));
+        put("part", &self.part.to_string());
+        put("previous_part", self.previous_part.as_deref().unwrap_or(""));
+        put(
+            "resume_completed_steps",
+            &self
+                .resume_completed_steps
+                .map_or(String::new(), |s| s.to_string()),
+        );
+        put("speed", &self.speed);
+        if let Some(f) = &self.imported_from {
+            put("imported_from", f);
+        }
+        m
+    }
+
+    /// True when the run ran on the embedded simulated bench.
+    pub fn is_embedded(&self) -> bool {
+        self.bench == "embedded"
+    }
+}
+
+/// One measurement as the `result` record lists it (for a store or a
+/// reader that does not replay).
+#[derive(Debug, Clone, PartialEq, Serialize, serde::Deserialize)]
+pub struct ResultMeasurement {
+    /// Name from the procedure.
+    pub name: String,
+    /// Value (null when it could not be computed).
+    pub value: Option<f64>,
+    /// Unit.
+    pub unit: String,
+    /// Lower limit.
+    pub low: Option<f64>,
+    /// Upper limit.
+    pub high: Option<f64>,
+    /// `pass`, `fail` or `error`.
+    pub outcome: String,
+    /// Step key.
+    pub step: String,
+    /// How it was obtained, or why it could not be.
+    pub note: String,
+}
+
+impl ResultMeasurement {
+    /// The entry of a measurement.
+    pub fn new(m: &Measurement) -> Self {
+        Self {
+            name: m.name.clone(),
+            value: m.value,
+            unit: m.unit.clone(),
+            low: m.low,
+            high: m.high,
+            outcome: m.outcome.as_str().to_owned(),
+            step: m.step.clone(),
+            note: m.note.clone(),
+        }
+    }
+}
+
+/// The `result` metadata: how a part of a run ended.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ResultMeta {
+    /// Verdict or how it stopped.
+    pub outcome: Outcome,
+    /// Whether cleanup ran to its end.
+    pub cleanup_completed: bool,
+    /// Device time of the run so far (every part), s.
+    pub device_time_s: Option<f64>,
+    /// Frames of the run so far (every part).
+    pub frames: u64,
+    /// The failure that ended it.
+    pub error: Option<RunError>,
+    /// Every measurement made (every part).
+    pub measurements: Vec<ResultMeasurement>,
+    /// The state the bench was left in, as read back.
+    pub bench_left: Option<BenchLeft>,
+}
+
+impl ResultMeta {
+    /// The record of a run's result.
+    pub fn new(r: &RunResult) -> Self {
+        Self {
+            outcome: r.outcome,
+            cleanup_completed: r.cleanup_completed,
+            device_time_s: Some(r.device_time_s),
+            frames: r.frames,
+            error: r.error.clone(),
+            measurements: r.measurements.iter().map(ResultMeasurement::new).collect(),
+            bench_left: r.bench_left.clone(),
+        }
+    }
+
+    /// The entries as written to the log.
+    pub fn to_entries(&self) -> BTreeMap<String, String> {
+        let mut m = BTreeMap::new();
+        let mut put = |k: &str, v: String| {
+            m.insert(k.to_owned(), v);
+        };
+        put("outcome", self.outcome.as_str().to_owned());
+        put("cleanup_completed", self.cleanup_completed.to_string());
+        if let Some(t) = self.device_time_s {
+            put("device_time_s", format!("{t:?}"));
+        }
+        put("frames", self.frames.to_string());
+        if let Some(e) = &self.error {
+            put("error_step", e.step.clone());
+            put("error_message", e.message.clone());
+            if let Some(d) = &e.device {
+                put("error_device", d.clone());
+            }
+        }
+        put(
+            "measurements",
+            serde_json::to_string(&self.measurements).unwrap_or_else(|_| "[]".into()),
+        );
+        if let Some(b) = &self.bench_left
+            && let Ok(j) = serde_json::to_string(b)
+        {
+            put("bench_left", j);
+        }
+        m
+    }
+
+    /// Read the `result` record's entries (format 1 has no measurements
+    /// and no bench state).
+    pub fn from_entries(entries: &BTreeMap<String, String>) -> Result<Self, MetaError> {
+        let m = &mut entries.clone();
+        let r = "result";
+        let bad = |key: &str, value: String, why: String| MetaError {
+            record: r,
+            key: key.to_owned(),
+            value,
+            why,
+        };
+        let outcome_text = take(m, "outcome");
+        let outcome = Outcome::parse(&outcome_text).ok_or_else(|| {
+            bad(
+                "outcome",
+                outcome_text.clone(),
+                "expected pass, fail, error or aborted".into(),
+            )
+        })?;
+        let error = take_opt(m, "error_step").map(|step| RunError {
+            device: take_opt(m, "error_device"),
+            step,
+            message: take(m, "error_message"),
+        });
+        let measurements = match take_opt(m, "measurements") {
+            None => Vec::new(),
+            Some(j) => serde_json::from_str(&j)
+                .map_err(|e| bad("measurements", j.clone(), e.to_string()))?,
+        };
+        let bench_left = match take_opt(m, "bench_left") {
+            None => None,
+            Some(j) => Some(
+                serde_json::from_str(&j)
+                    .map_err(|e| bad("bench_left", j.clone(), e.to_string()))?,
+            ),
+        };
+        Ok(Self {
+            outcome,
+            cleanup_completed: take(m, "cleanup_completed") == "true",
+            device_time_s: parse(r, m, "device_time_s", "expected seconds")?,
+            frames: parse(r, m, "frames", "expected a frame count")?.unwrap_or(0),
+            error,
+            measurements,
+            bench_left,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn run_meta_round_trips_and_keeps_unknown_keys() {
+        let mut m = RunMeta {
+            format: 2,
+            bench: "embedded".into(),
+            run_id: "r1".into(),
+            procedure_toml: "[procedure]".into(),
+            seed: Some(7),
+            part: 2,
+            previous_part: Some("run.mcap".into()),
+            resume_completed_steps: Some(4),
+            ..RunMeta::default()
+        };
+        m.other.insert("from_the_future".into(), "x".into());
+        let back = RunMeta::from_entries(&m.to_entries()).expect("parses");
+        assert_eq!(back, m);
+    }
+
+    #[test]
+    fn a_bad_seed_is_an_error_naming_the_key_not_seed_one() {
+        let mut e = RunMeta::default().to_entries();
+        e.insert("seed".into(), "seven".into());
+        let err = RunMeta::from_entries(&e).expect_err("must not guess");
+        assert_eq!(err.key, "seed");
+        assert!(err.to_string().contains("\"seven\""), "{err}");
+    }
+
+    #[test]
+    fn format_1_entries_read_with_defaults() {
+        let mut e = BTreeMap::new();
+        e.insert("procedure_toml".to_owned(), "x".to_owned());
+        e.insert("seed".to_owned(), "1".to_owned());
+        let m = RunMeta::from_entries(&e).expect("format 1");
+        assert_eq!((m.format, m.part, m.seed), (1, 1, Some(1)));
+        assert!(m.is_embedded());
+        let mut r = BTreeMap::new();
+        r.insert("outcome".to_owned(), "pass".to_owned());
+        let res = ResultMeta::from_entries(&r).expect("format 1 result");
+        assert_eq!(res.outcome, Outcome::Pass);
+        assert!(res.measurements.is_empty() && res.device_time_s.is_none());
+    }
+
+    #[test]
+    fn an_unknown_outcome_is_refused() {
+        let mut r = BTreeMap::new();
+        r.insert("outcome".to_owned(), "maybe".to_owned());
+        assert!(ResultMeta::from_entries(&r).is_err());
+    }
+}

@@ -1,0 +1,22 @@
+//! The run log: one MCAP file per part of a run (`docs/report.md`).
+//!
+//! - [`schema`]: topics, JSON Schemas and the message types shared by the
+//!   writer and every reader; attachment and metadata record names.
+//! - [`meta`]: the `run` and `result` metadata, typed.
+//! - [`writer`]: the [`Recorder`](writer::Recorder), a [`Sink`](crate::sequencer::Sink).
+//! - [`reader`]: streaming, bounded reading in file order.
+//! - [`recover`]: a complete log from a killed run's file.
+//! - [`replay`]: a run's measurements and verdict from its log alone.
+//! - [`exchange`] and [`interchange`]: runs recorded elsewhere (the
+//!   interchange CSV) in and out.
+
+pub mod exchange;
+pub mod interchange;
+pub mod meta;
+pub mod reader;
+pub mod recover;
+pub mod replay;
+pub mod schema;
+pub mod writer;
+
+pub use reader::{Item, ReadError, ReadSummary, read};

@@ -1,0 +1,161 @@
+//! `recover`: a complete, indexed log from what a killed run had flushed.
+
+use std::collections::HashMap;
+use std::io::BufWriter;
+use std::path::Path;
+
+use super::reader::{self, Item, ReadError};
+use super::schema::{RUN_META, topics};
+use super::writer::write_options;
+use crate::fsutil::Pending;
+
+/// What [`recover`] salvaged.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct Recovered {
+    /// Messages copied.
+    pub messages: u64,
+    /// Gyro frames inside the copied `/gyro/frames` messages.
+    pub frames: u64,
+    /// Bytes of the input after the last complete record (lost).
+    pub bytes_lost: u64,
+    /// Whether the input was complete already (had its footer).
+    pub was_complete: bool,
+    /// Why the read of the input stopped early, when it did.
+    pub stopped: Option<String>,
+}
+
+/// Why nothing could be recovered.
+#[derive(Debug, thiserror::Error)]
+pub enum RecoverError {
+    /// The input cannot be read or is not MCAP.
+    #[error(transparent)]
+    Read(#[from] ReadError),
+    /// An MCAP file with nothing of a run in it.
+    #[error(
+        "{path}: nothing of a run could be recovered (no run metadata and no message{}); is this the log of a gyrobench run?",
+        .stopped.as_ref().map_or(String::new(), |s| format!("; the read stopped: {s}"))
+    )]
+    Empty {
+        /// The input.
+        path: String,
+        /// Why the read stopped, when it did.
+        stopped: Option<String>,
+    },
+    /// The output could not be written.
+    #[error("writing {path}: {source}")]
+    Write {
+        /// The output.
+        path: String,
+        /// Cause.
+        #[source]
+        source: std::io::Error,
+    },
+}
+
+/// Rewrite the possibly truncated log at `input` as a complete, indexed
+/// file at `out`: every message of every complete chunk, the metadata and
+/// the attachments are copied; what follows the last complete record is
+/// lost. `out` appears only when something was recovered.
+pub fn recover(input: &Path, out: &Path) -> Result<Recovered, RecoverError> {
+    let write_err = |source: std::io::Error| RecoverError::Write {
+        path: out.display().to_string(),
+        source,
+    };
+    let mcap_err = |e: mcap::McapError| write_err(std::io::Error::other(e));
+    let mut pending = Pending::new(out).map_err(write_err)?;
+    let file = pending.take_file().map_err(write_err)?;
+    let library = format!("gyrobench {} (recovered)", env!("CARGO_PKG_VERSION"));
+    let mut w = write_options(&library)
+        .create(BufWriter::new(file))
+        .map_err(mcap_err)?;
+    let mut r = Recovered::default();
+    let mut saw_run = false;
+    // Channel id in the input -> channel id in the output.
+    let mut ids: HashMap<u16, u16> = HashMap::new();
+    let mut failure: Option<mcap::McapError> = None;
+    let read = reader::read(input, |item| {
+        let res = match item {
+            Item::Meta { name, entries } => {
+                saw_run |= name == RUN_META;
+                w.write_metadata(&mcap::records::Metadata {
+                    name: name.to_owned(),
+                    metadata: entries.clone(),
+                })
+            }
+            Item::Attachment {
+                name,
+                media_type,
+                log_time_ns,
+                data,
+            } => w.attach(&mcap::Attachment {
+                log_time: log_time_ns,
+                create_time: log_time_ns,
+                name: name.to_owned(),
+                media_type: media_type.to_owned(),
+                data: std::borrow::Cow::Borrowed(data),
+            }),
+            Item::Message {
+                topic,
+                channel,
+                sequence,
+                log_time_ns,
+                publish_time_ns,
+                data,
+            } => (|| {
+                let id = match ids.get(&channel.id) {
+                    Some(id) => *id,
+                    None => {
+                        let schema = match &channel.schema {
+                            Some(s) => w.add_schema(&s.name, &s.encoding, &s.data)?,
+                            None => 0,
+                        };
+                        let id = w.add_channel(
+                            schema,
+                            topic,
+                            &channel.message_encoding,
+                            &channel.metadata,
+                        )?;
+                        ids.insert(channel.id, id);
+                        id
+                    }
+                };
+                if topic == topics::FRAMES
+                    && let Ok(v) = serde_json::from_slice::<serde_json::Value>(data)
+                {
+                    r.frames += v["counts"].as_array().map_or(0, |a| a.len() as u64);
+                }
+                r.messages += 1;
+                w.write_to_known_channel(
+                    &mcap::records::MessageHeader {
+                        channel_id: id,
+                        sequence,
+                        log_time: log_time_ns,
+                        publish_time: publish_time_ns,
+                    },
+                    data,
+                )
+            })(),
+        };
+        res.map_err(|e| {
+            let text = e.to_string();
+            failure = Some(e);
+            text
+        })
+    })?;
+    if let Some(e) = failure {
+        return Err(mcap_err(e));
+    }
+    r.was_complete = read.complete;
+    r.bytes_lost = read.bytes_lost;
+    r.stopped = read.stopped.clone();
+    if !saw_run && r.messages == 0 {
+        return Err(RecoverError::Empty {
+            path: input.display().to_string(),
+            stopped: read.stopped,
+        });
+    }
+    w.finish().map_err(mcap_err)?;
+    drop(w);
+    pending.commit().map_err(write_err)?;
+    Ok(r)
+}

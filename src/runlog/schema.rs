@@ -1,0 +1,282 @@
+//! What a run log holds: its topics, their JSON Schemas, and the message
+//! types the writer serializes and every reader deserializes. One place, so
+//! the writer and its readers cannot drift apart.
+//!
+//! Every message is JSON with a jsonschema schema, so Foxglove / Lichtblick
+//! can plot any numeric field; the event log is `foxglove.Log`.
+
+use serde::{Deserialize, Serialize};
+
+use crate::analysis::series::Interval;
+use crate::protocol::frame::LinkStats;
+pub use crate::sequencer::events::{Level, StepEvent, StepPhase};
+
+/// Topics of a run log.
+pub mod topics {
+    /// Every gyro frame, batched per tick.
+    pub const FRAMES: &str = "/gyro/frames";
+    /// 1 Hz rate and temperatures for quick plots.
+    pub const RATE_1HZ: &str = "/gyro/rate_1hz";
+    /// Chamber state, 1 Hz.
+    pub const CHAMBER: &str = "/chamber/state";
+    /// Table state, orientation and Earth-rate projection, 1 Hz.
+    pub const TABLE: &str = "/table/state";
+    /// Notes, measurements and errors for people (foxglove.Log).
+    pub const EVENTS: &str = "/events";
+    /// Link statistics of the gyro.
+    pub const LINK: &str = "/gyro/link";
+    /// Step starts and ends, as data (format 2 on).
+    pub const STEPS: &str = "/steps";
+}
+
+/// Version of the log layout this build writes. Format 1 logs (no
+/// `/steps`, no attachments) still replay.
+pub const FORMAT: u32 = 2;
+
+/// Name of the metadata record with the run's configuration.
+pub const RUN_META: &str = "run";
+/// Name of the metadata record that says how the run ended.
+pub const RESULT_META: &str = "result";
+/// Attachment holding the procedure text the run executed.
+pub const PROCEDURE_ATTACHMENT: &str = "procedure.toml";
+/// Attachment holding the run's `report.json`.
+pub const REPORT_ATTACHMENT: &str = "report.json";
+
+/// (topic, schema name, JSON Schema) of every channel, in channel order.
+pub const CHANNELS: [(&str, &str, &str); 7] = [
+    (topics::FRAMES, "gyrobench.GyroFrames", FRAMES_SCHEMA),
+    (topics::RATE_1HZ, "gyrobench.Rate1Hz", RATE_SCHEMA),
+    (topics::CHAMBER, "gyrobench.ChamberState", CHAMBER_SCHEMA),
+    (topics::TABLE, "gyrobench.TableState", TABLE_SCHEMA),
+    (topics::EVENTS, "foxglove.Log", LOG_SCHEMA),
+    (topics::LINK, "gyrobench.LinkStats", LINK_SCHEMA),
+    (topics::STEPS, "gyrobench.StepEvent", STEP_SCHEMA),
+];
+
+const FRAMES_SCHEMA: &str = r#"{"type":"object","title":"gyrobench.GyroFrames","description":"Consecutive gyro frames; element i of every array is frame i","properties":{"t0_s":{"type":"number","description":"device time of the first frame, s since the run started"},"dt_s":{"type":"number","description":"frame period, s"},"lsb_arcsec":{"type":"number"},"temp_lsb_c":{"type":"number"},"seq":{"type":"array","items":{"type":"integer"}},"counts":{"type":"array","items":{"type":"integer"},"description":"delta-angle counts"},"t1_raw":{"type":"array","items":{"type":"integer"}},"t2_raw":{"type":"array","items":{"type":"integer"}},"tcase_raw":{"type":"array","items":{"type":"integer"}},"status":{"type":"array","items":{"type":"integer"}}},"required":["t0_s","dt_s","lsb_arcsec","temp_lsb_c","seq","counts","t1_raw","t2_raw","tcase_raw","status"]}"#;
+const RATE_SCHEMA: &str = r#"{"type":"object","title":"gyrobench.Rate1Hz","properties":{"t_s":{"type":"number"},"rate_dph":{"type":"number","description":"measured rate, Earth rate included"},"reference_dph":{"type":"number","description":"Earth + table rate on the nominal axis"},"bias_dph":{"type":"number","description":"rate minus reference"},"t1_c":{"type":"number"},"t2_c":{"type":"number"},"tcase_c":{"type":"number"},"chamber_c":{"type":"number"},"frames":{"type":"integer"},"record":{"type":["string","null"]}},"required":["t_s","rate_dph","reference_dph","bias_dph","t1_c","t2_c","tcase_c","chamber_c","frames"]}"#;
+const CHAMBER_SCHEMA: &str = r#"{"type":"object","title":"gyrobench.ChamberState","properties":{"t_s":{"type":"number"},"air_c":{"type":"number"},"set_point_c":{"type":"number"},"mode":{"type":"string"},"alarms":{"type":"array","items":{"type":"integer"}}},"required":["t_s","air_c","set_point_c","mode","alarms"]}"#;
+const TABLE_SCHEMA: &str = r#"{"type":"object","title":"gyrobench.TableState","properties":{"t_s":{"type":"number"},"outer_deg":{"type":"number"},"inner_deg":{"type":"number"},"outer_rate_dps":{"type":"number"},"inner_rate_dps":{"type":"number"},"commanded_outer_deg":{"type":"number"},"commanded_inner_deg":{"type":"number"},"azimuth_deg":{"type":"number"},"elevation_deg":{"type":"number"},"roll_deg":{"type":"number"},"earth_rate_dph":{"type":"number"},"in_position":{"type":"boolean"},"step":{"type":"string"}},"required":["t_s","outer_deg","inner_deg","outer_rate_dps","inner_rate_dps","commanded_outer_deg","commanded_inner_deg","azimuth_deg","elevation_deg","roll_deg","earth_rate_dph","step"]}"#;
+const LOG_SCHEMA: &str = r#"{"type":"object","title":"foxglove.Log","properties":{"timestamp":{"type":"object","properties":{"sec":{"type":"integer","minimum":0},"nsec":{"type":"integer","minimum":0}}},"level":{"type":"integer","description":"1 debug, 2 info, 3 warning, 4 error, 5 fatal"},"message":{"type":"string"},"name":{"type":"string"},"file":{"type":"string"},"line":{"type":"integer"}},"required":["timestamp","level","message","name","file","line"]}"#;
+const LINK_SCHEMA: &str = r#"{"type":"object","title":"gyrobench.LinkStats","properties":{"t_s":{"type":"number"},"bytes":{"type":"integer"},"frames":{"type":"integer"},"resyncs":{"type":"integer"},"skipped_bytes":{"type":"integer"},"crc_errors":{"type":"integer"},"lost_frames":{"type":"integer"},"duplicates":{"type":"integer"},"reconnects":{"type":"integer"},"silent_s":{"type":"number","description":"longest stretch without a valid frame, s"}},"required":["t_s","frames","lost_frames","crc_errors"]}"#;
+const STEP_SCHEMA: &str = r#"{"type":"object","title":"gyrobench.StepEvent","description":"A procedure step started, ended, or was run to restore a resumed run's conditions","properties":{"t_s":{"type":"number","description":"device time, s since this part of the run started"},"phase":{"type":"string","enum":["start","end","restore"]},"index":{"type":"integer","description":"position of the step in run order (setup, main, cleanup)"},"key":{"type":"string","description":"dotted key of the step in the procedure file"},"line":{"type":"integer"},"group":{"type":"string","enum":["setup","main","cleanup"]},"action":{"type":"string"},"description":{"type":"string"}},"required":["t_s","phase","index","key","line","group","action","description"]}"#;
+
+/// `foxglove.Log` time stamp.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Timestamp {
+    /// Seconds since the epoch.
+    pub sec: u64,
+    /// Nanoseconds.
+    pub nsec: u32,
+}
+
+/// One `/events` message (`foxglove.Log`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct LogLine {
+    /// Wall time of the event.
+    pub timestamp: Timestamp,
+    /// Severity.
+    pub level: Level,
+    /// Text for people.
+    pub message: String,
+    /// Who wrote it (`sequencer`).
+    #[serde(default)]
+    pub name: String,
+    /// Unused (required by the schema).
+    #[serde(default)]
+    pub file: String,
+    /// Unused (required by the schema).
+    #[serde(default)]
+    pub line: u32,
+}
+
+/// One `/gyro/rate_1hz` message: the 1 Hz interval as the recorder writes
+/// it and every reader (replay, export, diagnose) reads it back.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Rate1Hz {
+    /// Device time at the end of the interval, s.
+    pub t_s: f64,
+    /// Mean rate, deg/h (Earth rate included).
+    pub rate_dph: f64,
+    /// Earth (+ table) rate on the axis, deg/h.
+    pub reference_dph: f64,
+    /// `rate_dph - reference_dph`.
+    #[serde(default)]
+    pub bias_dph: f64,
+    /// Block sensor 1, degC.
+    pub t1_c: f64,
+    /// Block sensor 2, degC.
+    pub t2_c: f64,
+    /// Case, degC.
+    pub tcase_c: f64,
+    /// Chamber air, degC.
+    pub chamber_c: f64,
+    /// Frames in the interval (0 for an imported run).
+    #[serde(default)]
+    pub frames: u32,
+    /// Record label while recording.
+    #[serde(default)]
+    pub record: Option<String>,
+}
+
+impl Rate1Hz {
+    /// The message of an interval.
+    pub fn new(iv: &Interval, record: Option<&str>) -> Self {
+        Self {
+            t_s: iv.time_s,
+            rate_dph: iv.rate_dph,
+            reference_dph: iv.reference_dph,
+            bias_dph: iv.bias_dph(),
+            t1_c: iv.t1_c,
+            t2_c: iv.t2_c,
+            tcase_c: iv.tcase_c,
+            chamber_c: iv.chamber_c,
+            frames: iv.frames,
+            record: record.map(str::to_owned),
+        }
+    }
+
+    /// The interval as logged.
+    pub fn interval(&self) -> Interval {
+        Interval {
+            time_s: self.t_s,
+            rate_dph: self.rate_dph,
+            reference_dph: self.reference_dph,
+            t1_c: self.t1_c,
+            t2_c: self.t2_c,
+            tcase_c: self.tcase_c,
+            chamber_c: self.chamber_c,
+            frames: self.frames,
+        }
+    }
+}
+
+/// One `/chamber/state` message.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ChamberState {
+    /// Device time, s.
+    pub t_s: f64,
+    /// Air temperature, degC.
+    pub air_c: f64,
+    /// Set point, degC.
+    pub set_point_c: f64,
+    /// `off`, `standby` or `constant`.
+    pub mode: String,
+    /// Active alarm codes.
+    #[serde(default)]
+    pub alarms: Vec<u16>,
+}
+
+/// One `/table/state` message.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TableState {
+    /// Device time, s.
+    pub t_s: f64,
+    /// Outer axis angle, deg.
+    pub outer_deg: f64,
+    /// Inner axis angle, deg.
+    pub inner_deg: f64,
+    /// Outer axis rate, deg/s.
+    pub outer_rate_dps: f64,
+    /// Inner axis rate, deg/s.
+    pub inner_rate_dps: f64,
+    /// Outer angle last commanded, deg.
+    pub commanded_outer_deg: f64,
+    /// Inner angle last commanded, deg.
+    pub commanded_inner_deg: f64,
+    /// Body azimuth, deg.
+    pub azimuth_deg: f64,
+    /// Body elevation, deg.
+    pub elevation_deg: f64,
+    /// Body roll, deg.
+    pub roll_deg: f64,
+    /// Earth + table rate on the nominal axis, deg/h.
+    pub earth_rate_dph: f64,
+    /// Both axes at their commanded angles and at rest.
+    #[serde(default)]
+    pub in_position: bool,
+    /// Procedure step key.
+    #[serde(default)]
+    pub step: String,
+}
+
+/// One `/gyro/frames` message as written: every frame of one tick.
+#[derive(Debug, Clone, Default, PartialEq, Serialize)]
+pub struct GyroFrames {
+    /// Device time of the first frame, s.
+    pub t0_s: f64,
+    /// Frame period, s.
+    pub dt_s: f64,
+    /// Angle per count, arcsec.
+    pub lsb_arcsec: f64,
+    /// Temperature per LSB, degC.
+    pub temp_lsb_c: f64,
+    /// Sequence counters.
+    pub seq: Vec<u8>,
+    /// Delta-angle counts.
+    pub counts: Vec<i32>,
+    /// T1 in temperature LSB.
+    pub t1_raw: Vec<i16>,
+    /// T2 in temperature LSB.
+    pub t2_raw: Vec<i16>,
+    /// Case temperature in temperature LSB.
+    pub tcase_raw: Vec<i16>,
+    /// Status bits.
+    pub status: Vec<u16>,
+}
+
+/// One `/gyro/link` message.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct LinkSample {
+    /// Device time, s.
+    pub t_s: f64,
+    /// Figures so far.
+    #[serde(flatten)]
+    pub stats: LinkStats,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::procedure::Group;
+
+    #[test]
+    fn every_schema_is_json_naming_its_own_title() {
+        for (topic, name, schema) in CHANNELS {
+            let v: serde_json::Value = serde_json::from_str(schema).expect(topic);
+            assert_eq!(v["title"], name, "{topic}");
+        }
+    }
+
+    #[test]
+    fn a_step_event_round_trips_and_matches_its_schema_fields() {
+        let e = StepEvent {
+            t_s: 1.5,
+            phase: StepPhase::Restore,
+            index: 3,
+            key: "main.2".into(),
+            line: 12,
+            group: Group::Main,
+            action: "chamber".into(),
+            description: "chamber to +20.0 degC".into(),
+        };
+        let text = serde_json::to_string(&e).expect("json");
+        assert!(text.contains(r#""phase":"restore""#), "{text}");
+        assert_eq!(serde_json::from_str::<StepEvent>(&text).expect("back"), e);
+        let schema: serde_json::Value = serde_json::from_str(STEP_SCHEMA).expect("schema is JSON");
+        let v: serde_json::Value = serde_json::from_str(&text).expect("json");
+        for f in schema["required"].as_array().expect("required") {
+            assert!(v.get(f.as_str().expect("name")).is_some(), "{f}");
+        }
+    }
+
+    #[test]
+    fn levels_are_the_foxglove_integers() {
+        assert_eq!(serde_json::to_string(&Level::Warning).expect("json"), "3");
+        assert_eq!(
+            serde_json::from_str::<Level>("4").expect("level"),
+            Level::Error
+        );
+        assert!(serde_json::from_str::<Level>("9").is_err());
+    }
+}

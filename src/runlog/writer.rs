@@ -1,0 +1,336 @@
+//! Writes a run's MCAP log (`docs/report.md`, "The MCAP log").
+//!
+//! Channels, schemas, the `run` metadata and the procedure (as an
+//! attachment) go in up front. Gyro frames are batched one message per
+//! tick and zstd-compressed in chunks; a chunk is closed at least every
+//! second of wall time so a crash loses at most the last second.
+//! [`Recorder::finish_run`] writes the `result` metadata, the report as an
+//! attachment, the summary and the footer.
+//!
+//! A write that fails (a full disk) is kept with its file and the first
+//! cause: every later call returns that cause, not the writer's "another
+//! write after a failed one", and what reached the disk stays there for
+//! `gyrobench recover`.
+
+use std::collections::BTreeMap;
+use std::fs::File;
+use std::io::BufWriter;
+use std::path::{Path, PathBuf};
+
+use mcap::records::MessageHeader;
+use serde::Serialize;
+
+use super::meta::{ResultMeta, RunMeta};
+use super::schema::{
+    CHANNELS, ChamberState, GyroFrames, Level, LinkSample, LogLine, PROCEDURE_ATTACHMENT,
+    REPORT_ATTACHMENT, RESULT_META, RUN_META, Rate1Hz, StepEvent, TableState, Timestamp, topics,
+};
+use crate::analysis::series::Interval;
+use crate::clock::Stopwatch;
+use crate::sequencer::{Sink, Tick};
+
+/// Writes a run's MCAP file.
+pub struct Recorder {
+    path: PathBuf,
+    w: mcap::Writer<BufWriter<File>>,
+    ch: BTreeMap<&'static str, u16>,
+    seq: u32,
+    start_ns: u64,
+    frame_dt_s: f64,
+    lsb_arcsec: f64,
+    temp_lsb_c: f64,
+    since_flush: Stopwatch,
+    buf: Vec<u8>,
+    messages: BTreeMap<&'static str, u64>,
+    /// The first write failure, in words (file and cause).
+    failed: Option<String>,
+}
+
+impl std::fmt::Debug for Recorder {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Recorder")
+            .field("path", &self.path)
+            .field("messages", &self.messages)
+            .field("failed", &self.failed)
+            .finish_non_exhaustive()
+    }
+}
+
+/// The writer options every gyrobench log is written with.
+pub(super) fn write_options(library: &str) -> mcap::WriteOptions {
+    mcap::WriteOptions::new()
+        .compression(Some(mcap::Compression::Zstd))
+        .chunk_size(Some(4 * 1024 * 1024))
+        .profile("")
+        .library(library.to_owned())
+}
+
+/// The scales of the frames a run writes.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FrameScales {
+    /// Frame period, s.
+    pub dt_s: f64,
+    /// Angle per count, arcsec.
+    pub lsb_arcsec: f64,
+    /// Temperature per LSB, degC.
+    pub temp_lsb_c: f64,
+}
+
+impl Recorder {
+    /// Create `path` (which must not exist: a log is never overwritten)
+    /// and write the header, schemas, channels, the `run` metadata and the
+    /// procedure. `start_ns` is the wall time of device time zero (ns since
+    /// the epoch).
+    pub fn create(
+        path: &Path,
+        meta: &RunMeta,
+        start_ns: u64,
+        scales: FrameScales,
+    ) -> std::io::Result<Self> {
+        let file = std::fs::OpenOptions::new()
+            .write(true)
+            .create_new(true)
+            .open(path)?;
+        Self::from_file(file, path, meta, start_ns, scales)
+    }
+
+    /// The same on a file already open (a [`crate::fsutil::Pending`]
+    /// temporary); `path` names it in messages.
+    pub fn from_file(
+        file: File,
+        path: &Path,
+        meta: &RunMeta,
+        start_ns: u64,
+        scales: FrameScales,
+    ) -> std::io::Result<Self> {
+        let library = format!("gyrobench {}", env!("CARGO_PKG_VERSION"));
+        let mut w = write_options(&library)
+            .create(BufWriter::new(file))
+            .map_err(mcap_err)?;
+        let mut ch = BTreeMap::new();
+        for (topic, name, schema) in CHANNELS {
+            let sid = w
+                .add_schema(name, "jsonschema", schema.as_bytes())
+                .map_err(mcap_err)?;
+            let cid = w
+                .add_channel(sid, topic, "json", &BTreeMap::new())
+                .map_err(mcap_err)?;
+            ch.insert(topic, cid);
+        }
+        w.write_metadata(&mcap::records::Metadata {
+            name: RUN_META.into(),
+            metadata: meta.to_entries(),
+        })
+        .map_err(mcap_err)?;
+        w.attach(&mcap::Attachment {
+            log_time: start_ns,
+            create_time: start_ns,
+            name: PROCEDURE_ATTACHMENT.into(),
+            media_type: "application/toml".into(),
+            data: std::borrow::Cow::Borrowed(meta.procedure_toml.as_bytes()),
+        })
+        .map_err(mcap_err)?;
+        Ok(Self {
+            path: path.to_owned(),
+            w,
+            ch,
+            seq: 0,
+            start_ns,
+            frame_dt_s: scales.dt_s,
+            lsb_arcsec: scales.lsb_arcsec,
+            temp_lsb_c: scales.temp_lsb_c,
+            since_flush: Stopwatch::start(),
+            buf: Vec::with_capacity(64 * 1024),
+            messages: BTreeMap::new(),
+            failed: None,
+        })
+    }
+
+    /// The file being written.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// The first write failure, if any ("writing FILE: cause").
+    pub fn failure(&self) -> Option<&str> {
+        self.failed.as_deref()
+    }
+
+    /// Run `f` on the writer unless it failed before; keep the first
+    /// failure with the file's name.
+    fn guarded(
+        &mut self,
+        f: impl FnOnce(&mut mcap::Writer<BufWriter<File>>) -> mcap::McapResult<()>,
+    ) -> std::io::Result<()> {
+        if let Some(why) = &self.failed {
+            return Err(std::io::Error::other(why.clone()));
+        }
+        f(&mut self.w).map_err(|e| {
+            let why = format!("writing {}: {}", self.path.display(), describe(&e));
+            self.failed = Some(why.clone());
+            std::io::Error::other(why)
+        })
+    }
+
+    fn write_json(
+        &mut self,
+        topic: &'static str,
+        t_s: f64,
+        value: &impl Serialize,
+    ) -> std::io::Result<()> {
+        self.buf.clear();
+        serde_json::to_writer(&mut self.buf, value)?;
+        let time = self.ns(t_s);
+        self.seq += 1;
+        let header = MessageHeader {
+            channel_id: self.ch[topic],
+            sequence: self.seq,
+            log_time: time,
+            publish_time: time,
+        };
+        let buf = std::mem::take(&mut self.buf);
+        let flush = self.since_flush.elapsed_s() >= 1.0;
+        let r = self.guarded(|w| {
+            w.write_to_known_channel(&header, &buf)?;
+            if flush { w.flush() } else { Ok(()) }
+        });
+        self.buf = buf;
+        r?;
+        if flush {
+            self.since_flush.lap_s();
+        }
+        *self.messages.entry(topic).or_default() += 1;
+        Ok(())
+    }
+
+    fn ns(&self, t_s: f64) -> u64 {
+        self.start_ns
+            .saturating_add((t_s.max(0.0) * 1e9).min(u64::MAX as f64) as u64)
+    }
+
+    /// Messages written per topic.
+    pub fn message_counts(&self) -> &BTreeMap<&'static str, u64> {
+        &self.messages
+    }
+
+    /// End the log of a run: the `result` metadata, the report (when there
+    /// is one) as an attachment, the summary, indexes and footer. After a
+    /// write failure, returns that failure; what reached the disk is kept.
+    pub fn finish_run(
+        mut self,
+        result: &ResultMeta,
+        report_json: Option<&str>,
+        end_s: f64,
+    ) -> std::io::Result<()> {
+        let at = self.ns(end_s);
+        let entries = result.to_entries();
+        self.guarded(|w| {
+            w.write_metadata(&mcap::records::Metadata {
+                name: RESULT_META.into(),
+                metadata: entries,
+            })?;
+            if let Some(report) = report_json {
+                w.attach(&mcap::Attachment {
+                    log_time: at,
+                    create_time: at,
+                    name: REPORT_ATTACHMENT.into(),
+                    media_type: "application/json".into(),
+                    data: std::borrow::Cow::Borrowed(report.as_bytes()),
+                })?;
+            }
+            w.finish().map(|_| ())
+        })
+    }
+}
+
+fn mcap_err(e: mcap::McapError) -> std::io::Error {
+    match e {
+        mcap::McapError::Io(e) => e,
+        e => std::io::Error::other(e),
+    }
+}
+
+/// The cause of a writer error in words: the I/O error itself when there
+/// is one (`No space left on device`), not the writer's wrapper.
+fn describe(e: &mcap::McapError) -> String {
+    match e {
+        mcap::McapError::Io(io) => io.to_string(),
+        e => e.to_string(),
+    }
+}
+
+impl Sink for Recorder {
+    fn link(&mut self, t_s: f64, s: &crate::protocol::frame::LinkStats) -> std::io::Result<()> {
+        self.write_json(topics::LINK, t_s, &LinkSample { t_s, stats: *s })
+    }
+
+    fn tick(&mut self, tick: &Tick, _record: Option<&str>, step: &str) -> std::io::Result<()> {
+        if !tick.frames.is_empty() {
+            let f = &tick.frames;
+            let msg = GyroFrames {
+                t0_s: tick.t0_s,
+                dt_s: self.frame_dt_s,
+                lsb_arcsec: self.lsb_arcsec,
+                temp_lsb_c: self.temp_lsb_c,
+                seq: f.iter().map(|x| x.seq).collect(),
+                counts: f.iter().map(|x| x.counts).collect(),
+                t1_raw: f.iter().map(|x| x.temps_raw[0]).collect(),
+                t2_raw: f.iter().map(|x| x.temps_raw[1]).collect(),
+                tcase_raw: f.iter().map(|x| x.temps_raw[2]).collect(),
+                status: f.iter().map(|x| x.status).collect(),
+            };
+            self.write_json(topics::FRAMES, tick.t0_s, &msg)?;
+        }
+        if let Some(s) = &tick.state {
+            let chamber = ChamberState {
+                t_s: s.t_s,
+                air_c: s.chamber.air_c,
+                set_point_c: s.chamber.set_point_c,
+                mode: s.chamber.mode.as_str().to_owned(),
+                alarms: s.chamber.alarms.clone(),
+            };
+            self.write_json(topics::CHAMBER, s.t_s, &chamber)?;
+            let table = TableState {
+                t_s: s.t_s,
+                outer_deg: s.table.angles.outer_deg,
+                inner_deg: s.table.angles.inner_deg,
+                outer_rate_dps: s.table.rates.outer_deg,
+                inner_rate_dps: s.table.rates.inner_deg,
+                commanded_outer_deg: s.commanded.outer_deg,
+                commanded_inner_deg: s.commanded.inner_deg,
+                azimuth_deg: s.orientation.azimuth_deg,
+                elevation_deg: s.orientation.elevation_deg,
+                roll_deg: s.orientation.roll_deg,
+                earth_rate_dph: s.reference_dph,
+                in_position: s.in_position,
+                step: step.to_owned(),
+            };
+            self.write_json(topics::TABLE, s.t_s, &table)?;
+        }
+        Ok(())
+    }
+
+    fn interval(&mut self, iv: &Interval, record: Option<&str>) -> std::io::Result<()> {
+        self.write_json(topics::RATE_1HZ, iv.time_s, &Rate1Hz::new(iv, record))
+    }
+
+    fn event(&mut self, t_s: f64, level: Level, message: &str) -> std::io::Result<()> {
+        let ns = self.ns(t_s);
+        let line = LogLine {
+            timestamp: Timestamp {
+                sec: ns / 1_000_000_000,
+                nsec: (ns % 1_000_000_000) as u32,
+            },
+            level,
+            message: message.to_owned(),
+            name: "sequencer".into(),
+            file: String::new(),
+            line: 0,
+        };
+        self.write_json(topics::EVENTS, t_s, &line)
+    }
+
+    fn step(&mut self, e: &StepEvent) -> std::io::Result<()> {
+        self.write_json(topics::STEPS, e.t_s, e)
+    }
+}

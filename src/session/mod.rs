@@ -1,0 +1,482 @@
+//! A run from its start to its report, as `run` and `run --resume` drive
+//! it: the run directory (new, locked), the log's metadata, the bench
+//! (embedded or real drivers, behind the limits guard), the sequencer,
+//! the end of the log and the report. `import` and `twin study` share the
+//! pieces they need (the run id, the embedded bench).
+
+pub mod rundir;
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::atomic::AtomicBool;
+
+use crate::bench::{BenchConfig, open_bench};
+use crate::clock::{Pacing, VirtualClock, utc_now};
+use crate::coeffs::CoeffsFile;
+use crate::procedure::Procedure;
+use crate::procedure::estimate::estimate;
+use crate::protocol::frame::LinkStats;
+use crate::report::{Report, render_html};
+use crate::runlog::meta::{ResultMeta, RunMeta};
+use crate::runlog::replay::{ReplayError, add_link, logged, replay, resume_from};
+use crate::runlog::schema::FORMAT;
+use crate::runlog::writer::{FrameScales, Recorder};
+use crate::sequencer::device::DeviceBench;
+use crate::sequencer::embedded::{EmbeddedBench, Fault};
+use crate::sequencer::guard::Guarded;
+use crate::sequencer::{self, BenchIo, Options, Progress, Resume, RunResult};
+use crate::twin::TwinConfig;
+use rundir::{RunDir, RunDirError};
+
+/// Why a run could not start or end properly.
+#[derive(Debug, thiserror::Error)]
+pub enum SessionError {
+    /// The run directory cannot be used.
+    #[error(transparent)]
+    RunDir(#[from] RunDirError),
+    /// The run to resume cannot be read.
+    #[error("reading the run to resume: {0}")]
+    Replay(#[from] ReplayError),
+    /// The run to resume cannot be resumed.
+    #[error("{0}")]
+    NotResumable(String),
+    /// The bench is not usable for this plan.
+    #[error("{0}")]
+    Bench(String),
+    /// A device failed before the run started.
+    #[error("bringing the bench up: {0}")]
+    Device(#[from] crate::driver::DeviceError),
+    /// A file could not be written.
+    #[error("{what} {path}: {source}")]
+    Io {
+        /// What was being done.
+        what: &'static str,
+        /// The file.
+        path: String,
+        /// Cause.
+        #[source]
+        source: std::io::Error,
+    },
+}
+
+/// A fresh run id: 16 random bytes in hex, the same in every part.
+pub fn new_run_id() -> String {
+    let bytes: [u8; 16] = rand::random();
+    bytes.iter().map(|b| format!("{b:02x}")).collect()
+}
+
+/// What a run (or a resumed part of one) works with.
+#[derive(Debug)]
+pub struct Plan {
+    /// The validated procedure.
+    pub procedure: Procedure,
+    /// Where it was read from.
+    pub procedure_path: String,
+    /// The bench.
+    pub bench_cfg: BenchConfig,
+    /// The bench as named to the operator (`embedded` or the file).
+    pub bench_label: String,
+    /// Twin of the embedded bench.
+    pub twin: TwinConfig,
+    /// Coefficients to compensate with.
+    pub coeffs_file: Option<CoeffsFile>,
+    /// The run's seed; a resumed part seeds its twin with
+    /// `seed + part - 1` (a new power-on, fresh noise).
+    pub seed: u64,
+    /// Serial number of the unit.
+    pub dut: String,
+    /// Who runs it.
+    pub operator: String,
+    /// `max` or a factor (logged as given).
+    pub speed: String,
+    /// Pacing of the embedded bench.
+    pub pacing: Pacing,
+    /// Faults the embedded bench plays.
+    pub faults: Vec<(f64, Fault)>,
+    /// The earlier parts, when this continues a run.
+    pub resume: Option<Resumed>,
+}
+
+/// What the earlier parts of a resumed run leave.
+#[derive(Debug)]
+pub struct Resumed {
+    /// The run's id (empty for a format 1 run).
+    pub run_id: String,
+    /// UTC start of the first part.
+    pub start_time_utc: String,
+    /// Where to pick up and what the parts made.
+    pub state: Resume,
+    /// File name of the last part.
+    pub previous_file: String,
+    /// Link figures of the earlier parts.
+    pub link: LinkStats,
+    /// A summary line for the operator.
+    pub summary: String,
+}
+
+/// Where the run's directory goes.
+#[derive(Debug, Clone)]
+pub enum Place {
+    /// `base/<procedure>-<UTC time>`, made unique.
+    Auto {
+        /// The directory runs go in (`runs`).
+        base: PathBuf,
+    },
+    /// A directory the operator chose.
+    At {
+        /// The directory.
+        path: PathBuf,
+        /// Move a run already there aside instead of refusing.
+        force: bool,
+    },
+    /// The directory of the run being resumed.
+    Resume {
+        /// The directory.
+        path: PathBuf,
+    },
+}
+
+/// The newest part of the run in `dir`: `run.mcap`, `run.part2.mcap`, ...
+pub fn last_part(dir: &Path) -> Result<PathBuf, SessionError> {
+    let first = dir.join("run.mcap");
+    if !first.exists() {
+        return Err(SessionError::NotResumable(format!(
+            "{} holds no run.mcap: not a run directory",
+            dir.display()
+        )));
+    }
+    let mut n = 1;
+    while dir.join(format!("run.part{}.mcap", n + 1)).exists() {
+        n += 1;
+    }
+    Ok(if n == 1 {
+        first
+    } else {
+        dir.join(format!("run.part{n}.mcap"))
+    })
+}
+
+/// The plan that continues the interrupted run in `dir` from its last
+/// completed step, everything (procedure, bench, twin, coefficients, seed,
+/// unit) as its log says.
+pub fn plan_resume(dir: &Path, pacing: Pacing, speed: &str) -> Result<Plan, SessionError> {
+    let last = last_part(dir)?;
+    let prev = replay(&last, None)?;
+    if !matches!(
+        prev.result.outcome,
+        sequencer::Outcome::Error | sequencer::Outcome::Aborted
+    ) {
+        return Err(SessionError::NotResumable(format!(
+            "the run in {} finished (outcome {}); there is nothing to resume",
+            dir.display(),
+            prev.result.outcome.as_str()
+        )));
+    }
+    let config = logged(&prev.meta)
+        .map_err(|e| SessionError::NotResumable(format!("{}: {e}", last.display())))?;
+    let completed = prev.completed_steps;
+    let state = resume_from(&prev, completed);
+    let summary = format!(
+        "resuming {}: {} of {} steps completed, going on from step {} (last part {}, ended: {})",
+        dir.display(),
+        completed,
+        prev.procedure.setup.len() + prev.procedure.main.len(),
+        state.start_at + 1,
+        last.display(),
+        prev.result
+            .error
+            .as_ref()
+            .map_or("-".to_owned(), |e| format!(
+                "{} in step {}",
+                e.message, e.step
+            ))
+    );
+    let meta = &prev.meta;
+    let embedded = config.bench.is_embedded();
+    let seed = match (meta.seed, embedded) {
+        (Some(s), _) => s,
+        (None, false) => 0,
+        (None, true) => {
+            return Err(SessionError::NotResumable(format!(
+                "{}: the log of a simulated run names no seed; it cannot be continued with the same unit",
+                last.display()
+            )));
+        }
+    };
+    Ok(Plan {
+        procedure: prev.procedure.clone(),
+        procedure_path: meta.procedure_path.clone(),
+        bench_label: meta.bench.clone(),
+        bench_cfg: config.bench,
+        twin: config.twin.unwrap_or_else(TwinConfig::default_rl16),
+        coeffs_file: config.coeffs,
+        seed,
+        dut: meta.dut_serial.clone(),
+        operator: meta.operator.clone(),
+        speed: speed.to_owned(),
+        pacing,
+        faults: Vec::new(),
+        resume: Some(Resumed {
+            run_id: meta.run_id.clone(),
+            start_time_utc: meta.start_time_utc.clone(),
+            state,
+            previous_file: last
+                .file_name()
+                .map_or(String::new(), |f| f.to_string_lossy().into_owned()),
+            link: prev.link,
+            summary,
+        }),
+    })
+}
+
+/// How a run ended, with where its files are.
+#[derive(Debug)]
+pub struct Finished {
+    /// The run directory.
+    pub dir: PathBuf,
+    /// The log of this part.
+    pub log: PathBuf,
+    /// The report (also written as report.json and report.html unless
+    /// `report_error` says why not).
+    pub report: Report,
+    /// The run's result.
+    pub result: RunResult,
+    /// Why the report files could not be written, if they could not.
+    pub report_error: Option<String>,
+    /// Things the operator should know (a stale lock taken over, a run
+    /// moved aside).
+    pub notes: Vec<String>,
+}
+
+/// The embedded simulated bench for `twin` (guarded by `limits`).
+pub fn embedded_bench(
+    twin: &TwinConfig,
+    seed: u64,
+    pacing: Pacing,
+    faults: &[(f64, Fault)],
+    limits: crate::bench::Limits,
+) -> Guarded<EmbeddedBench> {
+    let clock = Arc::new(VirtualClock::new(pacing));
+    let mut b = EmbeddedBench::new(twin.clone(), seed, clock);
+    for (at, f) in faults {
+        b.schedule(*at, *f);
+    }
+    Guarded::new(b, limits)
+}
+
+fn io_err(what: &'static str, path: &Path) -> impl FnOnce(std::io::Error) -> SessionError {
+    let path = path.display().to_string();
+    move |source| SessionError::Io { what, path, source }
+}
+
+/// Run `plan` in `place` on the async runtime `rt`; `interrupt` stops it
+/// (cleanup still runs).
+pub fn execute(
+    plan: Plan,
+    place: Place,
+    rt: &tokio::runtime::Runtime,
+    progress: &mut dyn Progress,
+    interrupt: Arc<AtomicBool>,
+) -> Result<Finished, SessionError> {
+    let embedded = plan.bench_cfg.is_embedded();
+    let specs = [
+        &plan.bench_cfg.devices.chamber.spec,
+        &plan.bench_cfg.devices.table.spec,
+        &plan.bench_cfg.devices.gyro.spec,
+    ];
+    if !embedded && specs.iter().any(|s| s.starts_with("sim://")) {
+        return Err(SessionError::Bench(
+            "the bench file mixes sim:// and real devices; use all sim:// (the embedded bench) or none".into(),
+        ));
+    }
+    if !embedded && !plan.faults.is_empty() {
+        return Err(SessionError::Bench(
+            "--inject applies to the embedded simulated bench only".into(),
+        ));
+    }
+    let part = plan.resume.as_ref().map_or(1, |r| r.state.part);
+    let start = utc_now();
+    let run_start = plan
+        .resume
+        .as_ref()
+        .map_or_else(|| start.to_rfc3339(), |r| r.start_time_utc.clone());
+    let dir = match &place {
+        Place::Auto { base } => RunDir::create_unique(
+            base,
+            &plan.procedure.meta.name,
+            &start.format("%Y%m%dT%H%M%SZ").to_string(),
+            &start.to_rfc3339(),
+        )?,
+        Place::At { path, force } => RunDir::create_at(path, &start.to_rfc3339(), *force)?,
+        Place::Resume { path } => RunDir::open_existing(path, &start.to_rfc3339())?,
+    };
+    let mut notes = Vec::new();
+    if let Some(holder) = &dir.lock.stale {
+        notes.push(format!(
+            "took over the lock of {holder}, which no longer runs (killed or crashed)"
+        ));
+    }
+    if let Some(aside) = &dir.moved_aside {
+        notes.push(format!(
+            "the run that was in {} is now in {}",
+            dir.path.display(),
+            aside.display()
+        ));
+    }
+
+    let limits = plan.bench_cfg.limits.clone();
+    let mut bench: Box<dyn BenchIo> = if embedded {
+        let seed = plan.seed.wrapping_add(u64::from(part) - 1);
+        Box::new(embedded_bench(
+            &plan.twin,
+            seed,
+            plan.pacing,
+            &plan.faults,
+            limits,
+        ))
+    } else {
+        let open = rt.block_on(open_bench(&plan.bench_cfg))?;
+        let device = rt.block_on(DeviceBench::start(&plan.bench_cfg, open))?;
+        Box::new(Guarded::new(device, limits))
+    };
+    let bench_toml = toml::to_string_pretty(&plan.bench_cfg).map_err(|e| {
+        SessionError::Bench(format!("the bench configuration cannot be logged: {e}"))
+    })?;
+    let site_json = serde_json::to_string(&plan.bench_cfg.site)
+        .map_err(|e| SessionError::Bench(format!("the site cannot be logged: {e}")))?;
+    let meta = RunMeta {
+        format: FORMAT,
+        run_id: plan
+            .resume
+            .as_ref()
+            .map(|r| r.run_id.clone())
+            .filter(|id| !id.is_empty())
+            .unwrap_or_else(new_run_id),
+        procedure_toml: plan.procedure.text.clone(),
+        procedure_path: plan.procedure_path.clone(),
+        bench_toml,
+        bench: plan.bench_label.clone(),
+        twin_toml: embedded.then(|| plan.twin.to_toml()),
+        coeffs_toml: plan.coeffs_file.as_ref().map(CoeffsFile::to_toml),
+        site_json,
+        dut_serial: plan.dut.clone(),
+        dut_type: plan.procedure.meta.dut_type.clone(),
+        operator: plan.operator.clone(),
+        software_version: env!("CARGO_PKG_VERSION").to_owned(),
+        start_time_utc: run_start.clone(),
+        part_start_time_utc: start.to_rfc3339(),
+        seed: embedded.then_some(plan.seed),
+        part,
+        previous_part: plan.resume.as_ref().map(|r| r.previous_file.clone()),
+        resume_completed_steps: plan.resume.as_ref().map(|r| r.state.completed),
+        speed: plan.speed.clone(),
+        imported_from: None,
+        other: Default::default(),
+    };
+    let log = if part == 1 {
+        dir.path.join("run.mcap")
+    } else {
+        dir.path.join(format!("run.part{part}.mcap"))
+    };
+    let start_ns = start.timestamp_nanos_opt().unwrap_or(0).max(0) as u64;
+    let scales = FrameScales {
+        dt_s: bench.frame_dt_s(),
+        lsb_arcsec: bench.lsb_arcsec(),
+        temp_lsb_c: bench.temp_lsb_c(),
+    };
+    let mut recorder = Recorder::create(&log, &meta, start_ns, scales)
+        .map_err(io_err("creating the log", &log))?;
+
+    let opts = Options {
+        coeffs: plan.coeffs_file.as_ref().map(CoeffsFile::fit),
+        interrupt,
+        dut_max_c: plan.bench_cfg.limits.dut_max_c,
+        in_position: (
+            plan.bench_cfg.devices.table.in_position_deg,
+            plan.bench_cfg.devices.table.settle_s,
+        ),
+        move_timeout_s: 600.0,
+        resume: plan.resume.as_ref().map(|r| r.state.clone()),
+    };
+    let result = rt.block_on(sequencer::run(
+        &plan.procedure,
+        bench.as_mut(),
+        &mut recorder,
+        progress,
+        &opts,
+    ));
+    let part_link = bench.link_stats();
+    let link = match &plan.resume {
+        Some(r) => add_link(&r.link, &part_link),
+        None => part_link,
+    };
+    let finish = |result: &RunResult| {
+        Report::new(
+            &plan.procedure,
+            result,
+            &plan.dut,
+            &run_start,
+            link,
+            embedded.then_some(plan.seed),
+            &plan.bench_label,
+        )
+    };
+    let mut result = result;
+    let mut report = finish(&result);
+    let end_s = bench.now_s();
+    let link_written = {
+        use crate::sequencer::Sink;
+        recorder.link(end_s, &part_link)
+    };
+    let log_end = link_written.and_then(|()| {
+        recorder.finish_run(&ResultMeta::new(&result), Some(&report.to_json()), end_s)
+    });
+    if let Err(e) = log_end {
+        // The log could not be completed: what reached the disk stays
+        // (`gyrobench recover` rewrites it whole); the run is an error.
+        if result.error.is_none() {
+            result.outcome = sequencer::Outcome::Error;
+            result.error = Some(sequencer::RunError {
+                device: None,
+                step: "end of run".into(),
+                message: format!("the log could not be completed: {e}"),
+            });
+        }
+        notes.push(format!(
+            "the log {} is incomplete ({e}); `gyrobench recover {}` rewrites what it holds as a complete log",
+            log.display(),
+            log.display()
+        ));
+        report = finish(&result);
+    }
+    let report_error = write_report(&dir.path, &report, &result).err();
+    Ok(Finished {
+        dir: dir.path.clone(),
+        log,
+        report,
+        result,
+        report_error,
+        notes,
+    })
+}
+
+/// `report.json` and `report.html` in `dir`.
+pub fn write_report(dir: &Path, report: &Report, result: &RunResult) -> Result<(), String> {
+    for (name, bytes) in [
+        ("report.json", report.to_json()),
+        ("report.html", render_html(report, &result.records)),
+    ] {
+        let path = dir.join(name);
+        crate::fsutil::write_atomic(&path, bytes.as_bytes())
+            .map_err(|e| format!("writing {}: {e}", path.display()))?;
+    }
+    Ok(())
+}
+
+/// Device time the procedure needs at least, s (for progress bars).
+pub fn estimated_s(plan: &Plan) -> f64 {
+    estimate(&plan.procedure, &plan.bench_cfg)
+        .iter()
+        .map(|(_, e)| e.min_s)
+        .sum()
+}
