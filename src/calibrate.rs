@@ -27,6 +27,8 @@ pub const COLLINEAR_ABOVE: f64 = 0.9;
 pub struct RunSeries {
     /// File name.
     pub name: String,
+    /// Serial number of the unit the run tested.
+    pub serial: String,
     /// 1 Hz intervals used for calibration.
     pub series: Vec<Interval>,
 }
@@ -68,6 +70,7 @@ pub fn load(path: &Path) -> Result<RunSeries, ReplayError> {
     };
     Ok(RunSeries {
         name: path.display().to_string(),
+        serial: r.meta.dut_serial.clone(),
         series,
     })
 }
@@ -183,6 +186,64 @@ fn separate_with(a: &str, b: &str) -> String {
     } else {
         "a run with another temperature profile (a different range or ramp rate)".into()
     }
+}
+
+/// A held-out figure this many times the raw drift (or not finite) is
+/// not a fit of one unit's thermal behaviour but of something else
+/// (runs of several units, a broken log): refused.
+pub const ABSURD_OVER_RAW: f64 = 10.0;
+
+/// Serials of runs that are not all of one unit, as `serial (run)` lines;
+/// empty when they are.
+pub fn mixed_serials(runs: &[RunSeries]) -> Vec<String> {
+    let first = runs.first().map(|r| r.serial.as_str());
+    if runs.iter().all(|r| Some(r.serial.as_str()) == first) {
+        return Vec::new();
+    }
+    runs.iter()
+        .map(|r| {
+            format!(
+                "{} ({})",
+                if r.serial.is_empty() {
+                    "no serial"
+                } else {
+                    &r.serial
+                },
+                r.name
+            )
+        })
+        .collect()
+}
+
+impl Calibration {
+    /// Models whose held-out figures are absurd against the raw drift, in
+    /// words; empty when every held-out figure is plausible.
+    pub fn absurd(&self) -> Vec<String> {
+        absurd(&self.table)
+    }
+}
+
+/// Rows of a comparison table (raw first) whose held-out figures are more
+/// than [`ABSURD_OVER_RAW`] times the raw ones, or not finite.
+fn absurd(table: &[Row]) -> Vec<String> {
+    let Some(raw) = table.first().and_then(|r| r.held_out) else {
+        return Vec::new();
+    };
+    let limit = |raw: f64| ABSURD_OVER_RAW * raw.abs().max(1e-3);
+    table
+        .iter()
+        .skip(1)
+        .filter_map(|row| {
+            let h = row.held_out?;
+            let bad = |v: f64, r: f64| !v.is_finite() || v > limit(r);
+            (bad(h.drift_pp_dph, raw.drift_pp_dph) || bad(h.rms_dph, raw.rms_dph)).then(|| {
+                format!(
+                    "{}: held-out drift {:.4} deg/h p-p, rms {:.4} deg/h, against {:.4} / {:.4} deg/h raw",
+                    row.model, h.drift_pp_dph, h.rms_dph, raw.drift_pp_dph, raw.rms_dph
+                )
+            })
+        })
+        .collect()
 }
 
 /// Fit every model on `runs` and validate by leaving one run out.
@@ -441,5 +502,43 @@ impl Calibration {
             s.push_str(&format!("warning: {w}\n"));
         }
         s
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn row(model: &'static str, drift: f64, rms: f64) -> Row {
+        let s = Score {
+            drift_pp_dph: drift,
+            rms_dph: rms,
+        };
+        Row {
+            model,
+            held_out: Some(s),
+            in_sample: s,
+        }
+    }
+
+    #[test]
+    fn a_held_out_fit_far_worse_than_no_compensation_is_absurd() {
+        let fine = [
+            row("raw", 0.66, 0.2),
+            row("model1", 0.3, 0.1),
+            row("model4", 0.03, 0.01),
+        ];
+        assert!(absurd(&fine).is_empty());
+        let broken = [
+            row("raw", 0.66, 0.2),
+            row("model1", 2.4e6, 9.0e5),
+            row("model4", f64::NAN, 0.01),
+        ];
+        let a = absurd(&broken);
+        assert_eq!(a.len(), 2, "{a:?}");
+        assert!(
+            a[0].starts_with("model1") && a[1].starts_with("model4"),
+            "{a:?}"
+        );
     }
 }

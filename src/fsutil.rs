@@ -33,9 +33,12 @@ impl Pending {
         let mut prefix = std::ffi::OsString::from(".");
         prefix.push(name);
         prefix.push(".");
+        // The mode a plain create gives (0666 less the umask), not the
+        // temporary's private 0600: the result is an ordinary output file.
         let named = tempfile::Builder::new()
             .prefix(&prefix)
             .suffix(".partial")
+            .permissions(std::os::unix::fs::PermissionsExt::from_mode(0o666))
             .tempfile_in(dir)?;
         let (file, temp) = named.into_parts();
         Ok(Self {
@@ -139,6 +142,10 @@ mod tests {
         let p = dir.join("out.csv");
         write_atomic(&p, b"a,b\n1,2\n").expect("write");
         assert_eq!(std::fs::read(&p).expect("read back"), b"a,b\n1,2\n");
+        let mode = std::os::unix::fs::PermissionsExt::mode(
+            &std::fs::metadata(&p).expect("meta").permissions(),
+        );
+        assert_eq!(mode & 0o044, 0o044, "readable like any output, {mode:o}");
         let names: Vec<_> = std::fs::read_dir(&dir).expect("list").collect();
         assert_eq!(names.len(), 1, "temporary left behind");
         std::fs::remove_dir_all(&dir).expect("cleanup");

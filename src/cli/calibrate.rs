@@ -7,7 +7,8 @@ use anyhow::{Context, Result};
 use clap::Args;
 
 use super::Outcome;
-use crate::calibrate::{calibrate, load};
+use crate::calibrate::{ABSURD_OVER_RAW, calibrate, load, mixed_serials};
+use crate::fsutil::ensure_distinct;
 
 #[derive(Debug, Args)]
 pub struct CalibrateArgs {
@@ -17,25 +18,47 @@ pub struct CalibrateArgs {
     /// Coefficients file to write (the format `run --coeffs` reads).
     #[arg(short, long)]
     out: PathBuf,
+    /// Fit runs of units with different serial numbers together (refused
+    /// otherwise: coefficients belong to one unit).
+    #[arg(long)]
+    allow_mixed_serials: bool,
 }
 
 pub fn run(args: CalibrateArgs) -> Result<Outcome> {
+    let json_path = args.out.with_extension("calibration.json");
+    let html_path = args.out.with_extension("calibration.html");
+    let inputs: Vec<&std::path::Path> = args.runs.iter().map(PathBuf::as_path).collect();
+    for out in [&args.out, &json_path, &html_path] {
+        ensure_distinct(out, &inputs)?;
+    }
     let runs = args
         .runs
         .iter()
         .map(|p| load(p).with_context(|| format!("reading {}", p.display())))
         .collect::<Result<Vec<_>>>()?;
+    let mixed = mixed_serials(&runs);
+    if !mixed.is_empty() && !args.allow_mixed_serials {
+        anyhow::bail!(
+            "the runs are of different units: {}; coefficients belong to one unit (give --allow-mixed-serials to fit them together anyway)",
+            mixed.join(", ")
+        );
+    }
     let cal = calibrate(&runs).context("fitting the compensation models")?;
+    let absurd = cal.absurd();
+    if !absurd.is_empty() {
+        anyhow::bail!(
+            "the fit is not plausible: held out, it is more than {ABSURD_OVER_RAW}x worse than no compensation ({}); check that the runs are of one unit and cover its temperature range; no coefficients written",
+            absurd.join("; ")
+        );
+    }
     let toml_text = format!(
         "# Thermal compensation coefficients written by gyrobench calibrate.\n# `gyrobench run --coeffs` compensates with [model4].\n{}",
         toml::to_string_pretty(&cal.coeffs_file()).context("writing the coefficients as TOML")?
     );
     crate::fsutil::write_atomic(&args.out, toml_text.as_bytes())
         .with_context(|| format!("writing {}", args.out.display()))?;
-    let json_path = args.out.with_extension("calibration.json");
     crate::fsutil::write_atomic(&json_path, serde_json::to_string_pretty(&cal)?.as_bytes())
         .with_context(|| format!("writing {}", json_path.display()))?;
-    let html_path = args.out.with_extension("calibration.html");
     crate::fsutil::write_atomic(&html_path, cal.render_html().as_bytes())
         .with_context(|| format!("writing {}", html_path.display()))?;
     outf!("{}", cal.render_text())?;

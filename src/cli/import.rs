@@ -17,6 +17,10 @@ pub struct ImportArgs {
     /// Where the run stood: a TOML file with a `[site]` table.
     #[arg(long)]
     site: PathBuf,
+    /// Serial number of the unit (default: the CSV's file name without
+    /// its extension).
+    #[arg(long)]
+    dut: Option<String>,
     /// The log to write.
     #[arg(short, long)]
     out: PathBuf,
@@ -33,7 +37,7 @@ pub struct ExportArgs {
 
 pub fn run_import(args: ImportArgs) -> Result<Outcome> {
     let site = load_site(&args.site).with_context(|| format!("reading {}", args.site.display()))?;
-    let r = import(&args.csv, site, &args.out)?;
+    let r = import(&args.csv, site, args.dut.as_deref(), &args.out)?;
     outln!(
         "imported {} s of 1 Hz data in {} record(s) into {}; judged by the acceptance's limits: {}",
         r.intervals,

@@ -90,6 +90,19 @@ impl Live {
 }
 
 impl Progress for Live {
+    fn begin(&mut self, dir: &std::path::Path, notes: &[String]) {
+        let lines = notes
+            .iter()
+            .map(|n| format!("note: {n}"))
+            .chain([format!("logging to {}", dir.display())]);
+        for line in lines {
+            match &self.bar {
+                Some(b) => b.println(line),
+                None => eprintln!("{line}"),
+            }
+        }
+    }
+
     fn step(&mut self, s: &crate::procedure::Step, i: usize, n: usize) {
         let line = format!("[{}/{n}] {}", i + 1, s.describe());
         match &self.bar {
@@ -231,11 +244,12 @@ pub fn run(args: RunArgs) -> Result<Outcome> {
     }
     let (plan, place) = match (&args.resume, &args.procedure) {
         (Some(dir), _) => {
+            let locked = session::lock_for_resume(dir)?;
             let plan = session::plan_resume(dir, pacing, &args.speed)?;
             if let Some(r) = &plan.resume {
                 eprintln!("{}", r.summary);
             }
-            (plan, Place::Resume { path: dir.clone() })
+            (plan, Place::Resume(locked))
         }
         (None, Some(p)) => {
             let plan = fresh(&args, p, pacing)?;
@@ -268,7 +282,7 @@ pub fn run(args: RunArgs) -> Result<Outcome> {
         }
         Err(e) => return Err(e.into()),
     };
-    for n in &finished.notes {
+    for n in finished.notes.iter().skip(finished.notes_at_begin) {
         eprintln!("note: {n}");
     }
     outf!("{}", finished.report.render_text())?;

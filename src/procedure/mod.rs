@@ -298,9 +298,12 @@ impl Procedure {
             spec: raw.procedure.spec.clone(),
         };
         v.c.ensure(
-            !meta.name.trim().is_empty(),
+            is_path_safe_name(&meta.name),
             "procedure.name",
-            "must not be empty",
+            &format!(
+                "{:?} cannot name a run directory: use 1 to 64 letters, digits, `-`, `_` or `.`, starting with a letter or digit",
+                meta.name
+            ),
         )?;
         let setup = v.group(Group::Setup, &raw.setup)?;
         let main = v.group(Group::Main, &raw.main)?;
@@ -617,6 +620,15 @@ impl Validator<'_> {
         }
         Ok((angles, asked.unwrap_or_else(|| g.orientation(angles))))
     }
+}
+
+/// A name that is safe as one path component: no separator, no `..`, no
+/// hidden file, nothing a shell or a file system treats specially.
+pub fn is_path_safe_name(name: &str) -> bool {
+    let mut chars = name.chars();
+    chars.next().is_some_and(|c| c.is_ascii_alphanumeric())
+        && name.len() <= 64
+        && chars.all(|c| c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.'))
 }
 
 /// Bring each angle into its travel range by whole turns, where possible.

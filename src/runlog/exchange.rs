@@ -230,8 +230,14 @@ fn procedure_text(name: &str, parts: &[(String, usize, usize)], rows: &[Row]) ->
     t
 }
 
-/// Import the interchange CSV at `csv` (site from `site`) as a log at `out`.
-pub fn import(csv: &Path, site: Site, out: &Path) -> Result<Imported, ImportError> {
+/// Import the interchange CSV at `csv` (site from `site`) as a log at
+/// `out`; `dut` is the unit's serial (default: the CSV's file stem).
+pub fn import(
+    csv: &Path,
+    site: Site,
+    dut: Option<&str>,
+    out: &Path,
+) -> Result<Imported, ImportError> {
     ensure_distinct(out, &[csv])?;
     let name = csv.display().to_string();
     let rows = to_one_hz(&interchange::read(csv)?, &name)?;
@@ -254,9 +260,13 @@ pub fn import(csv: &Path, site: Site, out: &Path) -> Result<Imported, ImportErro
         bench_toml: toml::to_string_pretty(&bench).map_err(|e| other("bench", &e))?,
         bench: format!("imported from {name}"),
         site_json: serde_json::to_string(&site).map_err(|e| other("site", &e))?,
-        dut_serial: csv
-            .file_stem()
-            .map_or(String::new(), |s| s.to_string_lossy().into_owned()),
+        dut_serial: dut.map_or_else(
+            || {
+                csv.file_stem()
+                    .map_or(String::new(), |s| s.to_string_lossy().into_owned())
+            },
+            str::to_owned,
+        ),
         dut_type: "gyro".into(),
         software_version: env!("CARGO_PKG_VERSION").to_owned(),
         part: 1,

@@ -200,6 +200,10 @@ pub struct BenchLeft {
 
 /// Progress callbacks for the operator.
 pub trait Progress {
+    /// The run's directory and log are ready; the steps start next.
+    /// `notes` are what the operator should know first (a stale lock
+    /// taken over, an earlier run moved aside).
+    fn begin(&mut self, _dir: &std::path::Path, _notes: &[String]) {}
     /// A step starts.
     fn step(&mut self, step: &Step, index: usize, total: usize);
     /// A tick passed; `interval` is its 1 Hz mean (rate, temperatures).

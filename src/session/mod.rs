@@ -115,7 +115,7 @@ pub struct Resumed {
 }
 
 /// Where the run's directory goes.
-#[derive(Debug, Clone)]
+#[derive(Debug)]
 pub enum Place {
     /// `base/<procedure>-<UTC time>`, made unique.
     Auto {
@@ -129,11 +129,15 @@ pub enum Place {
         /// Move a run already there aside instead of refusing.
         force: bool,
     },
-    /// The directory of the run being resumed.
-    Resume {
-        /// The directory.
-        path: PathBuf,
-    },
+    /// The directory of the run being resumed, locked before its log was
+    /// read ([`lock_for_resume`]).
+    Resume(RunDir),
+}
+
+/// Lock the run directory `dir` to resume the run in it: taken before its
+/// log is read, so two resumes of one run cannot both go on.
+pub fn lock_for_resume(dir: &Path) -> Result<RunDir, SessionError> {
+    Ok(RunDir::open_existing(dir, &utc_now().to_rfc3339())?)
 }
 
 /// The newest part of the run in `dir`: `run.mcap`, `run.part2.mcap`, ...
@@ -244,8 +248,10 @@ pub struct Finished {
     /// Why the report files could not be written, if they could not.
     pub report_error: Option<String>,
     /// Things the operator should know (a stale lock taken over, a run
-    /// moved aside).
+    /// moved aside, an incomplete log).
     pub notes: Vec<String>,
+    /// How many of `notes` were given to [`Progress::begin`] already.
+    pub notes_at_begin: usize,
 }
 
 /// The embedded simulated bench for `twin` (guarded by `limits`).
@@ -300,15 +306,15 @@ pub fn execute(
         .resume
         .as_ref()
         .map_or_else(|| start.to_rfc3339(), |r| r.start_time_utc.clone());
-    let dir = match &place {
+    let dir = match place {
         Place::Auto { base } => RunDir::create_unique(
-            base,
+            &base,
             &plan.procedure.meta.name,
             &start.format("%Y%m%dT%H%M%SZ").to_string(),
             &start.to_rfc3339(),
         )?,
-        Place::At { path, force } => RunDir::create_at(path, &start.to_rfc3339(), *force)?,
-        Place::Resume { path } => RunDir::open_existing(path, &start.to_rfc3339())?,
+        Place::At { path, force } => RunDir::create_at(&path, &start.to_rfc3339(), force)?,
+        Place::Resume(dir) => dir,
     };
     let mut notes = Vec::new();
     if let Some(holder) = &dir.lock.stale {
@@ -387,6 +393,8 @@ pub fn execute(
     let mut recorder = Recorder::create(&log, &meta, start_ns, scales)
         .map_err(io_err("creating the log", &log))?;
 
+    progress.begin(&dir.path, &notes);
+    let notes_at_begin = notes.len();
     let opts = Options {
         coeffs: plan.coeffs_file.as_ref().map(CoeffsFile::fit),
         interrupt,
@@ -457,6 +465,7 @@ pub fn execute(
         result,
         report_error,
         notes,
+        notes_at_begin,
     })
 }
 

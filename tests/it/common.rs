@@ -107,3 +107,55 @@ action = "chamber"
 set_c = 20.0
 ramp_c_per_min = 2.0
 "#;
+
+/// A run of a few minutes of device time: a chamber step, two short
+/// records, a measure each and a cleanup move.
+pub const TINY: &str = r#"
+[procedure]
+name = "tiny"
+description = "two 60 s records"
+dut_type = "RL-16"
+spec = "test"
+
+[[setup]]
+action = "chamber"
+set_c = 20.0
+ramp_c_per_min = 1.0
+
+[[main]]
+action = "repeat"
+positions = [
+  { label = "up", table = { outer_deg = 90.0, inner_deg = 0.0 } },
+  { label = "east", table = { outer_deg = 0.0, inner_deg = 0.0 } },
+]
+
+[[main.steps]]
+action = "record"
+label = "{label}"
+duration_s = 60.0
+
+[[main.steps]]
+action = "measure"
+name = "bias_dph:{label}"
+metric = "mean_bias"
+records = ["{label}"]
+low = -5.0
+high = 5.0
+unit = "deg/h"
+
+[[cleanup]]
+action = "move"
+table = { outer_deg = 90.0, inner_deg = 0.0 }
+"#;
+
+/// Write `text` to `dir/name` and return the path.
+pub fn write(dir: &Path, name: &str, text: &str) -> std::path::PathBuf {
+    let p = dir.join(name);
+    std::fs::write(&p, text).unwrap_or_else(|e| panic!("{}: {e}", p.display()));
+    p
+}
+
+/// stderr of a finished command, as text.
+pub fn stderr(o: &std::process::Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}

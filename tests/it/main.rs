@@ -13,6 +13,7 @@ mod cli;
 mod common;
 mod diagnose;
 mod import;
+mod integrity;
 mod replay;
 mod resume;
 mod run;
