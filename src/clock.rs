@@ -69,7 +69,13 @@ impl VirtualClock {
             *anchor.get_or_insert_with(|| (Instant::now(), self.nanos.load(Ordering::Relaxed)))
         };
         let virtual_elapsed = target_ns.saturating_sub(start_ns) as f64 * 1e-9;
-        let due = start + Duration::from_secs_f64(virtual_elapsed / factor);
+        // A factor so small that the wait overflows a Duration or an
+        // Instant waits as long as one can (a year at a time), never panics.
+        let wait = Duration::try_from_secs_f64(virtual_elapsed / factor)
+            .unwrap_or(Duration::from_secs(365 * 86_400));
+        let due = start
+            .checked_add(wait)
+            .unwrap_or_else(|| Instant::now() + Duration::from_secs(365 * 86_400));
         let now = Instant::now();
         if due > now {
             std::thread::sleep(due - now);
@@ -135,7 +141,9 @@ impl Clock for WallClock {
     fn sleep_until(&self, t_s: f64) {
         let now = self.now_s();
         if t_s.is_finite() && t_s > now {
-            std::thread::sleep(Duration::from_secs_f64((t_s - now) / self.speed));
+            let wait = Duration::try_from_secs_f64((t_s - now) / self.speed)
+                .unwrap_or(Duration::from_secs(365 * 86_400));
+            std::thread::sleep(wait);
         }
     }
 

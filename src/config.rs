@@ -4,7 +4,9 @@
 //! (`deny_unknown_fields`); stage two validates values and builds typed,
 //! checked configuration. Both stages report `file:line:column` and the key.
 
+use std::collections::HashMap;
 use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
 
 use serde::de::DeserializeOwned;
 use toml::de::{DeTable, DeValue};
@@ -57,6 +59,79 @@ pub struct Source {
     pub path: PathBuf,
     /// The whole text.
     pub text: String,
+    /// Where every dotted key sits, built once on the first lookup (so
+    /// validating N steps costs one parse, not N).
+    index: OnceLock<KeyIndex>,
+}
+
+/// Byte offsets of every dotted key of a document, and of its line starts.
+#[derive(Debug, Clone, Default)]
+struct KeyIndex {
+    keys: HashMap<String, usize>,
+    line_starts: Vec<usize>,
+}
+
+impl KeyIndex {
+    fn build(text: &str) -> Self {
+        let mut keys = HashMap::new();
+        if let Ok(doc) = DeTable::parse(text) {
+            walk_table(doc.get_ref(), "", &mut keys);
+        }
+        let line_starts = std::iter::once(0)
+            .chain(text.match_indices('\n').map(|(i, _)| i + 1))
+            .collect();
+        Self { keys, line_starts }
+    }
+
+    /// 1-based line and column of a byte offset, by binary search.
+    fn line_col(&self, text: &str, offset: usize) -> (usize, usize) {
+        let offset = offset.min(text.len());
+        let line = self.line_starts.partition_point(|&s| s <= offset).max(1);
+        let start = self.line_starts[line - 1];
+        let column = text.get(start..offset).map_or(1, |t| t.chars().count() + 1);
+        (line, column)
+    }
+}
+
+fn is_container(v: &DeValue<'_>) -> bool {
+    matches!(v, DeValue::Table(_) | DeValue::Array(_))
+}
+
+fn join(prefix: &str, part: &str) -> String {
+    if prefix.is_empty() {
+        part.to_owned()
+    } else {
+        format!("{prefix}.{part}")
+    }
+}
+
+/// A table's keys: at the key for a table or array (an error about it
+/// points at its header), at the value for anything else.
+fn walk_table(t: &DeTable<'_>, prefix: &str, keys: &mut HashMap<String, usize>) {
+    for (k, v) in t {
+        let path = join(prefix, k.get_ref());
+        let at = if is_container(v.get_ref()) {
+            k.span().start
+        } else {
+            v.span().start
+        };
+        keys.insert(path.clone(), at);
+        walk_value(v.get_ref(), &path, keys);
+    }
+}
+
+fn walk_value(v: &DeValue<'_>, path: &str, keys: &mut HashMap<String, usize>) {
+    match v {
+        DeValue::Table(t) => walk_table(t, path, keys),
+        DeValue::Array(a) => {
+            for (i, e) in a.iter().enumerate() {
+                let p = join(path, &i.to_string());
+                keys.insert(p.clone(), e.span().start);
+                walk_value(e.get_ref(), &p, keys);
+            }
+        }
+        _ => {}
+    }
 }
 
 impl Source {
@@ -80,6 +155,7 @@ impl Source {
         Ok(Self {
             path: path.to_owned(),
             text,
+            index: OnceLock::new(),
         })
     }
 
@@ -88,6 +164,7 @@ impl Source {
         Self {
             path: PathBuf::from(name),
             text: text.to_owned(),
+            index: OnceLock::new(),
         }
     }
 
@@ -147,35 +224,14 @@ impl Source {
     /// parts index arrays (`main.3.set_c` = key `set_c` of the fourth
     /// `[[main]]` table). Falls back to the deepest part found.
     pub fn locate(&self, key: &str) -> Option<(usize, usize)> {
-        let doc = DeTable::parse(&self.text).ok()?;
-        let root = doc.get_ref();
-        let mut best = None;
-        let mut node: Option<&DeValue<'_>> = None;
-        for part in key.split('.') {
-            let next = match node {
-                None => root
-                    .iter()
-                    .find(|(k, _)| k.get_ref().as_ref() == part)
-                    .map(|(k, v)| (k.span().start, v)),
-                Some(DeValue::Table(t)) => t
-                    .iter()
-                    .find(|(k, _)| k.get_ref().as_ref() == part)
-                    .map(|(k, v)| (k.span().start, v)),
-                Some(DeValue::Array(a)) => part
-                    .parse::<usize>()
-                    .ok()
-                    .and_then(|i| a.get(i))
-                    .map(|v| (v.span().start, v)),
-                Some(_) => None,
-            };
-            let Some((at, v)) = next else { return best };
-            best = Some(line_col(&self.text, at));
-            node = Some(v.get_ref());
-            if !matches!(v.get_ref(), DeValue::Table(_) | DeValue::Array(_)) {
-                best = Some(line_col(&self.text, v.span().start));
+        let index = self.index.get_or_init(|| KeyIndex::build(&self.text));
+        let mut k = key;
+        loop {
+            if let Some(&at) = index.keys.get(k) {
+                return Some(index.line_col(&self.text, at));
             }
+            k = &k[..k.rfind('.')?];
         }
-        best
     }
 }
 

@@ -6,6 +6,7 @@
 pub mod estimate;
 pub mod raw;
 
+use std::collections::HashSet;
 use std::path::Path;
 
 use serde::Serialize;
@@ -14,6 +15,14 @@ use crate::bench::BenchConfig;
 use crate::config::{Checker, ConfigError, Source};
 use crate::geometry::{Orientation, TableAngles, TableGeometry};
 use raw::{RawPosition, RawProcedure, RawStep};
+
+/// Longest a single step may last (a wait, a record, a soak's timeout), s:
+/// seven days, longer than any acceptance a lab runs in one go.
+pub const MAX_STEP_S: f64 = 7.0 * 86_400.0;
+
+/// Slowest chamber ramp a procedure may ask for, degC/min: slower ramps are
+/// a constant set point in all but name.
+pub const MIN_RAMP_C_PER_MIN: f64 = 0.01;
 
 /// Which group a step belongs to.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, serde::Deserialize)]
@@ -288,8 +297,8 @@ impl Procedure {
             src,
             c: Checker::new(src),
             bench,
-            records: Vec::new(),
-            measures: Vec::new(),
+            records: HashSet::new(),
+            measures: HashSet::new(),
         };
         let meta = Meta {
             name: raw.procedure.name.clone(),
@@ -340,8 +349,8 @@ struct Validator<'a> {
     src: &'a Source,
     c: Checker<'a>,
     bench: &'a BenchConfig,
-    records: Vec<String>,
-    measures: Vec<String>,
+    records: HashSet<String>,
+    measures: HashSet<String>,
 }
 
 impl Validator<'_> {
@@ -352,6 +361,16 @@ impl Validator<'_> {
             self.step(group, &key, step, None, &mut out)?;
         }
         Ok(out)
+    }
+
+    /// A step duration: at least a second, at most [`MAX_STEP_S`].
+    fn duration(&self, v: f64, key: &str) -> Result<f64, ConfigError> {
+        self.c.ensure(
+            v.is_finite() && (1.0..=MAX_STEP_S).contains(&v),
+            key,
+            &format!("must be between 1 s and {MAX_STEP_S} s (7 days), got {v}"),
+        )?;
+        Ok(v)
     }
 
     fn line(&self, key: &str) -> usize {
@@ -398,10 +417,12 @@ impl Validator<'_> {
                         )
                     })?;
                 c.ensure(
-                    ramp_c_per_min.is_finite() && *ramp_c_per_min > 0.0 && *ramp_c_per_min <= l.chamber_max_ramp_c_per_min,
+                    ramp_c_per_min.is_finite()
+                        && *ramp_c_per_min >= MIN_RAMP_C_PER_MIN
+                        && *ramp_c_per_min <= l.chamber_max_ramp_c_per_min,
                     &k("ramp_c_per_min"),
                     &format!(
-                        "{ramp_c_per_min} degC/min is beyond the chamber's capability (0 < ramp <= {} degC/min)",
+                        "{ramp_c_per_min} degC/min is beyond the chamber's capability ({MIN_RAMP_C_PER_MIN} <= ramp <= {} degC/min)",
                         l.chamber_max_ramp_c_per_min
                     ),
                 )?;
@@ -416,11 +437,17 @@ impl Validator<'_> {
                 hold_s,
                 timeout_s,
             } => {
-                c.positive(*band_c, &k("band_c"))?;
-                c.positive(*case_slope_c_per_min, &k("case_slope_c_per_min"))?;
-                c.non_negative(*hold_s, &k("hold_s"))?;
+                c.within(*band_c, 0.01, 20.0, &k("band_c"))?;
+                c.within(
+                    *case_slope_c_per_min,
+                    1e-4,
+                    10.0,
+                    &k("case_slope_c_per_min"),
+                )?;
+                c.within(*hold_s, 0.0, MAX_STEP_S, &k("hold_s"))?;
+                c.within(*timeout_s, 1.0, MAX_STEP_S, &k("timeout_s"))?;
                 c.ensure(
-                    timeout_s.is_finite() && timeout_s > hold_s,
+                    timeout_s > hold_s,
                     &k("timeout_s"),
                     "must be longer than hold_s, s",
                 )?;
@@ -440,7 +467,7 @@ impl Validator<'_> {
                 }
             }
             RawStep::Wait { duration_s } => StepKind::Wait {
-                duration_s: c.positive(*duration_s, &k("duration_s"))?,
+                duration_s: self.duration(*duration_s, &k("duration_s"))?,
             },
             RawStep::Record {
                 label: l,
@@ -453,10 +480,10 @@ impl Validator<'_> {
                     &k("label"),
                     &format!("record {l:?} is already used; labels must be unique"),
                 )?;
-                self.records.push(l.clone());
+                self.records.insert(l.clone());
                 StepKind::Record {
                     label: l,
-                    duration_s: c.positive(*duration_s, &k("duration_s"))?,
+                    duration_s: self.duration(*duration_s, &k("duration_s"))?,
                 }
             }
             RawStep::Measure {
@@ -484,7 +511,7 @@ impl Validator<'_> {
                     &k("name"),
                     &format!("measurement {name:?} is already used"),
                 )?;
-                self.measures.push(name.clone());
+                self.measures.insert(name.clone());
                 let records: Vec<String> = records.iter().map(|r| subst(r)).collect();
                 c.ensure(
                     !records.is_empty(),
@@ -499,7 +526,7 @@ impl Validator<'_> {
                     )?;
                 }
                 let averaging_s = match (metric.needs_averaging(), averaging_s) {
-                    (true, Some(a)) => c.positive(*a, &k("averaging_s"))?,
+                    (true, Some(a)) => c.within(*a, 0.01, MAX_STEP_S, &k("averaging_s"))?,
                     (true, None) => {
                         return Err(self
                             .src
@@ -507,6 +534,11 @@ impl Validator<'_> {
                     }
                     (false, _) => 0.0,
                 };
+                for (v, f) in [(low, "low"), (high, "high")] {
+                    if let Some(v) = v {
+                        c.finite(*v, &k(f))?;
+                    }
+                }
                 if let (Some(lo), Some(hi)) = (low, high) {
                     c.ensure(lo <= hi, &k("low"), "must not be above high")?;
                 }

@@ -158,6 +158,61 @@ fn empty_and_binary_files_are_refused() {
     assert_eq!(err.line(), Some(1));
 }
 
+/// A procedure of many steps loads with one parse of the file for all of
+/// its error locations (it used to parse the file again for every step:
+/// 4,000 steps took half a minute). The last step's line is still right.
+#[test]
+fn a_procedure_of_twenty_thousand_steps_loads_and_locates_its_last_step() {
+    let mut text = String::from("[procedure]\nname = \"long\"\ndut_type = \"RL-16\"\n");
+    for i in 0..20_000 {
+        text.push_str(&format!(
+            "\n[[main]]\naction = \"record\"\nlabel = \"r{i}\"\nduration_s = 1.0\n"
+        ));
+    }
+    let p = load("long.toml", &text).expect("loads");
+    assert_eq!(p.main.len(), 20_000);
+    let last = p.main.last().expect("last");
+    assert_eq!(last.line, 4 + 5 * 19_999 + 1, "{}", last.key);
+    let bad = text.replace("label = \"r19999\"", "label = \"r0\"");
+    let err = load("long.toml", &bad).expect_err("duplicate label");
+    assert_eq!(err.line(), Some(4 + 5 * 19_999 + 3), "{err}");
+}
+
+/// Values outside physics are refused with their line, not run.
+#[test]
+fn absurd_durations_limits_and_ramps_are_refused() {
+    for (from, to, want) in [
+        (
+            "duration_s = 30.0",
+            "duration_s = 1e300",
+            "main.0.steps.0.duration_s",
+        ),
+        (
+            "duration_s = 30.0",
+            "duration_s = 0.001",
+            "main.0.steps.0.duration_s",
+        ),
+        ("high = 0.2", "high = nan", "main.0.steps.2.high"),
+        ("high = 0.2", "high = inf", "main.0.steps.2.high"),
+        (
+            "ramp_c_per_min = 1.0",
+            "ramp_c_per_min = 1e-300",
+            "setup.0.ramp_c_per_min",
+        ),
+        (
+            "averaging_s = 10.0",
+            "averaging_s = 1e300",
+            "main.0.steps.2.averaging_s",
+        ),
+    ] {
+        let t = SMOKE.replacen(from, to, 1);
+        let err = load("bad.toml", &t).expect_err(to);
+        assert!(err.to_string().contains(want), "{to}: {err}");
+        let line = t.lines().position(|l| l.contains(to)).map(|i| i + 1);
+        assert_eq!(err.line(), line, "{to}: {err}");
+    }
+}
+
 proptest::proptest! {
     #![proptest_config(proptest::prelude::ProptestConfig::with_cases(512))]
 

@@ -31,6 +31,9 @@ pub enum Checksum {
     Crc32Mpeg2,
 }
 
+/// Longest frame a layout may describe, bytes.
+pub const MAX_FRAME_LEN: usize = 1024;
+
 /// Where each field sits in a frame. Multi-byte fields share one byte order.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -99,6 +102,14 @@ impl FrameLayout {
         if s == 0 {
             return Err(LayoutError("the sync must have at least one byte".into()));
         }
+        // Checked before anything is sized by it: a layout comes from files
+        // (a bench, a sim serve config, a log's embedded bench).
+        if self.checksum_offset > MAX_FRAME_LEN - 4 || s > MAX_FRAME_LEN {
+            return Err(LayoutError(format!(
+                "checksum_offset {} and a {s}-byte sync make a frame longer than {MAX_FRAME_LEN} bytes; no gyro output frame is that long",
+                self.checksum_offset
+            )));
+        }
         let fields = [
             ("type", self.type_offset, 1),
             ("sequence", self.seq_offset, 1),
@@ -108,10 +119,10 @@ impl FrameLayout {
         ];
         let mut used = vec![false; self.checksum_offset];
         for (name, off, size) in fields {
-            if off < s || off + size > self.checksum_offset {
+            if off < s || off.saturating_add(size) > self.checksum_offset {
                 return Err(LayoutError(format!(
                     "field {name} at {off}..{} must lie between the sync ({s} bytes) and the checksum at {}",
-                    off + size,
+                    off.saturating_add(size),
                     self.checksum_offset
                 )));
             }

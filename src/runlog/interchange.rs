@@ -26,6 +26,16 @@ pub const HEADER: [&str; 10] = [
     "step",
 ];
 
+/// Time since power-on a row may have, s (from power-on to 115 days).
+pub const TIME_RANGE_S: (f64, f64) = (0.0, 1e7);
+/// Rate a row may have, deg/h (1000 deg/s either way: beyond any laser
+/// gyro's input range).
+pub const RATE_RANGE_DPH: (f64, f64) = (-3.6e6, 3.6e6);
+/// Temperature a row may have, degC (well outside any chamber's range).
+pub const TEMP_RANGE_C: (f64, f64) = (-100.0, 200.0);
+/// Azimuth and roll a row may have, deg (two turns either way).
+pub const ANGLE_RANGE_DEG: (f64, f64) = (-720.0, 720.0);
+
 /// One sample.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 pub struct Row {
@@ -129,16 +139,16 @@ pub fn parse(input: impl std::io::Read, name: &str) -> Result<Vec<Row>, CsvError
             };
             err(line, message)
         })?;
-        for (v, name) in [
-            (row.time_s, "time_s"),
-            (row.rate_dph, "rate_dph"),
-            (row.t1_c, "t1_c"),
-            (row.t2_c, "t2_c"),
-            (row.tcase_c, "tcase_c"),
-            (row.chamber_c, "chamber_c"),
-            (row.azimuth_deg, "azimuth_deg"),
-            (row.elevation_deg, "elevation_deg"),
-            (row.roll_deg, "roll_deg"),
+        for (v, name, (lo, hi)) in [
+            (row.time_s, "time_s", TIME_RANGE_S),
+            (row.rate_dph, "rate_dph", RATE_RANGE_DPH),
+            (row.t1_c, "t1_c", TEMP_RANGE_C),
+            (row.t2_c, "t2_c", TEMP_RANGE_C),
+            (row.tcase_c, "tcase_c", TEMP_RANGE_C),
+            (row.chamber_c, "chamber_c", TEMP_RANGE_C),
+            (row.azimuth_deg, "azimuth_deg", ANGLE_RANGE_DEG),
+            (row.elevation_deg, "elevation_deg", (-90.0, 90.0)),
+            (row.roll_deg, "roll_deg", ANGLE_RANGE_DEG),
         ] {
             if !v.is_finite() {
                 return Err(err(
@@ -146,15 +156,14 @@ pub fn parse(input: impl std::io::Read, name: &str) -> Result<Vec<Row>, CsvError
                     format!("field {name}: {v} is not a finite number"),
                 ));
             }
-        }
-        if !(-90.0..=90.0).contains(&row.elevation_deg) {
-            return Err(err(
-                line,
-                format!(
-                    "field elevation_deg: {} is outside -90..90",
-                    row.elevation_deg
-                ),
-            ));
+            if !(lo..=hi).contains(&v) {
+                return Err(err(
+                    line,
+                    format!(
+                        "field {name}: {v} is outside {lo}..{hi}, beyond what a gyro run can record"
+                    ),
+                ));
+            }
         }
         if let Some(prev) = rows.last()
             && row.time_s <= prev.time_s
@@ -259,6 +268,12 @@ mod tests {
             ),
             ("0.5,1,20,20,20,20,0,90\n", "t.csv:2:"),
             ("0.5,NaN,20,20,20,20,0,90,0,a\n", "t.csv:2: field rate_dph"),
+            (
+                "0.5,1e308,20,20,20,20,0,90,0,a\n",
+                "t.csv:2: field rate_dph",
+            ),
+            ("-3,1,20,20,20,20,0,90,0,a\n", "t.csv:2: field time_s"),
+            ("0.5,1,20,20,20,900,0,90,0,a\n", "t.csv:2: field chamber_c"),
             ("", "t.csv:2: no samples"),
         ] {
             let e = parse(format!("{HEAD}{body}").as_bytes(), "t.csv")

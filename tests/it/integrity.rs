@@ -423,3 +423,40 @@ fn calibrate_refuses_runs_of_different_units_unless_told() {
     assert!(!stderr(&r).contains("different units"), "{}", stderr(&r));
     std::fs::remove_dir_all(&dir).expect("cleanup");
 }
+
+#[test]
+fn a_closed_stdout_ends_a_command_quietly_after_its_files_are_complete() {
+    let dir = temp_dir("integrity-pipe");
+    let p = write(&dir, "tiny.toml", TINY);
+    let out = dir.join("run");
+    assert_eq!(
+        gyrobench(&["run", s(&p), "--out", s(&out)]).status.code(),
+        Some(0)
+    );
+    let csv = dir.join("run.csv");
+    let mut child = bin()
+        .args(["export", s(&out.join("run.mcap")), "-o", s(&csv)])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("export starts");
+    drop(child.stdout.take());
+    let done = child.wait_with_output().expect("ends");
+    assert_eq!(done.status.code(), Some(0), "{}", stderr(&done));
+    assert!(!stderr(&done).contains("panicked"), "{}", stderr(&done));
+    let text = std::fs::read_to_string(&csv).expect("csv");
+    assert!(text.starts_with("time_s,") && text.ends_with('\n'));
+    // The run's own summary too: the log and report are whole.
+    let mut child = bin()
+        .args(["run", s(&p), "--out", s(&dir.join("run2"))])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("run starts");
+    drop(child.stdout.take());
+    let done = child.wait_with_output().expect("ends");
+    assert_eq!(done.status.code(), Some(0), "{}", stderr(&done));
+    assert!(!stderr(&done).contains("panicked"), "{}", stderr(&done));
+    assert_eq!(json(&dir.join("run2/report.json"))["outcome"], "pass");
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}

@@ -190,6 +190,16 @@ fn invalid_layouts_are_refused() {
         ..FrameLayout::default()
     };
     assert!(on_sync.validate().is_err());
+    // Sizes from a hostile file are refused before anything is allocated.
+    for offset in [1_000_000_000_000, usize::MAX - 2, usize::MAX] {
+        let huge = FrameLayout {
+            checksum_offset: offset,
+            counts_offset: offset - 1,
+            ..FrameLayout::default()
+        };
+        let err = huge.validate().expect_err("too long");
+        assert!(err.to_string().contains("longer than"), "{err}");
+    }
 }
 
 proptest! {
