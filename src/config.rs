@@ -248,6 +248,17 @@ pub fn line_col(text: &str, offset: usize) -> (usize, usize) {
     (line, column)
 }
 
+/// A number as an error message shows it: plain when it reads well,
+/// in exponent form when it is huge or tiny (`1e300`, not 301 digits).
+pub fn num(v: f64) -> String {
+    let a = v.abs();
+    if v.is_finite() && a != 0.0 && !(1e-4..1e9).contains(&a) {
+        format!("{v:e}")
+    } else {
+        format!("{v}")
+    }
+}
+
 /// Collects validation checks; the first failure wins.
 #[derive(Debug)]
 pub struct Checker<'a> {
@@ -274,7 +285,7 @@ impl<'a> Checker<'a> {
         self.ensure(
             value.is_finite() && value > 0.0,
             key,
-            &format!("must be a finite number above zero, got {value}"),
+            &format!("must be a finite number above zero, got {}", num(value)),
         )?;
         Ok(value)
     }
@@ -284,7 +295,10 @@ impl<'a> Checker<'a> {
         self.ensure(
             value.is_finite() && value >= 0.0,
             key,
-            &format!("must be a finite number at or above zero, got {value}"),
+            &format!(
+                "must be a finite number at or above zero, got {}",
+                num(value)
+            ),
         )?;
         Ok(value)
     }
@@ -294,7 +308,12 @@ impl<'a> Checker<'a> {
         self.ensure(
             value.is_finite() && (lo..=hi).contains(&value),
             key,
-            &format!("must be between {lo} and {hi}, got {value}"),
+            &format!(
+                "must be between {} and {}, got {}",
+                num(lo),
+                num(hi),
+                num(value)
+            ),
         )?;
         Ok(value)
     }
@@ -304,7 +323,7 @@ impl<'a> Checker<'a> {
         self.ensure(
             value.is_finite(),
             key,
-            &format!("must be a finite number, got {value}"),
+            &format!("must be a finite number, got {}", num(value)),
         )?;
         Ok(value)
     }

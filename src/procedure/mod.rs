@@ -368,7 +368,10 @@ impl Validator<'_> {
         self.c.ensure(
             v.is_finite() && (1.0..=MAX_STEP_S).contains(&v),
             key,
-            &format!("must be between 1 s and {MAX_STEP_S} s (7 days), got {v}"),
+            &format!(
+                "must be between 1 s and {MAX_STEP_S} s (7 days), got {}",
+                crate::config::num(v)
+            ),
         )?;
         Ok(v)
     }
@@ -411,8 +414,10 @@ impl Validator<'_> {
                         self.src.invalid(
                             &k("set_c"),
                             format!(
-                                "{set_c} degC is beyond the bench's chamber limits {}..{} degC",
-                                l.chamber_min_c, l.chamber_max_c
+                                "{} degC is beyond the bench's chamber limits {}..{} degC",
+                                crate::config::num(*set_c),
+                                l.chamber_min_c,
+                                l.chamber_max_c
                             ),
                         )
                     })?;
@@ -422,7 +427,8 @@ impl Validator<'_> {
                         && *ramp_c_per_min <= l.chamber_max_ramp_c_per_min,
                     &k("ramp_c_per_min"),
                     &format!(
-                        "{ramp_c_per_min} degC/min is beyond the chamber's capability ({MIN_RAMP_C_PER_MIN} <= ramp <= {} degC/min)",
+                        "{} degC/min is beyond the chamber's capability ({MIN_RAMP_C_PER_MIN} <= ramp <= {} degC/min)",
+                        crate::config::num(*ramp_c_per_min),
                         l.chamber_max_ramp_c_per_min
                     ),
                 )?;

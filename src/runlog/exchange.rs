@@ -39,9 +39,13 @@ struct SiteFile {
 
 /// Read and check a site file.
 pub fn load_site(path: &Path) -> Result<Site, ConfigError> {
-    let src = Source::read(path)?;
+    site_from_source(&Source::read(path)?)
+}
+
+/// Parse and check a site file's text.
+pub fn site_from_source(src: &Source) -> Result<Site, ConfigError> {
     let f: SiteFile = src.parse()?;
-    f.site.validate(&Checker::new(&src), "site")?;
+    f.site.validate(&Checker::new(src), "site")?;
     Ok(f.site)
 }
 

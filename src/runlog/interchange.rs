@@ -12,6 +12,8 @@ use std::path::Path;
 
 use serde::Deserialize;
 
+use crate::config::num;
+
 /// The header, exactly.
 pub const HEADER: [&str; 10] = [
     "time_s",
@@ -160,7 +162,10 @@ pub fn parse(input: impl std::io::Read, name: &str) -> Result<Vec<Row>, CsvError
                 return Err(err(
                     line,
                     format!(
-                        "field {name}: {v} is outside {lo}..{hi}, beyond what a gyro run can record"
+                        "field {name}: {} is outside {}..{}, beyond what a gyro run can record",
+                        num(v),
+                        num(lo),
+                        num(hi)
                     ),
                 ));
             }

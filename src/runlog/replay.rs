@@ -645,13 +645,19 @@ pub fn record_rates(path: &Path, label: Option<&str>) -> Result<RecordRates, Rep
     if let Some(why) = read.stopped.as_ref().filter(|_| read.complete) {
         return Err(log_err(why.clone()));
     }
+    let stopped = read
+        .stopped
+        .as_ref()
+        .map_or(String::new(), |s| format!(" (the read stopped: {s})"));
     out.read = read;
     let Some(want) = want else {
-        return Err(log_err("the log has no record steps to analyse".into()));
+        return Err(log_err(format!(
+            "the log has no record steps to analyse{stopped}"
+        )));
     };
     if out.rate_dph.is_empty() {
         return Err(log_err(format!(
-            "no frames recorded under `{want}`; records in this log: {}",
+            "no frames recorded under `{want}`{stopped}; records in this log: {}",
             if labels.is_empty() {
                 "none".to_owned()
             } else {

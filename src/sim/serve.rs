@@ -95,12 +95,29 @@ impl Serve {
                 layout: FrameLayout::default(),
             });
         };
-        let src = Source::read(path)?;
+        let base = path.parent().unwrap_or(Path::new("."));
+        Self::from_source(&Source::read(path)?, base)
+    }
+
+    /// Parse and check a serve file's text; a `twin` path is taken relative
+    /// to `base`.
+    pub fn from_source(src: &Source, base: &Path) -> Result<Self, ConfigError> {
         let config: ServeConfig = src.parse()?;
-        let c = Checker::new(&src);
+        let c = Checker::new(src);
         c.within(config.speed, 0.001, 1e6, "speed")?;
         let twin = match &config.twin {
-            Some(rel) => TwinConfig::load(&path.parent().unwrap_or(Path::new(".")).join(rel))?,
+            Some(rel) => TwinConfig::load(&base.join(rel)).map_err(|e| match e {
+                // The twin file's own errors point into it; one that cannot
+                // be read points at this file's `twin`.
+                ConfigError::Read { path, source } => src.invalid(
+                    "twin",
+                    format!(
+                        "cannot read {}: {source}; the path is relative to this file",
+                        path.display()
+                    ),
+                ),
+                e => e,
+            })?,
             None => TwinConfig::default_rl16(),
         };
         let layout = config.frame.clone().unwrap_or_default();

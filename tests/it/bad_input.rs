@@ -1,6 +1,7 @@
 //! The bad-input corpus (`fixtures/bad/expected.toml`): every file is
-//! refused by the CLI with its expected error at its line, and a refused
-//! procedure never starts a run (no run directory, so no device command).
+//! refused by every command that reads it, with its expected error at its
+//! line, and a refused input never starts a run (no run directory, so no
+//! device command) nor leaves an output.
 
 use std::path::Path;
 
@@ -41,6 +42,14 @@ fn every_bad_file_is_refused_with_its_error_and_line() {
     let smoke = root.join("procedures/smoke.toml");
     let smoke = smoke.to_str().expect("utf-8");
     let dir = temp_dir("bad-input");
+    let good_site = dir.join("site.toml");
+    std::fs::write(
+        &good_site,
+        "[site]\nlatitude_deg = 50.45\nlongitude_deg = 30.52\nheight_m = 180.0\nmagnetic_field_ned_ut = [19.5, 2.7, 46.5]\n",
+    )
+    .expect("site");
+    let good_site = good_site.to_str().expect("utf-8");
+
     for c in &corpus.case {
         let path = bad.join(&c.file);
         let file = path.to_str().expect("utf-8");
@@ -55,6 +64,25 @@ fn every_bad_file_is_refused_with_its_error_and_line() {
             "bench" => vec![
                 vec!["check", smoke, "--bench", file],
                 vec!["run", smoke, "--bench", file, "--out", out],
+            ],
+            "serve" => vec![vec!["sim", "serve", "--config", file]],
+            "csv" => vec![
+                vec!["import", file, "--site", good_site, "-o", out],
+                vec!["allan", file],
+            ],
+            "site" => vec![vec![
+                "import",
+                "tests/it/does-not-matter.csv",
+                "--site",
+                file,
+                "-o",
+                out,
+            ]],
+            "log" => vec![
+                vec!["recover", file, "-o", out],
+                vec!["replay", file, "--out", out],
+                vec!["export", file, "-o", out],
+                vec!["allan", file],
             ],
             k => panic!("unknown kind {k}"),
         };
@@ -79,7 +107,7 @@ fn every_bad_file_is_refused_with_its_error_and_line() {
             );
             assert!(
                 !out_dir.exists(),
-                "{}: a refused input must not start a run",
+                "{}: a refused input must not start a run or leave an output",
                 c.file
             );
         }
