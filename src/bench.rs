@@ -41,6 +41,10 @@ fn unit_scale() -> f64 {
     1.0
 }
 
+fn reconnect_window_s() -> f64 {
+    crate::driver::RECONNECT_WINDOW.as_secs_f64()
+}
+
 /// `[table]`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -86,6 +90,10 @@ pub struct ChamberDevice {
     pub timeout_s: f64,
     /// Attempts per request before the device is declared failed.
     pub attempts: u32,
+    /// How long a dropped link is reopened (with backoff) before the
+    /// device is declared unreachable, s (default 180).
+    #[serde(default = "reconnect_window_s")]
+    pub reconnect_window_s: f64,
 }
 
 /// `[devices.table]` (ACL language).
@@ -98,6 +106,10 @@ pub struct TableDevice {
     pub timeout_s: f64,
     /// Attempts per request.
     pub attempts: u32,
+    /// How long a dropped link is reopened before the device is declared
+    /// unreachable, s (default 180).
+    #[serde(default = "reconnect_window_s")]
+    pub reconnect_window_s: f64,
     /// In-position tolerance, deg.
     pub in_position_deg: f64,
     /// Time within tolerance before "in position", s.
@@ -116,6 +128,10 @@ pub struct GyroDevice {
     pub lsb_arcsec: f64,
     /// No valid frame for this long is a failure, s.
     pub silence_s: f64,
+    /// How long a dropped link is reopened before the gyro is declared
+    /// unreachable, s (default 180).
+    #[serde(default = "reconnect_window_s")]
+    pub reconnect_window_s: f64,
     /// Frame layout (default: the documented 20-byte frame).
     #[serde(default)]
     pub frame: Option<FrameLayout>,
@@ -223,6 +239,19 @@ impl BenchConfig {
         )?;
         c.within(d.gyro.lsb_arcsec, 1e-6, 100.0, "devices.gyro.lsb_arcsec")?;
         c.within(d.gyro.silence_s, 0.01, 600.0, "devices.gyro.silence_s")?;
+        for (v, key) in [
+            (
+                d.chamber.reconnect_window_s,
+                "devices.chamber.reconnect_window_s",
+            ),
+            (
+                d.table.reconnect_window_s,
+                "devices.table.reconnect_window_s",
+            ),
+            (d.gyro.reconnect_window_s, "devices.gyro.reconnect_window_s"),
+        ] {
+            c.within(v, 0.0, 3600.0, key)?;
+        }
         if let Some(layout) = &d.gyro.frame {
             layout
                 .validate()
@@ -312,6 +341,7 @@ pub async fn open_bench(cfg: &BenchConfig) -> Result<OpenBench, DeviceError> {
     let cpol = RetryPolicy {
         timeout: ct,
         attempts: d.chamber.attempts,
+        reconnect_window: Duration::from_secs_f64(d.chamber.reconnect_window_s),
     };
     let chamber: Box<dyn Chamber> = match d.chamber.protocol {
         ChamberProtocol::EspecAscii => Box::new(EspecChamber::new(
@@ -334,11 +364,15 @@ pub async fn open_bench(cfg: &BenchConfig) -> Result<OpenBench, DeviceError> {
         RetryPolicy {
             timeout: tt,
             attempts: d.table.attempts,
+            reconnect_window: Duration::from_secs_f64(d.table.reconnect_window_s),
         },
     ));
     let gt = Duration::from_secs_f64(d.gyro.silence_s);
-    let (_, t) = open_device("gyro", &d.gyro.spec, gt).await?;
-    let gyro = GyroReader::new("gyro", t, cfg.frame_layout(), gt);
+    let (gs, t) = open_device("gyro", &d.gyro.spec, gt).await?;
+    let gyro = GyroReader::new("gyro", t, cfg.frame_layout(), gt).with_reconnect(
+        connector(gs, gt),
+        Duration::from_secs_f64(d.gyro.reconnect_window_s),
+    );
     Ok(OpenBench {
         chamber,
         table,

@@ -114,8 +114,8 @@ impl CoeffsFile {
     }
 
     /// The file's text.
-    pub fn to_toml(&self) -> String {
-        toml::to_string_pretty(self).unwrap_or_default()
+    pub fn to_toml(&self) -> Result<String, toml::ser::Error> {
+        toml::to_string_pretty(self)
     }
 
     /// As a fitted model.

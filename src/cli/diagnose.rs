@@ -110,7 +110,9 @@ pub fn run(args: DiagnoseArgs) -> Result<Outcome> {
         &out.join("twin-updated.toml"),
         &format!(
             "# The twin with the effects gyrobench diagnose accepted enabled and fitted,\n# and its thermal network fitted to the runs.\n{}",
-            diagnose::updated_twin(&base, &d).to_toml()
+            diagnose::updated_twin(&base, &d)
+                .to_toml()
+                .context("writing the updated twin as TOML")?
         ),
     )?;
     outln!(

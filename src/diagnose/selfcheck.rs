@@ -466,14 +466,19 @@ pub fn run(plan: &Plan, progress: &(dyn Fn(&str) + Sync)) -> Result<SelfCheck, S
                     if let Ok(t) = &r {
                         progress(&format!("{} seed {s}: {:?}", inj.label(), t.attributed));
                     }
-                    if let Ok(mut v) = results.lock() {
-                        v.push((i, inj.clone(), r));
-                    }
+                    // Pushing cannot panic, so the lock is never poisoned;
+                    // were it, the results in it are still whole.
+                    results
+                        .lock()
+                        .unwrap_or_else(std::sync::PoisonError::into_inner)
+                        .push((i, inj.clone(), r));
                 }
             });
         }
     });
-    let mut done = results.into_inner().unwrap_or_default();
+    let mut done = results
+        .into_inner()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
     done.sort_by_key(|(i, _, _)| *i);
     for (_, inj, r) in done {
         trials.push((inj, r?));

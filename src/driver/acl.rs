@@ -149,6 +149,7 @@ mod tests {
         let policy = RetryPolicy {
             timeout: Duration::from_millis(200),
             attempts: 1,
+            reconnect_window: Duration::ZERO,
         };
         AclTable::new(LineLink::new("table", Box::new(mock), None, policy))
     }

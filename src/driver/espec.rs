@@ -121,6 +121,7 @@ mod tests {
         let policy = RetryPolicy {
             timeout: Duration::from_millis(200),
             attempts,
+            reconnect_window: Duration::ZERO,
         };
         EspecChamber::new(LineLink::new("chamber", Box::new(mock), None, policy), None)
     }

@@ -10,10 +10,12 @@ use tokio::io::{AsyncReadExt, AsyncWriteExt, BufReader};
 use super::{DeviceError, RetryPolicy};
 use crate::transport::{BoxTransport, read_line};
 
+/// Reopens a link of type `R` after it dropped.
+pub type Reopen<R> =
+    Arc<dyn Fn() -> Pin<Box<dyn Future<Output = std::io::Result<R>> + Send>> + Send + Sync>;
+
 /// Reopens a transport after the link dropped.
-pub type Connector = Arc<
-    dyn Fn() -> Pin<Box<dyn Future<Output = std::io::Result<BoxTransport>> + Send>> + Send + Sync,
->;
+pub type Connector = Reopen<BoxTransport>;
 
 /// Counters of transient trouble, reported with a run's figures.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -85,23 +87,24 @@ impl LineLink {
         self.counters
     }
 
-    async fn ensure_open(&mut self) -> Result<&mut BufReader<BoxTransport>, DeviceError> {
-        if self.io.is_none() {
-            let Some(connect) = &self.connector else {
-                return Err(DeviceError::Connect {
-                    device: self.device.clone(),
-                    source: std::io::Error::new(
-                        std::io::ErrorKind::NotConnected,
-                        "link closed and no way to reopen it",
-                    ),
-                });
-            };
-            let t = connect().await.map_err(|source| DeviceError::Connect {
-                device: self.device.clone(),
-                source,
-            })?;
-            self.counters.reconnects += 1;
-            self.io = Some(BufReader::new(t));
+    /// The open link, reopened first if it dropped (each failed attempt
+    /// is a drop: backoff, then give up past the window).
+    async fn ensure_open(
+        &mut self,
+        drops: &mut Drops,
+    ) -> Result<&mut BufReader<BoxTransport>, DeviceError> {
+        while self.io.is_none() {
+            match open_once(&self.device, self.connector.as_ref()).await? {
+                Ok(t) => {
+                    self.counters.reconnects += 1;
+                    self.io = Some(BufReader::new(t));
+                }
+                Err(e) => {
+                    drops
+                        .dropped(&self.device, self.policy.reconnect_window, e)
+                        .await?;
+                }
+            }
         }
         match self.io.as_mut() {
             Some(io) => Ok(io),
@@ -123,30 +126,30 @@ impl LineLink {
 
     /// Send a message that has no reply.
     pub async fn send(&mut self, request: &[u8]) -> Result<(), DeviceError> {
-        let name = request_name(request);
-        for _ in 0..self.policy.attempts.max(1) {
-            let io = self.ensure_open().await?;
+        let mut drops = Drops::default();
+        loop {
+            let io = self.ensure_open(&mut drops).await?;
             let r = io.get_mut().write_all(request).await;
             let r = match r {
                 Ok(()) => io.get_mut().flush().await,
                 Err(e) => Err(e),
             };
-            if r.is_ok() {
-                return Ok(());
+            match r {
+                Ok(()) => return Ok(()),
+                Err(e) => {
+                    self.io = None;
+                    self.counters.retries += 1;
+                    drops
+                        .dropped(&self.device, self.policy.reconnect_window, e)
+                        .await?;
+                }
             }
-            self.io = None;
-            self.counters.retries += 1;
         }
-        Err(DeviceError::Timeout {
-            device: self.device.clone(),
-            request: name,
-            timeout_s: self.policy.timeout.as_secs_f64(),
-            attempts: self.policy.attempts,
-        })
     }
 
     /// Send `request` and judge the reply line with `judge`, retrying
-    /// timeouts, bad replies and dropped links within the policy.
+    /// timeouts and bad replies within the policy's attempts, and a dropped
+    /// link (reopened with backoff) within its reconnect window.
     pub async fn transact<T>(
         &mut self,
         request: &[u8],
@@ -156,29 +159,48 @@ impl LineLink {
         let attempts = self.policy.attempts.max(1);
         let mut last_problem: Option<String> = None;
         let mut buf = Vec::new();
-        for attempt in 1..=attempts {
-            if attempt > 1 {
+        let mut drops = Drops::default();
+        let mut attempt = 0;
+        while attempt < attempts {
+            if attempt > 0 || drops.since.is_some() {
                 self.counters.retries += 1;
             }
             let timeout = self.policy.timeout;
-            let io = self.ensure_open().await?;
+            let io = self.ensure_open(&mut drops).await?;
             Self::drain(io).await;
             let sent = async {
                 io.get_mut().write_all(request).await?;
                 io.get_mut().flush().await
             }
             .await;
-            if sent.is_err() {
+            if let Err(e) = sent {
                 self.io = None;
+                drops
+                    .dropped(&self.device, self.policy.reconnect_window, e)
+                    .await?;
                 continue;
             }
             match tokio::time::timeout(timeout, read_line(io, &mut buf, MAX_REPLY)).await {
-                Err(_) => continue,
-                Ok(Err(_)) | Ok(Ok(false)) => {
-                    self.io = None;
+                Err(_) => {
+                    attempt += 1;
                     continue;
                 }
-                Ok(Ok(true)) => {}
+                Ok(r) => {
+                    if let Err(e) = r.and_then(|open| {
+                        open.then_some(()).ok_or_else(|| {
+                            std::io::Error::new(
+                                std::io::ErrorKind::UnexpectedEof,
+                                "the device closed the connection",
+                            )
+                        })
+                    }) {
+                        self.io = None;
+                        drops
+                            .dropped(&self.device, self.policy.reconnect_window, e)
+                            .await?;
+                        continue;
+                    }
+                }
             }
             let line = String::from_utf8_lossy(&buf);
             match judge(&line) {
@@ -190,7 +212,10 @@ impl LineLink {
                         reason,
                     });
                 }
-                Verdict::Malformed(detail) => last_problem = Some(detail),
+                Verdict::Malformed(detail) => {
+                    last_problem = Some(detail);
+                    attempt += 1;
+                }
             }
         }
         Err(match last_problem {
@@ -210,22 +235,74 @@ impl LineLink {
     }
 }
 
-/// Reopen a dropped link through its connector.
-pub async fn reopen(
+/// Drops of a link during one exchange (or one outage of a stream): each
+/// waits (0.25 s doubling to 8 s) before the link is reopened; once the
+/// window has passed since the first, the device is unreachable. A
+/// connection that opens and closes at once (a device behind a rebooting
+/// switch) is a drop like any other, so nothing spins.
+#[derive(Debug, Default)]
+pub struct Drops {
+    since: Option<tokio::time::Instant>,
+    wait: Duration,
+    count: u32,
+}
+
+impl Drops {
+    /// The link dropped with `cause`: wait before reopening it, or give up
+    /// once `window` has passed since the first drop.
+    pub async fn dropped(
+        &mut self,
+        device: &str,
+        window: Duration,
+        cause: std::io::Error,
+    ) -> Result<(), DeviceError> {
+        let since = *self.since.get_or_insert_with(tokio::time::Instant::now);
+        self.count += 1;
+        let left = window.saturating_sub(since.elapsed());
+        if left.is_zero() {
+            return Err(DeviceError::Unreachable {
+                device: device.to_owned(),
+                window_s: window.as_secs_f64(),
+                attempts: self.count,
+                source: cause,
+            });
+        }
+        self.wait = if self.wait.is_zero() {
+            BACKOFF_FIRST
+        } else {
+            (self.wait * 2).min(BACKOFF_MAX)
+        };
+        tokio::time::sleep(self.wait.min(left)).await;
+        Ok(())
+    }
+
+    /// The link works again: the next drop starts a new outage.
+    pub fn reset(&mut self) {
+        *self = Self::default();
+    }
+}
+
+/// First wait between reconnect attempts; it doubles up to [`BACKOFF_MAX`].
+pub const BACKOFF_FIRST: Duration = Duration::from_millis(250);
+/// Longest wait between reconnect attempts.
+pub const BACKOFF_MAX: Duration = Duration::from_secs(8);
+
+/// One attempt to reopen a dropped link: `Err` when there is no way to
+/// reopen it, `Ok(Err)` when the attempt failed (a drop to wait out).
+pub async fn open_once<R>(
     device: &str,
-    connector: Option<&Connector>,
-) -> Result<BoxTransport, DeviceError> {
-    let err = |source| DeviceError::Connect {
-        device: device.to_owned(),
-        source,
-    };
+    connector: Option<&Reopen<R>>,
+) -> Result<std::io::Result<R>, DeviceError> {
     let Some(connect) = connector else {
-        return Err(err(std::io::Error::new(
-            std::io::ErrorKind::NotConnected,
-            "link closed and no way to reopen it",
-        )));
+        return Err(DeviceError::Connect {
+            device: device.to_owned(),
+            source: std::io::Error::new(
+                std::io::ErrorKind::NotConnected,
+                "link closed and no way to reopen it",
+            ),
+        });
     };
-    connect().await.map_err(err)
+    Ok(connect().await)
 }
 
 /// The request as text for messages (terminator stripped).

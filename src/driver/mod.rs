@@ -106,6 +106,23 @@ pub enum DeviceError {
         /// Device name.
         device: String,
     },
+    /// The link dropped and could not be reopened within the window.
+    #[error(
+        "{device}: the link dropped and could not be reopened within {window_s} s \
+         ({attempts} attempts, the last: {source}); check the network (switch, cable) \
+         and that the device is on; the window is reconnect_window_s in bench.toml"
+    )]
+    Unreachable {
+        /// Device name.
+        device: String,
+        /// How long reconnecting was tried, s.
+        window_s: f64,
+        /// Attempts made.
+        attempts: u32,
+        /// The last attempt's failure.
+        #[source]
+        source: std::io::Error,
+    },
     /// The gyro sent nothing usable for longer than the link timeout.
     #[error(
         "{device}: no valid frame for {timeout_s} s; check the gyro's power and the data cable"
@@ -125,13 +142,22 @@ pub struct RetryPolicy {
     pub timeout: Duration,
     /// Attempts before giving up (at least 1).
     pub attempts: u32,
+    /// How long a dropped link is reopened, with backoff, before the
+    /// device is declared unreachable.
+    pub reconnect_window: Duration,
 }
+
+/// Default reconnect window: long enough for a managed switch to reboot
+/// (one to three minutes), short enough that a dead device is reported
+/// while the operator is still near.
+pub const RECONNECT_WINDOW: Duration = Duration::from_secs(180);
 
 impl Default for RetryPolicy {
     fn default() -> Self {
         Self {
             timeout: Duration::from_millis(1000),
             attempts: 3,
+            reconnect_window: RECONNECT_WINDOW,
         }
     }
 }

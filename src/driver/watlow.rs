@@ -7,7 +7,7 @@ use async_trait::async_trait;
 use tokio_modbus::client::{Context, Reader, Writer};
 use tokio_modbus::{ExceptionCode, Slave};
 
-use super::link::{Connector, LinkCounters, reopen};
+use super::link::{Connector, LinkCounters, open_once};
 use super::{Chamber, ChamberMode, ChamberReading, DeviceError, RetryPolicy};
 use crate::protocol::watlow::{self as w, decode_f32, encode_f32, mode};
 use crate::transport::BoxTransport;
@@ -70,18 +70,28 @@ impl WatlowChamber {
 
     async fn op(&mut self, op: Op) -> Result<Vec<u16>, DeviceError> {
         let attempts = self.policy.attempts.max(1);
-        for attempt in 1..=attempts {
-            if attempt > 1 {
+        let mut drops = super::link::Drops::default();
+        let mut attempt = 0;
+        while attempt < attempts {
+            if attempt > 0 {
                 self.counters.retries += 1;
             }
-            let ctx = match &mut self.ctx {
-                Some(ctx) => ctx,
-                None => {
-                    let t = reopen(&self.device, self.connector.as_ref()).await?;
-                    self.counters.reconnects += 1;
-                    self.ctx
-                        .insert(tokio_modbus::client::tcp::attach_slave(t, Slave(1)))
+            if self.ctx.is_none() {
+                match open_once(&self.device, self.connector.as_ref()).await? {
+                    Ok(t) => {
+                        self.counters.reconnects += 1;
+                        self.ctx = Some(tokio_modbus::client::tcp::attach_slave(t, Slave(1)));
+                    }
+                    Err(e) => {
+                        drops
+                            .dropped(&self.device, self.policy.reconnect_window, e)
+                            .await?;
+                        continue;
+                    }
                 }
+            }
+            let Some(ctx) = self.ctx.as_mut() else {
+                continue;
             };
             let call = async {
                 match &op {
@@ -99,6 +109,7 @@ impl WatlowChamber {
             match tokio::time::timeout(self.policy.timeout, call).await {
                 Ok(Ok(Ok(words))) => return Ok(words),
                 Ok(Ok(Err(ExceptionCode::ServerDeviceBusy | ExceptionCode::Acknowledge))) => {
+                    attempt += 1;
                     continue;
                 }
                 Ok(Ok(Err(e))) => {
@@ -108,8 +119,23 @@ impl WatlowChamber {
                         reason: format!("Modbus exception {e:?}"),
                     });
                 }
-                // A late or broken exchange leaves the session unusable: reopen.
-                Ok(Err(_)) | Err(_) => self.ctx = None,
+                // A broken session is reopened (with backoff, within the
+                // reconnect window); a late one too, and counts as an attempt.
+                Ok(Err(e)) => {
+                    self.ctx = None;
+                    self.counters.retries += 1;
+                    drops
+                        .dropped(
+                            &self.device,
+                            self.policy.reconnect_window,
+                            std::io::Error::other(e),
+                        )
+                        .await?;
+                }
+                Err(_) => {
+                    self.ctx = None;
+                    attempt += 1;
+                }
             }
         }
         Err(DeviceError::Timeout {
@@ -215,6 +241,7 @@ mod tests {
         let policy = RetryPolicy {
             timeout: Duration::from_millis(500),
             attempts: 1,
+            reconnect_window: Duration::ZERO,
         };
         let mut c = WatlowChamber::new("chamber", Box::new(mock), None, policy);
         assert_eq!(c.read_f32(w::PV, "process value").await.expect("PV"), 20.0);

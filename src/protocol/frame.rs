@@ -282,6 +282,13 @@ pub struct LinkStats {
     pub lost_frames: u64,
     /// Duplicated frames dropped.
     pub duplicates: u64,
+    /// Times the link was reopened after it dropped.
+    #[serde(default)]
+    pub reconnects: u64,
+    /// Longest stretch without a valid frame, ms (host clock; 0 when not
+    /// measured, as on the embedded bench).
+    #[serde(default)]
+    pub longest_gap_ms: u64,
 }
 
 /// Sans-IO frame decoder: `push` bytes, then drain `next_event` until `None`

@@ -547,6 +547,8 @@ pub fn add_link(a: &LinkStats, b: &LinkStats) -> LinkStats {
         crc_errors: a.crc_errors + b.crc_errors,
         lost_frames: a.lost_frames + b.lost_frames,
         duplicates: a.duplicates + b.duplicates,
+        reconnects: a.reconnects + b.reconnects,
+        longest_gap_ms: a.longest_gap_ms.max(b.longest_gap_ms),
     }
 }
 

@@ -72,10 +72,7 @@ impl DeviceBench {
                         temps_raw: f.temps_raw,
                         status: f.status,
                     }),
-                    Ok(None) => Err(DeviceError::Silent {
-                        device: "gyro".into(),
-                        timeout_s: 0.0,
-                    }),
+                    Ok(None) => Err(gyro_stream_ended()),
                     Err(e) => Err(e),
                 };
                 let stop = msg.is_err();
@@ -112,6 +109,17 @@ impl DeviceBench {
         }
         self.ramp = (!r.done()).then_some(r);
         Ok(())
+    }
+}
+
+/// The gyro's stream ended and cannot be reopened.
+fn gyro_stream_ended() -> DeviceError {
+    DeviceError::Connect {
+        device: "gyro".into(),
+        source: std::io::Error::new(
+            std::io::ErrorKind::UnexpectedEof,
+            "the gyro's data stream ended",
+        ),
     }
 }
 
@@ -178,7 +186,7 @@ impl BenchIo for DeviceBench {
                 f = self.frames.recv() => match f {
                     Some(Ok(f)) => tick.frames.push(f),
                     Some(Err(e)) => return Err(e),
-                    None => return Err(DeviceError::Silent { device: "gyro".into(), timeout_s: 0.0 }),
+                    None => return Err(gyro_stream_ended()),
                 },
                 () = &mut deadline => break,
             }

@@ -371,6 +371,9 @@ struct Run<'a> {
     /// Cleanup is running: alarms were already acted on.
     cleaning_up: bool,
     last_link_s: f64,
+    /// The first log write that failed where the run could not stop for
+    /// it (the safe state, cleanup): it still makes the run an error.
+    log_failed: Option<String>,
 }
 
 impl Run<'_> {
@@ -379,6 +382,21 @@ impl Run<'_> {
         self.sink
             .event(self.bench.now_s(), level, message)
             .map_err(|e| Stop::Data(format!("writing the log: {e}")))
+    }
+
+    /// Write a line where a failure must not stop what is being done
+    /// (bringing the bench to a safe state); the failure is kept.
+    fn note(&mut self, level: Level, message: &str) {
+        if let Err(Stop::Data(e)) = self.log(level, message) {
+            self.log_failed.get_or_insert(e);
+        }
+    }
+
+    /// [`Run::log_step`] where a failure must not stop what is being done.
+    fn note_step(&mut self, phase: StepPhase, index: usize, s: &Step) {
+        if let Err(Stop::Data(e)) = self.log_step(phase, index, s) {
+            self.log_failed.get_or_insert(e);
+        }
     }
 
     /// Write a step event (and its line in words).
@@ -617,6 +635,7 @@ pub async fn run(
         measurements: Vec::new(),
         cleaning_up: false,
         last_link_s: 0.0,
+        log_failed: None,
     };
     let total = p.steps().count();
     let mut stop: Option<(Stop, String)> = None;
@@ -646,13 +665,13 @@ pub async fn run(
     // stop anything here: the bench comes first.
     let mut cleanup_completed = true;
     if stop.is_some() {
-        let _ignored = r.log(
+        r.note(
             Level::Warning,
             "run stopped: bringing the bench to a safe state",
         );
         if let Err(e) = r.bench.safe_state().await {
             cleanup_completed = false;
-            let _ignored = r.log(Level::Error, &format!("safe state failed: {e}"));
+            r.note(Level::Error, &format!("safe state failed: {e}"));
         }
     }
     let interrupted = matches!(stop, Some((Stop::Interrupted, _)));
@@ -662,11 +681,11 @@ pub async fn run(
     for (i, s) in p.cleanup.iter().enumerate() {
         let index = first_cleanup + i;
         r.progress.step(s, index, total);
-        let _ignored = r.log_step(StepPhase::Start, index, s);
+        r.note_step(StepPhase::Start, index, s);
         if let Err(e) = r.step(s).await {
             cleanup_completed = false;
             let msg = e.message();
-            let _ignored = r.log(
+            r.note(
                 Level::Error,
                 &format!("cleanup step {} failed: {msg}", s.key),
             );
@@ -675,7 +694,12 @@ pub async fn run(
             }
             break;
         }
-        let _ignored = r.log_step(StepPhase::End, index, s);
+        r.note_step(StepPhase::End, index, s);
+    }
+    if stop.is_none()
+        && let Some(e) = r.log_failed.take()
+    {
+        stop = Some((Stop::Data(e), "cleanup".into()));
     }
     let (outcome, error) = match stop {
         None => {
@@ -699,7 +723,7 @@ pub async fn run(
                 _ => None,
             };
             let message = e.message();
-            let _ignored = r.log(Level::Error, &format!("error in step {step}: {message}"));
+            r.note(Level::Error, &format!("error in step {step}: {message}"));
             (
                 Outcome::Error,
                 Some(RunError {
@@ -762,6 +786,7 @@ fn device_of(e: &DeviceError) -> Option<String> {
         | DeviceError::Connect { device, .. }
         | DeviceError::Alarm { device, .. }
         | DeviceError::Interlock { device }
+        | DeviceError::Unreachable { device, .. }
         | DeviceError::Silent { device, .. } => Some(device.clone()),
     }
 }

@@ -350,6 +350,20 @@ pub fn execute(
     })?;
     let site_json = serde_json::to_string(&plan.bench_cfg.site)
         .map_err(|e| SessionError::Bench(format!("the site cannot be logged: {e}")))?;
+    let twin_toml = if embedded {
+        Some(plan.twin.to_toml().map_err(|e| {
+            SessionError::Bench(format!("the twin configuration cannot be logged: {e}"))
+        })?)
+    } else {
+        None
+    };
+    let coeffs_toml =
+        match &plan.coeffs_file {
+            Some(c) => Some(c.to_toml().map_err(|e| {
+                SessionError::Bench(format!("the coefficients cannot be logged: {e}"))
+            })?),
+            None => None,
+        };
     let meta = RunMeta {
         format: FORMAT,
         run_id: plan
@@ -362,8 +376,8 @@ pub fn execute(
         procedure_path: plan.procedure_path.clone(),
         bench_toml,
         bench: plan.bench_label.clone(),
-        twin_toml: embedded.then(|| plan.twin.to_toml()),
-        coeffs_toml: plan.coeffs_file.as_ref().map(CoeffsFile::to_toml),
+        twin_toml,
+        coeffs_toml,
         site_json,
         dut_serial: plan.dut.clone(),
         dut_type: plan.procedure.meta.dut_type.clone(),

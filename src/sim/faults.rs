@@ -1,6 +1,32 @@
 //! Fault injection: what a simulated device does wrong, on demand.
 
+use std::sync::Mutex;
 use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
+use std::time::Duration;
+
+/// A network outage (a switch rebooting, a cable pulled): while it lasts,
+/// the device's connections are dropped and new ones closed at once.
+#[derive(Debug, Default)]
+pub struct Outage(Mutex<Option<tokio::time::Instant>>);
+
+impl Outage {
+    /// Start an outage of `d` (wall time) now.
+    pub fn start(&self, d: Duration) {
+        let mut until = self
+            .0
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        *until = Some(tokio::time::Instant::now() + d);
+    }
+
+    /// True while the outage lasts.
+    pub fn active(&self) -> bool {
+        self.0
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .is_some_and(|u| tokio::time::Instant::now() < u)
+    }
+}
 
 /// Faults of a request/reply instrument (chamber, table).
 #[derive(Debug, Default)]
@@ -16,6 +42,8 @@ pub struct DeviceFaults {
     pub disconnect: AtomicBool,
     /// Answer nothing at all until cleared.
     pub silent: AtomicBool,
+    /// Unreachable for a while.
+    pub outage: Outage,
 }
 
 /// What to do with one request.
@@ -67,6 +95,8 @@ pub struct GyroFaults {
     pub drop_every: AtomicU32,
     /// Send nothing until cleared.
     pub silent: AtomicBool,
+    /// Unreachable for a while.
+    pub outage: Outage,
 }
 
 /// Faults of every simulated device.

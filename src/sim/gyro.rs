@@ -20,6 +20,9 @@ pub async fn serve_gyro<W: AsyncWrite + Unpin>(
     let mut rx = bench.lock().subscribe_gyro();
     let mut position = 0u64;
     loop {
+        if bench.faults.gyro.outage.active() {
+            return Ok(());
+        }
         match rx.recv().await {
             Ok(chunk) => {
                 let f = &bench.faults.gyro;

@@ -25,7 +25,13 @@ where
     let (r, mut w) = tokio::io::split(stream);
     let mut r = BufReader::new(r);
     let mut buf = Vec::new();
+    if faults(&bench.faults).outage.active() {
+        return Ok(());
+    }
     while read_line(&mut r, &mut buf, max_line).await? {
+        if faults(&bench.faults).outage.active() {
+            return Ok(());
+        }
         let line = String::from_utf8_lossy(&buf).into_owned();
         let action = faults(&bench.faults).next_action();
         match action {

@@ -292,9 +292,8 @@ impl TwinConfig {
     }
 
     /// The configuration as TOML text (for logs and `twin-updated.toml`).
-    pub fn to_toml(&self) -> String {
+    pub fn to_toml(&self) -> Result<String, toml::ser::Error> {
         toml::to_string_pretty(self)
-            .unwrap_or_else(|e| format!("# cannot render twin config: {e}\n"))
     }
 
     fn validate(&self, c: &Checker<'_>) -> Result<(), ConfigError> {
@@ -535,8 +534,9 @@ mod tests {
     #[test]
     fn round_trips_through_toml() {
         let cfg = TwinConfig::default_rl16();
-        let back = TwinConfig::from_source(&Source::from_text("x", &cfg.to_toml()))
-            .expect("rendered config must load");
+        let back =
+            TwinConfig::from_source(&Source::from_text("x", &cfg.to_toml().expect("renders")))
+                .expect("rendered config must load");
         assert_eq!(cfg, back);
     }
 }

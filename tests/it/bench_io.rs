@@ -19,6 +19,7 @@ use gyrobench::transport::{BoxTransport, DeviceSpec, open};
 const POLICY: RetryPolicy = RetryPolicy {
     timeout: Duration::from_millis(300),
     attempts: 3,
+    reconnect_window: Duration::from_secs(3),
 };
 
 async fn serve(speed: f64) -> Served {
@@ -349,4 +350,62 @@ async fn drivers_work_over_an_in_memory_duplex_too() {
     // Same bench behind both: the table's move shows in the twin.
     tokio::time::sleep(Duration::from_millis(100)).await;
     assert!(bench.lock().twin.table_moving());
+}
+
+/// A network drop shorter than the reconnect window costs a pause, not the
+/// run: the chamber link and the gyro link are reopened with backoff, and
+/// the gyro's time without frames is measured. Past the window, the device
+/// is declared unreachable, naming the window.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_network_drop_within_the_window_is_ridden_out_and_a_longer_one_named() {
+    let served = serve(1.0).await;
+    let f = &served.bench.faults;
+    let mut c = espec(&served, "tcp://").await;
+    c.read().await.expect("before the drop");
+    f.chamber.outage.start(Duration::from_millis(800));
+    let t0 = tokio::time::Instant::now();
+    c.read().await.expect("read once the link is back");
+    assert!(
+        t0.elapsed() >= Duration::from_millis(700),
+        "it waited out the drop"
+    );
+    let k = c.link().counters();
+    assert!(k.reconnects >= 1, "{k:?}");
+
+    let s = spec(&served, "gyro", "rlg-frame", "tcp://");
+    let mut g = GyroReader::new(
+        "gyro",
+        connect(&s).await,
+        FrameLayout::default(),
+        Duration::from_secs(2),
+    )
+    .with_reconnect(connector(s), Duration::from_secs(3));
+    for _ in 0..100 {
+        g.next_frame().await.expect("frame").expect("open");
+    }
+    f.gyro.outage.start(Duration::from_millis(600));
+    // Frames resume after the drop, and the drop shows in the figures.
+    for _ in 0..1000 {
+        g.next_frame()
+            .await
+            .expect("frames across the drop")
+            .expect("open");
+    }
+    // Backoff: a few attempts over the drop (0.25 s, then 0.5 s later, ...),
+    // never a spin.
+    let st = g.stats();
+    assert!((1..=3).contains(&st.reconnects), "{st:?}");
+    assert!(st.longest_gap_ms >= 500, "{st:?}");
+    assert!(st.lost_frames > 0, "{st:?}");
+
+    f.chamber.outage.start(Duration::from_secs(6));
+    let t0 = tokio::time::Instant::now();
+    let err = c.read().await.expect_err("beyond the window");
+    assert!(matches!(err, DeviceError::Unreachable { .. }), "{err}");
+    assert!(
+        err.to_string()
+            .starts_with("chamber: the link dropped and could not be reopened within 3 s"),
+        "{err}"
+    );
+    assert!(t0.elapsed() >= Duration::from_secs(3));
 }
