@@ -58,7 +58,8 @@ pub struct RunArgs {
     #[arg(long, default_value = "")]
     operator: String,
     /// Simulated bench only: play a fault, FAULT@SECONDS of device time
-    /// (chamber-alarm, chamber-silent, table-interlock, gyro-silent).
+    /// (chamber-alarm, chamber-silent, table-interlock, gyro-silent,
+    /// gyro-corrupt, gyro-stuck, gyro-saturated, process-kill, panic).
     #[arg(long, value_name = "FAULT@SECONDS")]
     inject: Vec<String>,
 }

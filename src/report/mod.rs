@@ -195,8 +195,18 @@ impl Report {
             ));
         }
         if let Some(e) = &self.error {
+            // A measurement whose data were unsound ran to its end but was
+            // not judged; anything else stopped the run.
+            let unjudged = self.measurements.iter().any(|m| {
+                m.step == e.step && m.outcome == crate::sequencer::measure::MeasureOutcome::Error
+            });
             s.push_str(&format!(
-                "  stopped in step {}{}: {}\n",
+                "  {} step {}{}: {}\n",
+                if unjudged {
+                    "not judged in"
+                } else {
+                    "stopped in"
+                },
                 e.step,
                 e.device
                     .as_ref()

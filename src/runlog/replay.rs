@@ -31,7 +31,7 @@ use crate::coeffs::CoeffsFile;
 use crate::config::Source;
 use crate::procedure::{Procedure, StepKind};
 use crate::protocol::frame::LinkStats;
-use crate::sequencer::measure::{self, IntervalState, MeasureOutcome, Records, TickSums};
+use crate::sequencer::measure::{self, IntervalState, Records, TickSums};
 use crate::sequencer::{Outcome, Resume, RunError, RunResult, resume_plan};
 use crate::twin::TwinConfig;
 
@@ -73,12 +73,13 @@ pub enum ReplayError {
     },
 }
 
-/// A JSON array of integers reduced to its sum and length while parsing
-/// (no allocation per frame).
+/// A JSON array of integers reduced to its sum, length and extremes while
+/// parsing (no allocation per frame).
 #[derive(Debug, Default, Clone, Copy)]
 struct Sum {
     n: u64,
     sum: i64,
+    extremes: Option<(i64, i64)>,
 }
 
 impl<'de> Deserialize<'de> for Sum {
@@ -94,6 +95,7 @@ impl<'de> Deserialize<'de> for Sum {
                 while let Some(v) = a.next_element::<i64>()? {
                     s.n += 1;
                     s.sum = s.sum.saturating_add(v);
+                    s.extremes = Some(s.extremes.map_or((v, v), |(lo, hi)| (lo.min(v), hi.max(v))));
                 }
                 Ok(s)
             }
@@ -280,10 +282,13 @@ impl State<'_> {
                     return Err(self.log_err("a /gyro/frames message has arrays of unequal length"));
                 }
                 self.frames += m.counts.n;
+                let clamp =
+                    |v: i64| i32::try_from(v).unwrap_or(if v < 0 { i32::MIN } else { i32::MAX });
                 let sums = TickSums {
                     n: m.counts.n,
                     counts: m.counts.sum,
                     temps: [m.t1_raw.sum, m.t2_raw.sum, m.tcase_raw.sum],
+                    extremes: m.counts.extremes.map(|(lo, hi)| (clamp(lo), clamp(hi))),
                 };
                 let scales = Scales {
                     dt_s: m.dt_s,
@@ -316,9 +321,14 @@ impl State<'_> {
                     reference_dph,
                     chamber_c: self.chamber_c,
                 };
-                if let Some(iv) = sums.interval(&at, sc.dt_s, sc.lsb_arcsec, sc.temp_lsb_c) {
-                    self.records.push(iv, m.record.as_deref());
-                }
+                self.records.push_sums(
+                    &sums,
+                    &at,
+                    m.record.as_deref(),
+                    sc.dt_s,
+                    sc.lsb_arcsec,
+                    sc.temp_lsb_c,
+                );
             }
             topics::LINK => {
                 let m: LinkSample = serde_json::from_slice(data).map_err(|e| bad(topic, e))?;
@@ -354,17 +364,29 @@ impl State<'_> {
                 e.key, e.description, e.index
             )));
         };
+        let frames = self
+            .meta
+            .as_ref()
+            .is_some_and(|m| m.imported_from.is_none());
         match e.phase {
             StepPhase::End => {
                 // Steps completed count in setup + main run order.
                 if e.index < p.setup.len() + p.main.len() {
                     self.completed = self.completed.max(e.index + 1);
                 }
+                if let (StepKind::Record { label, .. }, Some(link)) = (&step.kind, e.link) {
+                    self.records.set_link(label, link);
+                }
             }
             StepPhase::Start => {
                 self.last_step = Some(e.key.clone());
                 self.cursor = e.index + 1;
                 match &step.kind {
+                    // A run of frames has its records' health judged; an
+                    // imported run (1 Hz means only) has none to judge.
+                    StepKind::Record { label, duration_s } if frames => {
+                        self.records.start_frames(label, *duration_s);
+                    }
                     StepKind::Record { label, .. } => self.records.start(label),
                     StepKind::Measure(m) => {
                         let coeffs = self.coeffs_override.or(self.coeffs.as_ref());
@@ -474,21 +496,17 @@ pub fn replay(path: &Path, coeffs: Option<&Fit>) -> Result<Replayed, ReplayError
     };
     let last_state_s = st.table.map_or(0.0, |(t, _)| t);
     let earlier_s = st.earlier.as_ref().map_or(0.0, |e| e.result.device_time_s);
-    let failed = st
-        .measurements
-        .iter()
-        .any(|m| m.outcome != MeasureOutcome::Pass);
-    let verdict = if failed { Outcome::Fail } else { Outcome::Pass };
+    let (verdict, verdict_error) = crate::sequencer::verdict(&st.measurements);
     let (outcome, error, cleanup_completed, device_time_s, bench_left) = match st.result_meta {
         Some(r) => {
-            let outcome = match r.outcome {
-                Outcome::Error | Outcome::Aborted => r.outcome,
+            let (outcome, error) = match r.outcome {
+                Outcome::Error | Outcome::Aborted => (r.outcome, r.error),
                 // pass or fail: the verdict is the recomputed one.
-                Outcome::Pass | Outcome::Fail => verdict,
+                Outcome::Pass | Outcome::Fail => (verdict, verdict_error),
             };
             (
                 outcome,
-                r.error,
+                error,
                 r.cleanup_completed,
                 r.device_time_s.unwrap_or(earlier_s + last_state_s),
                 r.bench_left,

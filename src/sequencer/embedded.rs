@@ -28,6 +28,34 @@ pub enum Fault {
     TableInterlock,
     /// The gyro stops sending.
     GyroSilent,
+    /// The gyro link corrupts every 50th frame (dropped, counted as a CRC
+    /// error).
+    GyroCorrupt,
+    /// The gyro's output sticks at one value.
+    GyroStuck,
+    /// The gyro's output pins at the largest count.
+    GyroSaturated,
+    /// The process dies at once, as under SIGKILL: no cleanup, no footer
+    /// (for the fault-and-resume sweep).
+    ProcessKill,
+    /// A bug: the run panics mid-tick (the bench must still reach its safe
+    /// state).
+    Panic,
+}
+
+impl Fault {
+    /// Every fault by the name `--inject` takes.
+    pub const NAMES: [&str; 9] = [
+        "chamber-alarm",
+        "chamber-silent",
+        "table-interlock",
+        "gyro-silent",
+        "gyro-corrupt",
+        "gyro-stuck",
+        "gyro-saturated",
+        "process-kill",
+        "panic",
+    ];
 }
 
 impl std::str::FromStr for Fault {
@@ -38,9 +66,15 @@ impl std::str::FromStr for Fault {
             "chamber-silent" => Self::ChamberSilent,
             "table-interlock" => Self::TableInterlock,
             "gyro-silent" => Self::GyroSilent,
+            "gyro-corrupt" => Self::GyroCorrupt,
+            "gyro-stuck" => Self::GyroStuck,
+            "gyro-saturated" => Self::GyroSaturated,
+            "process-kill" => Self::ProcessKill,
+            "panic" => Self::Panic,
             _ => {
                 return Err(format!(
-                    "unknown fault {s:?}; expected chamber-alarm, chamber-silent, table-interlock or gyro-silent"
+                    "unknown fault {s:?}; expected {}",
+                    Self::NAMES.join(", ")
                 ));
             }
         })
@@ -58,6 +92,7 @@ pub struct EmbeddedBench {
     mode: ChamberMode,
     faults: Vec<(f64, Fault)>,
     frames: u64,
+    crc_errors: u64,
 }
 
 impl EmbeddedBench {
@@ -73,6 +108,7 @@ impl EmbeddedBench {
             mode: ChamberMode::Constant,
             faults: Vec::new(),
             frames: 0,
+            crc_errors: 0,
         }
     }
 
@@ -187,19 +223,42 @@ impl BenchIo for EmbeddedBench {
 
     async fn advance(&mut self, t_s: f64, tick: &mut Tick) -> Result<(), DeviceError> {
         self.check()?;
+        if self.active(Fault::ProcessKill) {
+            // What SIGKILL does: nothing after this line runs.
+            std::process::abort();
+        }
+        assert!(
+            !self.active(Fault::Panic),
+            "injected fault: a bug panics the run at {} s",
+            self.twin.time_s()
+        );
         self.clock.sleep_until(t_s);
         tick.frames.clear();
         tick.t0_s = self.twin.time_s() + self.twin.frame_dt_s();
         let frames = &mut tick.frames;
         let raw = |t: f64| (t / TEMP_LSB_C).round() as i16;
+        let corrupt = self.active(Fault::GyroCorrupt);
+        let stuck = self.active(Fault::GyroStuck);
+        let saturated = self.active(Fault::GyroSaturated);
+        let mut crc_errors = 0;
         self.twin.run_until(t_s, |_, g| {
+            if corrupt && g.index % 50 == 0 {
+                crc_errors += 1;
+                return;
+            }
+            let counts = match (stuck, saturated) {
+                (_, true) => i32::MAX,
+                (true, _) => 3,
+                _ => g.delta_counts,
+            };
             frames.push(FrameRecord {
                 seq: (g.index % 256) as u8,
-                counts: g.delta_counts,
+                counts,
                 temps_raw: [raw(g.t1_c), raw(g.t2_c), raw(g.tcase_c)],
                 status: g.status,
             });
         });
+        self.crc_errors += crc_errors;
         self.frames += tick.frames.len() as u64;
         tick.state = Some(self.state());
         Ok(())
@@ -208,7 +267,8 @@ impl BenchIo for EmbeddedBench {
     fn link_stats(&self) -> LinkStats {
         LinkStats {
             frames: self.frames,
-            bytes: self.frames * 20,
+            bytes: (self.frames + self.crc_errors) * 20,
+            crc_errors: self.crc_errors,
             ..LinkStats::default()
         }
     }

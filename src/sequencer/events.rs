@@ -74,6 +74,9 @@ pub struct StepEvent {
     pub action: String,
     /// The step in words.
     pub description: String,
+    /// At the end of a record: the gyro link's figures over it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub link: Option<crate::protocol::frame::LinkStats>,
 }
 
 impl StepEvent {
@@ -88,6 +91,7 @@ impl StepEvent {
             group: s.group,
             action: s.kind.action().to_owned(),
             description: s.describe(),
+            link: None,
         }
     }
 }

@@ -4,6 +4,7 @@ use std::collections::BTreeMap;
 
 use serde::Serialize;
 
+use super::health::RecordHealth;
 use super::{BenchState, Tick};
 use crate::analysis::figures::{bias_stability, drift_pp, mean};
 use crate::analysis::model::{self, Fit, ModelKind};
@@ -20,6 +21,8 @@ pub struct Records {
     by_label: BTreeMap<String, Vec<Interval>>,
     /// Labels in the order they were recorded.
     pub order: Vec<String>,
+    /// Whether each record's frames can be judged (records with frames).
+    health: BTreeMap<String, RecordHealth>,
 }
 
 impl Records {
@@ -29,11 +32,41 @@ impl Records {
         self.order.push(label.to_owned());
     }
 
+    /// A record of frames starts: its health is watched from here.
+    pub fn start_frames(&mut self, label: &str, duration_s: f64) {
+        self.start(label);
+        self.health
+            .insert(label.to_owned(), RecordHealth::new(duration_s));
+    }
+
     /// Forget what a record holds (it is recorded again from its start).
     pub fn discard(&mut self, label: &str) {
         if let Some(v) = self.by_label.get_mut(label) {
             v.clear();
         }
+        self.health.remove(label);
+    }
+
+    /// The health of a record of frames.
+    pub fn health(&self, label: &str) -> Option<&RecordHealth> {
+        self.health.get(label)
+    }
+
+    /// The gyro link's figures over a record, at its end.
+    pub fn set_link(&mut self, label: &str, link: crate::protocol::frame::LinkStats) {
+        if let Some(h) = self.health.get_mut(label) {
+            h.link = Some(link);
+        }
+    }
+
+    /// Why the data of `labels` cannot be judged, or none.
+    pub fn problem(&self, labels: &[String]) -> Option<String> {
+        labels.iter().find_map(|l| {
+            self.health
+                .get(l)
+                .and_then(RecordHealth::problem)
+                .map(|p| format!("record {l}: {p}"))
+        })
     }
 
     /// Intervals of one record.
@@ -60,7 +93,26 @@ impl Records {
             reference_dph: state.reference_dph,
             chamber_c: state.chamber.air_c,
         };
-        let iv = sums.interval(&at, frame_dt_s, lsb_arcsec, temp_lsb_c)?;
+        self.push_sums(&sums, &at, record, frame_dt_s, lsb_arcsec, temp_lsb_c)
+    }
+
+    /// File the interval of a tick's frames (live or replayed) under
+    /// `record`, and count them into its health; returns the interval.
+    pub fn push_sums(
+        &mut self,
+        sums: &TickSums,
+        at: &IntervalState,
+        record: Option<&str>,
+        frame_dt_s: f64,
+        lsb_arcsec: f64,
+        temp_lsb_c: f64,
+    ) -> Option<Interval> {
+        if let (Some(label), Some((lo, hi))) = (record, sums.extremes)
+            && let Some(h) = self.health.get_mut(label)
+        {
+            h.add(sums.n, lo, hi, frame_dt_s, lsb_arcsec);
+        }
+        let iv = sums.interval(at, frame_dt_s, lsb_arcsec, temp_lsb_c)?;
         self.push(iv, record);
         Some(iv)
     }
@@ -83,6 +135,8 @@ pub struct TickSums {
     pub counts: i64,
     /// Sums of the raw T1, T2, TK readings.
     pub temps: [i64; 3],
+    /// Smallest and largest count (none without frames).
+    pub extremes: Option<(i32, i32)>,
 }
 
 /// The bench state an interval is stamped with.
@@ -101,6 +155,9 @@ impl TickSums {
     pub fn add(&mut self, counts: i32, temps_raw: [i16; 3]) {
         self.n += 1;
         self.counts += i64::from(counts);
+        self.extremes = Some(self.extremes.map_or((counts, counts), |(lo, hi)| {
+            (lo.min(counts), hi.max(counts))
+        }));
         for (acc, r) in self.temps.iter_mut().zip(temps_raw) {
             *acc += i64::from(r);
         }
@@ -142,14 +199,18 @@ pub enum MeasureOutcome {
     Pass,
     /// Outside limits, or not computable.
     Fail,
+    /// Not judged: the data it would be computed on are unsound (a link
+    /// that lost frames, a stuck or saturated output).
+    Error,
 }
 
 impl MeasureOutcome {
-    /// `pass` / `fail`.
+    /// `pass`, `fail` or `error`.
     pub fn as_str(self) -> &'static str {
         match self {
             Self::Pass => "pass",
             Self::Fail => "fail",
+            Self::Error => "error",
         }
     }
 }
@@ -239,17 +300,21 @@ pub fn compute(m: &Measure, records: &Records, coeffs: Option<&Fit>, step: &str)
     }
     let within =
         value.is_some_and(|v| m.low.is_none_or(|lo| v >= lo) && m.high.is_none_or(|hi| v <= hi));
+    let outcome = match records.problem(&m.records) {
+        Some(p) => {
+            note = format!("not judged: {p}");
+            MeasureOutcome::Error
+        }
+        None if within => MeasureOutcome::Pass,
+        None => MeasureOutcome::Fail,
+    };
     Measurement {
         name: m.name.clone(),
         value,
         unit: m.unit.clone(),
         low: m.low,
         high: m.high,
-        outcome: if within {
-            MeasureOutcome::Pass
-        } else {
-            MeasureOutcome::Fail
-        },
+        outcome,
         step: step.to_owned(),
         metric: m.metric,
         averaging_s: m.averaging_s,

@@ -10,6 +10,7 @@ pub mod device;
 pub mod embedded;
 pub mod events;
 pub mod guard;
+pub mod health;
 pub mod measure;
 
 use std::sync::Arc;
@@ -374,6 +375,9 @@ struct Run<'a> {
     /// The first log write that failed where the run could not stop for
     /// it (the safe state, cleanup): it still makes the run an error.
     log_failed: Option<String>,
+    /// The link figures of the record step that just ended (for its end
+    /// event).
+    record_link: Option<crate::protocol::frame::LinkStats>,
 }
 
 impl Run<'_> {
@@ -401,7 +405,10 @@ impl Run<'_> {
 
     /// Write a step event (and its line in words).
     fn log_step(&mut self, phase: StepPhase, index: usize, s: &Step) -> Result<(), Stop> {
-        let e = StepEvent::new(self.bench.now_s(), phase, index, s);
+        let mut e = StepEvent::new(self.bench.now_s(), phase, index, s);
+        if phase == StepPhase::End {
+            e.link = self.record_link.take();
+        }
         self.sink
             .step(&e)
             .map_err(|e| Stop::Data(format!("writing the log: {e}")))?;
@@ -560,8 +567,13 @@ impl Run<'_> {
             }
             StepKind::Wait { duration_s } => self.run_for(*duration_s, None, key).await,
             StepKind::Record { label, duration_s } => {
-                self.records.start(label);
-                self.run_for(*duration_s, Some(label), key).await
+                self.records.start_frames(label, *duration_s);
+                let before = self.bench.link_stats();
+                self.run_for(*duration_s, Some(label), key).await?;
+                let link = health::link_delta(&before, &self.bench.link_stats());
+                self.records.set_link(label, link);
+                self.record_link = Some(link);
+                Ok(())
             }
             StepKind::Measure(m) => {
                 let meas = measure::compute(m, &self.records, self.opts.coeffs.as_ref(), key);
@@ -636,6 +648,7 @@ pub async fn run(
         cleaning_up: false,
         last_link_s: 0.0,
         log_failed: None,
+        record_link: None,
     };
     let total = p.steps().count();
     let mut stop: Option<(Stop, String)> = None;
@@ -702,13 +715,7 @@ pub async fn run(
         stop = Some((Stop::Data(e), "cleanup".into()));
     }
     let (outcome, error) = match stop {
-        None => {
-            let failed = r
-                .measurements
-                .iter()
-                .any(|m| m.outcome != measure::MeasureOutcome::Pass);
-            (if failed { Outcome::Fail } else { Outcome::Pass }, None)
-        }
+        None => verdict(&r.measurements),
         Some((Stop::Interrupted, step)) if interrupted => (
             Outcome::Aborted,
             Some(RunError {
@@ -775,6 +782,30 @@ async fn restore(r: &mut Run<'_>, p: &Procedure, res: &Resume) -> Result<(), (St
         r.step(s).await.map_err(|e| (e, s.key.clone()))?;
     }
     Ok(())
+}
+
+/// The verdict of a run that ran to its end: pass when every measurement
+/// is within its limits, fail when one is not, and an error naming the
+/// first measurement that could not be judged (its data unsound).
+pub fn verdict(measurements: &[Measurement]) -> (Outcome, Option<RunError>) {
+    use measure::MeasureOutcome;
+    if let Some(m) = measurements
+        .iter()
+        .find(|m| m.outcome == MeasureOutcome::Error)
+    {
+        return (
+            Outcome::Error,
+            Some(RunError {
+                device: Some("gyro".into()),
+                step: m.step.clone(),
+                message: format!("{} was {}", m.name, m.note),
+            }),
+        );
+    }
+    let failed = measurements
+        .iter()
+        .any(|m| m.outcome != MeasureOutcome::Pass);
+    (if failed { Outcome::Fail } else { Outcome::Pass }, None)
 }
 
 fn device_of(e: &DeviceError) -> Option<String> {

@@ -460,3 +460,50 @@ fn a_closed_stdout_ends_a_command_quietly_after_its_files_are_complete() {
     assert_eq!(json(&dir.join("run2/report.json"))["outcome"], "pass");
     std::fs::remove_dir_all(&dir).expect("cleanup");
 }
+
+/// Data a record cannot be judged on (a link that corrupts frames, an
+/// output stuck at one value or pinned at its limit) are never judged: the
+/// measurement's outcome is `error` with the reason, the run is an error,
+/// and replay says the same from the log.
+#[test]
+fn unsound_gyro_data_are_not_judged_and_replay_agrees() {
+    let dir = temp_dir("integrity-unsound");
+    let p = write(&dir, "tiny.toml", TINY);
+    for (fault, why) in [
+        ("gyro-corrupt", "missing"),
+        ("gyro-stuck", "the output is stuck"),
+        ("gyro-saturated", "saturated"),
+    ] {
+        let out = dir.join(fault);
+        let r = gyrobench(&[
+            "run",
+            s(&p),
+            "--out",
+            s(&out),
+            "--inject",
+            &format!("{fault}@0"),
+        ]);
+        assert_eq!(r.status.code(), Some(1), "{fault}: {}", stderr(&r));
+        let text = String::from_utf8_lossy(&r.stdout);
+        assert!(text.contains("not judged in step"), "{fault}: {text}");
+        let report = json(&out.join("report.json"));
+        assert_eq!(report["outcome"], "error", "{fault}");
+        for m in report["measurements"].as_array().expect("list") {
+            assert_eq!(m["outcome"], "error", "{fault}: {m}");
+            let note = m["note"].as_str().expect("note");
+            assert!(
+                note.starts_with("not judged: record") && note.contains(why),
+                "{fault}: {note}"
+            );
+        }
+        let replayed = dir.join(format!("{fault}-replay"));
+        let rr = gyrobench(&["replay", s(&out.join("run.mcap")), "--out", s(&replayed)]);
+        assert_eq!(rr.status.code(), Some(1), "{fault}");
+        assert_eq!(
+            std::fs::read(out.join("report.json")).expect("report"),
+            std::fs::read(replayed.join("report.json")).expect("replayed"),
+            "{fault}: replay judges the same"
+        );
+    }
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
