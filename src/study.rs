@@ -6,7 +6,6 @@
 //! The cycle itself is defined once, in `procedures/thermal_cycle.toml`.
 
 use std::sync::Arc;
-use std::sync::atomic::AtomicBool;
 
 use serde::Serialize;
 
@@ -147,7 +146,7 @@ pub fn simulate(
     let opts = Options {
         resume: None,
         coeffs: None,
-        interrupt: Arc::new(AtomicBool::new(false)),
+        interrupt: Arc::new(crate::sequencer::Interrupt::default()),
         dut_max_c: bench_cfg.limits.dut_max_c,
         in_position: (
             bench_cfg.devices.table.in_position_deg,

@@ -61,8 +61,9 @@ pub enum Outcome {
     Fail,
     /// A device or data failure ended the run (reported): exit 1.
     Error,
-    /// Interrupted by the operator: exit 130.
-    Interrupted,
+    /// Interrupted: exit 128 + the signal (130 Ctrl-C, 143 SIGTERM,
+    /// 129 SIGHUP).
+    Interrupted(u8),
 }
 
 /// A usage error found after parsing (a bad value, a run directory that
@@ -82,7 +83,7 @@ impl Outcome {
             Self::Success => 0,
             Self::Fail => 3,
             Self::Error => EXIT_ERROR,
-            Self::Interrupted => 130,
+            Self::Interrupted(code) => code,
         }
     }
 }

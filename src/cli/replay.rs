@@ -88,6 +88,6 @@ pub fn run(args: ReplayArgs) -> Result<Outcome> {
         sequencer::Outcome::Pass => Outcome::Success,
         sequencer::Outcome::Fail => Outcome::Fail,
         sequencer::Outcome::Error => Outcome::Error,
-        sequencer::Outcome::Aborted => Outcome::Interrupted,
+        sequencer::Outcome::Aborted => Outcome::Interrupted(130),
     })
 }

@@ -2,7 +2,7 @@
 
 use std::path::PathBuf;
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicU8, Ordering};
 
 use anyhow::{Context, Result};
 use clap::Args;
@@ -14,7 +14,7 @@ use crate::clock::Pacing;
 use crate::coeffs::CoeffsFile;
 use crate::procedure::Procedure;
 use crate::sequencer::embedded::Fault;
-use crate::sequencer::{self, BenchState, Progress};
+use crate::sequencer::{self, BenchState, Interrupt, Progress};
 use crate::session::{self, Place, Plan, SessionError};
 use crate::twin::TwinConfig;
 
@@ -272,8 +272,9 @@ pub fn run(args: RunArgs) -> Result<Outcome> {
         .enable_all()
         .build()
         .context("starting the async runtime")?;
-    let interrupt = Arc::new(AtomicBool::new(false));
-    rt.block_on(async { watch_ctrl_c(interrupt.clone()) })?;
+    let interrupt = Arc::new(Interrupt::default());
+    let exit_code = Arc::new(AtomicU8::new(130));
+    rt.block_on(async { watch_signals(interrupt.clone(), exit_code.clone()) })?;
     let mut progress = Live::new(session::estimated_s(&plan));
     eprintln!("running {}", plan.procedure.meta.name);
     let finished = match session::execute(plan, place, &rt, &mut progress, interrupt) {
@@ -299,24 +300,44 @@ pub fn run(args: RunArgs) -> Result<Outcome> {
         sequencer::Outcome::Pass => Outcome::Success,
         sequencer::Outcome::Fail => Outcome::Fail,
         sequencer::Outcome::Error => Outcome::Error,
-        sequencer::Outcome::Aborted => Outcome::Interrupted,
+        sequencer::Outcome::Aborted => Outcome::Interrupted(exit_code.load(Ordering::Relaxed)),
     })
 }
 
-/// First Ctrl-C: stop and clean up. Second: abort at once. The handler
-/// is installed before this returns, so no early signal kills the run.
-fn watch_ctrl_c(interrupt: Arc<AtomicBool>) -> Result<()> {
-    use tokio::signal::unix::{SignalKind, signal};
-    let mut sigint = signal(SignalKind::interrupt()).context("installing the Ctrl-C handler")?;
-    tokio::spawn(async move {
-        if sigint.recv().await.is_some() {
-            eprintln!("interrupted: running cleanup (Ctrl-C again to abort without cleanup)");
-            interrupt.store(true, Ordering::Relaxed);
-        }
-        if sigint.recv().await.is_some() {
-            eprintln!("aborted without cleanup");
-            std::process::exit(130);
-        }
-    });
+/// The signals that stop a run, how the report names them, and the exit
+/// code of a run they stop (128 + the signal's number).
+fn stop_signals() -> [(tokio::signal::unix::SignalKind, &'static str, u8); 3] {
+    use tokio::signal::unix::SignalKind;
+    [
+        (SignalKind::interrupt(), "Ctrl-C (SIGINT)", 130),
+        (SignalKind::terminate(), "SIGTERM", 143),
+        (SignalKind::hangup(), "SIGHUP", 129),
+    ]
+}
+
+/// First Ctrl-C, SIGTERM or SIGHUP: stop, bring the bench to its safe
+/// state, clean up, write the report. A second one: exit at once, without
+/// cleanup. The handlers are installed before this returns, so no early
+/// signal kills the run.
+fn watch_signals(interrupt: Arc<Interrupt>, exit_code: Arc<AtomicU8>) -> Result<()> {
+    use tokio::signal::unix::signal;
+    for (kind, name, code) in stop_signals() {
+        let mut sig = signal(kind).with_context(|| format!("installing the {name} handler"))?;
+        let interrupt = interrupt.clone();
+        let exit_code = exit_code.clone();
+        tokio::spawn(async move {
+            while sig.recv().await.is_some() {
+                if interrupt.request(name) {
+                    exit_code.store(code, Ordering::Relaxed);
+                    eprintln!(
+                        "{name}: stopping; the bench goes to its safe state and cleanup runs (again to exit at once, without cleanup)"
+                    );
+                } else {
+                    eprintln!("{name} again: exiting without cleanup");
+                    std::process::exit(i32::from(code));
+                }
+            }
+        });
+    }
     Ok(())
 }

@@ -263,6 +263,16 @@ impl SetPointRamp {
     pub fn done(&self) -> bool {
         self.sent_c == Some(self.to_c)
     }
+
+    /// Time until the target is sent, from `t_s`, s (0 once sent).
+    pub fn remaining_s(&self, t_s: f64) -> f64 {
+        if self.done() {
+            return 0.0;
+        }
+        let total = (self.to_c - self.from_c).abs() / self.rate_c_per_s.max(f64::MIN_POSITIVE);
+        // At least a tick: the target goes out on the next one.
+        (self.start_s + total - t_s).max(1.0)
+    }
 }
 
 /// What a motion simulator reports.

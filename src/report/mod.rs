@@ -10,7 +10,7 @@ use crate::analysis::series::Interval;
 use crate::procedure::{Metric, Procedure};
 use crate::protocol::frame::LinkStats;
 use crate::sequencer::measure::{Measurement, Records};
-use crate::sequencer::{Outcome, RunError, RunResult};
+use crate::sequencer::{BenchLeft, Outcome, RunError, RunResult};
 
 pub use html::render_html;
 
@@ -39,6 +39,9 @@ pub struct Report {
     pub error: Option<RunError>,
     /// Whether cleanup ran to its end.
     pub cleanup_completed: bool,
+    /// The state the run left the bench in, read back from the devices
+    /// (none for a run that was never on a bench: an imported one).
+    pub bench_left: Option<BenchLeft>,
     /// Spec text of the procedure.
     pub spec: String,
     /// UTC start time.
@@ -156,6 +159,7 @@ impl Report {
             measurements: r.measurements.clone(),
             error: r.error.clone(),
             cleanup_completed: r.cleanup_completed,
+            bench_left: r.bench_left.clone(),
             spec: p.meta.spec.clone(),
             start_time_utc: start_time_utc.to_owned(),
             device_time_s: r.device_time_s,
@@ -213,6 +217,9 @@ impl Report {
                     .map_or(String::new(), |d| format!(" ({d})")),
                 e.message
             ));
+        }
+        if let Some(b) = &self.bench_left {
+            s.push_str(&format!("  bench left: {}\n", b.summary));
         }
         s
     }

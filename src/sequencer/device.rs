@@ -213,4 +213,16 @@ impl BenchIo for DeviceBench {
     fn link_stats(&self) -> LinkStats {
         self.stats.lock().map_or_else(|p| *p.into_inner(), |s| *s)
     }
+
+    fn pending_s(&self) -> f64 {
+        self.ramp.map_or(0.0, |r| r.remaining_s(self.now_s()))
+    }
+
+    async fn read_back(
+        &mut self,
+    ) -> Result<(crate::driver::ChamberReading, crate::driver::TableReading), DeviceError> {
+        let chamber = self.chamber.read().await?;
+        let table = self.table.read().await?;
+        Ok((chamber, table))
+    }
 }

@@ -264,6 +264,12 @@ impl BenchIo for EmbeddedBench {
         Ok(())
     }
 
+    async fn read_back(&mut self) -> Result<(ChamberReading, TableReading), DeviceError> {
+        self.check()?;
+        let st = self.state();
+        Ok((st.chamber, st.table))
+    }
+
     fn link_stats(&self) -> LinkStats {
         LinkStats {
             frames: self.frames,

@@ -104,6 +104,16 @@ impl<B: BenchIo> BenchIo for Guarded<B> {
     fn link_stats(&self) -> LinkStats {
         self.inner.link_stats()
     }
+
+    fn pending_s(&self) -> f64 {
+        self.inner.pending_s()
+    }
+
+    async fn read_back(
+        &mut self,
+    ) -> Result<(crate::driver::ChamberReading, crate::driver::TableReading), DeviceError> {
+        self.inner.read_back().await
+    }
 }
 
 #[cfg(test)]

@@ -9,12 +9,13 @@
 pub mod device;
 pub mod embedded;
 pub mod events;
+pub mod finish;
 pub mod guard;
 pub mod health;
+pub mod interrupt;
 pub mod measure;
 
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
 
 use async_trait::async_trait;
 use serde::Serialize;
@@ -23,6 +24,7 @@ use crate::driver::{ChamberReading, DeviceError, InPosition, TableReading};
 use crate::geometry::{Orientation, TableAngles};
 use crate::procedure::{Procedure, Step, StepKind};
 pub use events::{Level, StepEvent, StepPhase};
+pub use interrupt::Interrupt;
 use measure::{Measurement, Records};
 
 /// One gyro frame as received (wire units).
@@ -91,6 +93,15 @@ pub trait BenchIo: Send {
     async fn advance(&mut self, t_s: f64, tick: &mut Tick) -> Result<(), DeviceError>;
     /// Link figures of the gyro so far.
     fn link_stats(&self) -> crate::protocol::frame::LinkStats;
+    /// Device time until the commands given are carried out by the bench
+    /// itself, s: a chamber ramp stepped by the host goes on only while
+    /// the run ticks (0 when nothing is pending).
+    fn pending_s(&self) -> f64 {
+        0.0
+    }
+    /// Read the chamber and the table back (to verify the state a run
+    /// leaves them in).
+    async fn read_back(&mut self) -> Result<(ChamberReading, TableReading), DeviceError>;
 }
 
 /// Where the run's data goes (the recorder implements it).
@@ -228,8 +239,8 @@ impl Progress for Quiet {
 pub struct Options {
     /// Model-4 coefficients for compensation (else fitted on the run).
     pub coeffs: Option<crate::analysis::model::Fit>,
-    /// Set to stop the run (cleanup still runs).
-    pub interrupt: Arc<AtomicBool>,
+    /// Asked to stop the run (cleanup still runs).
+    pub interrupt: Arc<Interrupt>,
     /// Bench limit on the gyro's temperatures, degC.
     pub dut_max_c: f64,
     /// In-position tolerance, deg, and settle time, s.
@@ -259,6 +270,10 @@ pub struct Resume {
     /// Device time of the earlier parts, s.
     pub device_time_s: f64,
 }
+
+/// How long past its expected end the bench may take to settle at the end
+/// of a run, s.
+pub const SETTLE_MARGIN_S: f64 = 120.0;
 
 /// Soak criteria of a resume when the procedure has no soak step (ours).
 pub const RESUME_SOAK: StepKind = StepKind::Soak {
@@ -378,9 +393,57 @@ struct Run<'a> {
     /// The link figures of the record step that just ended (for its end
     /// event).
     record_link: Option<crate::protocol::frame::LinkStats>,
+    /// What the bench was last asked to do (verified at the end).
+    expected: finish::Expected,
 }
 
 impl Run<'_> {
+    /// Bring the bench to its safe state; false when that failed (said in
+    /// the log).
+    async fn safe_state(&mut self) -> bool {
+        match self.bench.safe_state().await {
+            Ok(()) => {
+                self.expected.safe();
+                true
+            }
+            Err(e) => {
+                self.note(Level::Error, &format!("safe state failed: {e}"));
+                false
+            }
+        }
+    }
+
+    /// Tick until the bench has carried out what it was asked (a chamber
+    /// ramp the host steps reaches its set point) and the table is at
+    /// rest; bounded by the time that takes plus two minutes. Another stop
+    /// request ends the wait.
+    async fn settle(&mut self) -> Result<(), Stop> {
+        let pending = self.bench.pending_s();
+        if pending > 0.0 {
+            self.note(
+                Level::Info,
+                &format!("the chamber reaches its final set point in {pending:.0} s"),
+            );
+        }
+        let until = self.bench.now_s() + pending + SETTLE_MARGIN_S;
+        loop {
+            let at_rest = self.last.as_ref().is_some_and(|st| {
+                st.table.rates.outer_deg.abs() <= finish::AT_REST_DPS
+                    && st.table.rates.inner_deg.abs() <= finish::AT_REST_DPS
+            });
+            if self.bench.pending_s() <= 0.0 && at_rest {
+                return Ok(());
+            }
+            if self.bench.now_s() >= until {
+                return Err(Stop::Data(format!(
+                    "the bench still had {:.0} s of commands to carry out, or the table had not stopped, {SETTLE_MARGIN_S} s after it should have",
+                    self.bench.pending_s()
+                )));
+            }
+            self.tick(until, None, "end of run").await?;
+        }
+    }
+
     /// Write a line for people; a log that cannot be written stops the run.
     fn log(&mut self, level: Level, message: &str) -> Result<(), Stop> {
         self.sink
@@ -422,7 +485,7 @@ impl Run<'_> {
 
     /// Advance one tick (at most 1 s, never past `until_s`).
     async fn tick(&mut self, until_s: f64, record: Option<&str>, step: &str) -> Result<(), Stop> {
-        if self.opts.interrupt.load(Ordering::Relaxed) {
+        if self.opts.interrupt.is_requested() {
             return Err(Stop::Interrupted);
         }
         let t = (self.bench.now_s() + 1.0).min(until_s);
@@ -497,13 +560,17 @@ impl Run<'_> {
             StepKind::Chamber {
                 set_c,
                 ramp_c_per_min,
-            } => self
-                .bench
-                .set_chamber(*set_c, *ramp_c_per_min)
-                .await
-                .map_err(Stop::Device),
+            } => {
+                self.bench
+                    .set_chamber(*set_c, *ramp_c_per_min)
+                    .await
+                    .map_err(Stop::Device)?;
+                self.expected.chamber_set(*set_c);
+                Ok(())
+            }
             StepKind::Move { angles, .. } => {
                 self.bench.move_table(*angles).await.map_err(Stop::Device)?;
+                self.expected.table_moved(*angles);
                 let (tol, settle) = self.opts.in_position;
                 let mut ip = InPosition::new(tol, 0.01, settle);
                 let deadline = self.bench.now_s() + self.opts.move_timeout_s;
@@ -649,6 +716,7 @@ pub async fn run(
         last_link_s: 0.0,
         log_failed: None,
         record_link: None,
+        expected: finish::Expected::default(),
     };
     let total = p.steps().count();
     let mut stop: Option<(Stop, String)> = None;
@@ -682,18 +750,40 @@ pub async fn run(
             Level::Warning,
             "run stopped: bringing the bench to a safe state",
         );
-        if let Err(e) = r.bench.safe_state().await {
-            cleanup_completed = false;
-            r.note(Level::Error, &format!("safe state failed: {e}"));
-        }
+        cleanup_completed &= r.safe_state().await;
     }
     let interrupted = matches!(stop, Some((Stop::Interrupted, _)));
-    r.opts.interrupt.store(false, Ordering::Relaxed);
+    r.opts.interrupt.rearm();
     r.cleaning_up = true;
+    // A device that failed stays in its safe state: cleanup does not drive
+    // it again (after a chamber alarm, a late set point would override
+    // the standby the alarm called for).
+    let faulted = match &stop {
+        Some((Stop::Device(e), _)) => device_of(e),
+        _ => None,
+    };
     let first_cleanup = p.setup.len() + p.main.len();
     for (i, s) in p.cleanup.iter().enumerate() {
         let index = first_cleanup + i;
         r.progress.step(s, index, total);
+        let needs = match s.kind {
+            StepKind::Chamber { .. } | StepKind::Soak { .. } => Some("chamber"),
+            StepKind::Move { .. } => Some("table"),
+            _ => None,
+        };
+        if let (Some(d), Some(f)) = (needs, faulted.as_deref())
+            && d == f
+        {
+            cleanup_completed = false;
+            r.note(
+                Level::Warning,
+                &format!(
+                    "cleanup step {} skipped: the {d} failed during the run and stays in its safe state",
+                    s.key
+                ),
+            );
+            continue;
+        }
         r.note_step(StepPhase::Start, index, s);
         if let Err(e) = r.step(s).await {
             cleanup_completed = false;
@@ -702,12 +792,57 @@ pub async fn run(
                 Level::Error,
                 &format!("cleanup step {} failed: {msg}", s.key),
             );
+            r.safe_state().await;
             if stop.is_none() {
                 stop = Some((e, s.key.clone()));
             }
             break;
         }
         r.note_step(StepPhase::End, index, s);
+    }
+    // The bench finishes what it was asked (a ramp the host steps goes on
+    // to its set point) and comes to rest; then its state is read back.
+    if let Err(e) = r.settle().await {
+        cleanup_completed = false;
+        r.note(
+            Level::Error,
+            &format!("the bench did not settle: {}", e.message()),
+        );
+        r.safe_state().await;
+    }
+    let in_position = r.opts.in_position.0;
+    let mut left = finish::bench_left(r.bench, &r.expected, in_position).await;
+    if !left.verified && !r.expected.safe_state {
+        r.note(
+            Level::Warning,
+            &format!(
+                "the bench is not as cleanup asked ({}): bringing it to its safe state",
+                left.summary
+            ),
+        );
+        r.safe_state().await;
+        let _settled = r.settle().await;
+        left = finish::bench_left(r.bench, &r.expected, in_position).await;
+    }
+    r.note(
+        if left.verified {
+            Level::Info
+        } else {
+            Level::Error
+        },
+        &format!("bench left: {}", left.summary),
+    );
+    if !left.verified {
+        cleanup_completed = false;
+        if stop.is_none() {
+            stop = Some((
+                Stop::Data(format!(
+                    "the bench is not in a known state: {}",
+                    left.summary
+                )),
+                "end of run".into(),
+            ));
+        }
     }
     if stop.is_none()
         && let Some(e) = r.log_failed.take()
@@ -721,7 +856,13 @@ pub async fn run(
             Some(RunError {
                 device: None,
                 step,
-                message: "interrupted by the operator".into(),
+                message: format!(
+                    "interrupted by {}",
+                    r.opts
+                        .interrupt
+                        .cause()
+                        .unwrap_or_else(|| "the operator".into())
+                ),
             }),
         ),
         Some((e, step)) => {
@@ -749,7 +890,7 @@ pub async fn run(
         device_time_s: r.bench.now_s() + opts.resume.as_ref().map_or(0.0, |res| res.device_time_s),
         frames: r.frames + opts.resume.as_ref().map_or(0, |res| res.frames),
         records: r.records,
-        bench_left: None,
+        bench_left: Some(left),
     }
 }
 

@@ -8,7 +8,6 @@ pub mod rundir;
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
-use std::sync::atomic::AtomicBool;
 
 use crate::bench::{BenchConfig, open_bench};
 use crate::clock::{Pacing, VirtualClock, utc_now};
@@ -24,7 +23,7 @@ use crate::runlog::writer::{FrameScales, Recorder};
 use crate::sequencer::device::DeviceBench;
 use crate::sequencer::embedded::{EmbeddedBench, Fault};
 use crate::sequencer::guard::Guarded;
-use crate::sequencer::{self, BenchIo, Options, Progress, Resume, RunResult};
+use crate::sequencer::{self, BenchIo, Interrupt, Options, Progress, Resume, RunResult};
 use crate::twin::TwinConfig;
 use rundir::{RunDir, RunDirError};
 
@@ -282,7 +281,7 @@ pub fn execute(
     place: Place,
     rt: &tokio::runtime::Runtime,
     progress: &mut dyn Progress,
-    interrupt: Arc<AtomicBool>,
+    interrupt: Arc<Interrupt>,
 ) -> Result<Finished, SessionError> {
     let embedded = plan.bench_cfg.is_embedded();
     let specs = [
@@ -420,13 +419,27 @@ pub fn execute(
         move_timeout_s: 600.0,
         resume: plan.resume.as_ref().map(|r| r.state.clone()),
     };
-    let result = rt.block_on(sequencer::run(
-        &plan.procedure,
-        bench.as_mut(),
-        &mut recorder,
-        progress,
-        &opts,
-    ));
+    // A bug that panics mid-run must not leave the bench where it was:
+    // the panic is caught, the bench brought to its safe state and read
+    // back, and the run ends as an error with everything logged kept.
+    let ran = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+        rt.block_on(sequencer::run(
+            &plan.procedure,
+            bench.as_mut(),
+            &mut recorder,
+            progress,
+            &opts,
+        ))
+    }));
+    let result = match ran {
+        Ok(r) => r,
+        Err(panic) => rt.block_on(after_panic(
+            bench.as_mut(),
+            &mut recorder,
+            &panic_text(panic.as_ref()),
+            plan.bench_cfg.devices.table.in_position_deg,
+        )),
+    };
     let part_link = bench.link_stats();
     let link = match &plan.resume {
         Some(r) => add_link(&r.link, &part_link),
@@ -481,6 +494,58 @@ pub fn execute(
         notes,
         notes_at_begin,
     })
+}
+
+/// What a panic said.
+fn panic_text(p: &(dyn std::any::Any + Send)) -> String {
+    p.downcast_ref::<&str>()
+        .map(|s| (*s).to_owned())
+        .or_else(|| p.downcast_ref::<String>().cloned())
+        .unwrap_or_else(|| "a panic without a message".into())
+}
+
+/// The end of a run that panicked: the bench to its safe state and read
+/// back, the failure logged; the result says what is known.
+async fn after_panic(
+    bench: &mut dyn BenchIo,
+    log: &mut dyn sequencer::Sink,
+    what: &str,
+    in_position_deg: f64,
+) -> RunResult {
+    use sequencer::{Level, finish};
+    let now = bench.now_s();
+    let mut expected = finish::Expected::default();
+    let safe = bench.safe_state().await;
+    if safe.is_ok() {
+        expected.safe();
+    }
+    let left = finish::bench_left(bench, &expected, in_position_deg).await;
+    let message = format!(
+        "internal error (please report it): {what}; the bench was brought to its safe state{}",
+        safe.err()
+            .map_or(String::new(), |e| format!(" but that failed: {e}"))
+    );
+    for (level, text) in [
+        (Level::Error, message.as_str()),
+        (Level::Info, &format!("bench left: {}", left.summary)),
+    ] {
+        // The log may be what failed; the report still says it all.
+        let _logged = log.event(now, level, text);
+    }
+    RunResult {
+        outcome: sequencer::Outcome::Error,
+        measurements: Vec::new(),
+        error: Some(sequencer::RunError {
+            device: None,
+            step: "unknown".into(),
+            message,
+        }),
+        cleanup_completed: false,
+        device_time_s: bench.now_s(),
+        frames: bench.link_stats().frames,
+        records: Default::default(),
+        bench_left: Some(left),
+    }
 }
 
 /// `report.json` and `report.html` in `dir`.

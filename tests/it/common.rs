@@ -159,3 +159,78 @@ pub fn write(dir: &Path, name: &str, text: &str) -> std::path::PathBuf {
 pub fn stderr(o: &std::process::Output) -> String {
     String::from_utf8_lossy(&o.stderr).into_owned()
 }
+
+/// `gyrobench sim serve` in its own process, killed when dropped.
+pub struct SimServe {
+    child: std::process::Child,
+    endpoints: Vec<String>,
+}
+
+impl SimServe {
+    /// Serve the simulated bench at `speed` (a config file written in `dir`).
+    pub fn start(dir: &Path, speed: f64) -> Self {
+        use std::io::BufRead;
+        let config = write(dir, "serve.toml", &format!("speed = {speed}\nseed = 1\n"));
+        let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_gyrobench"))
+            .args(["sim", "serve", "--config", s(&config)])
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::null())
+            .spawn()
+            .expect("sim serve starts");
+        let mut lines = std::io::BufReader::new(child.stdout.take().expect("stdout"));
+        let mut endpoints = Vec::new();
+        for _ in 0..7 {
+            let mut l = String::new();
+            lines.read_line(&mut l).expect("endpoint");
+            endpoints.push(l.trim().to_owned());
+        }
+        Self { child, endpoints }
+    }
+
+    /// The address of an endpoint (`tcp://...` or `pty://...`).
+    pub fn addr(&self, device: &str, protocol: &str, scheme: &str) -> String {
+        self.endpoints
+            .iter()
+            .find_map(|e| {
+                e.strip_prefix(&format!("{device} {protocol} "))
+                    .filter(|a| a.starts_with(scheme))
+            })
+            .expect("endpoint")
+            .to_owned()
+    }
+
+    /// A bench file of this bench's endpoints over `scheme`, at
+    /// `time_scale`, written in `dir`.
+    pub fn bench_file(&self, dir: &Path, scheme: &str, time_scale: f64) -> std::path::PathBuf {
+        let fixture = std::fs::read_to_string(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/fixtures/bench/sim-serve.toml"
+        ))
+        .expect("fixture");
+        let bench = format!(
+            "time_scale = {time_scale}\n{}",
+            fixture
+                .replace(
+                    "tcp://127.0.0.1:5001",
+                    &self.addr("chamber", "espec-ascii", scheme)
+                )
+                .replace("tcp://127.0.0.1:5003", &self.addr("table", "acl", scheme))
+                .replace(
+                    "tcp://127.0.0.1:5004",
+                    &self.addr("gyro", "rlg-frame", scheme)
+                )
+        );
+        write(
+            dir,
+            &format!("bench-{}.toml", scheme.trim_end_matches("://")),
+            &bench,
+        )
+    }
+}
+
+impl Drop for SimServe {
+    fn drop(&mut self) {
+        let _killed = self.child.kill();
+        let _reaped = self.child.wait();
+    }
+}

@@ -18,3 +18,4 @@ mod integrity;
 mod replay;
 mod resume;
 mod run;
+mod safety;

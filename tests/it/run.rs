@@ -5,6 +5,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use crate::cli::{gyrobench, temp_dir};
+use crate::common::SimServe;
 
 fn report(dir: &Path) -> serde_json::Value {
     let text = std::fs::read_to_string(dir.join("report.json")).expect("report.json written");
@@ -283,44 +284,10 @@ table = { outer_deg = 90.0, inner_deg = 0.0 }
 
 #[test]
 fn a_procedure_through_sim_serve_over_tcp_and_ptys_gives_the_embedded_verdict() {
-    use std::io::BufRead;
     let dir = temp_dir("run-served");
     let proc_path = dir.join("quick.toml");
     std::fs::write(&proc_path, QUICK).expect("procedure");
-    std::fs::write(dir.join("serve.toml"), "speed = 60.0\nseed = 1\n").expect("serve config");
-    let mut serve = Command::new(env!("CARGO_BIN_EXE_gyrobench"))
-        .args([
-            "sim",
-            "serve",
-            "--config",
-            dir.join("serve.toml").to_str().expect("utf-8"),
-        ])
-        .stdout(std::process::Stdio::piped())
-        .stderr(std::process::Stdio::null())
-        .spawn()
-        .expect("sim serve starts");
-    let mut lines = std::io::BufReader::new(serve.stdout.take().expect("stdout"));
-    let mut endpoints = Vec::new();
-    for _ in 0..7 {
-        let mut l = String::new();
-        lines.read_line(&mut l).expect("endpoint");
-        endpoints.push(l.trim().to_owned());
-    }
-    let addr = |device: &str, protocol: &str, scheme: &str| {
-        endpoints
-            .iter()
-            .find_map(|e| {
-                e.strip_prefix(&format!("{device} {protocol} "))
-                    .filter(|a| a.starts_with(scheme))
-            })
-            .expect("endpoint")
-            .to_owned()
-    };
-    let fixture = std::fs::read_to_string(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/fixtures/bench/sim-serve.toml"
-    ))
-    .expect("fixture");
+    let served = SimServe::start(&dir, 60.0);
     let p = proc_path.to_str().expect("utf-8");
     let embedded = dir.join("embedded");
     let out = run(&embedded, &[p]);
@@ -332,20 +299,8 @@ fn a_procedure_through_sim_serve_over_tcp_and_ptys_gives_the_embedded_verdict() 
     );
     let want = report(&embedded);
     for scheme in ["tcp://", "pty://"] {
-        let bench = format!(
-            "time_scale = 60.0\n{}",
-            fixture
-                .replace(
-                    "tcp://127.0.0.1:5001",
-                    &addr("chamber", "espec-ascii", scheme)
-                )
-                .replace("tcp://127.0.0.1:5003", &addr("table", "acl", scheme))
-                .replace("tcp://127.0.0.1:5004", &addr("gyro", "rlg-frame", scheme))
-        );
-        let name = scheme.trim_end_matches("://");
-        let bench_path = dir.join(format!("bench-{name}.toml"));
-        std::fs::write(&bench_path, bench).expect("bench file");
-        let run_dir = dir.join(name);
+        let bench_path = served.bench_file(&dir, scheme, 60.0);
+        let run_dir = dir.join(scheme.trim_end_matches("://"));
         let out = run(
             &run_dir,
             &[p, "--bench", bench_path.to_str().expect("utf-8")],
@@ -370,9 +325,13 @@ fn a_procedure_through_sim_serve_over_tcp_and_ptys_gives_the_embedded_verdict() 
             frames as u64,
             "{scheme}: every frame received is logged"
         );
+        assert_eq!(
+            got["bench_left"]["verified"], true,
+            "{scheme}: {}",
+            got["bench_left"]
+        );
     }
-    let _ = serve.kill();
-    let _ = serve.wait();
+    drop(served);
     std::fs::remove_dir_all(&dir).expect("cleanup");
 }
 

@@ -1,0 +1,223 @@
+//! Whatever ends a run, the bench is left in a known state, read back and
+//! reported: a cleanup ramp the host steps reaches its set point, SIGTERM
+//! and SIGHUP stop a run the way Ctrl-C does, a panic still brings the
+//! bench to its safe state, and a run killed through `sim serve` resumes.
+
+use std::path::Path;
+use std::process::{Command, Stdio};
+
+use crate::cli::{gyrobench, temp_dir};
+use crate::common::{MINI, SimServe, json, s, stderr, write};
+
+/// Wait until `path` exists, at most 60 s.
+fn wait_for(path: &Path) {
+    for _ in 0..3000 {
+        if path.exists() {
+            return;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    panic!("{} never appeared", path.display());
+}
+
+fn signal(pid: u32, sig: &str) {
+    let ok = Command::new("kill")
+        .args([&format!("-{sig}"), &pid.to_string()])
+        .status()
+        .expect("kill runs");
+    assert!(ok.success(), "kill -{sig} {pid}");
+}
+
+/// The last `/chamber/state` message of a complete log.
+fn last_chamber_state(log: &Path) -> serde_json::Value {
+    let bytes = std::fs::read(log).expect("log");
+    let mut last = serde_json::Value::Null;
+    for m in mcap::MessageStream::new(&bytes).expect("a complete log") {
+        let m = m.expect("message");
+        if m.channel.topic == "/chamber/state" {
+            last = serde_json::from_slice(&m.data).expect("JSON");
+        }
+    }
+    last
+}
+
+/// Up to +30 degC, a minute recorded, and a cleanup ramp back to +20.
+const RAMPED: &str = r#"
+[procedure]
+name = "ramped"
+dut_type = "RL-16"
+
+[[setup]]
+action = "chamber"
+set_c = 30.0
+ramp_c_per_min = 3.0
+
+[[main]]
+action = "record"
+label = "warm"
+duration_s = 60.0
+
+[[main]]
+action = "measure"
+name = "bias_dph:warm"
+metric = "mean_bias"
+records = ["warm"]
+low = -5.0
+high = 5.0
+unit = "deg/h"
+
+[[cleanup]]
+action = "chamber"
+set_c = 20.0
+ramp_c_per_min = 3.0
+"#;
+
+#[test]
+fn a_cleanup_ramp_the_host_steps_reaches_its_set_point_and_is_read_back() {
+    let dir = temp_dir("safety-ramp");
+    let served = SimServe::start(&dir, 100.0);
+    let bench = served.bench_file(&dir, "tcp://", 100.0);
+    let p = write(&dir, "ramped.toml", RAMPED);
+    let out = dir.join("run");
+    let r = gyrobench(&["run", s(&p), "--bench", s(&bench), "--out", s(&out)]);
+    assert_eq!(r.status.code(), Some(0), "{}", stderr(&r));
+    let report = json(&out.join("report.json"));
+    let left = &report["bench_left"];
+    assert_eq!(left["verified"], true, "{left}");
+    assert_eq!(left["intended"], "cleanup", "{left}");
+    assert_eq!(left["chamber_mode"], "constant", "{left}");
+    assert_eq!(left["chamber_set_point_c"], 20.0, "{left}");
+    assert_eq!(report["cleanup_completed"], true);
+    // The chamber's own reading at the end of the log agrees.
+    let last = last_chamber_state(&out.join("run.mcap"));
+    assert_eq!(last["set_point_c"], 20.0, "{last}");
+    assert!(String::from_utf8_lossy(&r.stdout).contains("bench left: chamber holding +20.0 degC"));
+    drop(served);
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
+
+#[test]
+fn sigterm_and_sighup_stop_a_run_as_ctrl_c_does() {
+    let dir = temp_dir("safety-signals");
+    let p = write(&dir, "mini.toml", MINI);
+    for (sig, code) in [("TERM", 143), ("HUP", 129)] {
+        let out = dir.join(sig);
+        let child = Command::new(env!("CARGO_BIN_EXE_gyrobench"))
+            .args(["run", s(&p), "--out", s(&out), "--speed", "300"])
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("run starts");
+        wait_for(&out.join("run.mcap"));
+        std::thread::sleep(std::time::Duration::from_millis(400));
+        signal(child.id(), sig);
+        let done = child.wait_with_output().expect("ends");
+        assert_eq!(
+            done.status.code(),
+            Some(code),
+            "SIG{sig}: {}",
+            stderr(&done)
+        );
+        let report = json(&out.join("report.json"));
+        assert_eq!(report["outcome"], "aborted", "SIG{sig}");
+        let message = report["error"]["message"].as_str().expect("message");
+        assert!(message.contains(&format!("SIG{sig}")), "{message}");
+        assert_eq!(
+            report["bench_left"]["verified"], true,
+            "{}",
+            report["bench_left"]
+        );
+        // The log is complete: its footer is there and replay reads it whole.
+        let replayed = dir.join(format!("{sig}-replay"));
+        let r = gyrobench(&["replay", s(&out.join("run.mcap")), "--out", s(&replayed)]);
+        assert!(!stderr(&r).contains("incomplete"), "{}", stderr(&r));
+        assert_eq!(json(&replayed.join("report.json"))["outcome"], "aborted");
+    }
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
+
+#[test]
+fn a_panic_mid_run_still_brings_the_bench_to_its_safe_state() {
+    let dir = temp_dir("safety-panic");
+    let p = write(&dir, "mini.toml", MINI);
+    let out = dir.join("run");
+    let r = gyrobench(&["run", s(&p), "--out", s(&out), "--inject", "panic@900"]);
+    assert_eq!(r.status.code(), Some(1), "{}", stderr(&r));
+    let report = json(&out.join("report.json"));
+    assert_eq!(report["outcome"], "error");
+    let message = report["error"]["message"].as_str().expect("message");
+    assert!(
+        message.contains("internal error") && message.contains("safe state"),
+        "{message}"
+    );
+    let left = &report["bench_left"];
+    assert_eq!(left["intended"], "safe_state", "{left}");
+    assert_eq!(left["chamber_mode"], "standby", "{left}");
+    assert_eq!(left["verified"], true, "{left}");
+    // What was logged before the panic is kept in a complete log.
+    let r = gyrobench(&[
+        "replay",
+        s(&out.join("run.mcap")),
+        "--out",
+        s(&dir.join("replay")),
+    ]);
+    assert!(!stderr(&r).contains("incomplete"), "{}", stderr(&r));
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
+
+#[test]
+fn a_device_run_stopped_by_sigterm_or_killed_through_sim_serve_ends_safe_and_resumes() {
+    let dir = temp_dir("safety-served");
+    let served = SimServe::start(&dir, 200.0);
+    let bench = served.bench_file(&dir, "tcp://", 200.0);
+    let p = write(&dir, "mini.toml", MINI);
+    // SIGTERM: cleanup, the safe state read back from the real drivers.
+    let out = dir.join("term");
+    let child = Command::new(env!("CARGO_BIN_EXE_gyrobench"))
+        .args(["run", s(&p), "--bench", s(&bench), "--out", s(&out)])
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("run starts");
+    wait_for(&out.join("run.mcap"));
+    std::thread::sleep(std::time::Duration::from_millis(1500));
+    signal(child.id(), "TERM");
+    let done = child.wait_with_output().expect("ends");
+    assert_eq!(done.status.code(), Some(143), "{}", stderr(&done));
+    let report = json(&out.join("report.json"));
+    assert_eq!(report["outcome"], "aborted");
+    assert_eq!(
+        report["bench_left"]["verified"], true,
+        "{}",
+        report["bench_left"]
+    );
+
+    // SIGKILL: nothing runs; the next part picks up from the log.
+    let out = dir.join("kill");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_gyrobench"))
+        .args(["run", s(&p), "--bench", s(&bench), "--out", s(&out)])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("run starts");
+    wait_for(&out.join("run.mcap"));
+    std::thread::sleep(std::time::Duration::from_millis(2500));
+    child.kill().expect("SIGKILL");
+    child.wait().expect("reaped");
+    assert!(!out.join("report.json").exists());
+    let r = gyrobench(&["run", "--resume", s(&out)]);
+    assert!(
+        r.status.code().is_some_and(|c| c == 0 || c == 3),
+        "{}",
+        stderr(&r)
+    );
+    let report = json(&out.join("report.json"));
+    assert_eq!(
+        report["bench_left"]["verified"], true,
+        "{}",
+        report["bench_left"]
+    );
+    assert_eq!(report["measurements"].as_array().map(Vec::len), Some(6));
+    drop(served);
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
