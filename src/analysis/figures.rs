@@ -68,6 +68,17 @@ pub fn drift_pp(x: &[f64], window: usize) -> f64 {
     peak_to_peak(&moving_average(x, window))
 }
 
+/// [`drift_pp`] over several stretches (parts of a resumed run): each is
+/// smoothed on its own, never across the break, and the peak-to-peak is
+/// taken over all of them. None when no stretch is as long as `window`.
+pub fn drift_pp_parts(parts: &[Vec<f64>], window: usize) -> Option<f64> {
+    let smoothed: Vec<f64> = parts
+        .iter()
+        .flat_map(|p| moving_average(p, window))
+        .collect();
+    (!smoothed.is_empty()).then(|| peak_to_peak(&smoothed))
+}
+
 /// Slope by local linear regression over `±half` samples (edges use what
 /// is there), per sample spacing `dt`. Far less noisy than a plain
 /// difference on quantized temperatures.

@@ -100,27 +100,47 @@ fn spacing(series: &[Interval]) -> f64 {
 /// rate does not leak into the temperature slope. `None` when the
 /// temperature does not move enough to tell (or too few samples).
 pub fn temperature_sensitivity(series: &[Interval]) -> Option<(f64, f64)> {
-    if series.len() < 10 {
+    temperature_sensitivity_parts(&[series])
+}
+
+/// [`temperature_sensitivity`] over the parts of a resumed run: one
+/// constant per part (each power-on has its own turn-on bias), the
+/// temperature rate differentiated within each part, never across a break.
+pub fn temperature_sensitivity_parts(parts: &[&[Interval]]) -> Option<(f64, f64)> {
+    let n: usize = parts.iter().map(|p| p.len()).sum();
+    if n < 10 {
         return None;
     }
-    let t: Vec<f64> = series.iter().map(|s| s.time_s).collect();
-    let tk: Vec<f64> = series.iter().map(|s| s.tcase_c).collect();
-    let rate = super::figures::derivative_by_time(&t, &tk, 30.0);
-    let y: Vec<f64> = series.iter().map(Interval::bias_dph).collect();
-    let n = series.len();
-    let x = nalgebra::DMatrix::from_fn(n, 3, |i, j| match j {
-        0 => 1.0,
-        1 => tk[i],
-        _ => rate[i] * 60.0,
+    let np = parts.len();
+    let mut rows: Vec<(usize, f64, f64, f64)> = Vec::with_capacity(n);
+    for (k, part) in parts.iter().enumerate() {
+        let t: Vec<f64> = part.iter().map(|s| s.time_s).collect();
+        let tk: Vec<f64> = part.iter().map(|s| s.tcase_c).collect();
+        let rate = super::figures::derivative_by_time(&t, &tk, 30.0);
+        for (i, s) in part.iter().enumerate() {
+            rows.push((k, tk[i], rate[i], s.bias_dph()));
+        }
+    }
+    let x = nalgebra::DMatrix::from_fn(n, np + 2, |i, j| {
+        let (k, tk, rate, _) = rows[i];
+        match j {
+            j if j < np => f64::from(u8::from(j == k)),
+            j if j == np => tk,
+            _ => rate * 60.0,
+        }
     });
-    let spread = tk.iter().copied().fold(f64::NEG_INFINITY, f64::max)
-        - tk.iter().copied().fold(f64::INFINITY, f64::min);
-    if spread < 0.5 {
+    let (lo, hi) = rows
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), r| {
+            (lo.min(r.1), hi.max(r.1))
+        });
+    if hi - lo < 0.5 {
         return None;
     }
+    let y: Vec<f64> = rows.iter().map(|r| r.3).collect();
     let b = nalgebra::DVector::from_column_slice(&y);
     let beta = x.svd(true, true).solve(&b, 1e-12).ok()?;
-    (beta[1].is_finite() && beta[2].is_finite()).then(|| (beta[1], beta[2]))
+    (beta[np].is_finite() && beta[np + 1].is_finite()).then(|| (beta[np], beta[np + 1]))
 }
 
 #[cfg(test)]

@@ -254,6 +254,7 @@ impl State<'_> {
                         .unwrap_or(earlier.completed_steps);
                     let r = resume_from(&earlier, completed);
                     self.records = r.records;
+                    self.records.set_part(r.part);
                     self.measurements = r.measurements;
                     self.frames = r.frames;
                     self.cursor = r.start_at;

@@ -214,6 +214,23 @@ impl BenchIo for DeviceBench {
         self.stats.lock().map_or_else(|p| *p.into_inner(), |s| *s)
     }
 
+    async fn idle(
+        &mut self,
+        t_s: f64,
+    ) -> Result<(crate::driver::ChamberReading, crate::driver::TableReading), DeviceError> {
+        let wall = ((t_s - self.now_s()) / self.time_scale).max(0.0);
+        tokio::time::sleep(Duration::try_from_secs_f64(wall).unwrap_or(Duration::ZERO)).await;
+        // Frames that arrive now are not the run's: dropped, so the
+        // channel never fills.
+        while self.frames.try_recv().is_ok() {}
+        let now = self.now_s();
+        self.step_ramp(now).await?;
+        let chamber = self.chamber.read().await?;
+        self.last_air_c = chamber.air_c;
+        let table = self.table.read().await?;
+        Ok((chamber, table))
+    }
+
     fn pending_s(&self) -> f64 {
         self.ramp.map_or(0.0, |r| r.remaining_s(self.now_s()))
     }

@@ -122,8 +122,10 @@ impl EmbeddedBench {
         self.faults.iter().any(|(t, g)| *g == f && now >= *t)
     }
 
-    fn check(&self) -> Result<(), DeviceError> {
-        if self.active(Fault::ChamberSilent) {
+    /// The faults of `devices` that are playing now, as their errors.
+    fn check(&self, devices: &[&str]) -> Result<(), DeviceError> {
+        let on = |d: &str| devices.contains(&d);
+        if on("chamber") && self.active(Fault::ChamberSilent) {
             return Err(DeviceError::Timeout {
                 device: "chamber".into(),
                 request: "TEMP?".into(),
@@ -131,12 +133,12 @@ impl EmbeddedBench {
                 attempts: 3,
             });
         }
-        if self.active(Fault::TableInterlock) {
+        if on("table") && self.active(Fault::TableInterlock) {
             return Err(DeviceError::Interlock {
                 device: "table".into(),
             });
         }
-        if self.active(Fault::GyroSilent) {
+        if on("gyro") && self.active(Fault::GyroSilent) {
             return Err(DeviceError::Silent {
                 device: "gyro".into(),
                 timeout_s: 1.0,
@@ -193,7 +195,7 @@ impl BenchIo for EmbeddedBench {
     }
 
     async fn set_chamber(&mut self, set_c: f64, ramp_c_per_min: f64) -> Result<(), DeviceError> {
-        self.check()?;
+        self.check(&["chamber"])?;
         self.twin
             .set_chamber(set_c, ramp_c_per_min)
             .map_err(|e| DeviceError::Refused {
@@ -206,23 +208,46 @@ impl BenchIo for EmbeddedBench {
     }
 
     async fn move_table(&mut self, angles: TableAngles) -> Result<(), DeviceError> {
-        self.check()?;
+        self.check(&["table"])?;
         self.commanded = angles;
         self.twin.move_table(angles);
         Ok(())
     }
 
     async fn safe_state(&mut self) -> Result<(), DeviceError> {
+        // An interlocked table is stopped already; a silent chamber cannot
+        // be told anything.
         self.twin
             .demand_table(Some(AxisDemand::Stop), Some(AxisDemand::Stop));
+        self.check(&["chamber"])?;
         let room = self.twin.config().chamber.initial_c;
-        let _ = self.twin.set_chamber(room, PASSIVE_DRIFT_C_PER_MIN);
+        self.twin
+            .set_chamber(room, PASSIVE_DRIFT_C_PER_MIN)
+            .map_err(|e| DeviceError::Refused {
+                device: "chamber".into(),
+                request: "standby".into(),
+                reason: e.to_string(),
+            })?;
         self.mode = ChamberMode::Standby;
         Ok(())
     }
 
+    async fn idle(&mut self, t_s: f64) -> Result<(ChamberReading, TableReading), DeviceError> {
+        // A tripped interlock stops the table, it does not blind it.
+        self.check(&["chamber"])?;
+        self.clock.sleep_until(t_s);
+        self.twin.run_until(t_s, |_, _| {});
+        let st = self.state();
+        Ok((st.chamber, st.table))
+    }
+
     async fn advance(&mut self, t_s: f64, tick: &mut Tick) -> Result<(), DeviceError> {
-        self.check()?;
+        if self.active(Fault::TableInterlock) {
+            // What the interlock does on the real table: both axes stop.
+            self.twin
+                .demand_table(Some(AxisDemand::Stop), Some(AxisDemand::Stop));
+        }
+        self.check(&["chamber", "table", "gyro"])?;
         if self.active(Fault::ProcessKill) {
             // What SIGKILL does: nothing after this line runs.
             std::process::abort();
@@ -265,7 +290,7 @@ impl BenchIo for EmbeddedBench {
     }
 
     async fn read_back(&mut self) -> Result<(ChamberReading, TableReading), DeviceError> {
-        self.check()?;
+        self.check(&["chamber"])?;
         let st = self.state();
         Ok((st.chamber, st.table))
     }

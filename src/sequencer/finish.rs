@@ -146,6 +146,10 @@ pub async fn bench_left(
     let bad = mismatches(&c, &t, expected, in_position_deg);
     let at_rest = t.rates.outer_deg.abs() <= AT_REST_DPS && t.rates.inner_deg.abs() <= AT_REST_DPS;
     let chamber = match c.mode {
+        ChamberMode::Constant if (c.air_c - c.set_point_c).abs() > 1.0 => format!(
+            "chamber on its way to {:+.1} degC (air {:+.1} degC now)",
+            c.set_point_c, c.air_c
+        ),
         ChamberMode::Constant => format!(
             "chamber holding {:+.1} degC (air {:+.1} degC)",
             c.set_point_c, c.air_c

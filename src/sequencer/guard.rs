@@ -114,6 +114,13 @@ impl<B: BenchIo> BenchIo for Guarded<B> {
     ) -> Result<(crate::driver::ChamberReading, crate::driver::TableReading), DeviceError> {
         self.inner.read_back().await
     }
+
+    async fn idle(
+        &mut self,
+        t_s: f64,
+    ) -> Result<(crate::driver::ChamberReading, crate::driver::TableReading), DeviceError> {
+        self.inner.idle(t_s).await
+    }
 }
 
 #[cfg(test)]

@@ -6,10 +6,10 @@ use serde::Serialize;
 
 use super::health::RecordHealth;
 use super::{BenchState, Tick};
-use crate::analysis::figures::{bias_stability, drift_pp, mean};
+use crate::analysis::figures::{bias_stability, drift_pp, drift_pp_parts, mean};
 use crate::analysis::model::{self, Fit, ModelKind};
 use crate::analysis::series::Interval;
-use crate::analysis::study::{self_heating_dph, temperature_sensitivity};
+use crate::analysis::study::{self_heating_dph, temperature_sensitivity_parts};
 use crate::procedure::{Measure, Metric};
 
 /// 1 Hz intervals of the whole run, and by record label.
@@ -23,6 +23,10 @@ pub struct Records {
     pub order: Vec<String>,
     /// Whether each record's frames can be judged (records with frames).
     health: BTreeMap<String, RecordHealth>,
+    /// The part of the run (power-on) each record was taken in.
+    part_of: BTreeMap<String, u32>,
+    /// The part records start in now (0 until set: the first).
+    part: u32,
 }
 
 impl Records {
@@ -30,6 +34,26 @@ impl Records {
     pub fn start(&mut self, label: &str) {
         self.by_label.entry(label.to_owned()).or_default();
         self.order.push(label.to_owned());
+        self.part_of.insert(label.to_owned(), self.part.max(1));
+    }
+
+    /// Records from here on are taken in part `part` of the run (a new
+    /// power-on after a resume).
+    pub fn set_part(&mut self, part: u32) {
+        self.part = part;
+    }
+
+    /// The intervals of `labels`, grouped by the part of the run they were
+    /// taken in (in part order; one group for a run never resumed).
+    pub fn by_part(&self, labels: &[String]) -> Vec<Vec<Interval>> {
+        let mut parts: BTreeMap<u32, Vec<Interval>> = BTreeMap::new();
+        for l in labels {
+            if let Some(ivs) = self.by_label.get(l) {
+                let part = self.part_of.get(l).copied().unwrap_or(1);
+                parts.entry(part).or_default().extend_from_slice(ivs);
+            }
+        }
+        parts.into_values().filter(|v| !v.is_empty()).collect()
     }
 
     /// A record of frames starts: its health is watched from here.
@@ -252,23 +276,55 @@ impl Measurement {
 }
 
 /// Compute a measure on the records; `coeffs` compensate when given.
+///
+/// Figures over records of several parts of a resumed run (several
+/// power-ons) give each part its own constant, as each has its own
+/// turn-on bias: the compensation and sensitivity fits have one offset per
+/// part, and drifts are smoothed within a part, never across the break.
+/// For a run never resumed this is the single-part figure.
 pub fn compute(m: &Measure, records: &Records, coeffs: Option<&Fit>, step: &str) -> Measurement {
-    let series: Vec<Interval> = m
-        .records
-        .iter()
-        .filter_map(|r| records.get(r))
-        .flat_map(|s| s.iter().copied())
-        .collect();
+    let parts = records.by_part(&m.records);
+    let series: Vec<Interval> = parts.iter().flatten().copied().collect();
     let bias: Vec<f64> = series.iter().map(Interval::bias_dph).collect();
     let window = m.averaging_s.round().max(1.0) as usize;
     let mut note = String::new();
+    let part_refs: Vec<&[Interval]> = parts.iter().map(Vec::as_slice).collect();
     let value = match m.metric {
         Metric::BiasStability => Some(bias_stability(&bias, window)),
+        Metric::DriftPp if parts.len() > 1 => {
+            // The turn-on bias differs between power-ons: each part is
+            // shifted by its offset from the first, as the model-4 fit
+            // with one offset per part estimates it.
+            match model::fit_runs(ModelKind::Model4, &part_refs) {
+                Ok(f) => {
+                    note = format!(
+                        "{} parts (power-ons) of a resumed run; turn-on offsets from the model-4 fit removed",
+                        parts.len()
+                    );
+                    let shifted: Vec<Vec<f64>> = parts
+                        .iter()
+                        .zip(&f.offsets)
+                        .map(|(p, o)| {
+                            p.iter()
+                                .map(|iv| iv.bias_dph() - (o - f.offsets[0]))
+                                .collect()
+                        })
+                        .collect();
+                    drift_pp_parts(&shifted, window)
+                }
+                Err(e) => {
+                    note = format!("cannot separate the parts' turn-on offsets: {e}");
+                    None
+                }
+            }
+        }
         Metric::DriftPp => (bias.len() >= window).then(|| drift_pp(&bias, window)),
         Metric::MeanBias => Some(mean(&bias)),
         Metric::SelfHeating => self_heating_dph(&series).map(f64::abs),
-        Metric::TemperatureSensitivity => temperature_sensitivity(&series).map(|(a, _)| a),
-        Metric::TemperatureRateSensitivity => temperature_sensitivity(&series).map(|(_, b)| b),
+        Metric::TemperatureSensitivity => temperature_sensitivity_parts(&part_refs).map(|(a, _)| a),
+        Metric::TemperatureRateSensitivity => {
+            temperature_sensitivity_parts(&part_refs).map(|(_, b)| b)
+        }
         Metric::CompensatedDriftPp => {
             let fit = match coeffs {
                 Some(f) => {
@@ -277,11 +333,24 @@ pub fn compute(m: &Measure, records: &Records, coeffs: Option<&Fit>, step: &str)
                 }
                 None => {
                     note = "model 4 fitted on these records (no --coeffs given)".into();
-                    model::fit(ModelKind::Model4, &series)
+                    model::fit_runs(ModelKind::Model4, &part_refs).map(|m| m.fit)
                 }
             };
             match fit {
-                Ok(f) if bias.len() >= window => Some(drift_pp(&f.residual(&series), window)),
+                Ok(f) if bias.len() >= window => {
+                    // Each part's own constant removed when there are
+                    // several (a p-p does not see it within one part).
+                    let several = part_refs.len() > 1;
+                    let residuals: Vec<Vec<f64>> = part_refs
+                        .iter()
+                        .map(|p| {
+                            let r = f.residual(p);
+                            let c = if several { mean(&r) } else { 0.0 };
+                            r.iter().map(|v| v - c).collect()
+                        })
+                        .collect();
+                    drift_pp_parts(&residuals, window)
+                }
                 Ok(_) => None,
                 Err(e) => {
                     note = format!("cannot compensate: {e}");

@@ -14,6 +14,7 @@ pub mod guard;
 pub mod health;
 pub mod interrupt;
 pub mod measure;
+pub mod resume;
 
 use std::sync::Arc;
 
@@ -26,6 +27,7 @@ use crate::procedure::{Procedure, Step, StepKind};
 pub use events::{Level, StepEvent, StepPhase};
 pub use interrupt::Interrupt;
 use measure::{Measurement, Records};
+pub use resume::{Resume, resume_plan};
 
 /// One gyro frame as received (wire units).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -102,6 +104,10 @@ pub trait BenchIo: Send {
     /// Read the chamber and the table back (to verify the state a run
     /// leaves them in).
     async fn read_back(&mut self) -> Result<(ChamberReading, TableReading), DeviceError>;
+    /// Let device time pass to `t_s` without the gyro (the end of a run,
+    /// when the gyro may be what failed): commands the host carries out go
+    /// on; the chamber and table as read at `t_s`.
+    async fn idle(&mut self, t_s: f64) -> Result<(ChamberReading, TableReading), DeviceError>;
 }
 
 /// Where the run's data goes (the recorder implements it).
@@ -251,112 +257,9 @@ pub struct Options {
     pub resume: Option<Resume>,
 }
 
-/// Where a resumed run picks up, and what the earlier parts left.
-#[derive(Debug, Clone, Default)]
-pub struct Resume {
-    /// Index, in setup + main run order, of the first step to run
-    /// ([`resume_plan`]).
-    pub start_at: usize,
-    /// Steps the earlier parts completed.
-    pub completed: usize,
-    /// Which part this is (2 for the first resume).
-    pub part: u32,
-    /// Records of the earlier parts ([`Resume::trim`]med).
-    pub records: Records,
-    /// Measurements the earlier parts made (trimmed).
-    pub measurements: Vec<Measurement>,
-    /// Frames of the earlier parts.
-    pub frames: u64,
-    /// Device time of the earlier parts, s.
-    pub device_time_s: f64,
-}
-
 /// How long past its expected end the bench may take to settle at the end
 /// of a run, s.
 pub const SETTLE_MARGIN_S: f64 = 120.0;
-
-/// Soak criteria of a resume when the procedure has no soak step (ours).
-pub const RESUME_SOAK: StepKind = StepKind::Soak {
-    band_c: 1.0,
-    case_slope_c_per_min: 0.05,
-    hold_s: 600.0,
-    timeout_s: 6.0 * 3600.0,
-};
-
-/// Where a resume picks up after `completed` steps (setup + main, run
-/// order), and the steps that first bring the bench back.
-///
-/// A thermal segment is whole: if no soak step stands between the last
-/// chamber step and the resume point, the records since that chamber step
-/// (and the one cut short) were taken while the chamber ramped or settled,
-/// and are taken again:
-/// the resume starts at that chamber step, after restoring the set point
-/// before it. The restore is the last table move, the last chamber set
-/// point, and a soak that re-checks its conditions (the procedure's own
-/// criteria when it has a soak step, else [`RESUME_SOAK`]).
-pub fn resume_plan(p: &Procedure, completed: usize) -> (usize, Vec<(usize, Step)>) {
-    let steps: Vec<&Step> = p.setup.iter().chain(&p.main).collect();
-    let completed = completed.min(steps.len());
-    let last_before =
-        |end: usize, f: &dyn Fn(&StepKind) -> bool| steps[..end].iter().rposition(|s| f(&s.kind));
-    let is_chamber = |k: &StepKind| matches!(k, StepKind::Chamber { .. });
-    let is_soak = |k: &StepKind| matches!(k, StepKind::Soak { .. });
-    let mut start_at = completed;
-    if let Some(c) = last_before(completed, &is_chamber)
-        && last_before(completed, &is_soak).is_none_or(|s| s < c)
-        && steps[c + 1..(completed + 1).min(steps.len())]
-            .iter()
-            .any(|s| matches!(s.kind, StepKind::Record { .. }))
-    {
-        start_at = c;
-    }
-    let mut restore: Vec<(usize, Step)> = Vec::new();
-    if let Some(m) = last_before(start_at, &|k| matches!(k, StepKind::Move { .. })) {
-        restore.push((m, steps[m].clone()));
-    }
-    if let Some(c) = last_before(start_at, &is_chamber) {
-        restore.push((c, steps[c].clone()));
-        let soak = p
-            .steps()
-            .find(|s| is_soak(&s.kind))
-            .map_or(RESUME_SOAK, |s| s.kind.clone());
-        restore.push((
-            c,
-            Step {
-                group: steps[c].group,
-                key: format!("{}.resume_soak", steps[c].key),
-                line: steps[c].line,
-                kind: soak,
-            },
-        ));
-    }
-    (start_at, restore)
-}
-
-impl Resume {
-    /// What the earlier parts leave for a resume at `start_at`: records and
-    /// measurements of the steps before it; records that will be taken
-    /// again are emptied.
-    pub fn trim(
-        p: &Procedure,
-        start_at: usize,
-        records: &mut Records,
-        measurements: &mut Vec<Measurement>,
-    ) {
-        let steps: Vec<&Step> = p.setup.iter().chain(&p.main).collect();
-        let kept = steps
-            .iter()
-            .take(start_at)
-            .filter(|s| matches!(s.kind, StepKind::Measure(_)))
-            .count();
-        measurements.truncate(kept);
-        for s in steps.iter().skip(start_at) {
-            if let StepKind::Record { label, .. } = &s.kind {
-                records.discard(label);
-            }
-        }
-    }
-}
 
 enum Stop {
     Device(DeviceError),
@@ -426,10 +329,14 @@ impl Run<'_> {
             );
         }
         let until = self.bench.now_s() + pending + SETTLE_MARGIN_S;
+        let mut table = self.last.as_ref().map(|st| st.table);
+        // Ticks log the bench as it settles; when a tick fails (the gyro,
+        // or the device that stopped the run), time passes without them.
+        let mut ticking = true;
         loop {
-            let at_rest = self.last.as_ref().is_some_and(|st| {
-                st.table.rates.outer_deg.abs() <= finish::AT_REST_DPS
-                    && st.table.rates.inner_deg.abs() <= finish::AT_REST_DPS
+            let at_rest = table.is_some_and(|t| {
+                t.rates.outer_deg.abs() <= finish::AT_REST_DPS
+                    && t.rates.inner_deg.abs() <= finish::AT_REST_DPS
             });
             if self.bench.pending_s() <= 0.0 && at_rest {
                 return Ok(());
@@ -440,7 +347,17 @@ impl Run<'_> {
                     self.bench.pending_s()
                 )));
             }
-            self.tick(until, None, "end of run").await?;
+            if ticking {
+                match self.tick(until, None, "end of run").await {
+                    Ok(()) => table = self.last.as_ref().map(|st| st.table),
+                    Err(Stop::Device(_)) => ticking = false,
+                    Err(e) => return Err(e),
+                }
+            } else {
+                let t = (self.bench.now_s() + 1.0).min(until);
+                let (_, tr) = self.bench.idle(t).await.map_err(Stop::Device)?;
+                table = Some(tr);
+            }
         }
     }
 
@@ -501,6 +418,9 @@ impl Run<'_> {
         let lsb = self.bench.lsb_arcsec();
         let tl = self.bench.temp_lsb_c();
         if let Some(state) = &self.tick.state {
+            // The tick's state is the truth whatever it says (an alarm, a
+            // hot unit): what follows the run's end judges from it.
+            self.last = Some(state.clone());
             if !state.chamber.alarms.is_empty() && !self.cleaning_up {
                 return Err(Stop::Device(DeviceError::Alarm {
                     device: "chamber".into(),
@@ -723,6 +643,7 @@ pub async fn run(
     let start_at = opts.resume.as_ref().map_or(0, |res| res.start_at);
     if let Some(res) = &opts.resume {
         r.records = res.records.clone();
+        r.records.set_part(res.part);
         r.measurements = res.measurements.clone();
         stop = restore(&mut r, p, res).await.err();
     }

@@ -19,3 +19,4 @@ mod replay;
 mod resume;
 mod run;
 mod safety;
+mod sweep;

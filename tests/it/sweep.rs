@@ -1,0 +1,519 @@
+//! The fault-and-resume sweep: a procedure is interrupted at every step
+//! boundary and in the middle of every step, by each fault kind, on the
+//! embedded bench at full speed, and resumed; every resumed run is checked.
+//!
+//! Shared by the quick sweep in `cargo test` (`resume.rs`) and the full
+//! sweep of the shipped acceptance that CI runs
+//! (`cargo run --release --example resume_sweep`).
+//!
+//! For each interruption: the first part's log is never overwritten; the
+//! resume passes (a passing unit); every figure lies within the spread of
+//! uninterrupted runs of other seeds; no step the first part completed is
+//! taken again, except the records of the interrupted thermal segment
+//! (`resume_plan`); the bench is left verified safe by every part; and
+//! replaying the last part gives its report byte for byte (nothing lost).
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use gyrobench::bench::BenchConfig;
+use gyrobench::config::Source;
+use gyrobench::procedure::Procedure;
+use gyrobench::sequencer::resume_plan;
+
+/// What a sweep needs.
+#[derive(Debug, Clone)]
+pub struct Sweep {
+    /// The gyrobench binary.
+    pub bin: PathBuf,
+    /// The procedure.
+    pub procedure: PathBuf,
+    /// Where the runs go.
+    pub dir: PathBuf,
+    /// Seeds of the uninterrupted reference runs (the first is the one
+    /// interrupted).
+    pub seeds: Vec<u64>,
+    /// Fault kinds, each with the share of the points it is played at
+    /// (1 = every point, 3 = every third).
+    pub faults: Vec<(String, usize)>,
+    /// Processes at once.
+    pub jobs: usize,
+}
+
+/// One interruption and its resume.
+#[derive(Debug, Clone)]
+pub struct Row {
+    /// Fault kind.
+    pub fault: String,
+    /// Device time of the fault, s.
+    pub at_s: f64,
+    /// The step it fell in.
+    pub step: String,
+    /// Exit code of the first part.
+    pub first_exit: Option<i32>,
+    /// Exit code of the resume.
+    pub resume_exit: Option<i32>,
+    /// Outcome of the resumed run.
+    pub outcome: String,
+    /// What went wrong (empty: nothing).
+    pub problems: Vec<String>,
+    /// The worst figure, in standard deviations of the reference runs.
+    pub worst: (String, f64),
+    /// Steps the first part completed that were taken again.
+    pub retaken: usize,
+}
+
+/// The totals of a sweep.
+#[derive(Debug, Clone, Default)]
+pub struct Totals {
+    /// Interruptions played.
+    pub runs: usize,
+    /// Runs whose log or report could not be read back whole.
+    pub lost: usize,
+    /// First-part logs changed by the resume.
+    pub overwritten: usize,
+    /// Resumes that did not pass.
+    pub resumes_failed: usize,
+    /// Parts that left the bench unverified.
+    pub bench_unsafe: usize,
+    /// Resumed runs with a figure outside the reference spread.
+    pub figures_outside: usize,
+    /// Steps taken again outside the interrupted segment.
+    pub retaken_outside: usize,
+}
+
+fn json(p: &Path) -> Option<serde_json::Value> {
+    serde_json::from_str(&std::fs::read_to_string(p).ok()?).ok()
+}
+
+/// (index, key, start, end) of every setup and main step a log ran.
+fn step_times(log: &Path) -> Vec<(usize, String, f64, f64)> {
+    let bytes = std::fs::read(log).unwrap_or_default();
+    let mut starts: BTreeMap<usize, (String, f64)> = BTreeMap::new();
+    let mut out = Vec::new();
+    let Ok(stream) = mcap::MessageStream::new(&bytes) else {
+        return out;
+    };
+    for m in stream.flatten() {
+        if m.channel.topic != "/steps" {
+            continue;
+        }
+        let Ok(e) = serde_json::from_slice::<serde_json::Value>(&m.data) else {
+            continue;
+        };
+        let (Some(i), Some(t)) = (e["index"].as_u64(), e["t_s"].as_f64()) else {
+            continue;
+        };
+        let i = i as usize;
+        match e["phase"].as_str() {
+            Some("start") => {
+                starts.insert(i, (e["key"].as_str().unwrap_or("").to_owned(), t));
+            }
+            Some("end") if e["group"] != "cleanup" => {
+                if let Some((k, t0)) = starts.remove(&i) {
+                    out.push((i, k, t0, t));
+                }
+            }
+            _ => {}
+        }
+    }
+    out
+}
+
+/// Indices of the steps a log started and completed (phase start / end).
+fn started_and_completed(log: &Path) -> (Vec<usize>, Vec<usize>) {
+    let bytes = std::fs::read(log).unwrap_or_default();
+    let (mut started, mut done) = (Vec::new(), Vec::new());
+    let opts = mcap::read::Options::IgnoreEndMagic.into();
+    let Ok(stream) = mcap::MessageStream::new_with_options(&bytes, opts) else {
+        return (started, done);
+    };
+    for m in stream {
+        let Ok(m) = m else { break };
+        if m.channel.topic != "/steps" {
+            continue;
+        }
+        let Ok(e) = serde_json::from_slice::<serde_json::Value>(&m.data) else {
+            continue;
+        };
+        if e["group"] == "cleanup" {
+            continue;
+        }
+        if let Some(i) = e["index"].as_u64() {
+            match e["phase"].as_str() {
+                Some("start") => started.push(i as usize),
+                Some("end") => done.push(i as usize),
+                _ => {}
+            }
+        }
+    }
+    (started, done)
+}
+
+fn gyrobench(bin: &Path, args: &[&str]) -> std::process::Output {
+    Command::new(bin)
+        .args(args)
+        .output()
+        .expect("gyrobench runs")
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().expect("utf-8 path")
+}
+
+/// A resumed run's figure is within the run-to-run spread when it lies
+/// within the reference runs' range, or within this many of their
+/// standard deviations from their mean.
+pub const SPREAD_SD: f64 = 4.0;
+
+/// Mean and spread of every figure over the reference runs.
+#[derive(Debug, Clone)]
+struct Spread {
+    mean: f64,
+    sd: f64,
+    min: f64,
+    max: f64,
+}
+
+impl Sweep {
+    /// Run the sweep; the rows and the totals.
+    pub fn run(&self) -> (Vec<Row>, Totals) {
+        let _ = std::fs::remove_dir_all(&self.dir);
+        std::fs::create_dir_all(&self.dir).expect("sweep dir");
+        let text = std::fs::read_to_string(&self.procedure).expect("procedure");
+        let procedure = Procedure::from_source(
+            &Source::from_text(s(&self.procedure), &text),
+            &BenchConfig::embedded(),
+        )
+        .expect("the procedure loads");
+        // Reference runs: the figures' spread, and where each step lies.
+        let next = std::sync::atomic::AtomicUsize::new(0);
+        let reports = std::sync::Mutex::new(Vec::new());
+        std::thread::scope(|scope| {
+            for _ in 0..self.jobs.max(1) {
+                scope.spawn(|| {
+                    loop {
+                        let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                        let Some(seed) = self.seeds.get(i) else { break };
+                        let out = self.dir.join(format!("reference-{seed}"));
+                        let r = gyrobench(
+                            &self.bin,
+                            &[
+                                "run",
+                                s(&self.procedure),
+                                "--seed",
+                                &seed.to_string(),
+                                "--out",
+                                s(&out),
+                            ],
+                        );
+                        assert_eq!(r.status.code(), Some(0), "reference seed {seed} must pass");
+                        let report = json(&out.join("report.json")).expect("reference report");
+                        reports
+                            .lock()
+                            .unwrap_or_else(std::sync::PoisonError::into_inner)
+                            .push(report);
+                    }
+                });
+            }
+        });
+        let mut values: BTreeMap<String, Vec<f64>> = BTreeMap::new();
+        for report in reports
+            .into_inner()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+        {
+            for m in report["measurements"].as_array().into_iter().flatten() {
+                if let (Some(n), Some(v)) = (m["name"].as_str(), m["value"].as_f64()) {
+                    values.entry(n.to_owned()).or_default().push(v);
+                }
+            }
+        }
+        let steps = step_times(
+            &self
+                .dir
+                .join(format!("reference-{}/run.mcap", self.seeds[0])),
+        );
+        let spread: BTreeMap<String, Spread> = values
+            .into_iter()
+            .map(|(n, v)| {
+                let mean = v.iter().sum::<f64>() / v.len() as f64;
+                let var =
+                    v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (v.len().max(2) - 1) as f64;
+                let min = v.iter().copied().fold(f64::INFINITY, f64::min);
+                let max = v.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+                (
+                    n,
+                    Spread {
+                        mean,
+                        sd: var.sqrt(),
+                        min,
+                        max,
+                    },
+                )
+            })
+            .collect();
+        // Every step boundary and the middle of every step that lasts.
+        let mut points: Vec<(f64, String)> = Vec::new();
+        for (_, key, t0, t1) in &steps {
+            points.push((t0 + 0.5, key.clone()));
+            if t1 - t0 > 2.0 {
+                points.push((0.5 * (t0 + t1), key.clone()));
+            }
+        }
+        let mut jobs: Vec<(String, f64, String)> = Vec::new();
+        for (fault, stride) in &self.faults {
+            for (i, (t, key)) in points.iter().enumerate() {
+                if i % stride.max(&1) == 0 {
+                    jobs.push((fault.clone(), *t, key.clone()));
+                }
+            }
+        }
+        let next = std::sync::atomic::AtomicUsize::new(0);
+        let rows = std::sync::Mutex::new(Vec::new());
+        std::thread::scope(|scope| {
+            for _ in 0..self.jobs.max(1) {
+                scope.spawn(|| {
+                    loop {
+                        let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                        let Some((fault, t, key)) = jobs.get(i) else {
+                            break;
+                        };
+                        let row = self.one(i, &procedure, &spread, fault, *t, key);
+                        rows.lock()
+                            .unwrap_or_else(std::sync::PoisonError::into_inner)
+                            .push((i, row));
+                    }
+                });
+            }
+        });
+        let mut rows = rows
+            .into_inner()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        rows.sort_by_key(|(i, _)| *i);
+        let rows: Vec<Row> = rows.into_iter().map(|(_, r)| r).collect();
+        let mut t = Totals {
+            runs: rows.len(),
+            ..Totals::default()
+        };
+        for r in &rows {
+            let has = |w: &str| r.problems.iter().any(|p| p.starts_with(w));
+            t.lost += usize::from(has("lost"));
+            t.overwritten += usize::from(has("overwritten"));
+            t.resumes_failed += usize::from(has("resume failed"));
+            t.bench_unsafe += usize::from(has("bench"));
+            t.figures_outside += usize::from(has("figure"));
+            t.retaken_outside += usize::from(has("retaken"));
+        }
+        (rows, t)
+    }
+
+    fn one(
+        &self,
+        n: usize,
+        procedure: &Procedure,
+        spread: &BTreeMap<String, Spread>,
+        fault: &str,
+        at_s: f64,
+        step: &str,
+    ) -> Row {
+        let dir = self.dir.join(format!("{n:04}-{fault}"));
+        let mut problems = Vec::new();
+        let first = gyrobench(
+            &self.bin,
+            &[
+                "run",
+                s(&self.procedure),
+                "--seed",
+                &self.seeds[0].to_string(),
+                "--out",
+                s(&dir),
+                "--inject",
+                &format!("{fault}@{at_s}"),
+            ],
+        );
+        let log1 = dir.join("run.mcap");
+        let before = std::fs::read(&log1).unwrap_or_default();
+        if let Some(r) = json(&dir.join("report.json"))
+            && r["bench_left"]["verified"] != true
+        {
+            problems.push(format!(
+                "bench unverified after part 1: {}",
+                r["bench_left"]
+            ));
+        }
+        // A fault after the last step finds the run over: nothing to resume.
+        if let Some(r) = json(&dir.join("report.json"))
+            && r["outcome"] == "pass"
+        {
+            return Row {
+                fault: fault.to_owned(),
+                at_s,
+                step: step.to_owned(),
+                first_exit: first.status.code(),
+                resume_exit: None,
+                outcome: "pass (finished before the fault)".into(),
+                problems,
+                worst: (String::new(), 0.0),
+                retaken: 0,
+            };
+        }
+        let (_, completed1) = started_and_completed(&log1);
+        let resume = gyrobench(&self.bin, &["run", "--resume", s(&dir)]);
+        let mut parts = 1;
+        while dir.join(format!("run.part{}.mcap", parts + 1)).exists() {
+            parts += 1;
+        }
+        let last = if parts == 1 {
+            log1.clone()
+        } else {
+            dir.join(format!("run.part{parts}.mcap"))
+        };
+        if std::fs::read(&log1).unwrap_or_default() != before {
+            problems.push("overwritten: the first part's log changed".into());
+        }
+        let report = json(&dir.join("report.json"));
+        let outcome = report
+            .as_ref()
+            .and_then(|r| r["outcome"].as_str().map(str::to_owned))
+            .unwrap_or_else(|| "none".into());
+        if resume.status.code() != Some(0) || outcome != "pass" {
+            problems.push(format!(
+                "resume failed: exit {:?}, outcome {outcome}: {}",
+                resume.status.code(),
+                String::from_utf8_lossy(&resume.stderr)
+                    .lines()
+                    .filter(|l| l.starts_with("error") || l.contains("stopped in"))
+                    .collect::<Vec<_>>()
+                    .join(" / ")
+            ));
+        }
+        let mut worst = (String::new(), 0.0);
+        if let Some(r) = &report {
+            if r["bench_left"]["verified"] != true {
+                problems.push(format!(
+                    "bench unverified after the resume: {}",
+                    r["bench_left"]
+                ));
+            }
+            for m in r["measurements"].as_array().into_iter().flatten() {
+                let (Some(name), Some(v)) = (m["name"].as_str(), m["value"].as_f64()) else {
+                    continue;
+                };
+                let Some(sp) = spread.get(name) else { continue };
+                let z = (v - sp.mean).abs() / sp.sd.max(1e-12);
+                if z > worst.1 {
+                    worst = (name.to_owned(), z);
+                }
+                if z > SPREAD_SD && (v < sp.min || v > sp.max) {
+                    problems.push(format!(
+                        "figure {name} = {v:.4} outside the reference runs' {:.4}..{:.4} by more than {SPREAD_SD} sd ({:.4})",
+                        sp.min, sp.max, sp.sd
+                    ));
+                }
+            }
+            // Nothing lost: the last part replays to the same report.
+            let replayed = dir.join("replay");
+            let rr = gyrobench(&self.bin, &["replay", s(&last), "--out", s(&replayed)]);
+            let same = std::fs::read(dir.join("report.json")).ok()
+                == std::fs::read(replayed.join("report.json")).ok();
+            if rr.status.code() != resume.status.code() || !same {
+                problems.push("lost: the last part does not replay to the report".into());
+            }
+        } else {
+            problems.push("lost: no report after the resume".into());
+        }
+        // Steps taken again: only the interrupted segment's.
+        let completed = completed1.iter().max().map_or(0, |m| m + 1);
+        let (start_at, _) = resume_plan(procedure, completed);
+        let mut retaken = 0;
+        for k in 2..=parts {
+            let (started, _) = started_and_completed(&dir.join(format!("run.part{k}.mcap")));
+            for i in started {
+                if completed1.contains(&i) {
+                    retaken += 1;
+                    if i < start_at {
+                        problems.push(format!(
+                            "retaken: step {i} is before the segment at {start_at}"
+                        ));
+                    }
+                }
+            }
+        }
+        Row {
+            fault: fault.to_owned(),
+            at_s,
+            step: step.to_owned(),
+            first_exit: first.status.code(),
+            resume_exit: resume.status.code(),
+            outcome,
+            problems,
+            worst,
+            retaken,
+        }
+    }
+}
+
+/// The totals as a markdown table, one line per fault kind and a total.
+pub fn render(rows: &[Row], totals: &Totals) -> String {
+    let mut kinds: BTreeMap<&str, (usize, usize, f64)> = BTreeMap::new();
+    for r in rows {
+        let k = kinds.entry(r.fault.as_str()).or_default();
+        k.0 += 1;
+        k.1 += usize::from(!r.problems.is_empty());
+        k.2 = k.2.max(r.worst.1);
+    }
+    let mut out = String::from(
+        "| fault | interruptions | with a problem | worst figure (sd of the references) |\n|---|---|---|---|\n",
+    );
+    for (k, (n, bad, z)) in &kinds {
+        out.push_str(&format!("| {k} | {n} | {bad} | {z:.1} |\n"));
+    }
+    out.push_str(&format!(
+        "\nruns {} · lost {} · overwritten {} · resumes failed {} · bench left unsafe {} · figures outside the spread {} · steps retaken outside the interrupted segment {}\n",
+        totals.runs,
+        totals.lost,
+        totals.overwritten,
+        totals.resumes_failed,
+        totals.bench_unsafe,
+        totals.figures_outside,
+        totals.retaken_outside
+    ));
+    for r in rows.iter().filter(|r| !r.problems.is_empty()) {
+        out.push_str(&format!(
+            "\n- {} at {:.0} s ({}): {}",
+            r.fault,
+            r.at_s,
+            r.step,
+            r.problems.join("; ")
+        ));
+    }
+    out
+}
+
+/// Every interruption, one line each.
+pub fn render_rows(rows: &[Row]) -> String {
+    let mut out = String::from(
+        "| fault | at s | step | part 1 exit | resume exit | outcome | steps retaken | worst figure | problems |\n|---|---|---|---|---|---|---|---|---|\n",
+    );
+    for r in rows {
+        out.push_str(&format!(
+            "| {} | {:.0} | {} | {} | {} | {} | {} | {} {:.1} sd | {} |\n",
+            r.fault,
+            r.at_s,
+            r.step,
+            r.first_exit.map_or("signal".into(), |c| c.to_string()),
+            r.resume_exit.map_or("-".into(), |c| c.to_string()),
+            r.outcome,
+            r.retaken,
+            r.worst.0,
+            r.worst.1,
+            if r.problems.is_empty() {
+                "-".into()
+            } else {
+                r.problems.join("; ")
+            }
+        ));
+    }
+    out
+}
