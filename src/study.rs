@@ -13,12 +13,11 @@ use crate::analysis::model::FitError;
 use crate::analysis::series::Interval;
 use crate::analysis::study::{ThermalFigures, self_heating_dph, thermal_figures};
 use crate::bench::BenchConfig;
-use crate::clock::{Pacing, VirtualClock};
+use crate::clock::Pacing;
 use crate::config::{ConfigError, Source};
 use crate::geometry::Orientation;
 use crate::procedure::Procedure;
-use crate::sequencer::embedded::EmbeddedBench;
-use crate::sequencer::{self, BenchState, Options, Quiet, RunError, Sink, Tick};
+use crate::sequencer::{self, BenchState, Quiet, RunError, Sink, Tick};
 use crate::twin::TwinConfig;
 
 /// The study's thermal cycle, as shipped.
@@ -141,19 +140,9 @@ pub fn simulate(
 ) -> Result<(crate::sequencer::RunResult, Vec<Sample>), StudyError> {
     let bench_cfg = BenchConfig::embedded();
     let procedure = Procedure::from_source(&Source::from_text(name, text), &bench_cfg)?;
-    let clock = Arc::new(VirtualClock::new(Pacing::Max));
-    let mut bench = EmbeddedBench::new(cfg.clone(), seed, clock);
-    let opts = Options {
-        resume: None,
-        coeffs: None,
-        interrupt: Arc::new(crate::sequencer::Interrupt::default()),
-        dut_max_c: bench_cfg.limits.dut_max_c,
-        in_position: (
-            bench_cfg.devices.table.in_position_deg,
-            bench_cfg.devices.table.settle_s,
-        ),
-        move_timeout_s: 600.0,
-    };
+    let mut bench =
+        crate::session::embedded_bench(cfg, seed, Pacing::Max, &[], bench_cfg.limits.clone());
+    let opts = crate::session::options(&bench_cfg, None, Arc::default(), None);
     let mut sink = Collect::default();
     // No timers or I/O are awaited on the embedded bench: a plain executor will do.
     let rt = tokio::runtime::Builder::new_current_thread()

@@ -253,6 +253,29 @@ pub struct Finished {
     pub notes_at_begin: usize,
 }
 
+/// Longest a table move may take before it is a failure, s.
+pub const MOVE_TIMEOUT_S: f64 = 600.0;
+
+/// The sequencer's options for a run on `bench`.
+pub fn options(
+    bench: &BenchConfig,
+    coeffs: Option<crate::analysis::model::Fit>,
+    interrupt: Arc<Interrupt>,
+    resume: Option<Resume>,
+) -> Options {
+    Options {
+        coeffs,
+        interrupt,
+        dut_max_c: bench.limits.dut_max_c,
+        in_position: (
+            bench.devices.table.in_position_deg,
+            bench.devices.table.settle_s,
+        ),
+        move_timeout_s: MOVE_TIMEOUT_S,
+        resume,
+    }
+}
+
 /// The embedded simulated bench for `twin` (guarded by `limits`).
 pub fn embedded_bench(
     twin: &TwinConfig,
@@ -408,17 +431,12 @@ pub fn execute(
 
     progress.begin(&dir.path, &notes);
     let notes_at_begin = notes.len();
-    let opts = Options {
-        coeffs: plan.coeffs_file.as_ref().map(CoeffsFile::fit),
+    let opts = options(
+        &plan.bench_cfg,
+        plan.coeffs_file.as_ref().map(CoeffsFile::fit),
         interrupt,
-        dut_max_c: plan.bench_cfg.limits.dut_max_c,
-        in_position: (
-            plan.bench_cfg.devices.table.in_position_deg,
-            plan.bench_cfg.devices.table.settle_s,
-        ),
-        move_timeout_s: 600.0,
-        resume: plan.resume.as_ref().map(|r| r.state.clone()),
-    };
+        plan.resume.as_ref().map(|r| r.state.clone()),
+    );
     // A bug that panics mid-run must not leave the bench where it was:
     // the panic is caught, the bench brought to its safe state and read
     // back, and the run ends as an error with everything logged kept.

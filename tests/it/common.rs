@@ -207,19 +207,17 @@ impl SimServe {
             "/fixtures/bench/sim-serve.toml"
         ))
         .expect("fixture");
-        let bench = format!(
-            "time_scale = {time_scale}\n{}",
-            fixture
-                .replace(
-                    "tcp://127.0.0.1:5001",
-                    &self.addr("chamber", "espec-ascii", scheme)
-                )
-                .replace("tcp://127.0.0.1:5003", &self.addr("table", "acl", scheme))
-                .replace(
-                    "tcp://127.0.0.1:5004",
-                    &self.addr("gyro", "rlg-frame", scheme)
-                )
-        );
+        let bench = fixture
+            .replace("time_scale = 1.0", &format!("time_scale = {time_scale}"))
+            .replace(
+                "tcp://127.0.0.1:5001",
+                &self.addr("chamber", "espec-ascii", scheme),
+            )
+            .replace("tcp://127.0.0.1:5003", &self.addr("table", "acl", scheme))
+            .replace(
+                "tcp://127.0.0.1:5004",
+                &self.addr("gyro", "rlg-frame", scheme),
+            );
         write(
             dir,
             &format!("bench-{}.toml", scheme.trim_end_matches("://")),
