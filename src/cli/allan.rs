@@ -68,19 +68,15 @@ fn load(args: &AllanArgs) -> Result<(String, Vec<f64>, f64)> {
         .is_some_and(|e| e.eq_ignore_ascii_case("csv"));
     if !is_csv {
         let r = record_rates(&args.file, args.record.as_deref())?;
-        if !r.read.complete {
-            eprintln!(
-                "warning: {} is incomplete ({}); analysing the {} frames of `{}` it holds, {} bytes after the last complete chunk are missing",
-                args.file.display(),
-                r.read
-                    .stopped
-                    .as_deref()
-                    .unwrap_or("the run did not finish writing it"),
+        super::warn_incomplete(
+            &args.file,
+            &r.read,
+            &format!(
+                "analysing the {} frames of `{}` it holds",
                 r.rate_dph.len(),
-                r.record,
-                r.read.bytes_lost
-            );
-        }
+                r.record
+            ),
+        );
         return Ok((r.record, r.rate_dph, r.dt_s));
     }
     let rows = interchange::read(&args.file)?;

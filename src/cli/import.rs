@@ -63,17 +63,7 @@ pub fn run_import(args: ImportArgs) -> Result<Outcome> {
 
 pub fn run_export(args: ExportArgs) -> Result<Outcome> {
     let done = export(&args.log, &args.out)?;
-    if !done.read.complete {
-        eprintln!(
-            "warning: {} is incomplete ({}); exported what it holds, {} bytes after the last complete chunk are missing",
-            args.log.display(),
-            done.read
-                .stopped
-                .as_deref()
-                .unwrap_or("the run did not finish writing it"),
-            done.read.bytes_lost
-        );
-    }
+    super::warn_incomplete(&args.log, &done.read, "exported what it holds");
     outln!(
         "exported {} rows (1 Hz) to {}",
         done.rows,

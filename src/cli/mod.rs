@@ -66,6 +66,22 @@ pub enum Outcome {
     Interrupted(u8),
 }
 
+/// On stderr: `file` was cut short (a run killed mid-way); `done` says
+/// what was made of what it holds.
+pub fn warn_incomplete(file: &std::path::Path, read: &crate::runlog::ReadSummary, done: &str) {
+    if read.complete {
+        return;
+    }
+    eprintln!(
+        "warning: {} is incomplete ({}); {done}; {} bytes after the last complete chunk are missing",
+        file.display(),
+        read.stopped
+            .as_deref()
+            .unwrap_or("the run did not finish writing it"),
+        read.bytes_lost
+    );
+}
+
 /// A usage error found after parsing (a bad value, a run directory that
 /// is taken): exit 2, like clap's own.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]

@@ -38,14 +38,11 @@ pub fn run(args: ReplayArgs) -> Result<Outcome> {
     let watch = Stopwatch::start();
     let r = replay(&args.log, coeffs.as_ref())?;
     let secs = watch.elapsed_s();
-    if !r.read.complete {
-        eprintln!(
-            "warning: {} is incomplete (the run did not finish writing it): read up to {:.0} s of device time, {} bytes after the last complete chunk are missing",
-            args.log.display(),
-            r.last_state_s,
-            r.read.bytes_lost
-        );
-    }
+    super::warn_incomplete(
+        &args.log,
+        &r.read,
+        &format!("read up to {:.0} s of device time", r.last_state_s),
+    );
     if r.result.frames == 0 {
         eprintln!(
             "replayed {} intervals in {secs:.2} s (no frames: an imported run)",

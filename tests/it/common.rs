@@ -232,3 +232,14 @@ impl Drop for SimServe {
         let _reaped = self.child.wait();
     }
 }
+
+/// Wait until `path` exists (a run started writing), at most 60 s.
+pub fn wait_for(path: &Path) {
+    for _ in 0..3000 {
+        if path.exists() {
+            return;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    panic!("{} never appeared", path.display());
+}

@@ -7,7 +7,7 @@ use std::path::Path;
 use std::process::{Command, Stdio};
 
 use crate::cli::{gyrobench, temp_dir};
-use crate::common::{MINI, TINY, json, s, stderr, write};
+use crate::common::{MINI, TINY, json, s, stderr, wait_for, write};
 
 fn bin() -> Command {
     Command::new(env!("CARGO_BIN_EXE_gyrobench"))
@@ -87,17 +87,6 @@ fn runs_started_together_get_their_own_directories() {
         );
     }
     std::fs::remove_dir_all(&dir).expect("cleanup");
-}
-
-/// Wait until `path` exists (a run started writing), at most 30 s.
-fn wait_for(path: &Path) {
-    for _ in 0..1500 {
-        if path.exists() {
-            return;
-        }
-        std::thread::sleep(std::time::Duration::from_millis(20));
-    }
-    panic!("{} never appeared", path.display());
 }
 
 #[test]

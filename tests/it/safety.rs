@@ -7,18 +7,7 @@ use std::path::Path;
 use std::process::{Command, Stdio};
 
 use crate::cli::{gyrobench, temp_dir};
-use crate::common::{MINI, SimServe, json, s, stderr, write};
-
-/// Wait until `path` exists, at most 60 s.
-fn wait_for(path: &Path) {
-    for _ in 0..3000 {
-        if path.exists() {
-            return;
-        }
-        std::thread::sleep(std::time::Duration::from_millis(20));
-    }
-    panic!("{} never appeared", path.display());
-}
+use crate::common::{MINI, SimServe, json, s, stderr, wait_for, write};
 
 fn signal(pid: u32, sig: &str) {
     let ok = Command::new("kill")

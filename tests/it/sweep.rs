@@ -87,48 +87,23 @@ fn json(p: &Path) -> Option<serde_json::Value> {
     serde_json::from_str(&std::fs::read_to_string(p).ok()?).ok()
 }
 
-/// (index, key, start, end) of every setup and main step a log ran.
-fn step_times(log: &Path) -> Vec<(usize, String, f64, f64)> {
-    let bytes = std::fs::read(log).unwrap_or_default();
-    let mut starts: BTreeMap<usize, (String, f64)> = BTreeMap::new();
-    let mut out = Vec::new();
-    let Ok(stream) = mcap::MessageStream::new(&bytes) else {
-        return out;
-    };
-    for m in stream.flatten() {
-        if m.channel.topic != "/steps" {
-            continue;
-        }
-        let Ok(e) = serde_json::from_slice::<serde_json::Value>(&m.data) else {
-            continue;
-        };
-        let (Some(i), Some(t)) = (e["index"].as_u64(), e["t_s"].as_f64()) else {
-            continue;
-        };
-        let i = i as usize;
-        match e["phase"].as_str() {
-            Some("start") => {
-                starts.insert(i, (e["key"].as_str().unwrap_or("").to_owned(), t));
-            }
-            Some("end") if e["group"] != "cleanup" => {
-                if let Some((k, t0)) = starts.remove(&i) {
-                    out.push((i, k, t0, t));
-                }
-            }
-            _ => {}
-        }
-    }
-    out
+/// A `/steps` event of a setup or main step.
+struct StepAt {
+    index: usize,
+    key: String,
+    phase: String,
+    t_s: f64,
 }
 
-/// Indices of the steps a log started and completed (phase start / end).
-fn started_and_completed(log: &Path) -> (Vec<usize>, Vec<usize>) {
+/// The setup and main step events of a log, read as far as it reads (a
+/// killed run's log has no footer).
+fn steps_of(log: &Path) -> Vec<StepAt> {
     let bytes = std::fs::read(log).unwrap_or_default();
-    let (mut started, mut done) = (Vec::new(), Vec::new());
     let opts = mcap::read::Options::IgnoreEndMagic.into();
     let Ok(stream) = mcap::MessageStream::new_with_options(&bytes, opts) else {
-        return (started, done);
+        return Vec::new();
     };
+    let mut out = Vec::new();
     for m in stream {
         let Ok(m) = m else { break };
         if m.channel.topic != "/steps" {
@@ -137,18 +112,49 @@ fn started_and_completed(log: &Path) -> (Vec<usize>, Vec<usize>) {
         let Ok(e) = serde_json::from_slice::<serde_json::Value>(&m.data) else {
             continue;
         };
-        if e["group"] == "cleanup" {
-            continue;
-        }
-        if let Some(i) = e["index"].as_u64() {
-            match e["phase"].as_str() {
-                Some("start") => started.push(i as usize),
-                Some("end") => done.push(i as usize),
-                _ => {}
-            }
+        if let (Some(i), Some(t), Some(phase), false) = (
+            e["index"].as_u64(),
+            e["t_s"].as_f64(),
+            e["phase"].as_str(),
+            e["group"] == "cleanup",
+        ) {
+            out.push(StepAt {
+                index: i as usize,
+                key: e["key"].as_str().unwrap_or("").to_owned(),
+                phase: phase.to_owned(),
+                t_s: t,
+            });
         }
     }
-    (started, done)
+    out
+}
+
+/// (key, start, end) of every setup and main step a log ran.
+fn step_times(log: &Path) -> Vec<(String, f64, f64)> {
+    let steps = steps_of(log);
+    let mut out = Vec::new();
+    for start in steps.iter().filter(|e| e.phase == "start") {
+        if let Some(end) = steps
+            .iter()
+            .find(|e| e.phase == "end" && e.index == start.index)
+        {
+            out.push((start.key.clone(), start.t_s, end.t_s));
+        }
+    }
+    out
+}
+
+/// Indices of the steps a log started and completed.
+fn started_and_completed(log: &Path) -> (Vec<usize>, Vec<usize>) {
+    let steps = steps_of(log);
+    let of = |phase: &str| {
+        steps
+            .iter()
+            .filter(|e| e.phase == phase)
+            .map(|e| e.index)
+            .collect()
+    };
+    (of("start"), of("end"))
 }
 
 fn gyrobench(bin: &Path, args: &[&str]) -> std::process::Output {
@@ -255,7 +261,7 @@ impl Sweep {
             .collect();
         // Every step boundary and the middle of every step that lasts.
         let mut points: Vec<(f64, String)> = Vec::new();
-        for (_, key, t0, t1) in &steps {
+        for (key, t0, t1) in &steps {
             points.push((t0 + 0.5, key.clone()));
             if t1 - t0 > 2.0 {
                 points.push((0.5 * (t0 + t1), key.clone()));
