@@ -35,6 +35,23 @@ pub struct BenchConfig {
     /// devices are `sim serve --config` endpoints running at speed N.
     #[serde(default = "unit_scale")]
     pub time_scale: f64,
+    /// Where this bench records its results (`docs/results.md`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub results: Option<ResultsSection>,
+}
+
+/// `[results]`: the results store of this bench.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ResultsSection {
+    /// The store: a SQLite file path, a `postgres://` URL, or `none`
+    /// (`$GYROBENCH_DB` and `--db` come first).
+    #[serde(default)]
+    pub db: Option<String>,
+    /// The name this bench PC records its runs under (default: its host
+    /// name).
+    #[serde(default)]
+    pub station: Option<String>,
 }
 
 fn unit_scale() -> f64 {

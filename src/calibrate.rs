@@ -29,6 +29,8 @@ pub struct RunSeries {
     pub name: String,
     /// Serial number of the unit the run tested.
     pub serial: String,
+    /// Its type.
+    pub dut_type: String,
     /// 1 Hz intervals used for calibration.
     pub series: Vec<Interval>,
 }
@@ -71,6 +73,7 @@ pub fn load(path: &Path) -> Result<RunSeries, ReplayError> {
     Ok(RunSeries {
         name: path.display().to_string(),
         serial: r.meta.dut_serial.clone(),
+        dut_type: r.meta.dut_type.clone(),
         series,
     })
 }

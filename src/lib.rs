@@ -20,6 +20,7 @@ pub mod geometry;
 pub mod procedure;
 pub mod protocol;
 pub mod report;
+pub mod results;
 pub mod runlog;
 pub mod sequencer;
 pub mod session;

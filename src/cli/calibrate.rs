@@ -22,6 +22,11 @@ pub struct CalibrateArgs {
     /// otherwise: coefficients belong to one unit).
     #[arg(long)]
     allow_mixed_serials: bool,
+    /// The results store the coefficient set is recorded in (one unit's
+    /// runs only): a SQLite file, a postgres:// URL or `none` (default:
+    /// $GYROBENCH_DB, else ~/.local/share/gyrobench/results.sqlite).
+    #[arg(long, value_name = "STORE")]
+    db: Option<String>,
 }
 
 pub fn run(args: CalibrateArgs) -> Result<Outcome> {
@@ -62,6 +67,9 @@ pub fn run(args: CalibrateArgs) -> Result<Outcome> {
     crate::fsutil::write_atomic(&html_path, cal.render_html().as_bytes())
         .with_context(|| format!("writing {}", html_path.display()))?;
     outf!("{}", cal.render_text())?;
+    if mixed.is_empty() {
+        record(&args, &runs, &cal, &toml_text);
+    }
     eprintln!(
         "coefficients in {}, details in {} and {}",
         args.out.display(),
@@ -69,4 +77,55 @@ pub fn run(args: CalibrateArgs) -> Result<Outcome> {
         html_path.display()
     );
     Ok(Outcome::Success)
+}
+
+/// Record the coefficient set for the unit in the results store; a store
+/// that cannot be reached is a warning (the file is the record).
+fn record(
+    args: &CalibrateArgs,
+    runs: &[crate::calibrate::RunSeries],
+    cal: &crate::calibrate::Calibration,
+    toml_text: &str,
+) {
+    use crate::results::record::{CoefficientSet, part_key_of_log};
+    let Some(first) = runs.first() else { return };
+    let held = cal
+        .table
+        .iter()
+        .find(|r| r.model == "model4")
+        .and_then(|r| r.held_out)
+        .map(|s| s.drift_pp_dph);
+    let sources = args
+        .runs
+        .iter()
+        .map(|p| {
+            let abs = std::path::absolute(p).unwrap_or_else(|_| p.clone());
+            (
+                part_key_of_log(p).unwrap_or_default(),
+                abs.display().to_string(),
+            )
+        })
+        .collect();
+    let set = CoefficientSet {
+        dut_type: &first.dut_type,
+        serial: &first.serial,
+        coeffs_toml: toml_text,
+        validation: &cal.validation,
+        held_out_drift_pp_dph: held,
+        sources,
+    };
+    let loc = crate::results::Location::resolve(args.db.as_deref(), None);
+    match crate::results::Store::open(&loc).and_then(|s| match s {
+        Some(mut s) => s
+            .record_coefficients(&set)
+            .map(|v| Some((v, s.name().to_owned()))),
+        None => Ok(None),
+    }) {
+        Ok(Some((v, name))) => eprintln!(
+            "coefficient set {v} of {} recorded in the results store {name}",
+            first.serial
+        ),
+        Ok(None) => {}
+        Err(e) => eprintln!("warning: {e}; the coefficients file is written"),
+    }
 }

@@ -24,6 +24,11 @@ pub struct ImportArgs {
     /// The log to write.
     #[arg(short, long)]
     out: PathBuf,
+    /// The results store the imported run is recorded in: a SQLite file,
+    /// a postgres:// URL or `none` (default: $GYROBENCH_DB, else
+    /// ~/.local/share/gyrobench/results.sqlite).
+    #[arg(long, value_name = "STORE")]
+    db: Option<String>,
 }
 
 #[derive(Debug, Args)]
@@ -38,6 +43,17 @@ pub struct ExportArgs {
 pub fn run_import(args: ImportArgs) -> Result<Outcome> {
     let site = load_site(&args.site).with_context(|| format!("reading {}", args.site.display()))?;
     let r = import(&args.csv, site, args.dut.as_deref(), &args.out)?;
+    let loc = crate::results::Location::resolve(args.db.as_deref(), None);
+    match crate::results::Store::open(&loc).and_then(|s| match s {
+        Some(mut s) => s.index_log(&args.out).map(|_| Some(s.name().to_owned())),
+        None => Ok(None),
+    }) {
+        Ok(Some(name)) => eprintln!("recorded in the results store {name}"),
+        Ok(None) => {}
+        Err(e) => {
+            eprintln!("warning: {e}; the log is written; `gyrobench results sync` indexes it later")
+        }
+    }
     outln!(
         "imported {} s of 1 Hz data in {} record(s) into {}; judged by the acceptance's limits: {}",
         r.intervals,

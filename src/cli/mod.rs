@@ -21,6 +21,7 @@ mod diagnose;
 mod import;
 mod recover;
 mod replay;
+mod results;
 mod run;
 mod sim;
 mod twin;
@@ -133,6 +134,9 @@ enum Command {
     Diagnose(diagnose::DiagnoseArgs),
     /// Recompute a run's measurements and verdict from its log alone.
     Replay(replay::ReplayArgs),
+    /// Every run of every unit: list, show, unit history, trends, JUnit
+    /// and CSV exports, sync from run directories.
+    Results(results::ResultsArgs),
     /// Validate a procedure and print its plan with estimated device times.
     Check(check::CheckArgs),
     /// The simulated RL-16 and its bench (digital twin).
@@ -157,6 +161,7 @@ pub fn main() -> ExitCode {
         Command::Check(args) => check::run(args),
         Command::Recover(args) => recover::run(args),
         Command::Replay(args) => replay::run(args),
+        Command::Results(args) => results::run(args),
         Command::Allan(args) => allan::run(args),
         Command::Diagnose(args) => diagnose::run(args),
         Command::Import(args) => import::run_import(args),

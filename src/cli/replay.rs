@@ -24,6 +24,13 @@ pub struct ReplayArgs {
     /// in <log dir>/replay).
     #[arg(long)]
     out: Option<PathBuf>,
+    /// Also index the run in the results store (idempotent).
+    #[arg(long)]
+    store: bool,
+    /// The results store (with --store): a SQLite file, a postgres:// URL
+    /// (default: $GYROBENCH_DB, else ~/.local/share/gyrobench/results.sqlite).
+    #[arg(long, value_name = "STORE", requires = "store")]
+    db: Option<String>,
 }
 
 pub fn run(args: ReplayArgs) -> Result<Outcome> {
@@ -81,6 +88,13 @@ pub fn run(args: ReplayArgs) -> Result<Outcome> {
     }
     outf!("{}", report.render_text())?;
     eprintln!("report in {}", out.display());
+    if args.store {
+        let loc = crate::results::Location::resolve(args.db.as_deref(), None);
+        if let Some(mut s) = crate::results::Store::open(&loc)? {
+            let done = s.index_log(&args.log)?;
+            eprintln!("{done:?} in the results store {}", s.name());
+        }
+    }
     Ok(match r.result.outcome {
         sequencer::Outcome::Pass => Outcome::Success,
         sequencer::Outcome::Fail => Outcome::Fail,

@@ -54,9 +54,14 @@ pub struct RunArgs {
     /// Serial number of the unit under test.
     #[arg(long, default_value = "SIM-0001")]
     dut: String,
-    /// Who runs it (recorded in the log and the report).
+    /// Who runs it (recorded in the log and the results store).
     #[arg(long, default_value = "")]
     operator: String,
+    /// The results store: a SQLite file, a postgres:// URL, or `none`
+    /// (default: $GYROBENCH_DB, else the bench file's [results] db, else
+    /// ~/.local/share/gyrobench/results.sqlite).
+    #[arg(long, value_name = "STORE")]
+    db: Option<String>,
     /// Simulated bench only: play a fault, FAULT@SECONDS of device time
     /// (chamber-alarm, chamber-silent, table-interlock, gyro-silent,
     /// gyro-corrupt, gyro-stuck, gyro-saturated, process-kill, panic).
@@ -218,7 +223,13 @@ fn fresh(args: &RunArgs, procedure_path: &std::path::Path, pacing: Pacing) -> Re
         .iter()
         .map(|s| parse_inject(s))
         .collect::<Result<_>>()?;
+    let store = crate::results::Location::resolve(
+        args.db.as_deref(),
+        bench_cfg.results.as_ref().and_then(|r| r.db.as_deref()),
+    );
     Ok(Plan {
+        station: session::station(&bench_cfg),
+        store,
         procedure,
         procedure_path: procedure_path.display().to_string(),
         bench_label: args
@@ -246,7 +257,7 @@ pub fn run(args: RunArgs) -> Result<Outcome> {
     let (plan, place) = match (&args.resume, &args.procedure) {
         (Some(dir), _) => {
             let locked = session::lock_for_resume(dir)?;
-            let plan = session::plan_resume(dir, pacing, &args.speed)?;
+            let plan = session::plan_resume(dir, pacing, &args.speed, args.db.as_deref())?;
             if let Some(r) = &plan.resume {
                 eprintln!("{}", r.summary);
             }

@@ -660,6 +660,13 @@ impl Validator<'_> {
     }
 }
 
+/// The `[procedure] name` of a procedure's text, read without validating
+/// it (to label a run whose procedure is known only as text).
+pub fn raw_name(text: &str) -> Option<String> {
+    let t: toml::Table = toml::from_str(text).ok()?;
+    t.get("procedure")?.get("name")?.as_str().map(str::to_owned)
+}
+
 /// A name that is safe as one path component: no separator, no `..`, no
 /// hidden file, nothing a shell or a file system treats specially.
 pub fn is_path_safe_name(name: &str) -> bool {

@@ -51,6 +51,9 @@ pub struct RunMeta {
     pub dut_type: String,
     /// Who ran it (empty when not given).
     pub operator: String,
+    /// The bench PC it ran on (its host name, or the bench file's
+    /// `[results] station`).
+    pub station: String,
     /// gyrobench version that wrote the log.
     pub software_version: String,
     /// UTC start of the run (of its first part), RFC 3339.
@@ -116,6 +119,7 @@ impl RunMeta {
             dut_serial: take(m, "dut_serial"),
             dut_type: take(m, "dut_type"),
             operator: take(m, "operator"),
+            station: take(m, "station"),
             software_version: take(m, "software_version"),
             start_time_utc: take(m, "start_time_utc"),
             part_start_time_utc: take(m, "part_start_time_utc"),
@@ -159,6 +163,7 @@ impl RunMeta {
         put("dut_serial", &self.dut_serial);
         put("dut_type", &self.dut_type);
         put("operator", &self.operator);
+        put("station", &self.station);
         put("software_version", &self.software_version);
         put("start_time_utc", &self.start_time_utc);
         put("part_start_time_utc", &self.part_start_time_utc);

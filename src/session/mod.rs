@@ -86,6 +86,10 @@ pub struct Plan {
     pub dut: String,
     /// Who runs it.
     pub operator: String,
+    /// The bench PC it runs on (its host name, or `[results] station`).
+    pub station: String,
+    /// Where its results are recorded.
+    pub store: crate::results::Location,
     /// `max` or a factor (logged as given).
     pub speed: String,
     /// Pacing of the embedded bench.
@@ -159,10 +163,25 @@ pub fn last_part(dir: &Path) -> Result<PathBuf, SessionError> {
     })
 }
 
+/// The station name a bench records its runs under.
+pub fn station(bench: &BenchConfig) -> String {
+    bench
+        .results
+        .as_ref()
+        .and_then(|r| r.station.clone())
+        .unwrap_or_else(rundir::hostname)
+}
+
 /// The plan that continues the interrupted run in `dir` from its last
 /// completed step, everything (procedure, bench, twin, coefficients, seed,
-/// unit) as its log says.
-pub fn plan_resume(dir: &Path, pacing: Pacing, speed: &str) -> Result<Plan, SessionError> {
+/// unit) as its log says; its results go to `store` (resolved against the
+/// logged bench's `[results]` when not given).
+pub fn plan_resume(
+    dir: &Path,
+    pacing: Pacing,
+    speed: &str,
+    store: Option<&str>,
+) -> Result<Plan, SessionError> {
     let last = last_part(dir)?;
     let prev = replay(&last, None)?;
     if !matches!(
@@ -206,10 +225,20 @@ pub fn plan_resume(dir: &Path, pacing: Pacing, speed: &str) -> Result<Plan, Sess
             )));
         }
     };
+    let store = crate::results::Location::resolve(
+        store,
+        config.bench.results.as_ref().and_then(|r| r.db.as_deref()),
+    );
     Ok(Plan {
         procedure: prev.procedure.clone(),
         procedure_path: meta.procedure_path.clone(),
         bench_label: meta.bench.clone(),
+        station: if meta.station.is_empty() {
+            station(&config.bench)
+        } else {
+            meta.station.clone()
+        },
+        store,
         bench_cfg: config.bench,
         twin: config.twin.unwrap_or_else(TwinConfig::default_rl16),
         coeffs_file: config.coeffs,
@@ -367,7 +396,12 @@ pub fn execute(
         let device = rt.block_on(DeviceBench::start(&plan.bench_cfg, open))?;
         Box::new(Guarded::new(device, limits))
     };
-    let bench_toml = toml::to_string_pretty(&plan.bench_cfg).map_err(|e| {
+    // A store URL's password never goes into a log.
+    let mut logged_bench = plan.bench_cfg.clone();
+    if let Some(r) = logged_bench.results.as_mut() {
+        r.db = r.db.as_deref().map(crate::results::pg::redact);
+    }
+    let bench_toml = toml::to_string_pretty(&logged_bench).map_err(|e| {
         SessionError::Bench(format!("the bench configuration cannot be logged: {e}"))
     })?;
     let site_json = serde_json::to_string(&plan.bench_cfg.site)
@@ -404,6 +438,7 @@ pub fn execute(
         dut_serial: plan.dut.clone(),
         dut_type: plan.procedure.meta.dut_type.clone(),
         operator: plan.operator.clone(),
+        station: plan.station.clone(),
         software_version: env!("CARGO_PKG_VERSION").to_owned(),
         start_time_utc: run_start.clone(),
         part_start_time_utc: start.to_rfc3339(),
@@ -429,6 +464,7 @@ pub fn execute(
     let mut recorder = Recorder::create(&log, &meta, start_ns, scales)
         .map_err(io_err("creating the log", &log))?;
 
+    let mut store = StoreLink::open(&plan.store, &meta, &log, &mut notes);
     progress.begin(&dir.path, &notes);
     let notes_at_begin = notes.len();
     let opts = options(
@@ -503,6 +539,7 @@ pub fn execute(
         report = finish(&result);
     }
     let report_error = write_report(&dir.path, &report, &result).err();
+    store.finish(&log, &result, link, &mut notes);
     Ok(Finished {
         dir: dir.path.clone(),
         log,
@@ -512,6 +549,93 @@ pub fn execute(
         notes,
         notes_at_begin,
     })
+}
+
+/// The run's link to the results store: recorded when it starts and when
+/// it ends; a store that cannot be reached is said once, and the run is
+/// queued to be written the next time a command opens the store.
+struct StoreLink {
+    store: Option<crate::results::Store>,
+    key: Option<String>,
+    location: crate::results::Location,
+}
+
+impl StoreLink {
+    fn open(
+        loc: &crate::results::Location,
+        meta: &RunMeta,
+        log: &Path,
+        notes: &mut Vec<String>,
+    ) -> Self {
+        let mut link = Self {
+            store: None,
+            key: None,
+            location: loc.clone(),
+        };
+        match crate::results::Store::open(loc) {
+            Ok(Some(mut s)) => {
+                let flushed = s.flush_pending();
+                if flushed > 0 {
+                    notes.push(format!(
+                        "{flushed} queued run(s) written to the results store"
+                    ));
+                }
+                match s.begin_part(meta, log) {
+                    Ok(k) => link.key = Some(k),
+                    Err(e) => notes.push(format!(
+                        "{e}; the run goes on and will be recorded when it ends"
+                    )),
+                }
+                link.store = Some(s);
+            }
+            Ok(None) => {}
+            Err(e) => notes.push(format!(
+                "{e}; the run goes on (its log is the record) and is queued for the store"
+            )),
+        }
+        link
+    }
+
+    fn finish(&mut self, log: &Path, result: &RunResult, link: LinkStats, notes: &mut Vec<String>) {
+        if self.location == crate::results::Location::Off {
+            return;
+        }
+        let done = match (&mut self.store, &self.key) {
+            (Some(s), Some(key)) => s
+                .finish_part(
+                    key,
+                    log,
+                    &crate::results::record::PartEnd {
+                        result,
+                        link,
+                        ended_utc: utc_now().to_rfc3339(),
+                    },
+                )
+                .map(|()| s.name().to_owned()),
+            // Not recorded at the start: the log has it all now.
+            _ => crate::results::Store::open(&self.location).and_then(|s| match s {
+                Some(mut s) => s.index_log(log).map(|_| s.name().to_owned()),
+                None => Ok(String::new()),
+            }),
+        };
+        match done {
+            Ok(name) => notes.push(format!("recorded in the results store {name}")),
+            Err(e) => {
+                let queued = crate::results::record::part_key_of_log(log)
+                    .and_then(|k| crate::results::pending::push(&k, log).ok());
+                notes.push(format!(
+                    "{e}; {}",
+                    match queued {
+                        Some(q) => format!(
+                            "the run is queued ({}) and will be written the next time a command opens the store, or by `gyrobench results sync`",
+                            q.display()
+                        ),
+                        None => "run `gyrobench results sync` on its directory once the store is back".into(),
+                    }
+                ));
+            }
+        }
+    }
 }
 
 /// What a panic said.

@@ -182,7 +182,8 @@ fn holder_alive(text: &str) -> bool {
         && pid.is_some_and(|p| p != std::process::id() && Path::new(&format!("/proc/{p}")).exists())
 }
 
-fn hostname() -> String {
+/// This machine's host name (empty when it cannot be read).
+pub fn hostname() -> String {
     std::fs::read_to_string("/proc/sys/kernel/hostname")
         .map(|h| h.trim().to_owned())
         .unwrap_or_default()

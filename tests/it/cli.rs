@@ -2,8 +2,18 @@
 
 use std::process::{Command, Output};
 
+/// The binary, with its results store and its own files in this test
+/// process's temporary directory (never the user's).
+pub fn command() -> Command {
+    let home = std::env::temp_dir().join(format!("gyrobench-test-home-{}", std::process::id()));
+    let mut c = Command::new(env!("CARGO_BIN_EXE_gyrobench"));
+    c.env("XDG_DATA_HOME", &home)
+        .env("GYROBENCH_DB", home.join("results.sqlite"));
+    c
+}
+
 pub fn gyrobench(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_gyrobench"))
+    command()
         .args(args)
         .output()
         .expect("the gyrobench binary runs")
@@ -165,7 +175,7 @@ fn missing_file_and_bad_usage_have_their_exit_codes() {
 #[test]
 fn sim_serve_prints_its_endpoints_serves_and_exits_0_on_sigterm() {
     use std::io::{BufRead, BufReader, Read, Write};
-    let mut child = Command::new(env!("CARGO_BIN_EXE_gyrobench"))
+    let mut child = command()
         .args(["sim", "serve"])
         .stdout(std::process::Stdio::piped())
         .stderr(std::process::Stdio::null())

@@ -171,7 +171,7 @@ impl SimServe {
     pub fn start(dir: &Path, speed: f64) -> Self {
         use std::io::BufRead;
         let config = write(dir, "serve.toml", &format!("speed = {speed}\nseed = 1\n"));
-        let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_gyrobench"))
+        let mut child = crate::cli::command()
             .args(["sim", "serve", "--config", s(&config)])
             .stdout(std::process::Stdio::piped())
             .stderr(std::process::Stdio::null())

@@ -10,7 +10,7 @@ use crate::cli::{gyrobench, temp_dir};
 use crate::common::{MINI, TINY, json, s, stderr, wait_for, write};
 
 fn bin() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_gyrobench"))
+    crate::cli::command()
 }
 
 #[test]
@@ -244,7 +244,7 @@ fn a_procedure_name_that_would_leave_runs_is_refused_with_its_line() {
     for name in ["../../escaped", "/tmp/escaped", ".hidden", "a/b"] {
         let text = TINY.replace("name = \"tiny\"", &format!("name = {name:?}"));
         let p = write(&dir, "p.toml", &text);
-        let r = Command::new(env!("CARGO_BIN_EXE_gyrobench"))
+        let r = crate::cli::command()
             .args(["run", s(&p)])
             .current_dir(&dir)
             .output()
@@ -336,6 +336,7 @@ fn a_full_disk_mid_run_names_the_file_and_step_and_keeps_what_was_written() {
     // A file size limit (in 512-byte blocks) makes the log's writes fail
     // as a full disk does; the small report files still fit.
     let r = Command::new("sh")
+        .env("GYROBENCH_DB", "none")
         .arg("-c")
         .arg(format!(
             "trap '' XFSZ; ulimit -f 400; exec {} run {} --out {}",

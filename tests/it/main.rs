@@ -16,6 +16,7 @@ mod fuzz;
 mod import;
 mod integrity;
 mod replay;
+mod results;
 mod resume;
 mod run;
 mod safety;

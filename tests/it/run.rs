@@ -204,7 +204,7 @@ fn a_device_failure_mid_run_is_an_error_after_cleanup_with_a_readable_log() {
 #[test]
 fn ctrl_c_runs_cleanup_and_exits_130() {
     let dir: PathBuf = temp_dir("run-sigint");
-    let child = Command::new(env!("CARGO_BIN_EXE_gyrobench"))
+    let child = crate::cli::command()
         .args([
             "run",
             &smoke(),
@@ -371,7 +371,7 @@ fn a_run_killed_with_sigkill_is_recovered_to_what_was_flushed() {
     let dir = temp_dir("run-sigkill");
     let killed = dir.join("killed");
     let proc_ = concat!(env!("CARGO_MANIFEST_DIR"), "/procedures/thermal_cycle.toml");
-    let mut child = Command::new(env!("CARGO_BIN_EXE_gyrobench"))
+    let mut child = crate::cli::command()
         .args([
             "run",
             proc_,

@@ -91,7 +91,7 @@ fn sigterm_and_sighup_stop_a_run_as_ctrl_c_does() {
     let p = write(&dir, "mini.toml", MINI);
     for (sig, code) in [("TERM", 143), ("HUP", 129)] {
         let out = dir.join(sig);
-        let child = Command::new(env!("CARGO_BIN_EXE_gyrobench"))
+        let child = crate::cli::command()
             .args(["run", s(&p), "--out", s(&out), "--speed", "300"])
             .stdout(Stdio::piped())
             .stderr(Stdio::piped())
@@ -162,7 +162,7 @@ fn a_device_run_stopped_by_sigterm_or_killed_through_sim_serve_ends_safe_and_res
     let p = write(&dir, "mini.toml", MINI);
     // SIGTERM: cleanup, the safe state read back from the real drivers.
     let out = dir.join("term");
-    let child = Command::new(env!("CARGO_BIN_EXE_gyrobench"))
+    let child = crate::cli::command()
         .args(["run", s(&p), "--bench", s(&bench), "--out", s(&out)])
         .stdout(Stdio::null())
         .stderr(Stdio::piped())
@@ -183,7 +183,7 @@ fn a_device_run_stopped_by_sigterm_or_killed_through_sim_serve_ends_safe_and_res
 
     // SIGKILL: nothing runs; the next part picks up from the log.
     let out = dir.join("kill");
-    let mut child = Command::new(env!("CARGO_BIN_EXE_gyrobench"))
+    let mut child = crate::cli::command()
         .args(["run", s(&p), "--bench", s(&bench), "--out", s(&out)])
         .stdout(Stdio::null())
         .stderr(Stdio::null())

@@ -157,8 +157,11 @@ fn started_and_completed(log: &Path) -> (Vec<usize>, Vec<usize>) {
     (of("start"), of("end"))
 }
 
-fn gyrobench(bin: &Path, args: &[&str]) -> std::process::Output {
+fn gyrobench(bin: &Path, dir: &Path, args: &[&str]) -> std::process::Output {
+    // The sweep's runs go into a store of its own, never the user's.
     Command::new(bin)
+        .env("XDG_DATA_HOME", dir.join("data"))
+        .env("GYROBENCH_DB", dir.join("results.sqlite"))
         .args(args)
         .output()
         .expect("gyrobench runs")
@@ -205,6 +208,7 @@ impl Sweep {
                         let out = self.dir.join(format!("reference-{seed}"));
                         let r = gyrobench(
                             &self.bin,
+                            &self.dir,
                             &[
                                 "run",
                                 s(&self.procedure),
@@ -327,6 +331,7 @@ impl Sweep {
         let mut problems = Vec::new();
         let first = gyrobench(
             &self.bin,
+            &self.dir,
             &[
                 "run",
                 s(&self.procedure),
@@ -365,7 +370,7 @@ impl Sweep {
             };
         }
         let (_, completed1) = started_and_completed(&log1);
-        let resume = gyrobench(&self.bin, &["run", "--resume", s(&dir)]);
+        let resume = gyrobench(&self.bin, &self.dir, &["run", "--resume", s(&dir)]);
         let mut parts = 1;
         while dir.join(format!("run.part{}.mcap", parts + 1)).exists() {
             parts += 1;
@@ -420,7 +425,11 @@ impl Sweep {
             }
             // Nothing lost: the last part replays to the same report.
             let replayed = dir.join("replay");
-            let rr = gyrobench(&self.bin, &["replay", s(&last), "--out", s(&replayed)]);
+            let rr = gyrobench(
+                &self.bin,
+                &self.dir,
+                &["replay", s(&last), "--out", s(&replayed)],
+            );
             let same = std::fs::read(dir.join("report.json")).ok()
                 == std::fs::read(replayed.join("report.json")).ok();
             if rr.status.code() != resume.status.code() || !same {

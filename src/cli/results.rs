@@ -1,0 +1,435 @@
+//! `gyrobench results ...`: the results store from the command line
+//! (`docs/results.md`).
+
+use std::path::PathBuf;
+
+use anyhow::{Context, Result};
+use clap::{Args, Subcommand};
+
+use super::{Outcome, Usage};
+use crate::results::query::{Filter, MeasurementRow, RunRow, Trend, UnitHistory};
+use crate::results::{Location, Store};
+
+#[derive(Debug, Args)]
+pub struct StoreArgs {
+    /// The results store: a SQLite file, a postgres:// URL (default:
+    /// $GYROBENCH_DB, else ~/.local/share/gyrobench/results.sqlite).
+    #[arg(long, global = true, value_name = "STORE")]
+    db: Option<String>,
+}
+
+#[derive(Debug, Args)]
+pub struct FilterArgs {
+    /// Unit serial number.
+    #[arg(long)]
+    serial: Option<String>,
+    /// Unit type (e.g. RL-16).
+    #[arg(long = "type")]
+    dut_type: Option<String>,
+    /// Procedure name (e.g. acceptance).
+    #[arg(long)]
+    procedure: Option<String>,
+    /// Outcome: running, pass, fail, error or aborted.
+    #[arg(long)]
+    outcome: Option<String>,
+    /// Bench (as the run named it) or station (host name).
+    #[arg(long)]
+    bench: Option<String>,
+    /// Runs started on or after this UTC time or date (2026-03-01).
+    #[arg(long)]
+    since: Option<String>,
+    /// Runs started before this UTC time or date.
+    #[arg(long)]
+    until: Option<String>,
+}
+
+impl FilterArgs {
+    fn filter(&self, latest_only: bool, limit: Option<usize>) -> Result<Filter> {
+        if let Some(o) = &self.outcome
+            && !["running", "pass", "fail", "error", "aborted"].contains(&o.as_str())
+        {
+            return Err(Usage(format!(
+                "--outcome {o:?}: expected running, pass, fail, error or aborted"
+            ))
+            .into());
+        }
+        for (flag, v) in [("--since", &self.since), ("--until", &self.until)] {
+            if let Some(v) = v
+                && !looks_like_a_time(v)
+            {
+                return Err(Usage(format!(
+                    "{flag} {v:?}: expected a UTC date or time, e.g. 2026-03-01 or 2026-03-01T08:00:00Z"
+                ))
+                .into());
+            }
+        }
+        Ok(Filter {
+            serial: self.serial.clone(),
+            dut_type: self.dut_type.clone(),
+            procedure: self.procedure.clone(),
+            outcome: self.outcome.clone(),
+            bench: self.bench.clone(),
+            since: self.since.clone(),
+            until: self.until.clone(),
+            latest_only,
+            limit,
+        })
+    }
+}
+
+/// A date `YYYY-MM-DD`, optionally followed by a time: compared as text
+/// with the stored RFC 3339 times.
+fn looks_like_a_time(s: &str) -> bool {
+    let b = s.as_bytes();
+    b.len() >= 10
+        && b[..4].iter().all(u8::is_ascii_digit)
+        && b[4] == b'-'
+        && b[5..7].iter().all(u8::is_ascii_digit)
+        && b[7] == b'-'
+        && b[8..10].iter().all(u8::is_ascii_digit)
+}
+
+#[derive(Debug, Subcommand)]
+pub enum ResultsCommand {
+    /// Runs, newest first.
+    #[command(after_help = "Example: gyrobench results list --serial RL16-0042 --outcome fail")]
+    List {
+        #[command(flatten)]
+        filter: FilterArgs,
+        /// At most this many rows.
+        #[arg(long, default_value_t = 50)]
+        limit: usize,
+        /// Every part of a resumed run (default: each run's latest part).
+        #[arg(long)]
+        all_parts: bool,
+        /// As JSON.
+        #[arg(long)]
+        json: bool,
+    },
+    /// One run whole: its record, measurements and parts.
+    #[command(after_help = "Example: gyrobench results show 3f2a9c")]
+    Show {
+        /// The run's id (or its start), as `results list` shows it.
+        run: String,
+        /// As JSON.
+        #[arg(long)]
+        json: bool,
+    },
+    /// A unit's history: every run and measurement, and its latest
+    /// coefficient set.
+    #[command(after_help = "Example: gyrobench results unit RL16-0042")]
+    Unit {
+        /// Serial number.
+        serial: String,
+        /// As JSON.
+        #[arg(long)]
+        json: bool,
+    },
+    /// A measurement across units: count, mean, sigma, min/max, yield,
+    /// Cpk; a chart page with --html.
+    #[command(
+        after_help = "Example: gyrobench results trend compensated_drift_pp_dph --html trend.html"
+    )]
+    Trend {
+        /// Measurement name, e.g. compensated_drift_pp_dph.
+        measurement: String,
+        #[command(flatten)]
+        filter: FilterArgs,
+        /// Also write a chart page (values against time, limits).
+        #[arg(long, value_name = "FILE")]
+        html: Option<PathBuf>,
+        /// As JSON.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Runs as JUnit XML (one testsuite per run) or CSV (one row per
+    /// measurement).
+    #[command(
+        after_help = "Example: gyrobench results export --junit results.xml --since 2026-03-01"
+    )]
+    Export {
+        #[command(flatten)]
+        filter: FilterArgs,
+        /// JUnit XML file to write.
+        #[arg(long, value_name = "FILE", required_unless_present = "csv")]
+        junit: Option<PathBuf>,
+        /// CSV file to write.
+        #[arg(long, value_name = "FILE")]
+        csv: Option<PathBuf>,
+    },
+    /// Index run directories from their logs (idempotent: what the store
+    /// has is left alone; a run left running is completed).
+    #[command(after_help = "Example: gyrobench results sync runs/")]
+    Sync {
+        /// Directories holding run directories (searched below).
+        #[arg(required = true)]
+        dirs: Vec<PathBuf>,
+    },
+}
+
+#[derive(Debug, Args)]
+pub struct ResultsArgs {
+    #[command(flatten)]
+    store: StoreArgs,
+    #[command(subcommand)]
+    command: ResultsCommand,
+}
+
+fn open(store: &StoreArgs) -> Result<Store> {
+    let loc = Location::resolve(store.db.as_deref(), None);
+    let mut s = Store::open(&loc)?.ok_or_else(|| {
+        Usage("the results store is `none`: give --db or set GYROBENCH_DB".into())
+    })?;
+    let flushed = s.flush_pending();
+    if flushed > 0 {
+        eprintln!("{flushed} queued run(s) written to the results store");
+    }
+    Ok(s)
+}
+
+pub fn run(args: ResultsArgs) -> Result<Outcome> {
+    let mut store = open(&args.store)?;
+    match args.command {
+        ResultsCommand::List {
+            filter,
+            limit,
+            all_parts,
+            json,
+        } => {
+            let rows = store.list(&filter.filter(!all_parts, Some(limit))?)?;
+            if json {
+                outln!("{}", serde_json::to_string_pretty(&rows)?)?;
+            } else {
+                outf!("{}", render_list(&rows))?;
+                eprintln!("{} run(s) from {}", rows.len(), store.name());
+            }
+        }
+        ResultsCommand::Show { run, json } => {
+            let d = store.show(&run)?;
+            if json {
+                outln!("{}", serde_json::to_string_pretty(&d)?)?;
+            } else {
+                outf!(
+                    "{}",
+                    render_run(&d.run, &d.fields, &d.measurements, &d.parts)
+                )?;
+            }
+        }
+        ResultsCommand::Unit { serial, json } => {
+            let h = store.unit(&serial)?;
+            if json {
+                outln!("{}", serde_json::to_string_pretty(&h)?)?;
+            } else {
+                outf!("{}", render_unit(&h))?;
+            }
+        }
+        ResultsCommand::Trend {
+            measurement,
+            filter,
+            html,
+            json,
+        } => {
+            let f = filter.filter(true, None)?;
+            let t = store.trend(&measurement, &f)?;
+            if let Some(path) = &html {
+                let points = store.trend_points(&measurement, &f, 5000)?;
+                crate::fsutil::write_atomic(
+                    path,
+                    crate::results::page::trend_page(&t, &points).as_bytes(),
+                )
+                .with_context(|| format!("writing {}", path.display()))?;
+                eprintln!("chart page in {}", path.display());
+            }
+            if json {
+                outln!("{}", serde_json::to_string_pretty(&t)?)?;
+            } else {
+                outf!("{}", render_trend(&t))?;
+            }
+        }
+        ResultsCommand::Export { filter, junit, csv } => {
+            let rows = store.export_rows(&filter.filter(true, None)?)?;
+            if let Some(path) = &junit {
+                let xml = crate::results::junit::junit(&rows).context("writing JUnit XML")?;
+                crate::fsutil::write_atomic(path, xml.as_bytes())
+                    .with_context(|| format!("writing {}", path.display()))?;
+                eprintln!("{} run(s) as JUnit XML in {}", rows.len(), path.display());
+            }
+            if let Some(path) = &csv {
+                let text = crate::results::junit::csv(&rows).context("writing CSV")?;
+                crate::fsutil::write_atomic(path, text.as_bytes())
+                    .with_context(|| format!("writing {}", path.display()))?;
+                eprintln!("{} run(s) as CSV in {}", rows.len(), path.display());
+            }
+        }
+        ResultsCommand::Sync { dirs } => {
+            let mut failed_any = false;
+            for d in &dirs {
+                anyhow::ensure!(d.is_dir(), "{}: not a directory", d.display());
+                let (added, there, failed) = store.sync_dir(d);
+                outln!(
+                    "{}: {added} part(s) indexed, {there} already in {}",
+                    d.display(),
+                    store.name()
+                )?;
+                for f in &failed {
+                    eprintln!("warning: {f}");
+                }
+                failed_any |= !failed.is_empty();
+            }
+            if failed_any {
+                return Ok(Outcome::Error);
+            }
+        }
+    }
+    Ok(Outcome::Success)
+}
+
+fn opt(v: Option<f64>, digits: usize) -> String {
+    v.map_or("-".into(), |v| format!("{v:.digits$}"))
+}
+
+fn lim(v: Option<f64>) -> String {
+    v.map_or(String::new(), |v| format!("{v}"))
+}
+
+/// The list as a table.
+pub fn render_list(rows: &[RunRow]) -> String {
+    let mut s = format!(
+        "{:<25} {:<36} {:<8} {:<14} {:<14} {:<12} {:<8}\n",
+        "started (UTC)", "run", "type", "serial", "procedure", "bench", "outcome"
+    );
+    for r in rows {
+        s.push_str(&format!(
+            "{:<25} {:<36} {:<8} {:<14} {:<14} {:<12} {:<8}\n",
+            r.started_utc.get(..19).unwrap_or(&r.started_utc),
+            r.id,
+            r.dut_type,
+            r.serial,
+            r.procedure,
+            r.bench,
+            r.outcome.to_uppercase()
+        ));
+    }
+    s
+}
+
+fn render_measurements(ms: &[MeasurementRow]) -> String {
+    let mut s = String::new();
+    for m in ms {
+        s.push_str(&format!(
+            "  {:<32} {:>12} {:<10} [{}..{}]  {}\n",
+            m.name,
+            opt(m.value, 4),
+            m.unit,
+            lim(m.low),
+            lim(m.high),
+            m.outcome.to_uppercase()
+        ));
+    }
+    s
+}
+
+/// One run as text.
+pub fn render_run(
+    run: &RunRow,
+    fields: &[(String, String)],
+    ms: &[MeasurementRow],
+    parts: &[RunRow],
+) -> String {
+    let mut s = format!(
+        "{}: {} on {} {} (run {}, part {}{})\n",
+        run.outcome.to_uppercase(),
+        run.procedure,
+        run.dut_type,
+        run.serial,
+        run.id,
+        run.part,
+        if run.latest {
+            ""
+        } else {
+            ", superseded by a later part"
+        }
+    );
+    s.push_str(&format!(
+        "  started {}  bench {}  station {}  operator {}\n",
+        run.started_utc,
+        run.bench,
+        run.station,
+        if run.operator.is_empty() {
+            "-"
+        } else {
+            &run.operator
+        }
+    ));
+    for (k, v) in fields.iter().filter(|(_, v)| !v.is_empty()) {
+        s.push_str(&format!("  {k}: {v}\n"));
+    }
+    s.push_str(&render_measurements(ms));
+    if parts.len() > 1 {
+        s.push_str("  parts:\n");
+        for p in parts {
+            s.push_str(&format!(
+                "    {} {} {}\n",
+                p.id,
+                p.started_utc,
+                p.outcome.to_uppercase()
+            ));
+        }
+    }
+    s
+}
+
+/// A unit's history as text: one block per run, and the coefficients.
+pub fn render_unit(h: &UnitHistory) -> String {
+    let mut s = format!("unit {}: {} run(s)\n", h.serial, h.runs.len());
+    for r in &h.runs {
+        s.push_str(&format!(
+            "{} {} {} {} ({})\n",
+            r.started_utc.get(..19).unwrap_or(&r.started_utc),
+            r.procedure,
+            r.outcome.to_uppercase(),
+            r.id,
+            r.bench
+        ));
+        let ms: Vec<MeasurementRow> = h
+            .measurements
+            .iter()
+            .filter(|m| m.run == r.id)
+            .cloned()
+            .collect();
+        s.push_str(&render_measurements(&ms));
+    }
+    match &h.coefficients {
+        Some(c) => s.push_str(&format!(
+            "coefficients: version {} of {} ({}; held-out drift {} deg/h) from {}\n{}",
+            c.version,
+            c.created_utc,
+            c.validation,
+            opt(c.held_out_drift_pp_dph, 4),
+            c.source_runs,
+            c.coeffs_toml
+        )),
+        None => s.push_str("coefficients: none calibrated\n"),
+    }
+    s
+}
+
+/// A trend as a small table.
+pub fn render_trend(t: &Trend) -> String {
+    format!(
+        "{} ({}): {} value(s) of {} judged\n  mean {}  sigma {}  min {}  max {}\n  limits [{}..{}]  yield {}  Cpk {}\n",
+        t.name,
+        t.unit,
+        t.count,
+        t.judged,
+        opt(t.mean, 4),
+        opt(t.sigma, 4),
+        opt(t.min, 4),
+        opt(t.max, 4),
+        lim(t.low),
+        lim(t.high),
+        t.yield_fraction
+            .map_or("-".into(), |y| format!("{:.1} %", 100.0 * y)),
+        opt(t.cpk, 2)
+    )
+}

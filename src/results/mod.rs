@@ -1,0 +1,248 @@
+//! The results store: every run of every unit, with its measurements, its
+//! logs and the coefficient sets calibrate made, in a database a lab can
+//! query (`docs/results.md`).
+//!
+//! One interface, two engines ([`sql::Sql`]): an embedded SQLite file by
+//! default (rusqlite, SQLite compiled in: nothing to install), PostgreSQL
+//! for a lab with several benches (the `postgres` client). Both are
+//! synchronous, as the command line and the run's own thread are; the
+//! same SQL serves both. The log is the record of truth: the store is an
+//! index of it, written by the run itself (at its start and its end), and
+//! rebuilt from the logs at any time (`results sync`). A store that cannot
+//! be reached never stops a run: the run is queued and written later.
+
+pub mod junit;
+pub mod page;
+pub mod pg;
+pub mod query;
+pub mod record;
+pub mod sql;
+pub mod sqlite;
+
+use std::path::{Path, PathBuf};
+
+use sql::Sql;
+
+/// What went wrong with the store.
+#[derive(Debug, thiserror::Error)]
+pub enum StoreError {
+    /// The engine refused or failed (a corrupt file, a wrong password, a
+    /// server that went away).
+    #[error("results store {store}: {message}")]
+    Engine {
+        /// The store (a file, a URL without its password).
+        store: String,
+        /// The engine's words.
+        message: String,
+    },
+    /// The store's schema is newer than this build reads.
+    #[error(
+        "results store {store}: its schema is version {have}, newer than this gyrobench reads ({supported}); use a newer gyrobench"
+    )]
+    Newer {
+        /// The store.
+        store: String,
+        /// Its schema version.
+        have: i64,
+        /// The newest this build knows.
+        supported: i64,
+    },
+    /// What was asked for is not there.
+    #[error("results store {store}: {what}")]
+    NotFound {
+        /// The store.
+        store: String,
+        /// What is missing.
+        what: String,
+    },
+    /// A log or run directory could not be indexed.
+    #[error("{path}: {message}")]
+    Log {
+        /// The file.
+        path: String,
+        /// Why.
+        message: String,
+    },
+}
+
+/// Where the results go.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Location {
+    /// A SQLite file.
+    Sqlite(PathBuf),
+    /// A PostgreSQL server (`postgres://...`).
+    Postgres(String),
+    /// Nowhere (`none`).
+    Off,
+}
+
+/// The environment variable that names the store.
+pub const ENV: &str = "GYROBENCH_DB";
+
+impl Location {
+    /// The store named by `spec`: `none`, a `postgres://` or
+    /// `postgresql://` URL, or a SQLite file path.
+    pub fn parse(spec: &str) -> Self {
+        let s = spec.trim();
+        if s.eq_ignore_ascii_case("none") || s.eq_ignore_ascii_case("off") {
+            Self::Off
+        } else if s.starts_with("postgres://") || s.starts_with("postgresql://") {
+            Self::Postgres(s.to_owned())
+        } else {
+            Self::Sqlite(PathBuf::from(s))
+        }
+    }
+
+    /// The store to use: `--db`, else `$GYROBENCH_DB`, else the bench
+    /// file's `[results] db`, else the default SQLite file
+    /// ([`default_sqlite`]).
+    pub fn resolve(cli: Option<&str>, bench: Option<&str>) -> Self {
+        if let Some(s) = cli {
+            return Self::parse(s);
+        }
+        if let Ok(s) = std::env::var(ENV)
+            && !s.trim().is_empty()
+        {
+            return Self::parse(&s);
+        }
+        if let Some(s) = bench {
+            return Self::parse(s);
+        }
+        Self::Sqlite(default_sqlite())
+    }
+
+    /// The store in words, without a password.
+    pub fn describe(&self) -> String {
+        match self {
+            Self::Sqlite(p) => p.display().to_string(),
+            Self::Postgres(url) => pg::redact(url),
+            Self::Off => "none".into(),
+        }
+    }
+}
+
+/// Where gyrobench keeps its own files on this machine:
+/// `$XDG_DATA_HOME/gyrobench`, else `$HOME/.local/share/gyrobench`, else
+/// `.gyrobench` here.
+pub fn data_dir() -> PathBuf {
+    let from = |k: &str| {
+        std::env::var_os(k)
+            .filter(|v| !v.is_empty())
+            .map(PathBuf::from)
+    };
+    from("XDG_DATA_HOME")
+        .or_else(|| from("HOME").map(|h| h.join(".local/share")))
+        .map_or_else(|| PathBuf::from(".gyrobench"), |d| d.join("gyrobench"))
+}
+
+/// The default store: `results.sqlite` in [`data_dir`].
+pub fn default_sqlite() -> PathBuf {
+    data_dir().join("results.sqlite")
+}
+
+/// An open store.
+pub struct Store {
+    sql: Box<dyn Sql>,
+    name: String,
+}
+
+impl std::fmt::Debug for Store {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Store").field("name", &self.name).finish()
+    }
+}
+
+impl Store {
+    /// Open the store at `loc`, creating it and bringing its schema up to
+    /// date; None for [`Location::Off`].
+    pub fn open(loc: &Location) -> Result<Option<Self>, StoreError> {
+        let name = loc.describe();
+        let mut sql: Box<dyn Sql> = match loc {
+            Location::Off => return Ok(None),
+            Location::Sqlite(p) => Box::new(sqlite::Sqlite::open(p)?),
+            Location::Postgres(url) => Box::new(pg::Postgres::connect(url)?),
+        };
+        sql::migrate(sql.as_mut(), &name)?;
+        Ok(Some(Self { sql, name }))
+    }
+
+    /// The store in words (no password).
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+
+    fn sql(&mut self) -> &mut dyn Sql {
+        self.sql.as_mut()
+    }
+}
+
+/// Runs waiting for a store that could not be reached: one file per run
+/// part in `data_dir()/pending`, holding the path of its log. Written
+/// when a run cannot record itself; indexed (and removed) the next time a
+/// command opens the store.
+pub mod pending {
+    use super::*;
+
+    /// The queue's directory.
+    pub fn dir() -> PathBuf {
+        data_dir().join("pending")
+    }
+
+    /// Queue the log at `log` (part `key` of a run).
+    pub fn push(key: &str, log: &Path) -> std::io::Result<PathBuf> {
+        let d = dir();
+        std::fs::create_dir_all(&d)?;
+        let name: String = key
+            .chars()
+            .map(|c| {
+                if c.is_ascii_alphanumeric() || c == '.' || c == '-' {
+                    c
+                } else {
+                    '_'
+                }
+            })
+            .collect();
+        let path = d.join(name);
+        let log = std::path::absolute(log)?;
+        crate::fsutil::write_atomic(&path, log.display().to_string().as_bytes())?;
+        Ok(path)
+    }
+
+    /// Every queued log, with its queue entry.
+    pub fn list() -> Vec<(PathBuf, PathBuf)> {
+        let Ok(entries) = std::fs::read_dir(dir()) else {
+            return Vec::new();
+        };
+        let mut out: Vec<(PathBuf, PathBuf)> = entries
+            .filter_map(Result::ok)
+            .filter(|e| !e.file_name().to_string_lossy().starts_with('.'))
+            .filter_map(|e| {
+                let log = std::fs::read_to_string(e.path()).ok()?;
+                Some((e.path(), PathBuf::from(log.trim())))
+            })
+            .collect();
+        out.sort();
+        out
+    }
+}
+
+impl Store {
+    /// Index the runs waiting in the queue; each one indexed (or whose
+    /// log is gone) leaves it. Returns how many were indexed.
+    pub fn flush_pending(&mut self) -> usize {
+        let mut done = 0;
+        for (entry, log) in pending::list() {
+            match self.index_log(&log) {
+                Ok(_) => {
+                    done += 1;
+                    let _removed = std::fs::remove_file(&entry);
+                }
+                Err(StoreError::Log { .. }) if !log.exists() => {
+                    let _removed = std::fs::remove_file(&entry);
+                }
+                Err(_) => {}
+            }
+        }
+        done
+    }
+}

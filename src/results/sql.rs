@@ -1,0 +1,202 @@
+//! The two engines behind one small interface: statements with `$1`-style
+//! parameters (SQLite takes them as numbered parameters, PostgreSQL as its
+//! own) and rows of plain values, so every query of the store is written
+//! once. Schema migrations, versioned in `src/results/migrations/`, are
+//! applied here on open.
+
+use super::StoreError;
+
+/// A value going in or coming out.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Value {
+    /// NULL.
+    Null,
+    /// An integer.
+    Int(i64),
+    /// A float.
+    Real(f64),
+    /// Text.
+    Text(String),
+}
+
+impl From<i64> for Value {
+    fn from(v: i64) -> Self {
+        Self::Int(v)
+    }
+}
+
+impl From<f64> for Value {
+    fn from(v: f64) -> Self {
+        if v.is_finite() {
+            Self::Real(v)
+        } else {
+            Self::Null
+        }
+    }
+}
+
+impl From<&str> for Value {
+    fn from(v: &str) -> Self {
+        Self::Text(v.to_owned())
+    }
+}
+
+impl From<String> for Value {
+    fn from(v: String) -> Self {
+        Self::Text(v)
+    }
+}
+
+impl From<bool> for Value {
+    fn from(v: bool) -> Self {
+        Self::Int(i64::from(v))
+    }
+}
+
+impl<T: Into<Value>> From<Option<T>> for Value {
+    fn from(v: Option<T>) -> Self {
+        v.map_or(Self::Null, Into::into)
+    }
+}
+
+impl Value {
+    /// As text (empty for NULL).
+    pub fn text(&self) -> String {
+        match self {
+            Self::Null => String::new(),
+            Self::Int(v) => v.to_string(),
+            Self::Real(v) => v.to_string(),
+            Self::Text(s) => s.clone(),
+        }
+    }
+
+    /// As an optional float.
+    pub fn real(&self) -> Option<f64> {
+        match self {
+            Self::Int(v) => Some(*v as f64),
+            Self::Real(v) => Some(*v),
+            _ => None,
+        }
+    }
+
+    /// As an optional integer.
+    pub fn int(&self) -> Option<i64> {
+        match self {
+            Self::Int(v) => Some(*v),
+            Self::Real(v) => Some(*v as i64),
+            _ => None,
+        }
+    }
+}
+
+/// A row: its values in the order of the select list.
+pub type Row = Vec<Value>;
+
+/// Which engine.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Engine {
+    /// An embedded SQLite file.
+    Sqlite,
+    /// A PostgreSQL server.
+    Postgres,
+}
+
+/// What an engine does for the store.
+pub trait Sql: Send {
+    /// Run a statement; rows affected.
+    fn execute(&mut self, sql: &str, params: &[Value]) -> Result<u64, StoreError>;
+    /// Run a query; its rows.
+    fn query(&mut self, sql: &str, params: &[Value]) -> Result<Vec<Row>, StoreError>;
+    /// Run statements without parameters (a migration, BEGIN, COMMIT).
+    fn batch(&mut self, sql: &str) -> Result<(), StoreError>;
+    /// Which engine this is.
+    fn engine(&self) -> Engine;
+}
+
+/// The migrations of each engine, in order: (version, name, SQL).
+pub fn migrations(engine: Engine) -> &'static [(i64, &'static str, &'static str)] {
+    match engine {
+        Engine::Sqlite => &[(1, "init", include_str!("migrations/sqlite/0001_init.sql"))],
+        Engine::Postgres => &[(1, "init", include_str!("migrations/postgres/0001_init.sql"))],
+    }
+}
+
+/// The schema version this build writes and reads.
+pub fn latest_version(engine: Engine) -> i64 {
+    migrations(engine).last().map_or(0, |m| m.0)
+}
+
+/// Bring the schema up to this build's version in one transaction (others
+/// that open the store meanwhile wait: an exclusive transaction in SQLite,
+/// an advisory lock in PostgreSQL). A store whose schema is newer than
+/// this build is refused.
+pub fn migrate(sql: &mut dyn Sql, store: &str) -> Result<i64, StoreError> {
+    let engine = sql.engine();
+    sql.batch(match engine {
+        Engine::Sqlite => "BEGIN IMMEDIATE",
+        Engine::Postgres => "BEGIN; SELECT pg_advisory_xact_lock(7411846281553)",
+    })?;
+    let result = (|| {
+        sql.batch("CREATE TABLE IF NOT EXISTS gyrobench_schema (version BIGINT NOT NULL)")?;
+        let rows = sql.query("SELECT version FROM gyrobench_schema", &[])?;
+        let have = rows
+            .first()
+            .and_then(|r| r.first())
+            .and_then(Value::int)
+            .unwrap_or(0);
+        let latest = latest_version(engine);
+        if have > latest {
+            return Err(StoreError::Newer {
+                store: store.to_owned(),
+                have,
+                supported: latest,
+            });
+        }
+        for (version, _, text) in migrations(engine) {
+            if *version > have {
+                sql.batch(text)?;
+            }
+        }
+        if rows.is_empty() {
+            sql.execute(
+                "INSERT INTO gyrobench_schema (version) VALUES ($1)",
+                &[Value::Int(latest)],
+            )?;
+        } else if have < latest {
+            sql.execute(
+                "UPDATE gyrobench_schema SET version = $1",
+                &[Value::Int(latest)],
+            )?;
+        }
+        Ok(latest)
+    })();
+    match result {
+        Ok(v) => {
+            sql.batch("COMMIT")?;
+            Ok(v)
+        }
+        Err(e) => {
+            let _rolled_back = sql.batch("ROLLBACK");
+            Err(e)
+        }
+    }
+}
+
+/// Run `f` in a transaction: committed when it returns Ok, rolled back
+/// otherwise.
+pub fn transaction<T>(
+    sql: &mut dyn Sql,
+    f: impl FnOnce(&mut dyn Sql) -> Result<T, StoreError>,
+) -> Result<T, StoreError> {
+    sql.batch("BEGIN")?;
+    match f(sql) {
+        Ok(v) => {
+            sql.batch("COMMIT")?;
+            Ok(v)
+        }
+        Err(e) => {
+            let _rolled_back = sql.batch("ROLLBACK");
+            Err(e)
+        }
+    }
+}

@@ -1,0 +1,501 @@
+//! The results store, on SQLite and on a real PostgreSQL server: runs
+//! record themselves, `results` answers from them, exports parse, sync is
+//! idempotent, bad stores are refused by name, a store that goes away
+//! never loses a run, and eight benches write one store at once.
+//!
+//! PostgreSQL comes from `GYROBENCH_TEST_POSTGRES` (a URL; `.ci/run` starts
+//! a server and sets it). Without it these tests say so and pass, except
+//! under CI (`CI` set), where a missing server fails them.
+
+use std::path::Path;
+use std::process::Stdio;
+
+use crate::cli::{command, temp_dir};
+use crate::common::{MINI, TINY, json, s, stderr, wait_for, write};
+
+/// The PostgreSQL URL to test against, if any.
+fn postgres() -> Option<String> {
+    match std::env::var("GYROBENCH_TEST_POSTGRES") {
+        Ok(url) if !url.is_empty() => Some(url),
+        _ => {
+            assert!(
+                std::env::var_os("CI").is_none(),
+                "CI needs a PostgreSQL server: set GYROBENCH_TEST_POSTGRES (tests/conformance/postgres.sh starts one)"
+            );
+            eprintln!(
+                "skipped: no PostgreSQL server (set GYROBENCH_TEST_POSTGRES to test against one)"
+            );
+            None
+        }
+    }
+}
+
+/// gyrobench against the store `db`.
+fn with_db(db: &str, args: &[&str]) -> std::process::Output {
+    command()
+        .env("GYROBENCH_DB", db)
+        .args(args)
+        .output()
+        .expect("runs")
+}
+
+fn stdout(o: &std::process::Output) -> String {
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
+/// Two runs of two units, a resumed run, and every question of the issue:
+/// list, show, unit, trend, exports, and a sync that adds nothing.
+fn lifecycle(db: &str, tag: &str) {
+    let dir = temp_dir(&format!("results-{tag}"));
+    let p = write(&dir, "tiny.toml", TINY);
+    let mini = write(&dir, "mini.toml", MINI);
+    let (a, b) = (format!("{tag}-A-1"), format!("{tag}-B-2"));
+    for (serial, seed) in [(&a, "1"), (&b, "2")] {
+        let r = with_db(
+            db,
+            &[
+                "run",
+                s(&p),
+                "--dut",
+                serial,
+                "--seed",
+                seed,
+                "--out",
+                s(&dir.join(serial.as_str())),
+                "--operator",
+                "ana",
+            ],
+        );
+        assert_eq!(r.status.code(), Some(0), "{}", stderr(&r));
+        assert!(
+            stderr(&r).contains("recorded in the results store"),
+            "{}",
+            stderr(&r)
+        );
+    }
+    // A run that stops and is resumed: two parts, the second the latest.
+    let resumed = dir.join("resumed");
+    let r = with_db(
+        db,
+        &[
+            "run",
+            s(&mini),
+            "--dut",
+            &a,
+            "--out",
+            s(&resumed),
+            "--inject",
+            "chamber-alarm@2500",
+        ],
+    );
+    assert_eq!(r.status.code(), Some(1));
+    let r = with_db(db, &["run", "--resume", s(&resumed)]);
+    assert_eq!(r.status.code(), Some(0), "{}", stderr(&r));
+
+    let list = with_db(db, &["results", "list", "--serial", &a, "--json"]);
+    assert_eq!(list.status.code(), Some(0), "{}", stderr(&list));
+    let runs: serde_json::Value = serde_json::from_slice(&list.stdout).expect("JSON");
+    let runs = runs.as_array().expect("list");
+    assert_eq!(runs.len(), 2, "latest parts only: {runs:?}");
+    assert!(
+        runs.iter()
+            .all(|r| r["operator"] == "ana" || r["part"] == 2),
+        "{runs:?}"
+    );
+    assert_eq!(runs[0]["part"], 2, "the resumed run, newest first");
+    assert_eq!(runs[0]["outcome"], "pass");
+    let all = with_db(
+        db,
+        &["results", "list", "--serial", &a, "--all-parts", "--json"],
+    );
+    let all: serde_json::Value = serde_json::from_slice(&all.stdout).expect("JSON");
+    assert_eq!(all.as_array().map(Vec::len), Some(3));
+    let errors = with_db(
+        db,
+        &[
+            "results",
+            "list",
+            "--serial",
+            &a,
+            "--all-parts",
+            "--outcome",
+            "error",
+            "--json",
+        ],
+    );
+    let errors: serde_json::Value = serde_json::from_slice(&errors.stdout).expect("JSON");
+    assert_eq!(errors[0]["part"], 1, "{errors}");
+
+    let id = runs[0]["id"].as_str().expect("id");
+    let show = with_db(db, &["results", "show", &id[..12]]);
+    assert_eq!(show.status.code(), Some(0), "{}", stderr(&show));
+    let text = stdout(&show);
+    assert!(
+        text.contains("PASS: mini on RL-16") && text.contains("parts:"),
+        "{text}"
+    );
+    assert!(
+        text.contains("log_sha256: ") && text.contains("procedure_sha256: "),
+        "{text}"
+    );
+    let report = json(&resumed.join("report.json"));
+    for m in report["measurements"].as_array().expect("measurements") {
+        assert!(text.contains(m["name"].as_str().expect("name")), "{text}");
+    }
+
+    let unit = with_db(db, &["results", "unit", &a, "--json"]);
+    let unit: serde_json::Value = serde_json::from_slice(&unit.stdout).expect("JSON");
+    assert_eq!(unit["runs"].as_array().map(Vec::len), Some(2));
+    assert_eq!(
+        unit["measurements"].as_array().map(Vec::len),
+        Some(2 + report["measurements"].as_array().map_or(0, Vec::len))
+    );
+
+    let trend = with_db(
+        db,
+        &[
+            "results",
+            "trend",
+            "bias_dph:up",
+            "--type",
+            "RL-16",
+            "--since",
+            "2000-01-01",
+            "--json",
+        ],
+    );
+    assert_eq!(trend.status.code(), Some(0), "{}", stderr(&trend));
+    let t: serde_json::Value = serde_json::from_slice(&trend.stdout).expect("JSON");
+    assert!(t["count"].as_i64().expect("count") >= 3, "{t}");
+    assert_eq!(t["low"], -5.0);
+    assert!(t["cpk"].as_f64().expect("both limits: a Cpk") > 1.0, "{t}");
+    let page = dir.join("trend.html");
+    let r = with_db(
+        db,
+        &[
+            "results",
+            "trend",
+            "bias_dph:up",
+            "--serial",
+            &b,
+            "--html",
+            s(&page),
+        ],
+    );
+    assert_eq!(r.status.code(), Some(0), "{}", stderr(&r));
+    assert!(
+        std::fs::read_to_string(&page)
+            .expect("page")
+            .contains("<svg")
+    );
+
+    let xml = dir.join("results.xml");
+    let csv = dir.join("results.csv");
+    let r = with_db(
+        db,
+        &[
+            "results",
+            "export",
+            "--serial",
+            &a,
+            "--junit",
+            s(&xml),
+            "--csv",
+            s(&csv),
+        ],
+    );
+    assert_eq!(r.status.code(), Some(0), "{}", stderr(&r));
+    check_junit(&xml, 2);
+    let rows = std::fs::read_to_string(&csv).expect("csv").lines().count();
+    assert_eq!(
+        rows,
+        1 + unit["measurements"].as_array().map_or(0, Vec::len)
+    );
+
+    // The logs are the truth: a sync of them adds nothing, twice.
+    for _ in 0..2 {
+        let r = with_db(db, &["results", "sync", s(&dir)]);
+        assert_eq!(r.status.code(), Some(0), "{}", stderr(&r));
+        assert!(
+            stdout(&r).contains(": 0 part(s) indexed, 4 already in"),
+            "{}",
+            stdout(&r)
+        );
+    }
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
+
+/// The JUnit file parses with a third-party parser (Python's junitparser,
+/// when CI's virtualenv is there) and has `suites` testsuites.
+fn check_junit(xml: &Path, suites: usize) {
+    let text = std::fs::read_to_string(xml).expect("junit");
+    assert_eq!(text.matches("<testsuite ").count(), suites, "{text}");
+    let python = match std::env::var("GYROBENCH_TEST_PYTHON") {
+        Ok(p) => p,
+        Err(_) => {
+            assert!(
+                std::env::var_os("CI").is_none(),
+                "CI checks JUnit with junitparser: set GYROBENCH_TEST_PYTHON"
+            );
+            eprintln!("skipped: JUnit not checked by junitparser (set GYROBENCH_TEST_PYTHON)");
+            return;
+        }
+    };
+    let out = std::process::Command::new(python)
+        .arg(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/tests/conformance/check_junit.py"
+        ))
+        .arg(xml)
+        .output()
+        .expect("python runs");
+    assert!(
+        out.status.success(),
+        "{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+#[test]
+fn sqlite_records_every_run_and_answers_the_lab_questions() {
+    let dir = temp_dir("results-sqlite-store");
+    lifecycle(s(&dir.join("results.sqlite")), "sqlite");
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
+
+#[test]
+fn postgres_records_every_run_and_answers_the_lab_questions() {
+    if let Some(url) = postgres() {
+        lifecycle(&url, &format!("pg{}", std::process::id()));
+    }
+}
+
+#[test]
+fn a_bad_store_is_refused_by_name_and_the_run_goes_on() {
+    let dir = temp_dir("results-bad");
+    let p = write(&dir, "tiny.toml", TINY);
+    // A file that is not SQLite.
+    let corrupt = write(&dir, "corrupt.sqlite", &"not a database ".repeat(400));
+    let r = with_db(s(&corrupt), &["results", "list"]);
+    assert_eq!(r.status.code(), Some(1));
+    assert!(
+        stderr(&r).contains(&format!("results store {}", corrupt.display())),
+        "{}",
+        stderr(&r)
+    );
+    let out = dir.join("run");
+    let r = with_db(s(&corrupt), &["run", s(&p), "--out", s(&out)]);
+    assert_eq!(r.status.code(), Some(0), "the run goes on: {}", stderr(&r));
+    assert!(stderr(&r).contains("queued"), "{}", stderr(&r));
+    assert_eq!(json(&out.join("report.json"))["outcome"], "pass");
+    // A schema from a newer gyrobench.
+    let newer = dir.join("newer.sqlite");
+    assert_eq!(
+        with_db(s(&newer), &["results", "list"]).status.code(),
+        Some(0)
+    );
+    let conn = std::process::Command::new("python3")
+        .args([
+            "-c",
+            "import sqlite3,sys; c=sqlite3.connect(sys.argv[1]); c.execute('UPDATE gyrobench_schema SET version = 99'); c.commit()",
+            s(&newer),
+        ])
+        .status()
+        .expect("python3");
+    assert!(conn.success());
+    let r = with_db(s(&newer), &["results", "list"]);
+    assert_eq!(r.status.code(), Some(1));
+    assert!(
+        stderr(&r).contains("schema is version 99, newer than this gyrobench"),
+        "{}",
+        stderr(&r)
+    );
+    // A wrong URL, and (with a server) a wrong password: the password
+    // never printed.
+    let r = with_db(
+        "postgres://gyrobench:secret@127.0.0.1:1/nowhere",
+        &["results", "list"],
+    );
+    assert_eq!(r.status.code(), Some(1));
+    assert!(
+        stderr(&r).contains("results store postgres://gyrobench@127.0.0.1:1/nowhere"),
+        "{}",
+        stderr(&r)
+    );
+    assert!(!stderr(&r).contains("secret"));
+    if let Some(url) = postgres() {
+        let wrong = url.replacen("gyrobench:gyrobench@", "gyrobench:not-it@", 1);
+        let r = with_db(&wrong, &["results", "list"]);
+        assert_eq!(r.status.code(), Some(1));
+        assert!(
+            stderr(&r).contains("password authentication failed"),
+            "{}",
+            stderr(&r)
+        );
+        assert!(!stderr(&r).contains("not-it"));
+    }
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
+
+/// A PostgreSQL server of this test's own, to stop mid-run.
+struct OwnServer {
+    dir: std::path::PathBuf,
+}
+
+impl OwnServer {
+    fn start(dir: &Path, port: u16) -> Option<(Self, String)> {
+        let script = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/conformance/postgres.sh");
+        let out = std::process::Command::new(script)
+            .args(["start", s(dir), &port.to_string()])
+            .output()
+            .ok()?;
+        out.status.success().then(|| {
+            (
+                Self {
+                    dir: dir.to_owned(),
+                },
+                String::from_utf8_lossy(&out.stdout).trim().to_owned(),
+            )
+        })
+    }
+
+    fn stop(&self) {
+        let script = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/conformance/postgres.sh");
+        let _stopped = std::process::Command::new(script)
+            .args(["stop", s(&self.dir)])
+            .status();
+    }
+}
+
+impl Drop for OwnServer {
+    fn drop(&mut self) {
+        self.stop();
+    }
+}
+
+#[test]
+fn a_server_that_goes_away_mid_run_loses_nothing_and_the_run_is_written_later() {
+    if postgres().is_none() {
+        return;
+    }
+    let dir = temp_dir("results-away");
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("dir");
+    let port = 20_000 + (std::process::id() % 20_000) as u16;
+    let Some((server, url)) = OwnServer::start(&dir.join("pg"), port) else {
+        panic!("a PostgreSQL server of the test's own must start (tests/conformance/postgres.sh)");
+    };
+    let p = write(&dir, "mini.toml", MINI);
+    let out = dir.join("run");
+    let child = command()
+        .env("GYROBENCH_DB", &url)
+        .args([
+            "run",
+            s(&p),
+            "--out",
+            s(&out),
+            "--speed",
+            "400",
+            "--dut",
+            "AWAY-1",
+        ])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("run starts");
+    wait_for(&out.join("run.mcap"));
+    server.stop();
+    let done = child.wait_with_output().expect("ends");
+    assert_eq!(done.status.code(), Some(0), "{}", stderr(&done));
+    assert!(stderr(&done).contains("is queued"), "{}", stderr(&done));
+    assert_eq!(json(&out.join("report.json"))["outcome"], "pass");
+    // Back: the first command that opens the store writes the run.
+    let (again, url2) = OwnServer::start(&dir.join("pg"), port).expect("the server starts again");
+    let r = with_db(&url2, &["results", "list", "--serial", "AWAY-1", "--json"]);
+    assert_eq!(r.status.code(), Some(0), "{}", stderr(&r));
+    assert!(
+        stderr(&r).contains("queued run(s) written"),
+        "{}",
+        stderr(&r)
+    );
+    let rows: serde_json::Value = serde_json::from_slice(&r.stdout).expect("JSON");
+    assert_eq!(rows[0]["outcome"], "pass", "{rows}");
+    drop(again);
+    drop(server);
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
+
+#[test]
+fn eight_benches_write_one_postgres_store_at_once_and_lose_nothing() {
+    let Some(url) = postgres() else { return };
+    let dir = temp_dir("results-eight");
+    let p = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("procedures/smoke.toml");
+    let tag = format!("EIGHT-{}", std::process::id());
+    let children: Vec<_> = (0..8)
+        .map(|i| {
+            command()
+                .env("GYROBENCH_DB", &url)
+                .args([
+                    "run",
+                    s(&p),
+                    "--out",
+                    s(&dir.join(format!("bench{i}"))),
+                    "--dut",
+                    &format!("{tag}-{i}"),
+                    "--seed",
+                    &(i + 1).to_string(),
+                ])
+                .stdout(Stdio::null())
+                .stderr(Stdio::piped())
+                .spawn()
+                .expect("bench starts")
+        })
+        .collect();
+    for c in children {
+        let o = c.wait_with_output().expect("ends");
+        assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    }
+    let xml = dir.join("eight.xml");
+    let mut total = 0;
+    for i in 0..8 {
+        let r = with_db(&url, &["results", "unit", &format!("{tag}-{i}"), "--json"]);
+        assert_eq!(r.status.code(), Some(0), "{}", stderr(&r));
+        let u: serde_json::Value = serde_json::from_slice(&r.stdout).expect("JSON");
+        assert_eq!(u["runs"].as_array().map(Vec::len), Some(1), "bench {i}");
+        let report = json(&dir.join(format!("bench{i}/report.json")));
+        assert_eq!(u["measurements"], {
+            let ms: Vec<serde_json::Value> = report["measurements"]
+                .as_array()
+                .expect("measurements")
+                .iter()
+                .map(|m| m["value"].clone())
+                .collect();
+            let stored: Vec<serde_json::Value> = u["measurements"]
+                .as_array()
+                .expect("stored")
+                .iter()
+                .map(|m| m["value"].clone())
+                .collect();
+            assert_eq!(stored, ms, "bench {i}: every measurement, as reported");
+            u["measurements"].clone()
+        });
+        total += 1;
+    }
+    assert_eq!(total, 8);
+    let r = with_db(
+        &url,
+        &[
+            "results",
+            "export",
+            "--junit",
+            s(&xml),
+            "--since",
+            "2000-01-01",
+            "--procedure",
+            "smoke",
+        ],
+    );
+    assert_eq!(r.status.code(), Some(0), "{}", stderr(&r));
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
