@@ -320,9 +320,9 @@ async fn open_device(
     spec: &str,
     timeout: Duration,
 ) -> Result<(DeviceSpec, BoxTransport), DeviceError> {
-    let connect = |source| DeviceError::Connect {
+    let connect = |cause| DeviceError::Connect {
         device: name.to_owned(),
-        source,
+        cause,
     };
     let spec: DeviceSpec = spec.parse().map_err(|e: crate::transport::SpecError| {
         connect(std::io::Error::new(std::io::ErrorKind::InvalidInput, e))

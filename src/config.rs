@@ -15,11 +15,10 @@ use toml::de::{DeTable, DeValue};
 #[derive(Debug, thiserror::Error)]
 pub enum ConfigError {
     /// The file could not be read at all.
-    #[error("cannot read {path}: {source}; check the path")]
+    #[error("cannot read {path}: {cause}; check the path")]
     Read {
         path: PathBuf,
-        #[source]
-        source: std::io::Error,
+        cause: std::io::Error,
     },
     /// The text is not valid TOML, or does not match the expected structure
     /// (unknown key, wrong type, missing field).
@@ -148,7 +147,7 @@ impl Source {
             } else {
                 ConfigError::Read {
                     path: path.to_owned(),
-                    source,
+                    cause: source,
                 }
             }
         })?;

@@ -13,15 +13,55 @@ use std::path::{Path, PathBuf};
 
 /// A file being written beside `target`; [`Pending::commit`] puts it in
 /// place, dropping it removes it.
+///
+/// [`Pending::new`] replaces whatever is at `target` (a file gyrobench
+/// owns, in its own run directory: a link planted there is replaced, never
+/// followed). [`Pending::output`] is for a path the user named (`-o`): a
+/// link is written where it points (the link stays), a FIFO or a device
+/// (`-o /dev/stdout`) directly, as neither can be renamed over.
 #[derive(Debug)]
 pub struct Pending {
     file: Option<File>,
-    temp: tempfile::TempPath,
+    temp: Option<tempfile::TempPath>,
     target: PathBuf,
 }
 
+/// Where an output named `path` really goes: through links.
+fn resolve(path: &Path) -> PathBuf {
+    let is_link = std::fs::symlink_metadata(path).is_ok_and(|m| m.file_type().is_symlink());
+    if !is_link {
+        return path.to_owned();
+    }
+    std::fs::canonicalize(path).unwrap_or_else(|_| {
+        // A dangling link: the file it names, created there.
+        match std::fs::read_link(path) {
+            Ok(t) if t.is_absolute() => t,
+            Ok(t) => path.parent().map_or(t.clone(), |d| d.join(t)),
+            Err(_) => path.to_owned(),
+        }
+    })
+}
+
 impl Pending {
-    /// An exclusively created temporary beside `target`.
+    /// An output the user named: through links; a FIFO or a device is
+    /// written directly.
+    pub fn output(target: &Path) -> std::io::Result<Self> {
+        let target = &resolve(target);
+        if let Ok(m) = std::fs::metadata(target)
+            && !m.is_file()
+            && !m.is_dir()
+        {
+            let file = std::fs::OpenOptions::new().write(true).open(target)?;
+            return Ok(Self {
+                file: Some(file),
+                temp: None,
+                target: target.to_owned(),
+            });
+        }
+        Self::new(target)
+    }
+
+    /// An exclusively created temporary beside `target`, to replace it.
     pub fn new(target: &Path) -> std::io::Result<Self> {
         let dir = match target.parent() {
             Some(d) if !d.as_os_str().is_empty() => d,
@@ -43,14 +83,14 @@ impl Pending {
         let (file, temp) = named.into_parts();
         Ok(Self {
             file: Some(file),
-            temp,
+            temp: Some(temp),
             target: target.to_owned(),
         })
     }
 
     /// The temporary's path (for messages).
     pub fn path(&self) -> &Path {
-        &self.temp
+        self.temp.as_deref().unwrap_or(&self.target)
     }
 
     /// Take the open file to write through (once).
@@ -62,19 +102,32 @@ impl Pending {
 
     /// Sync the written file and rename it over the target.
     pub fn commit(self) -> std::io::Result<()> {
-        File::open(&self.temp)?.sync_all()?;
-        self.temp
-            .persist(&self.target)
+        let Some(temp) = self.temp else {
+            return Ok(());
+        };
+        File::open(&temp)?.sync_all()?;
+        temp.persist(&self.target)
             .map_err(|e| std::io::Error::new(e.error.kind(), e.error))
     }
 }
 
-/// Write `bytes` to `path` through a [`Pending`] file.
+/// Write `bytes` to `path` through a [`Pending`] file that replaces it
+/// (gyrobench's own files).
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
-    let mut p = Pending::new(path)?;
+    write_pending(Pending::new(path)?, bytes)
+}
+
+/// Write `bytes` to an output the user named ([`Pending::output`]).
+pub fn write_output(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
+    write_pending(Pending::output(path)?, bytes)
+}
+
+fn write_pending(mut p: Pending, bytes: &[u8]) -> std::io::Result<()> {
     let mut f = p.take_file()?;
     f.write_all(bytes)?;
-    f.sync_all()?;
+    if p.temp.is_some() {
+        f.sync_all()?;
+    }
     drop(f);
     p.commit()
 }
@@ -166,6 +219,31 @@ mod tests {
         write_atomic(&dir.join("report.json"), b"{}").expect("write");
         assert_eq!(std::fs::read(&victim).expect("victim"), b"keep me");
         assert_eq!(std::fs::read(dir.join("report.json")).expect("out"), b"{}");
+        std::fs::remove_dir_all(&dir).expect("cleanup");
+    }
+
+    #[test]
+    fn an_output_link_is_written_through_and_a_fifo_directly() {
+        let dir = temp_dir("through");
+        let real = dir.join("real.csv");
+        std::fs::write(&real, b"old").expect("real");
+        let link = dir.join("link.csv");
+        std::os::unix::fs::symlink(&real, &link).expect("link");
+        write_output(&link, b"new").expect("through the link");
+        assert_eq!(std::fs::read(&real).expect("real"), b"new");
+        assert!(
+            std::fs::symlink_metadata(&link)
+                .expect("link")
+                .file_type()
+                .is_symlink(),
+            "the link stays a link"
+        );
+        let null = Path::new("/dev/null");
+        write_output(null, b"gone").expect("a device is written directly");
+        assert!(
+            !std::fs::metadata(null).expect("dev").is_file(),
+            "/dev/null untouched"
+        );
         std::fs::remove_dir_all(&dir).expect("cleanup");
     }
 

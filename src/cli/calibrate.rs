@@ -60,17 +60,17 @@ pub fn run(args: CalibrateArgs) -> Result<Outcome> {
         "# Thermal compensation coefficients written by gyrobench calibrate.\n# `gyrobench run --coeffs` compensates with [model4].\n{}",
         toml::to_string_pretty(&cal.coeffs_file()).context("writing the coefficients as TOML")?
     );
-    crate::fsutil::write_atomic(&args.out, toml_text.as_bytes())
+    crate::fsutil::write_output(&args.out, toml_text.as_bytes())
         .with_context(|| format!("writing {}", args.out.display()))?;
-    crate::fsutil::write_atomic(&json_path, serde_json::to_string_pretty(&cal)?.as_bytes())
+    crate::fsutil::write_output(&json_path, serde_json::to_string_pretty(&cal)?.as_bytes())
         .with_context(|| format!("writing {}", json_path.display()))?;
-    crate::fsutil::write_atomic(&html_path, cal.render_html().as_bytes())
+    crate::fsutil::write_output(&html_path, cal.render_html().as_bytes())
         .with_context(|| format!("writing {}", html_path.display()))?;
     outf!("{}", cal.render_text())?;
     if mixed.is_empty() {
         record(&args, &runs, &cal, &toml_text);
     }
-    eprintln!(
+    errln!(
         "coefficients in {}, details in {} and {}",
         args.out.display(),
         json_path.display(),
@@ -121,11 +121,11 @@ fn record(
             .map(|v| Some((v, s.name().to_owned()))),
         None => Ok(None),
     }) {
-        Ok(Some((v, name))) => eprintln!(
+        Ok(Some((v, name))) => errln!(
             "coefficient set {v} of {} recorded in the results store {name}",
             first.serial
         ),
         Ok(None) => {}
-        Err(e) => eprintln!("warning: {e}; the coefficients file is written"),
+        Err(e) => errln!("warning: {e}; the coefficients file is written"),
     }
 }

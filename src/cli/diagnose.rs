@@ -160,7 +160,7 @@ pub fn run(args: DiagnoseArgs) -> Result<Outcome> {
     if let Some(p) = d.unexplained.period_s {
         outln!("  unexplained: periodic, period {p:.0} s")?;
     }
-    eprintln!("diagnosis in {}", out.display());
+    errln!("diagnosis in {}", out.display());
     Ok(Outcome::Success)
 }
 
@@ -187,8 +187,7 @@ fn run_selfcheck(a: SelfcheckArgs) -> Result<Outcome> {
             UnitArg::Rms => selfcheck::Unit::Rms,
         },
     };
-    let s =
-        selfcheck::run(&plan, &|line| eprintln!("  {line}")).context("running the self-check")?;
+    let s = selfcheck::run(&plan, &|line| errln!("  {line}")).context("running the self-check")?;
     std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
     write(
         &a.out.join("selfcheck.json"),
@@ -218,6 +217,6 @@ fn run_selfcheck(a: SelfcheckArgs) -> Result<Outcome> {
             shows
         )?;
     }
-    eprintln!("self-check in {}", a.out.display());
+    errln!("self-check in {}", a.out.display());
     Ok(Outcome::Success)
 }

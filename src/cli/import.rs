@@ -48,10 +48,10 @@ pub fn run_import(args: ImportArgs) -> Result<Outcome> {
         Some(mut s) => s.index_log(&args.out).map(|_| Some(s.name().to_owned())),
         None => Ok(None),
     }) {
-        Ok(Some(name)) => eprintln!("recorded in the results store {name}"),
+        Ok(Some(name)) => errln!("recorded in the results store {name}"),
         Ok(None) => {}
         Err(e) => {
-            eprintln!("warning: {e}; the log is written; `gyrobench results sync` indexes it later")
+            errln!("warning: {e}; the log is written; `gyrobench results sync` indexes it later")
         }
     }
     outln!(

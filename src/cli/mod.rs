@@ -9,6 +9,15 @@ macro_rules! outf {
     ($($t:tt)*) => { $crate::cli::out(&format!($($t)*)) };
 }
 
+/// `eprintln!` that never fails: progress, notes and warnings on stderr
+/// must not stop a run when nobody reads them any more (`2>&1 | head`).
+macro_rules! errln {
+    ($($t:tt)*) => {{
+        use std::io::Write as _;
+        let _unread = writeln!(std::io::stderr().lock(), $($t)*);
+    }};
+}
+
 /// `println!` to stdout through [`out`].
 macro_rules! outln {
     ($($t:tt)*) => { $crate::cli::out(&format!("{}\n", format_args!($($t)*))) };
@@ -73,7 +82,7 @@ pub fn warn_incomplete(file: &std::path::Path, read: &crate::runlog::ReadSummary
     if read.complete {
         return;
     }
-    eprintln!(
+    errln!(
         "warning: {} is incomplete ({}); {done}; {} bytes after the last complete chunk are missing",
         file.display(),
         read.stopped
@@ -173,7 +182,7 @@ pub fn main() -> ExitCode {
     match result {
         Ok(outcome) => ExitCode::from(outcome.code()),
         Err(e) => {
-            eprintln!("error: {e:#}");
+            errln!("error: {e:#}");
             let usage = e.chain().any(|c| c.is::<Usage>());
             ExitCode::from(if usage { EXIT_USAGE } else { EXIT_ERROR })
         }

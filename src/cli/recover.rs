@@ -31,7 +31,7 @@ pub fn run(args: RecoverArgs) -> Result<Outcome> {
     let r =
         recover(&args.log, &out).with_context(|| format!("recovering {}", args.log.display()))?;
     if let Some(why) = &r.stopped {
-        eprintln!(
+        errln!(
             "warning: the read of {} stopped early: {why}",
             args.log.display()
         );

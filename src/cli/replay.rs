@@ -51,12 +51,12 @@ pub fn run(args: ReplayArgs) -> Result<Outcome> {
         &format!("read up to {:.0} s of device time", r.last_state_s),
     );
     if r.result.frames == 0 {
-        eprintln!(
+        errln!(
             "replayed {} intervals in {secs:.2} s (no frames: an imported run)",
             r.result.records.all.len()
         );
     } else {
-        eprintln!(
+        errln!(
             "replayed {} frames in {secs:.2} s ({:.1} M frames/s)",
             r.result.frames,
             r.result.frames as f64 / secs.max(1e-9) / 1e6
@@ -87,12 +87,12 @@ pub fn run(args: ReplayArgs) -> Result<Outcome> {
             .with_context(|| format!("writing {}", path.display()))?;
     }
     outf!("{}", report.render_text())?;
-    eprintln!("report in {}", out.display());
+    errln!("report in {}", out.display());
     if args.store {
         let loc = crate::results::Location::resolve(args.db.as_deref(), None);
         if let Some(mut s) = crate::results::Store::open(&loc)? {
             let done = s.index_log(&args.log)?;
-            eprintln!("{done:?} in the results store {}", s.name());
+            errln!("{done:?} in the results store {}", s.name());
         }
     }
     Ok(match r.result.outcome {

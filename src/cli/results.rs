@@ -182,7 +182,7 @@ fn open(store: &StoreArgs) -> Result<Store> {
     })?;
     let flushed = s.flush_pending();
     if flushed > 0 {
-        eprintln!("{flushed} queued run(s) written to the results store");
+        errln!("{flushed} queued run(s) written to the results store");
     }
     Ok(s)
 }
@@ -201,7 +201,7 @@ pub fn run(args: ResultsArgs) -> Result<Outcome> {
                 outln!("{}", serde_json::to_string_pretty(&rows)?)?;
             } else {
                 outf!("{}", render_list(&rows))?;
-                eprintln!("{} run(s) from {}", rows.len(), store.name());
+                errln!("{} run(s) from {}", rows.len(), store.name());
             }
         }
         ResultsCommand::Show { run, json } => {
@@ -233,12 +233,12 @@ pub fn run(args: ResultsArgs) -> Result<Outcome> {
             let t = store.trend(&measurement, &f)?;
             if let Some(path) = &html {
                 let points = store.trend_points(&measurement, &f, 5000)?;
-                crate::fsutil::write_atomic(
+                crate::fsutil::write_output(
                     path,
                     crate::results::page::trend_page(&t, &points).as_bytes(),
                 )
                 .with_context(|| format!("writing {}", path.display()))?;
-                eprintln!("chart page in {}", path.display());
+                errln!("chart page in {}", path.display());
             }
             if json {
                 outln!("{}", serde_json::to_string_pretty(&t)?)?;
@@ -250,15 +250,15 @@ pub fn run(args: ResultsArgs) -> Result<Outcome> {
             let rows = store.export_rows(&filter.filter(true, None)?)?;
             if let Some(path) = &junit {
                 let xml = crate::results::junit::junit(&rows).context("writing JUnit XML")?;
-                crate::fsutil::write_atomic(path, xml.as_bytes())
+                crate::fsutil::write_output(path, xml.as_bytes())
                     .with_context(|| format!("writing {}", path.display()))?;
-                eprintln!("{} run(s) as JUnit XML in {}", rows.len(), path.display());
+                errln!("{} run(s) as JUnit XML in {}", rows.len(), path.display());
             }
             if let Some(path) = &csv {
                 let text = crate::results::junit::csv(&rows).context("writing CSV")?;
-                crate::fsutil::write_atomic(path, text.as_bytes())
+                crate::fsutil::write_output(path, text.as_bytes())
                     .with_context(|| format!("writing {}", path.display()))?;
-                eprintln!("{} run(s) as CSV in {}", rows.len(), path.display());
+                errln!("{} run(s) as CSV in {}", rows.len(), path.display());
             }
         }
         ResultsCommand::Sync { dirs } => {
@@ -272,7 +272,7 @@ pub fn run(args: ResultsArgs) -> Result<Outcome> {
                     store.name()
                 )?;
                 for f in &failed {
-                    eprintln!("warning: {f}");
+                    errln!("warning: {f}");
                 }
                 failed_any |= !failed.is_empty();
             }

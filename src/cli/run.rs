@@ -104,7 +104,7 @@ impl Progress for Live {
         for line in lines {
             match &self.bar {
                 Some(b) => b.println(line),
-                None => eprintln!("{line}"),
+                None => errln!("{line}"),
             }
         }
     }
@@ -113,20 +113,20 @@ impl Progress for Live {
         let line = format!("[{}/{n}] {}", i + 1, s.describe());
         match &self.bar {
             Some(b) => b.println(line),
-            None => eprintln!("{line}"),
+            None => errln!("{line}"),
         }
     }
 
     fn prompt(&mut self, text: &str) {
         use std::io::IsTerminal;
         if !std::io::stdin().is_terminal() {
-            eprintln!("prompt (no terminal, going on): {text}");
+            errln!("prompt (no terminal, going on): {text}");
             return;
         }
         let ask = format!("{text} -- press Enter to continue");
         match &self.bar {
-            Some(b) => b.suspend(|| eprintln!("{ask}")),
-            None => eprintln!("{ask}"),
+            Some(b) => b.suspend(|| errln!("{ask}")),
+            None => errln!("{ask}"),
         }
         let mut line = String::new();
         let _ = std::io::stdin().read_line(&mut line);
@@ -153,7 +153,7 @@ impl Progress for Live {
             }
             None if st.t_s - self.last_line_s >= 3600.0 => {
                 self.last_line_s = st.t_s;
-                eprintln!("  t = {:.2} h  {msg}", st.t_s / 3600.0);
+                errln!("  t = {:.2} h  {msg}", st.t_s / 3600.0);
             }
             None => {}
         }
@@ -259,7 +259,7 @@ pub fn run(args: RunArgs) -> Result<Outcome> {
             let locked = session::lock_for_resume(dir)?;
             let plan = session::plan_resume(dir, pacing, &args.speed, args.db.as_deref())?;
             if let Some(r) = &plan.resume {
-                eprintln!("{}", r.summary);
+                errln!("{}", r.summary);
             }
             (plan, Place::Resume(locked))
         }
@@ -287,7 +287,7 @@ pub fn run(args: RunArgs) -> Result<Outcome> {
     let exit_code = Arc::new(AtomicU8::new(130));
     rt.block_on(async { watch_signals(interrupt.clone(), exit_code.clone()) })?;
     let mut progress = Live::new(session::estimated_s(&plan));
-    eprintln!("running {}", plan.procedure.meta.name);
+    errln!("running {}", plan.procedure.meta.name);
     let finished = match session::execute(plan, place, &rt, &mut progress, interrupt) {
         Ok(f) => f,
         Err(e @ SessionError::RunDir(session::rundir::RunDirError::Exists { .. })) => {
@@ -296,12 +296,12 @@ pub fn run(args: RunArgs) -> Result<Outcome> {
         Err(e) => return Err(e.into()),
     };
     for n in finished.notes.iter().skip(finished.notes_at_begin) {
-        eprintln!("note: {n}");
+        errln!("note: {n}");
     }
     outf!("{}", finished.report.render_text())?;
     match &finished.report_error {
-        None => eprintln!("log and report in {}", finished.dir.display()),
-        Some(e) => eprintln!(
+        None => errln!("log and report in {}", finished.dir.display()),
+        Some(e) => errln!(
             "log in {}; the report could not be written ({e}); the figures are above",
             finished.dir.display()
         ),
@@ -340,11 +340,11 @@ fn watch_signals(interrupt: Arc<Interrupt>, exit_code: Arc<AtomicU8>) -> Result<
             while sig.recv().await.is_some() {
                 if interrupt.request(name) {
                     exit_code.store(code, Ordering::Relaxed);
-                    eprintln!(
+                    errln!(
                         "{name}: stopping; the bench goes to its safe state and cleanup runs (again to exit at once, without cleanup)"
                     );
                 } else {
-                    eprintln!("{name} again: exiting without cleanup");
+                    errln!("{name} again: exiting without cleanup");
                     std::process::exit(i32::from(code));
                 }
             }

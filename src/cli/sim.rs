@@ -73,12 +73,12 @@ pub fn run(cmd: SimCommand) -> Result<Outcome> {
                 }
                 out.flush()?;
                 drop(out);
-                eprintln!(
+                errln!(
                     "serving the simulated bench (speed {}x); Ctrl-C or SIGTERM to stop",
                     serve.config.speed
                 );
                 wait_for_stop().await?;
-                eprintln!("stopped");
+                errln!("stopped");
                 Ok(Outcome::Success)
             })
         }

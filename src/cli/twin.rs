@@ -60,7 +60,7 @@ pub fn run(cmd: TwinCommand) -> Result<Outcome> {
     match cmd {
         TwinCommand::Study(args) => {
             let cfg = load(args.config.as_ref())?;
-            eprintln!(
+            errln!(
                 "simulating the 6.5 h thermal cycle at {} Hz ...",
                 cfg.gyro.frame_rate_hz
             );
@@ -68,16 +68,16 @@ pub fn run(cmd: TwinCommand) -> Result<Outcome> {
             let (report, series) = report.context("running the study on the twin")?;
             if let Some(path) = &args.csv {
                 let text = interchange_csv(&series);
-                crate::fsutil::write_atomic(path, text.as_bytes())
+                crate::fsutil::write_output(path, text.as_bytes())
                     .with_context(|| format!("writing {}", path.display()))?;
-                eprintln!("wrote {}", path.display());
+                errln!("wrote {}", path.display());
             }
             if args.json {
                 outln!("{}", serde_json::to_string_pretty(&report)?)?;
             } else {
                 outf!("{}", render_study(&report))?;
             }
-            eprintln!("done in {wall_s:.1} s of wall time");
+            errln!("done in {wall_s:.1} s of wall time");
             Ok(Outcome::Success)
         }
         TwinCommand::Bench(args) => {
@@ -100,7 +100,7 @@ pub fn run(cmd: TwinCommand) -> Result<Outcome> {
                     peak_rss_kib()
                 )
             )?;
-            eprintln!("(checksum of counts: {sum})");
+            errln!("(checksum of counts: {sum})");
             Ok(Outcome::Success)
         }
         TwinCommand::DefaultConfig => {

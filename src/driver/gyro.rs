@@ -109,7 +109,7 @@ impl<R: AsyncRead + Unpin> GyroReader<R> {
                 }
                 return Err(DeviceError::Connect {
                     device: self.device.clone(),
-                    source: cause,
+                    cause,
                 });
             };
             loop {

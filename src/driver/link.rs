@@ -264,7 +264,7 @@ impl Drops {
                 device: device.to_owned(),
                 window_s: window.as_secs_f64(),
                 attempts: self.count,
-                source: cause,
+                cause,
             });
         }
         self.wait = if self.wait.is_zero() {
@@ -296,7 +296,7 @@ pub async fn open_once<R>(
     let Some(connect) = connector else {
         return Err(DeviceError::Connect {
             device: device.to_owned(),
-            source: std::io::Error::new(
+            cause: std::io::Error::new(
                 std::io::ErrorKind::NotConnected,
                 "link closed and no way to reopen it",
             ),

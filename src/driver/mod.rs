@@ -79,14 +79,13 @@ pub enum DeviceError {
     },
     /// The link could not be (re)opened.
     #[error(
-        "{device}: cannot open the link: {source}; check that the device is on and the spec in bench.toml"
+        "{device}: cannot open the link: {cause}; check that the device is on and the spec in bench.toml"
     )]
     Connect {
         /// Device name.
         device: String,
         /// Why.
-        #[source]
-        source: std::io::Error,
+        cause: std::io::Error,
     },
     /// The chamber reports alarms.
     #[error(
@@ -109,7 +108,7 @@ pub enum DeviceError {
     /// The link dropped and could not be reopened within the window.
     #[error(
         "{device}: the link dropped and could not be reopened within {window_s} s \
-         ({attempts} attempts, the last: {source}); check the network (switch, cable) \
+         ({attempts} attempts, the last: {cause}); check the network (switch, cable) \
          and that the device is on; the window is reconnect_window_s in bench.toml"
     )]
     Unreachable {
@@ -120,8 +119,7 @@ pub enum DeviceError {
         /// Attempts made.
         attempts: u32,
         /// The last attempt's failure.
-        #[source]
-        source: std::io::Error,
+        cause: std::io::Error,
     },
     /// The gyro sent nothing usable for longer than the link timeout.
     #[error(

@@ -278,7 +278,7 @@ pub fn import(
         ..RunMeta::default()
     };
     let mut pending =
-        Pending::new(out).map_err(|e| ImportError::Other(format!("{}: {e}", out.display())))?;
+        Pending::output(out).map_err(|e| ImportError::Other(format!("{}: {e}", out.display())))?;
     let (outcome, measurements) =
         write_log(&mut pending, &meta, &bench, site, &procedure, &parts, &rows)?;
     pending
@@ -445,7 +445,7 @@ pub struct Exported {
 pub fn export(log: &Path, out: &Path) -> Result<Exported, ImportError> {
     ensure_distinct(out, &[log])?;
     let mut pending =
-        Pending::new(out).map_err(|e| ImportError::Other(format!("{}: {e}", out.display())))?;
+        Pending::output(out).map_err(|e| ImportError::Other(format!("{}: {e}", out.display())))?;
     let tmp = pending.path().to_owned();
     let err = |e: &dyn std::fmt::Display| format!("writing {}: {e}", tmp.display());
     let file = pending

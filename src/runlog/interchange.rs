@@ -67,12 +67,12 @@ pub struct Row {
 #[derive(Debug, thiserror::Error)]
 pub enum CsvError {
     /// Cannot read the file.
-    #[error("{path}: {source}")]
+    #[error("{path}: {cause}")]
     Io {
         /// File.
         path: String,
         /// Cause.
-        source: std::io::Error,
+        cause: std::io::Error,
     },
     /// A bad header or row.
     #[error("{path}:{line}: {message}")]
@@ -88,9 +88,9 @@ pub enum CsvError {
 
 /// Read and check a whole interchange CSV.
 pub fn read(path: &Path) -> Result<Vec<Row>, CsvError> {
-    let file = std::fs::File::open(path).map_err(|source| CsvError::Io {
+    let file = std::fs::File::open(path).map_err(|cause| CsvError::Io {
         path: path.display().to_string(),
-        source,
+        cause,
     })?;
     parse(file, &path.display().to_string())
 }

@@ -104,12 +104,12 @@ pub struct ReadSummary {
 #[derive(Debug, thiserror::Error)]
 pub enum ReadError {
     /// The file cannot be opened or read.
-    #[error("{path}: {source}")]
+    #[error("{path}: {cause}")]
     Io {
         /// File.
         path: String,
         /// Cause.
-        source: std::io::Error,
+        cause: std::io::Error,
     },
     /// Not an MCAP file at all.
     #[error("{path}: not an MCAP log ({reason})")]
@@ -128,9 +128,9 @@ pub fn read(
     path: &Path,
     mut f: impl FnMut(Item<'_>) -> Result<(), String>,
 ) -> Result<ReadSummary, ReadError> {
-    let io = |source| ReadError::Io {
+    let io = |cause| ReadError::Io {
         path: path.display().to_string(),
-        source,
+        cause,
     };
     let mut file = File::open(path).map_err(io)?;
     let file_bytes = file.metadata().map_err(io)?.len();

@@ -42,13 +42,12 @@ pub enum RecoverError {
         stopped: Option<String>,
     },
     /// The output could not be written.
-    #[error("writing {path}: {source}")]
+    #[error("writing {path}: {cause}")]
     Write {
         /// The output.
         path: String,
         /// Cause.
-        #[source]
-        source: std::io::Error,
+        cause: std::io::Error,
     },
 }
 
@@ -57,12 +56,12 @@ pub enum RecoverError {
 /// the attachments are copied; what follows the last complete record is
 /// lost. `out` appears only when something was recovered.
 pub fn recover(input: &Path, out: &Path) -> Result<Recovered, RecoverError> {
-    let write_err = |source: std::io::Error| RecoverError::Write {
+    let write_err = |cause: std::io::Error| RecoverError::Write {
         path: out.display().to_string(),
-        source,
+        cause,
     };
     let mcap_err = |e: mcap::McapError| write_err(std::io::Error::other(e));
-    let mut pending = Pending::new(out).map_err(write_err)?;
+    let mut pending = Pending::output(out).map_err(write_err)?;
     let file = pending.take_file().map_err(write_err)?;
     let library = format!("gyrobench {} (recovered)", env!("CARGO_PKG_VERSION"));
     let mut w = write_options(&library)

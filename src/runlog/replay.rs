@@ -80,6 +80,7 @@ struct Sum {
     n: u64,
     sum: i64,
     extremes: Option<(i64, i64)>,
+    runs: crate::sequencer::health::Runs,
 }
 
 impl<'de> Deserialize<'de> for Sum {
@@ -96,6 +97,11 @@ impl<'de> Deserialize<'de> for Sum {
                     s.n += 1;
                     s.sum = s.sum.saturating_add(v);
                     s.extremes = Some(s.extremes.map_or((v, v), |(lo, hi)| (lo.min(v), hi.max(v))));
+                    s.runs.push(i32::try_from(v).unwrap_or(if v < 0 {
+                        i32::MIN
+                    } else {
+                        i32::MAX
+                    }));
                 }
                 Ok(s)
             }
@@ -290,6 +296,7 @@ impl State<'_> {
                     counts: m.counts.sum,
                     temps: [m.t1_raw.sum, m.t2_raw.sum, m.tcase_raw.sum],
                     extremes: m.counts.extremes.map(|(lo, hi)| (clamp(lo), clamp(hi))),
+                    runs: m.counts.runs,
                 };
                 let scales = Scales {
                     dt_s: m.dt_s,

@@ -116,7 +116,7 @@ impl DeviceBench {
 fn gyro_stream_ended() -> DeviceError {
     DeviceError::Connect {
         device: "gyro".into(),
-        source: std::io::Error::new(
+        cause: std::io::Error::new(
             std::io::ErrorKind::UnexpectedEof,
             "the gyro's data stream ended",
         ),

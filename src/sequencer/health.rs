@@ -22,6 +22,100 @@ pub const MAX_LINK_LOSS: f64 = 1e-3;
 /// is a saturated or garbled output.
 pub const MAX_PLAUSIBLE_RATE_DPH: f64 = 3.6e6;
 
+/// A stretch of identical counts this long (s) is a stuck output (ours):
+/// a working laser gyro's output moves by a count within seconds, from
+/// the Earth rate and its own bias alone (the RL-16 at its 0.25 arcsec
+/// count: about 40 counts a second axis up, 2 a second axis east), and
+/// its angle random walk moves it even at zero rate.
+pub const STUCK_AFTER_S: f64 = 5.0;
+
+/// Runs of identical consecutive counts, mergeable tick by tick: what a
+/// frozen output leaves behind, however short the record's other part.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Runs {
+    /// Frames seen.
+    pub n: u64,
+    /// First count.
+    pub first: i32,
+    /// Last count.
+    pub last: i32,
+    /// Length of the run the frames start with.
+    pub prefix: u64,
+    /// Length of the run they end with.
+    pub suffix: u64,
+    /// Longest run, and its count.
+    pub longest: (u64, i32),
+}
+
+impl Runs {
+    /// One more frame (on every frame of a run: kept to a few compares).
+    pub fn push(&mut self, v: i32) {
+        if self.n == 0 {
+            *self = Self {
+                n: 1,
+                first: v,
+                last: v,
+                prefix: 1,
+                suffix: 1,
+                longest: (1, v),
+            };
+            return;
+        }
+        if v == self.last {
+            if self.prefix == self.n {
+                self.prefix += 1;
+            }
+            self.suffix += 1;
+            if self.suffix > self.longest.0 {
+                self.longest = (self.suffix, v);
+            }
+        } else {
+            self.last = v;
+            self.suffix = 1;
+        }
+        self.n += 1;
+    }
+
+    /// The frames of `b` follow these.
+    pub fn merge(&mut self, b: &Self) {
+        if b.n == 0 {
+            return;
+        }
+        if self.n == 0 {
+            *self = *b;
+            return;
+        }
+        let joins = self.last == b.first;
+        let joined = if joins { self.suffix + b.prefix } else { 0 };
+        let mut longest = if b.longest.0 > self.longest.0 {
+            b.longest
+        } else {
+            self.longest
+        };
+        if joined > longest.0 {
+            longest = (joined, self.last);
+        }
+        let prefix = if joins && self.prefix == self.n {
+            self.n + b.prefix
+        } else {
+            self.prefix
+        };
+        let suffix = if joins && b.suffix == b.n {
+            b.n + self.suffix
+        } else {
+            b.suffix
+        };
+        *self = Self {
+            n: self.n + b.n,
+            first: self.first,
+            last: b.last,
+            prefix,
+            suffix,
+            longest,
+        };
+    }
+}
+
 /// What a record's frames and link were like.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct RecordHealth {
@@ -37,6 +131,9 @@ pub struct RecordHealth {
     pub max_counts: Option<i32>,
     /// Rate of the largest count in magnitude, deg/h.
     pub max_abs_rate_dph: f64,
+    /// Runs of identical counts.
+    #[serde(default)]
+    pub runs: Runs,
     /// The gyro link's figures over the record (none on a bench whose link
     /// cannot fail, or in a log of the first format).
     pub link: Option<LinkStats>,
@@ -61,12 +158,20 @@ impl RecordHealth {
     }
 
     /// Frames of one tick: `n` of them at `frame_dt_s`, counts between
-    /// `min` and `max`, `lsb_arcsec` each.
-    pub fn add(&mut self, n: u64, min: i32, max: i32, frame_dt_s: f64, lsb_arcsec: f64) {
+    /// `min` and `max` with `runs` of identical ones, `lsb_arcsec` each.
+    pub fn add(
+        &mut self,
+        n: u64,
+        (min, max): (i32, i32),
+        runs: &Runs,
+        frame_dt_s: f64,
+        lsb_arcsec: f64,
+    ) {
         if n == 0 {
             return;
         }
         self.frames += n;
+        self.runs.merge(runs);
         self.frame_dt_s = frame_dt_s;
         // arcsec per second is deg/h.
         let counts_to_dph = lsb_arcsec / frame_dt_s;
@@ -106,13 +211,13 @@ impl RecordHealth {
                 self.max_abs_rate_dph / 3600.0
             ));
         }
-        match (self.min_counts, self.max_counts) {
-            (Some(lo), Some(hi)) if lo == hi && self.frames >= 2 => Some(format!(
-                "every one of its {} frames reads {lo} counts: the output is stuck",
-                self.frames
-            )),
-            _ => None,
-        }
+        let (len, value) = self.runs.longest;
+        let stuck_s = len as f64 * self.frame_dt_s;
+        (stuck_s >= STUCK_AFTER_S && len >= 2).then(|| {
+            format!(
+                "the output read {value} counts in every frame for {stuck_s:.0} s ({len} frames): it is stuck"
+            )
+        })
     }
 }
 
@@ -135,9 +240,26 @@ pub fn link_delta(start: &LinkStats, end: &LinkStats) -> LinkStats {
 mod tests {
     use super::*;
 
+    /// `n` frames cycling through -3..=4.
+    fn varied(n: u64) -> Runs {
+        let mut r = Runs::default();
+        for i in 0..n {
+            r.push((i % 8) as i32 - 3);
+        }
+        r
+    }
+
+    fn stuck(n: u64, v: i32) -> Runs {
+        let mut r = Runs::default();
+        for _ in 0..n {
+            r.push(v);
+        }
+        r
+    }
+
     fn healthy() -> RecordHealth {
         let mut h = RecordHealth::new(100.0);
-        h.add(40_000, -3, 4, 0.0025, 0.25);
+        h.add(40_000, (-3, 4), &varied(40_000), 0.0025, 0.25);
         h
     }
 
@@ -149,7 +271,7 @@ mod tests {
     #[test]
     fn lost_frames_corruption_stuck_and_saturated_outputs_are_named() {
         let mut short = RecordHealth::new(100.0);
-        short.add(39_000, -3, 4, 0.0025, 0.25);
+        short.add(39_000, (-3, 4), &varied(39_000), 0.0025, 0.25);
         assert!(short.problem().expect("short").contains("missing"));
 
         let mut corrupt = healthy();
@@ -165,13 +287,44 @@ mod tests {
                 .contains("300 CRC errors")
         );
 
-        let mut stuck = RecordHealth::new(100.0);
-        stuck.add(40_000, 7, 7, 0.0025, 0.25);
-        assert!(stuck.problem().expect("stuck").contains("stuck"));
+        // Stuck for the last 130 s of a 300 s record, tick by tick.
+        let mut part = RecordHealth::new(300.0);
+        for _ in 0..170 {
+            part.add(400, (-3, 4), &varied(400), 0.0025, 0.25);
+        }
+        for _ in 0..130 {
+            part.add(400, (7, 7), &stuck(400, 7), 0.0025, 0.25);
+        }
+        let why = part.problem().expect("stuck");
+        assert!(
+            why.contains("read 7 counts") && why.contains("130 s"),
+            "{why}"
+        );
+        // Shorter than that: a stretch an output can have.
+        let mut brief = RecordHealth::new(300.0);
+        brief.add(400, (-3, 4), &varied(400), 0.0025, 0.25);
+        brief.add(1_600, (0, 0), &stuck(1_600, 0), 0.0025, 0.25);
+        brief.add(400, (-3, 4), &varied(400), 0.0025, 0.25);
+        assert!(!brief.problem().is_some_and(|p| p.contains("stuck")));
 
         let mut pinned = RecordHealth::new(100.0);
-        pinned.add(40_000, 0, i32::MAX, 0.0025, 0.25);
+        pinned.add(40_000, (0, i32::MAX), &varied(40_000), 0.0025, 0.25);
         assert!(pinned.problem().expect("saturated").contains("saturated"));
+    }
+
+    #[test]
+    fn runs_merge_across_ticks_as_one_sequence_would() {
+        let seq: Vec<i32> = [1, 1, 2, 2, 2, 2, 3, 2, 2, 2].into_iter().collect();
+        let mut whole = Runs::default();
+        seq.iter().for_each(|v| whole.push(*v));
+        for cut in 0..seq.len() {
+            let (mut a, mut b) = (Runs::default(), Runs::default());
+            seq[..cut].iter().for_each(|v| a.push(*v));
+            seq[cut..].iter().for_each(|v| b.push(*v));
+            a.merge(&b);
+            assert_eq!(a, whole, "cut at {cut}");
+        }
+        assert_eq!(whole.longest, (4, 2));
     }
 
     #[test]

@@ -4,7 +4,7 @@ use std::collections::BTreeMap;
 
 use serde::Serialize;
 
-use super::health::RecordHealth;
+use super::health::{RecordHealth, Runs};
 use super::{BenchState, Tick};
 use crate::analysis::figures::{bias_stability, drift_pp, drift_pp_parts, mean};
 use crate::analysis::model::{self, Fit, ModelKind};
@@ -131,10 +131,10 @@ impl Records {
         lsb_arcsec: f64,
         temp_lsb_c: f64,
     ) -> Option<Interval> {
-        if let (Some(label), Some((lo, hi))) = (record, sums.extremes)
+        if let (Some(label), Some(extremes)) = (record, sums.extremes)
             && let Some(h) = self.health.get_mut(label)
         {
-            h.add(sums.n, lo, hi, frame_dt_s, lsb_arcsec);
+            h.add(sums.n, extremes, &sums.runs, frame_dt_s, lsb_arcsec);
         }
         let iv = sums.interval(at, frame_dt_s, lsb_arcsec, temp_lsb_c)?;
         self.push(iv, record);
@@ -161,6 +161,8 @@ pub struct TickSums {
     pub temps: [i64; 3],
     /// Smallest and largest count (none without frames).
     pub extremes: Option<(i32, i32)>,
+    /// Runs of identical consecutive counts.
+    pub runs: Runs,
 }
 
 /// The bench state an interval is stamped with.
@@ -179,6 +181,7 @@ impl TickSums {
     pub fn add(&mut self, counts: i32, temps_raw: [i16; 3]) {
         self.n += 1;
         self.counts += i64::from(counts);
+        self.runs.push(counts);
         self.extremes = Some(self.extremes.map_or((counts, counts), |(lo, hi)| {
             (lo.min(counts), hi.max(counts))
         }));

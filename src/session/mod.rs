@@ -46,15 +46,14 @@ pub enum SessionError {
     #[error("bringing the bench up: {0}")]
     Device(#[from] crate::driver::DeviceError),
     /// A file could not be written.
-    #[error("{what} {path}: {source}")]
+    #[error("{what} {path}: {cause}")]
     Io {
         /// What was being done.
         what: &'static str,
         /// The file.
         path: String,
         /// Cause.
-        #[source]
-        source: std::io::Error,
+        cause: std::io::Error,
     },
 }
 
@@ -196,7 +195,23 @@ pub fn plan_resume(
     }
     let config = logged(&prev.meta)
         .map_err(|e| SessionError::NotResumable(format!("{}: {e}", last.display())))?;
-    let completed = prev.completed_steps;
+    let steps = prev.procedure.setup.len() + prev.procedure.main.len();
+    let mut completed = prev.completed_steps;
+    if completed >= steps {
+        // Every step ran but a record could not be judged (a link that
+        // lost frames, a stuck output): take it again, from its thermal
+        // segment as after any break.
+        completed = first_unsound_record(&prev).ok_or_else(|| {
+            SessionError::NotResumable(format!(
+                "every step of the run in {} completed; it ended in error ({}), which no step taken again would change",
+                dir.display(),
+                prev.result
+                    .error
+                    .as_ref()
+                    .map_or("-".to_owned(), |e| e.message.clone())
+            ))
+        })?;
+    }
     let state = resume_from(&prev, completed);
     let summary = format!(
         "resuming {}: {} of {} steps completed, going on from step {} (last part {}, ended: {})",
@@ -261,6 +276,23 @@ pub fn plan_resume(
     })
 }
 
+/// Run-order index of the first record whose data could not be judged.
+fn first_unsound_record(prev: &crate::runlog::replay::Replayed) -> Option<usize> {
+    prev.procedure
+        .setup
+        .iter()
+        .chain(&prev.procedure.main)
+        .position(|s| match &s.kind {
+            crate::procedure::StepKind::Record { label, .. } => prev
+                .result
+                .records
+                .health(label)
+                .and_then(crate::sequencer::health::RecordHealth::problem)
+                .is_some(),
+            _ => false,
+        })
+}
+
 /// How a run ended, with where its files are.
 #[derive(Debug)]
 pub struct Finished {
@@ -323,7 +355,7 @@ pub fn embedded_bench(
 
 fn io_err(what: &'static str, path: &Path) -> impl FnOnce(std::io::Error) -> SessionError {
     let path = path.display().to_string();
-    move |source| SessionError::Io { what, path, source }
+    move |cause| SessionError::Io { what, path, cause }
 }
 
 /// Run `plan` in `place` on the async runtime `rt`; `interrupt` stops it

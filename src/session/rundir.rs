@@ -51,21 +51,20 @@ pub enum RunDirError {
         holder: String,
     },
     /// A file system error.
-    #[error("{what} {path}: {source}")]
+    #[error("{what} {path}: {cause}")]
     Io {
         /// What was being done.
         what: &'static str,
         /// The path.
         path: String,
         /// Cause.
-        #[source]
-        source: std::io::Error,
+        cause: std::io::Error,
     },
 }
 
 fn io(what: &'static str, path: &Path) -> impl FnOnce(std::io::Error) -> RunDirError {
     let path = path.display().to_string();
-    move |source| RunDirError::Io { what, path, source }
+    move |cause| RunDirError::Io { what, path, cause }
 }
 
 /// An exclusive lock on a run directory, held until dropped.
@@ -85,11 +84,23 @@ impl DirLock {
         // A holder that unlinks the file between our open and our lock
         // leaves us a lock on a dead inode: check and try again.
         for _ in 0..3 {
+            use std::os::unix::fs::OpenOptionsExt;
+            if std::fs::symlink_metadata(&path).is_ok_and(|m| !m.file_type().is_file()) {
+                return Err(RunDirError::Io {
+                    what: "locking",
+                    path: path.display().to_string(),
+                    cause: std::io::Error::other(
+                        "it is not a plain file (a link, a directory): refusing to follow it; remove it",
+                    ),
+                });
+            }
+            // Never through a link planted between the check and the open.
             let mut file = std::fs::OpenOptions::new()
                 .read(true)
                 .write(true)
                 .create(true)
                 .truncate(false)
+                .custom_flags(libc::O_NOFOLLOW)
                 .open(&path)
                 .map_err(io("opening the lock", &path))?;
             match file.try_lock() {

@@ -109,10 +109,10 @@ impl Serve {
             Some(rel) => TwinConfig::load(&base.join(rel)).map_err(|e| match e {
                 // The twin file's own errors point into it; one that cannot
                 // be read points at this file's `twin`.
-                ConfigError::Read { path, source } => src.invalid(
+                ConfigError::Read { path, cause } => src.invalid(
                     "twin",
                     format!(
-                        "cannot read {}: {source}; the path is relative to this file",
+                        "cannot read {}: {cause}; the path is relative to this file",
                         path.display()
                     ),
                 ),

@@ -461,7 +461,7 @@ fn unsound_gyro_data_are_not_judged_and_replay_agrees() {
     let p = write(&dir, "tiny.toml", TINY);
     for (fault, why) in [
         ("gyro-corrupt", "missing"),
-        ("gyro-stuck", "the output is stuck"),
+        ("gyro-stuck", "it is stuck"),
         ("gyro-saturated", "saturated"),
     ] {
         let out = dir.join(fault);
