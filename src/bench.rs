@@ -282,8 +282,16 @@ impl BenchConfig {
             "limits.chamber_max_c",
             "must be above limits.chamber_min_c",
         )?;
+        // Upper bounds are what no chamber or motion simulator reaches: a
+        // value beyond them is a slip of the keyboard, not a limit.
         c.positive(
             l.chamber_max_ramp_c_per_min,
+            "limits.chamber_max_ramp_c_per_min",
+        )?;
+        c.within(
+            l.chamber_max_ramp_c_per_min,
+            0.0,
+            100.0,
             "limits.chamber_max_ramp_c_per_min",
         )?;
         for (r, key) in [
@@ -298,6 +306,18 @@ impl BenchConfig {
         }
         c.positive(l.table_max_rate_dps, "limits.table_max_rate_dps")?;
         c.positive(l.table_max_acc_dps2, "limits.table_max_acc_dps2")?;
+        c.within(
+            l.table_max_rate_dps,
+            0.0,
+            5000.0,
+            "limits.table_max_rate_dps",
+        )?;
+        c.within(
+            l.table_max_acc_dps2,
+            0.0,
+            100_000.0,
+            "limits.table_max_acc_dps2",
+        )?;
         c.within(l.dut_max_c, -100.0, 300.0, "limits.dut_max_c")?;
         Ok(())
     }

@@ -31,6 +31,8 @@ pub struct RunSeries {
     pub serial: String,
     /// Its type.
     pub dut_type: String,
+    /// The run's id (empty in a log of the first format).
+    pub run_id: String,
     /// 1 Hz intervals used for calibration.
     pub series: Vec<Interval>,
 }
@@ -74,6 +76,7 @@ pub fn load(path: &Path) -> Result<RunSeries, ReplayError> {
         name: path.display().to_string(),
         serial: r.meta.dut_serial.clone(),
         dut_type: r.meta.dut_type.clone(),
+        run_id: r.meta.run_id.clone(),
         series,
     })
 }

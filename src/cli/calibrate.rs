@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use anyhow::{Context, Result};
 use clap::Args;
 
-use super::Outcome;
+use super::{Outcome, Usage};
 use crate::calibrate::{ABSURD_OVER_RAW, calibrate, load, mixed_serials};
 use crate::fsutil::ensure_distinct;
 
@@ -41,6 +41,28 @@ pub fn run(args: CalibrateArgs) -> Result<Outcome> {
         .iter()
         .map(|p| load(p).with_context(|| format!("reading {}", p.display())))
         .collect::<Result<Vec<_>>>()?;
+    // One run given twice (or a copy of it) would validate the fit on its
+    // own data: held-out figures would be a lie.
+    for (i, a) in runs.iter().enumerate() {
+        for b in &runs[..i] {
+            let same_file =
+                std::fs::canonicalize(&a.name).ok() == std::fs::canonicalize(&b.name).ok();
+            let same_run = !a.run_id.is_empty() && a.run_id == b.run_id;
+            if same_file || same_run {
+                return Err(Usage(format!(
+                    "{} and {} are the same run{}; give each run once (held-out validation needs different runs)",
+                    b.name,
+                    a.name,
+                    if same_run {
+                        format!(" (run id {})", a.run_id)
+                    } else {
+                        String::new()
+                    }
+                ))
+                .into());
+            }
+        }
+    }
     let mixed = mixed_serials(&runs);
     if !mixed.is_empty() && !args.allow_mixed_serials {
         anyhow::bail!(
@@ -49,6 +71,20 @@ pub fn run(args: CalibrateArgs) -> Result<Outcome> {
         );
     }
     let cal = calibrate(&runs).context("fitting the compensation models")?;
+    let scored = cal
+        .table
+        .iter()
+        .find(|r| r.model == "model4")
+        .is_some_and(|r| r.held_out.unwrap_or(r.in_sample).drift_pp_dph.is_finite());
+    if !scored {
+        let longest = runs.iter().map(|r| r.series.len()).max().unwrap_or(0);
+        anyhow::bail!(
+            "the runs are too short to score a drift: the longest holds {longest} s of recorded data, \
+             and the drift is the p-p of the residual smoothed over {:.0} s; calibrate on thermal \
+             runs (procedures/acceptance.toml); no coefficients written",
+            crate::analysis::study::DRIFT_SMOOTHING_S
+        );
+    }
     let absurd = cal.absurd();
     if !absurd.is_empty() {
         anyhow::bail!(

@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result};
 use clap::{Args, Subcommand};
 
-use super::Outcome;
+use super::{Outcome, Usage};
 use crate::diagnose::library::Effect;
 use crate::diagnose::{self, Options, data, html, selfcheck};
 use crate::twin::TwinConfig;
@@ -74,13 +74,16 @@ pub fn run(args: DiagnoseArgs) -> Result<Outcome> {
     if let Some(DiagnoseCommand::Selfcheck(a)) = args.command {
         return run_selfcheck(a);
     }
-    anyhow::ensure!(
-        !args.runs.is_empty(),
-        "give one or more run logs (RUN.mcap...)"
-    );
-    let out = args.out.context(
-        "--out DIR is required: where diagnosis.json, diagnosis.html and twin-updated.toml go",
-    )?;
+    if args.runs.is_empty() {
+        return Err(Usage("give one or more run logs (RUN.mcap...)".into()).into());
+    }
+    let Some(out) = args.out else {
+        return Err(Usage(
+            "--out DIR is required: where diagnosis.json, diagnosis.html and twin-updated.toml go"
+                .into(),
+        )
+        .into());
+    };
     let twin = match &args.twin {
         Some(p) => {
             Some(TwinConfig::load(p).with_context(|| format!("loading twin {}", p.display()))?)

@@ -61,7 +61,9 @@ pub fn run_import(args: ImportArgs) -> Result<Outcome> {
         args.out.display(),
         match r.outcome {
             crate::sequencer::Outcome::Pass => "PASS",
-            _ => "FAIL",
+            crate::sequencer::Outcome::Fail => "FAIL",
+            _ if r.measurements.is_empty() => "not judged: the data make no measurement",
+            _ => "not judged (see below)",
         }
     )?;
     for m in &r.measurements {
@@ -73,6 +75,9 @@ pub fn run_import(args: ImportArgs) -> Result<Outcome> {
             m.limits_text(),
             m.outcome.as_str().to_uppercase()
         )?;
+        if !m.note.is_empty() {
+            outln!("    {}", m.note)?;
+        }
     }
     Ok(Outcome::Success)
 }

@@ -72,7 +72,7 @@ pub enum Outcome {
     /// A device or data failure ended the run (reported): exit 1.
     Error,
     /// Interrupted: exit 128 + the signal (130 Ctrl-C, 143 SIGTERM,
-    /// 129 SIGHUP).
+    /// 129 SIGHUP, 131 SIGQUIT).
     Interrupted(u8),
 }
 

@@ -32,7 +32,7 @@ pub fn run(args: RecoverArgs) -> Result<Outcome> {
         recover(&args.log, &out).with_context(|| format!("recovering {}", args.log.display()))?;
     if let Some(why) = &r.stopped {
         errln!(
-            "warning: the read of {} stopped early: {why}",
+            "warning: the read of {} stopped at a damaged record: {why}; what follows it is lost",
             args.log.display()
         );
     }

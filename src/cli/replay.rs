@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use anyhow::{Context, Result};
 use clap::Args;
 
-use super::Outcome;
+use super::{Outcome, Usage};
 use crate::clock::Stopwatch;
 use crate::coeffs::CoeffsFile;
 use crate::report::{Report, render_html};
@@ -77,6 +77,15 @@ pub fn run(args: ReplayArgs) -> Result<Outcome> {
             .parent()
             .map_or_else(|| PathBuf::from("replay"), |d| d.join("replay"))
     });
+    // A run's own directory keeps the run's report; replay never replaces it.
+    if crate::session::rundir::is_run_dir(&out) {
+        return Err(Usage(format!(
+            "{} is a run directory (it holds run.mcap or run.lock): replay writes its report \
+             elsewhere; choose another --out",
+            out.display()
+        ))
+        .into());
+    }
     std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
     for (name, bytes) in [
         ("report.json", report.to_json()),

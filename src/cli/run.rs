@@ -15,6 +15,7 @@ use crate::coeffs::CoeffsFile;
 use crate::procedure::Procedure;
 use crate::sequencer::embedded::Fault;
 use crate::sequencer::{self, BenchState, Interrupt, Progress};
+use crate::session::rundir::RunDirError;
 use crate::session::{self, Place, Plan, SessionError};
 use crate::twin::TwinConfig;
 
@@ -290,7 +291,14 @@ pub fn run(args: RunArgs) -> Result<Outcome> {
     errln!("running {}", plan.procedure.meta.name);
     let finished = match session::execute(plan, place, &rt, &mut progress, interrupt) {
         Ok(f) => f,
-        Err(e @ SessionError::RunDir(session::rundir::RunDirError::Exists { .. })) => {
+        Err(
+            e @ SessionError::RunDir(
+                RunDirError::Exists { .. }
+                | RunDirError::NotARun { .. }
+                | RunDirError::Locked { .. }
+                | RunDirError::Suspicious { .. },
+            ),
+        ) => {
             return Err(Usage(e.to_string()).into());
         }
         Err(e) => return Err(e.into()),
@@ -317,16 +325,18 @@ pub fn run(args: RunArgs) -> Result<Outcome> {
 
 /// The signals that stop a run, how the report names them, and the exit
 /// code of a run they stop (128 + the signal's number).
-fn stop_signals() -> [(tokio::signal::unix::SignalKind, &'static str, u8); 3] {
+fn stop_signals() -> [(tokio::signal::unix::SignalKind, &'static str, u8); 4] {
     use tokio::signal::unix::SignalKind;
     [
         (SignalKind::interrupt(), "Ctrl-C (SIGINT)", 130),
         (SignalKind::terminate(), "SIGTERM", 143),
         (SignalKind::hangup(), "SIGHUP", 129),
+        // Ctrl-\ would otherwise kill the run without its safe state.
+        (SignalKind::quit(), "SIGQUIT (Ctrl-\\)", 131),
     ]
 }
 
-/// First Ctrl-C, SIGTERM or SIGHUP: stop, bring the bench to its safe
+/// First Ctrl-C, SIGTERM, SIGHUP or SIGQUIT: stop, bring the bench to its safe
 /// state, clean up, write the report. A second one: exit at once, without
 /// cleanup. The handlers are installed before this returns, so no early
 /// signal kills the run.

@@ -480,7 +480,7 @@ impl Validator<'_> {
                 duration_s,
             } => {
                 let l = subst(l);
-                c.ensure(!l.trim().is_empty(), &k("label"), "must not be empty")?;
+                c.ensure(is_plain_text(&l), &k("label"), PLAIN_TEXT)?;
                 c.ensure(
                     !self.records.contains(&l),
                     &k("label"),
@@ -502,6 +502,7 @@ impl Validator<'_> {
                 unit,
             } => {
                 let name = subst(name);
+                c.ensure(is_plain_text(&name), &k("name"), PLAIN_TEXT)?;
                 let metric = Metric::parse(metric).ok_or_else(|| {
                     self.src.invalid(
                         &k("metric"),
@@ -605,11 +606,8 @@ impl Validator<'_> {
         key: &str,
         p: &RawPosition,
     ) -> Result<(TableAngles, Orientation), ConfigError> {
-        self.c.ensure(
-            !p.label.trim().is_empty(),
-            &format!("{key}.label"),
-            "must not be empty",
-        )?;
+        self.c
+            .ensure(is_plain_text(&p.label), &format!("{key}.label"), PLAIN_TEXT)?;
         self.resolve(key, p.orientation.as_ref(), p.table.as_ref())
     }
 
@@ -658,6 +656,14 @@ impl Validator<'_> {
         }
         Ok((angles, asked.unwrap_or_else(|| g.orientation(angles))))
     }
+}
+
+/// What a label or measurement name must be: it is shown in reports,
+/// stored in the results store and written in logs.
+const PLAIN_TEXT: &str = "must be 1 to 128 characters, not blank, without control characters";
+
+fn is_plain_text(s: &str) -> bool {
+    !s.trim().is_empty() && s.chars().count() <= 128 && !s.chars().any(char::is_control)
 }
 
 /// The `[procedure] name` of a procedure's text, read without validating

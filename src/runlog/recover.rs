@@ -30,14 +30,18 @@ pub enum RecoverError {
     /// The input cannot be read or is not MCAP.
     #[error(transparent)]
     Read(#[from] ReadError),
-    /// An MCAP file with nothing of a run in it.
+    /// An MCAP file with no message of a run in it.
     #[error(
-        "{path}: nothing of a run could be recovered (no run metadata and no message{}); is this the log of a gyrobench run?",
-        .stopped.as_ref().map_or(String::new(), |s| format!("; the read stopped: {s}"))
+        "{path}: nothing of a run could be recovered ({}{}){}",
+        if *.had_meta { "the run's metadata but no message" } else { "no run metadata and no message" },
+        .stopped.as_ref().map_or(String::new(), |s| format!("; the read stopped: {s}")),
+        if *.had_meta { "; the run ended before its first record was written" } else { "; is this the log of a gyrobench run?" }
     )]
     Empty {
         /// The input.
         path: String,
+        /// Whether the run's metadata was found.
+        had_meta: bool,
         /// Why the read stopped, when it did.
         stopped: Option<String>,
     },
@@ -147,9 +151,10 @@ pub fn recover(input: &Path, out: &Path) -> Result<Recovered, RecoverError> {
     r.was_complete = read.complete;
     r.bytes_lost = read.bytes_lost;
     r.stopped = read.stopped.clone();
-    if !saw_run && r.messages == 0 {
+    if r.messages == 0 {
         return Err(RecoverError::Empty {
             path: input.display().to_string(),
+            had_meta: saw_run,
             stopped: read.stopped,
         });
     }

@@ -3,7 +3,8 @@
 //! Channels, schemas, the `run` metadata and the procedure (as an
 //! attachment) go in up front. Gyro frames are batched one message per
 //! tick and zstd-compressed in chunks; a chunk is closed at least every
-//! second of wall time so a crash loses at most the last second.
+//! second of wall time and every minute of device time, so a crash loses
+//! at most the last second (or, on a simulated bench, the last minute).
 //! [`Recorder::finish_run`] writes the `result` metadata, the report as an
 //! attachment, the summary and the footer.
 //!
@@ -40,6 +41,8 @@ pub struct Recorder {
     lsb_arcsec: f64,
     temp_lsb_c: f64,
     since_flush: Stopwatch,
+    /// Device time of the last flush, s.
+    flushed_t_s: f64,
     buf: Vec<u8>,
     messages: BTreeMap<&'static str, u64>,
     /// The first write failure, in words (file and cause).
@@ -140,6 +143,7 @@ impl Recorder {
             lsb_arcsec: scales.lsb_arcsec,
             temp_lsb_c: scales.temp_lsb_c,
             since_flush: Stopwatch::start(),
+            flushed_t_s: 0.0,
             buf: Vec::with_capacity(64 * 1024),
             messages: BTreeMap::new(),
             failed: None,
@@ -189,7 +193,9 @@ impl Recorder {
             publish_time: time,
         };
         let buf = std::mem::take(&mut self.buf);
-        let flush = self.since_flush.elapsed_s() >= 1.0;
+        // Each second of wall time, and each minute of device time (a
+        // simulated bench runs far faster than the clock).
+        let flush = self.since_flush.elapsed_s() >= 1.0 || t_s - self.flushed_t_s >= 60.0;
         let r = self.guarded(|w| {
             w.write_to_known_channel(&header, &buf)?;
             if flush { w.flush() } else { Ok(()) }
@@ -198,6 +204,7 @@ impl Recorder {
         r?;
         if flush {
             self.since_flush.lap_s();
+            self.flushed_t_s = t_s;
         }
         *self.messages.entry(topic).or_default() += 1;
         Ok(())

@@ -249,7 +249,12 @@ impl BenchIo for EmbeddedBench {
         }
         self.check(&["chamber", "table", "gyro"])?;
         if self.active(Fault::ProcessKill) {
-            // What SIGKILL does: nothing after this line runs.
+            // SIGKILL itself: nothing after this line runs, no handler,
+            // no unwinding, no core dump.
+            let _ = rustix::process::kill_process(
+                rustix::process::getpid(),
+                rustix::process::Signal::KILL,
+            );
             std::process::abort();
         }
         assert!(

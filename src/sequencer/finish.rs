@@ -35,6 +35,9 @@ pub struct Expected {
     pub table: Option<TableAngles>,
     /// The safe state was applied after the last command.
     pub safe_state: bool,
+    /// Devices whose cleanup steps were skipped (they failed during the
+    /// run and stay in their safe state).
+    pub skipped: Vec<String>,
 }
 
 impl Expected {
@@ -163,9 +166,14 @@ pub async fn bench_left(
         t.angles.inner_deg
     );
     let what = if expected.safe_state {
-        "the bench's safe state"
+        "the bench's safe state".to_owned()
+    } else if expected.skipped.is_empty() {
+        "as cleanup left it".to_owned()
     } else {
-        "as cleanup left it"
+        format!(
+            "as cleanup left it, except the {} (its cleanup was skipped; it stays in its safe state)",
+            expected.skipped.join(" and the ")
+        )
     };
     let mut summary = if bad.is_empty() {
         format!("{chamber}, {table}: {what}, read back")

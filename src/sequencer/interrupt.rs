@@ -1,4 +1,4 @@
-//! A request to stop a run: Ctrl-C, SIGTERM, SIGHUP, or an operator's
+//! A request to stop a run: Ctrl-C, SIGTERM, SIGHUP, SIGQUIT, or an operator's
 //! Abort. The first request stops the run and cleanup runs; a request
 //! during cleanup stops cleanup (the bench then goes to its safe state).
 

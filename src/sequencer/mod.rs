@@ -696,6 +696,9 @@ pub async fn run(
             && d == f
         {
             cleanup_completed = false;
+            if !r.expected.skipped.iter().any(|x| x == d) {
+                r.expected.skipped.push(d.to_owned());
+            }
             r.note(
                 Level::Warning,
                 &format!(

@@ -29,6 +29,17 @@ pub enum RunDirError {
         /// What is in it.
         what: String,
     },
+    /// `--force` on a directory that holds something other than a run.
+    #[error(
+        "{path} is not a run directory (it holds {what} but no run.mcap); --force only moves \
+         an old run aside: choose an empty or new directory with --out"
+    )]
+    NotARun {
+        /// The directory.
+        path: String,
+        /// What is in it.
+        what: String,
+    },
     /// Another process runs in it.
     #[error(
         "{path} is in use by another run ({holder}); wait for it to end or choose another directory"
@@ -181,6 +192,7 @@ fn holder_text(text: &str) -> String {
             host.map_or(String::new(), |h| format!(" on {h}")),
             started.map_or(String::new(), |s| format!(", started {s}"))
         ),
+        _ if text.trim().is_empty() => "a run that is starting".into(),
         _ => "an unknown process".into(),
     }
 }
@@ -220,6 +232,11 @@ pub struct RunDir {
 }
 
 /// What a directory holds besides a lock file, if anything.
+/// `dir` holds a run's log (a directory gyrobench wrote).
+pub fn is_run_dir(dir: &Path) -> bool {
+    dir.join("run.mcap").exists() || dir.join(LOCK_FILE).exists()
+}
+
 fn run_contents(dir: &Path) -> Option<String> {
     let entries = std::fs::read_dir(dir).ok()?;
     let names: Vec<String> = entries
@@ -251,6 +268,14 @@ impl RunDir {
         if let Some(what) = run_contents(path) {
             if !force {
                 return Err(RunDirError::Exists {
+                    path: path.display().to_string(),
+                    what,
+                });
+            }
+            // Never move aside a directory that is not a run (a home, a
+            // source tree given as `--out .`).
+            if !is_run_dir(path) {
+                return Err(RunDirError::NotARun {
                     path: path.display().to_string(),
                     what,
                 });

@@ -52,6 +52,32 @@ fn a_directory_holding_a_run_is_refused_and_force_moves_it_aside() {
         !out.join("run.lock").exists(),
         "the lock is released at the end"
     );
+
+    // --force moves runs aside, nothing else.
+    let notes = dir.join("notes");
+    std::fs::create_dir_all(&notes).expect("dir");
+    std::fs::write(notes.join("todo.txt"), "keep").expect("file");
+    let r = gyrobench(&["run", s(&p), "--out", s(&notes), "--force"]);
+    assert_eq!(r.status.code(), Some(2), "{}", stderr(&r));
+    assert!(
+        stderr(&r).contains("is not a run directory"),
+        "{}",
+        stderr(&r)
+    );
+    assert_eq!(
+        std::fs::read(notes.join("todo.txt")).expect("kept"),
+        b"keep"
+    );
+
+    // Replay never writes its report over the run's own.
+    let report = std::fs::read(out.join("report.json")).expect("report");
+    let r = gyrobench(&["replay", s(&out.join("run.mcap")), "--out", s(&out)]);
+    assert_eq!(r.status.code(), Some(2), "{}", stderr(&r));
+    assert!(stderr(&r).contains("is a run directory"), "{}", stderr(&r));
+    assert_eq!(
+        std::fs::read(out.join("report.json")).expect("kept"),
+        report
+    );
     std::fs::remove_dir_all(&dir).expect("cleanup");
 }
 
@@ -411,6 +437,31 @@ fn calibrate_refuses_runs_of_different_units_unless_told() {
         "--allow-mixed-serials",
     ]);
     assert!(!stderr(&r).contains("different units"), "{}", stderr(&r));
+
+    // One run twice, or a copy of it, would score the fit on its own data.
+    let _ = std::fs::remove_file(&coeffs);
+    let copy = dir.join("copy.mcap");
+    std::fs::copy(&logs[0], &copy).expect("copy");
+    for twice in [&logs[0], &copy] {
+        let r = gyrobench(&["calibrate", s(&logs[0]), s(twice), "-o", s(&coeffs)]);
+        assert_eq!(r.status.code(), Some(2), "{}", stderr(&r));
+        assert!(stderr(&r).contains("are the same run"), "{}", stderr(&r));
+        assert!(!coeffs.exists());
+    }
+
+    // A run too short for the 600 s drift smoothing scores nothing.
+    let t = write(&dir, "tiny.toml", TINY);
+    let short = dir.join("short");
+    let r = gyrobench(&["run", s(&t), "--out", s(&short)]);
+    assert_eq!(r.status.code(), Some(0), "{}", stderr(&r));
+    let r = gyrobench(&["calibrate", s(&short.join("run.mcap")), "-o", s(&coeffs)]);
+    assert_eq!(r.status.code(), Some(1), "{}", stderr(&r));
+    assert!(
+        stderr(&r).contains("too short to score a drift"),
+        "{}",
+        stderr(&r)
+    );
+    assert!(!coeffs.exists());
     std::fs::remove_dir_all(&dir).expect("cleanup");
 }
 

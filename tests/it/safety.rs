@@ -86,10 +86,10 @@ fn a_cleanup_ramp_the_host_steps_reaches_its_set_point_and_is_read_back() {
 }
 
 #[test]
-fn sigterm_and_sighup_stop_a_run_as_ctrl_c_does() {
+fn sigterm_sighup_and_sigquit_stop_a_run_as_ctrl_c_does() {
     let dir = temp_dir("safety-signals");
     let p = write(&dir, "mini.toml", MINI);
-    for (sig, code) in [("TERM", 143), ("HUP", 129)] {
+    for (sig, code) in [("TERM", 143), ("HUP", 129), ("QUIT", 131)] {
         let out = dir.join(sig);
         let child = crate::cli::command()
             .args(["run", s(&p), "--out", s(&out), "--speed", "300"])
