@@ -157,19 +157,16 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         })
         .map_or(0, |r| r.len())
     });
-    time(
-        &format!("list: runs of {serial} on bench-3 since June"),
-        &mut |s| {
-            s.list(&Filter {
-                serial: Some(serial.clone()),
-                since: Some("2026-06-01".into()),
-                limit: Some(50),
-                latest_only: true,
-                ..Filter::default()
-            })
-            .map_or(0, |r| r.len() + 1)
-        },
-    );
+    time(&format!("list: runs of {serial} since June"), &mut |s| {
+        s.list(&Filter {
+            serial: Some(serial.clone()),
+            since: Some("2026-06-01".into()),
+            limit: Some(50),
+            latest_only: true,
+            ..Filter::default()
+        })
+        .map_or(0, |r| r.len() + 1)
+    });
     time(
         "trend compensated_drift_pp_dph across all units",
         &mut |s| {

@@ -430,6 +430,10 @@ pub fn render_trend(t: &Trend) -> String {
         lim(t.high),
         t.yield_fraction
             .map_or("-".into(), |y| format!("{:.1} %", 100.0 * y)),
-        opt(t.cpk, 2)
+        match (t.cpk, t.low, t.high) {
+            (Some(c), _, _) => format!("{c:.2}"),
+            (None, Some(_), Some(_)) => "- (needs two values that differ)".into(),
+            _ => "- (needs both limits)".into(),
+        }
     )
 }

@@ -100,13 +100,17 @@ pub fn junit(runs: &[(RunRow, Vec<MeasurementRow>)]) -> std::io::Result<String> 
                                     } else {
                                         ("failure", "outside limits")
                                     };
-                                    let message = format!(
-                                        "{} {} {} outside {}",
-                                        m.name,
-                                        num(m.value),
-                                        m.unit,
-                                        limits(m)
-                                    );
+                                    let message = if outcome == "error" {
+                                        format!("{} not judged: {}", m.name, m.note)
+                                    } else {
+                                        format!(
+                                            "{} {} {} outside {}",
+                                            m.name,
+                                            num(m.value),
+                                            m.unit,
+                                            limits(m)
+                                        )
+                                    };
                                     el.write_inner_content(|w| {
                                         w.create_element(tag)
                                             .with_attributes([

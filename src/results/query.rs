@@ -437,7 +437,7 @@ impl Store {
         );
         let stats = self.sql().query(
             &format!(
-                "SELECT COUNT(m.value), AVG(m.value), AVG(m.value * m.value), MIN(m.value), MAX(m.value), \
+                "SELECT COUNT(m.value), AVG(m.value), MIN(m.value), MAX(m.value), \
                  SUM(CASE WHEN m.outcome = 'pass' THEN 1 ELSE 0 END), COUNT(*) {from}"
             ),
             &all,
@@ -445,7 +445,7 @@ impl Store {
         let s = stats.first().cloned().unwrap_or_default();
         let g = |i: usize| s.get(i).and_then(Value::real);
         let count = s.first().and_then(Value::int).unwrap_or(0);
-        let judged = s.get(6).and_then(Value::int).unwrap_or(0);
+        let judged = s.get(5).and_then(Value::int).unwrap_or(0);
         if judged == 0 {
             return Err(StoreError::NotFound {
                 store: self.name.clone(),
@@ -454,9 +454,21 @@ impl Store {
         }
         let mean = g(1);
         let n = count as f64;
-        let sigma = match (mean, g(2)) {
-            (Some(m), Some(m2)) if count > 1 => {
-                Some(((m2 - m * m).max(0.0) * n / (n - 1.0)).sqrt())
+        // Two passes: the squares about the mean, not the mean of the
+        // squares (which cancels catastrophically for a large mean).
+        let sigma = match mean {
+            Some(m) if count > 1 => {
+                let k = all.len() + 1;
+                let mut with_mean = all.clone();
+                with_mean.push(Value::from(m));
+                let ss = self.sql().query(
+                    &format!("SELECT SUM((m.value - ${k}) * (m.value - ${k})) {from}"),
+                    &with_mean,
+                )?;
+                ss.first()
+                    .and_then(|r| r.first())
+                    .and_then(Value::real)
+                    .map(|ss| (ss.max(0.0) / (n - 1.0)).sqrt())
             }
             _ => None,
         };
@@ -483,9 +495,9 @@ impl Store {
             judged,
             mean,
             sigma,
-            min: g(3),
-            max: g(4),
-            yield_fraction: g(5).map(|p| p / judged as f64),
+            min: g(2),
+            max: g(3),
+            yield_fraction: g(4).map(|p| p / judged as f64),
             low,
             high,
             cpk,

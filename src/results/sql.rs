@@ -116,8 +116,22 @@ pub trait Sql: Send {
 /// The migrations of each engine, in order: (version, name, SQL).
 pub fn migrations(engine: Engine) -> &'static [(i64, &'static str, &'static str)] {
     match engine {
-        Engine::Sqlite => &[(1, "init", include_str!("migrations/sqlite/0001_init.sql"))],
-        Engine::Postgres => &[(1, "init", include_str!("migrations/postgres/0001_init.sql"))],
+        Engine::Sqlite => &[
+            (1, "init", include_str!("migrations/sqlite/0001_init.sql")),
+            (
+                2,
+                "indexes",
+                include_str!("migrations/sqlite/0002_indexes.sql"),
+            ),
+        ],
+        Engine::Postgres => &[
+            (1, "init", include_str!("migrations/postgres/0001_init.sql")),
+            (
+                2,
+                "indexes",
+                include_str!("migrations/postgres/0002_indexes.sql"),
+            ),
+        ],
     }
 }
 

@@ -169,6 +169,49 @@ fn lifecycle(db: &str, tag: &str) {
     assert!(t["count"].as_i64().expect("count") >= 3, "{t}");
     assert_eq!(t["low"], -5.0);
     assert!(t["cpk"].as_f64().expect("both limits: a Cpk") > 1.0, "{t}");
+    // The same figures from the rows the store exports.
+    let csv = dir.join("trend-rows.csv");
+    let r = with_db(
+        db,
+        &[
+            "results",
+            "export",
+            "--type",
+            "RL-16",
+            "--since",
+            "2000-01-01",
+            "--csv",
+            s(&csv),
+        ],
+    );
+    assert_eq!(r.status.code(), Some(0), "{}", stderr(&r));
+    let text = std::fs::read_to_string(&csv).expect("csv");
+    let values: Vec<f64> = text
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').collect::<Vec<_>>())
+        .filter(|c| c[9] == "bias_dph:up" && !c[10].is_empty())
+        .map(|c| c[10].parse().expect("value"))
+        .collect();
+    let n = values.len() as f64;
+    let mean = values.iter().sum::<f64>() / n;
+    let sigma = (values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
+    let close = |a: f64, b: f64| (a - b).abs() <= 1e-9 * b.abs().max(1e-6);
+    assert_eq!(t["count"].as_f64(), Some(n), "{t}");
+    assert!(
+        close(t["mean"].as_f64().expect("mean"), mean),
+        "{t} vs {mean}"
+    );
+    assert!(
+        close(t["sigma"].as_f64().expect("sigma"), sigma),
+        "{t} vs {sigma}"
+    );
+    let lo = values.iter().copied().fold(f64::INFINITY, f64::min);
+    let hi = values.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    assert!(
+        close(t["min"].as_f64().expect("min"), lo) && close(t["max"].as_f64().expect("max"), hi),
+        "{t}"
+    );
     let page = dir.join("trend.html");
     let r = with_db(
         db,
