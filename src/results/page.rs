@@ -1,27 +1,35 @@
-//! The trend chart page: a measurement's values across units against the
-//! time their runs started, with the limits (one self-contained page,
-//! plotters SVG, no scripts).
+//! The trend chart page: a measurement's values across units in the order
+//! their runs started, with the limits (one self-contained page, plotters
+//! SVG, no scripts).
 
 use plotters::prelude::*;
 
 use super::query::Trend;
 use crate::report::html::{esc, legend, svg};
 
-fn days(t: &str, t0: Option<chrono::DateTime<chrono::FixedOffset>>) -> Option<f64> {
-    let t = chrono::DateTime::parse_from_rfc3339(t).ok()?;
-    Some((t - t0?).num_seconds() as f64 / 86_400.0)
-}
-
-/// The page of `t`, with `points` (start time, serial, value, outcome).
+/// The page of `t`, with `points` (start time, serial, value, outcome),
+/// oldest first. Values are plotted in run order (an individuals chart):
+/// runs a second apart and runs a month apart are each a point of their own.
 pub fn trend_page(t: &Trend, points: &[(String, String, f64, String)]) -> String {
-    let t0 = points
-        .first()
-        .and_then(|p| chrono::DateTime::parse_from_rfc3339(&p.0).ok());
     let xy: Vec<(f64, f64, bool)> = points
         .iter()
         .enumerate()
-        .map(|(i, p)| (days(&p.0, t0).unwrap_or(i as f64), p.2, p.3 == "pass"))
+        .map(|(i, p)| ((i + 1) as f64, p.2, p.3 == "pass"))
         .collect();
+    let day = |p: Option<&(String, String, f64, String)>| {
+        p.map_or(String::new(), |p| p.0.chars().take(10).collect())
+    };
+    let x_desc = format!(
+        "runs in the order they started, oldest first ({} to {})",
+        day(points.first()),
+        day(points.last())
+    );
+    // Points small enough that thousands stay points.
+    let dot = match xy.len() {
+        0..=100 => 4,
+        101..=1000 => 2,
+        _ => 1,
+    };
     let chart = svg(|s| {
         let root = SVGBackend::with_string(s, (900, 360)).into_drawing_area();
         root.fill(&WHITE)?;
@@ -39,7 +47,7 @@ pub fn trend_page(t: &Trend, points: &[(String, String, f64, String)]) -> String
                 (a.min(v), b.max(v))
             });
         let pad = ((y1 - y0) * 0.1).max(1e-9);
-        let xpad = ((x1 - x0) * 0.02).max(0.01);
+        let xpad = ((x1 - x0) * 0.02).max(0.5);
         let mut c = ChartBuilder::on(&root)
             .caption(format!("{} ({})", t.name, t.unit), ("sans-serif", 18))
             .margin(10)
@@ -47,21 +55,29 @@ pub fn trend_page(t: &Trend, points: &[(String, String, f64, String)]) -> String
             .y_label_area_size(64)
             .build_cartesian_2d((x0 - xpad)..(x1 + xpad), (y0 - pad)..(y1 + pad))?;
         c.configure_mesh()
-            .x_desc("days since the first run shown")
+            .x_desc(x_desc.as_str())
+            // Runs are whole numbers: ticks between them stay unlabelled.
+            .x_label_formatter(&|v| {
+                if (v - v.round()).abs() < 1e-6 {
+                    format!("{v:.0}")
+                } else {
+                    String::new()
+                }
+            })
             .y_desc(t.unit.as_str())
             .label_style(("sans-serif", 14))
             .draw()?;
         c.draw_series(
             xy.iter()
                 .filter(|p| p.2)
-                .map(|p| Circle::new((p.0, p.1), 3, BLUE.filled())),
+                .map(|p| Circle::new((p.0, p.1), dot, BLUE.filled())),
         )?
         .label("pass")
         .legend(|(x, y)| Circle::new((x + 8, y), 3, BLUE.filled()));
         c.draw_series(
             xy.iter()
                 .filter(|p| !p.2)
-                .map(|p| TriangleMarker::new((p.0, p.1), 5, RED.filled())),
+                .map(|p| TriangleMarker::new((p.0, p.1), dot + 2, RED.filled())),
         )?
         .label("fail or error")
         .legend(|(x, y)| TriangleMarker::new((x + 8, y), 5, RED.filled()));
