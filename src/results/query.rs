@@ -6,6 +6,7 @@ use serde::Serialize;
 
 use super::sql::{Row, Value};
 use super::{Store, StoreError};
+use crate::runlog::meta::ResultMeasurement;
 
 /// Which runs.
 #[derive(Debug, Clone, Default)]
@@ -110,45 +111,42 @@ fn run_row(r: &Row) -> RunRow {
     }
 }
 
-/// A measurement of a run.
+/// A measurement of a run: the run part it belongs to and the measurement
+/// as the log's `result` record has it (it reads as the measurement).
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct MeasurementRow {
     /// The run part it belongs to.
     pub run: String,
-    /// Name.
-    pub name: String,
-    /// Value.
-    pub value: Option<f64>,
-    /// Unit.
-    pub unit: String,
-    /// Lower limit.
-    pub low: Option<f64>,
-    /// Upper limit.
-    pub high: Option<f64>,
-    /// `pass`, `fail` or `error`.
-    pub outcome: String,
-    /// Step key.
-    pub step: String,
-    /// How it was obtained.
-    pub note: String,
+    /// The measurement.
+    #[serde(flatten)]
+    pub measurement: ResultMeasurement,
 }
 
 const MEASUREMENT_COLUMNS: &str =
     "m.run, m.name, m.value, m.unit, m.low, m.high, m.outcome, m.step, m.note";
+
+impl std::ops::Deref for MeasurementRow {
+    type Target = ResultMeasurement;
+    fn deref(&self) -> &ResultMeasurement {
+        &self.measurement
+    }
+}
 
 fn measurement_row(r: &Row) -> MeasurementRow {
     let t = |i: usize| r.get(i).map_or(String::new(), Value::text);
     let f = |i: usize| r.get(i).and_then(Value::real);
     MeasurementRow {
         run: t(0),
-        name: t(1),
-        value: f(2),
-        unit: t(3),
-        low: f(4),
-        high: f(5),
-        outcome: t(6),
-        step: t(7),
-        note: t(8),
+        measurement: ResultMeasurement {
+            name: t(1),
+            value: f(2),
+            unit: t(3),
+            low: f(4),
+            high: f(5),
+            outcome: t(6),
+            step: t(7),
+            note: t(8),
+        },
     }
 }
 

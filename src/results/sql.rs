@@ -184,6 +184,11 @@ pub fn migrate(sql: &mut dyn Sql, store: &str) -> Result<i64, StoreError> {
         }
         Ok(latest)
     })();
+    end(sql, result)
+}
+
+/// Commit when `result` is Ok, roll back otherwise.
+fn end<T>(sql: &mut dyn Sql, result: Result<T, StoreError>) -> Result<T, StoreError> {
     match result {
         Ok(v) => {
             sql.batch("COMMIT")?;
@@ -203,14 +208,6 @@ pub fn transaction<T>(
     f: impl FnOnce(&mut dyn Sql) -> Result<T, StoreError>,
 ) -> Result<T, StoreError> {
     sql.batch("BEGIN")?;
-    match f(sql) {
-        Ok(v) => {
-            sql.batch("COMMIT")?;
-            Ok(v)
-        }
-        Err(e) => {
-            let _rolled_back = sql.batch("ROLLBACK");
-            Err(e)
-        }
-    }
+    let result = f(sql);
+    end(sql, result)
 }
