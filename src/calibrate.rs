@@ -404,11 +404,7 @@ impl Calibration {
     /// A self-contained page: the comparison table, every model's
     /// coefficients with their errors, the warnings.
     pub fn render_html(&self) -> String {
-        let esc = |t: &str| {
-            t.replace('&', "&amp;")
-                .replace('<', "&lt;")
-                .replace('>', "&gt;")
-        };
+        use crate::view::{Chart, Marker, Series, esc, page};
         let f = |v: f64| {
             if v.is_finite() {
                 format!("{v:.4}")
@@ -448,17 +444,79 @@ impl Calibration {
         let warnings: String = self
             .warnings
             .iter()
-            .map(|w| format!("<p class=warn>{}</p>\n", esc(w)))
+            .map(|w| format!("<p class=box>{}</p>\n", esc(w)))
             .collect();
         let runs: String = self
             .runs
             .iter()
             .map(|r| format!("<li>{}</li>", esc(r)))
             .collect();
-        format!(
-            "<!doctype html>\n<html lang=en><head><meta charset=utf-8><title>Calibration</title><style>body{{font-family:sans-serif;margin:2em;max-width:960px}} table{{border-collapse:collapse;margin:1em 0}} td,th{{border:1px solid #ccc;padding:.25em .5em}} td.num{{text-align:right;font-family:monospace}} .warn{{background:#fff4e0;border-left:4px solid #8a5a00;padding:.5em}}</style></head><body>\n<h1>Thermal compensation calibration</h1>\n<p>Runs:</p><ul>{runs}</ul><p>Validation: {}.</p>\n<h2>The study's progression</h2>\n<table><tr><th>model</th><th>held-out drift p-p, deg/h</th><th>held-out RMS</th><th>in-sample drift p-p</th><th>in-sample RMS</th></tr>\n{rows}</table>\n<p>Drift = peak-to-peak of the residual smoothed over 600 s; each run's own offset (turn-on bias) removed.</p>\n{warnings}<h2>Coefficients (all runs)</h2>\n<table><tr><th>model</th><th>term</th><th>value</th><th>standard error</th></tr>\n{coeffs}</table>\n</body></html>\n",
+        let names: Vec<String> = self.table.iter().map(|r| r.model.to_owned()).collect();
+        let at = |pick: &dyn Fn(&Row) -> Option<f64>| -> Vec<(f64, f64)> {
+            self.table
+                .iter()
+                .enumerate()
+                .filter_map(|(i, r)| Some((i as f64, pick(r).filter(|v| v.is_finite())?)))
+                .collect()
+        };
+        let chart = Chart::new("Drift peak to peak left by each model", "model", "deg/h")
+            .categories(names)
+            .height(280)
+            .series(
+                Series::points(
+                    "held out (runs it was not fitted to)",
+                    at(&|r| r.held_out.map(|h| h.drift_pp_dph)),
+                    Marker::Circle,
+                )
+                .marker(Marker::Circle, 6)
+                .colour(0),
+            )
+            .series(
+                Series::points(
+                    "in sample",
+                    at(&|r| Some(r.in_sample.drift_pp_dph)),
+                    Marker::Square,
+                )
+                .marker(Marker::Square, 5)
+                .colour(1),
+            )
+            .render();
+        let body = format!(
+            "<h1>Thermal compensation calibration</h1>\n<p class=headline>{}</p>\n{warnings}<p>Runs:</p><ul>{runs}</ul><p class=note>Validation: {}.</p>\n<h2>The study's progression</h2>\n<table><tr><th>model</th><th>held-out drift p-p, deg/h</th><th>held-out RMS</th><th>in-sample drift p-p</th><th>in-sample RMS</th></tr>\n{rows}</table>\n<p class=note>Drift = peak-to-peak of the residual smoothed over 600 s; each run's own offset (turn-on bias) removed.</p>\n{chart}<h2>Coefficients (all runs)</h2>\n<table><tr><th>model</th><th>term</th><th>value</th><th>standard error</th></tr>\n{coeffs}</table>\n",
+            esc(&self.headline()),
             esc(&self.validation)
-        )
+        );
+        page("Thermal compensation calibration", "", &body)
+    }
+
+    /// One sentence: what model 4 leaves, held out when it can be, against
+    /// the raw drift; and whether there is a warning to read.
+    pub fn headline(&self) -> String {
+        let pick = |model: &str| self.table.iter().find(|r| r.model == model);
+        let fig = |r: &Row| {
+            r.held_out
+                .map_or((r.in_sample.drift_pp_dph, "in sample"), |h| {
+                    (h.drift_pp_dph, "held out")
+                })
+        };
+        let mut s = match (pick("model4"), pick("raw")) {
+            (Some(m4), Some(raw)) => {
+                let (v, how) = fig(m4);
+                let (r, _) = fig(raw);
+                format!(
+                    "Model 4 leaves a drift of {v:.4} deg/h peak to peak {how}, from {r:.4} deg/h uncompensated, on {} run(s).",
+                    self.runs.len()
+                )
+            }
+            _ => format!("Calibrated on {} run(s).", self.runs.len()),
+        };
+        if !self.warnings.is_empty() {
+            s.push_str(&format!(
+                " {} warning(s) below: read them before using the coefficients.",
+                self.warnings.len()
+            ));
+        }
+        s
     }
 
     /// The comparison table and the model-4 coefficients as text.

@@ -28,3 +28,4 @@ pub mod sim;
 pub mod study;
 pub mod transport;
 pub mod twin;
+pub mod view;

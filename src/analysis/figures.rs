@@ -68,15 +68,71 @@ pub fn drift_pp(x: &[f64], window: usize) -> f64 {
     peak_to_peak(&moving_average(x, window))
 }
 
-/// [`drift_pp`] over several stretches (parts of a resumed run): each is
-/// smoothed on its own, never across the break, and the peak-to-peak is
-/// taken over all of them. None when no stretch is as long as `window`.
-pub fn drift_pp_parts(parts: &[Vec<f64>], window: usize) -> Option<f64> {
-    let smoothed: Vec<f64> = parts
-        .iter()
-        .flat_map(|p| moving_average(p, window))
-        .collect();
-    (!smoothed.is_empty()).then(|| peak_to_peak(&smoothed))
+/// The smoothed series a drift figure is the peak-to-peak of, as a person
+/// checks it: each stretch's centred moving average against time (thinned
+/// to a tenth of the window, which loses nothing a 600 s smoothing shows),
+/// and the exact highest and lowest points.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct DriftTrace {
+    /// Per stretch: (time at the window's centre, s; smoothed value).
+    pub parts: Vec<Vec<(f64, f64)>>,
+    /// Where the highest smoothed value lies: (s, value).
+    pub max: (f64, f64),
+    /// Where the lowest lies.
+    pub min: (f64, f64),
+}
+
+impl DriftTrace {
+    /// The drift: highest minus lowest smoothed value.
+    pub fn pp(&self) -> f64 {
+        self.max.1 - self.min.1
+    }
+}
+
+/// [`drift_pp`] over several stretches (parts of a resumed run), each
+/// given as (times, values): each is smoothed on its own, never across the
+/// break, and the peak-to-peak is taken over all of them. None when no
+/// stretch is as long as `window`.
+pub fn drift_trace(parts: &[(Vec<f64>, Vec<f64>)], window: usize) -> Option<DriftTrace> {
+    let thin = (window / 10).max(1);
+    let mut trace = DriftTrace {
+        max: (f64::NAN, f64::NEG_INFINITY),
+        min: (f64::NAN, f64::INFINITY),
+        ..DriftTrace::default()
+    };
+    for (t, x) in parts {
+        let smoothed = moving_average(x, window);
+        let centre = |i: usize| (t[i] + t[i + window - 1]) / 2.0;
+        let (mut hi, mut lo) = (None, None);
+        for (i, &v) in smoothed.iter().enumerate() {
+            if v > trace.max.1 {
+                trace.max = (centre(i), v);
+                hi = Some(i);
+            }
+            if v < trace.min.1 {
+                trace.min = (centre(i), v);
+                lo = Some(i);
+            }
+        }
+        if !smoothed.is_empty() {
+            // Thinned, but the extremes kept: the line passes through the
+            // points the figure is taken between.
+            trace.parts.push(
+                smoothed
+                    .iter()
+                    .enumerate()
+                    .filter(|(i, _)| {
+                        i % thin == 0
+                            || *i == smoothed.len() - 1
+                            || Some(*i) == hi
+                            || Some(*i) == lo
+                    })
+                    .map(|(i, &v)| (centre(i), v))
+                    .collect(),
+            );
+        }
+    }
+    (!trace.parts.is_empty()).then_some(trace)
 }
 
 /// Slope by local linear regression over `±half` samples (edges use what
@@ -133,6 +189,31 @@ pub fn derivative_by_time(t_s: &[f64], x: &[f64], half_s: f64) -> Vec<f64> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_drift_trace_is_the_drift_and_shows_where_it_is_taken() {
+        // A ramp then a step down, in two stretches.
+        let t1: Vec<f64> = (0..100).map(f64::from).collect();
+        let x1: Vec<f64> = (0..100).map(|i| f64::from(i) * 0.01).collect();
+        let t2: Vec<f64> = (200..300).map(f64::from).collect();
+        let x2 = vec![-0.5; 100];
+        let tr = drift_trace(&[(t1, x1.clone()), (t2, x2.clone())], 20).expect("trace");
+        let all: Vec<f64> = moving_average(&x1, 20)
+            .into_iter()
+            .chain(moving_average(&x2, 20))
+            .collect();
+        assert_eq!(tr.pp(), peak_to_peak(&all));
+        assert_eq!(tr.max.0, 89.5);
+        assert!((tr.max.1 - 0.895).abs() < 1e-12);
+        assert_eq!(tr.min.1, -0.5);
+        assert_eq!(tr.parts.len(), 2, "never smoothed across the break");
+        assert!(tr.parts[0].len() < 81, "thinned");
+        assert!(
+            tr.parts[0].contains(&tr.max),
+            "the highest point is on the line"
+        );
+        assert!(drift_trace(&[(vec![0.0], vec![1.0])], 10).is_none());
+    }
 
     #[test]
     fn moving_average_keeps_full_windows_only() {

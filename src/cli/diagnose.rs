@@ -118,6 +118,7 @@ pub fn run(args: DiagnoseArgs) -> Result<Outcome> {
                 .context("writing the updated twin as TOML")?
         ),
     )?;
+    outln!("{}", diagnose::html::headline(&d))?;
     outln!(
         "rate layer: held-out gap {:.5} deg/h -> {:.5} deg/h; thermal layer: {:.4} degC{}",
         d.layers.rate.gap_dph,
@@ -135,12 +136,12 @@ pub fn run(args: DiagnoseArgs) -> Result<Outcome> {
     }
     for e in &d.effects {
         outln!(
-            "  {:<26} gap {:.5} -> {:.5} deg/h (shrink {:.0} %, p = {:.1e})",
+            "  {:<26} gap {:.5} -> {:.5} deg/h (shrink {:.0} %, p {})",
             e.name,
             e.held_out_gap_before_dph,
             e.held_out_gap_after_dph,
             100.0 * e.shrink,
-            e.p_value
+            crate::view::p_phrase(e.p_value)
         )?;
     }
     for c in &d.confounded {

@@ -623,16 +623,17 @@ pub fn render_html(s: &SelfCheck) -> String {
                 .collect::<String>()
         ));
     }
-    format!(
-        "<!doctype html>\n<html lang=en><head><meta charset=utf-8><title>Diagnosis self-check</title><style>body{{font-family:sans-serif;margin:2em}} table{{border-collapse:collapse;margin:1em 0}} td,th{{border:1px solid #ccc;padding:.25em .5em;font-size:.9em}} td.num{{text-align:right;font-family:monospace}}</style></head><body>\n<h1>Diagnosis self-check</h1>\n<p>{} run(s) per case from seed {}, each case these procedures on the twin: {}. Noise unit: {:.5} deg/h (the reference's held-out gap on null runs, RMS of 60 s means).</p>\n<p>False-positive rate on null runs: <b>{:.0} %</b>. Out-of-library periodic disturbance ({} s, {}x noise): attributed in {:.0} % of runs; its period reported within 20 % in {:.0} %.</p>\n<h2>Detection power</h2>\n<table><tr><th>effect</th><th>amplitude (noise units)</th><th>coefficient</th><th>runs</th><th>named first</th><th>excess gap closed</th><th>in a confounded pair</th></tr>\n{power}</table>\n<h2>Confusion matrix</h2>\n<table>{conf}</table>\n<h2>How much of each effect these runs show</h2>\n<p>Per unit coefficient: the RMS of its contribution (60 s means) and the held-out gap it alone opens against the reference (what the reference's refitted terms reproduce does not count). Amplitudes are in units of {unit}; a small ratio means the effect hides in the reference's terms with these runs.</p>\n<table><tr><th>effect</th><th>RMS (deg/h per unit)</th><th>gap (deg/h per unit)</th><th>gap / RMS</th></tr>\n{sizes}</table>\n</body></html>\n",
+    let body = format!(
+        "<h1>Diagnosis self-check</h1>\n<p>{} run(s) per case from seed {}, each case these procedures on the twin: {}. Noise unit: {:.5} deg/h (the reference's held-out gap on null runs, RMS of 60 s means).</p>\n<p>False-positive rate on null runs: <b>{:.0} %</b>. Out-of-library periodic disturbance ({} s, {}x noise): attributed in {:.0} % of runs; its period reported within 20 % in {:.0} %.</p>\n<h2>Detection power</h2>\n<table><tr><th>effect</th><th>amplitude (noise units)</th><th>coefficient</th><th>runs</th><th>named first</th><th>excess gap closed</th><th>in a confounded pair</th></tr>\n{power}</table>\n<h2>Confusion matrix</h2>\n<table>{conf}</table>\n<h2>How much of each effect these runs show</h2>\n<p>Per unit coefficient: the RMS of its contribution (60 s means) and the held-out gap it alone opens against the reference (what the reference's refitted terms reproduce does not count). Amplitudes are in units of {unit}; a small ratio means the effect hides in the reference's terms with these runs.</p>\n<table><tr><th>effect</th><th>RMS (deg/h per unit)</th><th>gap (deg/h per unit)</th><th>gap / RMS</th></tr>\n{sizes}</table>\n",
         s.runs,
         s.seed,
-        crate::report::html::esc(&s.procedures.join(", ")),
+        crate::view::esc(&s.procedures.join(", ")),
         s.noise_dph,
         100.0 * s.false_positive_rate,
         PERIODIC_PERIOD_S,
         PERIODIC_AMPLITUDE,
         100.0 * s.periodic_attributed,
         100.0 * s.periodic_period_found,
-    )
+    );
+    crate::view::page("Diagnosis self-check", "", &body)
 }

@@ -1,234 +1,337 @@
-//! `report.html`: one self-contained page, verdict first, charts drawn with
-//! plotters into inline SVG (no scripts, no external files).
+//! `report.html`: one self-contained page, verdict first, then the figure
+//! the unit is accepted on drawn against its limit, the measurements, the
+//! nine positions, the noise figures and the run's traces. Charts come from
+//! the shared helper (`view::chart`); nothing is fetched, nothing runs.
 
-use plotters::prelude::*;
-
-use super::Report;
-use crate::analysis::figures::block_means;
-use crate::analysis::model::{ModelKind, fit};
+use super::{Position, Report};
+use crate::analysis::figures::{DriftTrace, block_means};
 use crate::analysis::series::Interval;
 use crate::procedure::Metric;
 use crate::sequencer::Outcome;
-use crate::sequencer::measure::{MeasureOutcome, Records};
+use crate::sequencer::measure::{MeasureOutcome, Measurement, Records};
+use crate::view::chart::{Band, Rule};
+use crate::view::{Chart, Marker, Series, Stroke, esc, limit, num, page, utc_seconds};
 
-const W: u32 = 900;
-const H: u32 = 320;
-
-pub(crate) fn esc(s: &str) -> String {
-    s.replace('&', "&amp;")
-        .replace('<', "&lt;")
-        .replace('>', "&gt;")
-        .replace('"', "&quot;")
+/// 60 s means against device time in hours.
+fn means_h(iv: &[&Interval], f: impl Fn(&Interval) -> f64) -> Vec<(f64, f64)> {
+    let t = block_means(
+        &iv.iter().map(|i| i.time_s / 3600.0).collect::<Vec<_>>(),
+        60,
+    );
+    let v = block_means(&iv.iter().map(|i| f(i)).collect::<Vec<_>>(), 60);
+    t.into_iter().zip(v).collect()
 }
 
-/// The legend box every chart uses.
-pub(crate) fn legend<'a, DB, CT>(
-    c: &mut ChartContext<'a, DB, CT>,
-) -> Result<(), Box<dyn std::error::Error>>
-where
-    DB: DrawingBackend + 'a,
-    DB::ErrorType: 'static,
-    CT: CoordTranslate,
-{
-    c.configure_series_labels()
-        .background_style(WHITE.mix(0.8))
-        .border_style(BLACK)
-        .draw()?;
-    Ok(())
+/// A trace's stretches as one series in hours (the gaps between
+/// stretches break the line).
+fn trace_h(t: &DriftTrace) -> Vec<(f64, f64)> {
+    t.parts
+        .iter()
+        .flatten()
+        .map(|&(s, v)| (s / 3600.0, v))
+        .collect()
 }
 
-/// Draw into an SVG string; a drawing error becomes a note instead.
-pub(crate) fn svg(
-    draw: impl FnOnce(&mut String) -> Result<(), Box<dyn std::error::Error>>,
-) -> String {
-    let mut s = String::new();
-    let drawn = draw(&mut s).map_err(|e| e.to_string());
-    match drawn {
-        Ok(()) => s,
-        Err(e) => format!("<p class=note>chart not drawn: {}</p>", esc(&e)),
-    }
-}
-
-/// Tick label of a category axis: `labels[i]` at x = i, nothing between.
-pub(crate) fn label_at(labels: &[String], x: f64) -> String {
-    let i = x.round();
-    if (x - i).abs() < 0.01 && i >= 0.0 {
-        labels.get(i as usize).cloned().unwrap_or_default()
-    } else {
-        String::new()
-    }
-}
-
-pub(crate) fn range(v: impl Iterator<Item = f64>) -> (f64, f64) {
-    let (lo, hi) = v
-        .filter(|x| x.is_finite())
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), x| {
-            (a.min(x), b.max(x))
+/// The headline: the compensated drift's smoothed residual on its own
+/// scale, inside a band as tall as the limit centred on it (the trace
+/// fits in the band exactly when the drift is within the limit), with the
+/// highest and lowest points the peak-to-peak is taken between.
+fn drift_chart(m: &Measurement) -> Option<String> {
+    let t = m.trace.as_ref()?;
+    let pts = trace_h(t);
+    let (hi_t, hi) = (t.max.0 / 3600.0, t.max.1);
+    let (lo_t, lo) = (t.min.0 / 3600.0, t.min.1);
+    let mid = (hi + lo) / 2.0;
+    let mut c = Chart::new(
+        format!(
+            "{}: {} {} peak to peak ({})",
+            m.name,
+            num(m.value, 4),
+            m.unit,
+            m.outcome.as_str().to_uppercase()
+        ),
+        "device time, h",
+        &m.unit,
+    )
+    .series(
+        Series::line(
+            format!(
+                "residual after model 4, {:.0} s centred moving average",
+                m.averaging_s
+            ),
+            pts,
+        )
+        .colour(0)
+        .width(2),
+    )
+    .series(
+        Series::points(
+            format!("highest {hi:+.4}"),
+            vec![(hi_t, hi)],
+            Marker::Triangle,
+        )
+        .colour(1)
+        .marker(Marker::Triangle, 6),
+    )
+    .series(
+        Series::points(
+            format!("lowest {lo:+.4}"),
+            vec![(lo_t, lo)],
+            Marker::TriangleDown,
+        )
+        .colour(2)
+        .marker(Marker::TriangleDown, 6),
+    );
+    if let Some(h) = m.high {
+        c = c.band(Band {
+            label: format!("limit: {h} {} peak to peak, centred on the trace", m.unit),
+            y: (mid - h / 2.0, mid + h / 2.0),
+            x: None,
         });
-    if !lo.is_finite() {
-        return (0.0, 1.0);
     }
-    let pad = ((hi - lo) * 0.08).max(1e-6);
-    (lo - pad, hi + pad)
+    Some(
+        c.caption(format!(
+            "The drift is the highest minus the lowest point of this trace: {:.4} - ({:.4}) = {:.4} {}. {}",
+            hi,
+            lo,
+            hi - lo,
+            m.unit,
+            sentence(&m.note)
+        ))
+        .render(),
+    )
 }
 
-/// Raw and compensated Earth-removed rate (60 s means) against time, over
-/// the recorded (static) data: while the table moves, a 1 Hz reference
-/// cannot follow it and the difference means nothing.
-fn rate_chart(records: &Records, compensated: &[(f64, f64)]) -> String {
-    let all: Vec<&Interval> = records
+/// A note as a sentence (the chart escapes its caption).
+fn sentence(s: &str) -> String {
+    let s = s.trim();
+    let mut c = s.chars();
+    let s = match c.next() {
+        Some(f) => f.to_uppercase().chain(c).collect::<String>(),
+        None => return String::new(),
+    };
+    if s.ends_with('.') { s } else { format!("{s}.") }
+}
+
+/// Raw Earth-removed rate (60 s means) over the recorded (static) data,
+/// with the raw drift's smoothed trace. While the table moves a 1 Hz
+/// reference cannot follow it, so those stretches are left out (and the
+/// line breaks there).
+fn rate_chart(r: &Report, records: &Records) -> Option<String> {
+    let recorded: Vec<&Interval> = records
         .all
         .iter()
-        .filter(|(recorded, _)| *recorded)
+        .filter(|(rec, _)| *rec)
         .map(|(_, iv)| iv)
         .collect();
-    let t: Vec<f64> = block_means(
-        &all.iter().map(|i| i.time_s / 3600.0).collect::<Vec<_>>(),
-        60,
-    );
-    let raw: Vec<f64> = block_means(&all.iter().map(|i| i.bias_dph()).collect::<Vec<_>>(), 60);
-    let raw_pts: Vec<(f64, f64)> = t.iter().copied().zip(raw.iter().copied()).collect();
-    svg(|s| {
-        let root = SVGBackend::with_string(s, (W, H)).into_drawing_area();
-        root.fill(&WHITE)?;
-        let (x0, x1) = range(t.iter().copied());
-        let (y0, y1) = range(raw.iter().copied().chain(compensated.iter().map(|p| p.1)));
-        let mut c = ChartBuilder::on(&root)
-            .caption("Rate, Earth rate removed (60 s means)", ("sans-serif", 16))
-            .margin(8)
-            .x_label_area_size(32)
-            .y_label_area_size(56)
-            .build_cartesian_2d(x0..x1, y0..y1)?;
-        c.configure_mesh()
-            .x_desc("device time, h")
-            .y_desc("deg/h")
-            .draw()?;
-        c.draw_series(LineSeries::new(raw_pts, &BLUE))?
-            .label("raw")
-            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], BLUE));
-        if !compensated.is_empty() {
-            c.draw_series(LineSeries::new(compensated.iter().copied(), &RED))?
-                .label("model-4 compensated")
-                .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], RED));
-        }
-        legend(&mut c)?;
-        root.present()?;
-        Ok(())
-    })
-}
-
-/// Chamber and gyro temperatures against time.
-fn temperature_chart(records: &Records) -> String {
-    let all: Vec<&Interval> = records.all.iter().map(|(_, iv)| iv).collect();
-    let t = block_means(
-        &all.iter().map(|i| i.time_s / 3600.0).collect::<Vec<_>>(),
-        60,
-    );
-    let series: [(&str, RGBColor, Vec<f64>); 4] = [
-        (
-            "chamber",
-            BLACK,
-            block_means(&all.iter().map(|i| i.chamber_c).collect::<Vec<_>>(), 60),
-        ),
-        (
-            "case",
-            BLUE,
-            block_means(&all.iter().map(|i| i.tcase_c).collect::<Vec<_>>(), 60),
-        ),
-        (
-            "T1",
-            RED,
-            block_means(&all.iter().map(|i| i.t1_c).collect::<Vec<_>>(), 60),
-        ),
-        (
-            "T2",
-            GREEN,
-            block_means(&all.iter().map(|i| i.t2_c).collect::<Vec<_>>(), 60),
-        ),
-    ];
-    svg(|s| {
-        let root = SVGBackend::with_string(s, (W, H)).into_drawing_area();
-        root.fill(&WHITE)?;
-        let (x0, x1) = range(t.iter().copied());
-        let (y0, y1) = range(series.iter().flat_map(|(_, _, v)| v.iter().copied()));
-        let mut c = ChartBuilder::on(&root)
-            .caption("Temperatures (60 s means)", ("sans-serif", 16))
-            .margin(8)
-            .x_label_area_size(32)
-            .y_label_area_size(56)
-            .build_cartesian_2d(x0..x1, y0..y1)?;
-        c.configure_mesh()
-            .x_desc("device time, h")
-            .y_desc("degC")
-            .draw()?;
-        for (name, color, v) in &series {
-            let color = *color;
-            c.draw_series(LineSeries::new(
-                t.iter().copied().zip(v.iter().copied()),
-                color,
-            ))?
-            .label(*name)
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], color));
-        }
-        legend(&mut c)?;
-        root.present()?;
-        Ok(())
-    })
-}
-
-/// Bias stability per position against its limit.
-fn position_chart(r: &Report) -> Option<String> {
-    let pts: Vec<(String, f64, Option<f64>)> = r
-        .measurements
-        .iter()
-        .filter(|m| m.metric == Metric::BiasStability)
-        .filter_map(|m| Some((m.records.join("+"), m.value?, m.high)))
-        .collect();
-    if pts.len() < 2 {
+    if recorded.len() < 120 {
         return None;
     }
-    let spec = pts.iter().filter_map(|p| p.2).fold(f64::NAN, f64::max);
-    Some(svg(|s| {
-        let root = SVGBackend::with_string(s, (W, H)).into_drawing_area();
-        root.fill(&WHITE)?;
-        let ymax = pts.iter().map(|p| p.1).fold(spec.max(0.0), f64::max) * 1.2;
-        let n = pts.len();
-        let mut c = ChartBuilder::on(&root)
-            .caption(
-                "Bias stability per position (1-sigma of 100 s means) and the spec",
-                ("sans-serif", 16),
+    let mut c = Chart::new(
+        "Rate, Earth rate removed (recorded data)",
+        "device time, h",
+        "deg/h",
+    )
+    .series(
+        Series::line("60 s means", means_h(&recorded, Interval::bias_dph))
+            .colour(5)
+            .width(1),
+    );
+    let raw = r
+        .measurements
+        .iter()
+        .find(|m| m.metric == Metric::DriftPp && m.trace.is_some());
+    if let Some((m, t)) = raw.and_then(|m| Some((m, m.trace.as_ref()?))) {
+        c = c.series(
+            Series::line(
+                format!(
+                    "{:.0} s moving average ({}: {} {})",
+                    m.averaging_s,
+                    m.name,
+                    num(m.value, 4),
+                    m.unit
+                ),
+                trace_h(t),
             )
-            .margin(8)
-            .x_label_area_size(40)
-            .y_label_area_size(56)
-            .build_cartesian_2d(-0.5f64..(n as f64 - 0.5), 0f64..ymax.max(1e-3))?;
-        let labels: Vec<String> = pts.iter().map(|p| p.0.clone()).collect();
-        c.configure_mesh()
-            .x_labels(n)
-            .x_label_formatter(&|x| label_at(&labels, *x))
-            .y_desc("deg/h")
-            .draw()?;
-        c.draw_series(
-            pts.iter()
-                .enumerate()
-                .map(|(i, p)| Circle::new((i as f64, p.1), 5, BLUE.filled())),
-        )?;
-        if spec.is_finite() {
-            c.draw_series(LineSeries::new(
-                vec![(-0.5, spec), (n as f64 - 0.5, spec)],
-                RED.stroke_width(2),
-            ))?
-            .label(format!("spec {spec} deg/h"))
-            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], RED));
-            legend(&mut c)?;
+            .colour(0)
+            .stroke(Stroke::Dashed)
+            .width(3),
+        );
+    }
+    Some(c.render())
+}
+
+/// Chamber air and the gyro's sensors against time, each with its own
+/// line style.
+fn temperature_chart(records: &Records) -> Option<String> {
+    let all: Vec<&Interval> = records.all.iter().map(|(_, iv)| iv).collect();
+    if all.len() < 120 {
+        return None;
+    }
+    Some(
+        Chart::new("Temperatures (60 s means)", "device time, h", "degC")
+            .series(
+                Series::line("chamber air", means_h(&all, |i| i.chamber_c))
+                    .colour(6)
+                    .width(2),
+            )
+            .series(
+                Series::line("case", means_h(&all, |i| i.tcase_c))
+                    .colour(0)
+                    .stroke(Stroke::Dashed)
+                    .width(2),
+            )
+            .series(
+                Series::line("block T1", means_h(&all, |i| i.t1_c))
+                    .colour(1)
+                    .width(2),
+            )
+            .series(
+                Series::line("block T2", means_h(&all, |i| i.t2_c))
+                    .colour(2)
+                    .stroke(Stroke::Dotted)
+                    .width(3),
+            )
+            .render(),
+    )
+}
+
+/// A measurement of `metric` on exactly the record `label`.
+fn of_record<'a>(r: &'a Report, metric: Metric, label: &str) -> Option<&'a Measurement> {
+    r.measurements
+        .iter()
+        .find(|m| m.metric == metric && m.records.len() == 1 && m.records[0] == label)
+}
+
+/// A position with its two figures.
+struct Row<'a> {
+    position: &'a Position,
+    bias: Option<&'a Measurement>,
+    stability: Option<&'a Measurement>,
+}
+
+/// One figure per position, against its limits (the first row's: a
+/// procedure gives every position the same).
+fn position_chart<'a>(
+    title: &str,
+    rows: &[Row<'a>],
+    pick: impl Fn(&Row<'a>) -> Option<&'a Measurement>,
+) -> String {
+    let Some(first) = rows.iter().find_map(&pick) else {
+        return String::new();
+    };
+    let labels: Vec<String> = rows.iter().map(|x| x.position.record.clone()).collect();
+    let at = |pass: bool| -> Vec<(f64, f64)> {
+        rows.iter()
+            .enumerate()
+            .filter_map(|(i, x)| {
+                let m = pick(x)?;
+                ((m.outcome == MeasureOutcome::Pass) == pass).then_some((i as f64, m.value?))
+            })
+            .collect()
+    };
+    let (good, bad) = (at(true), at(false));
+    let mut c = Chart::new(title, "position (record)", &first.unit)
+        .categories(labels.clone())
+        .height(300)
+        .series(
+            Series::points("within its limits", good, Marker::Circle)
+                .marker(Marker::Circle, 6)
+                .colour(0),
+        );
+    if !bad.is_empty() {
+        c = c.series(
+            Series::points("outside its limits or not judged", bad, Marker::Cross)
+                .marker(Marker::Cross, 8)
+                .colour(1),
+        );
+    }
+    let n = labels.len() as f64;
+    match (first.low, first.high) {
+        (lo, Some(hi)) => {
+            c = c.band(Band {
+                label: format!("limits {}..{} {}", limit(first.low), hi, first.unit),
+                y: (lo.unwrap_or(0.0), hi),
+                x: Some((-0.5, n - 0.5)),
+            });
         }
-        root.present()?;
-        Ok(())
-    }))
+        (Some(lo), None) => {
+            c = c.rule(Rule {
+                label: format!("low limit {lo}"),
+                at: lo,
+                vertical: false,
+            });
+        }
+        (None, None) => {}
+    }
+    c.render()
+}
+
+/// The positions: a table (the record, the position in the operator's
+/// words, the table angles, bias and bias stability side by side) and a
+/// chart of each figure against its limit band.
+fn positions(r: &Report) -> String {
+    let rows: Vec<Row<'_>> = r
+        .positions
+        .iter()
+        .map(|p| Row {
+            position: p,
+            bias: of_record(r, Metric::MeanBias, &p.record),
+            stability: of_record(r, Metric::BiasStability, &p.record),
+        })
+        .filter(|x| x.bias.is_some() || x.stability.is_some())
+        .collect();
+    if rows.len() < 2 {
+        return String::new();
+    }
+    let cell = |m: Option<&Measurement>| {
+        m.map_or("<td></td><td></td>".to_owned(), |m| {
+            format!(
+                "<td class=num>{}</td><td class=\"outcome {}\">{}</td>",
+                num(m.value, 4),
+                m.outcome.as_str(),
+                m.outcome.as_str().to_uppercase()
+            )
+        })
+    };
+    let lim = |m: Option<&Measurement>| {
+        m.map_or(String::new(), |m| {
+            format!("{}..{} {}", limit(m.low), limit(m.high), m.unit)
+        })
+    };
+    let mut table = String::new();
+    for x in &rows {
+        let p = x.position;
+        table.push_str(&format!(
+            "<tr><td>{}</td><td>{}</td><td class=num>{:.2}</td><td class=num>{:.2}</td>{}{}</tr>\n",
+            esc(&p.record),
+            esc(&p.description),
+            p.table.outer_deg,
+            p.table.inner_deg,
+            cell(x.bias),
+            cell(x.stability),
+        ));
+    }
+    let bias = rows.iter().find_map(|x| x.bias);
+    let stability = rows.iter().find_map(|x| x.stability);
+    format!(
+        "<h2>Positions</h2>\n<table><tr><th>record</th><th>position</th><th>outer, deg</th><th>inner, deg</th><th>bias, {bu}</th><th></th><th>bias stability, {su}</th><th></th></tr>\n{table}</table>\n<p class=note>Limits: bias {bl}; bias stability {sl}.</p>\n{c1}{c2}",
+        bu = esc(bias.map_or("", |m| &m.unit)),
+        su = esc(stability.map_or("", |m| &m.unit)),
+        bl = esc(&lim(bias)),
+        sl = esc(&lim(stability)),
+        c1 = position_chart(
+            "Bias stability per position, against its limit",
+            &rows,
+            |x| x.stability
+        ),
+        c2 = position_chart("Bias per position, against its limits", &rows, |x| x.bias),
+    )
 }
 
 /// Allan deviation of the longest record judged for bias stability, with
-/// its one-sigma intervals and the spec line.
+/// its one-sigma intervals; the spec is drawn where it applies: at the
+/// bias stability's averaging time, beside the judged figure.
 fn allan_chart(r: &Report) -> Option<String> {
     let n = r.noise.as_ref()?;
     let dev: Vec<(f64, f64)> = n
@@ -237,70 +340,61 @@ fn allan_chart(r: &Report) -> Option<String> {
         .copied()
         .zip(n.adev_dph.iter().copied())
         .collect();
+    let errors: Vec<(f64, f64, f64)> = n
+        .tau_s
+        .iter()
+        .zip(n.lo_dph.iter().zip(&n.hi_dph))
+        .filter(|(_, (l, h))| l.is_finite() && h.is_finite() && **l > 0.0)
+        .map(|(&t, (&l, &h))| (t, l, h))
+        .collect();
+    let tau = n.bias_stability_averaging_s;
     let spec = r
         .measurements
         .iter()
-        .filter(|m| m.metric == Metric::BiasStability)
-        .filter_map(|m| m.high)
-        .fold(f64::NAN, f64::max);
-    Some(svg(|s| {
-        let root = SVGBackend::with_string(s, (W, H)).into_drawing_area();
-        root.fill(&WHITE)?;
-        let (t0, t1) = (dev[0].0 / 1.2, dev[dev.len() - 1].0 * 1.2);
-        let lo = n
-            .lo_dph
-            .iter()
-            .copied()
-            .filter(|v| v.is_finite())
-            .fold(f64::INFINITY, f64::min)
-            .min(spec)
-            * 0.5;
-        let hi = n
-            .hi_dph
-            .iter()
-            .copied()
-            .filter(|v| v.is_finite())
-            .fold(0.0, f64::max)
-            .max(spec)
-            * 2.0;
-        let mut c = ChartBuilder::on(&root)
-            .caption(
-                format!("Overlapping Allan deviation, record {}", n.record),
-                ("sans-serif", 16),
+        .filter(|m| m.metric == Metric::BiasStability && m.records.contains(&n.record))
+        .find_map(|m| m.high);
+    let mut c = Chart::new(
+        format!("Overlapping Allan deviation, record {}", n.record),
+        "averaging time tau, s",
+        "deg/h",
+    )
+    .log_x()
+    .log_y()
+    .series(
+        Series::line("ADEV with 1-sigma interval (Greenhall EDF)", dev)
+            .colour(0)
+            .marker(Marker::Circle, 3)
+            .gap(None)
+            .errors(errors),
+    );
+    if let Some(bs) = n.bias_stability_dph {
+        c = c.series(
+            Series::points(
+                format!("bias stability judged: 1-sigma of {tau:.0} s means, {bs:.4}"),
+                vec![(tau, bs)],
+                Marker::Diamond,
             )
-            .margin(8)
-            .x_label_area_size(32)
-            .y_label_area_size(56)
-            .build_cartesian_2d((t0..t1).log_scale(), (lo.max(1e-6)..hi).log_scale())?;
-        c.configure_mesh()
-            .x_desc("tau, s")
-            .y_desc("deg/h")
-            .x_label_formatter(&|v| format!("{v:.0}"))
-            .y_label_formatter(&|v| format!("{v:.3}"))
-            .draw()?;
-        c.draw_series(LineSeries::new(dev.iter().copied(), &BLUE))?
-            .label("ADEV, 1-sigma interval (Greenhall EDF)")
-            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], BLUE));
-        c.draw_series(dev.iter().map(|&p| Circle::new(p, 3, BLUE.filled())))?;
-        c.draw_series(
-            n.tau_s
-                .iter()
-                .zip(n.lo_dph.iter().zip(&n.hi_dph))
-                .filter(|(_, (l, h))| l.is_finite() && h.is_finite())
-                .map(|(&t, (&l, &h))| PathElement::new(vec![(t, l), (t, h)], BLUE)),
-        )?;
-        if spec.is_finite() {
-            c.draw_series(LineSeries::new(
-                vec![(t0, spec), (t1, spec)],
-                RED.stroke_width(2),
-            ))?
-            .label(format!("spec {spec} deg/h"))
-            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 16, y)], RED));
-        }
-        legend(&mut c)?;
-        root.present()?;
-        Ok(())
-    }))
+            .colour(2)
+            .marker(Marker::Diamond, 7),
+        );
+    }
+    if let Some(spec) = spec {
+        c = c.series(
+            Series::line(
+                format!("spec {spec} deg/h, at tau = {tau:.0} s only"),
+                vec![(tau / 1.6, spec), (tau * 1.6, spec)],
+            )
+            .colour(1)
+            .width(4)
+            .gap(None),
+        );
+    }
+    Some(
+        c.caption(format!(
+            "The spec bounds the bias stability, the scatter of {tau:.0} s means; it says nothing about the curve at other averaging times."
+        ))
+        .render(),
+    )
 }
 
 /// The three "bias instability" figures, the judged one named.
@@ -308,67 +402,105 @@ fn noise_table(r: &Report) -> String {
     let Some(n) = &r.noise else {
         return String::new();
     };
-    let f = |v: Option<f64>| v.map_or("n/a".to_owned(), |v| format!("{v:.4}"));
     format!(
-        "<h2>Bias instability: three figures</h2>\n<p>Record {rec}. Judged: {judged}.</p>\n<table><tr><th>figure</th><th>deg/h</th><th></th></tr>\n<tr><td>bias stability, 1-sigma of {avg} s averages (GJB 2426A)</td><td class=num>{bs}</td><td>judged</td></tr>\n<tr><td>IEEE Std 952 coefficient B = ADEV floor / 0.664 (noise fit)</td><td class=num>{b}</td><td>shown</td></tr>\n<tr><td>raw ADEV minimum (at {tmin:.0} s)</td><td class=num>{min}</td><td>shown</td></tr></table>\n<p class=note>Noise fit on the same curve: ARW {arw:.5} deg/sqrt(h), rate random walk {rrw:.4} deg/h/sqrt(h) (from 1 Hz means).</p>\n",
+        "<h2>Bias instability: three figures</h2>\n<p>Record {rec}. Judged: {judged}.</p>\n<table><tr><th>figure</th><th>deg/h</th><th></th></tr>\n<tr><td>bias stability, 1-sigma of {avg} s averages (GJB 2426A)</td><td class=num>{bs}</td><td>judged</td></tr>\n<tr><td>IEEE Std 952 coefficient B = ADEV floor / 0.664 (noise fit)</td><td class=num>{b}</td><td>shown</td></tr>\n<tr><td>raw ADEV minimum (at {tmin:.0} s)</td><td class=num>{min}</td><td>shown</td></tr></table>\n<p class=note>Noise fit on the same curve: ARW {arw}, rate random walk {rrw} (from 1 Hz means).</p>\n",
         rec = esc(&n.record),
         judged = esc(&n.judged),
         avg = n.bias_stability_averaging_s,
-        bs = f(n.bias_stability_dph),
-        b = f(Some(n.ieee_b_dph)),
-        min = f(Some(n.adev_min_dph)),
+        bs = num(n.bias_stability_dph, 4),
+        b = num(Some(n.ieee_b_dph), 4),
+        min = num(Some(n.adev_min_dph), 4),
         tmin = n.adev_min_tau_s,
-        arw = n.arw_deg_per_rt_h,
-        rrw = n.rate_random_walk_dph_per_rt_h,
+        arw = resolved(n.arw_deg_per_rt_h, 5, "deg/sqrt(h)"),
+        rrw = resolved(n.rate_random_walk_dph_per_rt_h, 4, "deg/h/sqrt(h)"),
     )
 }
 
-/// Model-4 residual (60 s means, hours) over the records of the first
-/// compensated-drift measurement, fitted on them.
-fn compensated_series(r: &Report, records: &Records) -> Vec<(f64, f64)> {
-    let Some(m) = r
+/// A fitted noise coefficient, or that the record does not resolve it (the
+/// fit leaves it at zero: its slope never shows in this curve).
+fn resolved(v: f64, digits: usize, unit: &str) -> String {
+    if v.is_finite() && v > 0.0 {
+        format!("{v:.digits$} {unit}")
+    } else {
+        "not resolved by this record".into()
+    }
+}
+
+/// One sentence under the verdict: what decided it.
+fn headline(r: &Report) -> String {
+    let total = r.measurements.len();
+    let outside: Vec<&Measurement> = r
         .measurements
         .iter()
-        .find(|m| m.metric == Metric::CompensatedDriftPp)
-    else {
-        return Vec::new();
-    };
-    let series: Vec<Interval> = m
-        .records
-        .iter()
-        .filter_map(|l| records.get(l))
-        .flat_map(|s| s.iter().copied())
+        .filter(|m| m.outcome == MeasureOutcome::Fail)
         .collect();
-    let Ok(f) = fit(ModelKind::Model4, &series) else {
-        return Vec::new();
+    let unjudged = r
+        .measurements
+        .iter()
+        .filter(|m| m.outcome == MeasureOutcome::Error)
+        .count();
+    let key = r
+        .measurements
+        .iter()
+        .find(|m| m.metric == Metric::CompensatedDriftPp && m.outcome != MeasureOutcome::Fail)
+        .map(|m| {
+            format!(
+                " Compensated drift {} {} against a limit of {} {}.",
+                num(m.value, 4),
+                m.unit,
+                limit(m.high),
+                m.unit
+            )
+        })
+        .unwrap_or_default();
+    let s = match r.outcome {
+        Outcome::Pass => format!("All {total} measurements within their limits.{key}"),
+        Outcome::Fail => format!(
+            "{} of {total} measurements outside their limits: {}.{key}",
+            outside.len(),
+            outside
+                .iter()
+                .map(|m| format!("{} = {} {}", m.name, num(m.value, 4), m.unit))
+                .collect::<Vec<_>>()
+                .join(", ")
+        ),
+        Outcome::Error => format!(
+            "The run did not complete: {}{}",
+            r.error.as_ref().map_or("see below".to_owned(), |e| format!(
+                "{} (step {})",
+                e.message, e.step
+            )),
+            if unjudged > 0 {
+                format!("; {unjudged} measurement(s) not judged")
+            } else {
+                String::new()
+            }
+        ),
+        Outcome::Aborted => {
+            "The run was interrupted before its end; what was measured is below.".to_owned()
+        }
     };
-    let t = block_means(
-        &series.iter().map(|i| i.time_s / 3600.0).collect::<Vec<_>>(),
-        60,
-    );
-    let res = block_means(&f.residual(&series), 60);
-    t.into_iter().zip(res).collect()
+    esc(&s)
 }
 
 /// The whole page.
 pub fn render_html(r: &Report, records: &Records) -> String {
-    let (color, word) = match r.outcome {
-        Outcome::Pass => ("#1b7f3b", "PASS"),
-        Outcome::Fail => ("#b3261e", "FAIL"),
-        Outcome::Error => ("#8a5a00", "ERROR"),
-        Outcome::Aborted => ("#555555", "ABORTED"),
+    let (colour, word) = match r.outcome {
+        Outcome::Pass => ("var(--pass)", "PASS"),
+        Outcome::Fail => ("var(--fail)", "FAIL"),
+        Outcome::Error => ("var(--error)", "ERROR"),
+        Outcome::Aborted => ("var(--aborted)", "ABORTED"),
     };
     let mut rows = String::new();
     for m in &r.measurements {
-        let ok = m.outcome == MeasureOutcome::Pass;
+        let class = m.outcome.as_str();
         rows.push_str(&format!(
-            "<tr class={}><td>{}</td><td class=num>{}</td><td>{}</td><td class=num>{}</td><td class=num>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>\n",
-            if ok { "pass" } else { "fail" },
+            "<tr class={class}><td>{}</td><td class=num>{}</td><td>{}</td><td class=num>{}</td><td class=num>{}</td><td class=\"outcome {class}\">{}</td><td>{}</td><td>{}</td></tr>\n",
             esc(&m.name),
-            m.value.map_or("n/a".into(), |v| format!("{v:.4}")),
+            num(m.value, 4),
             esc(&m.unit),
-            m.low.map_or(String::new(), |v| v.to_string()),
-            m.high.map_or(String::new(), |v| v.to_string()),
+            limit(m.low),
+            limit(m.high),
             m.outcome.as_str().to_uppercase(),
             esc(&m.step),
             esc(&m.note),
@@ -376,7 +508,7 @@ pub fn render_html(r: &Report, records: &Records) -> String {
     }
     let error = r.error.as_ref().map_or(String::new(), |e| {
         format!(
-            "<p class=error>Stopped in step <b>{}</b>{}: {}</p>",
+            "<p class=box>Stopped in step <b>{}</b>{}: {}</p>\n",
             esc(&e.step),
             e.device
                 .as_ref()
@@ -384,50 +516,57 @@ pub fn render_html(r: &Report, records: &Records) -> String {
             esc(&e.message)
         )
     });
-    let mut charts = String::new();
-    if !records.all.is_empty() {
-        charts.push_str(&rate_chart(records, &compensated_series(r, records)));
-        charts.push_str(&temperature_chart(records));
-    }
-    if let Some(c) = position_chart(r) {
-        charts.push_str(&c);
-    }
-    if let Some(c) = allan_chart(r) {
-        charts.push_str(&c);
-    }
-    let noise = noise_table(r);
+    let bench_left = match &r.bench_left {
+        Some(b) => format!(
+            "<p class={}><b>Bench left:</b> {}</p>\n",
+            if b.verified && r.cleanup_completed {
+                "ok"
+            } else {
+                "box"
+            },
+            esc(&b.summary)
+        ),
+        None if !r.cleanup_completed => {
+            "<p class=box><b>Cleanup did not complete: check the bench.</b></p>\n".to_owned()
+        }
+        None => String::new(),
+    };
+    let headline_chart = r
+        .measurements
+        .iter()
+        .find(|m| m.metric == Metric::CompensatedDriftPp)
+        .and_then(drift_chart)
+        .unwrap_or_default();
+    let traces: String = [rate_chart(r, records), temperature_chart(records)]
+        .into_iter()
+        .flatten()
+        .collect();
     let l = &r.link;
-    format!(
-        r#"<!doctype html>
-<html lang=en><head><meta charset=utf-8><title>{proc} {serial}: {word}</title>
-<style>
-body{{font-family:sans-serif;margin:2em;max-width:960px;color:#222}}
-.verdict{{font-size:2.2em;font-weight:bold;color:#fff;background:{color};padding:.3em .6em;border-radius:.2em;display:inline-block}}
-table{{border-collapse:collapse;margin:1em 0}} td,th{{border:1px solid #ccc;padding:.25em .5em;font-size:.9em}}
-td.num{{text-align:right;font-family:monospace}} tr.fail td{{background:#fde7e6}} tr.pass td:nth-child(7){{color:#1b7f3b}}
-.error{{background:#fff4e0;border-left:4px solid #8a5a00;padding:.5em}} .note{{color:#666}} svg{{display:block;margin:1em 0}}
-</style></head><body>
-<div class=verdict>{word}</div>
+    let body = format!(
+        r#"<div class=verdict style="background:{colour}">{word}</div>
 <h1>{proc} &mdash; {dut_type} {serial}</h1>
-<p>Spec: {spec}<br>Started {start} &middot; {hours:.2} h of device time &middot; {frames} frames &middot; bench {bench}{seed} &middot; gyrobench {version}</p>
-{error}
+<p class=headline>{headline}</p>
+{error}{bench_left}<p class=note>Spec: {spec}<br>Started {start} &middot; {hours:.2} h of device time &middot; {frames} frames &middot; bench {bench}{seed} &middot; gyrobench {version}</p>
+{headline_chart}
 <h2>Measurements</h2>
 <table><tr><th>name</th><th>value</th><th>unit</th><th>low</th><th>high</th><th>outcome</th><th>step</th><th>note</th></tr>
 {rows}</table>
-{noise}
 <p class=note>Definitions: bias stability = 1-sigma of the averages over the averaging time of the Earth-removed rate; drift = peak-to-peak of the Earth-removed rate smoothed by a centred moving average of the averaging time; compensated = the same after the study's model 4; self-heating = mean of the first 120 s after power-on minus the mean of 1680..1800 s. See docs/figures.md.</p>
-<h2>Charts</h2>
-{charts}
+{positions}{noise}{allan}
+<h2>Traces</h2>
+{traces}
 <h2>Gyro link</h2>
-<p>{lf} frames, {lost} lost, {crc} CRC errors, {res} resyncs, {dup} duplicates.{cleanup}</p>
-</body></html>
+<p>{lf} frames, {lost} lost, {crc} CRC errors, {res} resyncs, {dup} duplicates.</p>
 "#,
-        noise = noise,
+        headline = headline(r),
+        positions = positions(r),
+        noise = noise_table(r),
+        allan = allan_chart(r).unwrap_or_default(),
         proc = esc(&r.procedure),
         serial = esc(&r.dut.serial),
         dut_type = esc(&r.dut.kind),
         spec = esc(&r.spec),
-        start = esc(&r.start_time_utc),
+        start = esc(&utc_seconds(&r.start_time_utc)),
         hours = r.device_time_s / 3600.0,
         frames = r.frames,
         bench = esc(&r.bench),
@@ -438,10 +577,10 @@ td.num{{text-align:right;font-family:monospace}} tr.fail td{{background:#fde7e6}
         crc = l.crc_errors,
         res = l.resyncs,
         dup = l.duplicates,
-        cleanup = if r.cleanup_completed {
-            ""
-        } else {
-            " <b>Cleanup did not complete: check the bench.</b>"
-        },
+    );
+    page(
+        &format!("{} {}: {word}", r.procedure, r.dut.serial),
+        "",
+        &body,
     )
 }

@@ -7,7 +7,8 @@ use serde::Serialize;
 
 use crate::analysis::allan::{Taus, analyse};
 use crate::analysis::series::Interval;
-use crate::procedure::{Metric, Procedure};
+use crate::geometry::{Orientation, TableAngles};
+use crate::procedure::{Metric, Procedure, StepKind};
 use crate::protocol::frame::LinkStats;
 use crate::sequencer::measure::{Measurement, Records};
 use crate::sequencer::{BenchLeft, Outcome, RunError, RunResult};
@@ -61,6 +62,76 @@ pub struct Report {
     /// The three "bias instability" figures of the longest record judged
     /// for bias stability, and its Allan deviation (none without one).
     pub noise: Option<NoiseFigures>,
+    /// Where each record a measurement uses was taken (the table pose of
+    /// the move before it), in run order.
+    pub positions: Vec<Position>,
+}
+
+/// The pose of the unit while a record was taken.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Position {
+    /// Record label.
+    pub record: String,
+    /// The position in an operator's words (`axis up, azimuth 90 deg`).
+    pub description: String,
+    /// Orientation of the unit, deg.
+    pub orientation: Orientation,
+    /// Table axis angles, deg.
+    pub table: TableAngles,
+}
+
+impl Position {
+    /// The pose of every record of `p` a measurement uses: the last move
+    /// before the record step (records before any move have none).
+    pub fn of(p: &Procedure) -> Vec<Self> {
+        let used = |label: &str| p.measures().any(|m| m.records.iter().any(|r| r == label));
+        let mut pose: Option<(TableAngles, Orientation)> = None;
+        let mut out: Vec<Self> = Vec::new();
+        for step in p.steps() {
+            match &step.kind {
+                StepKind::Move {
+                    angles,
+                    orientation,
+                } => pose = Some((*angles, *orientation)),
+                StepKind::Record { label, .. } if used(label) => {
+                    if let Some((table, orientation)) = pose {
+                        out.retain(|q| &q.record != label);
+                        out.push(Self {
+                            record: label.clone(),
+                            description: describe(&orientation),
+                            orientation,
+                            table,
+                        });
+                    }
+                }
+                _ => {}
+            }
+        }
+        out
+    }
+}
+
+/// An orientation as the operator names it: the sensitive axis up or down
+/// (and the azimuth it faces), horizontal (and the roll about it), or
+/// tilted from the vertical.
+fn describe(o: &Orientation) -> String {
+    let whole = |v: f64| format!("{}", v.round() + 0.0);
+    let az = whole(o.azimuth_deg.rem_euclid(360.0));
+    if (o.elevation_deg - 90.0).abs() < 0.5 {
+        format!("axis up, azimuth {az} deg")
+    } else if (o.elevation_deg + 90.0).abs() < 0.5 {
+        format!("axis down, azimuth {az} deg")
+    } else if o.elevation_deg.abs() < 0.5 {
+        format!(
+            "axis horizontal toward azimuth {az} deg, roll {} deg",
+            whole(o.roll_deg.rem_euclid(360.0))
+        )
+    } else {
+        format!(
+            "axis tilted {} deg from vertical, toward azimuth {az} deg",
+            whole(90.0 - o.elevation_deg)
+        )
+    }
 }
 
 /// Which "bias instability" the report judges, with the others beside it
@@ -169,6 +240,7 @@ impl Report {
             bench: bench.to_owned(),
             software_version: env!("CARGO_PKG_VERSION").to_owned(),
             noise: NoiseFigures::of(&r.measurements, &r.records),
+            positions: Position::of(p),
         }
     }
 

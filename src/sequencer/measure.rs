@@ -6,7 +6,7 @@ use serde::Serialize;
 
 use super::health::{RecordHealth, Runs};
 use super::{BenchState, Tick};
-use crate::analysis::figures::{bias_stability, drift_pp, drift_pp_parts, mean};
+use crate::analysis::figures::{DriftTrace, bias_stability, drift_trace, mean};
 use crate::analysis::model::{self, Fit, ModelKind};
 use crate::analysis::series::Interval;
 use crate::analysis::study::{self_heating_dph, temperature_sensitivity_parts};
@@ -268,6 +268,10 @@ pub struct Measurement {
     pub records: Vec<String>,
     /// How the value was obtained (compensation source, why it is missing).
     pub note: String,
+    /// For a drift: the smoothed series its peak-to-peak was taken on (for
+    /// the report's charts; not part of `report.json`).
+    #[serde(skip)]
+    pub trace: Option<DriftTrace>,
 }
 
 impl Measurement {
@@ -291,6 +295,7 @@ pub fn compute(m: &Measure, records: &Records, coeffs: Option<&Fit>, step: &str)
     let bias: Vec<f64> = series.iter().map(Interval::bias_dph).collect();
     let window = m.averaging_s.round().max(1.0) as usize;
     let mut note = String::new();
+    let mut trace = None;
     let part_refs: Vec<&[Interval]> = parts.iter().map(Vec::as_slice).collect();
     let value = match m.metric {
         Metric::BiasStability => Some(bias_stability(&bias, window)),
@@ -304,16 +309,20 @@ pub fn compute(m: &Measure, records: &Records, coeffs: Option<&Fit>, step: &str)
                         "{} parts (power-ons) of a resumed run; turn-on offsets from the model-4 fit removed",
                         parts.len()
                     );
-                    let shifted: Vec<Vec<f64>> = parts
+                    let shifted: Vec<(Vec<f64>, Vec<f64>)> = parts
                         .iter()
                         .zip(&f.offsets)
                         .map(|(p, o)| {
-                            p.iter()
-                                .map(|iv| iv.bias_dph() - (o - f.offsets[0]))
-                                .collect()
+                            (
+                                times(p),
+                                p.iter()
+                                    .map(|iv| iv.bias_dph() - (o - f.offsets[0]))
+                                    .collect(),
+                            )
                         })
                         .collect();
-                    drift_pp_parts(&shifted, window)
+                    trace = drift_trace(&shifted, window);
+                    trace.as_ref().map(DriftTrace::pp)
                 }
                 Err(e) => {
                     note = format!("cannot separate the parts' turn-on offsets: {e}");
@@ -321,7 +330,10 @@ pub fn compute(m: &Measure, records: &Records, coeffs: Option<&Fit>, step: &str)
                 }
             }
         }
-        Metric::DriftPp => (bias.len() >= window).then(|| drift_pp(&bias, window)),
+        Metric::DriftPp => {
+            trace = drift_trace(&[(times(&series), bias.clone())], window);
+            trace.as_ref().map(DriftTrace::pp)
+        }
         Metric::MeanBias => Some(mean(&bias)),
         Metric::SelfHeating => self_heating_dph(&series).map(f64::abs),
         Metric::TemperatureSensitivity => temperature_sensitivity_parts(&part_refs).map(|(a, _)| a),
@@ -344,15 +356,16 @@ pub fn compute(m: &Measure, records: &Records, coeffs: Option<&Fit>, step: &str)
                     // Each part's own constant removed when there are
                     // several (a p-p does not see it within one part).
                     let several = part_refs.len() > 1;
-                    let residuals: Vec<Vec<f64>> = part_refs
+                    let residuals: Vec<(Vec<f64>, Vec<f64>)> = part_refs
                         .iter()
                         .map(|p| {
                             let r = f.residual(p);
                             let c = if several { mean(&r) } else { 0.0 };
-                            r.iter().map(|v| v - c).collect()
+                            (times(p), r.iter().map(|v| v - c).collect())
                         })
                         .collect();
-                    drift_pp_parts(&residuals, window)
+                    trace = drift_trace(&residuals, window);
+                    trace.as_ref().map(DriftTrace::pp)
                 }
                 Ok(_) => None,
                 Err(e) => {
@@ -392,7 +405,12 @@ pub fn compute(m: &Measure, records: &Records, coeffs: Option<&Fit>, step: &str)
         averaging_s: m.averaging_s,
         records: m.records.clone(),
         note,
+        trace,
     }
+}
+
+fn times(series: &[Interval]) -> Vec<f64> {
+    series.iter().map(|i| i.time_s).collect()
 }
 
 #[cfg(test)]

@@ -83,6 +83,20 @@ fn a_withheld_effect_is_found_and_the_updated_twin_closes_the_gap() {
     ] {
         assert!(html.contains(part), "diagnosis.html lacks {part}");
     }
+    // The page answers first: the layer, the effect and how far it shrinks.
+    let headline = html
+        .split("<p class=headline>")
+        .nth(1)
+        .and_then(|h| h.split("</p>").next())
+        .expect("a headline");
+    assert!(
+        headline.contains("hysteresis explains it") && headline.contains("% smaller"),
+        "{headline}"
+    );
+    assert!(!html.contains("0.0e0"), "p-values read as zero");
+    if d["confounded"].as_array().is_some_and(Vec::is_empty) {
+        assert!(!html.contains("<h2>Confounded</h2>"), "an empty heading");
+    }
     // A row per position: the orientation run's nine (the thermal cycle
     // sits at one of them).
     let rows = html.matches("<tr><td class=num>").count();

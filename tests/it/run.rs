@@ -165,6 +165,27 @@ fn an_unmodelled_effect_beyond_the_spec_fails_the_thermal_cycle() {
         .find(|m| m["name"] == "compensated_drift_pp_dph")
         .expect("compensated drift measured");
     assert_eq!(comp["outcome"], "fail", "{comp}");
+    // The page shows the failure: the figure on its own chart, titled with
+    // its value and verdict, inside the limit band, between its highest
+    // and lowest points; the sentence under the verdict names it.
+    let html = std::fs::read_to_string(dir.join("run/report.html")).expect("report.html");
+    let value = comp["value"].as_f64().expect("value");
+    for part in [
+        format!("compensated_drift_pp_dph: {value:.4} deg/h peak to peak (FAIL)"),
+        "limit: 0.05 deg/h peak to peak, centred on the trace".to_owned(),
+        "highest +".to_owned(),
+        "lowest ".to_owned(),
+        format!("outside their limits: compensated_drift_pp_dph = {value:.4} deg/h"),
+    ] {
+        assert!(html.contains(&part), "report.html lacks {part:?}");
+    }
+    // The start time to the second, not the nanosecond.
+    let start = html
+        .split("Started ")
+        .nth(1)
+        .and_then(|t| t.split(' ').next())
+        .expect("start time");
+    assert_eq!(start.len(), 10, "{start}");
     std::fs::remove_dir_all(&dir).expect("cleanup");
 }
 
