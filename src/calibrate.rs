@@ -452,20 +452,27 @@ impl Calibration {
             .map(|r| format!("<li>{}</li>", esc(r)))
             .collect();
         let names: Vec<String> = self.table.iter().map(|r| r.model.to_owned()).collect();
-        let at = |pick: &dyn Fn(&Row) -> Option<f64>| -> Vec<(f64, f64)> {
+        // Side by side at each model, so neither hides the other.
+        let at = |dx: f64, pick: &dyn Fn(&Row) -> Option<f64>| -> Vec<(f64, f64)> {
             self.table
                 .iter()
                 .enumerate()
-                .filter_map(|(i, r)| Some((i as f64, pick(r).filter(|v| v.is_finite())?)))
+                .filter_map(|(i, r)| {
+                    Some((
+                        i as f64 + dx,
+                        pick(r).filter(|v| v.is_finite() && *v > 0.0)?,
+                    ))
+                })
                 .collect()
         };
         let chart = Chart::new("Drift peak to peak left by each model", "model", "deg/h")
             .categories(names)
+            .log_y()
             .height(280)
             .series(
                 Series::points(
                     "held out (runs it was not fitted to)",
-                    at(&|r| r.held_out.map(|h| h.drift_pp_dph)),
+                    at(-0.08, &|r| r.held_out.map(|h| h.drift_pp_dph)),
                     Marker::Circle,
                 )
                 .marker(Marker::Circle, 6)
@@ -474,7 +481,7 @@ impl Calibration {
             .series(
                 Series::points(
                     "in sample",
-                    at(&|r| Some(r.in_sample.drift_pp_dph)),
+                    at(0.08, &|r| Some(r.in_sample.drift_pp_dph)),
                     Marker::Square,
                 )
                 .marker(Marker::Square, 5)
@@ -504,17 +511,19 @@ impl Calibration {
                 let (v, how) = fig(m4);
                 let (r, _) = fig(raw);
                 format!(
-                    "Model 4 leaves a drift of {v:.4} deg/h peak to peak {how}, from {r:.4} deg/h uncompensated, on {} run(s).",
-                    self.runs.len()
+                    "Model 4 leaves a drift of {v:.4} deg/h peak to peak {how}, from {r:.4} deg/h uncompensated, on {} {}.",
+                    self.runs.len(),
+                    if self.runs.len() == 1 { "run" } else { "runs" }
                 )
             }
             _ => format!("Calibrated on {} run(s).", self.runs.len()),
         };
         if !self.warnings.is_empty() {
-            s.push_str(&format!(
-                " {} warning(s) below: read them before using the coefficients.",
-                self.warnings.len()
-            ));
+            s.push_str(if self.warnings.len() == 1 {
+                " A warning below: read it before using the coefficients."
+            } else {
+                " Warnings below: read them before using the coefficients."
+            });
         }
         s
     }

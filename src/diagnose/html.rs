@@ -339,11 +339,17 @@ pub fn headline(d: &Diagnosis) -> String {
         } else {
             format!(" {:.5} deg/h remain unexplained.", d.unexplained.gap_dph)
         };
+        let names = names.join(" and ");
+        let mut initial = names.chars();
+        let names: String = initial
+            .next()
+            .map(|c| c.to_uppercase().chain(initial).collect())
+            .unwrap_or_default();
         format!(
             " {} explain{} it: with {} the held-out rate gap shrinks from {:.5} to {:.5} deg/h ({shrink:.0} % smaller).{rest}",
-            names.join(" and "),
-            if names.len() == 1 { "s" } else { "" },
-            if names.len() == 1 { "it" } else { "them" },
+            names,
+            if d.effects.len() == 1 { "s" } else { "" },
+            if d.effects.len() == 1 { "it" } else { "them" },
             r.gap_dph,
             r.gap_after_dph
         )
@@ -381,7 +387,7 @@ pub fn render(d: &Diagnosis) -> String {
         where_.push_str(&format!(
             "<tr><td>{}</td><td>{}</td><td>{}</td><td class=num>{:.0}..{:.0}</td><td>{}</td><td class=num>{:.1}</td><td class=num>{:.0}/{:.0}/{:.0}</td><td class=num>{:.5}</td><td class=num>{:.0} %</td></tr>\n",
             esc(&s.run), esc(&s.record), esc(&s.step), s.start_s, s.end_s, s.regime, s.temperature_c,
-            s.orientation_deg[0] + 0.0, s.orientation_deg[1] + 0.0, s.orientation_deg[2] + 0.0, s.rms_dph, 100.0 * s.share
+            s.orientation_deg[0].round() + 0.0, s.orientation_deg[1].round() + 0.0, s.orientation_deg[2].round() + 0.0, s.rms_dph, 100.0 * s.share
         ));
     }
     let confounded_items: String = d

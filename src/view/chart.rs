@@ -14,6 +14,7 @@ use plotters::coord::Shift;
 use plotters::coord::ranged1d::{Ranged, ValueFormatter};
 use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
+use plotters::style::text_anchor::{HPos, Pos, VPos};
 
 use super::esc;
 
@@ -445,18 +446,19 @@ impl Chart {
             .y_label_area_size(78)
             .build_cartesian_2d(x, y)?;
         let cats = &self.x.categories;
+        // A log axis is labelled below, by hand: plotters' labels stay empty.
         let x_fmt = |v: &f64| {
-            if !cats.is_empty() {
-                label_at(cats, *v)
-            } else if self.x.log {
-                tick_log(*v)
-            } else {
+            if self.x.log {
+                String::new()
+            } else if cats.is_empty() {
                 tick(*v)
+            } else {
+                label_at(cats, *v)
             }
         };
         let y_fmt = |v: &f64| match (self.y.log, self.y.decimals) {
-            (_, Some(d)) => format!("{v:.d$}"),
-            (true, None) => tick_log(*v),
+            (true, _) => String::new(),
+            (false, Some(d)) => format!("{v:.d$}"),
             (false, None) => tick(*v),
         };
         let mut mesh = c.configure_mesh();
@@ -476,7 +478,49 @@ impl Chart {
         if !cats.is_empty() {
             mesh.x_labels(cats.len()).disable_x_mesh();
         }
+        // A log axis gets its grid and labels here (below): plotters starts
+        // its key points at the first whole decade, so a range within one
+        // decade, or its part below the first, would go unlabelled.
+        if self.x.log {
+            mesh.x_labels(0);
+        }
+        if self.y.log {
+            mesh.y_labels(0);
+        }
         mesh.draw()?;
+        let label = TextStyle::from((FONT, TICK_PX).into_font());
+        if self.y.log {
+            for (v, major) in log_ticks(yr.start, yr.end) {
+                c.draw_series(std::iter::once(PathElement::new(
+                    vec![(xr.start, v), (xr.end, v)],
+                    grey(major).stroke_width(1),
+                )))?;
+                if major {
+                    let (px, py) = c.backend_coord(&(xr.start, v));
+                    area.draw(&Text::new(
+                        tick(v),
+                        (px - 6, py),
+                        label.pos(Pos::new(HPos::Right, VPos::Center)),
+                    ))?;
+                }
+            }
+        }
+        if self.x.log {
+            for (v, major) in log_ticks(xr.start, xr.end) {
+                c.draw_series(std::iter::once(PathElement::new(
+                    vec![(v, yr.start), (v, yr.end)],
+                    grey(major).stroke_width(1),
+                )))?;
+                if major {
+                    let (px, py) = c.backend_coord(&(v, yr.start));
+                    area.draw(&Text::new(
+                        tick(v),
+                        (px, py + 6),
+                        label.pos(Pos::new(HPos::Center, VPos::Top)),
+                    ))?;
+                }
+            }
+        }
         for b in &self.bands {
             let (bx0, bx1) = b.x.unwrap_or((xr.start, xr.end));
             c.draw_series(std::iter::once(Rectangle::new(
@@ -726,20 +770,36 @@ fn tick(v: f64) -> String {
     if s == "-0" { "0".into() } else { s }
 }
 
-/// A log tick: only 1, 2 and 5 x 10^k are labelled, in plain digits.
-fn tick_log(v: f64) -> String {
-    if v <= 0.0 || !v.is_finite() {
-        return String::new();
+/// A grid line's grey: darker for a labelled one.
+fn grey(major: bool) -> RGBColor {
+    let g = if major { 215 } else { 238 };
+    RGBColor(g, g, g)
+}
+
+/// Grid values of a log axis over `lo..hi`: every 1..9 x 10^k, the 1, 2
+/// and 5 ones major (labelled); when the range holds fewer than two of
+/// those, every one is.
+fn log_ticks(lo: f64, hi: f64) -> Vec<(f64, bool)> {
+    if !(lo > 0.0 && hi > lo && hi.is_finite()) {
+        return Vec::new();
     }
-    let m = v / 10f64.powf(v.log10().floor());
-    if [1.0, 2.0, 5.0, 10.0]
-        .iter()
-        .any(|k| (m - k).abs() < 1e-6 * k)
-    {
-        tick(v)
-    } else {
-        String::new()
+    let mut out = Vec::new();
+    let mut decade = 10f64.powf(lo.log10().floor());
+    while decade <= hi {
+        for m in 1..=9 {
+            let v = decade * f64::from(m);
+            if v >= lo * (1.0 - 1e-9) && v <= hi * (1.0 + 1e-9) {
+                out.push((v, matches!(m, 1 | 2 | 5)));
+            }
+        }
+        decade *= 10.0;
     }
+    if out.iter().filter(|t| t.1).count() < 2 {
+        for t in &mut out {
+            t.1 = true;
+        }
+    }
+    out
 }
 
 #[cfg(test)]
@@ -796,8 +856,12 @@ mod tests {
         assert_eq!(tick(0.025), "0.025");
         assert_eq!(tick(250.0), "250");
         assert_eq!(tick(1.5), "1.5");
-        assert_eq!(tick_log(0.05), "0.05");
-        assert_eq!(tick_log(0.06), "");
-        assert_eq!(tick_log(200.0), "200");
+        let t = log_ticks(0.027, 0.82);
+        let major: Vec<f64> = t.iter().filter(|t| t.1).map(|t| t.0).collect();
+        assert_eq!(major.len(), 4, "{major:?}");
+        assert!((major[0] - 0.05).abs() < 1e-12 && (major[3] - 0.5).abs() < 1e-12);
+        assert!(t.iter().any(|t| (t.0 - 0.03).abs() < 1e-12 && !t.1));
+        // Within one span of no 1, 2 or 5: every grid value is labelled.
+        assert!(log_ticks(0.3, 0.45).iter().all(|t| t.1));
     }
 }

@@ -90,7 +90,7 @@ fn a_withheld_effect_is_found_and_the_updated_twin_closes_the_gap() {
         .and_then(|h| h.split("</p>").next())
         .expect("a headline");
     assert!(
-        headline.contains("hysteresis explains it") && headline.contains("% smaller"),
+        headline.contains("Hysteresis explains it") && headline.contains("% smaller"),
         "{headline}"
     );
     assert!(!html.contains("0.0e0"), "p-values read as zero");

@@ -15,6 +15,7 @@ mod diagnose;
 mod fuzz;
 mod import;
 mod integrity;
+mod pages;
 mod replay;
 mod results;
 mod resume;
