@@ -33,6 +33,7 @@ pub fn trend_page(t: &Trend, points: &[(String, String, f64, String)]) -> String
         _ => 2,
     };
     let mut c = Chart::new(format!("{} ({})", t.name, t.unit), &x_desc, &t.unit)
+        .integer_x()
         .series(
             Series::points("pass", at(true), Marker::Circle)
                 .marker(Marker::Circle, dot)

@@ -217,6 +217,7 @@ pub struct Axis {
     range: Option<(f64, f64)>,
     categories: Vec<String>,
     decimals: Option<usize>,
+    integers: bool,
 }
 
 /// A chart.
@@ -278,6 +279,12 @@ impl Chart {
     /// Fixed y range.
     pub fn y_range(mut self, lo: f64, hi: f64) -> Self {
         self.y.range = Some((lo, hi));
+        self
+    }
+
+    /// Whole numbers on x (runs, counts): ticks between them unlabelled.
+    pub fn integer_x(mut self) -> Self {
+        self.x.integers = true;
         self
     }
 
@@ -448,7 +455,7 @@ impl Chart {
         let cats = &self.x.categories;
         // A log axis is labelled below, by hand: plotters' labels stay empty.
         let x_fmt = |v: &f64| {
-            if self.x.log {
+            if self.x.log || (self.x.integers && (v - v.round()).abs() > 1e-6) {
                 String::new()
             } else if cats.is_empty() {
                 tick(*v)
