@@ -111,18 +111,43 @@ fn twin_study_writes_the_interchange_csv() {
         );
     }
     assert!(tau.windows(2).all(|w| w[0] < w[1]));
+    // Each term is a number, or null with the reason it is not resolved.
     for k in [
         "quantization_arcsec",
         "arw_deg_per_rt_h",
         "bias_instability_dph",
         "rate_random_walk_dph_per_rt_h",
     ] {
-        assert!(
-            j["noise"][k].as_f64().is_some_and(|v| v >= 0.0),
-            "noise.{k}: {}",
-            j["noise"]
-        );
+        let why = j["noise"]["not_resolved"][k]["reason"].as_str();
+        match j["noise"][k].as_f64() {
+            Some(v) => assert!(v > 0.0 && why.is_none(), "noise.{k}: {}", j["noise"]),
+            None => assert!(
+                j["noise"][k].is_null() && why.is_some_and(|w| !w.is_empty()),
+                "noise.{k}: {}",
+                j["noise"]
+            ),
+        }
     }
+    // An hour at +50 degC at 1 Hz shows no flicker floor: B is not resolved,
+    // and says so instead of printing zero.
+    assert!(
+        j["noise"]["bias_instability_dph"].is_null(),
+        "{}",
+        j["noise"]
+    );
+    assert!(j["bias_instability"]["ieee_b_dph"].is_null());
+    let table = gyrobench(&[
+        "allan",
+        csv.to_str().expect("utf-8 path"),
+        "--record",
+        "soak_hot",
+    ]);
+    let table = String::from_utf8_lossy(&table.stdout);
+    assert!(
+        table.contains("bias instability  not resolved ("),
+        "{table}"
+    );
+    assert!(!table.contains(" 0.00000 deg/h"), "{table}");
     // A bad row is refused with its line.
     let bad = dir.join("bad.csv");
     std::fs::write(&bad, text.replacen(",soak_hot", ",soak_hot,extra", 1)).expect("bad csv");
