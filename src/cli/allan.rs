@@ -4,7 +4,7 @@
 
 use std::path::PathBuf;
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use clap::{Args, ValueEnum};
 use serde::Serialize;
 
@@ -162,8 +162,8 @@ fn load(args: &AllanArgs) -> Result<(String, Vec<f64>, f64)> {
 }
 
 pub fn run(args: AllanArgs) -> Result<Outcome> {
-    let (record, rate, tau0) =
-        load(&args).with_context(|| format!("reading {}", args.file.display()))?;
+    // Every error of the load names the file.
+    let (record, rate, tau0) = load(&args)?;
     anyhow::ensure!(
         rate.len() >= 9,
         "{}: {} samples in `{record}`; the Allan deviation needs at least 9",

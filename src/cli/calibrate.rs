@@ -39,7 +39,7 @@ pub fn run(args: CalibrateArgs) -> Result<Outcome> {
     let runs = args
         .runs
         .iter()
-        .map(|p| load(p).with_context(|| format!("reading {}", p.display())))
+        .map(|p| load(p).map_err(anyhow::Error::from))
         .collect::<Result<Vec<_>>>()?;
     // One run given twice (or a copy of it) would validate the fit on its
     // own data: held-out figures would be a lie.

@@ -22,15 +22,14 @@ pub struct CheckArgs {
 /// Load the bench file, or the embedded bench.
 pub fn load_bench(path: Option<&PathBuf>) -> Result<BenchConfig> {
     match path {
-        Some(p) => BenchConfig::load(p).with_context(|| format!("loading bench {}", p.display())),
+        Some(p) => BenchConfig::load(p).context("loading the bench file"),
         None => Ok(BenchConfig::embedded()),
     }
 }
 
 pub fn run(args: CheckArgs) -> Result<Outcome> {
     let bench = load_bench(args.bench.as_ref())?;
-    let p = Procedure::load(&args.procedure, &bench)
-        .with_context(|| format!("checking procedure {}", args.procedure.display()))?;
+    let p = Procedure::load(&args.procedure, &bench).context("checking the procedure")?;
     outf!("{}", render_plan(&p, &estimate(&p, &bench)))?;
     Ok(Outcome::Success)
 }

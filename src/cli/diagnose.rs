@@ -85,15 +85,13 @@ pub fn run(args: DiagnoseArgs) -> Result<Outcome> {
         .into());
     };
     let twin = match &args.twin {
-        Some(p) => {
-            Some(TwinConfig::load(p).with_context(|| format!("loading twin {}", p.display()))?)
-        }
+        Some(p) => Some(TwinConfig::load(p).context("loading the twin file")?),
         None => None,
     };
     let runs = args
         .runs
         .iter()
-        .map(|p| data::load(p).with_context(|| format!("reading {}", p.display())))
+        .map(|p| data::load(p).map_err(anyhow::Error::from))
         .collect::<Result<Vec<_>>>()?;
     let d = diagnose::diagnose(
         &runs,

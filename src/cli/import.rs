@@ -41,7 +41,7 @@ pub struct ExportArgs {
 }
 
 pub fn run_import(args: ImportArgs) -> Result<Outcome> {
-    let site = load_site(&args.site).with_context(|| format!("reading {}", args.site.display()))?;
+    let site = load_site(&args.site).context("reading the site file")?;
     let r = import(&args.csv, site, args.dut.as_deref(), &args.out)?;
     let loc = crate::results::Location::resolve(args.db.as_deref(), None);
     match crate::results::Store::open(&loc).and_then(|s| match s {

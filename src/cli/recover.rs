@@ -28,8 +28,7 @@ pub fn run(args: RecoverArgs) -> Result<Outcome> {
         args.log.with_file_name(format!("{stem}-recovered.mcap"))
     });
     ensure_distinct(&out, &[&args.log])?;
-    let r =
-        recover(&args.log, &out).with_context(|| format!("recovering {}", args.log.display()))?;
+    let r = recover(&args.log, &out).context("recovering the log")?;
     if let Some(why) = &r.stopped {
         errln!(
             "warning: the read of {} stopped at a damaged record: {why}; what follows it is lost",

@@ -37,7 +37,7 @@ pub fn run(args: ReplayArgs) -> Result<Outcome> {
     let coeffs = match &args.coeffs {
         Some(p) => Some(
             CoeffsFile::load(p)
-                .with_context(|| format!("loading coefficients {}", p.display()))?
+                .context("loading the coefficients file")?
                 .fit(),
         ),
         None => None,

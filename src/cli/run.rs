@@ -204,16 +204,14 @@ fn pacing(speed: &str) -> Result<Pacing> {
 
 fn fresh(args: &RunArgs, procedure_path: &std::path::Path, pacing: Pacing) -> Result<Plan> {
     let bench_cfg = load_bench(args.bench.as_ref())?;
-    let procedure = Procedure::load(procedure_path, &bench_cfg)
-        .with_context(|| format!("checking procedure {}", procedure_path.display()))?;
+    let procedure =
+        Procedure::load(procedure_path, &bench_cfg).context("checking the procedure")?;
     let twin = match &args.twin {
-        Some(p) => TwinConfig::load(p).with_context(|| format!("loading twin {}", p.display()))?,
+        Some(p) => TwinConfig::load(p).context("loading the twin file")?,
         None => TwinConfig::default_rl16(),
     };
     let coeffs_file = match &args.coeffs {
-        Some(p) => Some(
-            CoeffsFile::load(p).with_context(|| format!("loading coefficients {}", p.display()))?,
-        ),
+        Some(p) => Some(CoeffsFile::load(p).context("loading the coefficients file")?),
         None => None,
     };
     if !bench_cfg.is_embedded() && args.twin.is_some() {

@@ -64,9 +64,10 @@ pub fn run(cmd: SimCommand) -> Result<Outcome> {
             let serve = Serve::load(args.config.as_deref())
                 .context("loading the sim serve configuration")?;
             runtime()?.block_on(async {
-                let served = start(&serve)
-                    .await
-                    .context("opening the simulated devices")?;
+                let served = start(&serve).await.with_context(|| match &args.config {
+                    Some(p) => format!("serving the simulated bench of {}", p.display()),
+                    None => "serving the simulated bench".to_owned(),
+                })?;
                 let mut out = std::io::stdout().lock();
                 for e in &served.endpoints {
                     writeln!(out, "{e}")?;

@@ -49,9 +49,7 @@ pub struct BenchArgs {
 
 fn load(config: Option<&PathBuf>) -> Result<TwinConfig> {
     match config {
-        Some(path) => {
-            TwinConfig::load(path).with_context(|| format!("loading twin {}", path.display()))
-        }
+        Some(path) => TwinConfig::load(path).context("loading the twin file"),
         None => Ok(TwinConfig::default_rl16()),
     }
 }

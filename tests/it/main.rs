@@ -15,6 +15,7 @@ mod diagnose;
 mod fuzz;
 mod import;
 mod integrity;
+mod messages;
 mod replay;
 mod results;
 mod resume;
