@@ -172,12 +172,23 @@ fn run_selfcheck(a: SelfcheckArgs) -> Result<Outcome> {
         a.effects
             .iter()
             .map(|n| {
-                Effect::from_name(n)
-                    .with_context(|| format!("--effects: {n:?} is not a library effect"))
+                Effect::from_name(n).ok_or_else(|| {
+                    Usage(format!(
+                        "--effects: {n:?} is not a library effect (one of: {})",
+                        selfcheck::all_effects()
+                            .iter()
+                            .map(|e| e.name())
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    ))
+                    .into()
+                })
             })
             .collect::<Result<_>>()?
     };
-    anyhow::ensure!(a.runs >= 1, "--runs must be 1 or more");
+    if a.runs == 0 {
+        return Err(Usage("--runs must be 1 or more".into()).into());
+    }
     let plan = selfcheck::Plan {
         runs: a.runs,
         seed: a.seed,

@@ -8,6 +8,7 @@ use anyhow::{Context, Result};
 use clap::Args;
 
 use super::Outcome;
+use crate::fsutil::ensure_distinct;
 use crate::runlog::exchange::{export, import, load_site};
 
 #[derive(Debug, Args)]
@@ -41,6 +42,7 @@ pub struct ExportArgs {
 }
 
 pub fn run_import(args: ImportArgs) -> Result<Outcome> {
+    ensure_distinct(&args.out, &[&args.csv, &args.site])?;
     let site = load_site(&args.site).context("reading the site file")?;
     let r = import(&args.csv, site, args.dut.as_deref(), &args.out)?;
     let loc = crate::results::Location::resolve(args.db.as_deref(), None);
@@ -83,6 +85,7 @@ pub fn run_import(args: ImportArgs) -> Result<Outcome> {
 }
 
 pub fn run_export(args: ExportArgs) -> Result<Outcome> {
+    ensure_distinct(&args.out, &[&args.log])?;
     let done = export(&args.log, &args.out)?;
     super::warn_incomplete(&args.log, &done.read, "exported what it holds");
     outln!(

@@ -92,8 +92,8 @@ pub fn warn_incomplete(file: &std::path::Path, read: &crate::runlog::ReadSummary
     );
 }
 
-/// A usage error found after parsing (a bad value, a run directory that
-/// is taken): exit 2, like clap's own.
+/// A usage error found after parsing (a bad value, options that do not go
+/// together, a run directory that is taken): exit 2, like clap's own.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 #[error("{0}")]
 pub struct Usage(pub String);
@@ -183,7 +183,10 @@ pub fn main() -> ExitCode {
         Ok(outcome) => ExitCode::from(outcome.code()),
         Err(e) => {
             errln!("error: {e:#}");
-            let usage = e.chain().any(|c| c.is::<Usage>());
+            // An output that is one of the inputs is a bad pair of arguments.
+            let usage = e
+                .chain()
+                .any(|c| c.is::<Usage>() || c.is::<crate::fsutil::SamePath>());
             ExitCode::from(if usage { EXIT_USAGE } else { EXIT_ERROR })
         }
     }

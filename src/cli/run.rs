@@ -204,6 +204,13 @@ fn pacing(speed: &str) -> Result<Pacing> {
 
 fn fresh(args: &RunArgs, procedure_path: &std::path::Path, pacing: Pacing) -> Result<Plan> {
     let bench_cfg = load_bench(args.bench.as_ref())?;
+    // Options that do not go together are said before any file is read.
+    if !bench_cfg.is_embedded() && args.twin.is_some() {
+        return Err(Usage("--twin applies to the embedded simulated bench only".into()).into());
+    }
+    if !bench_cfg.is_embedded() && !args.inject.is_empty() {
+        return Err(Usage("--inject applies to the embedded simulated bench only".into()).into());
+    }
     let procedure =
         Procedure::load(procedure_path, &bench_cfg).context("checking the procedure")?;
     let twin = match &args.twin {
@@ -214,9 +221,6 @@ fn fresh(args: &RunArgs, procedure_path: &std::path::Path, pacing: Pacing) -> Re
         Some(p) => Some(CoeffsFile::load(p).context("loading the coefficients file")?),
         None => None,
     };
-    if !bench_cfg.is_embedded() && args.twin.is_some() {
-        return Err(Usage("--twin applies to the embedded simulated bench only".into()).into());
-    }
     let faults = args
         .inject
         .iter()

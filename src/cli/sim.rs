@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use anyhow::{Context, Result};
 use clap::{Args, Subcommand};
 
-use super::Outcome;
+use super::{Outcome, Usage};
 use crate::sim::serve::{Serve, start};
 
 #[derive(Debug, Subcommand)]
@@ -52,10 +52,12 @@ fn runtime() -> Result<tokio::runtime::Runtime> {
 pub fn run(cmd: SimCommand) -> Result<Outcome> {
     match cmd {
         SimCommand::LinkBench(args) => {
-            anyhow::ensure!(
-                args.rate_hz > 0.0 && args.seconds > 0.0,
-                "--rate-hz and --seconds must be positive"
-            );
+            if !(args.rate_hz > 0.0 && args.seconds > 0.0)
+                || !args.rate_hz.is_finite()
+                || !args.seconds.is_finite()
+            {
+                return Err(Usage("--rate-hz and --seconds must be positive".into()).into());
+            }
             let r = runtime()?.block_on(link_bench(&args))?;
             outf!("{}", render_link_bench(&args, &r))?;
             Ok(Outcome::Success)

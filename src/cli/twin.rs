@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use anyhow::{Context, Result};
 use clap::{Args, Subcommand};
 
-use super::Outcome;
+use super::{Outcome, Usage};
 use crate::clock::time_it;
 use crate::study::{StudyReport, interchange_csv, run_study};
 use crate::twin::{Twin, TwinConfig};
@@ -80,10 +80,9 @@ pub fn run(cmd: TwinCommand) -> Result<Outcome> {
         }
         TwinCommand::Bench(args) => {
             let cfg = load(args.config.as_ref())?;
-            anyhow::ensure!(
-                args.hours > 0.0 && args.hours.is_finite(),
-                "--hours must be a positive number"
-            );
+            if !(args.hours > 0.0 && args.hours.is_finite()) {
+                return Err(Usage("--hours must be a positive number".into()).into());
+            }
             let device_s = args.hours * 3600.0;
             let mut twin = Twin::new(cfg, 1);
             let mut sum: i64 = 0;

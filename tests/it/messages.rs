@@ -146,3 +146,72 @@ fn sim_serve_names_the_port_it_cannot_take() {
     drop(holder);
     std::fs::remove_dir_all(&dir).expect("cleanup");
 }
+
+/// Bad flag values, missing required options and options that do not go
+/// together exit 2, whichever command finds them (clap or the command).
+#[test]
+fn usage_errors_exit_2_everywhere() {
+    let dir = temp_dir("usage-errors");
+    let proc = write(&dir, "tiny.toml", crate::common::TINY);
+    let p = s(&proc);
+    let bench = concat!(env!("CARGO_MANIFEST_DIR"), "/fixtures/bench/sim-serve.toml");
+    let site = concat!(env!("CARGO_MANIFEST_DIR"), "/fixtures/import/site.toml");
+    let csv = concat!(env!("CARGO_MANIFEST_DIR"), "/fixtures/import/lab-run.csv");
+    let cases: Vec<(Vec<&str>, &str)> = vec![
+        (vec!["diagnose", "some.mcap"], "--out DIR is required"),
+        (vec!["diagnose", "--out", "d"], "give one or more run logs"),
+        (vec!["run", p, "--speed", "fast"], "--speed \"fast\""),
+        (
+            vec!["run", p, "--inject", "bogus"],
+            "expected FAULT@SECONDS",
+        ),
+        (vec!["run", p, "--inject", "no-such-fault@10"], "--inject"),
+        (
+            vec!["run", p, "--inject", "gyro-silent@soon"],
+            "seconds of device time",
+        ),
+        (
+            vec!["run", p, "--bench", bench, "--inject", "gyro-silent@10"],
+            "embedded",
+        ),
+        (vec!["run", p, "--bench", bench, "--twin", site], "embedded"),
+        (vec!["run", p, "--force"], "--force applies with --out"),
+        (vec!["run"], "PROCEDURE"),
+        (vec!["run", p, "--resume", "runs/x"], "cannot be used with"),
+        (
+            vec!["diagnose", "selfcheck", "--out", "x", "--runs", "0"],
+            "--runs",
+        ),
+        (
+            vec!["diagnose", "selfcheck", "--out", "x", "--effects", "bogus"],
+            "not a library effect",
+        ),
+        (vec!["diagnose", "selfcheck"], "--out"),
+        (vec!["twin", "bench", "--hours", "0"], "--hours"),
+        (vec!["sim", "link-bench", "--seconds", "0"], "--seconds"),
+        (vec!["allan", "x.csv", "--taus", "sparse"], "--taus"),
+        (vec!["import", csv, "--site", site], "--out"),
+        (
+            vec!["import", csv, "--site", site, "-o", csv],
+            "would destroy the input",
+        ),
+        (vec!["results", "list", "--outcome", "maybe"], "--outcome"),
+        (vec!["results", "list", "--since", "yesterday"], "--since"),
+        (vec!["results", "export"], "--junit"),
+        (vec!["replay", "x.mcap", "--db", "x.sqlite"], "--store"),
+        (vec!["no-such-command"], "unrecognized subcommand"),
+    ];
+    for (args, says) in cases {
+        let out = command()
+            .current_dir(&dir)
+            .args(&args)
+            .output()
+            .expect("gyrobench runs");
+        let err = stderr(&out);
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {err}");
+        assert!(err.contains(says), "{args:?}: expected {says:?} in {err}");
+    }
+    // Nothing was started: no run directory, no output.
+    assert!(!dir.join("runs").exists());
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
