@@ -199,7 +199,19 @@ fn run_selfcheck(a: SelfcheckArgs) -> Result<Outcome> {
             UnitArg::Rms => selfcheck::Unit::Rms,
         },
     };
-    let s = selfcheck::run(&plan, &|line| errln!("  {line}")).context("running the self-check")?;
+    let bar = super::progress::Bar::new(plan.trials() as u64, "{bar:30} {pos}/{len} trials  {msg}");
+    errln!(
+        "self-check: {} trials of the twin's study runs ({} per case)",
+        plan.trials(),
+        plan.runs
+    );
+    let s = selfcheck::run(&plan, &|d| {
+        let line = render_trial(&d);
+        bar.println(&line);
+        bar.set(d.done as u64, line);
+    })
+    .context("running the self-check")?;
+    bar.clear();
     std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
     write(
         &a.out.join("selfcheck.json"),
@@ -231,4 +243,73 @@ fn run_selfcheck(a: SelfcheckArgs) -> Result<Outcome> {
     }
     errln!("self-check in {}", a.out.display());
     Ok(Outcome::Success)
+}
+
+/// One finished trial as a progress line: `[n/N] what, seed: what was named`.
+fn render_trial(d: &selfcheck::TrialDone<'_>) -> String {
+    let what = match d.injected {
+        selfcheck::Injected::Null => "null (nothing injected)".to_owned(),
+        selfcheck::Injected::Effect(name, amp) => format!("{name} at {amp}x"),
+        selfcheck::Injected::Periodic => "periodic (outside the library)".to_owned(),
+    };
+    let named = d
+        .trial
+        .attributed
+        .as_deref()
+        .map_or("nothing named".to_owned(), |e| format!("named {e}"));
+    format!(
+        "[{:>w$}/{}] {what}, seed {}: {named}",
+        d.done,
+        d.total,
+        d.trial.seed,
+        w = d.total.to_string().len()
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::diagnose::selfcheck::{Injected, Trial, TrialDone};
+
+    fn trial(attributed: Option<&str>) -> Trial {
+        Trial {
+            injected: String::new(),
+            seed: 1001,
+            attributed: attributed.map(str::to_owned),
+            accepted: Vec::new(),
+            gap_before_dph: 0.0,
+            gap_after_dph: 0.0,
+            excess_closed: None,
+            period_s: None,
+            candidates: Vec::new(),
+            confounded: Vec::new(),
+        }
+    }
+
+    #[test]
+    fn a_trial_line_counts_and_speaks_plainly() {
+        let t = trial(Some("self_heating"));
+        let line = render_trial(&TrialDone {
+            done: 3,
+            total: 43,
+            injected: &Injected::Effect("self_heating".into(), 1.5),
+            trial: &t,
+        });
+        assert_eq!(
+            line,
+            "[ 3/43] self_heating at 1.5x, seed 1001: named self_heating"
+        );
+        let t = trial(None);
+        let line = render_trial(&TrialDone {
+            done: 43,
+            total: 43,
+            injected: &Injected::Null,
+            trial: &t,
+        });
+        assert_eq!(
+            line,
+            "[43/43] null (nothing injected), seed 1001: nothing named"
+        );
+        assert!(!line.contains("Some(") && !line.contains("None"));
+    }
 }

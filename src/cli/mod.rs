@@ -28,6 +28,7 @@ mod calibrate;
 mod check;
 mod diagnose;
 mod import;
+mod progress;
 mod recover;
 mod replay;
 mod results;
