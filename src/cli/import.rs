@@ -56,31 +56,9 @@ pub fn run_import(args: ImportArgs) -> Result<Outcome> {
             errln!("warning: {e}; the log is written; `gyrobench results sync` indexes it later")
         }
     }
-    outln!(
-        "imported {} s of 1 Hz data in {} record(s) into {}; judged by the acceptance's limits: {}",
-        r.intervals,
-        r.records.len(),
-        args.out.display(),
-        match r.outcome {
-            crate::sequencer::Outcome::Pass => "PASS",
-            crate::sequencer::Outcome::Fail => "FAIL",
-            _ if r.measurements.is_empty() => "not judged: the data make no measurement",
-            _ => "not judged (see below)",
-        }
-    )?;
-    for m in &r.measurements {
-        outln!(
-            "  {:<32} {:>10} {:<6} [{}]  {}",
-            m.name,
-            m.value.map_or("n/a".to_owned(), |v| format!("{v:.4}")),
-            m.unit,
-            m.limits_text(),
-            m.outcome.as_str().to_uppercase()
-        )?;
-        if !m.note.is_empty() {
-            outln!("    {}", m.note)?;
-        }
-    }
+    outf!("{}", render_import(&r, &args.out))?;
+    // The import did its job whatever the figures are: they are for
+    // reference, and `replay` gives the run's verdict.
     Ok(Outcome::Success)
 }
 
@@ -94,4 +72,45 @@ pub fn run_export(args: ExportArgs) -> Result<Outcome> {
         args.out.display()
     )?;
     Ok(Outcome::Success)
+}
+
+/// What `import` made, and the figures it could compute at the
+/// acceptance's limits: for reference, never a verdict (the run was not an
+/// acceptance; `replay` judges the log as a run).
+pub fn render_import(r: &crate::runlog::exchange::Imported, out: &std::path::Path) -> String {
+    use crate::sequencer::measure::MeasureOutcome;
+    let mut s = format!(
+        "imported {} s of 1 Hz data in {} record(s) into {}\n",
+        r.intervals,
+        r.records.len(),
+        out.display()
+    );
+    if r.measurements.is_empty() {
+        s.push_str("no figure of the acceptance can be computed from these data\n");
+        return s;
+    }
+    s.push_str(&format!(
+        "figures judged at the acceptance's limits, for reference (this run was not an acceptance; \
+         `gyrobench replay {}` judges the log as a run):\n",
+        out.display()
+    ));
+    for m in &r.measurements {
+        let against = match (m.outcome, m.value) {
+            (MeasureOutcome::Pass, _) => "within",
+            (MeasureOutcome::Fail, Some(_)) => "beyond",
+            (MeasureOutcome::Fail, None) => "not computable",
+            (MeasureOutcome::Error, _) => "not judged (unsound data)",
+        };
+        s.push_str(&format!(
+            "  {:<32} {:>10} {:<6} [{}]  {against}\n",
+            m.name,
+            m.value.map_or("n/a".to_owned(), |v| format!("{v:.4}")),
+            m.unit,
+            m.limits_text(),
+        ));
+        if !m.note.is_empty() {
+            s.push_str(&format!("    {}\n", m.note));
+        }
+    }
+    s
 }
