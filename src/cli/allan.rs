@@ -21,6 +21,7 @@ enum TauSet {
 }
 
 #[derive(Debug, Args)]
+#[command(after_help = after_help!("gyrobench allan runs/smoke/run.mcap --record up", plain))]
 pub struct AllanArgs {
     /// A run's log (.mcap) or an interchange CSV (.csv).
     file: PathBuf,

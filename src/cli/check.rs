@@ -11,6 +11,11 @@ use crate::procedure::Procedure;
 use crate::procedure::estimate::{Estimate, estimate};
 
 #[derive(Debug, Args)]
+#[command(after_help = after_help!(
+    "gyrobench check procedures/acceptance.toml",
+    "0 the procedure is valid on the bench, 1 it is not (file:line:column and the key say why), \
+     2 usage"
+))]
 pub struct CheckArgs {
     /// Procedure file (TOML).
     procedure: PathBuf,

@@ -12,7 +12,13 @@ use crate::diagnose::{self, Options, data, html, selfcheck};
 use crate::twin::TwinConfig;
 
 #[derive(Debug, Args)]
-#[command(args_conflicts_with_subcommands = true)]
+#[command(
+    args_conflicts_with_subcommands = true,
+    after_help = after_help!(
+        "gyrobench diagnose runs/c1/run.mcap runs/c2/run.mcap --out diag",
+        plain
+    )
+)]
 pub struct DiagnoseArgs {
     #[command(subcommand)]
     command: Option<DiagnoseCommand>,
@@ -30,6 +36,7 @@ pub struct DiagnoseArgs {
 #[derive(Debug, Subcommand)]
 enum DiagnoseCommand {
     /// The withheld-effect experiment on the twin (proves the diagnosis).
+    #[command(after_help = after_help!("gyrobench diagnose selfcheck --runs 1 --out selfcheck", plain))]
     Selfcheck(SelfcheckArgs),
 }
 

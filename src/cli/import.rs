@@ -12,6 +12,12 @@ use crate::fsutil::ensure_distinct;
 use crate::runlog::exchange::{export, import, load_site};
 
 #[derive(Debug, Args)]
+#[command(after_help = after_help!(
+    "gyrobench import fixtures/import/lab-run.csv --site fixtures/import/site.toml -o lab-run.mcap",
+    "0 the log is written, whatever its figures (they are for reference: `replay` of the log \
+     gives the verdict), 1 error (a bad row or site file, I/O), 2 usage (an output that is an \
+     input)"
+))]
 pub struct ImportArgs {
     /// Interchange CSV (docs/analysis.md, "Interchange CSV").
     csv: PathBuf,
@@ -33,6 +39,7 @@ pub struct ImportArgs {
 }
 
 #[derive(Debug, Args)]
+#[command(after_help = after_help!("gyrobench export runs/smoke/run.mcap -o run.csv", plain))]
 pub struct ExportArgs {
     /// Any run log (live, simulated or imported).
     log: PathBuf,

@@ -11,6 +11,10 @@ use crate::fsutil::ensure_distinct;
 use crate::runlog::recover::recover;
 
 #[derive(Debug, Args)]
+#[command(after_help = after_help!(
+    "gyrobench recover runs/killed/run.mcap",
+    "0 recovered, 1 error (nothing of a run in the file, I/O), 2 usage (an output that is the input)"
+))]
 pub struct RecoverArgs {
     /// The log of a run that did not finish (or any MCAP log).
     log: PathBuf,

@@ -20,6 +20,12 @@ use crate::session::{self, Place, Plan, SessionError};
 use crate::twin::TwinConfig;
 
 #[derive(Debug, Args)]
+#[command(after_help = after_help!(
+    "gyrobench run procedures/smoke.toml --out runs/smoke",
+    "0 the unit passed, 3 it failed its limits, 1 error (bad input, I/O, a device, data that could \
+     not be judged, a bench not left in a known state), 2 usage (bad arguments, a run directory \
+     that holds a run or is in use), 130 Ctrl-C, 143 SIGTERM, 129 SIGHUP, 131 SIGQUIT"
+))]
 pub struct RunArgs {
     /// Procedure file (TOML), e.g. procedures/acceptance.toml.
     #[arg(required_unless_present = "resume")]

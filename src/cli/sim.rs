@@ -14,9 +14,15 @@ pub enum SimCommand {
     /// Serve the simulated chamber, table and gyro on loopback TCP and ptys.
     /// Prints one line per endpoint, `<device> <protocol> <address>`, then
     /// serves until Ctrl-C or SIGTERM.
+    #[command(after_help = after_help!(
+        "gyrobench sim serve --config fixtures/sim/serve.toml",
+        "0 stopped by Ctrl-C or SIGTERM, 1 it could not start (a port taken, a bad configuration), \
+         2 usage"
+    ))]
     Serve(ServeArgs),
     /// Benchmark the gyro link: the simulated gyro streams frames into a pty
     /// in real time and the driver decodes them; prints frames, losses and rate.
+    #[command(after_help = after_help!("gyrobench sim link-bench --seconds 10", plain))]
     LinkBench(LinkBenchArgs),
 }
 

@@ -14,10 +14,13 @@ use crate::twin::{Twin, TwinConfig};
 pub enum TwinCommand {
     /// Run the study's thermal cycle (-40..+50 degC, starting with the
     /// self-heating half hour at +20 degC) on the twin and print its figures.
+    #[command(after_help = after_help!("gyrobench twin study --seed 7 --json", plain))]
     Study(StudyArgs),
     /// Measure how fast the twin simulates: frames/s and times real time.
+    #[command(after_help = after_help!("gyrobench twin bench --hours 1", plain))]
     Bench(BenchArgs),
     /// Print the default twin configuration (fixtures/twin/rl16.toml).
+    #[command(after_help = after_help!("gyrobench twin default-config > my-twin.toml", plain))]
     DefaultConfig,
 }
 

@@ -254,3 +254,37 @@ fn sim_serve_prints_its_endpoints_serves_and_exits_0_on_sigterm() {
         "SIGTERM must end sim serve with exit 0"
     );
 }
+
+/// Every command's path in the tree (`["results", "show"]`, ...), the
+/// top level first; clap's own `help` subcommands left out.
+fn command_paths(cmd: &clap::Command, path: Vec<String>, out: &mut Vec<Vec<String>>) {
+    out.push(path.clone());
+    for sub in cmd.get_subcommands().filter(|c| c.get_name() != "help") {
+        let mut p = path.clone();
+        p.push(sub.get_name().to_owned());
+        command_paths(sub, p, out);
+    }
+}
+
+#[test]
+fn every_command_help_has_an_example_of_itself_and_the_exit_codes() {
+    let mut paths = Vec::new();
+    command_paths(&gyrobench::cli::command(), Vec::new(), &mut paths);
+    assert!(paths.len() > 20, "{paths:?}");
+    for path in paths {
+        let mut args: Vec<&str> = path.iter().map(String::as_str).collect();
+        args.push("--help");
+        let out = gyrobench(&args);
+        assert_eq!(out.status.code(), Some(0), "{args:?}");
+        let help = String::from_utf8_lossy(&out.stdout);
+        let example = format!("Example:\n  gyrobench {}", path.join(" "));
+        assert!(
+            help.contains(example.trim_end()),
+            "{args:?}: no example of the command itself: {help}"
+        );
+        assert!(
+            help.contains("\nExit codes: 0 ") && help.contains(" 2 usage"),
+            "{args:?}: no exit codes: {help}"
+        );
+    }
+}
