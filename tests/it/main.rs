@@ -12,6 +12,7 @@ mod calibrate;
 mod cli;
 mod common;
 mod diagnose;
+mod docs;
 mod fuzz;
 mod import;
 mod integrity;
