@@ -17,6 +17,7 @@ mod fuzz;
 mod import;
 mod integrity;
 mod messages;
+mod readme;
 mod replay;
 mod results;
 mod resume;
