@@ -635,10 +635,12 @@ fn significance(
                 return Resolved::AtZero;
             }
             let var = cov.as_ref().map_or(f64::INFINITY, |c| c[(k, k)] * misfit);
-            let z = match var {
-                v if v == 0.0 => f64::INFINITY,
-                v if v.is_finite() && v > 0.0 => beta[k] / v.sqrt(),
-                _ => 0.0,
+            let z = if var == 0.0 {
+                f64::INFINITY
+            } else if var.is_finite() && var > 0.0 {
+                beta[k] / var.sqrt()
+            } else {
+                0.0
             };
             if z >= RESOLVED_SIGMAS {
                 Resolved::Yes { z }

@@ -1,6 +1,5 @@
 //! `gyrobench sim serve`: run the simulated bench as a standalone process.
 
-use std::io::Write as _;
 use std::path::PathBuf;
 
 use anyhow::{Context, Result};
@@ -58,10 +57,8 @@ fn runtime() -> Result<tokio::runtime::Runtime> {
 pub fn run(cmd: SimCommand) -> Result<Outcome> {
     match cmd {
         SimCommand::LinkBench(args) => {
-            if !(args.rate_hz > 0.0 && args.seconds > 0.0)
-                || !args.rate_hz.is_finite()
-                || !args.seconds.is_finite()
-            {
+            let positive = |v: f64| v > 0.0 && v.is_finite();
+            if !(positive(args.rate_hz) && positive(args.seconds)) {
                 return Err(Usage("--rate-hz and --seconds must be positive".into()).into());
             }
             let r = runtime()?.block_on(link_bench(&args))?;
@@ -72,21 +69,23 @@ pub fn run(cmd: SimCommand) -> Result<Outcome> {
             let serve = Serve::load(args.config.as_deref())
                 .context("loading the sim serve configuration")?;
             runtime()?.block_on(async {
+                // Listening for the stop signals before the endpoints are
+                // printed: a script that stops the server as soon as it
+                // has read them must not kill it without its handler.
+                let stop = stop_signals()?;
                 let served = start(&serve).await.with_context(|| match &args.config {
                     Some(p) => format!("serving the simulated bench of {}", p.display()),
                     None => "serving the simulated bench".to_owned(),
                 })?;
-                let mut out = std::io::stdout().lock();
-                for e in &served.endpoints {
-                    writeln!(out, "{e}")?;
-                }
-                out.flush()?;
-                drop(out);
+                // Through `out`: a reader that stops after the first lines
+                // (`sim serve | head -1`) does not stop the server.
+                let lines: String = served.endpoints.iter().map(|e| format!("{e}\n")).collect();
+                super::out(&lines)?;
                 errln!(
                     "serving the simulated bench (speed {}x); Ctrl-C or SIGTERM to stop",
                     serve.config.speed
                 );
-                wait_for_stop().await?;
+                wait_for_stop(stop).await;
                 errln!("stopped");
                 Ok(Outcome::Success)
             })
@@ -94,14 +93,20 @@ pub fn run(cmd: SimCommand) -> Result<Outcome> {
     }
 }
 
-async fn wait_for_stop() -> Result<()> {
-    let mut term = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())
-        .context("installing the SIGTERM handler")?;
+/// Ctrl-C and SIGTERM, listened for from now on.
+fn stop_signals() -> Result<[tokio::signal::unix::Signal; 2]> {
+    use tokio::signal::unix::{SignalKind, signal};
+    Ok([
+        signal(SignalKind::interrupt()).context("installing the Ctrl-C handler")?,
+        signal(SignalKind::terminate()).context("installing the SIGTERM handler")?,
+    ])
+}
+
+async fn wait_for_stop([mut int, mut term]: [tokio::signal::unix::Signal; 2]) {
     tokio::select! {
-        r = tokio::signal::ctrl_c() => r.context("waiting for Ctrl-C")?,
+        _ = int.recv() => {}
         _ = term.recv() => {}
     }
-    Ok(())
 }
 
 /// What the link benchmark measured.

@@ -288,3 +288,29 @@ fn every_command_help_has_an_example_of_itself_and_the_exit_codes() {
         );
     }
 }
+
+/// A reader that goes away (`sim serve | head -1`) does not stop the
+/// server, and SIGTERM right after it says it serves still ends it with 0
+/// (the handler is in place before the endpoints are printed).
+#[test]
+fn sim_serve_outlives_a_closed_stdout_and_stops_cleanly_at_once() {
+    use std::io::{BufRead, BufReader};
+    let mut child = command()
+        .args(["sim", "serve"])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("sim serve starts");
+    drop(child.stdout.take());
+    let mut said = String::new();
+    BufReader::new(child.stderr.take().expect("stderr"))
+        .read_line(&mut said)
+        .expect("stderr");
+    assert!(said.starts_with("serving the simulated bench"), "{said}");
+    let status = Command::new("kill")
+        .args(["-TERM", &child.id().to_string()])
+        .status()
+        .expect("kill runs");
+    assert!(status.success());
+    assert_eq!(child.wait().expect("sim serve ends").code(), Some(0));
+}

@@ -105,10 +105,11 @@ fn sections(readme: &str) -> Vec<(String, Vec<Line>)> {
             out.push((title.trim().to_owned(), Vec::new()));
         } else if l.starts_with("```") {
             in_sh = !in_sh && l.trim() == "```sh";
-        } else if in_sh && l.starts_with(PREFIX) {
-            if let Some((_, lines)) = out.last_mut() {
-                lines.push(parse_line(i + 1, l));
-            }
+        } else if in_sh
+            && l.starts_with(PREFIX)
+            && let Some((_, lines)) = out.last_mut()
+        {
+            lines.push(parse_line(i + 1, l));
         }
     }
     out
@@ -155,9 +156,9 @@ fn serve_and_stop(line: &Line, work: &Path) {
         .spawn()
         .expect("gyrobench starts");
     let mut first = String::new();
-    std::io::BufReader::new(child.stdout.take().expect("stdout"))
-        .read_line(&mut first)
-        .expect("stdout");
+    // Kept open while it serves, as a terminal would be.
+    let mut endpoints = std::io::BufReader::new(child.stdout.take().expect("stdout"));
+    endpoints.read_line(&mut first).expect("stdout");
     let err = || std::fs::read_to_string(&err_file).unwrap_or_default();
     if !first.starts_with("chamber espec-ascii tcp://127.0.0.1:") {
         let _killed = child.kill();
@@ -175,6 +176,7 @@ fn serve_and_stop(line: &Line, work: &Path) {
         .expect("kill runs");
     assert!(kill.success());
     let status = child.wait().expect("it ends");
+    drop(endpoints);
     assert_eq!(
         status.code(),
         Some(0),
