@@ -340,8 +340,9 @@ async fn open_device(
     spec: &str,
     timeout: Duration,
 ) -> Result<(DeviceSpec, BoxTransport), DeviceError> {
-    let connect = |cause| DeviceError::Connect {
+    let connect = |cause| DeviceError::Open {
         device: name.to_owned(),
+        spec: spec.to_owned(),
         cause,
     };
     let spec: DeviceSpec = spec.parse().map_err(|e: crate::transport::SpecError| {

@@ -75,6 +75,9 @@ impl Pending {
         prefix.push(".");
         // The mode a plain create gives (0666 less the umask), not the
         // temporary's private 0600: the result is an ordinary output file.
+        // A missing directory said plainly: tempfile's own error names its
+        // random temporary, which only confuses.
+        std::fs::metadata(dir)?;
         let named = tempfile::Builder::new()
             .prefix(&prefix)
             .suffix(".partial")

@@ -398,6 +398,72 @@ pub struct NoiseTerms {
     pub rate_random_walk_dph_per_rt_h: f64,
     /// RMS relative misfit of the fitted curve to the ADEV points.
     pub fit_rms_relative: f64,
+    /// Whether the curve resolves each term, in the order Q, N, B, K.
+    pub resolved: [Resolved; 4],
+}
+
+/// The noise terms' names as `--json` and reports key them, in the order
+/// of [`NoiseTerms::resolved`].
+pub const TERM_KEYS: [&str; 4] = [
+    "quantization_arcsec",
+    "arw_deg_per_rt_h",
+    "bias_instability_dph",
+    "rate_random_walk_dph_per_rt_h",
+];
+
+/// How many standard errors above zero a term's fitted AVAR coefficient
+/// must lie to count as resolved by the curve.
+pub const RESOLVED_SIGMAS: f64 = 2.0;
+
+/// Whether the ADEV curve resolves one fitted noise term.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+#[serde(tag = "kind", rename_all = "snake_case")]
+pub enum Resolved {
+    /// The coefficient lies `z` standard errors above zero, at least
+    /// [`RESOLVED_SIGMAS`].
+    Yes {
+        /// Coefficient over its standard error.
+        z: f64,
+    },
+    /// The best fit puts the term at zero (its bound): the curve shows no
+    /// part with this term's slope.
+    AtZero,
+    /// Fitted above zero, but fewer than [`RESOLVED_SIGMAS`] standard
+    /// errors; the errors are scaled by `misfit` (the reduced chi-squared
+    /// of the fit, when above 1: the curve departs from the model by more
+    /// than its intervals allow).
+    Weak {
+        /// Coefficient over its standard error.
+        z: f64,
+        /// Factor on the variances from the fit's misfit (1 when it fits).
+        misfit: f64,
+    },
+}
+
+impl Resolved {
+    /// The curve resolves the term.
+    pub fn is_resolved(self) -> bool {
+        matches!(self, Self::Yes { .. })
+    }
+
+    /// Why the term is not resolved, in words; `None` when it is.
+    pub fn reason(self) -> Option<String> {
+        match self {
+            Self::Yes { .. } => None,
+            Self::AtZero => {
+                Some("the fit puts it at zero: no part of the curve has its slope".to_owned())
+            }
+            Self::Weak { z, misfit } if misfit > 1.0 => Some(format!(
+                "{z:.1} standard errors from zero (needs {RESOLVED_SIGMAS}), the errors widened \
+                 {:.1}x by the misfit of the curve to the model",
+                misfit.sqrt()
+            )),
+            Self::Weak { z, .. } => Some(format!(
+                "{z:.1} standard errors from zero (needs {RESOLVED_SIGMAS}): too little of the \
+                 curve shows it"
+            )),
+        }
+    }
 }
 
 /// The three figures called "bias instability" (physics.md).
@@ -487,7 +553,7 @@ pub fn fit_noise(points: &[Point]) -> NoiseTerms {
         .iter()
         .filter(|p| p.adev.is_finite() && p.adev > 0.0)
         .collect();
-    let mut best: Option<([f64; 4], f64)> = None;
+    let mut best: Option<([f64; 4], f64, [Resolved; 4])> = None;
     for mask in 1u8..16 {
         let idx: Vec<usize> = (0..4).filter(|i| mask & (1 << i) != 0).collect();
         if idx.len() > pts.len() {
@@ -513,15 +579,18 @@ pub fn fit_noise(points: &[Point]) -> NoiseTerms {
             continue;
         }
         let sse = (&y - &x * &beta).norm_squared();
-        if best.as_ref().is_none_or(|(_, s)| sse < *s) {
+        if best.as_ref().is_none_or(|(_, s, _)| sse < *s) {
             let mut c = [0.0; 4];
+            let mut resolved = [Resolved::AtZero; 4];
+            let z = significance(&x, &beta, sse);
             for (k, &i) in idx.iter().enumerate() {
                 c[i] = beta[k];
+                resolved[i] = z[k];
             }
-            best = Some((c, sse));
+            best = Some((c, sse, resolved));
         }
     }
-    let c = best.map_or([0.0; 4], |(c, _)| c);
+    let (c, resolved) = best.map_or(([0.0; 4], [Resolved::AtZero; 4]), |(c, _, r)| (c, r));
     let model = |tau: f64| {
         term_columns(tau)
             .iter()
@@ -539,7 +608,47 @@ pub fn fit_noise(points: &[Point]) -> NoiseTerms {
         bias_instability_dph: c[2].sqrt() / floor_per_b(),
         rate_random_walk_dph_per_rt_h: (c[3] * 3.0 * 3600.0).sqrt(),
         fit_rms_relative: (rel.iter().map(|r| r * r).sum::<f64>() / rel.len().max(1) as f64).sqrt(),
+        resolved,
     }
+}
+
+/// How far each fitted coefficient lies from zero in standard errors, for
+/// the weighted design `x` (rows already divided by their standard error)
+/// and its residual sum of squares. The variances are scaled by the reduced
+/// chi-squared when it exceeds 1, so a curve the model misfits resolves
+/// less; a zero coefficient is [`Resolved::AtZero`].
+fn significance(
+    x: &nalgebra::DMatrix<f64>,
+    beta: &nalgebra::DVector<f64>,
+    sse: f64,
+) -> Vec<Resolved> {
+    let (n, p) = x.shape();
+    let misfit = if n > p {
+        (sse / (n - p) as f64).max(1.0)
+    } else {
+        1.0
+    };
+    let cov = (x.transpose() * x).try_inverse();
+    (0..p)
+        .map(|k| {
+            if beta[k] <= 0.0 {
+                return Resolved::AtZero;
+            }
+            let var = cov.as_ref().map_or(f64::INFINITY, |c| c[(k, k)] * misfit);
+            let z = if var == 0.0 {
+                f64::INFINITY
+            } else if var.is_finite() && var > 0.0 {
+                beta[k] / var.sqrt()
+            } else {
+                0.0
+            };
+            if z >= RESOLVED_SIGMAS {
+                Resolved::Yes { z }
+            } else {
+                Resolved::Weak { z, misfit }
+            }
+        })
+        .collect()
 }
 
 #[cfg(test)]

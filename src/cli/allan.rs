@@ -4,12 +4,12 @@
 
 use std::path::PathBuf;
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use clap::{Args, ValueEnum};
 use serde::Serialize;
 
 use super::Outcome;
-use crate::analysis::allan::{Allan, Taus, analyse};
+use crate::analysis::allan::{Allan, NoiseTerms, TERM_KEYS, Taus, analyse};
 use crate::analysis::figures::bias_stability;
 use crate::runlog::interchange;
 use crate::runlog::replay::record_rates;
@@ -21,6 +21,7 @@ enum TauSet {
 }
 
 #[derive(Debug, Args)]
+#[command(after_help = after_help!("gyrobench allan runs/smoke/run.mcap --record up", plain))]
 pub struct AllanArgs {
     /// A run's log (.mcap) or an interchange CSV (.csv).
     file: PathBuf,
@@ -36,7 +37,8 @@ pub struct AllanArgs {
     json: bool,
 }
 
-/// `--json` output.
+/// `--json` output. Field names are a contract (other tools read them):
+/// new fields are added, none renamed.
 #[derive(Debug, Serialize)]
 struct Output<'a> {
     file: String,
@@ -49,13 +51,68 @@ struct Output<'a> {
     hi_dph: Vec<f64>,
     edf: Vec<f64>,
     alpha: Vec<i32>,
-    noise: &'a crate::analysis::allan::NoiseTerms,
+    noise: NoiseJson,
     bias_instability: BiasInstability,
+}
+
+/// The fitted noise terms; a term the curve does not resolve is `null`,
+/// with the reason and the fitted value under `not_resolved`.
+#[derive(Debug, Serialize)]
+struct NoiseJson {
+    quantization_arcsec: Option<f64>,
+    arw_deg_per_rt_h: Option<f64>,
+    bias_instability_dph: Option<f64>,
+    rate_random_walk_dph_per_rt_h: Option<f64>,
+    fit_rms_relative: f64,
+    not_resolved: std::collections::BTreeMap<&'static str, NotResolved>,
+}
+
+#[derive(Debug, Serialize)]
+struct NotResolved {
+    reason: String,
+    fitted: f64,
+}
+
+impl NoiseJson {
+    fn new(n: &NoiseTerms) -> Self {
+        let v = terms(n);
+        let shown = |i: usize| n.resolved[i].is_resolved().then_some(v[i]);
+        Self {
+            quantization_arcsec: shown(0),
+            arw_deg_per_rt_h: shown(1),
+            bias_instability_dph: shown(2),
+            rate_random_walk_dph_per_rt_h: shown(3),
+            fit_rms_relative: n.fit_rms_relative,
+            not_resolved: (0..4)
+                .filter_map(|i| {
+                    let reason = n.resolved[i].reason()?;
+                    Some((
+                        TERM_KEYS[i],
+                        NotResolved {
+                            reason,
+                            fitted: v[i],
+                        },
+                    ))
+                })
+                .collect(),
+        }
+    }
+}
+
+/// The four terms' values in the order of [`TERM_KEYS`].
+fn terms(n: &NoiseTerms) -> [f64; 4] {
+    [
+        n.quantization_arcsec,
+        n.arw_deg_per_rt_h,
+        n.bias_instability_dph,
+        n.rate_random_walk_dph_per_rt_h,
+    ]
 }
 
 #[derive(Debug, Serialize)]
 struct BiasInstability {
-    ieee_b_dph: f64,
+    /// `null` when the fit does not resolve B (see `noise.not_resolved`).
+    ieee_b_dph: Option<f64>,
     adev_min_dph: f64,
     adev_min_tau_s: f64,
     bias_stability_100s_dph: f64,
@@ -106,8 +163,8 @@ fn load(args: &AllanArgs) -> Result<(String, Vec<f64>, f64)> {
 }
 
 pub fn run(args: AllanArgs) -> Result<Outcome> {
-    let (record, rate, tau0) =
-        load(&args).with_context(|| format!("reading {}", args.file.display()))?;
+    // Every error of the load names the file.
+    let (record, rate, tau0) = load(&args)?;
     anyhow::ensure!(
         rate.len() >= 9,
         "{}: {} samples in `{record}`; the Allan deviation needs at least 9",
@@ -121,7 +178,9 @@ pub fn run(args: AllanArgs) -> Result<Outcome> {
     let a: Allan = analyse(&rate, tau0, taus);
     let per_100s = ((100.0 / tau0).round() as usize).max(1);
     let bi = BiasInstability {
-        ieee_b_dph: a.bias_instability.ieee_b_dph,
+        ieee_b_dph: a.noise.resolved[2]
+            .is_resolved()
+            .then_some(a.bias_instability.ieee_b_dph),
         adev_min_dph: a.bias_instability.adev_min_dph,
         adev_min_tau_s: a.bias_instability.adev_min_tau_s,
         bias_stability_100s_dph: bias_stability(&rate, per_100s),
@@ -138,7 +197,7 @@ pub fn run(args: AllanArgs) -> Result<Outcome> {
             hi_dph: a.points.iter().map(|p| p.hi).collect(),
             edf: a.points.iter().map(|p| p.edf).collect(),
             alpha: a.points.iter().map(|p| p.alpha).collect(),
-            noise: &a.noise,
+            noise: NoiseJson::new(&a.noise),
             bias_instability: bi,
         };
         outln!("{}", serde_json::to_string_pretty(&out)?)?;
@@ -163,17 +222,35 @@ fn render_text(file: &str, record: &str, a: &Allan, bi: &BiasInstability) -> Str
         ));
     }
     let n = &a.noise;
+    let v = terms(n);
+    let term = |i: usize, value: String| match n.resolved[i].reason() {
+        None => value,
+        Some(why) => format!("not resolved ({why})"),
+    };
     s.push_str(&format!(
-        "\nnoise terms (weighted fit, rms misfit {:.1} %):\n  quantization      {:.4} arcsec\n  angle random walk {:.6} deg/sqrt(h)\n  bias instability  {:.5} deg/h (IEEE B = floor / 0.664)\n  rate random walk  {:.5} deg/h/sqrt(h)\n",
+        "\nnoise terms (weighted fit, rms misfit {:.1} %):\n  quantization      {}\n  angle random walk {}\n  bias instability  {}\n  rate random walk  {}\n",
         100.0 * n.fit_rms_relative,
-        n.quantization_arcsec,
-        n.arw_deg_per_rt_h,
-        n.bias_instability_dph,
-        n.rate_random_walk_dph_per_rt_h
+        term(0, format!("{:.4} arcsec", v[0])),
+        term(1, format!("{:.6} deg/sqrt(h)", v[1])),
+        term(2, format!("{:.5} deg/h (IEEE B = floor / 0.664)", v[2])),
+        term(3, format!("{:.5} deg/h/sqrt(h)", v[3])),
     ));
+    let b = bi
+        .ieee_b_dph
+        .map_or("not resolved (see the noise terms)".to_owned(), |b| {
+            format!("{b:.5} deg/h")
+        });
+    let stability = if bi.bias_stability_100s_dph.is_finite() {
+        format!(
+            "{:.5} deg/h (1-sigma, GJB 2426A; what acceptance limits judge)",
+            bi.bias_stability_100s_dph
+        )
+    } else {
+        "n/a (the record holds fewer than two 100 s averages)".to_owned()
+    };
     s.push_str(&format!(
-        "\n\"bias instability\", three figures:\n  IEEE coefficient B         {:.5} deg/h\n  raw ADEV minimum           {:.5} deg/h at {:.0} s\n  bias stability (100 s avg) {:.5} deg/h (1-sigma, GJB 2426A; what acceptance limits judge)\n",
-        bi.ieee_b_dph, bi.adev_min_dph, bi.adev_min_tau_s, bi.bias_stability_100s_dph
+        "\n\"bias instability\", three figures:\n  IEEE coefficient B         {b}\n  raw ADEV minimum           {:.5} deg/h at {:.0} s\n  bias stability (100 s avg) {stability}\n",
+        bi.adev_min_dph, bi.adev_min_tau_s
     ));
     s
 }

@@ -11,6 +11,11 @@ use crate::calibrate::{ABSURD_OVER_RAW, calibrate, load, mixed_serials};
 use crate::fsutil::ensure_distinct;
 
 #[derive(Debug, Args)]
+#[command(after_help = after_help!(
+    "gyrobench calibrate runs/c1/run.mcap runs/c2/run.mcap -o unit.toml",
+    "0 coefficients written, 1 error (unreadable runs, runs too short or of different units, a \
+     fit that is not plausible), 2 usage (one run given twice, an output that is an input)"
+))]
 pub struct CalibrateArgs {
     /// Run logs (.mcap) of one unit; two or more for held-out validation.
     #[arg(required = true)]
@@ -39,7 +44,7 @@ pub fn run(args: CalibrateArgs) -> Result<Outcome> {
     let runs = args
         .runs
         .iter()
-        .map(|p| load(p).with_context(|| format!("reading {}", p.display())))
+        .map(|p| load(p).map_err(anyhow::Error::from))
         .collect::<Result<Vec<_>>>()?;
     // One run given twice (or a copy of it) would validate the fit on its
     // own data: held-out figures would be a lie.

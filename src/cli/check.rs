@@ -11,6 +11,11 @@ use crate::procedure::Procedure;
 use crate::procedure::estimate::{Estimate, estimate};
 
 #[derive(Debug, Args)]
+#[command(after_help = after_help!(
+    "gyrobench check procedures/acceptance.toml",
+    "0 the procedure is valid on the bench, 1 it is not (file:line:column and the key say why), \
+     2 usage"
+))]
 pub struct CheckArgs {
     /// Procedure file (TOML).
     procedure: PathBuf,
@@ -22,15 +27,14 @@ pub struct CheckArgs {
 /// Load the bench file, or the embedded bench.
 pub fn load_bench(path: Option<&PathBuf>) -> Result<BenchConfig> {
     match path {
-        Some(p) => BenchConfig::load(p).with_context(|| format!("loading bench {}", p.display())),
+        Some(p) => BenchConfig::load(p).context("loading the bench file"),
         None => Ok(BenchConfig::embedded()),
     }
 }
 
 pub fn run(args: CheckArgs) -> Result<Outcome> {
     let bench = load_bench(args.bench.as_ref())?;
-    let p = Procedure::load(&args.procedure, &bench)
-        .with_context(|| format!("checking procedure {}", args.procedure.display()))?;
+    let p = Procedure::load(&args.procedure, &bench).context("checking the procedure")?;
     outf!("{}", render_plan(&p, &estimate(&p, &bench)))?;
     Ok(Outcome::Success)
 }

@@ -12,7 +12,13 @@ use crate::diagnose::{self, Options, data, html, selfcheck};
 use crate::twin::TwinConfig;
 
 #[derive(Debug, Args)]
-#[command(args_conflicts_with_subcommands = true)]
+#[command(
+    args_conflicts_with_subcommands = true,
+    after_help = after_help!(
+        "gyrobench diagnose runs/c1/run.mcap runs/c2/run.mcap --out diag",
+        plain
+    )
+)]
 pub struct DiagnoseArgs {
     #[command(subcommand)]
     command: Option<DiagnoseCommand>,
@@ -30,6 +36,7 @@ pub struct DiagnoseArgs {
 #[derive(Debug, Subcommand)]
 enum DiagnoseCommand {
     /// The withheld-effect experiment on the twin (proves the diagnosis).
+    #[command(after_help = after_help!("gyrobench diagnose selfcheck --runs 1 --out selfcheck", plain))]
     Selfcheck(SelfcheckArgs),
 }
 
@@ -85,15 +92,13 @@ pub fn run(args: DiagnoseArgs) -> Result<Outcome> {
         .into());
     };
     let twin = match &args.twin {
-        Some(p) => {
-            Some(TwinConfig::load(p).with_context(|| format!("loading twin {}", p.display()))?)
-        }
+        Some(p) => Some(TwinConfig::load(p).context("loading the twin file")?),
         None => None,
     };
     let runs = args
         .runs
         .iter()
-        .map(|p| data::load(p).with_context(|| format!("reading {}", p.display())))
+        .map(|p| data::load(p).map_err(anyhow::Error::from))
         .collect::<Result<Vec<_>>>()?;
     let d = diagnose::diagnose(
         &runs,
@@ -175,12 +180,23 @@ fn run_selfcheck(a: SelfcheckArgs) -> Result<Outcome> {
         a.effects
             .iter()
             .map(|n| {
-                Effect::from_name(n)
-                    .with_context(|| format!("--effects: {n:?} is not a library effect"))
+                Effect::from_name(n).ok_or_else(|| {
+                    Usage(format!(
+                        "--effects: {n:?} is not a library effect (one of: {})",
+                        selfcheck::all_effects()
+                            .iter()
+                            .map(|e| e.name())
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    ))
+                    .into()
+                })
             })
             .collect::<Result<_>>()?
     };
-    anyhow::ensure!(a.runs >= 1, "--runs must be 1 or more");
+    if a.runs == 0 {
+        return Err(Usage("--runs must be 1 or more".into()).into());
+    }
     let plan = selfcheck::Plan {
         runs: a.runs,
         seed: a.seed,
@@ -191,7 +207,19 @@ fn run_selfcheck(a: SelfcheckArgs) -> Result<Outcome> {
             UnitArg::Rms => selfcheck::Unit::Rms,
         },
     };
-    let s = selfcheck::run(&plan, &|line| errln!("  {line}")).context("running the self-check")?;
+    let bar = super::progress::Bar::new(plan.trials() as u64, "{bar:30} {pos}/{len} trials  {msg}");
+    errln!(
+        "self-check: {} trials of the twin's study runs ({} per case)",
+        plan.trials(),
+        plan.runs
+    );
+    let s = selfcheck::run(&plan, &|d| {
+        let line = render_trial(&d);
+        bar.println(&line);
+        bar.set(d.done as u64, line);
+    })
+    .context("running the self-check")?;
+    bar.clear();
     std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
     write(
         &a.out.join("selfcheck.json"),
@@ -223,4 +251,73 @@ fn run_selfcheck(a: SelfcheckArgs) -> Result<Outcome> {
     }
     errln!("self-check in {}", a.out.display());
     Ok(Outcome::Success)
+}
+
+/// One finished trial as a progress line: `[n/N] what, seed: what was named`.
+fn render_trial(d: &selfcheck::TrialDone<'_>) -> String {
+    let what = match d.injected {
+        selfcheck::Injected::Null => "null (nothing injected)".to_owned(),
+        selfcheck::Injected::Effect(name, amp) => format!("{name} at {amp}x"),
+        selfcheck::Injected::Periodic => "periodic (outside the library)".to_owned(),
+    };
+    let named = d
+        .trial
+        .attributed
+        .as_deref()
+        .map_or("nothing named".to_owned(), |e| format!("named {e}"));
+    format!(
+        "[{:>w$}/{}] {what}, seed {}: {named}",
+        d.done,
+        d.total,
+        d.trial.seed,
+        w = d.total.to_string().len()
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::diagnose::selfcheck::{Injected, Trial, TrialDone};
+
+    fn trial(attributed: Option<&str>) -> Trial {
+        Trial {
+            injected: String::new(),
+            seed: 1001,
+            attributed: attributed.map(str::to_owned),
+            accepted: Vec::new(),
+            gap_before_dph: 0.0,
+            gap_after_dph: 0.0,
+            excess_closed: None,
+            period_s: None,
+            candidates: Vec::new(),
+            confounded: Vec::new(),
+        }
+    }
+
+    #[test]
+    fn a_trial_line_counts_and_speaks_plainly() {
+        let t = trial(Some("self_heating"));
+        let line = render_trial(&TrialDone {
+            done: 3,
+            total: 43,
+            injected: &Injected::Effect("self_heating".into(), 1.5),
+            trial: &t,
+        });
+        assert_eq!(
+            line,
+            "[ 3/43] self_heating at 1.5x, seed 1001: named self_heating"
+        );
+        let t = trial(None);
+        let line = render_trial(&TrialDone {
+            done: 43,
+            total: 43,
+            injected: &Injected::Null,
+            trial: &t,
+        });
+        assert_eq!(
+            line,
+            "[43/43] null (nothing injected), seed 1001: nothing named"
+        );
+        assert!(!line.contains("Some(") && !line.contains("None"));
+    }
 }

@@ -8,9 +8,16 @@ use anyhow::{Context, Result};
 use clap::Args;
 
 use super::Outcome;
+use crate::fsutil::ensure_distinct;
 use crate::runlog::exchange::{export, import, load_site};
 
 #[derive(Debug, Args)]
+#[command(after_help = after_help!(
+    "gyrobench import fixtures/import/lab-run.csv --site fixtures/import/site.toml -o lab-run.mcap",
+    "0 the log is written, whatever its figures (they are for reference: `replay` of the log \
+     gives the verdict), 1 error (a bad row or site file, I/O), 2 usage (an output that is an \
+     input)"
+))]
 pub struct ImportArgs {
     /// Interchange CSV (docs/analysis.md, "Interchange CSV").
     csv: PathBuf,
@@ -32,6 +39,7 @@ pub struct ImportArgs {
 }
 
 #[derive(Debug, Args)]
+#[command(after_help = after_help!("gyrobench export runs/smoke/run.mcap -o run.csv", plain))]
 pub struct ExportArgs {
     /// Any run log (live, simulated or imported).
     log: PathBuf,
@@ -41,7 +49,8 @@ pub struct ExportArgs {
 }
 
 pub fn run_import(args: ImportArgs) -> Result<Outcome> {
-    let site = load_site(&args.site).with_context(|| format!("reading {}", args.site.display()))?;
+    ensure_distinct(&args.out, &[&args.csv, &args.site])?;
+    let site = load_site(&args.site).context("reading the site file")?;
     let r = import(&args.csv, site, args.dut.as_deref(), &args.out)?;
     let loc = crate::results::Location::resolve(args.db.as_deref(), None);
     match crate::results::Store::open(&loc).and_then(|s| match s {
@@ -54,35 +63,14 @@ pub fn run_import(args: ImportArgs) -> Result<Outcome> {
             errln!("warning: {e}; the log is written; `gyrobench results sync` indexes it later")
         }
     }
-    outln!(
-        "imported {} s of 1 Hz data in {} record(s) into {}; judged by the acceptance's limits: {}",
-        r.intervals,
-        r.records.len(),
-        args.out.display(),
-        match r.outcome {
-            crate::sequencer::Outcome::Pass => "PASS",
-            crate::sequencer::Outcome::Fail => "FAIL",
-            _ if r.measurements.is_empty() => "not judged: the data make no measurement",
-            _ => "not judged (see below)",
-        }
-    )?;
-    for m in &r.measurements {
-        outln!(
-            "  {:<32} {:>10} {:<6} [{}]  {}",
-            m.name,
-            m.value.map_or("n/a".to_owned(), |v| format!("{v:.4}")),
-            m.unit,
-            m.limits_text(),
-            m.outcome.as_str().to_uppercase()
-        )?;
-        if !m.note.is_empty() {
-            outln!("    {}", m.note)?;
-        }
-    }
+    outf!("{}", render_import(&r, &args.out))?;
+    // The import did its job whatever the figures are: they are for
+    // reference, and `replay` gives the run's verdict.
     Ok(Outcome::Success)
 }
 
 pub fn run_export(args: ExportArgs) -> Result<Outcome> {
+    ensure_distinct(&args.out, &[&args.log])?;
     let done = export(&args.log, &args.out)?;
     super::warn_incomplete(&args.log, &done.read, "exported what it holds");
     outln!(
@@ -91,4 +79,45 @@ pub fn run_export(args: ExportArgs) -> Result<Outcome> {
         args.out.display()
     )?;
     Ok(Outcome::Success)
+}
+
+/// What `import` made, and the figures it could compute at the
+/// acceptance's limits: for reference, never a verdict (the run was not an
+/// acceptance; `replay` judges the log as a run).
+pub fn render_import(r: &crate::runlog::exchange::Imported, out: &std::path::Path) -> String {
+    use crate::sequencer::measure::MeasureOutcome;
+    let mut s = format!(
+        "imported {} s of 1 Hz data in {} record(s) into {}\n",
+        r.intervals,
+        r.records.len(),
+        out.display()
+    );
+    if r.measurements.is_empty() {
+        s.push_str("no figure of the acceptance can be computed from these data\n");
+        return s;
+    }
+    s.push_str(&format!(
+        "figures judged at the acceptance's limits, for reference (this run was not an acceptance; \
+         `gyrobench replay {}` judges the log as a run):\n",
+        out.display()
+    ));
+    for m in &r.measurements {
+        let against = match (m.outcome, m.value) {
+            (MeasureOutcome::Pass, _) => "within",
+            (MeasureOutcome::Fail, Some(_)) => "beyond",
+            (MeasureOutcome::Fail, None) => "not computable",
+            (MeasureOutcome::Error, _) => "not judged (unsound data)",
+        };
+        s.push_str(&format!(
+            "  {:<32} {:>10} {:<6} [{}]  {against}\n",
+            m.name,
+            m.value.map_or("n/a".to_owned(), |v| format!("{v:.4}")),
+            m.unit,
+            m.limits_text(),
+        ));
+        if !m.note.is_empty() {
+            s.push_str(&format!("    {}\n", m.note));
+        }
+    }
+    s
 }

@@ -23,11 +23,34 @@ macro_rules! outln {
     ($($t:tt)*) => { $crate::cli::out(&format!("{}\n", format_args!($($t)*))) };
 }
 
+/// `--help`'s closing for every command, in one layout: one example and
+/// the exit codes (`plain`: a command that does its job or not; `store`:
+/// one of the results store's).
+macro_rules! after_help {
+    ($example:literal, store) => {
+        after_help!(
+            $example,
+            "0 done, 1 error (a store that cannot be reached, no such run or measurement), \
+             2 usage (bad filters, the store `none`)"
+        )
+    };
+    ($example:literal, plain) => {
+        after_help!(
+            $example,
+            "0 done, 1 error (a file that cannot be read or written, bad data), 2 usage (bad arguments)"
+        )
+    };
+    ($example:literal, $codes:literal) => {
+        concat!("Example:\n  ", $example, "\n\nExit codes: ", $codes, ".")
+    };
+}
+
 mod allan;
 mod calibrate;
 mod check;
 mod diagnose;
 mod import;
+mod progress;
 mod recover;
 mod replay;
 mod results;
@@ -92,8 +115,8 @@ pub fn warn_incomplete(file: &std::path::Path, read: &crate::runlog::ReadSummary
     );
 }
 
-/// A usage error found after parsing (a bad value, a run directory that
-/// is taken): exit 2, like clap's own.
+/// A usage error found after parsing (a bad value, options that do not go
+/// together, a run directory that is taken): exit 2, like clap's own.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 #[error("{0}")]
 pub struct Usage(pub String);
@@ -118,7 +141,13 @@ impl Outcome {
 #[command(
     name = "gyrobench",
     version,
-    about = "Hardware-in-the-loop test bench controller for ring laser gyroscopes"
+    about = "Hardware-in-the-loop test bench controller for ring laser gyroscopes",
+    after_help = after_help!(
+        "gyrobench run procedures/acceptance.toml",
+        "0 success (for a run: the unit passed), 1 error, 2 usage, 3 the unit failed its limits, \
+         130 Ctrl-C, 143 SIGTERM, 129 SIGHUP, 131 SIGQUIT; `gyrobench COMMAND --help` gives each \
+         command's"
+    )
 )]
 struct Cli {
     #[command(subcommand)]
@@ -149,11 +178,17 @@ enum Command {
     /// Validate a procedure and print its plan with estimated device times.
     Check(check::CheckArgs),
     /// The simulated RL-16 and its bench (digital twin).
-    #[command(subcommand)]
+    #[command(subcommand, after_help = after_help!("gyrobench twin study", plain))]
     Twin(twin::TwinCommand),
     /// Simulated instruments speaking the real protocols.
-    #[command(subcommand)]
+    #[command(subcommand, after_help = after_help!("gyrobench sim serve", plain))]
     Sim(sim::SimCommand),
+}
+
+/// The command tree, as `--help` shows it (the tests walk it to check every
+/// command's help).
+pub fn command() -> clap::Command {
+    <Cli as clap::CommandFactory>::command()
 }
 
 /// Parse arguments, run, print the error chain once, and map to an exit code.
@@ -183,7 +218,10 @@ pub fn main() -> ExitCode {
         Ok(outcome) => ExitCode::from(outcome.code()),
         Err(e) => {
             errln!("error: {e:#}");
-            let usage = e.chain().any(|c| c.is::<Usage>());
+            // An output that is one of the inputs is a bad pair of arguments.
+            let usage = e
+                .chain()
+                .any(|c| c.is::<Usage>() || c.is::<crate::fsutil::SamePath>());
             ExitCode::from(if usage { EXIT_USAGE } else { EXIT_ERROR })
         }
     }

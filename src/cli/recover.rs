@@ -11,6 +11,10 @@ use crate::fsutil::ensure_distinct;
 use crate::runlog::recover::recover;
 
 #[derive(Debug, Args)]
+#[command(after_help = after_help!(
+    "gyrobench recover runs/killed/run.mcap",
+    "0 recovered, 1 error (nothing of a run in the file, I/O), 2 usage (an output that is the input)"
+))]
 pub struct RecoverArgs {
     /// The log of a run that did not finish (or any MCAP log).
     log: PathBuf,
@@ -28,8 +32,7 @@ pub fn run(args: RecoverArgs) -> Result<Outcome> {
         args.log.with_file_name(format!("{stem}-recovered.mcap"))
     });
     ensure_distinct(&out, &[&args.log])?;
-    let r =
-        recover(&args.log, &out).with_context(|| format!("recovering {}", args.log.display()))?;
+    let r = recover(&args.log, &out).context("recovering the log")?;
     if let Some(why) = &r.stopped {
         errln!(
             "warning: the read of {} stopped at a damaged record: {why}; what follows it is lost",

@@ -14,6 +14,12 @@ use crate::runlog::replay::replay;
 use crate::sequencer;
 
 #[derive(Debug, Args)]
+#[command(after_help = after_help!(
+    "gyrobench replay runs/smoke/run.mcap",
+    "0 the run passed, 3 it failed its limits, 1 error (an unreadable log, a run that ended in \
+     error or was cut short), 2 usage (an --out that is a run directory), 130 the run was \
+     interrupted"
+))]
 pub struct ReplayArgs {
     /// The run's log (live, recovered, truncated or imported).
     log: PathBuf,
@@ -37,7 +43,7 @@ pub fn run(args: ReplayArgs) -> Result<Outcome> {
     let coeffs = match &args.coeffs {
         Some(p) => Some(
             CoeffsFile::load(p)
-                .with_context(|| format!("loading coefficients {}", p.display()))?
+                .context("loading the coefficients file")?
                 .fit(),
         ),
         None => None,

@@ -92,7 +92,7 @@ fn looks_like_a_time(s: &str) -> bool {
 #[derive(Debug, Subcommand)]
 pub enum ResultsCommand {
     /// Runs, newest first.
-    #[command(after_help = "Example: gyrobench results list --serial RL16-0042 --outcome fail")]
+    #[command(after_help = after_help!("gyrobench results list --serial RL16-0042 --outcome fail", store))]
     List {
         #[command(flatten)]
         filter: FilterArgs,
@@ -107,7 +107,7 @@ pub enum ResultsCommand {
         json: bool,
     },
     /// One run whole: its record, measurements and parts.
-    #[command(after_help = "Example: gyrobench results show 3f2a9c")]
+    #[command(after_help = after_help!("gyrobench results show 3f2a9c", store))]
     Show {
         /// The run's id (or its start), as `results list` shows it.
         run: String,
@@ -117,7 +117,7 @@ pub enum ResultsCommand {
     },
     /// A unit's history: every run and measurement, and its latest
     /// coefficient set.
-    #[command(after_help = "Example: gyrobench results unit RL16-0042")]
+    #[command(after_help = after_help!("gyrobench results unit RL16-0042", store))]
     Unit {
         /// Serial number.
         serial: String,
@@ -128,7 +128,7 @@ pub enum ResultsCommand {
     /// A measurement across units: count, mean, sigma, min/max, yield,
     /// Cpk; a chart page with --html.
     #[command(
-        after_help = "Example: gyrobench results trend compensated_drift_pp_dph --html trend.html"
+        after_help = after_help!("gyrobench results trend compensated_drift_pp_dph --html trend.html", store)
     )]
     Trend {
         /// Measurement name, e.g. compensated_drift_pp_dph.
@@ -145,7 +145,7 @@ pub enum ResultsCommand {
     /// Runs as JUnit XML (one testsuite per run) or CSV (one row per
     /// measurement).
     #[command(
-        after_help = "Example: gyrobench results export --junit results.xml --since 2026-03-01"
+        after_help = after_help!("gyrobench results export --junit results.xml --since 2026-03-01", store)
     )]
     Export {
         #[command(flatten)]
@@ -159,7 +159,7 @@ pub enum ResultsCommand {
     },
     /// Index run directories from their logs (idempotent: what the store
     /// has is left alone; a run left running is completed).
-    #[command(after_help = "Example: gyrobench results sync runs/")]
+    #[command(after_help = after_help!("gyrobench results sync runs/", store))]
     Sync {
         /// Directories holding run directories (searched below).
         #[arg(required = true)]
@@ -168,6 +168,7 @@ pub enum ResultsCommand {
 }
 
 #[derive(Debug, Args)]
+#[command(after_help = after_help!("gyrobench results list", store))]
 pub struct ResultsArgs {
     #[command(flatten)]
     store: StoreArgs,

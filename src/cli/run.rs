@@ -20,6 +20,12 @@ use crate::session::{self, Place, Plan, SessionError};
 use crate::twin::TwinConfig;
 
 #[derive(Debug, Args)]
+#[command(after_help = after_help!(
+    "gyrobench run procedures/smoke.toml --out runs/smoke",
+    "0 the unit passed, 3 it failed its limits, 1 error (bad input, I/O, a device, data that could \
+     not be judged, a bench not left in a known state), 2 usage (bad arguments, a run directory \
+     that holds a run or is in use), 130 Ctrl-C, 143 SIGTERM, 129 SIGHUP, 131 SIGQUIT"
+))]
 pub struct RunArgs {
     /// Procedure file (TOML), e.g. procedures/acceptance.toml.
     #[arg(required_unless_present = "resume")]
@@ -72,25 +78,17 @@ pub struct RunArgs {
 
 /// Progress on stderr: a live bar on a terminal, plain lines otherwise.
 struct Live {
-    bar: Option<indicatif::ProgressBar>,
+    bar: super::progress::Bar,
     last_line_s: f64,
 }
 
 impl Live {
     fn new(total_s: f64) -> Self {
-        use std::io::IsTerminal;
-        let bar = std::io::stderr().is_terminal().then(|| {
-            let b = indicatif::ProgressBar::new(total_s.max(1.0) as u64);
-            b.set_style(
-                indicatif::ProgressStyle::with_template(
-                    "{bar:30} {pos}/{len} s device time  {msg}",
-                )
-                .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
-            );
-            b
-        });
         Self {
-            bar,
+            bar: super::progress::Bar::new(
+                total_s.max(1.0) as u64,
+                "{bar:30} {pos}/{len} s device time  {msg}",
+            ),
             last_line_s: 0.0,
         }
     }
@@ -98,24 +96,15 @@ impl Live {
 
 impl Progress for Live {
     fn begin(&mut self, dir: &std::path::Path, notes: &[String]) {
-        let lines = notes
-            .iter()
-            .map(|n| format!("note: {n}"))
-            .chain([format!("logging to {}", dir.display())]);
-        for line in lines {
-            match &self.bar {
-                Some(b) => b.println(line),
-                None => errln!("{line}"),
-            }
+        for n in notes {
+            self.bar.println(&format!("note: {n}"));
         }
+        self.bar.println(&format!("logging to {}", dir.display()));
     }
 
     fn step(&mut self, s: &crate::procedure::Step, i: usize, n: usize) {
-        let line = format!("[{}/{n}] {}", i + 1, s.describe());
-        match &self.bar {
-            Some(b) => b.println(line),
-            None => errln!("{line}"),
-        }
+        self.bar
+            .println(&format!("[{}/{n}] {}", i + 1, s.describe()));
     }
 
     fn prompt(&mut self, text: &str) {
@@ -124,11 +113,8 @@ impl Progress for Live {
             errln!("prompt (no terminal, going on): {text}");
             return;
         }
-        let ask = format!("{text} -- press Enter to continue");
-        match &self.bar {
-            Some(b) => b.suspend(|| errln!("{ask}")),
-            None => errln!("{ask}"),
-        }
+        self.bar
+            .suspend(|| errln!("{text} -- press Enter to continue"));
         let mut line = String::new();
         let _ = std::io::stdin().read_line(&mut line);
     }
@@ -147,16 +133,11 @@ impl Progress for Live {
             "chamber {:+.2} degC (set {:+.1}){rate}",
             st.chamber.air_c, st.chamber.set_point_c
         );
-        match &self.bar {
-            Some(b) => {
-                b.set_position(st.t_s as u64);
-                b.set_message(msg);
-            }
-            None if st.t_s - self.last_line_s >= 3600.0 => {
-                self.last_line_s = st.t_s;
-                errln!("  t = {:.2} h  {msg}", st.t_s / 3600.0);
-            }
-            None => {}
+        if self.bar.is_live() {
+            self.bar.set(st.t_s as u64, msg);
+        } else if st.t_s - self.last_line_s >= 3600.0 {
+            self.last_line_s = st.t_s;
+            errln!("  t = {:.2} h  {msg}", st.t_s / 3600.0);
         }
     }
 }
@@ -204,21 +185,23 @@ fn pacing(speed: &str) -> Result<Pacing> {
 
 fn fresh(args: &RunArgs, procedure_path: &std::path::Path, pacing: Pacing) -> Result<Plan> {
     let bench_cfg = load_bench(args.bench.as_ref())?;
-    let procedure = Procedure::load(procedure_path, &bench_cfg)
-        .with_context(|| format!("checking procedure {}", procedure_path.display()))?;
-    let twin = match &args.twin {
-        Some(p) => TwinConfig::load(p).with_context(|| format!("loading twin {}", p.display()))?,
-        None => TwinConfig::default_rl16(),
-    };
-    let coeffs_file = match &args.coeffs {
-        Some(p) => Some(
-            CoeffsFile::load(p).with_context(|| format!("loading coefficients {}", p.display()))?,
-        ),
-        None => None,
-    };
+    // Options that do not go together are said before any file is read.
     if !bench_cfg.is_embedded() && args.twin.is_some() {
         return Err(Usage("--twin applies to the embedded simulated bench only".into()).into());
     }
+    if !bench_cfg.is_embedded() && !args.inject.is_empty() {
+        return Err(Usage("--inject applies to the embedded simulated bench only".into()).into());
+    }
+    let procedure =
+        Procedure::load(procedure_path, &bench_cfg).context("checking the procedure")?;
+    let twin = match &args.twin {
+        Some(p) => TwinConfig::load(p).context("loading the twin file")?,
+        None => TwinConfig::default_rl16(),
+    };
+    let coeffs_file = match &args.coeffs {
+        Some(p) => Some(CoeffsFile::load(p).context("loading the coefficients file")?),
+        None => None,
+    };
     let faults = args
         .inject
         .iter()

@@ -1,12 +1,11 @@
 //! `gyrobench sim serve`: run the simulated bench as a standalone process.
 
-use std::io::Write as _;
 use std::path::PathBuf;
 
 use anyhow::{Context, Result};
 use clap::{Args, Subcommand};
 
-use super::Outcome;
+use super::{Outcome, Usage};
 use crate::sim::serve::{Serve, start};
 
 #[derive(Debug, Subcommand)]
@@ -14,9 +13,15 @@ pub enum SimCommand {
     /// Serve the simulated chamber, table and gyro on loopback TCP and ptys.
     /// Prints one line per endpoint, `<device> <protocol> <address>`, then
     /// serves until Ctrl-C or SIGTERM.
+    #[command(after_help = after_help!(
+        "gyrobench sim serve --config fixtures/sim/serve.toml",
+        "0 stopped by Ctrl-C or SIGTERM, 1 it could not start (a port taken, a bad configuration), \
+         2 usage"
+    ))]
     Serve(ServeArgs),
     /// Benchmark the gyro link: the simulated gyro streams frames into a pty
     /// in real time and the driver decodes them; prints frames, losses and rate.
+    #[command(after_help = after_help!("gyrobench sim link-bench --seconds 10", plain))]
     LinkBench(LinkBenchArgs),
 }
 
@@ -52,10 +57,10 @@ fn runtime() -> Result<tokio::runtime::Runtime> {
 pub fn run(cmd: SimCommand) -> Result<Outcome> {
     match cmd {
         SimCommand::LinkBench(args) => {
-            anyhow::ensure!(
-                args.rate_hz > 0.0 && args.seconds > 0.0,
-                "--rate-hz and --seconds must be positive"
-            );
+            let positive = |v: f64| v > 0.0 && v.is_finite();
+            if !(positive(args.rate_hz) && positive(args.seconds)) {
+                return Err(Usage("--rate-hz and --seconds must be positive".into()).into());
+            }
             let r = runtime()?.block_on(link_bench(&args))?;
             outf!("{}", render_link_bench(&args, &r))?;
             Ok(Outcome::Success)
@@ -64,20 +69,23 @@ pub fn run(cmd: SimCommand) -> Result<Outcome> {
             let serve = Serve::load(args.config.as_deref())
                 .context("loading the sim serve configuration")?;
             runtime()?.block_on(async {
-                let served = start(&serve)
-                    .await
-                    .context("opening the simulated devices")?;
-                let mut out = std::io::stdout().lock();
-                for e in &served.endpoints {
-                    writeln!(out, "{e}")?;
-                }
-                out.flush()?;
-                drop(out);
+                // Listening for the stop signals before the endpoints are
+                // printed: a script that stops the server as soon as it
+                // has read them must not kill it without its handler.
+                let stop = stop_signals()?;
+                let served = start(&serve).await.with_context(|| match &args.config {
+                    Some(p) => format!("serving the simulated bench of {}", p.display()),
+                    None => "serving the simulated bench".to_owned(),
+                })?;
+                // Through `out`: a reader that stops after the first lines
+                // (`sim serve | head -1`) does not stop the server.
+                let lines: String = served.endpoints.iter().map(|e| format!("{e}\n")).collect();
+                super::out(&lines)?;
                 errln!(
                     "serving the simulated bench (speed {}x); Ctrl-C or SIGTERM to stop",
                     serve.config.speed
                 );
-                wait_for_stop().await?;
+                wait_for_stop(stop).await;
                 errln!("stopped");
                 Ok(Outcome::Success)
             })
@@ -85,14 +93,20 @@ pub fn run(cmd: SimCommand) -> Result<Outcome> {
     }
 }
 
-async fn wait_for_stop() -> Result<()> {
-    let mut term = tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())
-        .context("installing the SIGTERM handler")?;
+/// Ctrl-C and SIGTERM, listened for from now on.
+fn stop_signals() -> Result<[tokio::signal::unix::Signal; 2]> {
+    use tokio::signal::unix::{SignalKind, signal};
+    Ok([
+        signal(SignalKind::interrupt()).context("installing the Ctrl-C handler")?,
+        signal(SignalKind::terminate()).context("installing the SIGTERM handler")?,
+    ])
+}
+
+async fn wait_for_stop([mut int, mut term]: [tokio::signal::unix::Signal; 2]) {
     tokio::select! {
-        r = tokio::signal::ctrl_c() => r.context("waiting for Ctrl-C")?,
+        _ = int.recv() => {}
         _ = term.recv() => {}
     }
-    Ok(())
 }
 
 /// What the link benchmark measured.

@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use anyhow::{Context, Result};
 use clap::{Args, Subcommand};
 
-use super::Outcome;
+use super::{Outcome, Usage};
 use crate::clock::time_it;
 use crate::study::{StudyReport, interchange_csv, run_study};
 use crate::twin::{Twin, TwinConfig};
@@ -14,10 +14,13 @@ use crate::twin::{Twin, TwinConfig};
 pub enum TwinCommand {
     /// Run the study's thermal cycle (-40..+50 degC, starting with the
     /// self-heating half hour at +20 degC) on the twin and print its figures.
+    #[command(after_help = after_help!("gyrobench twin study --seed 7 --json", plain))]
     Study(StudyArgs),
     /// Measure how fast the twin simulates: frames/s and times real time.
+    #[command(after_help = after_help!("gyrobench twin bench --hours 1", plain))]
     Bench(BenchArgs),
     /// Print the default twin configuration (fixtures/twin/rl16.toml).
+    #[command(after_help = after_help!("gyrobench twin default-config > my-twin.toml", plain))]
     DefaultConfig,
 }
 
@@ -49,9 +52,7 @@ pub struct BenchArgs {
 
 fn load(config: Option<&PathBuf>) -> Result<TwinConfig> {
     match config {
-        Some(path) => {
-            TwinConfig::load(path).with_context(|| format!("loading twin {}", path.display()))
-        }
+        Some(path) => TwinConfig::load(path).context("loading the twin file"),
         None => Ok(TwinConfig::default_rl16()),
     }
 }
@@ -82,10 +83,9 @@ pub fn run(cmd: TwinCommand) -> Result<Outcome> {
         }
         TwinCommand::Bench(args) => {
             let cfg = load(args.config.as_ref())?;
-            anyhow::ensure!(
-                args.hours > 0.0 && args.hours.is_finite(),
-                "--hours must be a positive number"
-            );
+            if !(args.hours > 0.0 && args.hours.is_finite()) {
+                return Err(Usage("--hours must be a positive number".into()).into());
+            }
             let device_s = args.hours * 3600.0;
             let mut twin = Twin::new(cfg, 1);
             let mut sum: i64 = 0;

@@ -379,8 +379,44 @@ pub enum Unit {
     Rms,
 }
 
-/// Run the self-check.
-pub fn run(plan: &Plan, progress: &(dyn Fn(&str) + Sync)) -> Result<SelfCheck, StudyError> {
+/// One trial finished, as the self-check reports its progress.
+#[derive(Debug, Clone, Copy)]
+pub struct TrialDone<'a> {
+    /// Trials finished so far, this one included.
+    pub done: usize,
+    /// Trials in the whole self-check.
+    pub total: usize,
+    /// What the trial's runs carried.
+    pub injected: &'a Injected,
+    /// Its outcome.
+    pub trial: &'a Trial,
+}
+
+impl Plan {
+    /// Trials the self-check makes: `runs` each of the null case, every
+    /// effect at every amplitude, and the outside effect.
+    pub fn trials(&self) -> usize {
+        self.runs * (1 + self.effects.len() * AMPLITUDES.len() + 1)
+    }
+}
+
+/// Run the self-check; `progress` hears of each trial as it ends (from
+/// the worker threads, in the order they finish).
+pub fn run(
+    plan: &Plan,
+    progress: &(dyn Fn(TrialDone<'_>) + Sync),
+) -> Result<SelfCheck, StudyError> {
+    let total = plan.trials();
+    let finished = std::sync::atomic::AtomicUsize::new(0);
+    let report = |injected: &Injected, trial: &Trial| {
+        let done = finished.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
+        progress(TrialDone {
+            done,
+            total,
+            injected,
+            trial,
+        });
+    };
     let (runs, seed, effects, separating) = (
         plan.runs,
         plan.seed,
@@ -395,7 +431,7 @@ pub fn run(plan: &Plan, progress: &(dyn Fn(&str) + Sync)) -> Result<SelfCheck, S
     for k in 0..runs {
         let s = seed + k as u64;
         let t = trial(&Injected::Null, s, separating, &base, &base, 0.0)?;
-        progress(&format!("null seed {s}: {:?}", t.attributed));
+        report(&Injected::Null, &t);
         null_gaps.push(t.gap_before_dph);
         trials.push((Injected::Null, t));
         if null_runs.is_none() {
@@ -464,7 +500,7 @@ pub fn run(plan: &Plan, progress: &(dyn Fn(&str) + Sync)) -> Result<SelfCheck, S
                     let (inj, data, reference) = &cases[c];
                     let r = trial(inj, s, separating, data, reference, noise);
                     if let Ok(t) = &r {
-                        progress(&format!("{} seed {s}: {:?}", inj.label(), t.attributed));
+                        report(inj, t);
                     }
                     // Pushing cannot panic, so the lock is never poisoned;
                     // were it, the results in it are still whole.

@@ -77,6 +77,19 @@ pub enum DeviceError {
         /// The plausible range.
         range: &'static str,
     },
+    /// The device's spec could not be opened when the bench came up.
+    #[error(
+        "{device}: cannot open {spec}: {cause}; check that the device is on and \
+         `devices.{device}.spec` in the bench file"
+    )]
+    Open {
+        /// Device name.
+        device: String,
+        /// Its spec from the bench file (`tcp://...`, `serial://...`).
+        spec: String,
+        /// Why.
+        cause: std::io::Error,
+    },
     /// The link could not be (re)opened.
     #[error(
         "{device}: cannot open the link: {cause}; check that the device is on and the spec in bench.toml"

@@ -880,6 +880,7 @@ fn device_of(e: &DeviceError) -> Option<String> {
         | DeviceError::Malformed { device, .. }
         | DeviceError::OutOfRange { device, .. }
         | DeviceError::Connect { device, .. }
+        | DeviceError::Open { device, .. }
         | DeviceError::Alarm { device, .. }
         | DeviceError::Interlock { device }
         | DeviceError::Unreachable { device, .. }

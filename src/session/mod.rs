@@ -34,7 +34,7 @@ pub enum SessionError {
     #[error(transparent)]
     RunDir(#[from] RunDirError),
     /// The run to resume cannot be read.
-    #[error("reading the run to resume: {0}")]
+    #[error("reading the run to resume")]
     Replay(#[from] ReplayError),
     /// The run to resume cannot be resumed.
     #[error("{0}")]
@@ -43,8 +43,14 @@ pub enum SessionError {
     #[error("{0}")]
     Bench(String),
     /// A device failed before the run started.
-    #[error("bringing the bench up: {0}")]
-    Device(#[from] crate::driver::DeviceError),
+    #[error("bringing up the bench of {bench}")]
+    Device {
+        /// The bench file, as the operator named it.
+        bench: String,
+        /// What the device did.
+        #[source]
+        source: crate::driver::DeviceError,
+    },
     /// A file could not be written.
     #[error("{what} {path}: {cause}")]
     Io {
@@ -424,8 +430,16 @@ pub fn execute(
             limits,
         ))
     } else {
-        let open = rt.block_on(open_bench(&plan.bench_cfg))?;
-        let device = rt.block_on(DeviceBench::start(&plan.bench_cfg, open))?;
+        let bench_err = |source| SessionError::Device {
+            bench: plan.bench_label.clone(),
+            source,
+        };
+        let open = rt
+            .block_on(open_bench(&plan.bench_cfg))
+            .map_err(bench_err)?;
+        let device = rt
+            .block_on(DeviceBench::start(&plan.bench_cfg, open))
+            .map_err(bench_err)?;
         Box::new(Guarded::new(device, limits))
     };
     // A store URL's password never goes into a log.

@@ -149,20 +149,84 @@ impl std::fmt::Display for Endpoint {
     }
 }
 
-async fn listen(port: u16) -> std::io::Result<TcpListener> {
-    TcpListener::bind(SocketAddr::from((Ipv4Addr::LOCALHOST, port))).await
+/// Why the simulated bench could not start.
+#[derive(Debug, thiserror::Error)]
+pub enum ServeError {
+    /// A TCP endpoint could not listen (the port is taken, or not allowed).
+    #[error("{device} {protocol}: cannot listen on {addr}: {cause}; {hint}")]
+    Listen {
+        /// `chamber`, `table` or `gyro`.
+        device: &'static str,
+        /// The protocol served there.
+        protocol: &'static str,
+        /// The address asked for (port 0: any free one).
+        addr: SocketAddr,
+        /// The serve configuration's key of the port (`ports.espec`, ...).
+        key: &'static str,
+        /// Why.
+        cause: std::io::Error,
+        /// What to do about it.
+        hint: String,
+    },
+    /// A pty pair could not be made.
+    #[error(
+        "{device}: cannot create a pty: {cause}; set `ptys = false` in the serve configuration to serve on TCP only"
+    )]
+    Pty {
+        /// The device it was for.
+        device: &'static str,
+        /// Why.
+        cause: std::io::Error,
+    },
+    /// The system could not say where a listener is.
+    #[error("{device} {protocol}: cannot read the listening address: {cause}")]
+    Address {
+        /// The device.
+        device: &'static str,
+        /// Its protocol.
+        protocol: &'static str,
+        /// Why.
+        cause: std::io::Error,
+    },
 }
 
-fn tcp_endpoint(
+/// Listen on loopback `port` (0: one the OS picks) for `device`.
+async fn listen(
     device: &'static str,
     protocol: &'static str,
-    l: &TcpListener,
-) -> std::io::Result<Endpoint> {
-    Ok(Endpoint {
+    port: u16,
+    key: &'static str,
+) -> Result<(TcpListener, Endpoint), ServeError> {
+    let addr = SocketAddr::from((Ipv4Addr::LOCALHOST, port));
+    let l = TcpListener::bind(addr).await.map_err(|cause| {
+        let hint = if cause.kind() == std::io::ErrorKind::AddrInUse {
+            format!(
+                "another process holds port {port} (another `gyrobench sim serve`?): stop it, \
+                 or choose another `{key}` in the serve configuration (0 lets the system choose)"
+            )
+        } else {
+            format!("choose another `{key}` in the serve configuration (0 lets the system choose)")
+        };
+        ServeError::Listen {
+            device,
+            protocol,
+            addr,
+            key,
+            cause,
+            hint,
+        }
+    })?;
+    let local = l.local_addr().map_err(|cause| ServeError::Address {
         device,
         protocol,
-        address: format!("tcp://{}", l.local_addr()?),
-    })
+        cause,
+    })?;
+    let endpoint = Endpoint {
+        device,
+        protocol,
+        address: format!("tcp://{local}"),
+    };
+    Ok((l, endpoint))
 }
 
 /// Accept connections forever, serving each with `serve`.
@@ -191,7 +255,7 @@ pub struct Served {
 }
 
 /// Start every simulated device; returns once all endpoints listen.
-pub async fn start(s: &Serve) -> std::io::Result<Served> {
+pub async fn start(s: &Serve) -> Result<Served, ServeError> {
     let clock = Arc::new(WallClock::scaled(s.config.speed));
     let bench = SharedBench::new(
         SimBench::new(s.twin.clone(), s.config.seed, s.layout.clone()),
@@ -201,12 +265,12 @@ pub async fn start(s: &Serve) -> std::io::Result<Served> {
     let p = s.config.ports;
     let mut endpoints = Vec::new();
 
-    let espec = listen(p.espec).await?;
-    endpoints.push(tcp_endpoint("chamber", "espec-ascii", &espec)?);
+    let (espec, e) = listen("chamber", "espec-ascii", p.espec, "ports.espec").await?;
+    endpoints.push(e);
     spawn_accept(espec, bench.clone(), serve_espec);
 
-    let watlow = listen(p.watlow).await?;
-    endpoints.push(tcp_endpoint("chamber", "watlow-f4t-modbus", &watlow)?);
+    let (watlow, e) = listen("chamber", "watlow-f4t-modbus", p.watlow, "ports.watlow").await?;
+    endpoints.push(e);
     let b = bench.clone();
     tokio::spawn(async move {
         let server = tokio_modbus::server::tcp::Server::new(watlow);
@@ -221,12 +285,12 @@ pub async fn start(s: &Serve) -> std::io::Result<Served> {
         let _ = server.serve(&on_connected, |_| {}).await;
     });
 
-    let acl = listen(p.acl).await?;
-    endpoints.push(tcp_endpoint("table", "acl", &acl)?);
+    let (acl, e) = listen("table", "acl", p.acl, "ports.acl").await?;
+    endpoints.push(e);
     spawn_accept(acl, bench.clone(), serve_acl);
 
-    let gyro = listen(p.gyro).await?;
-    endpoints.push(tcp_endpoint("gyro", "rlg-frame", &gyro)?);
+    let (gyro, e) = listen("gyro", "rlg-frame", p.gyro, "ports.gyro").await?;
+    endpoints.push(e);
     spawn_accept(gyro, bench.clone(), serve_gyro);
 
     let mut ptys = Vec::new();
@@ -240,7 +304,7 @@ pub async fn start(s: &Serve) -> std::io::Result<Served> {
                 master,
                 slave,
                 path,
-            } = pty_pair()?;
+            } = pty_pair().map_err(|cause| ServeError::Pty { device, cause })?;
             endpoints.push(Endpoint {
                 device,
                 protocol,

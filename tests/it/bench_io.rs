@@ -319,7 +319,8 @@ async fn a_bench_file_opens_every_device_of_sim_serve() {
         .await
         .expect_err("nothing listens on port 1");
     assert!(
-        err.to_string().starts_with("chamber: cannot open the link"),
+        err.to_string()
+            .starts_with("chamber: cannot open tcp://127.0.0.1:1: "),
         "{err}"
     );
 }

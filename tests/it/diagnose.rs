@@ -197,6 +197,24 @@ fn quick_selfcheck(dir: &std::path::Path, effects: &str, extra: &[&str]) -> serd
         "{}",
         String::from_utf8_lossy(&r.stderr)
     );
+    // Progress on stderr, one line a trial counted "n of N" in words a
+    // person reads; stdout holds the results only.
+    let err = String::from_utf8_lossy(&r.stderr);
+    let out = String::from_utf8_lossy(&r.stdout);
+    let total = 2 + 2 * effects.split(',').count();
+    for n in 1..=total {
+        let want = format!("[{n:>w$}/{total}] ", w = total.to_string().len());
+        assert_eq!(err.matches(&want).count(), 1, "{want}: {err}");
+    }
+    assert!(
+        err.contains("null (nothing injected), seed 1: nothing named"),
+        "{err}"
+    );
+    assert!(!err.contains("Some(") && !err.contains("None"), "{err}");
+    assert!(
+        !out.contains("seed") && out.starts_with("noise unit"),
+        "{out}"
+    );
     let sc = json(&dir.join("selfcheck.json"));
     assert_eq!(sc["false_positive_rate"], 0.0, "{}", sc["trials"]);
     sc

@@ -165,3 +165,56 @@ fn a_bad_row_is_refused_with_its_line_and_leaves_no_file() {
     assert!(String::from_utf8_lossy(&out.stderr).contains("site.latitude_deg"));
     std::fs::remove_dir_all(&dir).expect("cleanup");
 }
+
+/// `import` prints the figures it can compute at the acceptance's limits
+/// as what they are, for reference: no PASS or FAIL for a run that was
+/// never an acceptance, and exit 0 whatever they are; `replay` gives the
+/// verdict (0 pass, 3 fail).
+#[test]
+fn import_gives_figures_for_reference_and_leaves_the_verdict_to_replay() {
+    let dir = temp_dir("import-reference");
+    let fixture = concat!(env!("CARGO_MANIFEST_DIR"), "/fixtures/import/lab-run.csv");
+    let site = concat!(env!("CARGO_MANIFEST_DIR"), "/fixtures/import/site.toml");
+    // The shipped lab run, and the same run with a drift of 1.8 deg/h per
+    // hour added: beyond the acceptance's raw-drift limit.
+    let text = std::fs::read_to_string(fixture).expect("fixture");
+    let mut drifting = String::new();
+    for (i, line) in text.lines().enumerate() {
+        let mut f: Vec<String> = line.split(',').map(str::to_owned).collect();
+        if i > 0 {
+            let t: f64 = f[0].parse().expect("time_s");
+            let rate: f64 = f[1].parse().expect("rate_dph");
+            f[1] = format!("{:.6}", rate + 0.0005 * t);
+        }
+        drifting.push_str(&f.join(","));
+        drifting.push('\n');
+    }
+    let drifting_csv = dir.join("drifting.csv");
+    std::fs::write(&drifting_csv, drifting).expect("csv");
+    for (csv, against, verdict) in [(fixture, "within", 0), (s(&drifting_csv), "beyond", 3)] {
+        let log = dir.join(format!("{against}.mcap"));
+        let out = gyrobench(&["import", csv, "--site", site, "-o", s(&log)]);
+        let text = String::from_utf8_lossy(&out.stdout);
+        assert_eq!(
+            out.status.code(),
+            Some(0),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        assert!(
+            text.contains("figures judged at the acceptance's limits, for reference")
+                && text.contains("this run was not an acceptance")
+                && text.contains(&format!("gyrobench replay {}", s(&log))),
+            "{text}"
+        );
+        assert!(!text.contains("PASS") && !text.contains("FAIL"), "{text}");
+        let raw = text
+            .lines()
+            .find(|l| l.trim_start().starts_with("raw_drift_pp_dph"))
+            .unwrap_or_else(|| panic!("raw drift in {text}"));
+        assert!(raw.ends_with(against), "{raw}");
+        let out = gyrobench(&["replay", s(&log), "--out", s(&dir.join(against))]);
+        assert_eq!(out.status.code(), Some(verdict), "{against}");
+    }
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}

@@ -135,6 +135,10 @@ fn the_noise_fit_recovers_known_arw_bias_instability_and_rrw() {
         got.rate_random_walk_dph_per_rt_h
     );
     assert!(got.fit_rms_relative < 0.15, "{got:?}");
+    // The two terms put in are resolved; quantization, absent, is not.
+    assert!(got.resolved[1].is_resolved(), "{got:?}");
+    assert!(got.resolved[3].is_resolved(), "{got:?}");
+    assert!(!got.resolved[0].is_resolved(), "{got:?}");
     // Every interval brackets its deviation and narrows with more data.
     for p in &a.points {
         assert!(p.lo < p.adev && p.adev < p.hi, "{p:?}");
@@ -162,5 +166,54 @@ fn a_flicker_floor_reads_as_b_equal_floor_over_0_664() {
         .collect();
     let f = fit_noise(&points);
     assert!((f.bias_instability_dph / 0.01 - 1.0).abs() < 1e-3, "{f:?}");
+    assert!(f.resolved[2].is_resolved(), "{f:?}");
     assert!(f.arw_deg_per_rt_h < 1e-9 && f.quantization_arcsec < 1e-9);
+}
+
+/// White rate noise alone has no floor and no rise: bias instability and
+/// rate random walk are not resolved (the CLI prints that, never a zero).
+#[test]
+fn white_noise_resolves_arw_only() {
+    let rate: Vec<f64> = xorshift_gauss(3, 100_000)
+        .iter()
+        .map(|e| e * 0.002 * 60.0 / 0.1f64.sqrt())
+        .collect();
+    let n = analyse(&rate, 0.1, Taus::Octave).noise;
+    assert!(n.resolved[1].is_resolved(), "{n:?}");
+    for i in [2, 3] {
+        assert!(!n.resolved[i].is_resolved(), "{}: {n:?}", TERM_KEYS[i]);
+        assert!(n.resolved[i].reason().is_some());
+    }
+}
+
+/// A term the fit keeps but the curve barely shows is weak, with the
+/// misfit widening its error when the points stray from the model.
+#[test]
+fn a_term_lost_in_scatter_is_weak_not_resolved() {
+    // A flicker floor of 0.001 under white noise of 0.1 at tau 1 s: at the
+    // longest tau (1024 s) the floor is a few percent of the curve.
+    let points: Vec<Point> = (0..11)
+        .map(|k| {
+            let tau = 2f64.powi(k);
+            let floor = 0.664 * 0.001;
+            let wobble = if k % 2 == 0 { 1.15 } else { 0.87 };
+            let adev = (0.01 / tau + floor * floor).sqrt() * wobble;
+            Point {
+                tau_s: tau,
+                m: 1 << k,
+                adev,
+                lo: adev * 0.9,
+                hi: adev * 1.1,
+                edf: 1000.0,
+                alpha: 0,
+            }
+        })
+        .collect();
+    let n = fit_noise(&points);
+    assert!(n.resolved[1].is_resolved(), "{n:?}");
+    assert!(
+        matches!(n.resolved[2], Resolved::Weak { misfit, .. } if misfit > 1.0)
+            || n.resolved[2] == Resolved::AtZero,
+        "{n:?}"
+    );
 }
