@@ -160,6 +160,16 @@ pub fn stderr(o: &std::process::Output) -> String {
     String::from_utf8_lossy(&o.stderr).into_owned()
 }
 
+/// Held by tests that run a simulated bench paced against the wall clock
+/// (`sim serve` at 60-200x: a starved reader loses frames, which the run
+/// rightly refuses to judge) and by the README test, whose selfchecks and
+/// 2 kHz link benchmark would starve them. They take turns; the rest of
+/// the suite runs beside them.
+pub fn wall_clock_turn() -> std::sync::MutexGuard<'static, ()> {
+    static TURN: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    TURN.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
+}
+
 /// `gyrobench sim serve` in its own process, killed when dropped.
 pub struct SimServe {
     child: std::process::Child,

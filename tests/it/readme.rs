@@ -196,6 +196,7 @@ fn exited(status: std::process::ExitStatus, want: i32) -> bool {
 
 #[test]
 fn the_readme_commands_run_top_to_bottom_from_a_fresh_clone() {
+    let _turn = crate::common::wall_clock_turn();
     let lines = readme_lines();
     assert!(lines.len() >= 20, "{lines:#?}");
     assert_eq!(lines[0].args, ["run", "procedures/acceptance.toml"]);

@@ -308,6 +308,7 @@ fn a_procedure_through_sim_serve_over_tcp_and_ptys_gives_the_embedded_verdict() 
     let dir = temp_dir("run-served");
     let proc_path = dir.join("quick.toml");
     std::fs::write(&proc_path, QUICK).expect("procedure");
+    let _turn = crate::common::wall_clock_turn();
     let served = SimServe::start(&dir, 60.0);
     let p = proc_path.to_str().expect("utf-8");
     let embedded = dir.join("embedded");

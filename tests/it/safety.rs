@@ -64,6 +64,7 @@ ramp_c_per_min = 3.0
 #[test]
 fn a_cleanup_ramp_the_host_steps_reaches_its_set_point_and_is_read_back() {
     let dir = temp_dir("safety-ramp");
+    let _turn = crate::common::wall_clock_turn();
     let served = SimServe::start(&dir, 100.0);
     let bench = served.bench_file(&dir, "tcp://", 100.0);
     let p = write(&dir, "ramped.toml", RAMPED);
@@ -157,6 +158,7 @@ fn a_panic_mid_run_still_brings_the_bench_to_its_safe_state() {
 #[test]
 fn a_device_run_stopped_by_sigterm_or_killed_through_sim_serve_ends_safe_and_resumes() {
     let dir = temp_dir("safety-served");
+    let _turn = crate::common::wall_clock_turn();
     let served = SimServe::start(&dir, 200.0);
     let bench = served.bench_file(&dir, "tcp://", 200.0);
     let p = write(&dir, "mini.toml", MINI);
