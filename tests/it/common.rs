@@ -167,7 +167,8 @@ pub fn stderr(o: &std::process::Output) -> String {
 /// the suite runs beside them.
 pub fn wall_clock_turn() -> std::sync::MutexGuard<'static, ()> {
     static TURN: std::sync::Mutex<()> = std::sync::Mutex::new(());
-    TURN.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
+    TURN.lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner)
 }
 
 /// `gyrobench sim serve` in its own process, killed when dropped.
