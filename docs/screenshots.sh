@@ -6,7 +6,8 @@
 #
 #   docs/screenshots.sh
 #
-# Needs: chromium and pdftoppm (Debian: apt-get install chromium poppler-utils).
+# Needs: chromium and pdftoppm (Debian: apt-get install chromium poppler-utils);
+# for the station, chromium-driver and .venv with selenium (.ci/run makes it).
 set -euo pipefail
 
 cd "$(dirname "$0")/.."
@@ -44,3 +45,33 @@ chromium --headless --no-sandbox --disable-gpu --no-pdf-header-footer \
     --print-to-pdf="$work/fail.pdf" "file://$work/fail/report.html" 2>/dev/null
 pdftoppm -r 70 -png -f 1 -l 1 -singlefile "$work/fail.pdf" "$img/report-fail-a4"
 echo "$img/report-fail-a4.png"
+
+# The station during an acceptance at 2000x, driven as an operator would.
+if [ -x .venv/bin/python ] && .venv/bin/python -c "import selenium" 2>/dev/null; then
+    $gb station --listen 127.0.0.1:0 --db none --runs "$work/station" --speed 2000 >"$work/station.out" 2>/dev/null &
+    station=$!
+    sleep 1.5
+    url=$(head -1 "$work/station.out" | cut -d' ' -f2)
+    .venv/bin/python - "$url" "$img/station.png" <<'PY'
+import sys, time
+from selenium import webdriver
+from selenium.webdriver.common.by import By
+from selenium.webdriver.common.keys import Keys
+o = webdriver.ChromeOptions()
+for a in ("--headless=new", "--no-sandbox", "--disable-gpu", "--window-size=1400,1150"):
+    o.add_argument(a)
+import shutil
+d = webdriver.Chrome(options=o, service=webdriver.ChromeService(executable_path=shutil.which("chromedriver")))
+d.get(sys.argv[1]); time.sleep(1)
+d.find_element(By.CSS_SELECTOR, "#procedure option[value='acceptance.toml']").click()
+d.find_element(By.ID, "serial").send_keys("RL16-0042", Keys.ENTER)
+d.switch_to.active_element.send_keys("ann", Keys.ENTER)
+d.find_element(By.ID, "start").click()
+time.sleep(9)
+d.save_screenshot(sys.argv[2]); d.quit()
+PY
+    kill -TERM "$station"; wait "$station" || true
+    echo "$img/station.png"
+else
+    echo "screenshots: no .venv with selenium: the station was not shot" >&2
+fi

@@ -25,6 +25,7 @@ pub mod runlog;
 pub mod sequencer;
 pub mod session;
 pub mod sim;
+pub mod station;
 pub mod study;
 pub mod transport;
 pub mod twin;

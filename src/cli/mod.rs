@@ -56,6 +56,7 @@ mod replay;
 mod results;
 mod run;
 mod sim;
+mod station;
 mod twin;
 
 use std::io::Write;
@@ -180,6 +181,8 @@ enum Command {
     /// The simulated RL-16 and its bench (digital twin).
     #[command(subcommand, after_help = after_help!("gyrobench twin study", plain))]
     Twin(twin::TwinCommand),
+    /// The operator's page: run, watch and answer procedures from a browser.
+    Station(station::StationArgs),
     /// Simulated instruments speaking the real protocols.
     #[command(subcommand, after_help = after_help!("gyrobench sim serve", plain))]
     Sim(sim::SimCommand),
@@ -213,6 +216,7 @@ pub fn main() -> ExitCode {
         Command::Calibrate(args) => calibrate::run(args),
         Command::Twin(cmd) => twin::run(cmd),
         Command::Sim(cmd) => sim::run(cmd),
+        Command::Station(args) => station::run(args),
     };
     match result {
         Ok(outcome) => ExitCode::from(outcome.code()),

@@ -166,7 +166,7 @@ fn parse_inject(s: &str) -> Result<(f64, Fault)> {
 /// Slowest and fastest pacing of the embedded bench (factors over real time).
 const SPEED_RANGE: (f64, f64) = (1e-3, 1e6);
 
-fn pacing(speed: &str) -> Result<Pacing> {
+pub(super) fn pacing(speed: &str) -> Result<Pacing> {
     if speed == "max" {
         return Ok(Pacing::Max);
     }

@@ -229,6 +229,13 @@ pub trait Progress {
     /// Ask the operator to confirm `text`; returns when confirmed. The
     /// default confirms at once (no operator).
     fn prompt(&mut self, _text: &str) {}
+    /// Whether an operator answers prompts even on a simulated bench (a
+    /// station page); else a simulated run goes on without asking.
+    fn answers_prompts(&self) -> bool {
+        false
+    }
+    /// A measurement was computed.
+    fn measured(&mut self, _m: &measure::Measurement) {}
 }
 
 /// No progress display.
@@ -578,6 +585,7 @@ impl Run<'_> {
                     Level::Warning
                 };
                 self.log(level, &msg)?;
+                self.progress.measured(&meas);
                 self.measurements.push(meas);
                 Ok(())
             }
@@ -585,7 +593,7 @@ impl Run<'_> {
             StepKind::Prompt { text } => {
                 self.log(Level::Info, &format!("prompt: {text}"))?;
                 // Simulated benches have no operator to wait for.
-                if !self.bench.is_simulated() {
+                if !self.bench.is_simulated() || self.progress.answers_prompts() {
                     self.progress.prompt(text);
                     self.log(Level::Info, "operator confirmed")?;
                 }

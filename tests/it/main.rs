@@ -24,4 +24,5 @@ mod results;
 mod resume;
 mod run;
 mod safety;
+mod station;
 mod sweep;

@@ -160,7 +160,10 @@ fn serve_and_stop(line: &Line, work: &Path) {
     let mut endpoints = std::io::BufReader::new(child.stdout.take().expect("stdout"));
     endpoints.read_line(&mut first).expect("stdout");
     let err = || std::fs::read_to_string(&err_file).unwrap_or_default();
-    if !first.starts_with("chamber espec-ascii tcp://127.0.0.1:") {
+    // `sim serve` prints its endpoints, `station` its URL.
+    if !first.starts_with("chamber espec-ascii tcp://127.0.0.1:")
+        && !first.starts_with("station http://127.0.0.1:")
+    {
         let _killed = child.kill();
         let _reaped = child.wait();
         panic!(

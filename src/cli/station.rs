@@ -1,0 +1,125 @@
+//! `gyrobench station [--bench FILE] [--procedures DIR] [--listen ADDR]`:
+//! the operator's page, served until Ctrl-C.
+
+use std::net::SocketAddr;
+use std::path::PathBuf;
+
+use anyhow::{Context, Result};
+use clap::Args;
+
+use super::{Outcome, Usage};
+use crate::station::{Config, Station, new_token, router};
+
+#[derive(Debug, Args)]
+#[command(after_help = after_help!(
+    "gyrobench station --procedures procedures",
+    "0 stopped with Ctrl-C or SIGTERM (a run going on is aborted first: the bench goes to its safe state), \
+     1 error (the address cannot be taken, a bench file that does not load), 2 usage (bad arguments)"
+))]
+pub struct StationArgs {
+    /// Bench file (default: the embedded simulated bench, on virtual time)
+    #[arg(long)]
+    pub bench: Option<PathBuf>,
+    /// The procedures the page offers (every `*.toml` in it)
+    #[arg(long, default_value = "procedures")]
+    pub procedures: PathBuf,
+    /// Where run directories go
+    #[arg(long, default_value = "runs")]
+    pub runs: PathBuf,
+    /// Address to serve on; anything but loopback is said loudly (the
+    /// token in the URL is then all that keeps others out)
+    #[arg(long, default_value = "127.0.0.1:8700")]
+    pub listen: SocketAddr,
+    /// Simulated bench speed: `max` or a factor over real time
+    #[arg(long, default_value = "max")]
+    pub speed: String,
+    /// The results store (as `run --db`)
+    #[arg(long = "db", value_name = "STORE")]
+    pub db: Option<String>,
+    /// The access token (default: a fresh random one)
+    #[arg(long)]
+    pub token: Option<String>,
+}
+
+pub fn run(args: StationArgs) -> Result<Outcome> {
+    let pacing = super::run::pacing(&args.speed)?;
+    let bench = super::check::load_bench(args.bench.as_ref())?;
+    if !args.procedures.is_dir() {
+        return Err(Usage(format!(
+            "{} is not a directory of procedures; give one with --procedures",
+            args.procedures.display()
+        ))
+        .into());
+    }
+    let token = match args.token {
+        Some(t) if t.len() < 16 || !t.chars().all(|c| c.is_ascii_alphanumeric()) => {
+            return Err(Usage("a station token is at least 16 letters or digits".into()).into());
+        }
+        Some(t) => t,
+        None => new_token(),
+    };
+    let store = crate::results::Location::resolve(
+        args.db.as_deref(),
+        bench.results.as_ref().and_then(|r| r.db.as_deref()),
+    );
+    let station = Station::new(Config {
+        bench_label: args
+            .bench
+            .as_ref()
+            .map_or("embedded".into(), |p| p.display().to_string()),
+        bench,
+        procedures: args.procedures,
+        runs: args.runs,
+        store,
+        speed: args.speed,
+        pacing,
+        token: token.clone(),
+        db: args.db,
+    });
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .context("starting the async runtime")?;
+    rt.block_on(async move {
+        let listener = tokio::net::TcpListener::bind(args.listen)
+            .await
+            .with_context(|| format!("serving the station on {}", args.listen))?;
+        let addr = listener.local_addr().context("the station's address")?;
+        if !addr.ip().is_loopback() {
+            errln!(
+                "warning: the station listens on {addr}, beyond this computer: anyone with the URL below (its token) can run the bench"
+            );
+        }
+        outln!("station http://{addr}/?token={token}")?;
+        errln!("open the URL above in a browser; Ctrl-C stops the station");
+        let app = router(station.clone());
+        let stopping = station.clone();
+        axum::serve(listener, app)
+            .with_graceful_shutdown(async move {
+                stop_signal().await;
+                errln!("stopping: a run going on is aborted and its cleanup runs first");
+                let _not_running = stopping.abort();
+                stopping.wait_idle().await;
+            })
+            .await
+            .context("serving the station")
+    })?;
+    Ok(Outcome::Success)
+}
+
+/// Ctrl-C or SIGTERM.
+async fn stop_signal() {
+    use tokio::signal::unix::{SignalKind, signal};
+    match signal(SignalKind::terminate()) {
+        Ok(mut term) => {
+            tokio::select! {
+                _ = tokio::signal::ctrl_c() => {}
+                _ = term.recv() => {}
+            }
+        }
+        Err(_) => {
+            let _ = tokio::signal::ctrl_c().await;
+        }
+    }
+}

@@ -1,0 +1,726 @@
+//! `gyrobench station`: the operator's page. A local web app (axum) that
+//! starts runs on the bench through the same session code `run` uses, and
+//! shows them live to any number of browsers (server-sent events); the
+//! state lives here, so a browser closed, reloaded or opened later sees the
+//! run from its start.
+//!
+//! Every state change is a POST carrying the station's token (printed with
+//! the URL at start): another site's page cannot post to it (a custom
+//! header needs a CORS preflight the station never grants), and on a lab
+//! network nobody without the URL can.
+
+pub mod state;
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::Duration;
+
+use axum::Router;
+use axum::extract::{Path as UrlPath, Query, State};
+use axum::http::{HeaderMap, StatusCode, header};
+use axum::response::sse::{Event, KeepAlive, Sse};
+use axum::response::{Html, IntoResponse, Response};
+use axum::routing::{get, post};
+use serde::{Deserialize, Serialize};
+
+use crate::bench::BenchConfig;
+use crate::procedure::Procedure;
+use crate::procedure::estimate::estimate;
+use crate::sequencer::interrupt::Interrupt;
+use crate::session::{self, Place, Plan};
+use crate::twin::config::TwinConfig;
+use state::{Reporter, RunView, Shared, StepView};
+
+/// How the station runs its benches.
+#[derive(Debug, Clone)]
+pub struct Config {
+    /// The bench.
+    pub bench: BenchConfig,
+    /// The bench as named to the operator (`embedded` or the file).
+    pub bench_label: String,
+    /// Where the procedures are (`*.toml`).
+    pub procedures: PathBuf,
+    /// Where run directories go.
+    pub runs: PathBuf,
+    /// The results store.
+    pub store: crate::results::Location,
+    /// `max` or a factor (the embedded bench).
+    pub speed: String,
+    /// Pacing of the embedded bench.
+    pub pacing: crate::clock::Pacing,
+    /// Token every state change carries.
+    pub token: String,
+    /// The store as given (`--db`), for resumed runs.
+    pub db: Option<String>,
+}
+
+/// The station: its configuration, the board and the run going on.
+#[derive(Debug)]
+pub struct Station {
+    cfg: Config,
+    shared: Arc<Shared>,
+    /// The running run's stop request (none when idle).
+    interrupt: std::sync::Mutex<Option<Arc<Interrupt>>>,
+    runs_started: std::sync::atomic::AtomicU64,
+}
+
+/// A procedure the page offers.
+#[derive(Debug, Clone, Serialize)]
+pub struct Offer {
+    /// File name in the procedures directory.
+    pub file: String,
+    /// Procedure name (or the file's, when it does not load).
+    pub name: String,
+    /// Its description.
+    pub description: String,
+    /// Device time it needs at least, s.
+    pub device_s: Option<f64>,
+    /// Its prompt steps (a checklist for the operator).
+    pub prompts: Vec<String>,
+    /// Why it cannot run, when `check` refuses it.
+    pub problem: Option<String>,
+}
+
+/// Why the station refused a request.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum Refused {
+    /// Missing or wrong token.
+    #[error("this needs the station's token (the URL printed at start carries it)")]
+    Token,
+    /// A run is going on.
+    #[error("the bench is busy: run {0} is going on; wait for it or abort it")]
+    Busy(u64),
+    /// Bad request.
+    #[error("{0}")]
+    Bad(String),
+    /// Nothing of that name.
+    #[error("{0}")]
+    NotFound(String),
+}
+
+impl IntoResponse for Refused {
+    fn into_response(self) -> Response {
+        let code = match self {
+            Self::Token => StatusCode::FORBIDDEN,
+            Self::Busy(_) => StatusCode::CONFLICT,
+            Self::Bad(_) => StatusCode::BAD_REQUEST,
+            Self::NotFound(_) => StatusCode::NOT_FOUND,
+        };
+        (
+            code,
+            axum::Json(serde_json::json!({ "error": self.to_string() })),
+        )
+            .into_response()
+    }
+}
+
+/// A start request.
+#[derive(Debug, Clone, Deserialize)]
+pub struct Start {
+    /// File name of the procedure (as offered).
+    pub procedure: String,
+    /// Unit serial (scanned or typed).
+    pub serial: String,
+    /// Who runs it.
+    #[serde(default)]
+    pub operator: String,
+}
+
+impl Station {
+    /// A station with nothing run yet.
+    pub fn new(cfg: Config) -> Arc<Self> {
+        Arc::new(Self {
+            cfg,
+            shared: Arc::new(Shared::default()),
+            interrupt: std::sync::Mutex::new(None),
+            runs_started: std::sync::atomic::AtomicU64::new(0),
+        })
+    }
+
+    /// The board (tests and the event streams read it).
+    pub fn shared(&self) -> &Arc<Shared> {
+        &self.shared
+    }
+
+    /// The procedures of the directory, checked against the bench.
+    pub fn offers(&self) -> Vec<Offer> {
+        let mut files: Vec<PathBuf> = std::fs::read_dir(&self.cfg.procedures)
+            .map(|d| {
+                d.filter_map(|e| Some(e.ok()?.path()))
+                    .filter(|p| p.extension().is_some_and(|x| x == "toml"))
+                    .collect()
+            })
+            .unwrap_or_default();
+        files.sort();
+        files
+            .iter()
+            .map(|p| {
+                let file = p
+                    .file_name()
+                    .map(|f| f.to_string_lossy().into_owned())
+                    .unwrap_or_default();
+                match Procedure::load(p, &self.cfg.bench) {
+                    Ok(proc_) => Offer {
+                        file,
+                        name: proc_.meta.name.clone(),
+                        description: proc_.meta.description.clone(),
+                        device_s: Some(
+                            estimate(&proc_, &self.cfg.bench)
+                                .iter()
+                                .map(|(_, e)| e.min_s)
+                                .sum(),
+                        ),
+                        prompts: proc_
+                            .steps()
+                            .filter_map(|s| match &s.kind {
+                                crate::procedure::StepKind::Prompt { text } => Some(text.clone()),
+                                _ => None,
+                            })
+                            .collect(),
+                        problem: None,
+                    },
+                    Err(e) => Offer {
+                        name: file.trim_end_matches(".toml").to_owned(),
+                        file,
+                        description: String::new(),
+                        device_s: None,
+                        prompts: Vec::new(),
+                        problem: Some(e.to_string()),
+                    },
+                }
+            })
+            .collect()
+    }
+
+    /// Start a run: refused when the serial is empty, the procedure does
+    /// not pass `check`, or the bench is busy.
+    pub fn start(self: &Arc<Self>, req: &Start) -> Result<u64, Refused> {
+        let serial = req.serial.trim();
+        if serial.is_empty() {
+            return Err(Refused::Bad(
+                "scan or type the unit's serial number first".into(),
+            ));
+        }
+        if serial.chars().any(char::is_control) || serial.len() > 64 {
+            return Err(Refused::Bad(
+                "a serial number is at most 64 characters, without control characters".into(),
+            ));
+        }
+        let offer = self
+            .offers()
+            .into_iter()
+            .find(|o| o.file == req.procedure)
+            .ok_or_else(|| Refused::NotFound(format!("no procedure {}", req.procedure)))?;
+        if let Some(problem) = offer.problem {
+            return Err(Refused::Bad(format!(
+                "{} does not pass check: {problem}",
+                offer.file
+            )));
+        }
+        let path = self.cfg.procedures.join(&offer.file);
+        let procedure = Procedure::load(&path, &self.cfg.bench)
+            .map_err(|e| Refused::Bad(format!("{} does not pass check: {e}", offer.file)))?;
+        let plan = Plan {
+            station: session::station(&self.cfg.bench),
+            store: self.cfg.store.clone(),
+            procedure_path: path.display().to_string(),
+            bench_label: self.cfg.bench_label.clone(),
+            bench_cfg: self.cfg.bench.clone(),
+            twin: TwinConfig::default_rl16(),
+            coeffs_file: None,
+            seed: self.runs_started.load(std::sync::atomic::Ordering::Relaxed) + 1,
+            dut: serial.to_owned(),
+            operator: req.operator.trim().to_owned(),
+            speed: self.cfg.speed.clone(),
+            pacing: self.cfg.pacing,
+            faults: Vec::new(),
+            resume: None,
+            procedure,
+        };
+        let place = Place::Auto {
+            base: self.cfg.runs.clone(),
+        };
+        self.launch(plan, place, offer.device_s.unwrap_or(0.0), None)
+    }
+
+    /// Resume run `number` (interrupted: aborted or stopped by an error)
+    /// from its last completed step, in a new part of its directory, as
+    /// `run --resume` does.
+    pub fn resume(self: &Arc<Self>, number: u64) -> Result<u64, Refused> {
+        let dir = {
+            let b = self.shared.lock();
+            let run = b
+                .run
+                .as_ref()
+                .filter(|r| r.number == number)
+                .ok_or_else(|| Refused::NotFound(format!("no run {number} here")))?;
+            if run.phase != "finished"
+                || !matches!(run.outcome.as_deref(), Some("aborted" | "error"))
+                || run.dir.is_empty()
+            {
+                return Err(Refused::Bad(format!(
+                    "run {number} is not an interrupted run: only an aborted run or one stopped by an error resumes"
+                )));
+            }
+            PathBuf::from(&run.dir)
+        };
+        if self.busy().is_some() {
+            return Err(Refused::Busy(
+                self.runs_started.load(std::sync::atomic::Ordering::Relaxed),
+            ));
+        }
+        let locked = session::lock_for_resume(&dir).map_err(|e| Refused::Bad(e.to_string()))?;
+        let plan = session::plan_resume(
+            &dir,
+            self.cfg.pacing,
+            &self.cfg.speed,
+            self.cfg.db.as_deref(),
+        )
+        .map_err(|e| Refused::Bad(e.to_string()))?;
+        let summary = plan.resume.as_ref().map(|r| r.summary.clone());
+        let estimate_s = session::estimated_s(&plan);
+        self.launch(plan, Place::Resume(locked), estimate_s, summary)
+    }
+
+    /// The interrupt of the run going on, if one is.
+    fn busy(&self) -> Option<Arc<Interrupt>> {
+        self.interrupt
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .clone()
+    }
+
+    /// Take the bench for `plan` and run it on a thread of its own.
+    fn launch(
+        self: &Arc<Self>,
+        plan: Plan,
+        place: Place,
+        estimate_s: f64,
+        note: Option<String>,
+    ) -> Result<u64, Refused> {
+        let interrupt = Arc::new(Interrupt::default());
+        {
+            let mut slot = self
+                .interrupt
+                .lock()
+                .unwrap_or_else(std::sync::PoisonError::into_inner);
+            if slot.is_some() {
+                let n = self.runs_started.load(std::sync::atomic::Ordering::Relaxed);
+                return Err(Refused::Busy(n));
+            }
+            *slot = Some(interrupt.clone());
+        }
+        let number = self
+            .runs_started
+            .fetch_add(1, std::sync::atomic::Ordering::Relaxed)
+            + 1;
+        let view = RunView {
+            number,
+            phase: "running".into(),
+            procedure: plan.procedure.meta.name.clone(),
+            serial: plan.dut.clone(),
+            operator: plan.operator.clone(),
+            steps: plan
+                .procedure
+                .steps()
+                .map(|s| StepView {
+                    key: s.key.clone(),
+                    text: s.describe(),
+                })
+                .collect(),
+            estimate_s,
+            events: note.into_iter().collect(),
+            ..RunView::default()
+        };
+        self.shared.update(|b| {
+            b.run = Some(view);
+            b.samples.clear();
+            b.answered = 0;
+        });
+        let station = self.clone();
+        let spawned = std::thread::Builder::new()
+            .name(format!("run-{number}"))
+            .spawn(move || station.execute(plan, place, interrupt));
+        if let Err(e) = spawned {
+            *self
+                .interrupt
+                .lock()
+                .unwrap_or_else(std::sync::PoisonError::into_inner) = None;
+            return Err(Refused::Bad(format!("cannot start the run: {e}")));
+        }
+        Ok(number)
+    }
+
+    /// The run, on its own thread and runtime, as `run` does it.
+    fn execute(self: Arc<Self>, plan: Plan, place: Place, interrupt: Arc<Interrupt>) {
+        let mut reporter = Reporter {
+            shared: self.shared.clone(),
+            interrupt: interrupt.clone(),
+            started: std::time::Instant::now(),
+            prompts: 0,
+        };
+        let finished = tokio::runtime::Builder::new_multi_thread()
+            .worker_threads(2)
+            .enable_all()
+            .build()
+            .map_err(|e| format!("starting the async runtime: {e}"))
+            .and_then(|rt| {
+                session::execute(plan, place, &rt, &mut reporter, interrupt)
+                    .map_err(|e| e.to_string())
+            });
+        self.shared.update(|b| {
+            let Some(run) = &mut b.run else {
+                return;
+            };
+            run.phase = "finished".into();
+            run.prompt = None;
+            match &finished {
+                Ok(f) => {
+                    run.outcome = Some(f.report.outcome_word().to_lowercase());
+                    run.summary = Some(f.report.render_text());
+                    run.bench_left = f.report.bench_left.as_ref().map(|l| l.summary.clone());
+                    run.dir = f.dir.display().to_string();
+                    run.link = Some([
+                        f.report.link.frames,
+                        f.report.link.lost_frames,
+                        f.report.link.crc_errors,
+                    ]);
+                    if let Some(e) = &f.report_error {
+                        run.error = Some(format!("the report could not be written: {e}"));
+                    }
+                }
+                Err(e) => {
+                    run.outcome = Some("error".into());
+                    run.error = Some(e.clone());
+                }
+            }
+        });
+        *self
+            .interrupt
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner) = None;
+    }
+
+    /// Ask the running run to stop: the bench goes to its safe state and
+    /// cleanup runs, as Ctrl-C does.
+    pub fn abort(&self) -> Result<(), Refused> {
+        let slot = self
+            .interrupt
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        let Some(i) = slot.as_ref() else {
+            return Err(Refused::Bad("no run is going on".into()));
+        };
+        i.request("abort from the station page");
+        drop(slot);
+        self.shared.update(|b| {
+            if let Some(run) = &mut b.run {
+                run.abort_requested = true;
+                run.events
+                    .push("abort asked: the bench goes to its safe state, cleanup runs".into());
+            }
+        });
+        Ok(())
+    }
+
+    /// Until no run is going on.
+    pub async fn wait_idle(&self) {
+        loop {
+            let busy = self
+                .interrupt
+                .lock()
+                .unwrap_or_else(std::sync::PoisonError::into_inner)
+                .is_some();
+            if !busy {
+                return;
+            }
+            tokio::time::sleep(Duration::from_millis(100)).await;
+        }
+    }
+
+    /// A file of run `number`'s directory: its report page or its log.
+    fn run_file(&self, number: u64, name: &str) -> Result<PathBuf, Refused> {
+        let b = self.shared.lock();
+        let run = b
+            .run
+            .as_ref()
+            .filter(|r| r.number == number && !r.dir.is_empty())
+            .ok_or_else(|| Refused::NotFound(format!("no run {number} here")))?;
+        let path = Path::new(&run.dir).join(name);
+        if path.is_file() {
+            Ok(path)
+        } else {
+            Err(Refused::NotFound(format!(
+                "run {number} has no {name} (yet)"
+            )))
+        }
+    }
+
+    fn check_token(&self, headers: &HeaderMap, query: Option<&str>) -> Result<(), Refused> {
+        let given = headers
+            .get("x-gyrobench-token")
+            .and_then(|v| v.to_str().ok())
+            .or(query);
+        if given == Some(self.cfg.token.as_str()) {
+            Ok(())
+        } else {
+            Err(Refused::Token)
+        }
+    }
+}
+
+/// The token in a query string.
+#[derive(Debug, Deserialize)]
+struct TokenQuery {
+    token: Option<String>,
+}
+
+/// A prompt's answer.
+#[derive(Debug, Deserialize)]
+struct Answer {
+    id: u64,
+}
+
+/// A unit's history request.
+#[derive(Debug, Deserialize)]
+struct HistoryQuery {
+    serial: String,
+    token: Option<String>,
+}
+
+const PAGE: &str = include_str!("page.html");
+const UPLOT_JS: &str = include_str!("assets/uPlot.iife.min.js");
+const UPLOT_CSS: &str = include_str!("assets/uPlot.min.css");
+
+/// The station's routes.
+pub fn router(station: Arc<Station>) -> Router {
+    Router::new()
+        .route("/", get(|| async { Html(PAGE) }))
+        .route(
+            "/assets/uPlot.iife.min.js",
+            get(|| async { ([(header::CONTENT_TYPE, "text/javascript")], UPLOT_JS) }),
+        )
+        .route(
+            "/assets/uPlot.min.css",
+            get(|| async { ([(header::CONTENT_TYPE, "text/css")], UPLOT_CSS) }),
+        )
+        .route("/api/procedures", get(procedures))
+        .route("/api/state", get(snapshot))
+        .route("/api/events", get(events))
+        .route("/api/history", get(history))
+        .route("/api/start", post(start))
+        .route("/api/abort", post(abort))
+        .route("/api/answer", post(answer))
+        .route("/api/resume", post(resume))
+        .route("/runs/{number}/{file}", get(run_file))
+        .with_state(station)
+}
+
+type St = State<Arc<Station>>;
+
+async fn procedures(State(s): St, headers: HeaderMap, Query(q): Query<TokenQuery>) -> Response {
+    if let Err(e) = s.check_token(&headers, q.token.as_deref()) {
+        return e.into_response();
+    }
+    let offers = tokio::task::spawn_blocking(move || s.offers())
+        .await
+        .unwrap_or_default();
+    axum::Json(offers).into_response()
+}
+
+/// Everything a page needs, from the run's start.
+#[derive(Debug, Serialize)]
+struct Snapshot {
+    version: u64,
+    run: Option<RunView>,
+    /// Samples from `from` on.
+    from: usize,
+    samples: Vec<state::Sample>,
+    /// When the newest sample arrived at the station, Unix ms.
+    sample_unix_ms: i64,
+}
+
+fn snapshot_of(shared: &Shared, from: usize) -> Snapshot {
+    let b = shared.lock();
+    let from = from.min(b.samples.len());
+    Snapshot {
+        version: b.version,
+        run: b.run.clone(),
+        from,
+        samples: b.samples[from..].to_vec(),
+        sample_unix_ms: b.sample_unix_ms,
+    }
+}
+
+async fn snapshot(State(s): St, headers: HeaderMap, Query(q): Query<TokenQuery>) -> Response {
+    if let Err(e) = s.check_token(&headers, q.token.as_deref()) {
+        return e.into_response();
+    }
+    axum::Json(snapshot_of(&s.shared, 0)).into_response()
+}
+
+/// Server-sent events: the whole run first, then what changed, at most
+/// four times a second and at least once a second.
+async fn events(State(s): St, headers: HeaderMap, Query(q): Query<TokenQuery>) -> Response {
+    if let Err(e) = s.check_token(&headers, q.token.as_deref()) {
+        return e.into_response();
+    }
+    struct Cursor {
+        station: Arc<Station>,
+        sent_samples: usize,
+        run: u64,
+        first: bool,
+    }
+    let cursor = Cursor {
+        station: s,
+        sent_samples: 0,
+        run: 0,
+        first: true,
+    };
+    let stream = futures_util::stream::unfold(cursor, |mut c| async move {
+        if !c.first {
+            let shared = c.station.shared.clone();
+            let _woken =
+                tokio::time::timeout(Duration::from_secs(1), shared.changed.notified()).await;
+            tokio::time::sleep(Duration::from_millis(250)).await;
+        }
+        c.first = false;
+        let number = c.station.shared.lock().run.as_ref().map_or(0, |r| r.number);
+        if number != c.run {
+            c.run = number;
+            c.sent_samples = 0;
+        }
+        let snap = snapshot_of(&c.station.shared, c.sent_samples);
+        c.sent_samples = snap.from + snap.samples.len();
+        let event = Event::default()
+            .event("state")
+            .json_data(&snap)
+            .unwrap_or_else(|_| Event::default().event("state").data("{}"));
+        Some((Ok::<_, std::convert::Infallible>(event), c))
+    });
+    Sse::new(stream)
+        .keep_alive(KeepAlive::default())
+        .into_response()
+}
+
+async fn history(State(s): St, headers: HeaderMap, Query(q): Query<HistoryQuery>) -> Response {
+    if let Err(e) = s.check_token(&headers, q.token.as_deref()) {
+        return e.into_response();
+    }
+    let store = s.cfg.store.clone();
+    let serial = q.serial;
+    let found = tokio::task::spawn_blocking(move || -> Result<serde_json::Value, String> {
+        let Some(mut st) = crate::results::Store::open(&store).map_err(|e| e.to_string())? else {
+            return Ok(serde_json::json!({ "runs": [], "note": "no results store (--db none)" }));
+        };
+        let h = st.unit(&serial).map_err(|e| e.to_string())?;
+        serde_json::to_value(&h).map_err(|e| e.to_string())
+    })
+    .await;
+    match found {
+        Ok(Ok(v)) => axum::Json(v).into_response(),
+        Ok(Err(e)) => Refused::NotFound(e).into_response(),
+        Err(e) => Refused::Bad(e.to_string()).into_response(),
+    }
+}
+
+async fn start(State(s): St, headers: HeaderMap, axum::Json(req): axum::Json<Start>) -> Response {
+    if let Err(e) = s.check_token(&headers, None) {
+        return e.into_response();
+    }
+    match tokio::task::spawn_blocking(move || s.start(&req)).await {
+        Ok(Ok(n)) => axum::Json(serde_json::json!({ "run": n })).into_response(),
+        Ok(Err(e)) => e.into_response(),
+        Err(e) => Refused::Bad(e.to_string()).into_response(),
+    }
+}
+
+async fn abort(State(s): St, headers: HeaderMap) -> Response {
+    if let Err(e) = s.check_token(&headers, None) {
+        return e.into_response();
+    }
+    match s.abort() {
+        Ok(()) => axum::Json(serde_json::json!({ "aborting": true })).into_response(),
+        Err(e) => e.into_response(),
+    }
+}
+
+async fn answer(State(s): St, headers: HeaderMap, axum::Json(a): axum::Json<Answer>) -> Response {
+    if let Err(e) = s.check_token(&headers, None) {
+        return e.into_response();
+    }
+    if s.shared.answer(a.id) {
+        axum::Json(serde_json::json!({ "answered": a.id })).into_response()
+    } else {
+        Refused::Bad(format!("prompt {} is not waiting", a.id)).into_response()
+    }
+}
+
+/// Which run to resume.
+#[derive(Debug, Deserialize)]
+struct ResumeRequest {
+    run: u64,
+}
+
+async fn resume(
+    State(s): St,
+    headers: HeaderMap,
+    axum::Json(r): axum::Json<ResumeRequest>,
+) -> Response {
+    if let Err(e) = s.check_token(&headers, None) {
+        return e.into_response();
+    }
+    match tokio::task::spawn_blocking(move || s.resume(r.run)).await {
+        Ok(Ok(n)) => axum::Json(serde_json::json!({ "run": n })).into_response(),
+        Ok(Err(e)) => e.into_response(),
+        Err(e) => Refused::Bad(e.to_string()).into_response(),
+    }
+}
+
+async fn run_file(
+    State(s): St,
+    headers: HeaderMap,
+    UrlPath((number, file)): UrlPath<(u64, String)>,
+    Query(q): Query<TokenQuery>,
+) -> Response {
+    if let Err(e) = s.check_token(&headers, q.token.as_deref()) {
+        return e.into_response();
+    }
+    let (name, kind) = match file.as_str() {
+        "report.html" => ("report.html", "text/html; charset=utf-8"),
+        "report.json" => ("report.json", "application/json"),
+        "run.mcap" => ("run.mcap", "application/octet-stream"),
+        _ => return Refused::NotFound(format!("no {file} in a run")).into_response(),
+    };
+    let path = match s.run_file(number, name) {
+        Ok(p) => p,
+        Err(e) => return e.into_response(),
+    };
+    match tokio::task::spawn_blocking(move || std::fs::read(&path))
+        .await
+        .unwrap_or_else(|e| Err(std::io::Error::other(e)))
+    {
+        Ok(bytes) => {
+            let mut headers = vec![(header::CONTENT_TYPE, kind.to_owned())];
+            if name == "run.mcap" {
+                headers.push((
+                    header::CONTENT_DISPOSITION,
+                    format!("attachment; filename=\"run-{number}.mcap\""),
+                ));
+            }
+            let mut r = bytes.into_response();
+            for (k, v) in headers {
+                if let Ok(v) = v.parse() {
+                    r.headers_mut().insert(k, v);
+                }
+            }
+            r
+        }
+        Err(e) => Refused::NotFound(format!("{name} of run {number}: {e}")).into_response(),
+    }
+}
+
+/// A fresh random token (16 bytes, hex).
+pub fn new_token() -> String {
+    session::new_run_id()
+}

@@ -1,0 +1,272 @@
+//! What the station knows of its run, as the page shows it: built by the
+//! run's progress callbacks, read by every browser. A page opened late (or
+//! reloaded) gets the whole run from its start.
+
+use std::sync::{Arc, Condvar, Mutex, MutexGuard, PoisonError};
+
+use serde::Serialize;
+
+use crate::analysis::series::Interval;
+use crate::procedure::Step;
+use crate::sequencer::measure::Measurement;
+use crate::sequencer::{BenchState, Progress};
+
+/// One step of the plan.
+#[derive(Debug, Clone, Serialize)]
+pub struct StepView {
+    /// Key in the procedure (`main.3`).
+    pub key: String,
+    /// What it does, in words.
+    pub text: String,
+}
+
+/// A measurement as computed.
+#[derive(Debug, Clone, Serialize)]
+pub struct MeasurementView {
+    /// Name.
+    pub name: String,
+    /// Value (null when it could not be computed).
+    pub value: Option<f64>,
+    /// Unit.
+    pub unit: String,
+    /// `low..high`.
+    pub limits: String,
+    /// `pass`, `fail` or `error`.
+    pub outcome: String,
+}
+
+/// A question the run waits on.
+#[derive(Debug, Clone, Serialize)]
+pub struct PromptView {
+    /// Its number in the run (answers name it).
+    pub id: u64,
+    /// The procedure's text.
+    pub text: String,
+}
+
+/// The run, without its samples.
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct RunView {
+    /// Station-local number of the run (1, 2, ...).
+    pub number: u64,
+    /// `running` or `finished`.
+    pub phase: String,
+    /// Procedure name.
+    pub procedure: String,
+    /// Unit serial.
+    pub serial: String,
+    /// Operator.
+    pub operator: String,
+    /// Run directory.
+    pub dir: String,
+    /// Every step in run order.
+    pub steps: Vec<StepView>,
+    /// Index of the step running now.
+    pub current: Option<usize>,
+    /// Device time, s.
+    pub device_s: f64,
+    /// Device time the procedure needs at least (`check`'s estimate), s.
+    pub estimate_s: f64,
+    /// Wall time since the start, s.
+    pub elapsed_wall_s: f64,
+    /// Measurements as they were computed.
+    pub measurements: Vec<MeasurementView>,
+    /// Step starts and notes, oldest first.
+    pub events: Vec<String>,
+    /// The question the run waits on.
+    pub prompt: Option<PromptView>,
+    /// Abort was asked (cleanup runs).
+    pub abort_requested: bool,
+    /// `pass`, `fail`, `error` or `aborted` once finished.
+    pub outcome: Option<String>,
+    /// The report's summary lines once finished.
+    pub summary: Option<String>,
+    /// How the bench was left, once finished.
+    pub bench_left: Option<String>,
+    /// Why the run could not start or finish, if so.
+    pub error: Option<String>,
+    /// Gyro link: frames, lost, CRC errors (at the end).
+    pub link: Option<[u64; 3]>,
+}
+
+/// One 1 Hz sample for the charts: device time (h), Earth-removed rate
+/// (deg/h), chamber air, case, block T1, block T2 (degC), table outer and
+/// inner (deg).
+pub type Sample = [f64; 8];
+
+/// The station's shared knowledge.
+#[derive(Debug, Default)]
+pub struct Board {
+    /// The current (or last) run.
+    pub run: Option<RunView>,
+    /// Its samples.
+    pub samples: Vec<Sample>,
+    /// Bumped on every change (browsers wait on it).
+    pub version: u64,
+    /// The answer to prompt `id`, once given.
+    pub answered: u64,
+    /// When the newest sample arrived, Unix ms (a page's latency is its
+    /// arrival minus this).
+    pub sample_unix_ms: i64,
+}
+
+/// The board behind a lock, with a wake-up for the run waiting on a
+/// prompt.
+#[derive(Debug, Default)]
+pub struct Shared {
+    board: Mutex<Board>,
+    answer: Condvar,
+    /// Woken on every change (the event streams).
+    pub changed: tokio::sync::Notify,
+}
+
+impl Shared {
+    /// The board, locked (a poisoned lock still holds the last state).
+    pub fn lock(&self) -> MutexGuard<'_, Board> {
+        self.board.lock().unwrap_or_else(PoisonError::into_inner)
+    }
+
+    /// Change the board and tell the browsers.
+    pub fn update(&self, f: impl FnOnce(&mut Board)) {
+        {
+            let mut b = self.lock();
+            f(&mut b);
+            b.version += 1;
+        }
+        self.changed.notify_waiters();
+    }
+
+    /// Answer prompt `id`; false when no such prompt waits.
+    pub fn answer(&self, id: u64) -> bool {
+        let mut ok = false;
+        self.update(|b| {
+            if let Some(run) = &mut b.run
+                && run.prompt.as_ref().is_some_and(|p| p.id == id)
+            {
+                run.prompt = None;
+                run.events.push("operator confirmed".into());
+                b.answered = id;
+                ok = true;
+            }
+        });
+        self.answer.notify_all();
+        ok
+    }
+}
+
+/// The run's progress, told to the board.
+pub struct Reporter {
+    /// Where it goes.
+    pub shared: Arc<Shared>,
+    /// Asked to stop (a prompt stops waiting then).
+    pub interrupt: Arc<crate::sequencer::interrupt::Interrupt>,
+    /// Wall clock of the start.
+    pub started: std::time::Instant,
+    /// Prompts asked so far.
+    pub prompts: u64,
+}
+
+impl std::fmt::Debug for Reporter {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Reporter")
+            .field("prompts", &self.prompts)
+            .finish_non_exhaustive()
+    }
+}
+
+impl Progress for Reporter {
+    fn begin(&mut self, dir: &std::path::Path, notes: &[String]) {
+        let dir = dir.display().to_string();
+        self.shared.update(|b| {
+            if let Some(run) = &mut b.run {
+                run.dir = dir;
+                run.events
+                    .extend(notes.iter().map(|n| format!("note: {n}")));
+            }
+        });
+    }
+
+    fn step(&mut self, step: &Step, index: usize, _total: usize) {
+        let line = step.start_message();
+        let wall = self.started.elapsed().as_secs_f64();
+        self.shared.update(|b| {
+            if let Some(run) = &mut b.run {
+                run.current = Some(index);
+                run.elapsed_wall_s = wall;
+                run.events.push(line);
+            }
+        });
+    }
+
+    fn tick(&mut self, st: &BenchState, iv: Option<&Interval>) {
+        let wall = self.started.elapsed().as_secs_f64();
+        let sample = iv.map(|i| {
+            [
+                i.time_s / 3600.0,
+                i.bias_dph(),
+                i.chamber_c,
+                i.tcase_c,
+                i.t1_c,
+                i.t2_c,
+                st.table.angles.outer_deg,
+                st.table.angles.inner_deg,
+            ]
+        });
+        self.shared.update(|b| {
+            if let Some(run) = &mut b.run {
+                run.device_s = st.t_s;
+                run.elapsed_wall_s = wall;
+            }
+            if let Some(s) = sample {
+                b.samples.push(s);
+                b.sample_unix_ms = crate::clock::utc_now().timestamp_millis();
+            }
+        });
+    }
+
+    fn answers_prompts(&self) -> bool {
+        true
+    }
+
+    fn prompt(&mut self, text: &str) {
+        self.prompts += 1;
+        let id = self.prompts;
+        let text = text.to_owned();
+        self.shared.update(|b| {
+            if let Some(run) = &mut b.run {
+                run.prompt = Some(PromptView { id, text });
+            }
+        });
+        // The run waits here until the page answers, or an abort.
+        let mut b = self.shared.lock();
+        while b.answered < id && !self.interrupt.is_requested() {
+            b = self
+                .shared
+                .answer
+                .wait_timeout(b, std::time::Duration::from_millis(200))
+                .unwrap_or_else(PoisonError::into_inner)
+                .0;
+        }
+        drop(b);
+        self.shared.update(|b| {
+            if let Some(run) = &mut b.run {
+                run.prompt = None;
+            }
+        });
+    }
+
+    fn measured(&mut self, m: &Measurement) {
+        let view = MeasurementView {
+            name: m.name.clone(),
+            value: m.value,
+            unit: m.unit.clone(),
+            limits: m.limits_text(),
+            outcome: m.outcome.as_str().to_owned(),
+        };
+        self.shared.update(|b| {
+            if let Some(run) = &mut b.run {
+                run.measurements.push(view);
+            }
+        });
+    }
+}
