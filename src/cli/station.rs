@@ -99,8 +99,7 @@ pub fn run(args: StationArgs) -> Result<Outcome> {
             .with_graceful_shutdown(async move {
                 stop_signal().await;
                 errln!("stopping: a run going on is aborted and its cleanup runs first");
-                let _not_running = stopping.abort();
-                stopping.wait_idle().await;
+                stopping.shut_down().await;
             })
             .await
             .context("serving the station")

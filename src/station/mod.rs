@@ -62,6 +62,9 @@ pub struct Station {
     /// The running run's stop request (none when idle).
     interrupt: std::sync::Mutex<Option<Arc<Interrupt>>>,
     runs_started: std::sync::atomic::AtomicU64,
+    /// Set when the station stops: event streams end, so that open
+    /// browsers do not hold the shutdown.
+    stopping: std::sync::atomic::AtomicBool,
 }
 
 /// A procedure the page offers.
@@ -134,6 +137,7 @@ impl Station {
             shared: Arc::new(Shared::default()),
             interrupt: std::sync::Mutex::new(None),
             runs_started: std::sync::atomic::AtomicU64::new(0),
+            stopping: std::sync::atomic::AtomicBool::new(false),
         })
     }
 
@@ -423,6 +427,16 @@ impl Station {
         Ok(())
     }
 
+    /// The station stops: a run going on is aborted (its cleanup runs)
+    /// and every event stream ends; returns when no run is going on.
+    pub async fn shut_down(&self) {
+        self.stopping
+            .store(true, std::sync::atomic::Ordering::Relaxed);
+        self.shared.changed.notify_waiters();
+        let _not_running = self.abort();
+        self.wait_idle().await;
+    }
+
     /// Until no run is going on.
     pub async fn wait_idle(&self) {
         loop {
@@ -578,6 +592,12 @@ async fn events(State(s): St, headers: HeaderMap, Query(q): Query<TokenQuery>) -
         first: true,
     };
     let stream = futures_util::stream::unfold(cursor, |mut c| async move {
+        if c.station
+            .stopping
+            .load(std::sync::atomic::Ordering::Relaxed)
+        {
+            return None;
+        }
         if !c.first {
             let shared = c.station.shared.clone();
             let _woken =

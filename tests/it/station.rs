@@ -106,7 +106,13 @@ impl Served {
         let _sent = std::process::Command::new("kill")
             .args(["-TERM", &self.child.id().to_string()])
             .status();
-        self.child.wait().expect("station ends")
+        for _ in 0..200 {
+            if let Some(status) = self.child.try_wait().expect("station") {
+                return status;
+            }
+            std::thread::sleep(std::time::Duration::from_millis(100));
+        }
+        panic!("the station did not stop within 20 s of SIGTERM");
     }
 }
 
