@@ -27,6 +27,12 @@ fn travel_s(d: f64, rate: f64, acc: f64) -> f64 {
     }
 }
 
+/// Device time the whole procedure needs at least, s (progress bars, the
+/// station's offer).
+pub fn min_total_s(p: &Procedure, bench: &BenchConfig) -> f64 {
+    estimate(p, bench).iter().map(|(_, e)| e.min_s).sum()
+}
+
 /// Per-step estimates in run order (setup, main, cleanup). The table is
 /// assumed to start at (0, 0) and the chamber at [`START_C`].
 pub fn estimate<'p>(p: &'p Procedure, bench: &BenchConfig) -> Vec<(&'p Step, Estimate)> {
@@ -100,7 +106,7 @@ mod tests {
             &bench,
         )
         .expect("valid");
-        let total: f64 = estimate(&p, &bench).iter().map(|(_, e)| e.min_s).sum();
+        let total = min_total_s(&p, &bench);
         // 6.5 h of records plus the first move (90 deg outer from 0) and settling.
         assert!(
             (total - (23_400.0 + 6.5 + bench.devices.table.settle_s)).abs() < 1e-6,

@@ -13,7 +13,7 @@ use crate::bench::{BenchConfig, open_bench};
 use crate::clock::{Pacing, VirtualClock, utc_now};
 use crate::coeffs::CoeffsFile;
 use crate::procedure::Procedure;
-use crate::procedure::estimate::estimate;
+use crate::procedure::estimate::min_total_s;
 use crate::protocol::frame::LinkStats;
 use crate::report::{Report, render_html};
 use crate::runlog::meta::{ResultMeta, RunMeta};
@@ -751,8 +751,5 @@ pub fn write_report(dir: &Path, report: &Report, result: &RunResult) -> Result<(
 
 /// Device time the procedure needs at least, s (for progress bars).
 pub fn estimated_s(plan: &Plan) -> f64 {
-    estimate(&plan.procedure, &plan.bench_cfg)
-        .iter()
-        .map(|(_, e)| e.min_s)
-        .sum()
+    min_total_s(&plan.procedure, &plan.bench_cfg)
 }

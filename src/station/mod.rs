@@ -25,7 +25,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::bench::BenchConfig;
 use crate::procedure::Procedure;
-use crate::procedure::estimate::estimate;
+use crate::procedure::estimate::min_total_s;
 use crate::sequencer::interrupt::Interrupt;
 use crate::session::{self, Place, Plan};
 use crate::twin::config::TwinConfig;
@@ -168,12 +168,7 @@ impl Station {
                         file,
                         name: proc_.meta.name.clone(),
                         description: proc_.meta.description.clone(),
-                        device_s: Some(
-                            estimate(&proc_, &self.cfg.bench)
-                                .iter()
-                                .map(|(_, e)| e.min_s)
-                                .sum(),
-                        ),
+                        device_s: Some(min_total_s(&proc_, &self.cfg.bench)),
                         prompts: proc_
                             .steps()
                             .filter_map(|s| match &s.kind {

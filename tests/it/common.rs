@@ -160,6 +160,41 @@ pub fn stderr(o: &std::process::Output) -> String {
     String::from_utf8_lossy(&o.stderr).into_owned()
 }
 
+/// The Python of the third-party checks (`$GYROBENCH_TEST_PYTHON`, the
+/// virtualenv `.ci/run` makes). CI must have it; elsewhere a check without
+/// it is skipped and says so (`what` names the check).
+pub fn python(what: &str) -> Option<String> {
+    let p = std::env::var("GYROBENCH_TEST_PYTHON").ok();
+    if p.is_none() {
+        assert!(
+            std::env::var_os("CI").is_none(),
+            "CI runs {what}: set GYROBENCH_TEST_PYTHON (.ci/run makes the virtualenv)"
+        );
+        eprintln!("skipped: {what} (set GYROBENCH_TEST_PYTHON)");
+    }
+    p
+}
+
+/// Run `tests/conformance/SCRIPT` with `python` and `args`; it must succeed
+/// (its output is the failure message).
+pub fn conformance(python: &str, script: &str, args: &[&str]) {
+    let out = std::process::Command::new(python)
+        .arg(
+            Path::new(env!("CARGO_MANIFEST_DIR"))
+                .join("tests/conformance")
+                .join(script),
+        )
+        .args(args)
+        .output()
+        .expect("python runs");
+    assert!(
+        out.status.success(),
+        "{script}: {}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
 /// Held by tests that run a simulated bench paced against the wall clock
 /// (`sim serve` at 60-200x: a starved reader loses frames, which the run
 /// rightly refuses to judge) and by the README test, whose selfchecks and

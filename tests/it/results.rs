@@ -273,31 +273,9 @@ fn lifecycle(db: &str, tag: &str) {
 fn check_junit(xml: &Path, suites: usize) {
     let text = std::fs::read_to_string(xml).expect("junit");
     assert_eq!(text.matches("<testsuite ").count(), suites, "{text}");
-    let python = match std::env::var("GYROBENCH_TEST_PYTHON") {
-        Ok(p) => p,
-        Err(_) => {
-            assert!(
-                std::env::var_os("CI").is_none(),
-                "CI checks JUnit with junitparser: set GYROBENCH_TEST_PYTHON"
-            );
-            eprintln!("skipped: JUnit not checked by junitparser (set GYROBENCH_TEST_PYTHON)");
-            return;
-        }
-    };
-    let out = std::process::Command::new(python)
-        .arg(concat!(
-            env!("CARGO_MANIFEST_DIR"),
-            "/tests/conformance/check_junit.py"
-        ))
-        .arg(xml)
-        .output()
-        .expect("python runs");
-    assert!(
-        out.status.success(),
-        "{}{}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
+    if let Some(python) = crate::common::python("the JUnit check by junitparser") {
+        crate::common::conformance(&python, "check_junit.py", &[s(xml)]);
+    }
 }
 
 #[test]

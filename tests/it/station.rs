@@ -260,30 +260,19 @@ fn the_station_runs_a_procedure_from_start_to_report_and_refuses_what_it_must() 
 /// `tests/conformance/station_browser.py` against the station: required
 /// in CI, skipped (said) elsewhere without selenium and chromedriver.
 fn browser_check(st: &Served) {
-    let python = std::env::var("GYROBENCH_TEST_PYTHON").ok();
+    let Some(python) = crate::common::python("the station page driven in Chromium") else {
+        return;
+    };
     let driver = ["/usr/bin/chromedriver", "/usr/lib/chromium/chromedriver"]
         .into_iter()
         .find(|p| Path::new(p).is_file());
-    let (Some(python), Some(driver)) = (python, driver) else {
+    let Some(driver) = driver else {
         assert!(
             std::env::var_os("CI").is_none(),
-            "CI drives the station page in Chromium: set GYROBENCH_TEST_PYTHON and install chromium-driver"
+            "CI drives the station page in Chromium: install chromium-driver"
         );
-        eprintln!("skipped: the station page was not driven in a browser (no python/chromedriver)");
+        eprintln!("skipped: the station page was not driven in a browser (no chromedriver)");
         return;
     };
-    let script = concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/tests/conformance/station_browser.py"
-    );
-    let out = std::process::Command::new(python)
-        .args([script, &st.url(), driver])
-        .output()
-        .expect("python runs");
-    assert!(
-        out.status.success(),
-        "{}{}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
+    crate::common::conformance(&python, "station_browser.py", &[&st.url(), driver]);
 }
