@@ -13,6 +13,7 @@ use crate::analysis::series::Interval;
 use crate::clock::Pacing;
 use crate::coeffs::CoeffsFile;
 use crate::procedure::Procedure;
+use crate::runlog::live::{Live as LiveStream, LiveError};
 use crate::sequencer::embedded::Fault;
 use crate::sequencer::{self, BenchState, Interrupt, Progress};
 use crate::session::rundir::RunDirError;
@@ -74,6 +75,11 @@ pub struct RunArgs {
     /// gyro-corrupt, gyro-stuck, gyro-saturated, process-kill, panic).
     #[arg(long, value_name = "FAULT@SECONDS")]
     inject: Vec<String>,
+    /// Publish the run's channels live on a Foxglove WebSocket server
+    /// (loopback only; default 127.0.0.1:8765, port 0 picks a free one):
+    /// Foxglove or Lichtblick shows the run as it goes.
+    #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = "127.0.0.1:8765")]
+    live: Option<std::net::SocketAddr>,
 }
 
 /// Progress on stderr: a live bar on a terminal, plain lines otherwise.
@@ -230,6 +236,7 @@ fn fresh(args: &RunArgs, procedure_path: &std::path::Path, pacing: Pacing) -> Re
         pacing,
         faults,
         resume: None,
+        live: None,
     })
 }
 
@@ -270,6 +277,24 @@ pub fn run(args: RunArgs) -> Result<Outcome> {
     let interrupt = Arc::new(Interrupt::default());
     let exit_code = Arc::new(AtomicU8::new(130));
     rt.block_on(async { watch_signals(interrupt.clone(), exit_code.clone()) })?;
+    let live = match args.live {
+        Some(addr) => {
+            let live = rt.block_on(LiveStream::start(addr)).map_err(|e| match e {
+                LiveError::NotLoopback(_) => anyhow::Error::from(Usage(e.to_string())),
+                e => e.into(),
+            })?;
+            errln!(
+                "live: {} (Foxglove or Lichtblick: Open connection, Foxglove WebSocket)",
+                live.url()
+            );
+            Some(Arc::new(live))
+        }
+        None => None,
+    };
+    let plan = Plan {
+        live: live.clone(),
+        ..plan
+    };
     let mut progress = Live::new(session::estimated_s(&plan));
     errln!("running {}", plan.procedure.meta.name);
     let finished = match session::execute(plan, place, &rt, &mut progress, interrupt) {
@@ -288,6 +313,9 @@ pub fn run(args: RunArgs) -> Result<Outcome> {
     };
     for n in finished.notes.iter().skip(finished.notes_at_begin) {
         errln!("note: {n}");
+    }
+    if let Some(live) = live.and_then(|l| Arc::try_unwrap(l).ok()) {
+        rt.block_on(live.stop());
     }
     outf!("{}", finished.report.render_text())?;
     match &finished.report_error {

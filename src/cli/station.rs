@@ -3,11 +3,13 @@
 
 use std::net::SocketAddr;
 use std::path::PathBuf;
+use std::sync::Arc;
 
 use anyhow::{Context, Result};
 use clap::Args;
 
 use super::{Outcome, Usage};
+use crate::runlog::live::{Live, LiveError};
 use crate::station::{Config, Station, new_token, router};
 
 #[derive(Debug, Args)]
@@ -39,10 +41,21 @@ pub struct StationArgs {
     /// The access token (default: a fresh random one)
     #[arg(long)]
     pub token: Option<String>,
+    /// Where every run's channels are published live for Foxglove or
+    /// Lichtblick (a Foxglove WebSocket server; loopback only, port 0
+    /// picks a free one)
+    #[arg(long, value_name = "ADDR", default_value = "127.0.0.1:8765")]
+    pub live: SocketAddr,
+    /// No live Foxglove stream
+    #[arg(long, conflicts_with = "live")]
+    pub no_live: bool,
 }
 
 pub fn run(args: StationArgs) -> Result<Outcome> {
     let pacing = super::run::pacing(&args.speed)?;
+    if !args.no_live && !args.live.ip().is_loopback() {
+        return Err(Usage(LiveError::NotLoopback(args.live).to_string()).into());
+    }
     let bench = super::check::load_bench(args.bench.as_ref())?;
     if !args.procedures.is_dir() {
         return Err(Usage(format!(
@@ -62,6 +75,20 @@ pub fn run(args: StationArgs) -> Result<Outcome> {
         args.db.as_deref(),
         bench.results.as_ref().and_then(|r| r.db.as_deref()),
     );
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .context("starting the async runtime")?;
+    let live = if args.no_live {
+        None
+    } else {
+        let live = rt.block_on(Live::start(args.live)).context(
+            "another station or run --live may hold the port: give another with --live 127.0.0.1:PORT, or --no-live",
+        )?;
+        Some(Arc::new(live))
+    };
+    let live_url = live.as_ref().map(|l| l.url());
     let station = Station::new(Config {
         bench_label: args
             .bench
@@ -75,12 +102,8 @@ pub fn run(args: StationArgs) -> Result<Outcome> {
         pacing,
         token: token.clone(),
         db: args.db,
+        live,
     });
-    let rt = tokio::runtime::Builder::new_multi_thread()
-        .worker_threads(2)
-        .enable_all()
-        .build()
-        .context("starting the async runtime")?;
     rt.block_on(async move {
         let listener = tokio::net::TcpListener::bind(args.listen)
             .await
@@ -93,6 +116,9 @@ pub fn run(args: StationArgs) -> Result<Outcome> {
         }
         outln!("station http://{addr}/?token={token}")?;
         errln!("open the URL above in a browser; Ctrl-C stops the station");
+        if let Some(url) = &live_url {
+            errln!("live: {url} (Foxglove or Lichtblick: Open connection, Foxglove WebSocket)");
+        }
         let app = router(station.clone());
         let stopping = station.clone();
         axum::serve(listener, app)

@@ -4,6 +4,7 @@
 //!   writer and every reader; attachment and metadata record names.
 //! - [`meta`]: the `run` and `result` metadata, typed.
 //! - [`writer`]: the [`Recorder`](writer::Recorder), a [`Sink`](crate::sequencer::Sink).
+//! - [`live`]: the same messages on a Foxglove WebSocket server, live.
 //! - [`reader`]: streaming, bounded reading in file order.
 //! - [`recover`]: a complete log from a killed run's file.
 //! - [`replay`]: a run's measurements and verdict from its log alone.
@@ -12,6 +13,7 @@
 
 pub mod exchange;
 pub mod interchange;
+pub mod live;
 pub mod meta;
 pub mod reader;
 pub mod recover;

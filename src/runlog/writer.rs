@@ -17,10 +17,12 @@ use std::collections::BTreeMap;
 use std::fs::File;
 use std::io::BufWriter;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 use mcap::records::MessageHeader;
 use serde::Serialize;
 
+use super::live::Live;
 use super::meta::{ResultMeta, RunMeta};
 use super::schema::{
     CHANNELS, ChamberState, GyroFrames, Level, LinkSample, LogLine, PROCEDURE_ATTACHMENT,
@@ -47,6 +49,8 @@ pub struct Recorder {
     messages: BTreeMap<&'static str, u64>,
     /// The first write failure, in words (file and cause).
     failed: Option<String>,
+    /// Where every message is also published live, if anywhere.
+    live: Option<Arc<Live>>,
 }
 
 impl std::fmt::Debug for Recorder {
@@ -147,7 +151,13 @@ impl Recorder {
             buf: Vec::with_capacity(64 * 1024),
             messages: BTreeMap::new(),
             failed: None,
+            live: None,
         })
+    }
+
+    /// Publish every message written from now on on `live` too.
+    pub fn publish_live(&mut self, live: Arc<Live>) {
+        self.live = Some(live);
     }
 
     /// The file being written.
@@ -200,6 +210,11 @@ impl Recorder {
             w.write_to_known_channel(&header, &buf)?;
             if flush { w.flush() } else { Ok(()) }
         });
+        if r.is_ok()
+            && let Some(live) = &self.live
+        {
+            live.publish(topic, time, &buf);
+        }
         self.buf = buf;
         r?;
         if flush {

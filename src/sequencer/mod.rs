@@ -236,6 +236,8 @@ pub trait Progress {
     }
     /// A measurement was computed.
     fn measured(&mut self, _m: &measure::Measurement) {}
+    /// The gyro link's figures so far, once a second of device time.
+    fn link(&mut self, _stats: &crate::protocol::frame::LinkStats) {}
 }
 
 /// No progress display.
@@ -452,6 +454,7 @@ impl Run<'_> {
                 .push_tick(&self.tick, state, record, dt, lsb, tl);
             self.progress.tick(state, iv.as_ref());
             if let Some(iv) = iv {
+                self.progress.link(&self.bench.link_stats());
                 self.sink
                     .interval(&iv, record)
                     .map_err(|e| Stop::Data(format!("writing the log: {e}")))?;

@@ -103,6 +103,9 @@ pub struct Plan {
     pub faults: Vec<(f64, Fault)>,
     /// The earlier parts, when this continues a run.
     pub resume: Option<Resumed>,
+    /// Where the run's channels are also published live (`run --live`,
+    /// the station).
+    pub live: Option<Arc<crate::runlog::live::Live>>,
 }
 
 /// What the earlier parts of a resumed run leave.
@@ -279,6 +282,7 @@ pub fn plan_resume(
             link: prev.link,
             summary,
         }),
+        live: None,
     })
 }
 
@@ -509,6 +513,9 @@ pub fn execute(
     };
     let mut recorder = Recorder::create(&log, &meta, start_ns, scales)
         .map_err(io_err("creating the log", &log))?;
+    if let Some(live) = &plan.live {
+        recorder.publish_live(live.clone());
+    }
 
     let mut store = StoreLink::open(&plan.store, &meta, &log, &mut notes);
     progress.begin(&dir.path, &notes);

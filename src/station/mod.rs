@@ -52,6 +52,8 @@ pub struct Config {
     pub token: String,
     /// The store as given (`--db`), for resumed runs.
     pub db: Option<String>,
+    /// The live Foxglove stream every run publishes on, if any.
+    pub live: Option<Arc<crate::runlog::live::Live>>,
 }
 
 /// The station: its configuration, the board and the run going on.
@@ -132,9 +134,11 @@ pub struct Start {
 impl Station {
     /// A station with nothing run yet.
     pub fn new(cfg: Config) -> Arc<Self> {
+        let shared = Arc::new(Shared::default());
+        shared.lock().live_url = cfg.live.as_ref().map(|l| l.url());
         Arc::new(Self {
             cfg,
-            shared: Arc::new(Shared::default()),
+            shared,
             interrupt: std::sync::Mutex::new(None),
             runs_started: std::sync::atomic::AtomicU64::new(0),
             stopping: std::sync::atomic::AtomicBool::new(false),
@@ -146,48 +150,59 @@ impl Station {
         &self.shared
     }
 
-    /// The procedures of the directory, checked against the bench.
-    pub fn offers(&self) -> Vec<Offer> {
-        let mut files: Vec<PathBuf> = std::fs::read_dir(&self.cfg.procedures)
+    /// The procedure files of the directory, by name.
+    fn procedure_files(&self) -> Vec<String> {
+        let mut files: Vec<String> = std::fs::read_dir(&self.cfg.procedures)
             .map(|d| {
-                d.filter_map(|e| Some(e.ok()?.path()))
-                    .filter(|p| p.extension().is_some_and(|x| x == "toml"))
+                d.filter_map(|e| Some(e.ok()?.file_name().to_string_lossy().into_owned()))
+                    .filter(|f| f.ends_with(".toml"))
                     .collect()
             })
             .unwrap_or_default();
         files.sort();
         files
-            .iter()
-            .map(|p| {
-                let file = p
-                    .file_name()
-                    .map(|f| f.to_string_lossy().into_owned())
-                    .unwrap_or_default();
-                match Procedure::load(p, &self.cfg.bench) {
-                    Ok(proc_) => Offer {
-                        file,
-                        name: proc_.meta.name.clone(),
-                        description: proc_.meta.description.clone(),
-                        device_s: Some(min_total_s(&proc_, &self.cfg.bench)),
-                        prompts: proc_
-                            .steps()
-                            .filter_map(|s| match &s.kind {
-                                crate::procedure::StepKind::Prompt { text } => Some(text.clone()),
-                                _ => None,
-                            })
-                            .collect(),
-                        problem: None,
-                    },
-                    Err(e) => Offer {
-                        name: file.trim_end_matches(".toml").to_owned(),
-                        file,
-                        description: String::new(),
-                        device_s: None,
-                        prompts: Vec::new(),
-                        problem: Some(e.to_string()),
-                    },
-                }
-            })
+    }
+
+    /// The procedure `file` of the directory as offered, and the
+    /// procedure itself when it passes `check`.
+    fn offer(&self, file: String) -> (Offer, Option<Procedure>) {
+        match Procedure::load(&self.cfg.procedures.join(&file), &self.cfg.bench) {
+            Ok(proc_) => (
+                Offer {
+                    file,
+                    name: proc_.meta.name.clone(),
+                    description: proc_.meta.description.clone(),
+                    device_s: Some(min_total_s(&proc_, &self.cfg.bench)),
+                    prompts: proc_
+                        .steps()
+                        .filter_map(|s| match &s.kind {
+                            crate::procedure::StepKind::Prompt { text } => Some(text.clone()),
+                            _ => None,
+                        })
+                        .collect(),
+                    problem: None,
+                },
+                Some(proc_),
+            ),
+            Err(e) => (
+                Offer {
+                    name: file.trim_end_matches(".toml").to_owned(),
+                    file,
+                    description: String::new(),
+                    device_s: None,
+                    prompts: Vec::new(),
+                    problem: Some(e.to_string()),
+                },
+                None,
+            ),
+        }
+    }
+
+    /// The procedures of the directory, checked against the bench.
+    pub fn offers(&self) -> Vec<Offer> {
+        self.procedure_files()
+            .into_iter()
+            .map(|f| self.offer(f).0)
             .collect()
     }
 
@@ -205,20 +220,21 @@ impl Station {
                 "a serial number is at most 64 characters, without control characters".into(),
             ));
         }
-        let offer = self
-            .offers()
+        // Only a file the directory lists (never a path given by the page).
+        let file = self
+            .procedure_files()
             .into_iter()
-            .find(|o| o.file == req.procedure)
+            .find(|f| *f == req.procedure)
             .ok_or_else(|| Refused::NotFound(format!("no procedure {}", req.procedure)))?;
-        if let Some(problem) = offer.problem {
+        let (offer, procedure) = self.offer(file);
+        let Some(procedure) = procedure else {
             return Err(Refused::Bad(format!(
-                "{} does not pass check: {problem}",
-                offer.file
+                "{} does not pass check: {}",
+                offer.file,
+                offer.problem.unwrap_or_default()
             )));
-        }
+        };
         let path = self.cfg.procedures.join(&offer.file);
-        let procedure = Procedure::load(&path, &self.cfg.bench)
-            .map_err(|e| Refused::Bad(format!("{} does not pass check: {e}", offer.file)))?;
         let plan = Plan {
             station: session::station(&self.cfg.bench),
             store: self.cfg.store.clone(),
@@ -234,6 +250,7 @@ impl Station {
             pacing: self.cfg.pacing,
             faults: Vec::new(),
             resume: None,
+            live: self.cfg.live.clone(),
             procedure,
         };
         let place = Place::Auto {
@@ -276,6 +293,10 @@ impl Station {
             self.cfg.db.as_deref(),
         )
         .map_err(|e| Refused::Bad(e.to_string()))?;
+        let plan = Plan {
+            live: self.cfg.live.clone(),
+            ..plan
+        };
         let summary = plan.resume.as_ref().map(|r| r.summary.clone());
         let estimate_s = session::estimated_s(&plan);
         self.launch(plan, Place::Resume(locked), estimate_s, summary)
@@ -379,11 +400,7 @@ impl Station {
                     run.summary = Some(f.report.render_text());
                     run.bench_left = f.report.bench_left.as_ref().map(|l| l.summary.clone());
                     run.dir = f.dir.display().to_string();
-                    run.link = Some([
-                        f.report.link.frames,
-                        f.report.link.lost_frames,
-                        f.report.link.crc_errors,
-                    ]);
+                    run.link = Some(f.report.link);
                     if let Some(e) = &f.report_error {
                         run.error = Some(format!("the report could not be written: {e}"));
                     }
@@ -547,6 +564,8 @@ struct Snapshot {
     samples: Vec<state::Sample>,
     /// When the newest sample arrived at the station, Unix ms.
     sample_unix_ms: i64,
+    /// The live Foxglove stream's URL, if there is one.
+    live_url: Option<String>,
 }
 
 fn snapshot_of(shared: &Shared, from: usize) -> Snapshot {
@@ -558,6 +577,7 @@ fn snapshot_of(shared: &Shared, from: usize) -> Snapshot {
         from,
         samples: b.samples[from..].to_vec(),
         sample_unix_ms: b.sample_unix_ms,
+        live_url: b.live_url.clone(),
     }
 }
 

@@ -85,8 +85,8 @@ pub struct RunView {
     pub bench_left: Option<String>,
     /// Why the run could not start or finish, if so.
     pub error: Option<String>,
-    /// Gyro link: frames, lost, CRC errors (at the end).
-    pub link: Option<[u64; 3]>,
+    /// The gyro link's figures so far (each second of device time).
+    pub link: Option<crate::protocol::frame::LinkStats>,
 }
 
 /// One 1 Hz sample for the charts: device time (h), Earth-removed rate
@@ -108,6 +108,8 @@ pub struct Board {
     /// When the newest sample arrived, Unix ms (a page's latency is its
     /// arrival minus this).
     pub sample_unix_ms: i64,
+    /// Where runs are published live for Foxglove (`ws://...`), if they are.
+    pub live_url: Option<String>,
 }
 
 /// The board behind a lock, with a wake-up for the run waiting on a
@@ -251,6 +253,14 @@ impl Progress for Reporter {
         self.shared.update(|b| {
             if let Some(run) = &mut b.run {
                 run.prompt = None;
+            }
+        });
+    }
+
+    fn link(&mut self, stats: &crate::protocol::frame::LinkStats) {
+        self.shared.update(|b| {
+            if let Some(run) = &mut b.run {
+                run.link = Some(*stats);
             }
         });
     }

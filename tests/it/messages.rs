@@ -176,6 +176,14 @@ fn usage_errors_exit_2_everywhere() {
         ),
         (vec!["run", p, "--bench", bench, "--twin", site], "embedded"),
         (vec!["run", p, "--force"], "--force applies with --out"),
+        (
+            vec!["run", p, "--live", "0.0.0.0:8765"],
+            "listens on loopback only",
+        ),
+        (
+            vec!["station", "--live", "192.168.1.2:8765"],
+            "listens on loopback only",
+        ),
         (vec!["run"], "PROCEDURE"),
         (vec!["run", p, "--resume", "runs/x"], "cannot be used with"),
         (

@@ -19,11 +19,15 @@ struct Served {
 }
 
 impl Served {
-    fn start(dir: &Path) -> Self {
+    /// `extra` arguments after the usual ones (the embedded bench at full
+    /// speed, a live stream on a free loopback port).
+    fn start(dir: &Path, extra: &[&str]) -> Self {
         let mut child = command()
             .args([
                 "station",
                 "--listen",
+                "127.0.0.1:0",
+                "--live",
                 "127.0.0.1:0",
                 "--procedures",
                 concat!(env!("CARGO_MANIFEST_DIR"), "/procedures"),
@@ -32,6 +36,7 @@ impl Served {
                 "--db",
                 s(&dir.join("results.sqlite")),
             ])
+            .args(extra)
             .stdout(Stdio::piped())
             .stderr(Stdio::null())
             .spawn()
@@ -128,7 +133,7 @@ const SMOKE: &str = r#"{"procedure":"smoke.toml","serial":"RL16-0042","operator"
 #[test]
 fn the_station_runs_a_procedure_from_start_to_report_and_refuses_what_it_must() {
     let dir = temp_dir("station");
-    let st = Served::start(&dir);
+    let st = Served::start(&dir, &[]);
 
     // Refusals, each with its reason.
     let (code, body) = st.request("POST", "/api/start", false, SMOKE);
@@ -249,11 +254,29 @@ fn the_station_runs_a_procedure_from_start_to_report_and_refuses_what_it_must() 
 
     // The page itself, in a browser, when there is one.
     browser_check(&st);
+    // A browser left open on the page (its event stream streaming) must
+    // not hold the stop: the stream ends and the station exits.
+    let host = st.base.trim_start_matches("http://").to_owned();
+    let mut open = TcpStream::connect(&host).expect("connect");
+    write!(
+        open,
+        "GET /api/events?token={} HTTP/1.1\r\nHost: {host}\r\n\r\n",
+        st.token
+    )
+    .expect("send");
+    let mut first = [0u8; 256];
+    let n = open.read(&mut first).expect("the stream starts");
+    assert!(
+        String::from_utf8_lossy(&first[..n]).starts_with("HTTP/1.1 200"),
+        "{}",
+        String::from_utf8_lossy(&first[..n])
+    );
     assert_eq!(
         st.stop().code(),
         Some(0),
-        "SIGTERM stops the station cleanly"
+        "SIGTERM stops the station cleanly, an event stream open"
     );
+    drop(open);
     std::fs::remove_dir_all(&dir).expect("cleanup");
 }
 
@@ -275,4 +298,36 @@ fn browser_check(st: &Served) {
         return;
     };
     crate::common::conformance(&python, "station_browser.py", &[&st.url(), driver]);
+}
+
+/// The live Foxglove stream, from `run --live` and from the station, to a
+/// third-party client (`tests/conformance/live_foxglove.py`: the Python
+/// `websockets` package speaking the protocol): every channel of the log
+/// advertised with its schema, and messages that validate against it and
+/// are the log's own. Runs at 60x so that the client sees them live.
+#[test]
+fn the_live_foxglove_stream_carries_the_logs_channels_to_a_third_party_client() {
+    let Some(python) = crate::common::python("the live Foxglove stream checked by websockets")
+    else {
+        return;
+    };
+    let dir = temp_dir("live");
+    crate::common::conformance(
+        &python,
+        "live_foxglove.py",
+        &["run", env!("CARGO_BIN_EXE_gyrobench"), s(&dir)],
+    );
+    let st = Served::start(&dir, &["--speed", "60"]);
+    let state = st.state();
+    let live = state["live_url"]
+        .as_str()
+        .expect("the station says its live URL");
+    assert!(live.starts_with("ws://127.0.0.1:"), "{live}");
+    crate::common::conformance(
+        &python,
+        "live_foxglove.py",
+        &["station", &st.base, &st.token],
+    );
+    assert!(st.stop().success());
+    std::fs::remove_dir_all(&dir).expect("cleanup");
 }
