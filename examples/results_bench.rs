@@ -91,6 +91,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                         averaging_s: 600.0,
                         records: Vec::new(),
                         note: String::new(),
+                        std_error: None,
                         trace: None,
                     }
                 })

@@ -172,8 +172,30 @@ pub struct Limits {
     pub table_max_rate_dps: f64,
     /// Largest axis acceleration, deg/s^2.
     pub table_max_acc_dps2: f64,
+    /// Fastest rate a `rate` step may ask of an axis in rate mode, deg/s
+    /// (none: the table has no rate mode, or no slip rings for continuous
+    /// turns, and `rate` steps are refused).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub table_rate_mode_max_dps: Option<f64>,
+    /// Largest acceleration of an axis in rate mode, deg/s^2 (default:
+    /// `table_max_acc_dps2`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub table_rate_mode_max_acc_dps2: Option<f64>,
     /// Hottest the gyro (any sensor) may get, degC.
     pub dut_max_c: f64,
+}
+
+impl Limits {
+    /// Rate-mode rate and acceleration limits, if the table has a rate mode.
+    pub fn rate_mode(&self) -> Option<(f64, f64)> {
+        self.table_rate_mode_max_dps.map(|r| {
+            (
+                r,
+                self.table_rate_mode_max_acc_dps2
+                    .unwrap_or(self.table_max_acc_dps2),
+            )
+        })
+    }
 }
 
 /// The embedded simulated bench (`fixtures/bench/embedded.toml`).
@@ -318,6 +340,12 @@ impl BenchConfig {
             100_000.0,
             "limits.table_max_acc_dps2",
         )?;
+        if let Some(r) = l.table_rate_mode_max_dps {
+            c.within(r, 1e-6, 5000.0, "limits.table_rate_mode_max_dps")?;
+        }
+        if let Some(a) = l.table_rate_mode_max_acc_dps2 {
+            c.within(a, 1e-6, 100_000.0, "limits.table_rate_mode_max_acc_dps2")?;
+        }
         c.within(l.dut_max_c, -100.0, 300.0, "limits.dut_max_c")?;
         Ok(())
     }

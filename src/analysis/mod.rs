@@ -2,10 +2,11 @@
 //!
 //! `series` reduces frames to interval means, `figures` computes figures of
 //! merit, `model` fits the study's compensation models, `study` holds the
-//! definitions of the study's figures.
+//! definitions of the study's figures, `rate` the rate-table figures.
 
 pub mod allan;
 pub mod figures;
 pub mod model;
+pub mod rate;
 pub mod series;
 pub mod study;

@@ -178,13 +178,13 @@ mod tests {
     #[tokio::test]
     async fn a_refused_demand_surfaces_the_queued_error() {
         let mock = Builder::new()
-            .write(b":M:R 2;:D:R 2,500.0000\n")
+            .write(b":M:R 2;:D:R 2,900.000000\n")
             .write(b"*STB?\n")
             .read(b"4\n")
             .write(b":SYST:ERR?\n")
             .read(b"-222,\"Data out of range\"\n")
             .build();
-        let err = driver(mock).rate(true, 500.0).await.expect_err("refused");
+        let err = driver(mock).rate(true, 900.0).await.expect_err("refused");
         assert!(
             err.to_string().contains("-222,\"Data out of range\""),
             "{err}"

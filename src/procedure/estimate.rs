@@ -41,6 +41,7 @@ pub fn estimate<'p>(p: &'p Procedure, bench: &BenchConfig) -> Vec<(&'p Step, Est
     let mut table = TableAngles::default();
     let mut chamber_c = START_C;
     let mut ramp_left_s = 0.0_f64;
+    let mut turning_dps = 0.0_f64;
     let mut out = Vec::new();
     for s in p.steps() {
         let (lo, hi) = match &s.kind {
@@ -67,6 +68,14 @@ pub fn estimate<'p>(p: &'p Procedure, bench: &BenchConfig) -> Vec<(&'p Step, Est
                     l.table_max_acc_dps2,
                 )) + settle;
                 table = *angles;
+                (t, t)
+            }
+            StepKind::Turn {
+                rate_dps, settle_s, ..
+            } => {
+                let acc = l.rate_mode().map_or(l.table_max_acc_dps2, |(_, a)| a);
+                let t = (rate_dps - turning_dps).abs() / acc + settle_s;
+                turning_dps = *rate_dps;
                 (t, t)
             }
             StepKind::Wait { duration_s } | StepKind::Record { duration_s, .. } => {

@@ -66,6 +66,22 @@ pub enum Metric {
     /// Slope against the rate of change of the case temperature, deg/h
     /// per degC/min (jointly with the temperature).
     TemperatureRateSensitivity,
+    /// Scale factor error against nominal, ppm: the least-squares line of
+    /// output against input rate over rate records.
+    ScaleFactor,
+    /// Largest residual of that line, ppm of the output there.
+    ScaleFactorNonlinearity,
+    /// Scale factor for positive minus negative input rates, ppm.
+    ScaleFactorAsymmetry,
+    /// Scale factor change per degC of the block (rate records at several
+    /// temperatures), ppm/degC.
+    ScaleFactorTemperature,
+    /// Half-width of the input band around zero where the output is under
+    /// 10 % of the expected, deg/h (IEEE dead band), from a lock-in fit.
+    DeadBand,
+    /// Smallest input giving at least 50 % of the expected output, deg/h
+    /// (IEEE threshold), from the same fit.
+    Threshold,
 }
 
 impl Metric {
@@ -78,6 +94,12 @@ impl Metric {
             "mean_bias" => Self::MeanBias,
             "temperature_sensitivity" => Self::TemperatureSensitivity,
             "temperature_rate_sensitivity" => Self::TemperatureRateSensitivity,
+            "scale_factor" => Self::ScaleFactor,
+            "scale_factor_nonlinearity" => Self::ScaleFactorNonlinearity,
+            "scale_factor_asymmetry" => Self::ScaleFactorAsymmetry,
+            "scale_factor_temperature" => Self::ScaleFactorTemperature,
+            "dead_band" => Self::DeadBand,
+            "threshold" => Self::Threshold,
             _ => return None,
         })
     }
@@ -153,6 +175,16 @@ pub enum StepKind {
         /// s.
         duration_s: f64,
     },
+    /// Turn an axis in rate mode at `rate_dps` and wait until it turns at
+    /// that rate (0: at rest), then `settle_s` more.
+    Turn {
+        /// The inner axis (else the outer).
+        inner: bool,
+        /// deg/s.
+        rate_dps: f64,
+        /// s.
+        settle_s: f64,
+    },
     /// Compute and judge a figure.
     Measure(Measure),
     /// A note for the operator.
@@ -176,6 +208,7 @@ impl StepKind {
             Self::Move { .. } => "move",
             Self::Wait { .. } => "wait",
             Self::Record { .. } => "record",
+            Self::Turn { .. } => "turn",
             Self::Measure(_) => "measure",
             Self::Note { .. } => "note",
             Self::Prompt { .. } => "prompt",
@@ -241,6 +274,18 @@ impl Step {
             StepKind::Record { label, duration_s } => {
                 format!("record {label} for {duration_s:.0} s")
             }
+            StepKind::Turn {
+                inner, rate_dps, ..
+            } => {
+                let axis = if *inner { "inner" } else { "outer" };
+                if *rate_dps == 0.0 {
+                    format!("bring the {axis} axis to rest")
+                } else if rate_dps.abs() < 0.1 {
+                    format!("turn the {axis} axis at {:+.2} deg/h", rate_dps * 3600.0)
+                } else {
+                    format!("turn the {axis} axis at {rate_dps:+} deg/s")
+                }
+            }
             StepKind::Measure(m) => format!("measure {}", m.name),
             StepKind::Note { text } => format!("note: {text}"),
             StepKind::Prompt { text } => format!("prompt: {text}"),
@@ -298,6 +343,7 @@ impl Procedure {
             c: Checker::new(src),
             bench,
             records: HashSet::new(),
+            record_order: Vec::new(),
             measures: HashSet::new(),
         };
         let meta = Meta {
@@ -350,6 +396,8 @@ struct Validator<'a> {
     c: Checker<'a>,
     bench: &'a BenchConfig,
     records: HashSet<String>,
+    /// Record labels in the order they are made.
+    record_order: Vec<String>,
     measures: HashSet<String>,
 }
 
@@ -487,6 +535,7 @@ impl Validator<'_> {
                     &format!("record {l:?} is already used; labels must be unique"),
                 )?;
                 self.records.insert(l.clone());
+                self.record_order.push(l.clone());
                 StepKind::Record {
                     label: l,
                     duration_s: self.duration(*duration_s, &k("duration_s"))?,
@@ -509,7 +558,9 @@ impl Validator<'_> {
                         format!(
                             "{metric:?} is not a metric; expected bias_stability, drift_pp, \
                              compensated_drift_pp, self_heating, mean_bias, \
-                             temperature_sensitivity or temperature_rate_sensitivity"
+                             temperature_sensitivity, temperature_rate_sensitivity, \
+                             scale_factor, scale_factor_nonlinearity, scale_factor_asymmetry, \
+                             scale_factor_temperature, dead_band or threshold"
                         ),
                     )
                 })?;
@@ -519,7 +570,28 @@ impl Validator<'_> {
                     &format!("measurement {name:?} is already used"),
                 )?;
                 self.measures.insert(name.clone());
-                let records: Vec<String> = records.iter().map(|r| subst(r)).collect();
+                // `PREFIX*` names every earlier record whose label starts so.
+                let mut named: Vec<String> = Vec::new();
+                for r in records.iter().map(|r| subst(r)) {
+                    match r.strip_suffix('*') {
+                        Some(prefix) => {
+                            let found: Vec<String> = self
+                                .record_order
+                                .iter()
+                                .filter(|l| l.starts_with(prefix))
+                                .cloned()
+                                .collect();
+                            c.ensure(
+                                !found.is_empty(),
+                                &k("records"),
+                                &format!("{r:?} matches no earlier record"),
+                            )?;
+                            named.extend(found);
+                        }
+                        None => named.push(r),
+                    }
+                }
+                let records = named;
                 c.ensure(
                     !records.is_empty(),
                     &k("records"),
@@ -568,6 +640,123 @@ impl Validator<'_> {
                     high: *high,
                     unit: unit.clone(),
                 })
+            }
+            RawStep::Rate {
+                label: l,
+                rate_dps,
+                rate_dph,
+                axis,
+                duration_s,
+                revolutions,
+                settle_s,
+            } => {
+                let l = subst(l);
+                c.ensure(is_plain_text(&l), &k("label"), PLAIN_TEXT)?;
+                c.ensure(
+                    !self.records.contains(&l),
+                    &k("label"),
+                    &format!("record {l:?} is already used; labels must be unique"),
+                )?;
+                let rate_dps = &match (rate_dps, rate_dph) {
+                    (Some(r), None) => *r,
+                    (None, Some(r)) => *r / 3600.0,
+                    _ => {
+                        return Err(self
+                            .src
+                            .invalid(key, "needs exactly one of `rate_dps` or `rate_dph`"));
+                    }
+                };
+                let rate_key = if rate_dph.is_some() {
+                    k("rate_dph")
+                } else {
+                    k("rate_dps")
+                };
+                let inner = match axis.as_deref() {
+                    None | Some("inner") => true,
+                    Some("outer") => false,
+                    Some(other) => {
+                        return Err(self.src.invalid(
+                            &k("axis"),
+                            format!("{other:?} is not an axis; expected \"inner\" or \"outer\""),
+                        ));
+                    }
+                };
+                let Some((max_rate, _)) = self.bench.limits.rate_mode() else {
+                    return Err(self.src.invalid(
+                        &rate_key,
+                        "this bench's table has no rate mode: its bench file gives no limits.table_rate_mode_max_dps",
+                    ));
+                };
+                c.ensure(
+                    rate_dps.is_finite() && rate_dps.abs() <= max_rate,
+                    &rate_key,
+                    &format!(
+                        "{} deg/s is beyond the table's rate-mode limit of {max_rate} deg/s (limits.table_rate_mode_max_dps)",
+                        crate::config::num(*rate_dps)
+                    ),
+                )?;
+                let duration = match (duration_s, revolutions) {
+                    (Some(d), None) => self.duration(*d, &k("duration_s"))?,
+                    (None, Some(n)) => {
+                        c.ensure(
+                            *n >= 1.0 && n.fract() == 0.0 && *n <= 1e6,
+                            &k("revolutions"),
+                            "must be a whole number of revolutions, at least 1",
+                        )?;
+                        c.ensure(
+                            *rate_dps != 0.0,
+                            &k("revolutions"),
+                            "a rate of 0 deg/s makes no revolutions; give duration_s",
+                        )?;
+                        self.duration(n * 360.0 / rate_dps.abs(), &k("revolutions"))?
+                    }
+                    _ => {
+                        return Err(self
+                            .src
+                            .invalid(key, "needs exactly one of `duration_s` or `revolutions`"));
+                    }
+                };
+                let settle = settle_s.unwrap_or(2.0);
+                c.within(settle, 0.0, 3600.0, &k("settle_s"))?;
+                self.records.insert(l.clone());
+                self.record_order.push(l.clone());
+                // Turn, record, come to rest: three plain steps (a record is
+                // a record wherever it is taken: replay, resume and health
+                // treat it as any other).
+                let line = self.line(key);
+                for (sub, kind) in [
+                    (
+                        format!("{key}.turn"),
+                        StepKind::Turn {
+                            inner,
+                            rate_dps: *rate_dps,
+                            settle_s: settle,
+                        },
+                    ),
+                    (
+                        format!("{key}.record"),
+                        StepKind::Record {
+                            label: l.clone(),
+                            duration_s: duration,
+                        },
+                    ),
+                    (
+                        format!("{key}.rest"),
+                        StepKind::Turn {
+                            inner,
+                            rate_dps: 0.0,
+                            settle_s: 0.0,
+                        },
+                    ),
+                ] {
+                    out.push(Step {
+                        group,
+                        key: sub,
+                        line,
+                        kind,
+                    });
+                }
+                return Ok(());
             }
             RawStep::Note { text } => StepKind::Note { text: subst(text) },
             RawStep::Prompt { text } => StepKind::Prompt { text: subst(text) },

@@ -90,6 +90,26 @@ pub enum RawStep {
         /// s.
         duration_s: f64,
     },
+    /// Turn an axis at a rate (rate mode) and record the gyro over it:
+    /// ramp to the rate, settle, record for a duration or a whole number
+    /// of revolutions, ramp back to rest.
+    Rate {
+        /// Label of the record (measurements refer to it).
+        label: String,
+        /// Axis rate, deg/s (the sign is the direction).
+        rate_dps: Option<f64>,
+        /// Or in deg/h (small rates).
+        rate_dph: Option<f64>,
+        /// `inner` (default: the axis the gyro's sensitive axis lies on)
+        /// or `outer`.
+        axis: Option<String>,
+        /// Record this long, s.
+        duration_s: Option<f64>,
+        /// Or this many whole revolutions.
+        revolutions: Option<f64>,
+        /// Time at the rate before the record starts, s (default 2).
+        settle_s: Option<f64>,
+    },
     /// Compute a figure and judge it against limits.
     Measure {
         /// Name in the report (e.g. `bias_stability_dph:az000`).

@@ -87,7 +87,7 @@ impl Command {
             Self::Mode(a, ServoMode::Rate) => format!(":M:R {}", ax(a)),
             Self::Mode(a, ServoMode::Stop) => format!(":M:O {}", ax(a)),
             Self::DemandPosition(a, v) => format!(":D:P {},{v:.4}", ax(a)),
-            Self::DemandRate(a, v) => format!(":D:R {},{v:.4}", ax(a)),
+            Self::DemandRate(a, v) => format!(":D:R {},{v:.6}", ax(a)),
             Self::ReadPosition(a) => format!(":R:P? {}", ax(a)),
             Self::ReadRate(a) => format!(":R:R? {}", ax(a)),
             Self::LimitRate(a, v) => format!(":LIM:RATE {},{v:.4}", ax(a)),

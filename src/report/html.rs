@@ -1,10 +1,14 @@
 //! `report.html`: one self-contained page, verdict first, then the figure
 //! the unit is accepted on drawn against its limit, the measurements, the
-//! nine positions, the noise figures and the run's traces. Charts come from
+//! nine positions, the rate-table figures, the noise figures and the run's
+//! traces. Charts come from
 //! the shared helper (`view::chart`); nothing is fetched, nothing runs.
 
 use super::{Position, Report};
 use crate::analysis::figures::{DriftTrace, block_means};
+use crate::analysis::rate::{
+    DEAD_BAND_SHARE, RatePoint, THRESHOLD_SHARE, Transfer, input_for_share, lock_in, locked_output,
+};
 use crate::analysis::series::Interval;
 use crate::procedure::Metric;
 use crate::sequencer::Outcome;
@@ -267,6 +271,143 @@ fn position_chart<'a>(
     c.render()
 }
 
+/// The points of a rate measurement's records, in input order.
+fn rate_points(m: &Measurement, records: &Records) -> Vec<RatePoint> {
+    let mut pts: Vec<RatePoint> = m
+        .records
+        .iter()
+        .filter_map(|l| records.get(l))
+        .filter_map(RatePoint::of)
+        .collect();
+    pts.sort_by(|a, b| a.input_dph.total_cmp(&b.input_dph));
+    pts
+}
+
+/// The rate-table figures drawn: each record's residual from the transfer
+/// fit in ppm (with its standard error and the nonlinearity limit), and
+/// near zero the output against the input with the lock-in fit.
+fn rate_table_charts(r: &Report, records: &Records) -> String {
+    let mut out = String::new();
+    let transfer = r.measurements.iter().find(|m| {
+        matches!(
+            m.metric,
+            Metric::ScaleFactorNonlinearity | Metric::ScaleFactor | Metric::ScaleFactorAsymmetry
+        )
+    });
+    if let Some(m) = transfer {
+        let pts = rate_points(m, records);
+        if let Some(t) = Transfer::fit(&pts) {
+            let labels: Vec<String> = pts
+                .iter()
+                .map(|p| format!("{:+}", (p.input_dph / 3600.0 * 10.0).round() / 10.0))
+                .collect();
+            let resid: Vec<(f64, f64, f64)> = pts
+                .iter()
+                .enumerate()
+                .map(|(i, p)| {
+                    let net = (t.output_dph(p.input_dph) - t.bias_dph).abs().max(1e-12);
+                    let r = (p.output_dph - t.output_dph(p.input_dph)) / net * 1e6;
+                    let se = p.se_dph / net * 1e6;
+                    (i as f64, r, se)
+                })
+                .collect();
+            let mut c = Chart::new(
+                format!(
+                    "Scale-factor residuals: K+ {:.1} ppm, K- {:.1} ppm from nominal, bias {:.3} deg/h",
+                    (t.k_pos - 1.0) * 1e6,
+                    (t.k_neg - 1.0) * 1e6,
+                    t.bias_dph
+                ),
+                "input rate (table + Earth), deg/s",
+                "residual, ppm of the output",
+            )
+            .categories(labels)
+            .height(320)
+            .series(
+                Series::points(
+                    "record mean minus the transfer fit (one slope per direction), with its standard error",
+                    resid.iter().map(|(x, y, _)| (*x, *y)).collect(),
+                    Marker::Circle,
+                )
+                .marker(Marker::Circle, 6)
+                .colour(0)
+                .errors(resid.iter().map(|(x, y, e)| (*x, y - e, y + e)).collect()),
+            );
+            if let Some(nl) = r
+                .measurements
+                .iter()
+                .find(|m| m.metric == Metric::ScaleFactorNonlinearity)
+                && let Some(hi) = nl.high
+            {
+                c = c.band(Band {
+                    label: format!("nonlinearity limit +-{hi} ppm"),
+                    y: (-hi, hi),
+                    x: Some((-0.5, pts.len() as f64 - 0.5)),
+                });
+            }
+            out.push_str(&c.render());
+        }
+    }
+    let band = r
+        .measurements
+        .iter()
+        .find(|m| matches!(m.metric, Metric::DeadBand | Metric::Threshold));
+    if let Some(m) = band {
+        let pts = rate_points(m, records);
+        if let Some((b, l, _)) = lock_in(&pts) {
+            let (lo, hi) = (
+                pts.first().map_or(0.0, |p| p.input_dph),
+                pts.last().map_or(0.0, |p| p.input_dph),
+            );
+            let curve: Vec<(f64, f64)> = (0..=400)
+                .map(|i| {
+                    let x = lo + (hi - lo) * f64::from(i) / 400.0;
+                    (x, locked_output(x, b, l))
+                })
+                .collect();
+            let c = Chart::new(
+                format!(
+                    "Output near zero input: lock-in {l:.3} deg/h, dead band {:.3} deg/h, threshold {:.3} deg/h",
+                    input_for_share(l, DEAD_BAND_SHARE),
+                    input_for_share(l, THRESHOLD_SHARE)
+                ),
+                "input rate (table + Earth), deg/h",
+                "output rate, deg/h",
+            )
+            .height(320)
+            .series(
+                Series::line(
+                    format!("no lock-in: output = input + bias ({b:.3} deg/h)"),
+                    vec![(lo, lo + b), (hi, hi + b)],
+                )
+                .colour(2)
+                .stroke(Stroke::Dashed)
+                .width(1),
+            )
+            .series(
+                Series::line("lock-in fit (Adler equation)", curve)
+                    .colour(5)
+                    .width(2),
+            )
+            .series(
+                Series::points(
+                    "record means",
+                    pts.iter().map(|p| (p.input_dph, p.output_dph)).collect(),
+                    Marker::Circle,
+                )
+                .marker(Marker::Circle, 6)
+                .colour(0),
+            );
+            out.push_str(&c.render());
+        }
+    }
+    if out.is_empty() {
+        out
+    } else {
+        format!("<h2>Rate table</h2>\n{out}")
+    }
+}
+
 /// The positions: a table (the record, the position in the operator's
 /// words, the table angles, bias and bias stability side by side) and a
 /// chart of each figure against its limit band.
@@ -497,7 +638,10 @@ pub fn render_html(r: &Report, records: &Records) -> String {
         rows.push_str(&format!(
             "<tr class={class}><td>{}</td><td class=num>{}</td><td>{}</td><td class=num>{}</td><td class=num>{}</td><td class=\"outcome {class}\">{}</td><td>{}</td><td>{}</td></tr>\n",
             esc(&m.name),
-            num(m.value, 4),
+            match m.std_error {
+                Some(se) if m.value.is_some() => format!("{} ± {}", num(m.value, 4), num(Some(se), 4)),
+                _ => num(m.value, 4),
+            },
             esc(&m.unit),
             limit(m.low),
             limit(m.high),
@@ -551,8 +695,8 @@ pub fn render_html(r: &Report, records: &Records) -> String {
 <h2>Measurements</h2>
 <table><tr><th>name</th><th>value</th><th>unit</th><th>low</th><th>high</th><th>outcome</th><th>step</th><th>note</th></tr>
 {rows}</table>
-<p class=note>Definitions: bias stability = 1-sigma of the averages over the averaging time of the Earth-removed rate; drift = peak-to-peak of the Earth-removed rate smoothed by a centred moving average of the averaging time; compensated = the same after the study's model 4; self-heating = mean of the first 120 s after power-on minus the mean of 1680..1800 s. See docs/figures.md.</p>
-{positions}{noise}{allan}
+<p class=note>Definitions: bias stability = 1-sigma of the averages over the averaging time of the Earth-removed rate; drift = peak-to-peak of the Earth-removed rate smoothed by a centred moving average of the averaging time; compensated = the same after the study's model 4; self-heating = mean of the first 120 s after power-on minus the mean of 1680..1800 s; scale factor, nonlinearity and asymmetry = the fit of output against input rate with one slope per direction; dead band and threshold = the inputs giving 10 % and 50 % of the expected output in a lock-in fit (&plusmn; one standard error). See docs/figures.md.</p>
+{positions}{rate_table}{noise}{allan}
 <h2>Traces</h2>
 {traces}
 <h2>Gyro link</h2>
@@ -560,6 +704,7 @@ pub fn render_html(r: &Report, records: &Records) -> String {
 "#,
         headline = headline(r),
         positions = positions(r),
+        rate_table = rate_table_charts(r, records),
         noise = noise_table(r),
         allan = allan_chart(r).unwrap_or_default(),
         proc = esc(&r.procedure),

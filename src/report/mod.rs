@@ -264,7 +264,11 @@ impl Report {
             s.push_str(&format!(
                 "  {:<32} {:>10} {:<6} [{}]  {}\n",
                 m.name,
-                m.value.map_or("n/a".to_owned(), |v| format!("{v:.4}")),
+                match (m.value, m.std_error) {
+                    (Some(v), Some(se)) => format!("{v:.4} ± {se:.4}"),
+                    (Some(v), None) => format!("{v:.4}"),
+                    (None, _) => "n/a".to_owned(),
+                },
                 m.unit,
                 m.limits_text(),
                 m.outcome.as_str().to_uppercase()

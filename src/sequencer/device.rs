@@ -168,6 +168,10 @@ impl BenchIo for DeviceBench {
         self.table.move_to(angles).await
     }
 
+    async fn rotate_table(&mut self, inner: bool, rate_dps: f64) -> Result<(), DeviceError> {
+        self.table.rate(inner, rate_dps).await
+    }
+
     async fn safe_state(&mut self) -> Result<(), DeviceError> {
         self.ramp = None;
         let table = self.table.stop().await;

@@ -214,6 +214,17 @@ impl BenchIo for EmbeddedBench {
         Ok(())
     }
 
+    async fn rotate_table(&mut self, inner: bool, rate_dps: f64) -> Result<(), DeviceError> {
+        self.check(&["table"])?;
+        let d = Some(AxisDemand::Rate(rate_dps));
+        if inner {
+            self.twin.demand_table(None, d);
+        } else {
+            self.twin.demand_table(d, None);
+        }
+        Ok(())
+    }
+
     async fn safe_state(&mut self) -> Result<(), DeviceError> {
         // An interlocked table is stopped already; a silent chamber cannot
         // be told anything.

@@ -93,6 +93,27 @@ impl<B: BenchIo> BenchIo for Guarded<B> {
         self.inner.move_table(a).await
     }
 
+    async fn rotate_table(&mut self, inner: bool, rate_dps: f64) -> Result<(), DeviceError> {
+        let axis = if inner { "inner" } else { "outer" };
+        let request = format!("turn the {axis} axis at {rate_dps} deg/s");
+        match self.limits.rate_mode() {
+            None => Err(Self::refuse(
+                "table",
+                request,
+                "the bench file gives the table no rate mode (limits.table_rate_mode_max_dps)"
+                    .into(),
+            )),
+            Some((max, _)) if !(rate_dps.is_finite() && rate_dps.abs() <= max) => {
+                Err(Self::refuse(
+                    "table",
+                    request,
+                    format!("beyond the rate-mode limit {max} deg/s"),
+                ))
+            }
+            Some(_) => self.inner.rotate_table(inner, rate_dps).await,
+        }
+    }
+
     async fn safe_state(&mut self) -> Result<(), DeviceError> {
         self.inner.safe_state().await
     }

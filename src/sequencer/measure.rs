@@ -8,6 +8,7 @@ use super::health::{RecordHealth, Runs};
 use super::{BenchState, Tick};
 use crate::analysis::figures::{DriftTrace, bias_stability, drift_trace, mean};
 use crate::analysis::model::{self, Fit, ModelKind};
+use crate::analysis::rate::{self, Figure, RatePoint};
 use crate::analysis::series::Interval;
 use crate::analysis::study::{self_heating_dph, temperature_sensitivity_parts};
 use crate::procedure::{Measure, Metric};
@@ -268,6 +269,10 @@ pub struct Measurement {
     pub records: Vec<String>,
     /// How the value was obtained (compensation source, why it is missing).
     pub note: String,
+    /// One standard error of the value, where the figure has one (the
+    /// rate-table figures).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub std_error: Option<f64>,
     /// For a drift: the smoothed series its peak-to-peak was taken on (for
     /// the report's charts; not part of `report.json`).
     #[serde(skip)]
@@ -297,7 +302,52 @@ pub fn compute(m: &Measure, records: &Records, coeffs: Option<&Fit>, step: &str)
     let mut note = String::new();
     let mut trace = None;
     let part_refs: Vec<&[Interval]> = parts.iter().map(Vec::as_slice).collect();
+    let mut std_error = None;
+    let points = || -> Vec<RatePoint> {
+        m.records
+            .iter()
+            .filter_map(|l| records.get(l))
+            .filter_map(RatePoint::of)
+            .collect()
+    };
+    let mut figure = |f: Option<Figure>, what: &str, note: &mut String| {
+        if f.is_none() {
+            *note = format!("not computable: {what}");
+        }
+        std_error = f.and_then(|f| f.std_error);
+        f.map(|f| f.value)
+    };
     let value = match m.metric {
+        Metric::ScaleFactor => figure(
+            rate::scale_factor_ppm(&points()),
+            "needs rate records at three or more input rates",
+            &mut note,
+        ),
+        Metric::ScaleFactorNonlinearity => figure(
+            rate::nonlinearity_ppm(&points()),
+            "needs rate records at three or more input rates",
+            &mut note,
+        ),
+        Metric::ScaleFactorAsymmetry => figure(
+            rate::asymmetry_ppm(&points()),
+            "needs rate records in both directions, four or more",
+            &mut note,
+        ),
+        Metric::ScaleFactorTemperature => figure(
+            rate::temperature_coefficient_ppm_per_c(&points()),
+            "needs rate records at block temperatures at least 1 degC apart",
+            &mut note,
+        ),
+        Metric::DeadBand => figure(
+            rate::band_dph(&points(), rate::DEAD_BAND_SHARE),
+            "needs four or more records at small input rates",
+            &mut note,
+        ),
+        Metric::Threshold => figure(
+            rate::band_dph(&points(), rate::THRESHOLD_SHARE),
+            "needs four or more records at small input rates",
+            &mut note,
+        ),
         Metric::BiasStability => Some(bias_stability(&bias, window)),
         Metric::DriftPp if parts.len() > 1 => {
             // The turn-on bias differs between power-ons: each part is
@@ -405,6 +455,7 @@ pub fn compute(m: &Measure, records: &Records, coeffs: Option<&Fit>, step: &str)
         averaging_s: m.averaging_s,
         records: m.records.clone(),
         note,
+        std_error,
         trace,
     }
 }

@@ -89,6 +89,10 @@ pub trait BenchIo: Send {
     async fn set_chamber(&mut self, set_c: f64, ramp_c_per_min: f64) -> Result<(), DeviceError>;
     /// Move the table (position mode).
     async fn move_table(&mut self, angles: TableAngles) -> Result<(), DeviceError>;
+    /// Turn one table axis (`inner` or the outer) at `rate_dps` in rate
+    /// mode; 0 brings it to rest, still in rate mode (a move returns it to
+    /// position mode).
+    async fn rotate_table(&mut self, inner: bool, rate_dps: f64) -> Result<(), DeviceError>;
     /// Safe state: table to a controlled stop, chamber to standby.
     async fn safe_state(&mut self) -> Result<(), DeviceError>;
     /// Advance to device time `t_s`, filling `tick`.
@@ -561,6 +565,40 @@ impl Run<'_> {
                         )));
                     }
                 }
+            }
+            StepKind::Turn {
+                inner,
+                rate_dps,
+                settle_s,
+            } => {
+                self.bench
+                    .rotate_table(*inner, *rate_dps)
+                    .await
+                    .map_err(Stop::Device)?;
+                // At the rate when the axis reads it to a part in a thousand.
+                let tol = 1e-3 * rate_dps.abs() + 1e-4;
+                let deadline = self.bench.now_s() + self.opts.move_timeout_s;
+                loop {
+                    self.tick(f64::INFINITY, None, key).await?;
+                    if let Some(st) = &self.last {
+                        let r = if *inner {
+                            st.table.rates.inner_deg
+                        } else {
+                            st.table.rates.outer_deg
+                        };
+                        if (r - rate_dps).abs() <= tol {
+                            break;
+                        }
+                    }
+                    if self.bench.now_s() > deadline {
+                        return Err(Stop::Data(format!(
+                            "the table's {} axis did not reach {rate_dps} deg/s within {} s; check the table",
+                            if *inner { "inner" } else { "outer" },
+                            self.opts.move_timeout_s
+                        )));
+                    }
+                }
+                self.run_for(*settle_s, None, key).await
             }
             StepKind::Wait { duration_s } => self.run_for(*duration_s, None, key).await,
             StepKind::Record { label, duration_s } => {

@@ -76,6 +76,16 @@ pub fn resume_plan(p: &Procedure, completed: usize) -> (usize, Vec<(usize, Step)
         start_at = c;
     }
 
+    // A record taken while the table turns starts again with its turn.
+    if start_at > 0
+        && steps
+            .get(start_at)
+            .is_some_and(|s| matches!(s.kind, StepKind::Record { .. }))
+        && matches!(steps[start_at - 1].kind, StepKind::Turn { rate_dps, .. } if rate_dps != 0.0)
+    {
+        start_at -= 1;
+    }
+
     let mut restore: Vec<(usize, Step)> = Vec::new();
     if let Some(m) = steps[..start_at]
         .iter()

@@ -80,7 +80,7 @@ impl SimBench {
                 }
             }
             Command::DemandRate(a, r) => {
-                let limit = self.twin.axis(a == Axis::Inner).limits().0;
+                let limit = self.twin.axis(a == Axis::Inner).rate_mode_limits().0;
                 if !ready(a) || t.mode[idx(a)] != ServoMode::Rate {
                     self.acl_error(ScpiError::SETTINGS_CONFLICT);
                 } else if r.abs() > limit {
@@ -216,8 +216,12 @@ mod tests {
             Some("-221,\"Settings conflict\"")
         );
         assert_eq!(b.acl_message(":SYST:ERR?").as_deref(), Some(NO_ERROR));
+        // Rate mode turns up to its own limit (500 deg/s on the RL-16
+        // bench), far beyond the positioning profile, and refuses more.
         b.acl_message(":M:R 2");
         b.acl_message(":D:R 2,500");
+        assert_eq!(b.acl_message(":SYST:ERR?").as_deref(), Some(NO_ERROR));
+        b.acl_message(":D:R 2,500.5");
         assert_eq!(
             b.acl_message(":SYST:ERR?").as_deref(),
             Some("-222,\"Data out of range\"")

@@ -35,6 +35,101 @@ pub struct TwinConfig {
     /// Extra effects beyond model 4, each off unless enabled.
     #[serde(default)]
     pub effects: EffectsConfig,
+    /// How the output follows the input rate (scale factor, nonlinearity,
+    /// asymmetry, lock-in); nominal unless set.
+    #[serde(default)]
+    pub rate_response: RateResponseConfig,
+}
+
+/// The output's response to the input rate (`docs/twin.md`, "Rate
+/// response"). Every term is zero by default: the output is the input.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct RateResponseConfig {
+    /// Scale factor error against the nominal count (`gyro.lsb_arcsec`), ppm.
+    pub scale_factor_error_ppm: f64,
+    /// Scale-factor nonlinearity: the scale factor changes by this much at
+    /// `full_scale_dps`, in proportion to |rate| (an output error growing
+    /// with the square of the rate), ppm.
+    pub nonlinearity_ppm: f64,
+    /// Input rate at which `nonlinearity_ppm` applies, deg/s (the unit's
+    /// range).
+    pub full_scale_dps: f64,
+    /// Scale factor for positive input rates minus that for negative ones,
+    /// ppm (each half of it on either side).
+    pub asymmetry_ppm: f64,
+    /// Lock-in threshold left after dither, deg/h: an input (with the
+    /// bias) smaller than this gives no output; above it the output is
+    /// `sign(x) sqrt(x^2 - lock_in^2)` (the Adler equation of a ring laser).
+    /// A locking gyro is a dithered one: its frames then also carry the
+    /// dither-stripping residual, one count rms of white angle jitter.
+    pub lock_in_dph: f64,
+    /// Random walk the dither adds to the angle output, deg/sqrt(h)
+    /// (beyond `noise.arw_deg_per_rt_h`).
+    pub dither_random_walk_deg_per_rt_h: f64,
+}
+
+impl RateResponseConfig {
+    /// The output rate, deg/h, for the input `input_dph` (Earth and
+    /// table rate on the sensitive axis) times the temperature scale
+    /// factor `sf_temperature`, plus `bias_dph`; no noise. The twin's
+    /// output follows this exactly (tests compare figures with it).
+    pub fn output_dph(&self, input_dph: f64, sf_temperature: f64, bias_dph: f64) -> f64 {
+        let mut k = sf_temperature * (1.0 + self.scale_factor_error_ppm * 1e-6);
+        if self.asymmetry_ppm != 0.0 {
+            k *= 1.0 + 0.5e-6 * self.asymmetry_ppm * input_dph.signum();
+        }
+        if self.nonlinearity_ppm != 0.0 && self.full_scale_dps > 0.0 {
+            k *= 1.0
+                + 1e-6 * self.nonlinearity_ppm * input_dph.abs() / (self.full_scale_dps * 3600.0);
+        }
+        let x = k * input_dph + bias_dph;
+        if self.lock_in_dph > 0.0 {
+            let l = self.lock_in_dph;
+            if x.abs() <= l {
+                0.0
+            } else {
+                x.signum() * (x * x - l * l).sqrt()
+            }
+        } else {
+            x
+        }
+    }
+
+    fn validate(&self, c: &Checker<'_>) -> Result<(), ConfigError> {
+        c.within(
+            self.scale_factor_error_ppm,
+            -1e5,
+            1e5,
+            "rate_response.scale_factor_error_ppm",
+        )?;
+        c.within(
+            self.nonlinearity_ppm,
+            -1e5,
+            1e5,
+            "rate_response.nonlinearity_ppm",
+        )?;
+        c.within(
+            self.full_scale_dps,
+            0.0,
+            1e4,
+            "rate_response.full_scale_dps",
+        )?;
+        c.ensure(
+            self.nonlinearity_ppm == 0.0 || self.full_scale_dps > 0.0,
+            "rate_response.full_scale_dps",
+            "must be above 0 deg/s when nonlinearity_ppm is set",
+        )?;
+        c.within(self.asymmetry_ppm, -1e5, 1e5, "rate_response.asymmetry_ppm")?;
+        c.within(self.lock_in_dph, 0.0, 3600.0, "rate_response.lock_in_dph")?;
+        c.within(
+            self.dither_random_walk_deg_per_rt_h,
+            0.0,
+            1.0,
+            "rate_response.dither_random_walk_deg_per_rt_h",
+        )?;
+        Ok(())
+    }
 }
 
 /// Chamber air: follows a ramped set point through a first-order lag.
@@ -159,6 +254,21 @@ pub struct TableConfig {
     pub max_acc_dps2: f64,
     /// Table angles at the start.
     pub initial: TableAngles,
+    /// Fastest rate in rate mode, deg/s (`max_rate_dps` is the profile of
+    /// position moves).
+    #[serde(default = "default_rate_mode_max_dps")]
+    pub rate_mode_max_dps: f64,
+    /// Largest acceleration in rate mode, deg/s^2.
+    #[serde(default = "default_rate_mode_max_acc_dps2")]
+    pub rate_mode_max_acc_dps2: f64,
+}
+
+fn default_rate_mode_max_dps() -> f64 {
+    500.0
+}
+
+fn default_rate_mode_max_acc_dps2() -> f64 {
+    100.0
 }
 
 /// Extra effects, named as in the diagnosis library.
@@ -356,10 +466,13 @@ impl TwinConfig {
         let t = &self.table;
         c.positive(t.max_rate_dps, "table.max_rate_dps")?;
         c.positive(t.max_acc_dps2, "table.max_acc_dps2")?;
+        c.positive(t.rate_mode_max_dps, "table.rate_mode_max_dps")?;
+        c.positive(t.rate_mode_max_acc_dps2, "table.rate_mode_max_acc_dps2")?;
         t.geometry.validate(c, "table.geometry")?;
         c.finite(t.initial.outer_deg, "table.initial.outer_deg")?;
         c.finite(t.initial.inner_deg, "table.initial.inner_deg")?;
 
+        self.rate_response.validate(c)?;
         self.effects.validate(c)
     }
 }

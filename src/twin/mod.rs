@@ -107,6 +107,8 @@ pub struct Twin {
     // Caches refreshed by the slow step or when the table moves.
     kinematic_dph: f64,
     scale_factor: f64,
+    /// The rate response when it is not nominal.
+    response: Option<config::RateResponseConfig>,
     bias_dph: f64,
     effect_dph: f64,
     noise_dph: f64,
@@ -116,6 +118,9 @@ pub struct Twin {
     sensor_c: [f64; 3],
     // Angle bookkeeping.
     residual_arcsec: f64,
+    /// Dither-stripping residual of a dithered (locking) gyro: white angle
+    /// jitter of one count rms, and the last frame's.
+    jitter: Option<(f64, f64)>,
     true_angle_arcsec: f64,
     true_angle_comp: f64,
 }
@@ -144,14 +149,18 @@ impl Twin {
             frame_index: 0,
             chamber: ChamberAir::new(&cfg.chamber),
             thermal: ThermalNetwork::soaked(&cfg.thermal, cfg.chamber.initial_c),
-            outer: Axis::at_rest(t.initial.outer_deg, t.max_rate_dps, t.max_acc_dps2),
-            inner: Axis::at_rest(t.initial.inner_deg, t.max_rate_dps, t.max_acc_dps2),
-            noise: Noise::new(&cfg.noise, frame_dt_s, step_dt_s),
+            outer: Axis::at_rest(t.initial.outer_deg, t.max_rate_dps, t.max_acc_dps2)
+                .with_rate_mode(t.rate_mode_max_dps, t.rate_mode_max_acc_dps2),
+            inner: Axis::at_rest(t.initial.inner_deg, t.max_rate_dps, t.max_acc_dps2)
+                .with_rate_mode(t.rate_mode_max_dps, t.rate_mode_max_acc_dps2),
+            noise: Noise::new(&with_dither(&cfg), frame_dt_s, step_dt_s),
             effects: Effects::new(&cfg.effects),
             axis_body: Vector3::x(),
             turn_on_dph: 0.0,
             kinematic_dph: 0.0,
             scale_factor: 1.0,
+            response: (cfg.rate_response != config::RateResponseConfig::default())
+                .then(|| cfg.rate_response.clone()),
             bias_dph: 0.0,
             effect_dph: 0.0,
             noise_dph: 0.0,
@@ -160,6 +169,7 @@ impl Twin {
             magnetic_body_ut: Vector3::zeros(),
             sensor_c: [cfg.chamber.initial_c; 3],
             residual_arcsec: 0.0,
+            jitter: (cfg.rate_response.lock_in_dph > 0.0).then_some((cfg.gyro.lsb_arcsec, 0.0)),
             true_angle_arcsec: 0.0,
             true_angle_comp: 0.0,
             cfg,
@@ -319,7 +329,10 @@ impl Twin {
         }
         self.power_on_tick?;
 
-        let rate_dph = self.scale_factor * self.kinematic_dph + self.bias_dph;
+        let rate_dph = match &self.response {
+            None => self.scale_factor * self.kinematic_dph + self.bias_dph,
+            Some(r) => r.output_dph(self.kinematic_dph, self.scale_factor, self.bias_dph),
+        };
         let d_angle = rate_dph * self.frame_dt_s + self.noise.frame_angle_arcsec(&mut self.rng);
         // Kahan sum: the reference angle must stay exact over 1e7+ frames.
         let y = d_angle - self.true_angle_comp;
@@ -328,6 +341,11 @@ impl Twin {
         self.true_angle_arcsec = t;
 
         self.residual_arcsec += d_angle;
+        if let Some((sigma, last)) = &mut self.jitter {
+            let j = *sigma * self.rng.sample::<f64, _>(StandardNormal);
+            self.residual_arcsec += j - *last;
+            *last = j;
+        }
         let lsb = self.cfg.gyro.lsb_arcsec;
         let counts = (self.residual_arcsec / lsb).floor();
         self.residual_arcsec -= counts * lsb;
@@ -412,6 +430,17 @@ impl Twin {
             *out = (noisy / lsb).round() * lsb;
         }
     }
+}
+
+/// The noise terms with the dither's random walk added to the angle
+/// random walk (independent white noises add in variance).
+fn with_dither(cfg: &TwinConfig) -> config::NoiseConfig {
+    let mut n = cfg.noise.clone();
+    let d = cfg.rate_response.dither_random_walk_deg_per_rt_h;
+    if d > 0.0 {
+        n.arw_deg_per_rt_h = n.arw_deg_per_rt_h.hypot(d);
+    }
+    n
 }
 
 /// Inputs of the model-4 bias.

@@ -22,6 +22,8 @@ pub struct Axis {
     demand: AxisDemand,
     max_rate_dps: f64,
     max_acc_dps2: f64,
+    /// Rate and acceleration limits of rate mode (and of stopping from it).
+    rate_mode: (f64, f64),
 }
 
 impl Axis {
@@ -33,13 +35,27 @@ impl Axis {
             demand: AxisDemand::Position(pos_deg),
             max_rate_dps,
             max_acc_dps2,
+            rate_mode: (max_rate_dps, max_acc_dps2),
         }
     }
 
-    /// Replace the demand (rates beyond the axis limit are clamped to it).
+    /// With rate-mode limits of its own (a rate table turns far faster
+    /// than it positions).
+    pub fn with_rate_mode(mut self, rate_dps: f64, acc_dps2: f64) -> Self {
+        self.rate_mode = (rate_dps, acc_dps2);
+        self
+    }
+
+    /// Rate and acceleration limits of rate mode, deg/s and deg/s^2.
+    pub fn rate_mode_limits(&self) -> (f64, f64) {
+        self.rate_mode
+    }
+
+    /// Replace the demand (rates beyond the rate-mode limit are clamped
+    /// to it).
     pub fn demand(&mut self, demand: AxisDemand) {
         self.demand = match demand {
-            AxisDemand::Rate(r) => AxisDemand::Rate(r.clamp(-self.max_rate_dps, self.max_rate_dps)),
+            AxisDemand::Rate(r) => AxisDemand::Rate(r.clamp(-self.rate_mode.0, self.rate_mode.0)),
             d => d,
         };
     }
@@ -71,7 +87,13 @@ impl Axis {
 
     /// Advance by `dt_s` within the rate and acceleration limits.
     pub fn step(&mut self, dt_s: f64) {
-        let dv = self.max_acc_dps2 * dt_s;
+        // Turning and stopping from a turn use the rate-mode acceleration;
+        // position moves the positioning profile.
+        let acc = match self.demand {
+            AxisDemand::Position(_) => self.max_acc_dps2,
+            AxisDemand::Rate(_) | AxisDemand::Stop => self.rate_mode.1,
+        };
+        let dv = acc * dt_s;
         let v_target = match self.demand {
             AxisDemand::Rate(r) => r,
             AxisDemand::Stop => 0.0,
@@ -91,6 +113,13 @@ impl Axis {
         let v_new = self.rate_dps + (v_target - self.rate_dps).clamp(-dv, dv);
         self.pos_deg += 0.5 * (self.rate_dps + v_new) * dt_s;
         self.rate_dps = v_new;
+        // A turning axis reads its angle as its encoder does on slip rings:
+        // within one turn (the pose is the same).
+        if let AxisDemand::Rate(_) = self.demand
+            && !(-180.0..180.0).contains(&self.pos_deg)
+        {
+            self.pos_deg = (self.pos_deg + 180.0).rem_euclid(360.0) - 180.0;
+        }
         if let AxisDemand::Stop = self.demand
             && self.rate_dps == 0.0
         {
@@ -127,6 +156,11 @@ mod tests {
     fn stop_decelerates_and_holds() {
         let mut ax = Axis::at_rest(0.0, 20.0, 10.0);
         ax.demand(AxisDemand::Rate(100.0));
+        assert_eq!(
+            ax.rate_mode_limits(),
+            (20.0, 10.0),
+            "no rate mode of its own"
+        );
         for _ in 0..400 {
             ax.step(0.01);
         }

@@ -104,7 +104,7 @@ async fn watlow_driver_against_its_simulator_over_tcp() {
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn acl_driver_moves_the_table_into_position_over_tcp_and_pty() {
+async fn acl_driver_moves_and_turns_the_table_over_tcp_and_pty() {
     let served = serve(20.0).await;
     for (scheme, target) in [("tcp://", (0.0, 90.0)), ("pty://", (35.0, 180.0))] {
         let mut t = acl(&served, scheme).await;
@@ -126,11 +126,37 @@ async fn acl_driver_moves_the_table_into_position_over_tcp_and_pty() {
             tokio::time::sleep(Duration::from_millis(10)).await;
         }
         assert!(settled, "{scheme}: table never settled on {target:?}");
+        // Rate mode in the instrument's own language: the inner axis
+        // turns at 100 deg/s (far beyond the 20 deg/s of position moves),
+        // a demand beyond the rate-mode limit is refused with the
+        // instrument's error, and 0 brings the axis to rest.
+        t.rate(true, 100.0).await.expect("turning accepted");
+        let mut turning = false;
+        for _ in 0..400 {
+            let r = t.read().await.expect("reading");
+            if (r.rates.inner_deg - 100.0).abs() < 1e-6 {
+                turning = true;
+                break;
+            }
+            tokio::time::sleep(Duration::from_millis(10)).await;
+        }
+        assert!(turning, "{scheme}: the inner axis never reached 100 deg/s");
         let err = t
-            .rate(true, 500.0)
+            .rate(true, 600.0)
             .await
-            .expect_err("beyond the rate limit");
+            .expect_err("beyond the rate-mode limit");
         assert!(err.to_string().contains("-222"), "{err}");
+        t.rate(true, 0.0).await.expect("to rest");
+        let mut rest = false;
+        for _ in 0..400 {
+            let r = t.read().await.expect("reading");
+            if r.rates.inner_deg == 0.0 {
+                rest = true;
+                break;
+            }
+            tokio::time::sleep(Duration::from_millis(10)).await;
+        }
+        assert!(rest, "{scheme}: the inner axis never came to rest");
     }
 }
 

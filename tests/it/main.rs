@@ -18,6 +18,7 @@ mod import;
 mod integrity;
 mod messages;
 mod pages;
+mod rate;
 mod readme;
 mod replay;
 mod results;

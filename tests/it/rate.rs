@@ -1,0 +1,314 @@
+//! Rate-table tests on the embedded bench: the figures of
+//! `procedures/rate_transfer.toml` and `procedures/dead_band.toml` against
+//! the twin's configured rate response, a unit beyond its limit failing,
+//! the figures replayed from the log, and the same `rate` steps run over
+//! the real ACL command language to `sim serve`.
+
+use std::path::{Path, PathBuf};
+
+use gyrobench::analysis::rate::{
+    self, DEAD_BAND_SHARE, RatePoint, THRESHOLD_SHARE, input_for_share,
+};
+use gyrobench::runlog::replay::replay;
+use gyrobench::twin::config::{RateResponseConfig, TwinConfig};
+
+use crate::cli::{gyrobench, temp_dir};
+use crate::common::{json, s, stderr, write};
+
+const PROCEDURES: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/procedures");
+
+/// A twin file: the RL-16 with `response` as its rate response.
+fn twin_with(dir: &Path, name: &str, response: &RateResponseConfig) -> PathBuf {
+    let mut twin = TwinConfig::default_rl16();
+    twin.rate_response = response.clone();
+    write(dir, name, &twin.to_toml().expect("twin TOML"))
+}
+
+/// Run `procedure` on the embedded bench with `twin` into `dir/out`.
+fn run(procedure: &str, twin: &Path, out: &Path) -> std::process::Output {
+    gyrobench(&[
+        "run",
+        &format!("{PROCEDURES}/{procedure}"),
+        "--twin",
+        s(twin),
+        "--out",
+        s(out),
+        "--db",
+        "none",
+    ])
+}
+
+/// (value, standard error) of measurement `name` in `report`.
+fn figure(report: &serde_json::Value, name: &str) -> (f64, f64) {
+    let m = report["measurements"]
+        .as_array()
+        .expect("measurements")
+        .iter()
+        .find(|m| m["name"] == name)
+        .unwrap_or_else(|| panic!("no {name}: {report}"));
+    (
+        m["value"].as_f64().expect("a value"),
+        m["std_error"].as_f64().expect("a standard error"),
+    )
+}
+
+/// The records of the run's log as the twin's truth would give them: the
+/// same input rates, the output the configured response gives without
+/// noise or bias (a constant bias cancels in every figure).
+fn truth_points(log: &Path, response: &RateResponseConfig, prefix: &str) -> Vec<RatePoint> {
+    let replayed = replay(log, None).expect("the log replays");
+    let records = &replayed.result.records;
+    records
+        .order
+        .iter()
+        .filter(|l| l.starts_with(prefix))
+        .filter_map(|l| RatePoint::of(records.get(l)?))
+        .map(|p| RatePoint {
+            output_dph: response.output_dph(p.input_dph, 1.0, 0.0),
+            ..p
+        })
+        .collect()
+}
+
+fn assert_within_3_se(what: &str, (value, se): (f64, f64), truth: f64) {
+    assert!(
+        se > 0.0 && (value - truth).abs() <= 3.0 * se,
+        "{what}: measured {value} +- {se}, the twin's value {truth}"
+    );
+}
+
+#[test]
+fn rate_transfer_figures_agree_with_the_twin_at_two_settings() {
+    let dir = temp_dir("rate-transfer");
+    let settings = [
+        RateResponseConfig {
+            scale_factor_error_ppm: 60.0,
+            nonlinearity_ppm: 40.0,
+            full_scale_dps: 400.0,
+            asymmetry_ppm: 12.0,
+            ..RateResponseConfig::default()
+        },
+        RateResponseConfig {
+            scale_factor_error_ppm: -150.0,
+            nonlinearity_ppm: 120.0,
+            full_scale_dps: 400.0,
+            asymmetry_ppm: -30.0,
+            ..RateResponseConfig::default()
+        },
+    ];
+    let mut seen = Vec::new();
+    for (i, response) in settings.iter().enumerate() {
+        let twin = twin_with(&dir, &format!("twin{i}.toml"), response);
+        let out = dir.join(format!("run{i}"));
+        let o = run("rate_transfer.toml", &twin, &out);
+        assert!(
+            matches!(o.status.code(), Some(0 | 3)),
+            "setting {i}: {}",
+            stderr(&o)
+        );
+        let report = json(&out.join("report.json"));
+        let truth = truth_points(&out.join("run.mcap"), response, "rate_");
+        assert_eq!(truth.len(), 16, "16 rate records");
+        let sf = figure(&report, "scale_factor_ppm");
+        let nl = figure(&report, "scale_factor_nonlinearity_ppm");
+        let asym = figure(&report, "scale_factor_asymmetry_ppm");
+        let t_sf = rate::scale_factor_ppm(&truth).expect("truth").value;
+        let t_nl = rate::nonlinearity_ppm(&truth).expect("truth").value;
+        let t_asym = rate::asymmetry_ppm(&truth).expect("truth").value;
+        assert_within_3_se(&format!("setting {i} scale factor"), sf, t_sf);
+        assert_within_3_se(&format!("setting {i} nonlinearity"), nl, t_nl);
+        assert_within_3_se(&format!("setting {i} asymmetry"), asym, t_asym);
+        // The asymmetry and scale factor are the configured ones (the
+        // nonlinearity, odd in the rate, leaves both directions alike).
+        assert!((t_asym - response.asymmetry_ppm).abs() < 0.5, "{t_asym}");
+        seen.push((sf.0, nl.0, asym.0));
+    }
+    // The two settings are told apart by far more than their errors.
+    assert!((seen[0].0 - seen[1].0).abs() > 100.0, "{seen:?}");
+    assert!((seen[0].1 - seen[1].1).abs() > 20.0, "{seen:?}");
+    assert!((seen[0].2 - seen[1].2).abs() > 20.0, "{seen:?}");
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
+
+#[test]
+fn dead_band_and_threshold_agree_with_the_twin_at_two_settings() {
+    let dir = temp_dir("dead-band");
+    for (i, lock_in) in [3.0, 8.0].into_iter().enumerate() {
+        let response = RateResponseConfig {
+            lock_in_dph: lock_in,
+            ..RateResponseConfig::default()
+        };
+        let twin = twin_with(&dir, &format!("twin{i}.toml"), &response);
+        let out = dir.join(format!("run{i}"));
+        let o = run("dead_band.toml", &twin, &out);
+        assert_eq!(o.status.code(), Some(3), "beyond 2 deg/h: {}", stderr(&o));
+        let report = json(&out.join("report.json"));
+        assert_within_3_se(
+            &format!("lock-in {lock_in} dead band"),
+            figure(&report, "dead_band_dph"),
+            input_for_share(lock_in, DEAD_BAND_SHARE),
+        );
+        assert_within_3_se(
+            &format!("lock-in {lock_in} threshold"),
+            figure(&report, "threshold_dph"),
+            input_for_share(lock_in, THRESHOLD_SHARE),
+        );
+    }
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
+
+#[test]
+fn the_rl16_passes_a_nonlinear_unit_fails_and_replay_gives_the_same_figures() {
+    let dir = temp_dir("rate-verdicts");
+    let nominal = twin_with(&dir, "nominal.toml", &RateResponseConfig::default());
+    let out = dir.join("nominal");
+    let o = run("rate_transfer.toml", &nominal, &out);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        text.contains("scale_factor_nonlinearity_ppm") && text.contains(" ± "),
+        "figures with their standard errors: {text}"
+    );
+    let bent = twin_with(
+        &dir,
+        "bent.toml",
+        &RateResponseConfig {
+            nonlinearity_ppm: 300.0,
+            full_scale_dps: 400.0,
+            ..RateResponseConfig::default()
+        },
+    );
+    let out = dir.join("bent");
+    let o = run("rate_transfer.toml", &bent, &out);
+    assert_eq!(o.status.code(), Some(3), "{}", stderr(&o));
+    let report = json(&out.join("report.json"));
+    let nl = report["measurements"]
+        .as_array()
+        .expect("measurements")
+        .iter()
+        .find(|m| m["name"] == "scale_factor_nonlinearity_ppm")
+        .expect("nonlinearity");
+    assert_eq!(nl["outcome"], "fail", "{nl}");
+    let html = std::fs::read_to_string(out.join("report.html")).expect("page");
+    assert!(
+        html.contains("Scale-factor residuals"),
+        "the residual chart"
+    );
+    // Replay recomputes every figure from the log alone.
+    let replayed = dir.join("replayed");
+    let r = gyrobench(&["replay", s(&out.join("run.mcap")), "--out", s(&replayed)]);
+    assert_eq!(r.status.code(), Some(3), "{}", stderr(&r));
+    assert_eq!(
+        std::fs::read_to_string(out.join("report.json")).expect("live"),
+        std::fs::read_to_string(replayed.join("report.json")).expect("replayed"),
+    );
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
+
+/// `rate` steps are refused at `check` with their file, line and field when
+/// the bench cannot turn that fast or has no rate mode.
+#[test]
+fn rate_steps_beyond_the_bench_are_refused_with_their_place() {
+    let dir = temp_dir("rate-refused");
+    let p = write(
+        &dir,
+        "fast.toml",
+        "[procedure]\nname = \"fast\"\ndut_type = \"RL-16\"\n\n[[main]]\naction = \"rate\"\nlabel = \"a\"\nrate_dps = 900.0\nrevolutions = 1\n",
+    );
+    let o = gyrobench(&["check", s(&p)]);
+    let err = stderr(&o);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("main.0.rate_dps") && err.contains("rate-mode limit of 400"),
+        "{err}"
+    );
+    let p = write(
+        &dir,
+        "half.toml",
+        "[procedure]\nname = \"half\"\ndut_type = \"RL-16\"\n\n[[main]]\naction = \"rate\"\nlabel = \"a\"\nrate_dps = 10.0\nrevolutions = 1.5\n",
+    );
+    let o = gyrobench(&["check", s(&p)]);
+    assert!(
+        stderr(&o).contains("whole number of revolutions"),
+        "{}",
+        stderr(&o)
+    );
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
+
+/// The same `rate` steps on `sim serve` over TCP and a pty: the driver
+/// turns the table in the ACL command language and the figures come out.
+#[test]
+fn rate_steps_run_on_sim_serve_over_tcp_and_pty() {
+    let _turn = crate::common::wall_clock_turn();
+    let dir = temp_dir("rate-served");
+    let served = crate::common::SimServe::start(&dir, 200.0);
+    let p = write(
+        &dir,
+        "ladder.toml",
+        r#"[procedure]
+name = "ladder"
+dut_type = "RL-16"
+
+[[setup]]
+action = "move"
+table = { outer_deg = 90.0, inner_deg = 0.0 }
+
+[[main]]
+action = "rate"
+label = "r+20"
+rate_dps = 20.0
+revolutions = 2
+
+[[main]]
+action = "rate"
+label = "r-20"
+rate_dps = -20.0
+revolutions = 2
+
+[[main]]
+action = "rate"
+label = "r+50"
+rate_dps = 50.0
+revolutions = 5
+
+[[main]]
+action = "rate"
+label = "r-50"
+rate_dps = -50.0
+revolutions = 5
+
+[[main]]
+action = "measure"
+name = "scale_factor_ppm"
+metric = "scale_factor"
+records = ["r*"]
+low = -100.0
+high = 100.0
+unit = "ppm"
+
+[[cleanup]]
+action = "move"
+table = { outer_deg = 90.0, inner_deg = 0.0 }
+"#,
+    );
+    for scheme in ["tcp://", "pty://"] {
+        let bench = served.bench_file(&dir, scheme, 200.0);
+        let out = dir.join(format!("run-{}", scheme.trim_end_matches("://")));
+        let o = gyrobench(&[
+            "run",
+            s(&p),
+            "--bench",
+            s(&bench),
+            "--out",
+            s(&out),
+            "--db",
+            "none",
+        ]);
+        assert_eq!(o.status.code(), Some(0), "{scheme}: {}", stderr(&o));
+        let report = json(&out.join("report.json"));
+        let (sf, se) = figure(&report, "scale_factor_ppm");
+        assert!(sf.abs() <= 3.0 * se + 1.0, "{scheme}: {sf} +- {se} ppm");
+    }
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
