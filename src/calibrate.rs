@@ -6,6 +6,9 @@
 //! Data: the 1 Hz intervals of each run rebuilt from its log (as replay
 //! does), restricted to the records its compensated-drift measurements use
 //! (the thermal records), or every recorded interval when it has none.
+//! Records taken while the table turns (`rate` steps) are not thermal
+//! data: they give the scale factor and its temperature coefficient
+//! ([`scale_factor`]), pooled over the runs with one bias per run.
 
 use std::path::Path;
 
@@ -13,9 +16,10 @@ use serde::Serialize;
 
 use crate::analysis::figures::drift_pp;
 use crate::analysis::model::{Fit, FitError, ModelKind, MultiFit, collinear, fit_runs};
+use crate::analysis::rate::RatePoint;
 use crate::analysis::series::Interval;
 use crate::analysis::study::DRIFT_SMOOTHING_S;
-use crate::coeffs::{CoeffsFile, Model1Coeffs, Model3Coeffs, Model4Coeffs};
+use crate::coeffs::{CoeffsFile, Model1Coeffs, Model3Coeffs, Model4Coeffs, ScaleFactorCoeffs};
 use crate::procedure::{Metric, StepKind};
 use crate::runlog::replay::{ReplayError, replay};
 
@@ -35,11 +39,30 @@ pub struct RunSeries {
     pub run_id: String,
     /// 1 Hz intervals used for calibration.
     pub series: Vec<Interval>,
+    /// Its records taken while the table turned, one point each.
+    pub rate: Vec<RatePoint>,
 }
 
 /// Load the calibration series of a run from its log.
 pub fn load(path: &Path) -> Result<RunSeries, ReplayError> {
     let r = replay(path, None)?;
+    // Records of `rate` steps: a record right after a turn at a rate.
+    let steps: Vec<&crate::procedure::Step> = r.procedure.steps().collect();
+    let turning: Vec<String> = steps
+        .windows(2)
+        .filter_map(|w| match (&w[0].kind, &w[1].kind) {
+            (StepKind::Turn { rate_dps, .. }, StepKind::Record { label, .. })
+                if *rate_dps != 0.0 =>
+            {
+                Some(label.clone())
+            }
+            _ => None,
+        })
+        .collect();
+    let rate: Vec<RatePoint> = turning
+        .iter()
+        .filter_map(|l| RatePoint::of(r.result.records.get(l)?))
+        .collect();
     let thermal: Vec<String> = r
         .procedure
         .steps()
@@ -51,6 +74,12 @@ pub fn load(path: &Path) -> Result<RunSeries, ReplayError> {
         })
         .flatten()
         .collect();
+    let in_turns: std::collections::HashSet<u64> = turning
+        .iter()
+        .filter_map(|l| r.result.records.get(l))
+        .flatten()
+        .map(|iv| iv.time_s.to_bits())
+        .collect();
     let series: Vec<Interval> = if thermal.is_empty() {
         r.result
             .records
@@ -58,6 +87,9 @@ pub fn load(path: &Path) -> Result<RunSeries, ReplayError> {
             .iter()
             .filter(|(rec, _)| *rec)
             .map(|(_, iv)| *iv)
+            // Not the rate records (their "bias" carries the scale factor
+            // times the rate).
+            .filter(|iv| !in_turns.contains(&iv.time_s.to_bits()))
             .collect()
     } else {
         let mut seen = Vec::new();
@@ -78,7 +110,76 @@ pub fn load(path: &Path) -> Result<RunSeries, ReplayError> {
         dut_type: r.meta.dut_type.clone(),
         run_id: r.meta.run_id.clone(),
         series,
+        rate,
     })
+}
+
+/// The scale factor pooled over the runs' rate records: `output = K0 x +
+/// c x (T - Tref) + B_run` by least squares, one bias per run, `Tref` the
+/// records' mean block temperature to 0.1 degC; `c` only when the records
+/// span 1 degC or more. None without three rate records.
+pub fn scale_factor(runs: &[RunSeries]) -> Option<ScaleFactorCoeffs> {
+    use nalgebra::{DMatrix, DVector};
+    let pts: Vec<(usize, &RatePoint)> = runs
+        .iter()
+        .enumerate()
+        .flat_map(|(i, r)| r.rate.iter().map(move |p| (i, p)))
+        .collect();
+    let with: Vec<usize> = (0..runs.len())
+        .filter(|i| !runs[*i].rate.is_empty())
+        .collect();
+    if pts.len() < 3 {
+        return None;
+    }
+    let n = pts.len() as f64;
+    let tref = (pts.iter().map(|(_, p)| p.block_c).sum::<f64>() / n * 10.0).round() / 10.0;
+    let (lo, hi) = pts
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), (_, p)| {
+            (a.min(p.block_c), b.max(p.block_c))
+        });
+    let temp = hi - lo >= 1.0;
+    let k = if temp { 2 } else { 1 };
+    let cols = k + with.len();
+    if pts.len() <= cols {
+        return None;
+    }
+    let x = DMatrix::from_fn(pts.len(), cols, |i, j| {
+        let (run, p) = pts[i];
+        match j {
+            0 => p.input_dph,
+            1 if temp => p.input_dph * (p.block_c - tref),
+            _ => f64::from(u8::from(with[j - k] == run)),
+        }
+    });
+    let y = DVector::from_iterator(pts.len(), pts.iter().map(|(_, p)| p.output_dph));
+    let inv = (x.transpose() * &x).try_inverse()?;
+    let b = &inv * x.transpose() * &y;
+    let s2 = (&y - &x * &b).norm_squared() / (pts.len() - cols) as f64;
+    let se = |i: usize| (inv[(i, i)] * s2).max(0.0).sqrt();
+    Some(ScaleFactorCoeffs {
+        error_ppm: (b[0] - 1.0) * 1e6,
+        error_ppm_stderr: se(0) * 1e6,
+        ppm_per_c: temp.then(|| b[1] / b[0] * 1e6),
+        ppm_per_c_stderr: temp.then(|| se(1) / b[0].abs() * 1e6),
+        reference_c: tref,
+        records: pts.len(),
+    })
+}
+
+impl ScaleFactorCoeffs {
+    /// In words, for the operator.
+    pub fn render_text(&self) -> String {
+        let mut s = format!(
+            "scale factor from {} rate records: {:+.3} ± {:.3} ppm against nominal at {:.1} degC (block)",
+            self.records, self.error_ppm, self.error_ppm_stderr, self.reference_c
+        );
+        match (self.ppm_per_c, self.ppm_per_c_stderr) {
+            (Some(c), Some(e)) => s.push_str(&format!(", {c:+.4} ± {e:.4} ppm/degC\n")),
+            _ => s.push_str("; the records span less than 1 degC: no temperature coefficient\n"),
+        }
+        s
+    }
 }
 
 /// Residual figures of one model on one run (its own offset removed).
@@ -397,6 +498,7 @@ impl Calibration {
                 k3_dph_per_c: m1[2],
                 offset_dph: m1[3],
             }),
+            scale_factor: None,
             calibration: Some(info),
         }
     }

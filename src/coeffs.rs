@@ -83,9 +83,35 @@ pub struct CoeffsFile {
     /// Model 1.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub model1: Option<Model1Coeffs>,
+    /// The scale factor from rate runs (`calibrate` with rate-table runs).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub scale_factor: Option<ScaleFactorCoeffs>,
     /// Provenance written by `gyrobench calibrate`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub calibration: Option<toml::Table>,
+}
+
+/// `[scale_factor]`: the unit's scale factor against nominal and its
+/// temperature coefficient, `K = (1 + error 1e-6) (1 + ppm_per_c 1e-6 (T -
+/// reference_c))`, T the block temperature.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ScaleFactorCoeffs {
+    /// Scale factor error at `reference_c`, ppm.
+    pub error_ppm: f64,
+    /// Its standard error, ppm.
+    pub error_ppm_stderr: f64,
+    /// Change per degC of the block, ppm/degC (none: the runs spanned
+    /// less than 1 degC).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ppm_per_c: Option<f64>,
+    /// Its standard error.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ppm_per_c_stderr: Option<f64>,
+    /// Block temperature the error applies at, degC.
+    pub reference_c: f64,
+    /// Rate records the fit used.
+    pub records: usize,
 }
 
 impl CoeffsFile {

@@ -27,6 +27,10 @@ pub const ORIENTATION_TOML: &str = include_str!("../procedures/orientation.toml"
 /// The run that separates what those two cannot (thermal lag,
 /// scale-factor drift), as shipped.
 pub const SEPARATING_TOML: &str = include_str!("../procedures/separating.toml");
+/// The rate transfer at three temperatures: the run that measures the
+/// scale factor's temperature coefficient directly, as shipped.
+pub const RATE_TEMPERATURES_TOML: &str =
+    include_str!("../procedures/rate_transfer_temperatures.toml");
 
 /// One recorded 1 Hz interval with its record label and the orientation.
 #[derive(Debug, Clone)]

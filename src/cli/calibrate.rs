@@ -1,5 +1,7 @@
 //! `gyrobench calibrate RUN.mcap... -o COEFFS.toml`: fit the compensation
-//! models on recorded runs, validate on held-out runs, write coefficients.
+//! models on recorded runs, validate on held-out runs, write coefficients;
+//! rate-table runs among them give the scale factor and its temperature
+//! coefficient (`[scale_factor]`).
 
 use std::path::PathBuf;
 
@@ -7,7 +9,7 @@ use anyhow::{Context, Result};
 use clap::Args;
 
 use super::{Outcome, Usage};
-use crate::calibrate::{ABSURD_OVER_RAW, calibrate, load, mixed_serials};
+use crate::calibrate::{ABSURD_OVER_RAW, calibrate, load, mixed_serials, scale_factor};
 use crate::fsutil::ensure_distinct;
 
 #[derive(Debug, Args)]
@@ -17,7 +19,9 @@ use crate::fsutil::ensure_distinct;
      fit that is not plausible), 2 usage (one run given twice, an output that is an input)"
 ))]
 pub struct CalibrateArgs {
-    /// Run logs (.mcap) of one unit; two or more for held-out validation.
+    /// Run logs (.mcap) of one unit: thermal runs for the compensation
+    /// (two or more for held-out validation), rate-table runs for the
+    /// scale factor and its temperature coefficient.
     #[arg(required = true)]
     runs: Vec<PathBuf>,
     /// Coefficients file to write (the format `run --coeffs` reads).
@@ -75,6 +79,36 @@ pub fn run(args: CalibrateArgs) -> Result<Outcome> {
             mixed.join(", ")
         );
     }
+    // Rate runs give the scale factor; thermal runs the compensation.
+    let sf = scale_factor(&runs);
+    let thermal: Vec<crate::calibrate::RunSeries> = runs
+        .iter()
+        .filter(|r| !r.series.is_empty())
+        .cloned()
+        .collect();
+    if thermal.is_empty()
+        && let Some(sf) = sf
+    {
+        #[derive(serde::Serialize)]
+        struct ScaleFactorOnly {
+            scale_factor: crate::coeffs::ScaleFactorCoeffs,
+        }
+        let toml_text = format!(
+            "# Scale factor of the unit from rate-table runs, written by gyrobench calibrate.\n\
+             # No thermal runs were given: no compensation coefficients ([model4]).\n{}",
+            toml::to_string_pretty(&ScaleFactorOnly { scale_factor: sf })
+                .context("writing the scale factor as TOML")?
+        );
+        crate::fsutil::write_output(&args.out, toml_text.as_bytes())
+            .with_context(|| format!("writing {}", args.out.display()))?;
+        outf!("{}", sf.render_text())?;
+        errln!(
+            "scale factor in {} (rate runs only: give thermal runs too for compensation coefficients)",
+            args.out.display()
+        );
+        return Ok(Outcome::Success);
+    }
+    let runs = if thermal.is_empty() { runs } else { thermal };
     let cal = calibrate(&runs).context("fitting the compensation models")?;
     let scored = cal
         .table
@@ -97,9 +131,11 @@ pub fn run(args: CalibrateArgs) -> Result<Outcome> {
             absurd.join("; ")
         );
     }
+    let mut file = cal.coeffs_file();
+    file.scale_factor = sf;
     let toml_text = format!(
         "# Thermal compensation coefficients written by gyrobench calibrate.\n# `gyrobench run --coeffs` compensates with [model4].\n{}",
-        toml::to_string_pretty(&cal.coeffs_file()).context("writing the coefficients as TOML")?
+        toml::to_string_pretty(&file).context("writing the coefficients as TOML")?
     );
     crate::fsutil::write_output(&args.out, toml_text.as_bytes())
         .with_context(|| format!("writing {}", args.out.display()))?;
@@ -108,6 +144,9 @@ pub fn run(args: CalibrateArgs) -> Result<Outcome> {
     crate::fsutil::write_output(&html_path, cal.render_html().as_bytes())
         .with_context(|| format!("writing {}", html_path.display()))?;
     outf!("{}", cal.render_text())?;
+    if let Some(sf) = &sf {
+        outf!("{}", sf.render_text())?;
+    }
     if mixed.is_empty() {
         record(&args, &runs, &cal, &toml_text);
     }

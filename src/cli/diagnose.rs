@@ -58,8 +58,9 @@ struct SelfcheckArgs {
     #[arg(long, value_delimiter = ',')]
     effects: Vec<String>,
     /// Add procedures/separating.toml (axis down, two ramp rates, a pause
-    /// mid-ramp) to each trial: the run that makes thermal_lag and
-    /// scale_factor_temperature identifiable.
+    /// mid-ramp) and procedures/rate_transfer_temperatures.toml (the rate
+    /// ladder at -40, +20, +50 degC) to each trial: the runs that make
+    /// thermal_lag and scale_factor_temperature identifiable.
     #[arg(long)]
     separating: bool,
     /// What an amplitude of 1 is: the held-out gap the effect alone opens

@@ -12,7 +12,10 @@ use serde::Serialize;
 use super::data::{RunData, Sample};
 use super::library::{Effect, LIBRARY};
 use super::{Options, diagnose};
-use crate::study::{ORIENTATION_TOML, SEPARATING_TOML, StudyError, THERMAL_CYCLE_TOML, simulate};
+use crate::study::{
+    ORIENTATION_TOML, RATE_TEMPERATURES_TOML, SEPARATING_TOML, StudyError, THERMAL_CYCLE_TOML,
+    simulate,
+};
 use crate::twin::TwinConfig;
 use crate::twin::config as tc;
 
@@ -159,7 +162,9 @@ fn to_run(samples: Vec<crate::study::Sample>, name: &str, twin: &TwinConfig) -> 
 }
 
 /// The runs of one trial on `twin`: the study's thermal cycle and
-/// orientation run, and with `separating` also `procedures/separating.toml`.
+/// orientation run, and with `separating` also `procedures/separating.toml`
+/// and the rate transfer at three temperatures
+/// (`procedures/rate_transfer_temperatures.toml`).
 fn runs_of(twin: &TwinConfig, seed: u64, separating: bool) -> Result<Vec<RunData>, StudyError> {
     let mut procedures = vec![
         (THERMAL_CYCLE_TOML, "thermal_cycle"),
@@ -167,6 +172,7 @@ fn runs_of(twin: &TwinConfig, seed: u64, separating: bool) -> Result<Vec<RunData
     ];
     if separating {
         procedures.push((SEPARATING_TOML, "separating"));
+        procedures.push((RATE_TEMPERATURES_TOML, "rate_transfer_temperatures"));
     }
     procedures
         .into_iter()
@@ -578,6 +584,7 @@ pub fn run(
     let mut procedures = vec!["thermal_cycle".to_owned(), "orientation".to_owned()];
     if separating {
         procedures.push("separating".into());
+        procedures.push("rate_transfer_temperatures".into());
     }
     Ok(SelfCheck {
         runs,

@@ -196,6 +196,17 @@ impl RecordHealth {
                 100.0 * short as f64 / expected.max(1) as f64
             ));
         }
+        // A tick takes every frame the link holds: far more than the record
+        // lasts means the host fell behind the gyro, and frames from before
+        // the record (another rate, a move) were counted in it.
+        let over = self.frames.saturating_sub(expected);
+        let slack = (0.05 * expected as f64).max(2.0 / self.frame_dt_s.max(1e-9));
+        if expected > 0 && over as f64 > slack {
+            return Some(format!(
+                "{} frames for a record of {expected}: the host fell behind the gyro and frames from before the record were counted in it; run with fewer programs beside it",
+                self.frames
+            ));
+        }
         if let Some(l) = &self.link {
             let bad = l.crc_errors + l.lost_frames + l.duplicates;
             if bad as f64 > allowed {
@@ -273,6 +284,15 @@ mod tests {
         let mut short = RecordHealth::new(100.0);
         short.add(39_000, (-3, 4), &varied(39_000), 0.0025, 0.25);
         assert!(short.problem().expect("short").contains("missing"));
+
+        // 100 s at 400 Hz holds 40,000 frames; 60,000 is a backlog from
+        // before the record (the host fell behind), a few more is not.
+        let mut over = RecordHealth::new(100.0);
+        over.add(60_000, (-3, 4), &varied(60_000), 0.0025, 0.25);
+        assert!(over.problem().expect("overfull").contains("fell behind"));
+        let mut edge = RecordHealth::new(100.0);
+        edge.add(40_600, (-3, 4), &varied(40_600), 0.0025, 0.25);
+        assert_eq!(edge.problem(), None);
 
         let mut corrupt = healthy();
         corrupt.link = Some(LinkStats {

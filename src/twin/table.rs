@@ -87,11 +87,13 @@ impl Axis {
 
     /// Advance by `dt_s` within the rate and acceleration limits.
     pub fn step(&mut self, dt_s: f64) {
-        // Turning and stopping from a turn use the rate-mode acceleration;
-        // position moves the positioning profile.
+        // Turning, and stopping from a turn faster than position moves go,
+        // use the rate-mode acceleration; position moves the positioning
+        // profile.
         let acc = match self.demand {
-            AxisDemand::Position(_) => self.max_acc_dps2,
-            AxisDemand::Rate(_) | AxisDemand::Stop => self.rate_mode.1,
+            AxisDemand::Rate(_) => self.rate_mode.1,
+            AxisDemand::Stop if self.rate_dps.abs() > self.max_rate_dps => self.rate_mode.1,
+            AxisDemand::Position(_) | AxisDemand::Stop => self.max_acc_dps2,
         };
         let dv = acc * dt_s;
         let v_target = match self.demand {

@@ -242,7 +242,7 @@ fn rate_steps_beyond_the_bench_are_refused_with_their_place() {
 fn rate_steps_run_on_sim_serve_over_tcp_and_pty() {
     let _turn = crate::common::wall_clock_turn();
     let dir = temp_dir("rate-served");
-    let served = crate::common::SimServe::start(&dir, 200.0);
+    let served = crate::common::SimServe::start(&dir, 60.0);
     let p = write(
         &dir,
         "ladder.toml",
@@ -293,7 +293,7 @@ table = { outer_deg = 90.0, inner_deg = 0.0 }
 "#,
     );
     for scheme in ["tcp://", "pty://"] {
-        let bench = served.bench_file(&dir, scheme, 200.0);
+        let bench = served.bench_file(&dir, scheme, 60.0);
         let out = dir.join(format!("run-{}", scheme.trim_end_matches("://")));
         let o = gyrobench(&[
             "run",
@@ -310,5 +310,68 @@ table = { outer_deg = 90.0, inner_deg = 0.0 }
         let (sf, se) = figure(&report, "scale_factor_ppm");
         assert!(sf.abs() <= 3.0 * se + 1.0, "{scheme}: {sf} +- {se} ppm");
     }
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
+
+/// The rate ladder at -40, +20 and +50 degC measures the scale factor's
+/// temperature coefficient; `calibrate` fits it into `[scale_factor]`,
+/// and `diagnose` names the library's `scale_factor_temperature` with it.
+#[test]
+fn the_scale_factor_temperature_coefficient_comes_from_rate_runs() {
+    let dir = temp_dir("rate-temperature");
+    let mut twin = TwinConfig::default_rl16();
+    let sft = twin
+        .effects
+        .scale_factor_temperature
+        .as_mut()
+        .expect("the default file has the effect");
+    sft.enabled = true;
+    sft.ppm_per_c = 2.0;
+    sft.reference_c = 20.0;
+    let twin = write(&dir, "twin.toml", &twin.to_toml().expect("twin TOML"));
+    let out = dir.join("run");
+    let o = run("rate_transfer_temperatures.toml", &twin, &out);
+    assert_eq!(
+        o.status.code(),
+        Some(3),
+        "2 ppm/degC is beyond 1: {}",
+        stderr(&o)
+    );
+    let report = json(&out.join("report.json"));
+    assert_within_3_se(
+        "scale factor temperature coefficient",
+        figure(&report, "scale_factor_temperature_ppm_per_c"),
+        2.0,
+    );
+    let log = out.join("run.mcap");
+    let coeffs = dir.join("sf.toml");
+    let o = gyrobench(&["calibrate", s(&log), "-o", s(&coeffs), "--db", "none"]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let t: toml::Table =
+        toml::from_str(&std::fs::read_to_string(&coeffs).expect("written")).expect("TOML");
+    let sf = t["scale_factor"].as_table().expect("[scale_factor]");
+    let f = |k: &str| sf[k].as_float().expect(k);
+    assert_within_3_se(
+        "calibrated ppm/degC",
+        (f("ppm_per_c"), f("ppm_per_c_stderr")),
+        2.0,
+    );
+    // At the reference (the records' mean block temperature) the error is
+    // the coefficient times its distance from the twin's 20 degC.
+    let at_ref = 2.0 * (f("reference_c") - 20.0);
+    assert!(
+        (f("error_ppm") - at_ref).abs() < 0.5,
+        "{} ppm at {} degC, the twin's {at_ref}",
+        f("error_ppm"),
+        f("reference_c")
+    );
+    let diag = dir.join("diag");
+    let o = gyrobench(&["diagnose", s(&log), "--out", s(&diag)]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let d = json(&diag.join("diagnosis.json"));
+    let named = &d["effects"][0];
+    assert_eq!(named["name"], "scale_factor_temperature", "{d}");
+    let per_c = named["parameters"]["per_c"].as_f64().expect("per_c");
+    assert!((per_c - 2e-6).abs() < 0.05e-6, "{per_c}");
     std::fs::remove_dir_all(&dir).expect("cleanup");
 }
