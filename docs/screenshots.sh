@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # The pages as a person sees them, in headless Chromium: report.html of a
-# PASS and of a FAIL, the FAIL printed to A4 (page 1), diagnosis.html and
-# the calibration page. Writes docs/img/*.png from a fresh build; run from
+# PASS and of a FAIL, the FAIL printed to A4 (page 1), diagnosis.html, the
+# calibration page, a rate-transfer report and the station. Writes docs/img/*.png from a fresh build; run from
 # the repository root:
 #
 #   docs/screenshots.sh
@@ -31,6 +31,11 @@ $gb run procedures/acceptance.toml --out "$work/fail" --db none --dut RL16-0042 
 $gb run procedures/thermal_cycle.toml --out "$work/cycle2" --db none --seed 2 >/dev/null 2>&1
 $gb diagnose "$work/fail/run.mcap" --out "$work/diag" >/dev/null 2>&1
 $gb calibrate "$work/pass/run.mcap" "$work/cycle2/run.mcap" -o "$work/unit.toml" >/dev/null 2>&1
+# A unit with some scale-factor curvature and asymmetry on the rate table.
+$gb twin default-config |
+    sed '/^\[rate_response\]/,/^$/{s/^nonlinearity_ppm = .*/nonlinearity_ppm = 30.0/;s/^asymmetry_ppm = .*/asymmetry_ppm = 4.0/}' \
+        >"$work/rate.toml"
+$gb run procedures/rate_transfer.toml --out "$work/rate" --db none --twin "$work/rate.toml" >/dev/null 2>&1 || [ $? -eq 3 ]
 
 shot() { # page.html out.png height
     chromium --headless --no-sandbox --disable-gpu --hide-scrollbars \
@@ -41,6 +46,7 @@ shot "$work/pass/report.html" "$img/report-pass.png" 1250
 shot "$work/fail/report.html" "$img/report-fail.png" 1250
 shot "$work/diag/diagnosis.html" "$img/diagnosis.png" 1100
 shot "$work/unit.calibration.html" "$img/calibration.png" 1000
+shot "$work/rate/report.html" "$img/report-rate.png" 1150
 chromium --headless --no-sandbox --disable-gpu --no-pdf-header-footer \
     --print-to-pdf="$work/fail.pdf" "file://$work/fail/report.html" 2>/dev/null
 pdftoppm -r 70 -png -f 1 -l 1 -singlefile "$work/fail.pdf" "$img/report-fail-a4"
@@ -48,7 +54,7 @@ echo "$img/report-fail-a4.png"
 
 # The station during an acceptance at 2000x, driven as an operator would.
 if [ -x .venv/bin/python ] && .venv/bin/python -c "import selenium" 2>/dev/null; then
-    $gb station --listen 127.0.0.1:0 --db none --runs "$work/station" --speed 2000 >"$work/station.out" 2>/dev/null &
+    $gb station --listen 127.0.0.1:0 --live 127.0.0.1:0 --db none --runs "$work/station" --speed 2000 >"$work/station.out" 2>/dev/null &
     station=$!
     sleep 1.5
     url=$(head -1 "$work/station.out" | cut -d' ' -f2)

@@ -41,18 +41,22 @@ pub struct Sample {
     pub record: String,
     /// Body orientation at the end of the interval.
     pub orientation: Orientation,
+    /// Key of the procedure step it was recorded in.
+    pub step: String,
 }
 
 /// Keeps the recorded intervals with their orientation (no log file).
 #[derive(Debug, Default)]
 struct Collect {
     orientation: Option<Orientation>,
+    step: String,
     samples: Vec<Sample>,
 }
 
 impl Sink for Collect {
-    fn tick(&mut self, tick: &Tick, _: Option<&str>, _: &str) -> std::io::Result<()> {
+    fn tick(&mut self, tick: &Tick, _: Option<&str>, step: &str) -> std::io::Result<()> {
         self.orientation = tick.state.as_ref().map(|s: &BenchState| s.orientation);
+        step.clone_into(&mut self.step);
         Ok(())
     }
 
@@ -62,6 +66,7 @@ impl Sink for Collect {
                 interval: *iv,
                 record: record.to_owned(),
                 orientation,
+                step: self.step.clone(),
             });
         }
         Ok(())
@@ -178,6 +183,7 @@ pub fn run_study(cfg: &TwinConfig, seed: u64) -> Result<(StudyReport, Vec<Sample
     )?;
     let sink = Collect {
         orientation: None,
+        step: String::new(),
         samples,
     };
     let series: Vec<Interval> = sink.samples.iter().map(|s| s.interval).collect();

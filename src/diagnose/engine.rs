@@ -58,6 +58,14 @@ pub struct Data<'a> {
     pub run_of: Vec<usize>,
     /// The folds, in row order.
     pub folds: Vec<Fold>,
+    /// Rows of records taken while the table turned (rate runs), by the
+    /// index of their run in [`Data::turning_runs`]: each such run gets a
+    /// scale factor of its own, a nuisance as its offset is.
+    pub turning_of: Vec<Option<usize>>,
+    /// Runs with records taken while turning, in run order.
+    pub turning_runs: Vec<usize>,
+    /// Kinematic reference of each row, deg/h.
+    pub reference: Vec<f64>,
 }
 
 impl<'a> Data<'a> {
@@ -66,11 +74,23 @@ impl<'a> Data<'a> {
         let mut y = Vec::new();
         let mut run_of = Vec::new();
         let mut folds: Vec<Fold> = Vec::new();
+        let mut turning_of = Vec::new();
+        let mut turning_runs: Vec<usize> = Vec::new();
+        let mut reference = Vec::new();
         for (r, run) in runs.iter().enumerate() {
             for s in &run.samples {
                 let row = y.len();
                 y.push(s.iv.bias_dph());
                 run_of.push(r);
+                reference.push(s.iv.reference_dph);
+                turning_of.push(if crate::procedure::is_rate_record_key(&s.step) {
+                    if turning_runs.last() != Some(&r) {
+                        turning_runs.push(r);
+                    }
+                    Some(turning_runs.len() - 1)
+                } else {
+                    None
+                });
                 match folds.last_mut() {
                     Some(f)
                         if f.run == r
@@ -99,6 +119,9 @@ impl<'a> Data<'a> {
             y,
             run_of,
             folds,
+            turning_of,
+            turning_runs,
+            reference,
         }
     }
 
@@ -176,7 +199,10 @@ pub fn score(data: &Data<'_>, model: &[(Effect, f64)]) -> Scored {
     let cols = data.columns(model);
     let q = cols.len();
     let nruns = data.runs.len();
-    let p = q + nruns;
+    // A rate run's scale factor is the unit's, known from its calibration,
+    // not an effect: one per run with turning records, a nuisance (a
+    // misaligned axis, for one, reads every turn short by its cosine).
+    let p = q + nruns + data.turning_runs.len();
     let n = data.y.len();
     let scales: Vec<f64> = cols
         .iter()
@@ -190,8 +216,11 @@ pub fn score(data: &Data<'_>, model: &[(Effect, f64)]) -> Scored {
         DVector::from_fn(p, |j, _| {
             if j < q {
                 cols[j][i] / scales[j]
-            } else if data.run_of[i] == j - q {
-                1.0
+            } else if j < q + nruns {
+                if data.run_of[i] == j - q { 1.0 } else { 0.0 }
+            } else if data.turning_of[i] == Some(j - q - nruns) {
+                // In units of 100,000 deg/h, near the others' size.
+                data.reference[i] * 1e-5
             } else {
                 0.0
             }

@@ -154,7 +154,7 @@ fn to_run(samples: Vec<crate::study::Sample>, name: &str, twin: &TwinConfig) -> 
             .map(|s| Sample {
                 iv: s.interval,
                 orientation: s.orientation,
-                step: s.record.clone(),
+                step: s.step,
                 record: s.record,
             })
             .collect(),

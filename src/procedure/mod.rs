@@ -734,6 +734,7 @@ impl Validator<'_> {
                         },
                     ),
                     (
+                        // `is_rate_record_key` knows this suffix.
                         format!("{key}.record"),
                         StepKind::Record {
                             label: l.clone(),
@@ -845,6 +846,12 @@ impl Validator<'_> {
         }
         Ok((angles, asked.unwrap_or_else(|| g.orientation(angles))))
     }
+}
+
+/// Whether `key` is the step key of the record of a `rate` step (taken
+/// while the table turns): `KEY.record`.
+pub fn is_rate_record_key(key: &str) -> bool {
+    key.ends_with(".record")
 }
 
 /// What a label or measurement name must be: it is shown in reports,

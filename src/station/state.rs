@@ -27,6 +27,8 @@ pub struct MeasurementView {
     pub name: String,
     /// Value (null when it could not be computed).
     pub value: Option<f64>,
+    /// One standard error of the value, where the figure has one.
+    pub std_error: Option<f64>,
     /// Unit.
     pub unit: String,
     /// `low..high`.
@@ -269,6 +271,7 @@ impl Progress for Reporter {
         let view = MeasurementView {
             name: m.name.clone(),
             value: m.value,
+            std_error: m.std_error,
             unit: m.unit.clone(),
             limits: m.limits_text(),
             outcome: m.outcome.as_str().to_owned(),
