@@ -375,3 +375,40 @@ fn the_scale_factor_temperature_coefficient_comes_from_rate_runs() {
     assert!((per_c - 2e-6).abs() < 0.05e-6, "{per_c}");
     std::fs::remove_dir_all(&dir).expect("cleanup");
 }
+
+/// A rate run killed mid-record resumes with that record's turn: the
+/// table is turned again before the record is retaken, and the run ends
+/// with its figures.
+#[test]
+fn a_rate_run_killed_mid_record_resumes_with_the_turn() {
+    let dir = temp_dir("rate-resume");
+    let out = dir.join("run");
+    // After the soak and the hour of warm-up, inside the +1 deg/s record.
+    let o = gyrobench(&[
+        "run",
+        &format!("{PROCEDURES}/rate_transfer.toml"),
+        "--out",
+        s(&out),
+        "--db",
+        "none",
+        "--inject",
+        "process-kill@6200",
+    ]);
+    assert_eq!(o.status.code(), None, "killed: {}", stderr(&o));
+    let o = gyrobench(&["run", "--resume", s(&out), "--db", "none"]);
+    let err = stderr(&o);
+    assert_eq!(o.status.code(), Some(0), "{err}");
+    let first = err
+        .lines()
+        .find(|l| l.starts_with('['))
+        .unwrap_or_else(|| panic!("no step in {err}"));
+    assert!(
+        first.contains("turn the inner axis at +1 deg/s"),
+        "the resumed part starts with the turn: {first}"
+    );
+    let report = json(&out.join("report.json"));
+    let (sf, se) = figure(&report, "scale_factor_ppm");
+    assert!(sf.abs() <= 3.0 * se + 0.1, "{sf} +- {se}");
+    assert!(out.join("run.part2.mcap").is_file());
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
