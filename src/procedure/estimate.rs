@@ -71,9 +71,14 @@ pub fn estimate<'p>(p: &'p Procedure, bench: &BenchConfig) -> Vec<(&'p Step, Est
                 (t, t)
             }
             StepKind::Turn {
-                rate_dps, settle_s, ..
+                rate_dps,
+                settle_s,
+                acc_dps2,
+                ..
             } => {
-                let acc = l.rate_mode().map_or(l.table_max_acc_dps2, |(_, a)| a);
+                let acc = acc_dps2
+                    .or(l.rate_mode().map(|(_, a)| a))
+                    .unwrap_or(l.table_max_acc_dps2);
                 let t = (rate_dps - turning_dps).abs() / acc + settle_s;
                 turning_dps = *rate_dps;
                 (t, t)

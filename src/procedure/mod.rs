@@ -184,6 +184,8 @@ pub enum StepKind {
         rate_dps: f64,
         /// s.
         settle_s: f64,
+        /// Ramp acceleration, deg/s^2 (none: the table's own).
+        acc_dps2: Option<f64>,
     },
     /// Compute and judge a figure.
     Measure(Measure),
@@ -407,6 +409,23 @@ impl Validator<'_> {
         for (i, step) in raw.iter().enumerate() {
             let key = format!("{}.{i}", group.key());
             self.step(group, &key, step, None, &mut out)?;
+        }
+        // A rate step that keeps turning hands the table to another rate
+        // step, never to a move, a record at rest or the end of the group.
+        for (i, s) in out.iter().enumerate() {
+            let turning_on = matches!(s.kind, StepKind::Record { .. })
+                && i > 0
+                && matches!(out[i - 1].kind, StepKind::Turn { rate_dps, .. } if rate_dps != 0.0);
+            let next_turns = out
+                .get(i + 1)
+                .is_some_and(|n| matches!(n.kind, StepKind::Turn { .. }));
+            if turning_on && !next_turns {
+                let key = s.key.trim_end_matches(".record");
+                return Err(self.src.invalid(
+                    &format!("{key}.keep_turning"),
+                    "a rate step that keeps turning must be followed by another rate step (the table would still turn)",
+                ));
+            }
         }
         Ok(out)
     }
@@ -649,6 +668,8 @@ impl Validator<'_> {
                 duration_s,
                 revolutions,
                 settle_s,
+                acc_dps2,
+                keep_turning,
             } => {
                 let l = subst(l);
                 c.ensure(is_plain_text(&l), &k("label"), PLAIN_TEXT)?;
@@ -718,19 +739,30 @@ impl Validator<'_> {
                 };
                 let settle = settle_s.unwrap_or(2.0);
                 c.within(settle, 0.0, 3600.0, &k("settle_s"))?;
+                if let (Some(a), Some((_, max_acc))) = (acc_dps2, self.bench.limits.rate_mode()) {
+                    c.ensure(
+                        a.is_finite() && *a > 0.0 && *a <= max_acc,
+                        &k("acc_dps2"),
+                        &format!(
+                            "{} deg/s^2 is beyond the table's rate-mode acceleration (0 < acc <= {max_acc} deg/s^2, limits.table_rate_mode_max_acc_dps2)",
+                            crate::config::num(*a)
+                        ),
+                    )?;
+                }
                 self.records.insert(l.clone());
                 self.record_order.push(l.clone());
                 // Turn, record, come to rest: three plain steps (a record is
                 // a record wherever it is taken: replay, resume and health
                 // treat it as any other).
                 let line = self.line(key);
-                for (sub, kind) in [
+                let mut steps = vec![
                     (
                         format!("{key}.turn"),
                         StepKind::Turn {
                             inner,
                             rate_dps: *rate_dps,
                             settle_s: settle,
+                            acc_dps2: *acc_dps2,
                         },
                     ),
                     (
@@ -741,15 +773,19 @@ impl Validator<'_> {
                             duration_s: duration,
                         },
                     ),
-                    (
+                ];
+                if !keep_turning.unwrap_or(false) {
+                    steps.push((
                         format!("{key}.rest"),
                         StepKind::Turn {
                             inner,
                             rate_dps: 0.0,
                             settle_s: 0.0,
+                            acc_dps2: *acc_dps2,
                         },
-                    ),
-                ] {
+                    ));
+                }
+                for (sub, kind) in steps {
                     out.push(Step {
                         group,
                         key: sub,

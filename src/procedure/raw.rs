@@ -109,6 +109,12 @@ pub enum RawStep {
         revolutions: Option<f64>,
         /// Time at the rate before the record starts, s (default 2).
         settle_s: Option<f64>,
+        /// Ramp to the rate at this acceleration, deg/s^2 (default: as
+        /// fast as the table's rate mode allows).
+        acc_dps2: Option<f64>,
+        /// Keep turning after the record: the next step, another `rate`,
+        /// ramps from this rate to its own (default false: come to rest).
+        keep_turning: Option<bool>,
     },
     /// Compute a figure and judge it against limits.
     Measure {

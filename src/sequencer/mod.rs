@@ -570,25 +570,54 @@ impl Run<'_> {
                 inner,
                 rate_dps,
                 settle_s,
+                acc_dps2,
             } => {
+                let axis_rate = |st: &BenchState| {
+                    if *inner {
+                        st.table.rates.inner_deg
+                    } else {
+                        st.table.rates.outer_deg
+                    }
+                };
+                // A ramp at `acc_dps2` is the host's: the demand steps
+                // towards the rate each tick (the table's own acceleration
+                // is higher); without it the table ramps as fast as it can.
+                let mut demand = match (acc_dps2, &self.last) {
+                    (Some(_), Some(st)) => axis_rate(st),
+                    _ => *rate_dps,
+                };
                 self.bench
-                    .rotate_table(*inner, *rate_dps)
+                    .rotate_table(*inner, demand)
                     .await
                     .map_err(Stop::Device)?;
                 // At the rate when the axis reads it to a part in a thousand.
                 let tol = 1e-3 * rate_dps.abs() + 1e-4;
-                let deadline = self.bench.now_s() + self.opts.move_timeout_s;
+                let deadline = self.bench.now_s()
+                    + self.opts.move_timeout_s
+                    + acc_dps2.map_or(0.0, |a| (rate_dps - demand).abs() / a);
                 loop {
+                    let before = self.bench.now_s();
                     self.tick(f64::INFINITY, None, key).await?;
-                    if let Some(st) = &self.last {
-                        let r = if *inner {
-                            st.table.rates.inner_deg
+                    if let Some(a) = acc_dps2
+                        && demand != *rate_dps
+                    {
+                        let dt = self.bench.now_s() - before;
+                        let step = a * dt;
+                        demand = if (rate_dps - demand).abs() <= step {
+                            *rate_dps
                         } else {
-                            st.table.rates.outer_deg
+                            demand + step * (rate_dps - demand).signum()
                         };
-                        if (r - rate_dps).abs() <= tol {
-                            break;
-                        }
+                        self.bench
+                            .rotate_table(*inner, demand)
+                            .await
+                            .map_err(Stop::Device)?;
+                    }
+                    if let Some(st) = &self.last
+                        && demand == *rate_dps
+                        && (axis_rate(st) - rate_dps).abs() <= tol
+                    {
+                        break;
                     }
                     if self.bench.now_s() > deadline {
                         return Err(Stop::Data(format!(

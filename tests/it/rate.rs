@@ -233,6 +233,108 @@ fn rate_steps_beyond_the_bench_are_refused_with_their_place() {
         "{}",
         stderr(&o)
     );
+    let p = write(
+        &dir,
+        "left.toml",
+        "[procedure]\nname = \"left\"\ndut_type = \"RL-16\"\n\n[[main]]\naction = \"rate\"\nlabel = \"a\"\nrate_dps = 10.0\nrevolutions = 1\nkeep_turning = true\n\n[[main]]\naction = \"wait\"\nduration_s = 10.0\n",
+    );
+    let o = gyrobench(&["check", s(&p)]);
+    let err = stderr(&o);
+    assert!(
+        err.contains("main.0.keep_turning") && err.contains("followed by another rate step"),
+        "{err}"
+    );
+    let p = write(
+        &dir,
+        "jerk.toml",
+        "[procedure]\nname = \"jerk\"\ndut_type = \"RL-16\"\n\n[[main]]\naction = \"rate\"\nlabel = \"a\"\nrate_dps = 10.0\nrevolutions = 1\nacc_dps2 = 500.0\n",
+    );
+    let o = gyrobench(&["check", s(&p)]);
+    assert!(stderr(&o).contains("main.0.acc_dps2"), "{}", stderr(&o));
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
+
+/// Ramps between rates: each step keeps turning and the next ramps from
+/// its rate (from 10 to 40 deg/s at 1 deg/s^2, stepped by the host), and
+/// the table is seen passing through the rates between them.
+#[test]
+fn a_ramp_between_rates_passes_through_the_rates_between() {
+    let dir = temp_dir("rate-ramp");
+    let p = write(
+        &dir,
+        "ramp.toml",
+        r#"[procedure]
+name = "ramp"
+dut_type = "RL-16"
+
+[[setup]]
+action = "move"
+table = { outer_deg = 90.0, inner_deg = 0.0 }
+
+[[main]]
+action = "rate"
+label = "r10"
+rate_dps = 10.0
+revolutions = 1
+keep_turning = true
+
+[[main]]
+action = "rate"
+label = "r40"
+rate_dps = 40.0
+revolutions = 4
+acc_dps2 = 1.0
+keep_turning = true
+
+[[main]]
+action = "rate"
+label = "r-10"
+rate_dps = -10.0
+revolutions = 1
+acc_dps2 = 5.0
+keep_turning = true
+
+[[main]]
+action = "rate"
+label = "r-40"
+rate_dps = -40.0
+revolutions = 4
+acc_dps2 = 5.0
+
+[[main]]
+action = "measure"
+name = "scale_factor_ppm"
+metric = "scale_factor"
+records = ["r*"]
+low = -100.0
+high = 100.0
+unit = "ppm"
+
+[[cleanup]]
+action = "move"
+table = { outer_deg = 90.0, inner_deg = 0.0 }
+"#,
+    );
+    let out = dir.join("run");
+    let o = gyrobench(&["run", s(&p), "--out", s(&out), "--db", "none"]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    // The table's 1 Hz states between the two records: rates between 10
+    // and 40 deg/s, rising about 1 deg/s each second.
+    let replayed = replay(&out.join("run.mcap"), None).expect("replays");
+    let between: Vec<f64> = replayed
+        .result
+        .records
+        .all
+        .iter()
+        .filter(|(rec, _)| !*rec)
+        .map(|(_, iv)| iv.reference_dph / 3600.0)
+        .filter(|r| *r > 11.0 && *r < 39.0)
+        .collect();
+    assert!(
+        between.len() >= 25,
+        "30 s of ramp at 1 deg/s^2, seen {} s: {between:?}",
+        between.len()
+    );
     std::fs::remove_dir_all(&dir).expect("cleanup");
 }
 
