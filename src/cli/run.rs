@@ -283,10 +283,7 @@ pub fn run(args: RunArgs) -> Result<Outcome> {
                 LiveError::NotLoopback(_) => anyhow::Error::from(Usage(e.to_string())),
                 e => e.into(),
             })?;
-            errln!(
-                "live: {} (Foxglove or Lichtblick: Open connection, Foxglove WebSocket)",
-                live.url()
-            );
+            errln!("{}", live.banner());
             Some(Arc::new(live))
         }
         None => None,

@@ -83,12 +83,12 @@ pub fn run(args: StationArgs) -> Result<Outcome> {
     let live = if args.no_live {
         None
     } else {
-        let live = rt.block_on(Live::start(args.live)).context(
-            "another station or run --live may hold the port: give another with --live 127.0.0.1:PORT, or --no-live",
-        )?;
+        let live = rt
+            .block_on(Live::start(args.live))
+            .map_err(|e| anyhow::anyhow!("{e}, or run the station without it: --no-live"))?;
         Some(Arc::new(live))
     };
-    let live_url = live.as_ref().map(|l| l.url());
+    let banner = live.as_ref().map(|l| l.banner());
     let station = Station::new(Config {
         bench_label: args
             .bench
@@ -116,8 +116,8 @@ pub fn run(args: StationArgs) -> Result<Outcome> {
         }
         outln!("station http://{addr}/?token={token}")?;
         errln!("open the URL above in a browser; Ctrl-C stops the station");
-        if let Some(url) = &live_url {
-            errln!("live: {url} (Foxglove or Lichtblick: Open connection, Foxglove WebSocket)");
+        if let Some(b) = &banner {
+            errln!("{b}");
         }
         let app = router(station.clone());
         let stopping = station.clone();

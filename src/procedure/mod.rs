@@ -344,8 +344,7 @@ impl Procedure {
             src,
             c: Checker::new(src),
             bench,
-            records: HashSet::new(),
-            record_order: Vec::new(),
+            records: Labels::default(),
             measures: HashSet::new(),
         };
         let meta = Meta {
@@ -397,10 +396,31 @@ struct Validator<'a> {
     src: &'a Source,
     c: Checker<'a>,
     bench: &'a BenchConfig,
-    records: HashSet<String>,
-    /// Record labels in the order they are made.
-    record_order: Vec<String>,
+    records: Labels,
     measures: HashSet<String>,
+}
+
+/// The record labels made so far: unique, in the order they are made.
+#[derive(Default)]
+struct Labels {
+    set: HashSet<String>,
+    order: Vec<String>,
+}
+
+impl Labels {
+    /// Take `label` for a new record (the step's `key`): plain text, and
+    /// not used before.
+    fn claim(&mut self, c: &Checker<'_>, label: &str, key: &str) -> Result<(), ConfigError> {
+        c.ensure(is_plain_text(label), key, PLAIN_TEXT)?;
+        c.ensure(
+            !self.set.contains(label),
+            key,
+            &format!("record {label:?} is already used; labels must be unique"),
+        )?;
+        self.set.insert(label.to_owned());
+        self.order.push(label.to_owned());
+        Ok(())
+    }
 }
 
 impl Validator<'_> {
@@ -547,14 +567,7 @@ impl Validator<'_> {
                 duration_s,
             } => {
                 let l = subst(l);
-                c.ensure(is_plain_text(&l), &k("label"), PLAIN_TEXT)?;
-                c.ensure(
-                    !self.records.contains(&l),
-                    &k("label"),
-                    &format!("record {l:?} is already used; labels must be unique"),
-                )?;
-                self.records.insert(l.clone());
-                self.record_order.push(l.clone());
+                self.records.claim(c, &l, &k("label"))?;
                 StepKind::Record {
                     label: l,
                     duration_s: self.duration(*duration_s, &k("duration_s"))?,
@@ -595,7 +608,8 @@ impl Validator<'_> {
                     match r.strip_suffix('*') {
                         Some(prefix) => {
                             let found: Vec<String> = self
-                                .record_order
+                                .records
+                                .order
                                 .iter()
                                 .filter(|l| l.starts_with(prefix))
                                 .cloned()
@@ -618,7 +632,7 @@ impl Validator<'_> {
                 )?;
                 for r in &records {
                     c.ensure(
-                        self.records.contains(r),
+                        self.records.set.contains(r),
                         &k("records"),
                         &format!("names record {r:?}, which no earlier record step makes"),
                     )?;
@@ -672,12 +686,7 @@ impl Validator<'_> {
                 keep_turning,
             } => {
                 let l = subst(l);
-                c.ensure(is_plain_text(&l), &k("label"), PLAIN_TEXT)?;
-                c.ensure(
-                    !self.records.contains(&l),
-                    &k("label"),
-                    &format!("record {l:?} is already used; labels must be unique"),
-                )?;
+                self.records.claim(c, &l, &k("label"))?;
                 let rate_dps = &match (rate_dps, rate_dph) {
                     (Some(r), None) => *r,
                     (None, Some(r)) => *r / 3600.0,
@@ -749,8 +758,6 @@ impl Validator<'_> {
                         ),
                     )?;
                 }
-                self.records.insert(l.clone());
-                self.record_order.push(l.clone());
                 // Turn, record, come to rest: three plain steps (a record is
                 // a record wherever it is taken: replay, resume and health
                 // treat it as any other).

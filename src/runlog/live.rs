@@ -31,7 +31,9 @@ pub enum LiveError {
     )]
     NotLoopback(SocketAddr),
     /// The server did not start (the port is taken, say).
-    #[error("starting the live Foxglove stream on {addr}: {cause}")]
+    #[error(
+        "starting the live Foxglove stream on {addr}: {cause} (another station or run --live may hold the port: give another with --live 127.0.0.1:PORT)"
+    )]
     Start {
         /// Where it was asked to listen.
         addr: SocketAddr,
@@ -102,6 +104,14 @@ impl Live {
     /// The URL a Foxglove or Lichtblick "Open connection" takes.
     pub fn url(&self) -> String {
         format!("ws://{}", self.addr)
+    }
+
+    /// The line that tells the operator where to connect.
+    pub fn banner(&self) -> String {
+        format!(
+            "live: {} (Foxglove or Lichtblick: Open connection, Foxglove WebSocket)",
+            self.url()
+        )
     }
 
     /// Offer one logged message (its JSON and log time, ns since the

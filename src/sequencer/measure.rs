@@ -320,12 +320,12 @@ pub fn compute(m: &Measure, records: &Records, coeffs: Option<&Fit>, step: &str)
     let value = match m.metric {
         Metric::ScaleFactor => figure(
             rate::scale_factor_ppm(&points()),
-            "needs rate records at three or more input rates",
+            "needs rate records at three or more input rates (four when they turn both ways)",
             &mut note,
         ),
         Metric::ScaleFactorNonlinearity => figure(
             rate::nonlinearity_ppm(&points()),
-            "needs rate records at three or more input rates",
+            "needs rate records at three or more input rates (four when they turn both ways)",
             &mut note,
         ),
         Metric::ScaleFactorAsymmetry => figure(
