@@ -125,17 +125,25 @@ pub fn run(args: DiagnoseArgs) -> Result<Outcome> {
         ),
     )?;
     outln!("{}", diagnose::html::headline(&d))?;
+    let th = &d.layers.thermal;
+    let network = match (&th.form_misfit, th.fitted_gap_c) {
+        (Some(m), _) => format!(
+            " (the twin's network form cannot follow the runs: {:.4} degC held out, most in {} {} from {:.0} s; twin-updated.toml keeps the thermal network it had)",
+            m.gap_c,
+            m.r#where.first().map_or("", |w| w.run.as_str()),
+            m.r#where.first().map_or("", |w| w.sensor.as_str()),
+            m.r#where.first().map_or(0.0, |w| w.start_s),
+        ),
+        (None, Some(g)) if args.twin.is_some() => {
+            format!(" ({g:.4} degC with the network fitted to the runs, in twin-updated.toml)")
+        }
+        _ => String::new(),
+    };
     outln!(
-        "rate layer: held-out gap {:.5} deg/h -> {:.5} deg/h; thermal layer: {:.4} degC{}",
+        "rate layer: held-out gap {:.5} deg/h -> {:.5} deg/h; thermal layer: {:.4} degC{network}",
         d.layers.rate.gap_dph,
         d.layers.rate.gap_after_dph,
-        d.layers.thermal.gap_c,
-        d.layers
-            .thermal
-            .fitted_gap_c
-            .map_or(String::new(), |g| format!(
-                " ({g:.4} degC with the network fitted to the runs, in twin-updated.toml)"
-            ))
+        th.gap_c,
     )?;
     if d.effects.is_empty() {
         outln!("no library effect is significant")?;

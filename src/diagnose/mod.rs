@@ -54,7 +54,7 @@ pub struct Layers {
 }
 
 /// Sensor temperatures from the chamber air.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Default, Serialize)]
 pub struct ThermalLayer {
     /// Held-out RMS of the 60 s means of measured minus simulated T1, T2, TK, degC.
     pub gap_c: f64,
@@ -62,15 +62,22 @@ pub struct ThermalLayer {
     pub per_sensor_c: BTreeMap<String, f64>,
     /// How the layer's simulator was made.
     pub reference: String,
-    /// The thermal network fitted to the runs (it goes into
-    /// `twin-updated.toml`): the reference without a twin; with one, fitted
-    /// from the twin's values.
+    /// Without a twin, the reference's (modal model's) time constants, s.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub modes_s: Option<[f64; thermal::MODES]>,
+    /// The twin's network form fitted to the runs (it goes into
+    /// `twin-updated.toml`), within its bounds; absent when the form cannot
+    /// follow the runs (`form_misfit`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub fitted: Option<crate::twin::config::ThermalConfig>,
-    /// With a twin, the fitted network's held-out gap, degC (what adopting
-    /// it would leave).
+    /// The fitted network's held-out gap, degC (what adopting it would
+    /// leave).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub fitted_gap_c: Option<f64>,
+    /// Set instead of `fitted` when the network form cannot follow the
+    /// runs: the held-out gap and where it lies.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub form_misfit: Option<thermal::FormMisfit>,
     /// Held-out residual per run (for the page).
     #[serde(skip)]
     pub series: Vec<thermal::Series>,
@@ -433,6 +440,25 @@ pub const PERIODIC_ABOVE: f64 = 0.3;
 
 /// Diagnose `runs` against the reference (model 4, or `opts.twin`).
 pub fn diagnose(runs: &[RunData], opts: &Options) -> Diagnosis {
+    // The thermal layer needs nothing from the rate layer: it runs alongside.
+    std::thread::scope(|s| {
+        let thermal = s.spawn(|| thermal::layer(runs, opts.twin.as_ref(), opts.fit_thermal));
+        let rate = diagnose_rate(runs, opts);
+        let thermal = thermal
+            .join()
+            .unwrap_or_else(|p| std::panic::resume_unwind(p));
+        Diagnosis {
+            layers: Layers {
+                thermal,
+                rate: rate.layers.rate,
+            },
+            ..rate
+        }
+    })
+}
+
+/// The rate layer and the selection, with a placeholder thermal layer.
+fn diagnose_rate(runs: &[RunData], opts: &Options) -> Diagnosis {
     let data = Data::new(runs);
     let spec = reference(opts.twin.as_ref());
     let base_model = build(&data, &spec);
@@ -548,7 +574,6 @@ pub fn diagnose(runs: &[RunData], opts: &Options) -> Diagnosis {
     let where_ = segments(&data, &base.fold_sse, &base.fold_blocks);
     let left = segments(&data, &current.fold_sse, &current.fold_blocks);
     let (period, frac) = periodicity(&data, &current.residual);
-    let thermal = thermal::layer(runs, opts.twin.as_ref(), opts.fit_thermal);
     Diagnosis {
         runs: runs.iter().map(|r| r.name.clone()).collect(),
         protocol: format!(
@@ -557,7 +582,7 @@ pub fn diagnose(runs: &[RunData], opts: &Options) -> Diagnosis {
             runs.len()
         ),
         layers: Layers {
-            thermal,
+            thermal: ThermalLayer::default(),
             rate: RateLayer {
                 gap_dph: base.gap(),
                 gap_after_dph: current.gap(),

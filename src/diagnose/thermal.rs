@@ -13,7 +13,8 @@ use std::collections::BTreeMap;
 
 use argmin::core::{CostFunction, Error, Executor, State};
 use argmin::solver::neldermead::NelderMead;
-use nalgebra::Vector3;
+use nalgebra::{Matrix4, SMatrix, SVector, Vector3};
+use serde::Serialize;
 
 use super::ThermalLayer;
 use super::data::RunData;
@@ -31,9 +32,6 @@ pub const FOLDS: usize = 4;
 /// Integration step of the fitted network, s (ours: a tenth of the
 /// shortest time constant the network is started from).
 const STEP_S: f64 = 10.0;
-/// Nelder-Mead iterations per fit (ours: the fit settles within ~600 on
-/// the study's runs).
-const MAX_ITERS: u64 = 1500;
 
 /// One 60 s block of a run: its span, the mean air and convection factor
 /// input, and the measured means of T1, T2, TK.
@@ -51,14 +49,20 @@ struct Block {
 /// The runs as 60 s blocks (within each record), with their fold.
 fn blocks(runs: &[RunData], axis: Vector3<f64>) -> Vec<Vec<Block>> {
     runs.iter()
-        .map(|run| {
+        .enumerate()
+        .map(|(r, run)| {
             let mut out = Vec::new();
             let mut i = 0;
             let s = &run.samples;
             while i + AVERAGING_S <= s.len() {
                 let c = &s[i..i + AVERAGING_S];
-                if c.iter().any(|x| x.record != c[0].record) {
-                    i += c.iter().position(|x| x.record != c[0].record).unwrap_or(1);
+                // One record, no second missing: a block is 60 s of air.
+                let broken = c.windows(2).position(|w| {
+                    w[1].record != w[0].record
+                        || (w[1].iv.time_s - w[0].iv.time_s - 1.0).abs() > 0.5
+                });
+                if let Some(k) = broken {
+                    i += k + 1;
                     continue;
                 }
                 let n = c.len() as f64;
@@ -82,98 +86,288 @@ fn blocks(runs: &[RunData], axis: Vector3<f64>) -> Vec<Vec<Block>> {
                 i += AVERAGING_S;
             }
             let n = out.len().max(1);
+            // Each run's quarters in turn, the first quarter of run r in
+            // fold r: the warm-ups (where the rises show apart from the
+            // offsets) are never all held out together.
             for (k, b) in out.iter_mut().enumerate() {
-                b.fold = k * FOLDS / n;
+                b.fold = (k * FOLDS / n + r) % FOLDS;
             }
             out
         })
         .collect()
 }
 
-/// Simulated means of (T1, T2, TK) over each block: the network soaked at
-/// the first air temperature, powered from t = 0, driven by the blocks' air.
-fn simulate(cfg: &ThermalConfig, run: &[Block]) -> Vec<[f64; 3]> {
-    let Some(first) = run.first() else {
-        return Vec::new();
-    };
-    let mut net = ThermalNetwork::soaked(cfg, first.air_c[0]);
-    let mut t = 0.0;
-    run.iter()
-        .map(|b| {
-            let convection = 1.0 + cfg.convection_gain * b.gravity_along_axis;
-            // Up to the block (gaps between records) on its first air.
-            while t < b.start_s - 1e-9 {
-                let dt = (b.start_s - t).min(STEP_S);
-                net.step(dt, b.air_c[0], true, convection);
-                t += dt;
-            }
-            let (mut acc, mut n) = ([0.0; 3], 0.0);
-            for &air in &b.air_c {
-                let dt = STEP_S.min(b.end_s - t).max(0.0);
-                let before = [net.t1_c, net.t2_c, net.case_c];
-                net.step(dt, air, true, convection);
-                let after = [net.t1_c, net.t2_c, net.case_c];
-                for k in 0..3 {
-                    acc[k] += 0.5 * (before[k] + after[k]) * dt;
-                }
-                n += dt;
-                t += dt;
-            }
-            acc.map(|a| a / n.max(1e-9))
-        })
-        .collect()
+/// The fitted quantities found by search, each within its bounds (ours:
+/// wider than any gyro of this size; docs/diagnosis.md): time constants of
+/// the mount node (1 s: none), the case, the two blocks and their
+/// exchange, s, and the convection gain.
+const SHAPE: [(&str, f64, f64); 8] = [
+    ("mount_tau_s", 1.0, 7200.0),
+    ("case_tau_s", 60.0, 36_000.0),
+    ("block1_tau_s", 30.0, 36_000.0),
+    ("block2_tau_s", 30.0, 36_000.0),
+    ("coupling_tau_s", 30.0, 1.0e6),
+    ("convection_gain", 0.0, 5.0),
+    ("block_capacity_ratio[0]", 0.0, 5.0),
+    ("block_capacity_ratio[1]", 0.0, 5.0),
+];
+/// Self-heating rises, degC: never negative (ours: at most 30).
+const RISE_MAX_C: f64 = 30.0;
+/// The air gain's range (ours: a chamber sensor or a workspace gradient
+/// off by up to a fifth).
+const AIR_GAIN: (f64, f64) = (0.8, 1.25);
+/// Weight of the prior that the air gain is 1 and the offsets are 0, in
+/// the units of one 60 s block's squared residual (ours: only breaks the
+/// tie when the runs cannot tell them from the rises - a stretch without
+/// the warm-up, a run at one temperature; an air gain off by 1 % costs as
+/// much as a 0.5 degC offset would at a weight of 1, and the offsets' own
+/// weight is far below the few warm-up blocks that tell them apart).
+const PRIOR_OFFSET: f64 = 1e-3;
+const PRIOR_GAIN: f64 = 2500.0;
+/// Held-out gap above which the network form is said not to follow the
+/// runs (ours: the tolerance; a network that fits leaves about a
+/// hundredth on 60 s means).
+pub const FORM_MISFIT_C: f64 = 0.05;
+
+/// The searched quantities as the solver sees them: log time constants,
+/// the convection gain and the blocks' capacity ratios.
+type Shape = [f64; 8];
+
+/// Within bounds, and how far outside they were (for a penalty).
+fn clamp_shape(q: &Shape) -> (Shape, f64) {
+    let mut out = [0.0; 8];
+    let mut outside = 0.0;
+    for (i, (&(_, lo, hi), v)) in SHAPE.iter().zip(q).enumerate() {
+        let (lo, hi) = if i < 5 { (lo.ln(), hi.ln()) } else { (lo, hi) };
+        let c = v.clamp(lo, hi);
+        outside += (v - c).powi(2);
+        out[i] = c;
+    }
+    (out, outside)
 }
 
-/// The fitted quantities: log time constants, rises, convection gain.
-fn to_config(base: &ThermalConfig, p: &[f64]) -> ThermalConfig {
-    let mut c = base.clone();
-    c.case_tau_s = p[0].exp();
-    c.block1_tau_s = p[1].exp();
-    c.block2_tau_s = p[2].exp();
-    c.coupling_tau_s = p[3].exp();
-    c.case_rise_c = p[4];
-    c.block1_rise_c = p[5];
-    c.block2_rise_c = p[6];
-    c.convection_gain = p[7].abs();
-    c
-}
-
-fn from_config(c: &ThermalConfig) -> Vec<f64> {
-    vec![
+fn shape_of(c: &ThermalConfig) -> Shape {
+    let (m, _) = clamp_shape(&[
+        c.mount_tau_s.max(1.0).ln(),
         c.case_tau_s.ln(),
         c.block1_tau_s.ln(),
         c.block2_tau_s.ln(),
         c.coupling_tau_s.ln(),
-        c.case_rise_c,
-        c.block1_rise_c,
-        c.block2_rise_c,
         c.convection_gain,
-    ]
+        c.block_capacity_ratio[0],
+        c.block_capacity_ratio[1],
+    ]);
+    m
 }
 
-/// Sum of squares of the block residuals outside `held_out` (no sensor
-/// offsets: the self-heating rises would trade against them, and a stretch
-/// without the warm-up could not tell them apart).
+/// The state transition over `dt_s` of the network's four nodes (mount,
+/// case, block 1, block 2) and its input matrix for the inputs (air, case
+/// rise, block 1 rise, block 2 rise), exact for inputs held over the step.
+fn discretize(q: &Shape, convection: f64, dt_s: f64) -> (Matrix4<f64>, Matrix4<f64>) {
+    let [tm, tk, t1, t2, tc] = [0, 1, 2, 3, 4].map(|i| q[i].exp());
+    let kc = convection / tc;
+    let (r1, r2) = (q[6] / t1, q[7] / t2);
+    let mut m = SMatrix::<f64, 8, 8>::zeros();
+    m[(0, 0)] = -1.0 / tm;
+    m[(1, 0)] = 1.0 / tk;
+    m[(1, 1)] = -1.0 / tk - r1 - r2;
+    m[(1, 2)] = r1;
+    m[(1, 3)] = r2;
+    m[(2, 1)] = 1.0 / t1;
+    m[(2, 2)] = -1.0 / t1 - kc;
+    m[(2, 3)] = kc;
+    m[(3, 1)] = 1.0 / t2;
+    m[(3, 3)] = -1.0 / t2 - kc;
+    m[(3, 2)] = kc;
+    m[(0, 4)] = 1.0 / tm;
+    m[(1, 5)] = 1.0 / tk;
+    m[(2, 6)] = 1.0 / t1;
+    m[(3, 7)] = 1.0 / t2;
+    let e = (m * dt_s).exp();
+    (
+        e.fixed_view::<4, 4>(0, 0).into_owned(),
+        e.fixed_view::<4, 4>(0, 4).into_owned(),
+    )
+}
+
+/// Per block and sensor (T1, T2, TK), the mean response to each input
+/// (air, case rise, block 1 rise, block 2 rise): the network soaked at the
+/// first air, powered from t = 0, driven by the blocks' air. The readings
+/// are linear in these: `gain * air + rises + offset`.
+type Responses = Vec<[[f64; 4]; 3]>;
+
+fn simulate(q: &Shape, run: &[Block]) -> Responses {
+    let Some(first) = run.first() else {
+        return Vec::new();
+    };
+    let mut cache: Vec<(f64, Matrix4<f64>, Matrix4<f64>)> = Vec::new();
+    let mut x = Matrix4::<f64>::zeros();
+    for i in 0..4 {
+        x[(i, 0)] = first.air_c[0];
+    }
+    let advance = |x: &mut Matrix4<f64>, phi: &Matrix4<f64>, gamma: &Matrix4<f64>, air: f64| {
+        let mut u = *gamma;
+        u.column_mut(0).scale_mut(air);
+        *x = phi * *x + u;
+    };
+    let mut t = 0.0;
+    run.iter()
+        .map(|b| {
+            let convection = 1.0 + q[5] * b.gravity_along_axis;
+            let (phi, gamma) = match cache.iter().find(|c| c.0 == convection) {
+                Some(c) => (c.1, c.2),
+                None => {
+                    let (p, g) = discretize(q, convection, STEP_S);
+                    cache.push((convection, p, g));
+                    (p, g)
+                }
+            };
+            // Up to the block (gaps between records) on its first air.
+            while t < b.start_s - 1e-9 {
+                let dt = (b.start_s - t).min(STEP_S);
+                if dt == STEP_S {
+                    advance(&mut x, &phi, &gamma, b.air_c[0]);
+                } else {
+                    let (p, g) = discretize(q, convection, dt);
+                    advance(&mut x, &p, &g, b.air_c[0]);
+                }
+                t += dt;
+            }
+            let mut acc = Matrix4::<f64>::zeros();
+            let mut n = 0.0;
+            for &air in &b.air_c {
+                let before = x;
+                advance(&mut x, &phi, &gamma, air);
+                acc += (before + x) * (0.5 * STEP_S);
+                n += STEP_S;
+                t += STEP_S;
+            }
+            let acc = acc / n;
+            // Sensors: T1 on block 1, T2 on block 2, TK on the case.
+            [2usize, 3, 1].map(|node| [0, 1, 2, 3].map(|j| acc[(node, j)]))
+        })
+        .collect()
+}
+
+/// The linear quantities given the responses: air gain, the three rises,
+/// the three sensor offsets.
+type Linear = [f64; 7];
+
+/// The row of the linear model for one sensor of one block.
+fn row(r: &[[f64; 4]; 3], sensor: usize) -> [f64; 7] {
+    let mut x = [0.0; 7];
+    x[..4].copy_from_slice(&r[sensor]);
+    x[4 + sensor] = 1.0;
+    x
+}
+
+/// Least squares for the linear quantities on the blocks outside
+/// `held_out`, with the weak prior, the rises kept within 0..RISE_MAX_C
+/// and the gain within AIR_GAIN (a quantity past its bound is held there
+/// and the rest solved again).
+fn solve_linear(runs: &[Vec<Block>], resp: &[Responses], held_out: Option<usize>) -> Linear {
+    let mut ata = SMatrix::<f64, 7, 7>::zeros();
+    let mut atb = SVector::<f64, 7>::zeros();
+    for (run, r) in runs.iter().zip(resp) {
+        for (b, rb) in run.iter().zip(r) {
+            if Some(b.fold) == held_out {
+                continue;
+            }
+            for s in 0..3 {
+                let x = SVector::<f64, 7>::from(row(rb, s));
+                ata += x * x.transpose();
+                atb += x * b.measured[s];
+            }
+        }
+    }
+    ata[(0, 0)] += PRIOR_GAIN;
+    atb[0] += PRIOR_GAIN;
+    for k in 4..7 {
+        ata[(k, k)] += PRIOR_OFFSET;
+    }
+    let mut fixed: [Option<f64>; 7] = [None; 7];
+    let mut theta = [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0];
+    for _ in 0..8 {
+        let free: Vec<usize> = (0..7).filter(|&i| fixed[i].is_none()).collect();
+        let n = free.len();
+        let mut a = nalgebra::DMatrix::<f64>::zeros(n, n);
+        let mut b = nalgebra::DVector::<f64>::zeros(n);
+        for (i, &fi) in free.iter().enumerate() {
+            b[i] = atb[fi];
+            for (k, v) in fixed.iter().enumerate() {
+                if let Some(v) = v {
+                    b[i] -= ata[(fi, k)] * v;
+                }
+            }
+            for (j, &fj) in free.iter().enumerate() {
+                a[(i, j)] = ata[(fi, fj)];
+            }
+        }
+        let Some(sol) = a.cholesky().map(|c| c.solve(&b)) else {
+            break;
+        };
+        for (i, &fi) in free.iter().enumerate() {
+            theta[fi] = sol[i];
+        }
+        for (k, v) in fixed.iter().enumerate() {
+            if let Some(v) = v {
+                theta[k] = *v;
+            }
+        }
+        let mut moved = false;
+        for &k in &free {
+            let (lo, hi) = if k == 0 {
+                AIR_GAIN
+            } else if k < 4 {
+                (0.0, RISE_MAX_C)
+            } else {
+                continue;
+            };
+            if !(lo..=hi).contains(&theta[k]) {
+                fixed[k] = Some(theta[k].clamp(lo, hi));
+                moved = true;
+            }
+        }
+        if !moved {
+            break;
+        }
+    }
+    theta
+}
+
+fn predict(rb: &[[f64; 4]; 3], lin: &Linear) -> [f64; 3] {
+    [0, 1, 2].map(|s| row(rb, s).iter().zip(lin).map(|(x, c)| x * c).sum())
+}
+
+/// Sum of squares of the block residuals outside `held_out`, the linear
+/// quantities solved for each searched shape (variable projection).
 #[derive(Clone, Copy)]
 struct Cost<'a> {
-    base: &'a ThermalConfig,
     runs: &'a [Vec<Block>],
     held_out: Option<usize>,
 }
 
 impl Cost<'_> {
-    /// Residuals (measured - simulated) per block.
-    fn residuals(&self, cfg: &ThermalConfig) -> Vec<Vec<[f64; 3]>> {
-        self.runs
+    /// The linear quantities and the residuals (measured - simulated) per
+    /// block at `q`.
+    fn fit_at(&self, q: &Shape) -> (Linear, Vec<Vec<[f64; 3]>>) {
+        let resp: Vec<Responses> = self.runs.iter().map(|r| simulate(q, r)).collect();
+        let lin = solve_linear(self.runs, &resp, self.held_out);
+        let res = self
+            .runs
             .iter()
-            .map(|run| {
-                simulate(cfg, run)
-                    .iter()
-                    .zip(run)
-                    .map(|(sim, b)| [0, 1, 2].map(|k| b.measured[k] - sim[k]))
+            .zip(&resp)
+            .map(|(run, r)| {
+                run.iter()
+                    .zip(r)
+                    .map(|(b, rb)| {
+                        let p = predict(rb, &lin);
+                        [0, 1, 2].map(|k| b.measured[k] - p[k])
+                    })
                     .collect()
             })
-            .collect()
+            .collect();
+        (lin, res)
     }
 }
 
@@ -182,7 +376,10 @@ impl CostFunction for Cost<'_> {
     type Output = f64;
 
     fn cost(&self, p: &Vec<f64>) -> Result<f64, Error> {
-        let res = self.residuals(&to_config(self.base, p));
+        let mut q = [0.0; 8];
+        q.copy_from_slice(p);
+        let (q, outside) = clamp_shape(&q);
+        let (_, res) = self.fit_at(&q);
         let mut sse = 0.0;
         for (run, r) in self.runs.iter().zip(&res) {
             for (b, v) in run.iter().zip(r) {
@@ -191,84 +388,561 @@ impl CostFunction for Cost<'_> {
                 }
             }
         }
+        // Outside the bounds the cost grows, so the simplex turns back.
+        let sse = sse * (1.0 + outside);
         Ok(if sse.is_finite() { sse } else { f64::MAX })
     }
 }
 
-/// Nelder-Mead from `start`; the start itself when the solver fails.
-fn fit(cost: Cost<'_>, start: &[f64]) -> Vec<f64> {
-    // Initial simplex: the start and one step along each quantity (a
-    // fifth in each time constant, 0.5 degC in each rise, 0.2 in gain).
+/// Nelder-Mead from `start` (a step of 0.3 along each quantity: a third
+/// of a log time constant), at most `iters` iterations: the best point
+/// found and its cost.
+fn search<C>(cost: C, start: &[f64], iters: u64) -> (Vec<f64>, f64)
+where
+    C: CostFunction<Param = Vec<f64>, Output = f64> + Clone,
+{
     let mut simplex = vec![start.to_vec()];
     for i in 0..start.len() {
         let mut v = start.to_vec();
-        v[i] += if i < 4 {
-            0.2
-        } else if i < 7 {
-            0.5
-        } else {
-            0.2
-        };
+        v[i] += 0.3;
         simplex.push(v);
     }
-    let Ok(solver) = NelderMead::new(simplex).with_sd_tolerance(1e-10) else {
-        return start.to_vec();
+    let fallback = || {
+        (
+            start.to_vec(),
+            cost.cost(&start.to_vec()).unwrap_or(f64::MAX),
+        )
     };
-    Executor::new(cost, solver)
-        .configure(|s| s.max_iters(MAX_ITERS))
+    let Ok(solver) = NelderMead::new(simplex).with_sd_tolerance(1e-12) else {
+        return fallback();
+    };
+    Executor::new(cost.clone(), solver)
+        .configure(|s| s.max_iters(iters))
         .run()
         .ok()
-        .and_then(|r| r.state().get_best_param().cloned())
-        .unwrap_or_else(|| start.to_vec())
+        .and_then(|r| {
+            Some((
+                r.state().get_best_param()?.clone(),
+                r.state().get_best_cost(),
+            ))
+        })
+        .unwrap_or_else(fallback)
 }
 
-/// The network fitted to all the runs, and the held-out RMS of the 60 s
-/// means per sensor (each stretch predicted with parameters fitted on the
-/// others).
-pub fn fitted_network(
-    runs: &[RunData],
-    base: &ThermalConfig,
-) -> (ThermalConfig, BTreeMap<String, f64>, Vec<Series>) {
-    let base = base.clone();
-    let axis = Vector3::from(base.sensor_axis_body).normalize();
-    let data = blocks(runs, axis);
-    let start = from_config(&base);
-    let cost = |held_out| Cost {
-        base: &base,
-        runs: &data,
-        held_out,
+/// Every start scored, the best `keep` searched, the winner searched again
+/// (a simplex that collapsed early gets a fresh one).
+fn multistart<C>(cost: C, starts: &[Vec<f64>], keep: usize, iters: (u64, u64)) -> Vec<f64>
+where
+    C: CostFunction<Param = Vec<f64>, Output = f64> + Clone,
+{
+    let mut scored: Vec<(&Vec<f64>, f64)> = starts
+        .iter()
+        .map(|q| (q, cost.cost(q).unwrap_or(f64::MAX)))
+        .collect();
+    scored.sort_by(|a, b| a.1.total_cmp(&b.1));
+    let mut best = scored
+        .iter()
+        .take(keep)
+        .map(|(q, _)| search(cost.clone(), q, iters.0))
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+        .unwrap_or_else(|| (starts[0].clone(), f64::MAX));
+    // Fresh simplices until one no longer improves by a part in 10^4.
+    for _ in 0..RESTARTS {
+        let next = search(cost.clone(), &best.0, iters.1);
+        let gained = best.1 - next.1;
+        if next.1 < best.1 {
+            best = next;
+        }
+        if gained.is_nan() || gained <= 1e-4 * best.1 {
+            break;
+        }
+    }
+    best.0
+}
+
+/// Most fresh simplices after the first search (ours: the study's runs
+/// settle within two).
+const RESTARTS: usize = 4;
+
+/// The starts: a coarse grid over the shapes a unit can have, not the
+/// RL-16 defaults (ours: case 600-5000 s, blocks 150-2000 s, weak and
+/// strong exchange, with and without a mount node, blocks that do and do
+/// not load the case).
+fn grid() -> Vec<Shape> {
+    let mut out = Vec::new();
+    for mount in [1.0f64, 900.0] {
+        for case in [600.0f64, 1600.0, 5000.0] {
+            for block in [150.0f64, 600.0, 2000.0] {
+                for coupling in [300.0f64, 5000.0] {
+                    for ratio in [0.0, 0.5] {
+                        out.push([
+                            mount.ln(),
+                            case.ln(),
+                            block.ln(),
+                            (block * 1.1).ln(),
+                            coupling.ln(),
+                            0.5,
+                            ratio,
+                            ratio,
+                        ]);
+                    }
+                }
+            }
+        }
+    }
+    out
+}
+
+/// Identify the network on the blocks outside `held_out` from the grid of
+/// starts (and `prior`, a twin's network, as one more).
+fn identify(runs: &[Vec<Block>], held_out: Option<usize>, prior: Option<&Shape>) -> Shape {
+    let cost = Cost { runs, held_out };
+    let starts: Vec<Vec<f64>> = grid()
+        .into_iter()
+        .chain(prior.copied())
+        .map(|q| q.to_vec())
+        .collect();
+    let p = multistart(cost, &starts, 6, (150, 800));
+    let mut q = [0.0; 8];
+    q.copy_from_slice(&p);
+    clamp_shape(&q).0
+}
+
+/// The fitted network as the twin's configuration.
+fn to_config(base: &ThermalConfig, q: &Shape, lin: &Linear) -> ThermalConfig {
+    let mut c = base.clone();
+    let tau = |i: usize| q[i].exp();
+    c.mount_tau_s = if q[0] <= SHAPE[0].1.ln() + 1e-9 {
+        0.0
+    } else {
+        tau(0)
     };
-    let all = fit(cost(None), &start);
+    c.case_tau_s = tau(1);
+    c.block1_tau_s = tau(2);
+    c.block2_tau_s = tau(3);
+    c.coupling_tau_s = tau(4);
+    c.convection_gain = q[5];
+    c.block_capacity_ratio = [q[6], q[7]];
+    c.air_gain = lin[0];
+    c.case_rise_c = lin[1];
+    c.block1_rise_c = lin[2];
+    c.block2_rise_c = lin[3];
+    c.sensor_offset_c = [lin[4], lin[5], lin[6]];
+    c
+}
+
+/// Modes of the modal model: a linear network of this many nodes (ours:
+/// a case, two blocks and one node nobody measures) has this many.
+pub const MODES: usize = 4;
+/// Bounds of a mode's time constant, s (ours).
+const MODE_TAU_S: (f64, f64) = (30.0, 36_000.0);
+/// Regressors per mode: the air through the mode's lag, the power-on step,
+/// the convection factor through the lag.
+const PER_MODE: usize = 3;
+/// Unknowns per sensor: the regressors' weights and the offset.
+const MODAL_UNKNOWNS: usize = PER_MODE * MODES + 1;
+
+/// The modes' time constants within bounds, and how far outside.
+fn clamp_modes(p: &[f64]) -> ([f64; MODES], f64) {
+    let (lo, hi) = (MODE_TAU_S.0.ln(), MODE_TAU_S.1.ln());
+    let mut out = [0.0; MODES];
+    let mut outside = 0.0;
+    for (o, v) in out.iter_mut().zip(p) {
+        let c = v.clamp(lo, hi);
+        outside += (v - c).powi(2);
+        *o = c.exp();
+    }
+    (out, outside)
+}
+
+/// A block's regressors for modes `tau`: each is the block's mean of the
+/// air through a first-order lag (soaked at the first air), of the step
+/// 1 - exp(-t / tau) from power-on, and of the orientation's vertical share
+/// of the sensor axis through the lag. Exact for the air held over each
+/// 10 s.
+fn modal_regressors(tau: &[f64; MODES], run: &[Block]) -> Vec<[f64; PER_MODE * MODES]> {
+    let Some(first) = run.first() else {
+        return Vec::new();
+    };
+    let mut air = [first.air_c[0]; MODES];
+    let mut grav = [first.gravity_along_axis; MODES];
+    let mut t = 0.0;
+    let decay = tau.map(|tm| (-STEP_S / tm).exp());
+    run.iter()
+        .map(|b| {
+            let span = b.air_c.len() as f64 * STEP_S;
+            let g = b.gravity_along_axis;
+            let mut out = [0.0; PER_MODE * MODES];
+            for m in 0..MODES {
+                let tm = tau[m];
+                // Through a gap on the block's first air and orientation.
+                if b.start_s > t {
+                    let a = (-(b.start_s - t) / tm).exp();
+                    air[m] = b.air_c[0] + (air[m] - b.air_c[0]) * a;
+                    grav[m] = g + (grav[m] - g) * a;
+                }
+                let a = decay[m];
+                let mean_frac = tm / STEP_S * (1.0 - a);
+                let mut acc = 0.0;
+                for &u in &b.air_c {
+                    acc += u + (air[m] - u) * mean_frac;
+                    air[m] = u + (air[m] - u) * a;
+                }
+                out[m] = acc / b.air_c.len() as f64;
+                let (t0, t1) = (b.start_s, b.start_s + span);
+                out[MODES + m] = 1.0 - tm / span * ((-t0 / tm).exp() - (-t1 / tm).exp());
+                let ab = (-span / tm).exp();
+                out[2 * MODES + m] = g + (grav[m] - g) * tm / span * (1.0 - ab);
+                grav[m] = g + (grav[m] - g) * ab;
+            }
+            t = b.start_s + span;
+            out
+        })
+        .collect()
+}
+
+/// Weight of the ridge on the regressors' weights and on the offsets, in
+/// units of one block's squared residual (ours: keeps two near-equal modes
+/// from trading huge opposite weights, and an offset the runs cannot tell
+/// from the warm-up at zero).
+const MODAL_RIDGE: f64 = 1e-4;
+const MODAL_RIDGE_OFFSET: f64 = 1.0;
+
+/// The modal model's cost on the blocks outside `held_out`.
+#[derive(Clone, Copy)]
+struct ModalCost<'a> {
+    runs: &'a [Vec<Block>],
+    held_out: Option<usize>,
+}
+
+impl ModalCost<'_> {
+    /// Per sensor, the weights solved on the training blocks, and the
+    /// residuals of every block.
+    fn fit_at(&self, tau: &[f64; MODES]) -> Vec<Vec<[f64; 3]>> {
+        type V = SVector<f64, MODAL_UNKNOWNS>;
+        let regs: Vec<Vec<[f64; PER_MODE * MODES]>> =
+            self.runs.iter().map(|r| modal_regressors(tau, r)).collect();
+        let x_of = |r: &[f64; PER_MODE * MODES]| {
+            let mut x = V::zeros();
+            x.fixed_rows_mut::<{ PER_MODE * MODES }>(0)
+                .copy_from_slice(r);
+            x[MODAL_UNKNOWNS - 1] = 1.0;
+            x
+        };
+        let mut ata = SMatrix::<f64, MODAL_UNKNOWNS, MODAL_UNKNOWNS>::zeros();
+        let mut atb = [V::zeros(); 3];
+        for (run, rr) in self.runs.iter().zip(&regs) {
+            for (b, r) in run.iter().zip(rr) {
+                if Some(b.fold) == self.held_out {
+                    continue;
+                }
+                let x = x_of(r);
+                ata += x * x.transpose();
+                for (a, m) in atb.iter_mut().zip(b.measured) {
+                    *a += x * m;
+                }
+            }
+        }
+        for k in 0..MODAL_UNKNOWNS - 1 {
+            ata[(k, k)] += MODAL_RIDGE;
+        }
+        ata[(MODAL_UNKNOWNS - 1, MODAL_UNKNOWNS - 1)] += MODAL_RIDGE_OFFSET;
+        let w: Vec<V> = match ata.cholesky() {
+            Some(c) => atb.iter().map(|b| c.solve(b)).collect(),
+            None => vec![V::zeros(); 3],
+        };
+        self.runs
+            .iter()
+            .zip(&regs)
+            .map(|(run, rr)| {
+                run.iter()
+                    .zip(rr)
+                    .map(|(b, r)| {
+                        let x = x_of(r);
+                        [0, 1, 2].map(|s| b.measured[s] - w[s].dot(&x))
+                    })
+                    .collect()
+            })
+            .collect()
+    }
+}
+
+impl CostFunction for ModalCost<'_> {
+    type Param = Vec<f64>;
+    type Output = f64;
+
+    fn cost(&self, p: &Vec<f64>) -> Result<f64, Error> {
+        let (tau, outside) = clamp_modes(p);
+        let res = self.fit_at(&tau);
+        let sse = training_sse(self.runs, &res, self.held_out) * (1.0 + outside);
+        Ok(if sse.is_finite() { sse } else { f64::MAX })
+    }
+}
+
+/// Sum of squares of the residuals outside `held_out`.
+fn training_sse(runs: &[Vec<Block>], res: &[Vec<[f64; 3]>], held_out: Option<usize>) -> f64 {
+    let mut sse = 0.0;
+    for (run, r) in runs.iter().zip(res) {
+        for (b, v) in run.iter().zip(r) {
+            if Some(b.fold) != held_out {
+                sse += v.iter().map(|x| x * x).sum::<f64>();
+            }
+        }
+    }
+    sse
+}
+
+/// The modal model's modes on the blocks outside `held_out`, from a few
+/// spreads of four time constants (ours: 30 s to 6 h between them).
+fn identify_modes(runs: &[Vec<Block>], held_out: Option<usize>) -> [f64; MODES] {
+    let starts: Vec<Vec<f64>> = [
+        [40.0f64, 200.0, 1000.0, 5000.0],
+        [80.0, 400.0, 2000.0, 10_000.0],
+        [150.0, 700.0, 3000.0, 20_000.0],
+        [30.0, 120.0, 600.0, 3000.0],
+        [300.0, 1000.0, 3000.0, 12_000.0],
+    ]
+    .iter()
+    .map(|s| s.iter().map(|v| v.ln()).collect())
+    .collect();
+    let p = multistart(ModalCost { runs, held_out }, &starts, 2, (300, 600));
+    clamp_modes(&p).0
+}
+
+/// Where the network form does not follow the runs.
+#[derive(Debug, Clone, Serialize)]
+pub struct FormMisfit {
+    /// The held-out gap, degC.
+    pub gap_c: f64,
+    /// The gap a network that fits stays within, degC.
+    pub limit_c: f64,
+    /// What the modal model (any linear network of four nodes) leaves held
+    /// out, degC: within the limit, the runs are a linear response to the
+    /// air that the network form cannot take; beyond it, they are not.
+    pub modal_gap_c: f64,
+    /// The held-out stretches and sensors that miss most.
+    pub r#where: Vec<MisfitStretch>,
+}
+
+/// One held-out stretch of one sensor.
+#[derive(Debug, Clone, Serialize)]
+pub struct MisfitStretch {
+    /// Run file.
+    pub run: String,
+    /// `t1_c`, `t2_c` or `tcase_c`.
+    pub sensor: String,
+    /// Start, s since power-on.
+    pub start_s: f64,
+    /// End, s.
+    pub end_s: f64,
+    /// RMS of the held-out residual's 60 s means, degC.
+    pub rms_c: f64,
+    /// Their mean, degC (measured - fitted).
+    pub mean_c: f64,
+}
+
+/// The thermal models fitted to the runs and how well each predicts held
+/// out.
+#[derive(Debug)]
+pub struct Fitted {
+    /// The twin's network form, fitted on all the runs.
+    pub network: ThermalConfig,
+    /// Its held-out RMS of the 60 s means per sensor, degC.
+    pub network_per_sensor_c: BTreeMap<String, f64>,
+    /// The modal model's held-out RMS per sensor, degC.
+    pub modal_per_sensor_c: BTreeMap<String, f64>,
+    /// The modal model's time constants fitted on all the runs, s.
+    pub modes_s: [f64; MODES],
+    /// The modal model's held-out residual per run.
+    pub modal_series: Vec<Series>,
+    /// The network's held-out residual per run.
+    pub network_series: Vec<Series>,
+    /// Set when the network (or even the modal model) misses by more than
+    /// [`FORM_MISFIT_C`] held out.
+    pub misfit: Option<FormMisfit>,
+}
+
+const SENSORS: [&str; 3] = ["t1_c", "t2_c", "tcase_c"];
+
+/// Held-out figures from each fold's residuals (`fold_res[k]`: every block's
+/// residual with the model fitted outside fold k; only fold k's count).
+struct HeldOut {
+    per_sensor_c: BTreeMap<String, f64>,
+    series: Vec<Series>,
+    stretches: Vec<MisfitStretch>,
+}
+
+fn held_out(runs: &[RunData], data: &[Vec<Block>], fold_res: &[Vec<Vec<[f64; 3]>>]) -> HeldOut {
     let (mut sse, mut n) = ([0.0; 3], 0usize);
     let mut series: Vec<Series> = data
         .iter()
         .map(|r| vec![(0.0, [0.0; 3]); r.len()])
         .collect();
-    for k in 0..FOLDS {
-        // From the defaults, not from the fit on all data: a quantity the
-        // other stretches cannot pin down must not keep the held-out
-        // stretch's value.
-        let cost = cost(Some(k));
-        let p = fit(cost, &start);
-        let res = cost.residuals(&to_config(&base, &p));
-        for ((run, r), out) in data.iter().zip(&res).zip(&mut series) {
-            for ((b, v), o) in run.iter().zip(r).zip(out.iter_mut()) {
-                if b.fold == k {
-                    *o = (0.5 * (b.start_s + b.end_s), *v);
-                    for j in 0..3 {
-                        sse[j] += v[j].powi(2);
-                    }
-                    n += 1;
+    // Per run and fold: sums, sums of squares, count, span.
+    type Sums = ([f64; 3], [f64; 3], usize, f64, f64);
+    let mut acc: BTreeMap<(usize, usize), Sums> = BTreeMap::new();
+    for (fold, res) in fold_res.iter().enumerate() {
+        for (r, ((run, rr), out)) in data.iter().zip(res).zip(&mut series).enumerate() {
+            for ((b, v), o) in run.iter().zip(rr).zip(out.iter_mut()) {
+                if b.fold != fold {
+                    continue;
                 }
+                *o = (0.5 * (b.start_s + b.end_s), *v);
+                let st = acc
+                    .entry((r, fold))
+                    .or_insert(([0.0; 3], [0.0; 3], 0, b.start_s, b.end_s));
+                for j in 0..3 {
+                    sse[j] += v[j].powi(2);
+                    st.0[j] += v[j];
+                    st.1[j] += v[j].powi(2);
+                }
+                st.2 += 1;
+                st.3 = st.3.min(b.start_s);
+                st.4 = st.4.max(b.end_s);
+                n += 1;
             }
         }
     }
-    let rms = |j: usize| (sse[j] / n.max(1) as f64).sqrt();
-    let per_sensor = [("t1_c", 0), ("t2_c", 1), ("tcase_c", 2)]
-        .into_iter()
-        .map(|(name, j)| (name.to_owned(), rms(j)))
+    let per_sensor_c = SENSORS
+        .iter()
+        .enumerate()
+        .map(|(j, name)| ((*name).to_owned(), (sse[j] / n.max(1) as f64).sqrt()))
         .collect();
-    (to_config(&base, &all), per_sensor, series)
+    let mut stretches: Vec<MisfitStretch> = acc
+        .iter()
+        .flat_map(|(&(r, _), st)| {
+            (0..3).map(move |j| MisfitStretch {
+                run: runs[r].name.clone(),
+                sensor: SENSORS[j].to_owned(),
+                start_s: st.3,
+                end_s: st.4,
+                rms_c: (st.1[j] / st.2.max(1) as f64).sqrt(),
+                mean_c: st.0[j] / st.2.max(1) as f64,
+            })
+        })
+        .collect();
+    stretches.sort_by(|a, b| b.rms_c.total_cmp(&a.rms_c));
+    stretches.truncate(3);
+    HeldOut {
+        per_sensor_c,
+        series,
+        stretches,
+    }
+}
+
+/// Both thermal models fitted to the runs, each scored held out (each
+/// stretch predicted by a model identified on the others, from the same
+/// starts: nothing the held-out stretch decided carries over):
+///
+/// - the twin's network form (for `twin-updated.toml`); `base` gives what
+///   is not fitted (the sensor axis, the sensor noise), and with `prior`
+///   its shape is one more start;
+/// - the modal model: every sensor a linear response to the air through
+///   [`MODES`] first-order lags, to the power-on through the same lags, and
+///   to the orientation's convection through them, plus an offset. Any
+///   linear network of up to that many nodes driven by the air is one.
+pub fn fitted_network(runs: &[RunData], base: &ThermalConfig, prior: bool) -> Fitted {
+    let axis = Vector3::from(base.sensor_axis_body).normalize();
+    let data = blocks(runs, axis);
+    let prior = prior.then(|| shape_of(base));
+    enum Job {
+        Network(Option<usize>),
+        Modal(Option<usize>),
+    }
+    enum Out {
+        Network(Shape),
+        Modal([f64; MODES]),
+    }
+    let folds = std::iter::once(None).chain((0..FOLDS).map(Some));
+    let jobs: Vec<Job> = folds
+        .clone()
+        .map(Job::Network)
+        .chain(folds.map(Job::Modal))
+        .collect();
+    // Independent fits: two threads, the jobs dealt alternately.
+    let mut outs: Vec<(usize, Out)> = std::thread::scope(|s| {
+        let handles: Vec<_> = (0..2)
+            .map(|w| {
+                let (data, jobs, prior) = (&data, &jobs, prior.as_ref());
+                s.spawn(move || {
+                    jobs.iter()
+                        .enumerate()
+                        .filter(|(i, _)| i % 2 == w)
+                        .map(|(i, j)| match *j {
+                            Job::Network(k) => (i, Out::Network(identify(data, k, prior))),
+                            Job::Modal(k) => (i, Out::Modal(identify_modes(data, k))),
+                        })
+                        .collect::<Vec<_>>()
+                })
+            })
+            .collect();
+        handles
+            .into_iter()
+            .flat_map(|h| h.join().unwrap_or_default())
+            .collect()
+    });
+    outs.sort_by_key(|o| o.0);
+    let shapes: Vec<Shape> = outs
+        .iter()
+        .filter_map(|o| match o.1 {
+            Out::Network(q) => Some(q),
+            Out::Modal(_) => None,
+        })
+        .collect();
+    let modes: Vec<[f64; MODES]> = outs
+        .iter()
+        .filter_map(|o| match o.1 {
+            Out::Modal(t) => Some(t),
+            Out::Network(_) => None,
+        })
+        .collect();
+    let all = shapes.first().copied().unwrap_or_else(|| shape_of(base));
+    let (all_lin, _) = Cost {
+        runs: &data,
+        held_out: None,
+    }
+    .fit_at(&all);
+    let network_res: Vec<_> = (0..FOLDS)
+        .map(|k| {
+            let q = shapes.get(k + 1).copied().unwrap_or(all);
+            Cost {
+                runs: &data,
+                held_out: Some(k),
+            }
+            .fit_at(&q)
+            .1
+        })
+        .collect();
+    let modal_res: Vec<_> = (0..FOLDS)
+        .map(|k| {
+            let tau = modes.get(k + 1).copied().unwrap_or([600.0; MODES]);
+            ModalCost {
+                runs: &data,
+                held_out: Some(k),
+            }
+            .fit_at(&tau)
+        })
+        .collect();
+    let net = held_out(runs, &data, &network_res);
+    let modal = held_out(runs, &data, &modal_res);
+    let network = to_config(base, &all, &all_lin);
+    let net_gap = quadratic_mean(&net.per_sensor_c);
+    let modal_gap = quadratic_mean(&modal.per_sensor_c);
+    let misfit = (net_gap.is_nan() || net_gap > FORM_MISFIT_C).then_some(FormMisfit {
+        gap_c: net_gap,
+        limit_c: FORM_MISFIT_C,
+        modal_gap_c: modal_gap,
+        r#where: net.stretches,
+    });
+    Fitted {
+        network,
+        network_per_sensor_c: net.per_sensor_c,
+        modal_per_sensor_c: modal.per_sensor_c,
+        modes_s: modes.first().copied().unwrap_or([600.0; MODES]),
+        modal_series: modal.series,
+        network_series: net.series,
+        misfit,
+    }
 }
 
 /// The twin's network driven by the measured air: held-out is moot (nothing
@@ -338,13 +1012,18 @@ fn quadratic_mean(per_sensor: &BTreeMap<String, f64>) -> f64 {
 pub fn layer(runs: &[RunData], twin: Option<&TwinConfig>, fit_with_twin: bool) -> ThermalLayer {
     let mut network = None;
     let mut fitted_gap_c = None;
+    let mut form_misfit = None;
+    let mut modes_s = None;
     let (per_sensor_c, series, reference) = match twin {
         Some(t) => {
             let (per_sensor, series) = twin_sensor_rms(runs, t);
             if fit_with_twin {
-                let (fitted, fitted_sensor, _) = fitted_network(runs, &t.thermal);
-                network = Some(fitted);
-                fitted_gap_c = Some(quadratic_mean(&fitted_sensor));
+                let f = fitted_network(runs, &t.thermal, true);
+                fitted_gap_c = Some(quadratic_mean(&f.network_per_sensor_c));
+                if f.misfit.is_none() {
+                    network = Some(f.network);
+                }
+                form_misfit = f.misfit;
             }
             (
                 per_sensor,
@@ -354,22 +1033,438 @@ pub fn layer(runs: &[RunData], twin: Option<&TwinConfig>, fit_with_twin: bool) -
             )
         }
         None => {
-            let (fitted, per_sensor, series) =
-                fitted_network(runs, &TwinConfig::default_rl16().thermal);
-            network = Some(fitted);
-            (
-                per_sensor,
-                series,
-                "the twin's thermal network form (case, two coupled blocks, self-heating rises, convection) with its time constants, rises and convection gain fitted to the runs (Nelder-Mead from the RL-16 defaults); each quarter of a run predicted with parameters fitted on the rest".to_owned(),
-            )
+            let f = fitted_network(runs, &TwinConfig::default_rl16().thermal, false);
+            let net_gap = quadratic_mean(&f.network_per_sensor_c);
+            fitted_gap_c = Some(net_gap);
+            modes_s = Some(f.modes_s);
+            let modal = quadratic_mean(&f.modal_per_sensor_c);
+            let network_text = "the twin's network form (a mount node, the case, two coupled blocks with convection; self-heating rises, the air's gain, sensor offsets) identified from the measured air: time constants searched within bounds from a grid of starts, the rest solved by least squares";
+            let modal_text = format!(
+                "a linear model of the sensors from the measured air: {MODES} modes (time constants searched within 30 s..10 h from several starts), each sensor's response to the air, to the power-on and to the orientation's convection through them and an offset solved by least squares"
+            );
+            let folds = "; each quarter of a run predicted with a model identified on the rest";
+            // The reference is whichever model predicts better held out: the
+            // network where its form holds (it also carries the orientation's
+            // convection as a coupling, which the modal model only adds), the
+            // modal model where it does not.
+            let out = if net_gap <= modal {
+                (
+                    f.network_per_sensor_c.clone(),
+                    f.network_series,
+                    format!("{network_text}{folds}"),
+                )
+            } else {
+                (
+                    f.modal_per_sensor_c,
+                    f.modal_series,
+                    format!("{modal_text}{folds}"),
+                )
+            };
+            if f.misfit.is_none() {
+                network = Some(f.network);
+            }
+            form_misfit = f.misfit;
+            out
         }
     };
     ThermalLayer {
         gap_c: quadratic_mean(&per_sensor_c),
         per_sensor_c,
         reference,
+        modes_s,
         fitted: network,
         fitted_gap_c,
+        form_misfit,
         series,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    //! The identification on units that are not the twin: linear networks
+    //! of two to four nodes in forms the fitted one does not have (a block
+    //! carrying both sensors, a heat sink hanging off the case, a second
+    //! path from the air to the blocks), integrated here by their own
+    //! exact discretisation, read through offset, noisy, quantised sensors
+    //! and a chamber sensor with a gain error, with rows missing.
+
+    use super::*;
+    use crate::analysis::series::Interval;
+    use crate::diagnose::data::Sample;
+    use crate::geometry::Orientation;
+    use crate::twin::thermal::ThermalNetwork;
+    use nalgebra::DMatrix;
+    use rand::{RngExt, SeedableRng};
+    use rand_distr::StandardNormal;
+    use rand_xoshiro::Xoshiro256PlusPlus;
+
+    /// A linear network: `C dT/dt = G_air (air - T) + sum G_ij (T_j - T_i)
+    /// + Q`, with the sensors on nodes.
+    struct Unit {
+        /// Per node: capacitance (s per unit conductance), conductance to
+        /// the air, heat input (degC per unit conductance).
+        cap: Vec<f64>,
+        to_air: Vec<f64>,
+        heat: Vec<f64>,
+        /// Symmetric conductances between nodes.
+        links: Vec<(usize, usize, f64)>,
+        /// Node of T1, T2, TK.
+        sensors: [usize; 3],
+        offsets: [f64; 3],
+        noise_c: f64,
+        lsb_c: f64,
+        /// Chamber reading = gain * air + bias.
+        air_gain: f64,
+        air_bias: f64,
+    }
+
+    fn draw_unit(seed: u64) -> Unit {
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
+        let mut u = |lo: f64, hi: f64| lo + (hi - lo) * rng.random::<f64>();
+        let log = |u: &mut dyn FnMut(f64, f64) -> f64, lo: f64, hi: f64| {
+            (lo.ln() + (hi.ln() - lo.ln()) * u(0.0, 1.0)).exp()
+        };
+        let form = (seed % 4) as usize;
+        // Node 0 is the case: time constant to the air 600..3000 s.
+        let case_tau = log(&mut u, 600.0, 3000.0);
+        let b1_tau = log(&mut u, 100.0, 2000.0);
+        let b2_tau = log(&mut u, 100.0, 2000.0);
+        let coupling = log(&mut u, 200.0, 20_000.0);
+        let rise = |u: &mut dyn FnMut(f64, f64) -> f64| u(0.0, 5.0);
+        let (cap, to_air, heat, links, sensors) = match form {
+            // Two nodes: one block carries both block sensors.
+            0 => (
+                vec![case_tau, b1_tau],
+                vec![1.0, 0.0],
+                vec![rise(&mut u), rise(&mut u) / b1_tau],
+                vec![(0, 1, 1.0)],
+                [1, 1, 0],
+            ),
+            // Three nodes: the fitted form without convection.
+            1 => (
+                vec![case_tau, b1_tau, b2_tau],
+                vec![1.0, 0.0, 0.0],
+                vec![rise(&mut u), rise(&mut u) / b1_tau, rise(&mut u) / b2_tau],
+                vec![(0, 1, 1.0), (0, 2, 1.0), (1, 2, b1_tau / coupling)],
+                [1, 2, 0],
+            ),
+            // Four nodes: a heat sink on the case (a baseplate).
+            2 => {
+                let sink = log(&mut u, 300.0, 6000.0);
+                let g = u(0.3, 2.0);
+                (
+                    vec![case_tau, b1_tau, b2_tau, sink * g],
+                    vec![1.0, 0.0, 0.0, 0.0],
+                    vec![
+                        rise(&mut u),
+                        rise(&mut u) / b1_tau,
+                        rise(&mut u) / b2_tau,
+                        0.0,
+                    ],
+                    vec![
+                        (0, 1, 1.0),
+                        (0, 2, 1.0),
+                        (1, 2, b1_tau / coupling),
+                        (0, 3, g),
+                    ],
+                    [1, 2, 0],
+                )
+            }
+            // Four nodes: a mount between the air and the case, and a weak
+            // second path from the air to block 2.
+            _ => {
+                let mount = log(&mut u, 60.0, 1500.0);
+                (
+                    vec![case_tau, b1_tau, b2_tau, mount],
+                    vec![0.0, 0.0, u(0.0, 0.05) * b2_tau / case_tau, 1.0],
+                    vec![
+                        rise(&mut u),
+                        rise(&mut u) / b1_tau,
+                        rise(&mut u) / b2_tau,
+                        0.0,
+                    ],
+                    vec![
+                        (3, 0, case_tau / mount),
+                        (0, 1, 1.0),
+                        (0, 2, 1.0),
+                        (1, 2, b1_tau / coupling),
+                    ],
+                    [1, 2, 0],
+                )
+            }
+        };
+        // Case heat as conductance-to-air units: a case rise of `heat[0]`.
+        let offsets = [u(-0.3, 0.3), u(-0.3, 0.3), u(-0.3, 0.3)];
+        let noise_c = log(&mut u, 0.005, 0.1);
+        let lsb_c = log(&mut u, 0.005, 0.1);
+        let air_gain = 1.0 + u(-0.05, 0.05);
+        let air_bias = u(-0.5, 0.5);
+        Unit {
+            cap,
+            to_air,
+            heat,
+            links,
+            sensors,
+            offsets,
+            noise_c,
+            lsb_c,
+            air_gain,
+            air_bias,
+        }
+    }
+
+    /// A thermal cycle (soak, -40, +50, back) and a run at one temperature
+    /// with the orientation changing every 25 min: true air per second.
+    fn air_profiles() -> [Vec<f64>; 2] {
+        let mut sp = Vec::new();
+        let mut at: f64 = 20.0;
+        for (target, hold_s) in [
+            (20.0, 3600.0),
+            (-40.0, 7200.0),
+            (50.0, 7200.0),
+            (20.0, 3600.0),
+        ] {
+            while (at - target).abs() > 1e-9 {
+                at += (target - at).clamp(-1.0 / 60.0, 1.0 / 60.0);
+                sp.push(at);
+            }
+            sp.extend(std::iter::repeat_n(at, hold_s as usize));
+        }
+        // The air trails the controller by 120 s.
+        let mut air = 20.0;
+        let cycle = sp
+            .iter()
+            .map(|&s| {
+                air += (s - air) * (1.0 - (-1.0f64 / 120.0).exp());
+                air
+            })
+            .collect();
+        [cycle, vec![20.0; 9 * 1500]]
+    }
+
+    fn run_of(unit: &Unit, air: &[f64], seed: u64, name: &str) -> RunData {
+        let n = unit.cap.len();
+        let mut a = DMatrix::<f64>::zeros(n, n);
+        let mut b = DMatrix::<f64>::zeros(n, 2);
+        for i in 0..n {
+            a[(i, i)] -= unit.to_air[i] / unit.cap[i];
+            b[(i, 0)] = unit.to_air[i] / unit.cap[i];
+            b[(i, 1)] = unit.heat[i] / unit.cap[i];
+        }
+        // The case's heat is a rise above its air coupling.
+        b[(0, 1)] = unit.heat[0] / unit.cap[0];
+        for &(i, j, g) in &unit.links {
+            a[(i, i)] -= g / unit.cap[i];
+            a[(i, j)] += g / unit.cap[i];
+            a[(j, j)] -= g / unit.cap[j];
+            a[(j, i)] += g / unit.cap[j];
+        }
+        let mut m = DMatrix::<f64>::zeros(n + 2, n + 2);
+        m.view_mut((0, 0), (n, n)).copy_from(&a);
+        m.view_mut((0, n), (n, 2)).copy_from(&b);
+        let e = m.exp();
+        let (phi, gamma) = (
+            e.view((0, 0), (n, n)).into_owned(),
+            e.view((0, n), (n, 2)).into_owned(),
+        );
+        let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
+        // Soaked, unpowered, then powered at t = 0.
+        let mut x = nalgebra::DVector::<f64>::from_element(n, air[0]);
+        let mut samples = Vec::new();
+        for (t, &air_c) in air.iter().enumerate() {
+            let u = nalgebra::DVector::from_vec(vec![air_c, 1.0]);
+            x = &phi * &x + &gamma * u;
+            let record = t / 3600;
+            // A minute between records unrecorded, and rows lost at random.
+            if t % 3600 < 60 || rng.random::<f64>() < 0.002 {
+                continue;
+            }
+            let mut read = |k: usize| {
+                let v = x[unit.sensors[k]]
+                    + unit.offsets[k]
+                    + unit.noise_c * rng.sample::<f64, _>(StandardNormal);
+                (v / unit.lsb_c).round() * unit.lsb_c
+            };
+            let (t1, t2, tk) = (read(0), read(1), read(2));
+            let position = (t / 1500) % 9;
+            let orientation = if air.len() == 9 * 1500 {
+                Orientation::new(
+                    90.0 * (position % 4) as f64,
+                    if position < 4 { 90.0 } else { 0.0 },
+                    0.0,
+                )
+            } else {
+                Orientation::new(0.0, 90.0, 0.0)
+            };
+            samples.push(Sample {
+                iv: Interval {
+                    time_s: t as f64 + 0.5,
+                    rate_dph: 0.0,
+                    reference_dph: 0.0,
+                    t1_c: t1,
+                    t2_c: t2,
+                    tcase_c: tk,
+                    chamber_c: unit.air_gain * air_c + unit.air_bias,
+                    frames: 400,
+                },
+                orientation,
+                record: format!("r{record}"),
+                step: format!("s{record}"),
+            });
+        }
+        RunData {
+            name: name.to_owned(),
+            site: TwinConfig::default_rl16().site,
+            samples,
+        }
+    }
+
+    fn within_bounds(c: &ThermalConfig) -> bool {
+        let taus = [
+            (c.case_tau_s, SHAPE[1]),
+            (c.block1_tau_s, SHAPE[2]),
+            (c.block2_tau_s, SHAPE[3]),
+            (c.coupling_tau_s, SHAPE[4]),
+        ];
+        taus.iter().all(|(v, (_, lo, hi))| (*lo..=*hi).contains(v))
+            && (c.mount_tau_s == 0.0 || (SHAPE[0].1..=SHAPE[0].2).contains(&c.mount_tau_s))
+            && (0.0..=5.0).contains(&c.convection_gain)
+            && [c.case_rise_c, c.block1_rise_c, c.block2_rise_c]
+                .iter()
+                .all(|r| (0.0..=RISE_MAX_C).contains(r))
+            && (AIR_GAIN.0..=AIR_GAIN.1).contains(&c.air_gain)
+    }
+
+    /// The two runs of a unit.
+    fn runs_of(seed: u64) -> [RunData; 2] {
+        let [cycle, flat] = air_profiles();
+        let unit = draw_unit(seed);
+        [
+            run_of(&unit, &cycle, seed * 2, "cycle"),
+            run_of(&unit, &flat, seed * 2 + 1, "flat"),
+        ]
+    }
+
+    #[test]
+    fn the_fitted_form_is_the_twins_network() {
+        // What the fit simulates for a network is what the twin makes of it
+        // (mount node, air gain, offsets, blocks loading the case,
+        // convection), so twin-updated.toml carries the fitted unit.
+        let mut cfg = TwinConfig::default_rl16().thermal;
+        cfg.mount_tau_s = 300.0;
+        cfg.air_gain = 1.02;
+        cfg.block_capacity_ratio = [0.4, 0.2];
+        cfg.sensor_offset_c = [0.1, -0.2, 0.05];
+        cfg.convection_gain = 0.8;
+        let [cycle, _] = air_profiles();
+        let mut net = ThermalNetwork::soaked(&cfg, cycle[0]);
+        let mut samples = Vec::new();
+        for (t, &air) in cycle.iter().enumerate() {
+            let up = t >= cycle.len() / 2;
+            let orientation = Orientation::new(0.0, if up { 0.0 } else { 90.0 }, 0.0);
+            let g = (orientation.rotation().inverse() * crate::geometry::gravity_ned_g())
+                .dot(&Vector3::from(cfg.sensor_axis_body).normalize())
+                .abs();
+            for _ in 0..10 {
+                net.step(0.1, air, true, 1.0 + cfg.convection_gain * g);
+            }
+            let o = cfg.sensor_offset_c;
+            samples.push(Sample {
+                iv: Interval {
+                    time_s: t as f64 + 0.5,
+                    rate_dph: 0.0,
+                    reference_dph: 0.0,
+                    t1_c: net.t1_c + o[0],
+                    t2_c: net.t2_c + o[1],
+                    tcase_c: net.case_c + o[2],
+                    chamber_c: air,
+                    frames: 400,
+                },
+                orientation,
+                // The table turns between records.
+                record: if up { "r2" } else { "r1" }.into(),
+                step: "s".into(),
+            });
+        }
+        let runs = [RunData {
+            name: "twin".into(),
+            site: TwinConfig::default_rl16().site,
+            samples,
+        }];
+        let data = blocks(&runs, Vector3::from(cfg.sensor_axis_body).normalize());
+        let cost = Cost {
+            runs: &data,
+            held_out: None,
+        };
+        let (lin, res) = cost.fit_at(&shape_of(&cfg));
+        // (The first minute, where the blocks start from the soak, differs
+        // by a few hundredths: the twin steps every 0.1 s, the fit every
+        // 10 s.)
+        let worst = res[0]
+            .iter()
+            .skip(1)
+            .flat_map(|r| r.iter().map(|v| v.abs()))
+            .fold(0.0, f64::max);
+        assert!(worst < 0.01, "worst block {worst} degC");
+        let fitted = to_config(&cfg, &shape_of(&cfg), &lin);
+        assert!((fitted.air_gain - 1.02).abs() < 1e-3, "{fitted:?}");
+        assert!(
+            (fitted.case_rise_c - cfg.case_rise_c).abs() < 0.02,
+            "{fitted:?}"
+        );
+        for k in 0..3 {
+            let off = fitted.sensor_offset_c[k] - cfg.sensor_offset_c[k];
+            assert!(off.abs() < 0.02, "{fitted:?}");
+        }
+    }
+
+    #[test]
+    fn units_of_other_network_forms_are_followed_and_never_get_an_unphysical_network() {
+        // One unit of each form: two nodes, three with unequal block
+        // capacities, a heat sink on the case, a mount and a second path.
+        for seed in 0..4 {
+            let runs = runs_of(seed);
+            let layer = layer(&runs, None, false);
+            let net_gap = layer.fitted_gap_c.expect("the network is always fitted");
+            assert_eq!(layer.form_misfit.is_some(), net_gap > FORM_MISFIT_C);
+            if let Some(n) = &layer.fitted {
+                assert!(within_bounds(n), "seed {seed}: {n:?}");
+            }
+            assert!(layer.gap_c < FORM_MISFIT_C, "seed {seed}: {}", layer.gap_c);
+            // A network that cannot follow is not returned, and where it
+            // misses is said.
+            assert_eq!(layer.fitted.is_some(), layer.form_misfit.is_none());
+            if let Some(m) = &layer.form_misfit {
+                assert!(m.gap_c > FORM_MISFIT_C && !m.r#where.is_empty());
+                assert!(m.modal_gap_c < FORM_MISFIT_C);
+            }
+        }
+    }
+
+    #[test]
+    #[ignore = "the measurement over 40 units; run with --release --ignored"]
+    fn independent_units_measured() {
+        let base = TwinConfig::default_rl16().thermal;
+        let mut gaps = Vec::new();
+        for seed in 0..40u64 {
+            let runs = runs_of(seed);
+            let f = fitted_network(&runs, &base, false);
+            let gap = quadratic_mean(&f.modal_per_sensor_c);
+            println!(
+                "seed {seed} form {} modal {gap:.4} network {:.4} modes {:?}",
+                seed % 4,
+                quadratic_mean(&f.network_per_sensor_c),
+                f.modes_s.map(|t| t.round()),
+            );
+            assert!(within_bounds(&f.network), "{:?}", f.network);
+            gaps.push(gap);
+        }
+        gaps.sort_by(f64::total_cmp);
+        let below = gaps.iter().filter(|g| **g < FORM_MISFIT_C).count();
+        println!(
+            "median {:.4}, below {FORM_MISFIT_C}: {below}/{}",
+            gaps[gaps.len() / 2],
+            gaps.len()
+        );
     }
 }

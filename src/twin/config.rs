@@ -174,6 +174,26 @@ pub struct ThermalConfig {
     pub block2_rise_c: f64,
     /// White noise of each temperature sensor reading, degC (1 sigma).
     pub sensor_noise_c: f64,
+    /// Time constant of a mount node between the chamber air and the case
+    /// (a fixture, a jacket), s; 0 = none: the case sees the air.
+    #[serde(default)]
+    pub mount_tau_s: f64,
+    /// The air the unit sees per degC of the chamber's air reading (1: the
+    /// reading is that air; a chamber sensor with a gain error, or a
+    /// workspace gradient, shows as a few percent off).
+    #[serde(default = "unit_gain")]
+    pub air_gain: f64,
+    /// Offsets of the T1, T2 and TK readings, degC.
+    #[serde(default)]
+    pub sensor_offset_c: [f64; 3],
+    /// Heat capacity of block node 1 and of block node 2 over the case's
+    /// (0: the blocks follow the case without warming or cooling it back).
+    #[serde(default)]
+    pub block_capacity_ratio: [f64; 2],
+}
+
+fn unit_gain() -> f64 {
+    1.0
 }
 
 /// Digital output of the gyro.
@@ -427,6 +447,19 @@ impl TwinConfig {
         c.positive(th.block2_tau_s, "thermal.block2_tau_s")?;
         c.positive(th.coupling_tau_s, "thermal.coupling_tau_s")?;
         c.non_negative(th.convection_gain, "thermal.convection_gain")?;
+        c.non_negative(th.mount_tau_s, "thermal.mount_tau_s")?;
+        c.within(th.air_gain, 0.5, 2.0, "thermal.air_gain")?;
+        for (k, v) in th.block_capacity_ratio.iter().enumerate() {
+            c.within(
+                *v,
+                0.0,
+                100.0,
+                &format!("thermal.block_capacity_ratio[{k}]"),
+            )?;
+        }
+        for (k, v) in th.sensor_offset_c.iter().enumerate() {
+            c.within(*v, -20.0, 20.0, &format!("thermal.sensor_offset_c[{k}]"))?;
+        }
         let n = th
             .sensor_axis_body
             .iter()

@@ -424,9 +424,10 @@ impl Twin {
     fn read_sensors(&mut self) {
         let th = &self.thermal;
         let truth = [th.t1_c, th.t2_c, th.case_c];
-        let (noise, lsb) = (self.cfg.thermal.sensor_noise_c, self.cfg.gyro.temp_lsb_c);
-        for (out, t) in self.sensor_c.iter_mut().zip(truth) {
-            let noisy = t + noise * self.rng.sample::<f64, _>(StandardNormal);
+        let c = &self.cfg.thermal;
+        let (noise, lsb) = (c.sensor_noise_c, self.cfg.gyro.temp_lsb_c);
+        for ((out, t), offset) in self.sensor_c.iter_mut().zip(truth).zip(c.sensor_offset_c) {
+            let noisy = t + offset + noise * self.rng.sample::<f64, _>(StandardNormal);
             *out = (noisy / lsb).round() * lsb;
         }
     }

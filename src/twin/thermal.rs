@@ -98,10 +98,13 @@ impl ChamberAir {
     }
 }
 
-/// Case (housing) node and two block nodes carrying sensors T1 and T2.
+/// Case (housing) node and two block nodes carrying sensors T1 and T2,
+/// with an optional mount node between the air and the case.
 #[derive(Debug, Clone)]
 pub struct ThermalNetwork {
     cfg: ThermalConfig,
+    /// Mount node, degC (follows the air when the network has none).
+    pub mount_c: f64,
     /// Case temperature T_K, degC.
     pub case_c: f64,
     /// Block node 1 temperature (sensor T1), degC.
@@ -115,8 +118,10 @@ pub struct ThermalNetwork {
 impl ThermalNetwork {
     /// All nodes soaked at `temp_c`.
     pub fn soaked(cfg: &ThermalConfig, temp_c: f64) -> Self {
+        let temp_c = cfg.air_gain * temp_c;
         Self {
             cfg: cfg.clone(),
+            mount_c: temp_c,
             case_c: temp_c,
             t1_c: temp_c,
             t2_c: temp_c,
@@ -130,11 +135,28 @@ impl ThermalNetwork {
         let c = &self.cfg;
         let on = if powered { 1.0 } else { 0.0 };
         let dt_before = self.t1_c - self.t2_c;
-        relax(
-            &mut self.case_c,
-            air_c + c.case_rise_c * on,
-            dt_s / c.case_tau_s,
-        );
+        let air_c = c.air_gain * air_c;
+        if c.mount_tau_s > 0.0 {
+            relax(&mut self.mount_c, air_c, dt_s / c.mount_tau_s);
+        } else {
+            self.mount_c = air_c;
+        }
+        let [r1, r2] = c.block_capacity_ratio;
+        if r1 > 0.0 || r2 > 0.0 {
+            // The blocks' heat flows back into the case in proportion to
+            // their capacities.
+            let kk = 1.0 / c.case_tau_s;
+            let (b1, b2) = (r1 / c.block1_tau_s, r2 / c.block2_tau_s);
+            let eq = (kk * (self.mount_c + c.case_rise_c * on) + b1 * self.t1_c + b2 * self.t2_c)
+                / (kk + b1 + b2);
+            relax(&mut self.case_c, eq, dt_s * (kk + b1 + b2));
+        } else {
+            relax(
+                &mut self.case_c,
+                self.mount_c + c.case_rise_c * on,
+                dt_s / c.case_tau_s,
+            );
+        }
 
         let k1 = 1.0 / c.block1_tau_s;
         let k2 = 1.0 / c.block2_tau_s;
@@ -155,17 +177,24 @@ impl ThermalNetwork {
     /// Steady state (case, T1, T2) for air at `air_c`, powered, with
     /// `convection`: the closed form the integrator must settle to.
     pub fn steady_state(cfg: &ThermalConfig, air_c: f64, convection: f64) -> (f64, f64, f64) {
-        let case = air_c + cfg.case_rise_c;
+        let kk = 1.0 / cfg.case_tau_s;
         let (k1, k2) = (1.0 / cfg.block1_tau_s, 1.0 / cfg.block2_tau_s);
-        let kc = convection / cfg.coupling_tau_s;
-        // [k1+kc, -kc; -kc, k2+kc] [T1; T2] = [k1 (case+r1); k2 (case+r2)]
-        let (a, b, d) = (k1 + kc, -kc, k2 + kc);
-        let (r1, r2) = (
-            k1 * (case + cfg.block1_rise_c),
-            k2 * (case + cfg.block2_rise_c),
+        let (b1, b2) = (
+            cfg.block_capacity_ratio[0] * k1,
+            cfg.block_capacity_ratio[1] * k2,
         );
-        let det = a * d - b * b;
-        ((case), (d * r1 - b * r2) / det, (a * r2 - b * r1) / det)
+        let kc = convection / cfg.coupling_tau_s;
+        // Heat balance of the case, block 1 and block 2 (the mount node
+        // settles at the air it sees).
+        let a =
+            nalgebra::Matrix3::new(kk + b1 + b2, -b1, -b2, -k1, k1 + kc, -kc, -k2, -kc, k2 + kc);
+        let rhs = nalgebra::Vector3::new(
+            kk * (cfg.air_gain * air_c + cfg.case_rise_c),
+            k1 * cfg.block1_rise_c,
+            k2 * cfg.block2_rise_c,
+        );
+        let x = a.lu().solve(&rhs).unwrap_or(rhs);
+        (x[0], x[1], x[2])
     }
 }
 
@@ -235,8 +264,15 @@ mod tests {
 
     #[test]
     fn powered_network_settles_to_the_closed_form_steady_state() {
-        let cfg = TwinConfig::default_rl16().thermal;
-        for convection in [1.0, 1.5] {
+        let mut other = TwinConfig::default_rl16().thermal;
+        other.mount_tau_s = 400.0;
+        other.air_gain = 1.03;
+        other.block_capacity_ratio = [0.3, 0.15];
+        for (cfg, convection) in [
+            (TwinConfig::default_rl16().thermal, 1.0),
+            (TwinConfig::default_rl16().thermal, 1.5),
+            (other, 1.2),
+        ] {
             let mut net = ThermalNetwork::soaked(&cfg, -40.0);
             for _ in 0..(40_000.0 / 0.1) as usize {
                 net.step(0.1, -40.0, true, convection);
@@ -247,6 +283,7 @@ mod tests {
             assert!((net.t2_c - t2).abs() < 1e-4, "{} vs {t2}", net.t2_c);
             assert!(net.ddt_dt_c_per_s.abs() < 1e-7);
         }
+        let cfg = TwinConfig::default_rl16().thermal;
         // Self-heating warms side 1 more than side 2: a positive gradient.
         let (_, t1, t2) = ThermalNetwork::steady_state(&cfg, 20.0, 1.0);
         assert!(t1 - t2 > 0.1);
