@@ -114,6 +114,14 @@ pub fn run(args: DiagnoseArgs) -> Result<Outcome> {
         &serde_json::to_string_pretty(&d)?,
     )?;
     write(&out.join("diagnosis.html"), &html::render(&d))?;
+    let deciding = out.join("deciding-run.toml");
+    match &d.deciding_procedure {
+        Some(text) => write(&deciding, text)?,
+        // A file from an earlier diagnosis in the same place no longer holds.
+        None if deciding.exists() => std::fs::remove_file(&deciding)
+            .with_context(|| format!("removing {}", deciding.display()))?,
+        None => {}
+    }
     let base = twin.unwrap_or_else(TwinConfig::default_rl16);
     write(
         &out.join("twin-updated.toml"),
@@ -157,6 +165,31 @@ pub fn run(args: DiagnoseArgs) -> Result<Outcome> {
             100.0 * e.shrink,
             crate::view::p_phrase(e.p_value)
         )?;
+    }
+    if let Some(i) = &d.inconclusive {
+        let r = &i.deciding_run;
+        outln!("inconclusive: these improve the held-out gap but miss the bar")?;
+        for c in &i.candidates {
+            outln!(
+                "  {:<26} removes {:.0} % of it, p {:.4} (bar {:.4})",
+                c.name,
+                100.0 * c.improvement,
+                c.p_value,
+                c.level
+            )?;
+        }
+        if r.passes > 0 {
+            outln!(
+                "  deciding run for {}: {} ({:.1} h of device time, power {:.0} %): {}",
+                r.effect,
+                r.what,
+                r.device_time_h,
+                100.0 * r.power,
+                out.join(&r.file).display()
+            )?;
+        } else {
+            outln!("  {}: {}", r.effect, r.what)?;
+        }
     }
     for c in &d.confounded {
         outln!(

@@ -293,13 +293,17 @@ pub fn headline(d: &Diagnosis) -> String {
     let noise_text = noise.map_or(String::new(), |n| {
         format!("the noise of 60 s means alone, about {n:.5} deg/h")
     });
-    if d.effects.is_empty() && at_noise(r.gap_dph) && t.gap_c <= THERMAL_GAP_C {
+    if d.effects.is_empty()
+        && d.inconclusive.is_none()
+        && at_noise(r.gap_dph)
+        && t.gap_c <= THERMAL_GAP_C
+    {
         return format!(
             "Simulator and runs agree: the thermal layer matches ({:.3} degC held out) and the rate gap of {:.5} deg/h held out is at {noise_text}, so nothing is left for an effect to explain.",
             t.gap_c, r.gap_dph
         );
     }
-    let rate = if d.effects.is_empty() && at_noise(r.gap_dph) {
+    let rate = if d.effects.is_empty() && d.inconclusive.is_none() && at_noise(r.gap_dph) {
         format!(
             " The rate gap of {:.5} deg/h held out is at {noise_text}.",
             r.gap_dph
@@ -323,8 +327,26 @@ pub fn headline(d: &Diagnosis) -> String {
                 c.effects[0], c.effects[1], c.separate_with
             )
         });
+        let undecided = d.inconclusive.as_ref().map_or(String::new(), |i| {
+            let r = &i.deciding_run;
+            if r.passes > 0 {
+                format!(
+                    " Inconclusive: {} improves it but misses the bar; {} would decide ({:.1} h of device time, power {:.0} %, {}).",
+                    r.effect,
+                    r.what,
+                    r.device_time_h,
+                    100.0 * r.power,
+                    r.file
+                )
+            } else {
+                format!(
+                    " Inconclusive: {} improves it but misses the bar, and {}.",
+                    r.effect, r.what
+                )
+            }
+        });
         format!(
-            " No effect of the library explains the rate gap of {:.5} deg/h held out{place}{period}.{confounded}",
+            " No effect of the library explains the rate gap of {:.5} deg/h held out{place}{period}.{confounded}{undecided}",
             r.gap_dph
         )
     } else {
@@ -403,11 +425,43 @@ pub fn render(d: &Diagnosis) -> String {
         })
         .collect();
     // A heading only over something.
-    let confounded = if confounded_items.is_empty() {
+    let mut confounded = if confounded_items.is_empty() {
         String::new()
     } else {
         format!("<h2>Confounded</h2><ul>{confounded_items}</ul>\n")
     };
+    if let Some(i) = &d.inconclusive {
+        let rows: String = i
+            .candidates
+            .iter()
+            .map(|c| {
+                format!(
+                    "<tr><td>{}</td><td class=num>{:.5} deg/h</td><td class=num>{:.0} %</td><td class=num>{:.4}</td><td class=num>{:.4}</td></tr>",
+                    esc(&c.name),
+                    c.held_out_gap_dph,
+                    100.0 * c.improvement,
+                    c.p_value,
+                    c.level
+                )
+            })
+            .collect();
+        let r = &i.deciding_run;
+        let decide = if r.passes > 0 {
+            format!(
+                "The run that would decide for {}: {} ({:.1} h of device time; power {:.0} % if the effect is as large as fitted), written as <code>{}</code>, ready for <code>gyrobench run</code>.",
+                esc(&r.effect),
+                esc(&r.what),
+                r.device_time_h,
+                100.0 * r.power,
+                esc(&r.file)
+            )
+        } else {
+            format!("For {}: {}.", esc(&r.effect), esc(&r.what))
+        };
+        confounded.push_str(&format!(
+            "<h2>Inconclusive</h2><p>These improve the held-out gap but miss the bar. {decide}</p>\n<table><tr><th>candidate</th><th>held-out gap with it</th><th>removes</th><th>p</th><th>bar</th></tr>{rows}</table>\n"
+        ));
+    }
     let candidates: String = d
         .candidates
         .iter()

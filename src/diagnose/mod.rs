@@ -171,6 +171,56 @@ pub struct CandidateScore {
     pub p_value: f64,
 }
 
+/// Between named and nothing: the best candidate improves the held-out
+/// gap but misses the significance bar (or [`MIN_GAIN`]).
+#[derive(Debug, Clone, Serialize)]
+pub struct Inconclusive {
+    /// Candidates that improve the held-out gap, best first.
+    pub candidates: Vec<InconclusiveCandidate>,
+    /// The run that would decide for the first of them.
+    pub deciding_run: DecidingRun,
+}
+
+/// One candidate of an inconclusive step.
+#[derive(Debug, Clone, Serialize)]
+pub struct InconclusiveCandidate {
+    /// Library name.
+    pub name: String,
+    /// Held-out gap with it added, deg/h.
+    pub held_out_gap_dph: f64,
+    /// Fraction of the held-out sum of squares it removes.
+    pub improvement: f64,
+    /// Its p-value.
+    pub p_value: f64,
+    /// The bar it had to pass (0.05 / candidates left).
+    pub level: f64,
+}
+
+/// The run that would decide an inconclusive candidate.
+#[derive(Debug, Clone, Serialize)]
+pub struct DecidingRun {
+    /// The candidate it decides.
+    pub effect: String,
+    /// The procedure it builds on.
+    pub procedure: String,
+    /// What to run: positions, temperatures, repeats.
+    pub what: String,
+    /// Passes (of the positions, or runs of the procedure).
+    pub passes: usize,
+    /// Device time, h.
+    pub device_time_h: f64,
+    /// Chance that the candidate passes the bar with that run added, if it
+    /// is as large as fitted (normal approximation of the test's
+    /// statistic, growing with the square root of the information).
+    pub power: f64,
+    /// Share of the held-out sum of squares the candidate removes in the run
+    /// it acts most in: what repeating that run approaches.
+    pub share_ceiling: f64,
+    /// The procedure file `diagnose --out DIR` writes (`deciding-run.toml`;
+    /// empty when no repeat decides).
+    pub file: String,
+}
+
 /// `diagnosis.json`.
 #[derive(Debug, Clone, Serialize)]
 pub struct Diagnosis {
@@ -186,6 +236,12 @@ pub struct Diagnosis {
     pub effects: Vec<Accepted>,
     /// Pairs the runs cannot tell apart.
     pub confounded: Vec<Confounded>,
+    /// Set when selection stopped at a candidate that improves the held-out
+    /// gap but misses the bar: the ranked candidates and the deciding run.
+    pub inconclusive: Option<Inconclusive>,
+    /// The deciding run as a procedure file (written next to diagnosis.json).
+    #[serde(skip)]
+    pub deciding_procedure: Option<String>,
     /// What is left.
     pub unexplained: Unexplained,
     /// Every candidate against the reference.
@@ -571,6 +627,12 @@ fn diagnose_rate(runs: &[RunData], opts: &Options) -> Diagnosis {
             }
         }
     }
+    let level = ALPHA / remaining.len().max(1) as f64;
+    let (inconclusive, deciding_procedure) =
+        match inconclusive(&data, &remaining, &step_scores, &current, level) {
+            Some((i, text)) => (Some(i), text),
+            None => (None, None),
+        };
     let where_ = segments(&data, &base.fold_sse, &base.fold_blocks);
     let left = segments(&data, &current.fold_sse, &current.fold_blocks);
     let (period, frac) = periodicity(&data, &current.residual);
@@ -592,6 +654,8 @@ fn diagnose_rate(runs: &[RunData], opts: &Options) -> Diagnosis {
         r#where: where_,
         effects,
         confounded,
+        inconclusive,
+        deciding_procedure,
         unexplained: Unexplained {
             gap_dph: current.gap(),
             r#where: left.into_iter().take(3).collect(),
@@ -621,6 +685,200 @@ fn diagnose_rate(runs: &[RunData], opts: &Options) -> Diagnosis {
                 .collect(),
         }),
     }
+}
+
+/// Smallest held-out improvement, as a fraction of the held-out sum of
+/// squares, for a candidate that misses the bar to be reported as
+/// inconclusive rather than nothing (ours: the null runs' best candidate
+/// removes up to 6 %).
+pub const INCONCLUSIVE_GAIN: f64 = 0.10;
+/// Power the deciding run is sized for.
+pub const DECIDING_POWER: f64 = 0.8;
+/// Most passes a deciding run is sized to.
+const MAX_PASSES: usize = 12;
+/// The repeated run's share of the gap the candidate removes, taken this
+/// much smaller for its scatter (ours).
+const SHARE_MARGIN: f64 = 0.8;
+
+/// The inconclusive step, if selection stopped at one: every remaining
+/// candidate that improves the held-out gap by [`INCONCLUSIVE_GAIN`] or
+/// more, ranked, and the run that would decide the first, as a procedure.
+fn inconclusive(
+    data: &Data<'_>,
+    remaining: &[Effect],
+    step_scores: &[(Effect, Scored, f64, f64)],
+    current: &Scored,
+    level: f64,
+) -> Option<(Inconclusive, Option<String>)> {
+    use statrs::distribution::{ContinuousCDF, Normal};
+    let runs = data.runs;
+    let sse = current.sse();
+    let mut ranked: Vec<&(Effect, Scored, f64, f64)> = step_scores
+        .iter()
+        .filter(|(e, _, gain, p)| {
+            remaining.contains(e) && *gain >= INCONCLUSIVE_GAIN * sse && *p < 0.5
+        })
+        .collect();
+    ranked.sort_by(|a, b| b.2.total_cmp(&a.2));
+    let best = ranked.first()?;
+    // Per run: the held-out sum of squares now, and what the candidate
+    // removes of it. The deciding run repeats the run where it removes
+    // most, and is diagnosed together with that run alone: the candidate's
+    // share of the gap is then that run's (the other runs would dilute
+    // it), and the information the test has grows with each pass.
+    let mut per_run = vec![(0.0, 0.0); runs.len()];
+    for (k, f) in data.folds.iter().enumerate() {
+        let now = current.fold_sse.get(k).copied().unwrap_or(0.0);
+        let with = best.1.fold_sse.get(k).copied().unwrap_or(now);
+        per_run[f.run].0 += now;
+        per_run[f.run].1 += now - with;
+    }
+    let (r_star, &(s_star, g_star)) = per_run
+        .iter()
+        .enumerate()
+        .max_by(|a, b| a.1.1.total_cmp(&b.1.1))?;
+    let gain = best.2;
+    let normal = Normal::standard();
+    let z_obs = normal.inverse_cdf(1.0 - best.3.max(1e-300));
+    let z_bar = normal.inverse_cdf(1.0 - level);
+    // (That run's share, fitted on few records, is taken a fifth smaller
+    // for its scatter: ours.)
+    let ceiling = g_star.max(0.0) / s_star.max(f64::MIN_POSITIVE);
+    let share = SHARE_MARGIN * ceiling;
+    // Both bars must be passed: the share of the held-out sum of squares
+    // (MIN_GAIN) and the significance, whose statistic's expected z grows
+    // with the square root of the information (the gain it rests on).
+    let power = |k: usize| {
+        if share < MIN_GAIN {
+            return 0.0;
+        }
+        let info = (1 + k) as f64 * SHARE_MARGIN * g_star.max(0.0) / gain.max(f64::MIN_POSITIVE);
+        normal.cdf(z_obs * info.sqrt() - z_bar)
+    };
+    let passes = (1..=MAX_PASSES)
+        .find(|&k| power(k) >= DECIDING_POWER)
+        .unwrap_or(MAX_PASSES);
+    let e = best.0;
+    let positional = matches!(
+        e,
+        Effect::GSensitivity | Effect::MagneticSensitivity | Effect::AxisMisalignment
+    );
+    let (procedure, what, device_time_h, text) = if positional {
+        let text = repeated_positions(crate::study::ORIENTATION_TOML, passes);
+        (
+            "orientation".to_owned(),
+            format!(
+                "the study's nine positions at +20 degC, {passes} pass(es) after one warm-up (the effect lives between positions), diagnosed together with {} alone",
+                runs[r_star].name
+            ),
+            0.5 + passes as f64 * 9.0 * 25.0 / 60.0,
+            text,
+        )
+    } else {
+        let (name, toml) = if matches!(e, Effect::ScaleFactorTemperature | Effect::ThermalLag) {
+            ("separating", crate::study::SEPARATING_TOML)
+        } else {
+            ("thermal_cycle", crate::study::THERMAL_CYCLE_TOML)
+        };
+        // The run it acts most in stands for one run of the profile.
+        let one_h = runs[r_star]
+            .samples
+            .last()
+            .map_or(0.0, |s| s.iv.time_s / 3600.0);
+        (
+            name.to_owned(),
+            format!(
+                "procedures/{name}.toml run {passes} time(s), a power-on each (the effect lives in the temperature profile), diagnosed together with {} alone",
+                runs[r_star].name
+            ),
+            passes as f64 * one_h,
+            format!(
+                "# The deciding run for {}: run this procedure {passes} time(s), a power-on each,\n# then diagnose them together with {}.\n{toml}",
+                e.name(),
+                runs[r_star].name
+            ),
+        )
+    };
+    let achievable = power(passes);
+    let (what, passes, device_time_h) = if achievable < DECIDING_POWER {
+        (
+            format!(
+                "no repeat of these runs decides: where it acts most ({}) it removes {:.0} % of the held-out sum of squares of 60 s means, a fifth less counted for its scatter, and an effect must remove {:.0} % (MIN_GAIN) with a power of {:.0} % ({:.0} % at {MAX_PASSES} passes); an effect this small beside the noise of 60 s means needs a quieter unit or a run where it is larger (other positions, a wider temperature range)",
+                runs[r_star].name,
+                100.0 * ceiling,
+                100.0 * MIN_GAIN,
+                100.0 * DECIDING_POWER,
+                100.0 * achievable
+            ),
+            0,
+            0.0,
+        )
+    } else {
+        (what, passes, device_time_h)
+    };
+    let candidates = ranked
+        .iter()
+        .take(4)
+        .map(|(e, s, gain, p)| InconclusiveCandidate {
+            name: e.name().into(),
+            held_out_gap_dph: s.gap(),
+            improvement: gain / sse.max(f64::MIN_POSITIVE),
+            p_value: *p,
+            level,
+        })
+        .collect();
+    let text = if passes > 0 { Some(text) } else { None };
+    Some((
+        Inconclusive {
+            candidates,
+            deciding_run: DecidingRun {
+                effect: e.name().into(),
+                procedure,
+                what,
+                passes,
+                device_time_h,
+                power: achievable,
+                share_ceiling: ceiling,
+                file: if passes > 0 {
+                    "deciding-run.toml".into()
+                } else {
+                    String::new()
+                },
+            },
+        },
+        text,
+    ))
+}
+
+/// The orientation procedure with its positions taken `passes` times (the
+/// labels of later passes suffixed `-p2`, `-p3`, ...).
+fn repeated_positions(toml: &str, passes: usize) -> String {
+    let Some(start) = toml.find("positions = [\n") else {
+        return toml.to_owned();
+    };
+    let body_start = start + "positions = [\n".len();
+    let Some(len) = toml[body_start..].find("\n]") else {
+        return toml.to_owned();
+    };
+    let body = &toml[body_start..body_start + len];
+    let mut out = String::new();
+    for pass in 1..=passes {
+        for line in body.lines() {
+            if pass == 1 {
+                out.push_str(line);
+            } else {
+                out.push_str(&line.replacen("\", orientation", &format!("-p{pass}\", orientation"), 1));
+            }
+            out.push('\n');
+        }
+    }
+    format!(
+        "# The deciding run: the nine positions {passes} time(s) after one warm-up.\n{}{}{}",
+        &toml[..body_start],
+        out.trim_end_matches('\n'),
+        &toml[body_start + len..]
+    )
+    .replace("name = \"orientation\"", "name = \"deciding-run\"")
 }
 
 /// The twin with the accepted effects enabled and fitted.
