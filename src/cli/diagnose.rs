@@ -68,6 +68,14 @@ struct SelfcheckArgs {
     /// 60 s means, in units of the null runs' gap.
     #[arg(long, value_enum, default_value = "gap")]
     unit: UnitArg,
+    /// Draw every trial's unit from wide priors unlike the twin's defaults
+    /// and diagnose it without a twin (docs/diagnosis.md, "Randomised
+    /// units"); writes randomized.json.
+    #[arg(long)]
+    randomize: bool,
+    /// With --randomize: how many units (the cases cycle among them).
+    #[arg(long, default_value_t = 300)]
+    units: usize,
     /// Where to write selfcheck.json and selfcheck.html.
     #[arg(long)]
     out: PathBuf,
@@ -216,6 +224,9 @@ pub fn run(args: DiagnoseArgs) -> Result<Outcome> {
 }
 
 fn run_selfcheck(a: SelfcheckArgs) -> Result<Outcome> {
+    if a.randomize {
+        return run_randomized(&a);
+    }
     let effects: Vec<Effect> = if a.effects.is_empty() {
         selfcheck::all_effects()
     } else {
@@ -289,6 +300,69 @@ fn run_selfcheck(a: SelfcheckArgs) -> Result<Outcome> {
             100.0 * p.excess_closed,
             p.coefficient,
             shows
+        )?;
+    }
+    errln!("self-check in {}", a.out.display());
+    Ok(Outcome::Success)
+}
+
+fn run_randomized(a: &SelfcheckArgs) -> Result<Outcome> {
+    use crate::diagnose::randomized;
+    if a.units == 0 {
+        return Err(Usage("--units must be 1 or more".into()).into());
+    }
+    let bar = super::progress::Bar::new(a.units as u64, "{bar:30} {pos}/{len} units  {msg}");
+    errln!(
+        "self-check on {} randomised units from seed {}, diagnosed without a twin",
+        a.units,
+        a.seed
+    );
+    let r = randomized::run(a.units, a.seed, &|done, _, t| {
+        let line = format!(
+            "[{done}/{}] seed {} {}: named {} / inconclusive {} (thermal {:.3} degC)",
+            a.units,
+            t.seed,
+            serde_json::to_string(&t.case).unwrap_or_default(),
+            if t.accepted.is_empty() {
+                "nothing".to_owned()
+            } else {
+                t.accepted.join(", ")
+            },
+            t.inconclusive.as_deref().unwrap_or("-"),
+            t.thermal_gap_c
+        );
+        bar.println(&line);
+        bar.set(done as u64, line);
+    })
+    .context("running the randomised self-check")?;
+    bar.clear();
+    std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
+    write(
+        &a.out.join("randomized.json"),
+        &serde_json::to_string_pretty(&r)?,
+    )?;
+    outln!(
+        "named first: {:.0} % at >= 2x, {:.0} % at 1.5x; pairs both named {:.0} %; false attribution {:.0} %; thermal layer within 0.05 degC {:.0} % (network form {:.0} %); median excess closed {:.0} %",
+        100.0 * r.named_at_2x,
+        100.0 * r.named_at_1_5x,
+        100.0 * r.pairs_both_named,
+        100.0 * r.false_attribution,
+        100.0 * r.thermal_within_0_05,
+        100.0 * r.network_followed,
+        100.0 * r.median_excess_closed
+    )?;
+    for why in &r.skipped {
+        outln!("  not diagnosed: {why}")?;
+    }
+    for row in &r.rows {
+        outln!(
+            "  {:<48} {:>3} units  named {:>4.0} %  inconclusive {:>4.0} %  excess closed {}",
+            row.case,
+            row.trials,
+            100.0 * row.named,
+            100.0 * row.inconclusive,
+            row.median_excess_closed
+                .map_or("-".to_owned(), |m| format!("{:.0} %", 100.0 * m))
         )?;
     }
     errln!("self-check in {}", a.out.display());

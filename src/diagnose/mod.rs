@@ -14,6 +14,7 @@ pub mod data;
 pub mod engine;
 pub mod html;
 pub mod library;
+pub mod randomized;
 pub mod selfcheck;
 pub mod thermal;
 
@@ -514,7 +515,7 @@ pub fn diagnose(runs: &[RunData], opts: &Options) -> Diagnosis {
 }
 
 /// The rate layer and the selection, with a placeholder thermal layer.
-fn diagnose_rate(runs: &[RunData], opts: &Options) -> Diagnosis {
+pub(crate) fn diagnose_rate(runs: &[RunData], opts: &Options) -> Diagnosis {
     let data = Data::new(runs);
     let spec = reference(opts.twin.as_ref());
     let base_model = build(&data, &spec);
@@ -867,7 +868,11 @@ fn repeated_positions(toml: &str, passes: usize) -> String {
             if pass == 1 {
                 out.push_str(line);
             } else {
-                out.push_str(&line.replacen("\", orientation", &format!("-p{pass}\", orientation"), 1));
+                out.push_str(&line.replacen(
+                    "\", orientation",
+                    &format!("-p{pass}\", orientation"),
+                    1,
+                ));
             }
             out.push('\n');
         }

@@ -165,7 +165,11 @@ fn to_run(samples: Vec<crate::study::Sample>, name: &str, twin: &TwinConfig) -> 
 /// orientation run, and with `separating` also `procedures/separating.toml`
 /// and the rate transfer at three temperatures
 /// (`procedures/rate_transfer_temperatures.toml`).
-fn runs_of(twin: &TwinConfig, seed: u64, separating: bool) -> Result<Vec<RunData>, StudyError> {
+pub(crate) fn runs_of(
+    twin: &TwinConfig,
+    seed: u64,
+    separating: bool,
+) -> Result<Vec<RunData>, StudyError> {
     let mut procedures = vec![
         (THERMAL_CYCLE_TOML, "thermal_cycle"),
         (ORIENTATION_TOML, "orientation"),
@@ -190,7 +194,7 @@ const DIRECTION: [f64; 3] = [0.0, 0.8, 0.6];
 
 /// An effect's contribution with coefficient 1 along [`DIRECTION`], per
 /// sample, runs in order.
-fn contribution(runs: &[RunData], e: Effect, p: f64) -> Vec<f64> {
+pub(crate) fn contribution(runs: &[RunData], e: Effect, p: f64) -> Vec<f64> {
     let mut out = Vec::new();
     for run in runs {
         let cols = e.columns(run, p);
@@ -246,7 +250,7 @@ fn size(runs: &[RunData], e: Effect, p: f64, reference: &TwinConfig) -> Size {
 
 /// The twin with effect `e` added at coefficient `a` (along [`DIRECTION`]),
 /// and the reference twin without it.
-fn inject(base: &TwinConfig, e: Effect, a: f64) -> (TwinConfig, TwinConfig) {
+pub(crate) fn inject(base: &TwinConfig, e: Effect, a: f64) -> (TwinConfig, TwinConfig) {
     let mut data = base.clone();
     let mut reference = base.clone();
     let d = DIRECTION;

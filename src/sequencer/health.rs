@@ -28,6 +28,12 @@ pub const MAX_PLAUSIBLE_RATE_DPH: f64 = 3.6e6;
 /// count: about 40 counts a second axis up, 2 a second axis east), and
 /// its angle random walk moves it even at zero rate.
 pub const STUCK_AFTER_S: f64 = 5.0;
+/// The same for a stretch of zero counts (ours): near zero input (a
+/// position where the bias cancels the Earth rate) a quiet gyro's angle
+/// random walk takes its time to move a count: at 0.001 deg/sqrt(h) and
+/// 0.25 arcsec a count, about 17 s for one sigma; a minute of zeros is
+/// still a frozen output.
+pub const STUCK_AT_ZERO_AFTER_S: f64 = 60.0;
 
 /// Runs of identical consecutive counts, mergeable tick by tick: what a
 /// frozen output leaves behind, however short the record's other part.
@@ -224,7 +230,12 @@ impl RecordHealth {
         }
         let (len, value) = self.runs.longest;
         let stuck_s = len as f64 * self.frame_dt_s;
-        (stuck_s >= STUCK_AFTER_S && len >= 2).then(|| {
+        let after = if value == 0 {
+            STUCK_AT_ZERO_AFTER_S
+        } else {
+            STUCK_AFTER_S
+        };
+        (stuck_s >= after && len >= 2).then(|| {
             format!(
                 "the output read {value} counts in every frame for {stuck_s:.0} s ({len} frames): it is stuck"
             )
@@ -326,6 +337,21 @@ mod tests {
         brief.add(1_600, (0, 0), &stuck(1_600, 0), 0.0025, 0.25);
         brief.add(400, (-3, 4), &varied(400), 0.0025, 0.25);
         assert!(!brief.problem().is_some_and(|p| p.contains("stuck")));
+        // Zeros for 20 s: a quiet gyro near zero input; for 70 s: frozen.
+        for (zeros_s, frozen) in [(20u64, false), (70, true)] {
+            let mut quiet = RecordHealth::new(100.0);
+            quiet.add(400, (-1, 1), &varied(400), 0.0025, 0.25);
+            let n = zeros_s * 400;
+            quiet.add(n, (0, 0), &stuck(n, 0), 0.0025, 0.25);
+            quiet.add(
+                40_000 - 400 - n,
+                (-1, 1),
+                &varied(40_000 - 400 - n),
+                0.0025,
+                0.25,
+            );
+            assert_eq!(quiet.problem().is_some_and(|p| p.contains("stuck")), frozen);
+        }
 
         let mut pinned = RecordHealth::new(100.0);
         pinned.add(40_000, (0, i32::MAX), &varied(40_000), 0.0025, 0.25);

@@ -1,0 +1,487 @@
+//! The self-check on units that are not the RL-16 twin
+//! (`gyrobench diagnose selfcheck --randomize`): every trial draws a unit
+//! from wide priors (thermal network form and parameters, model-4
+//! coefficients with their signs, noise, site, sensor noise and
+//! quantisation), runs the study's thermal cycle and orientation run on it
+//! with nothing, one or two withheld effects, or a disturbance outside the
+//! library, and diagnoses the runs **without** a twin (the reference is
+//! model 4 fitted to them, the thermal layer identified from them), as a
+//! lab would diagnose a unit it has no model of.
+
+use std::collections::BTreeMap;
+
+use rand::{RngExt, SeedableRng};
+use rand_xoshiro::Xoshiro256PlusPlus;
+use serde::Serialize;
+
+use super::data::RunData;
+use super::library::Effect;
+use super::selfcheck::{contribution, inject, runs_of};
+use super::{Options, diagnose, diagnose_rate, visible_gap};
+use crate::study::StudyError;
+use crate::twin::TwinConfig;
+
+/// Amplitudes of a withheld effect, in units of the unit's own noise of
+/// 60 s means (its null runs' held-out gap).
+pub const AMPLITUDES: [f64; 4] = [1.0, 1.5, 2.0, 3.0];
+/// Amplitude of each effect of a pair.
+pub const PAIR_AMPLITUDE: f64 = 2.0;
+/// Amplitude of a disturbance outside the library (ours: 3x, as the
+/// twin's self-check).
+pub const OUTSIDE_AMPLITUDE: f64 = 3.0;
+
+/// The effects a model-4 reference leaves to find.
+pub const EFFECTS: [Effect; 6] = [
+    Effect::Hysteresis,
+    Effect::ThermalLag,
+    Effect::GSensitivity,
+    Effect::MagneticSensitivity,
+    Effect::AxisMisalignment,
+    Effect::ScaleFactorTemperature,
+];
+
+/// Pairs withheld together (ours: one of each kind - two between
+/// positions, a thermal and a positional one, two thermal ones).
+const PAIRS: [(Effect, Effect); 3] = [
+    (Effect::GSensitivity, Effect::Hysteresis),
+    (Effect::MagneticSensitivity, Effect::AxisMisalignment),
+    (Effect::ThermalLag, Effect::GSensitivity),
+];
+
+/// Disturbances no library effect holds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Outside {
+    /// A sine, period 40-120 min.
+    Periodic,
+    /// A step of the bias at a random time.
+    Step,
+    /// A slow linear drift over the run.
+    Drift,
+    /// A turn-on transient that decays as 1 / (1 + t / t0)^2.
+    Transient,
+}
+
+/// One case of the design.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+#[serde(rename_all = "snake_case", tag = "kind")]
+pub enum Case {
+    /// Nothing withheld.
+    Null,
+    /// One effect at an amplitude.
+    Effect {
+        /// Library name.
+        effect: String,
+        /// Noise units.
+        amplitude: f64,
+    },
+    /// Two effects at [`PAIR_AMPLITUDE`] each.
+    Pair {
+        /// Library names.
+        effects: [String; 2],
+    },
+    /// A disturbance outside the library.
+    Outside {
+        /// Which.
+        disturbance: Outside,
+    },
+}
+
+/// Every case, in the order trials cycle through them.
+pub fn cases() -> Vec<Case> {
+    let mut out = vec![Case::Null];
+    for e in EFFECTS {
+        for a in AMPLITUDES {
+            out.push(Case::Effect {
+                effect: e.name().into(),
+                amplitude: a,
+            });
+        }
+    }
+    for (a, b) in PAIRS {
+        out.push(Case::Pair {
+            effects: [a.name().into(), b.name().into()],
+        });
+    }
+    for d in [
+        Outside::Periodic,
+        Outside::Step,
+        Outside::Drift,
+        Outside::Transient,
+    ] {
+        out.push(Case::Outside { disturbance: d });
+    }
+    // Nulls are the false-attribution baseline: as many as outside cases.
+    out.extend([Case::Null, Case::Null, Case::Null]);
+    out
+}
+
+/// A unit drawn from the priors (docs/diagnosis.md, "Randomised units").
+pub fn draw_unit(seed: u64) -> TwinConfig {
+    let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed ^ 0x5eed_0f00_1a7e);
+    let mut u = |lo: f64, hi: f64| lo + (hi - lo) * rng.random::<f64>();
+    let mut t = TwinConfig::default_rl16();
+    let log = |x: f64, lo: f64, hi: f64| (lo.ln() + (hi.ln() - lo.ln()) * x).exp();
+    let th = &mut t.thermal;
+    th.case_tau_s = log(u(0.0, 1.0), 600.0, 3000.0);
+    th.block1_tau_s = log(u(0.0, 1.0), 100.0, 2000.0);
+    th.block2_tau_s = log(u(0.0, 1.0), 100.0, 2000.0);
+    th.coupling_tau_s = log(u(0.0, 1.0), 200.0, 20_000.0);
+    th.convection_gain = u(0.0, 1.0);
+    // Rises that keep the unit under the bench's 70 degC at +50 degC air.
+    th.case_rise_c = u(0.0, 2.5);
+    th.block1_rise_c = u(0.0, 4.0);
+    th.block2_rise_c = u(0.0, 4.0);
+    th.mount_tau_s = if u(0.0, 1.0) < 0.5 {
+        0.0
+    } else {
+        log(u(0.0, 1.0), 60.0, 1500.0)
+    };
+    th.block_capacity_ratio = [u(0.0, 0.5), u(0.0, 0.5)];
+    th.air_gain = 1.0 + u(-0.03, 0.03);
+    th.sensor_offset_c = [u(-0.3, 0.3), u(-0.3, 0.3), u(-0.3, 0.3)];
+    th.sensor_noise_c = log(u(0.0, 1.0), 0.005, 0.1);
+    t.gyro.temp_lsb_c = log(u(0.0, 1.0), 0.005, 0.1);
+    // Model 4 within +-60 % of the study's, a sign changed one time in five.
+    let b = &mut t.bias;
+    for k in [
+        &mut b.k1_dph_per_c,
+        &mut b.k2_dph_per_c2,
+        &mut b.k3_dph_per_c_per_s,
+        &mut b.k4_dph_per_c,
+        &mut b.k5_dph,
+    ] {
+        let sign = if u(0.0, 1.0) < 0.2 { -1.0 } else { 1.0 };
+        *k *= sign * u(0.4, 1.6);
+    }
+    b.warmup_tau_s = log(u(0.0, 1.0), 300.0, 3000.0);
+    b.offset_dph = u(-1.0, 1.0);
+    let n = &mut t.noise;
+    n.arw_deg_per_rt_h = log(u(0.0, 1.0), 0.001, 0.008);
+    n.bias_instability_dph = log(u(0.0, 1.0), 0.0005, 0.01);
+    n.rrw_dph_per_rt_h = log(u(0.0, 1.0), 0.0005, 0.01);
+    // A site and a field that goes with it (a dipole: horizontal
+    // 10-35 uT north, vertical down in the north, up in the south).
+    let lat = u(-65.0, 70.0);
+    let l = lat.to_radians();
+    t.site.latitude_deg = lat;
+    let b0 = u(25.0, 35.0);
+    t.site.magnetic_field_ned_ut = [b0 * l.cos(), u(-3.0, 3.0), 2.0 * b0 * l.sin()];
+    t
+}
+
+/// A disturbance outside the library, added to the runs' rates: `a` deg/h
+/// RMS over the runs' 60 s means (approximately).
+fn disturb(runs: &mut [RunData], d: Outside, a: f64, seed: u64) {
+    let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed ^ 0x0075_1de0);
+    let mut u = |lo: f64, hi: f64| lo + (hi - lo) * rng.random::<f64>();
+    let period = u(2400.0, 7200.0);
+    for run in runs.iter_mut() {
+        let end = run.samples.last().map_or(1.0, |s| s.iv.time_s).max(1.0);
+        let at = u(0.3, 0.7) * end;
+        let t0 = u(300.0, 1500.0);
+        for s in &mut run.samples {
+            let t = s.iv.time_s;
+            s.iv.rate_dph += match d {
+                Outside::Periodic => {
+                    a * std::f64::consts::SQRT_2 * (std::f64::consts::TAU * t / period).sin()
+                }
+                Outside::Step => {
+                    if t >= at {
+                        2.0 * a
+                    } else {
+                        0.0
+                    }
+                }
+                Outside::Drift => a * 3.0_f64.sqrt() * (2.0 * t / end - 1.0),
+                Outside::Transient => 4.0 * a / (1.0 + t / t0).powi(2),
+            };
+        }
+    }
+}
+
+/// One trial's outcome.
+#[derive(Debug, Clone, Serialize)]
+pub struct UnitTrial {
+    /// Seed of the unit and its runs.
+    pub seed: u64,
+    /// What was withheld.
+    pub case: Case,
+    /// The unit's noise of 60 s means (its null runs' held-out gap), deg/h.
+    pub noise_dph: f64,
+    /// Accepted effects, in order.
+    pub accepted: Vec<String>,
+    /// The inconclusive step's first candidate, if any.
+    pub inconclusive: Option<String>,
+    /// Rate gap before and after, deg/h.
+    pub gap_before_dph: f64,
+    /// After.
+    pub gap_after_dph: f64,
+    /// Fraction of the excess gap closed: (before^2 - after^2) /
+    /// (before^2 - noise^2).
+    pub excess_closed: Option<f64>,
+    /// The thermal layer's held-out gap, degC.
+    pub thermal_gap_c: f64,
+    /// The twin's network form followed (no `form_misfit`).
+    pub network_fits: bool,
+}
+
+/// Rates over a set of trials.
+#[derive(Debug, Clone, Serialize)]
+pub struct Row {
+    /// What.
+    pub case: String,
+    /// Trials.
+    pub trials: usize,
+    /// Named first (effects), both named (pairs), anything accepted (null
+    /// and outside): fraction.
+    pub named: f64,
+    /// Inconclusive with the right effect first (effects, pairs), or at
+    /// all (null and outside): fraction.
+    pub inconclusive: f64,
+    /// Median of the excess gap closed where named.
+    pub median_excess_closed: Option<f64>,
+}
+
+/// The randomised self-check's result.
+#[derive(Debug, Clone, Serialize)]
+pub struct Randomized {
+    /// Units.
+    pub units: usize,
+    /// First seed.
+    pub seed: u64,
+    /// Per case kind and amplitude.
+    pub rows: Vec<Row>,
+    /// Named first at amplitude >= 2 (effects).
+    pub named_at_2x: f64,
+    /// Named first at amplitude 1.5.
+    pub named_at_1_5x: f64,
+    /// Both effects named (pairs).
+    pub pairs_both_named: f64,
+    /// Anything accepted on null and outside units.
+    pub false_attribution: f64,
+    /// Units whose thermal layer is within 0.05 degC held out.
+    pub thermal_within_0_05: f64,
+    /// Units whose thermal network form followed.
+    pub network_followed: f64,
+    /// Median excess closed for named effects.
+    pub median_excess_closed: f64,
+    /// Units whose runs stopped (a bench limit), with why.
+    pub skipped: Vec<String>,
+    /// Every trial.
+    pub trials: Vec<UnitTrial>,
+}
+
+fn trial(seed: u64, case: &Case) -> Result<UnitTrial, StudyError> {
+    let unit = draw_unit(seed);
+    let null_runs = runs_of(&unit, seed, false)?;
+    let opts = Options {
+        twin: None,
+        fit_thermal: true,
+    };
+    let noise = diagnose_rate(&null_runs, &opts).layers.rate.gap_dph;
+    let coefficient = |e: Effect, amp: f64| {
+        let p = match e {
+            Effect::Hysteresis => 2.0,
+            Effect::ThermalLag => 1800.0,
+            _ => f64::NAN,
+        };
+        let gap = visible_gap(&null_runs, &opts, &contribution(&null_runs, e, p));
+        if gap > 0.0 { amp * noise / gap } else { 0.0 }
+    };
+    let mut data = unit.clone();
+    let mut outside = None;
+    match case {
+        Case::Null => {}
+        Case::Effect { effect, amplitude } => {
+            if let Some(e) = Effect::from_name(effect) {
+                data = inject(&data, e, coefficient(e, *amplitude)).0;
+            }
+        }
+        Case::Pair { effects } => {
+            for name in effects {
+                if let Some(e) = Effect::from_name(name) {
+                    data = inject(&data, e, coefficient(e, PAIR_AMPLITUDE)).0;
+                }
+            }
+        }
+        Case::Outside { disturbance } => {
+            outside = Some(*disturbance);
+            if *disturbance == Outside::Periodic {
+                data.effects.periodic = None;
+            }
+        }
+    }
+    let mut runs = if data == unit {
+        null_runs
+    } else {
+        runs_of(&data, seed, false)?
+    };
+    if let Some(d) = outside {
+        disturb(&mut runs, d, OUTSIDE_AMPLITUDE * noise, seed);
+    }
+    let d = diagnose(&runs, &opts);
+    let accepted: Vec<String> = d.effects.iter().map(|e| e.name.clone()).collect();
+    let (before, after) = (d.layers.rate.gap_dph, d.layers.rate.gap_after_dph);
+    let excess_closed = (matches!(case, Case::Effect { .. } | Case::Pair { .. }) && before > noise)
+        .then(|| {
+            ((before * before - after * after) / (before * before - noise * noise)).clamp(0.0, 1.0)
+        });
+    Ok(UnitTrial {
+        seed,
+        case: case.clone(),
+        noise_dph: noise,
+        accepted,
+        inconclusive: d
+            .inconclusive
+            .as_ref()
+            .and_then(|i| i.candidates.first().map(|c| c.name.clone())),
+        gap_before_dph: before,
+        gap_after_dph: after,
+        excess_closed,
+        thermal_gap_c: d.layers.thermal.gap_c,
+        network_fits: d.layers.thermal.form_misfit.is_none(),
+    })
+}
+
+/// Run `units` trials from `seed`, cycling through [`cases`]; `progress`
+/// hears of each as it ends.
+pub fn run(
+    units: usize,
+    seed: u64,
+    progress: &(dyn Fn(usize, usize, &UnitTrial) + Sync),
+) -> Result<Randomized, StudyError> {
+    let design = cases();
+    let next = std::sync::atomic::AtomicUsize::new(0);
+    let finished = std::sync::atomic::AtomicUsize::new(0);
+    let results = std::sync::Mutex::new(Vec::new());
+    // Two workers: each diagnosis fits its thermal layer on two threads of
+    // its own, so more would only queue.
+    std::thread::scope(|scope| {
+        for _ in 0..2 {
+            scope.spawn(|| {
+                loop {
+                    let k = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                    if k >= units {
+                        break;
+                    }
+                    let case = &design[k % design.len()];
+                    let r = trial(seed + k as u64, case);
+                    if let Ok(t) = &r {
+                        let done = finished.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
+                        progress(done, units, t);
+                    }
+                    results
+                        .lock()
+                        .unwrap_or_else(std::sync::PoisonError::into_inner)
+                        .push((k, r));
+                }
+            });
+        }
+    });
+    let mut done = results
+        .into_inner()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
+    done.sort_by_key(|x| x.0);
+    // A unit whose runs a bench limit stopped (too hot at +50 degC) is
+    // counted, not diagnosed.
+    let mut skipped = Vec::new();
+    let mut trials = Vec::new();
+    for (k, r) in done {
+        match r {
+            Ok(t) => trials.push(t),
+            Err(e) => skipped.push(format!("seed {}: {e}", seed + k as u64)),
+        }
+    }
+    let mut out = summarise(units, seed, trials);
+    out.skipped = skipped;
+    Ok(out)
+}
+
+fn median(mut v: Vec<f64>) -> Option<f64> {
+    if v.is_empty() {
+        return None;
+    }
+    v.sort_by(f64::total_cmp);
+    Some(v[v.len() / 2])
+}
+
+fn summarise(units: usize, seed: u64, trials: Vec<UnitTrial>) -> Randomized {
+    let mut groups: BTreeMap<String, Vec<&UnitTrial>> = BTreeMap::new();
+    for t in &trials {
+        let key = match &t.case {
+            Case::Null => "null".to_owned(),
+            Case::Effect { effect, amplitude } => format!("{effect}@{amplitude}"),
+            Case::Pair { effects } => format!("{}+{}", effects[0], effects[1]),
+            Case::Outside { disturbance } => format!("outside: {disturbance:?}").to_lowercase(),
+        };
+        groups.entry(key).or_default().push(t);
+    }
+    let named = |t: &UnitTrial| match &t.case {
+        Case::Effect { effect, .. } => t.accepted.first() == Some(effect),
+        Case::Pair { effects } => effects.iter().all(|e| t.accepted.contains(e)),
+        _ => !t.accepted.is_empty(),
+    };
+    let undecided = |t: &UnitTrial| match &t.case {
+        Case::Effect { effect, .. } => {
+            t.accepted.is_empty() && t.inconclusive.as_ref() == Some(effect)
+        }
+        Case::Pair { effects } => t.inconclusive.as_ref().is_some_and(|i| effects.contains(i)),
+        _ => t.accepted.is_empty() && t.inconclusive.is_some(),
+    };
+    let frac = |v: &[&UnitTrial], f: &dyn Fn(&UnitTrial) -> bool| {
+        v.iter().filter(|t| f(t)).count() as f64 / v.len().max(1) as f64
+    };
+    let rows = groups
+        .iter()
+        .map(|(k, v)| Row {
+            case: k.clone(),
+            trials: v.len(),
+            named: frac(v, &named),
+            inconclusive: frac(v, &undecided),
+            median_excess_closed: median(
+                v.iter()
+                    .filter(|t| named(t))
+                    .filter_map(|t| t.excess_closed)
+                    .collect(),
+            ),
+        })
+        .collect();
+    let all: Vec<&UnitTrial> = trials.iter().collect();
+    let effects_at = |f: &dyn Fn(f64) -> bool| -> Vec<&UnitTrial> {
+        all.iter()
+            .copied()
+            .filter(|t| matches!(&t.case, Case::Effect { amplitude, .. } if f(*amplitude)))
+            .collect()
+    };
+    let pairs: Vec<&UnitTrial> = all
+        .iter()
+        .copied()
+        .filter(|t| matches!(t.case, Case::Pair { .. }))
+        .collect();
+    let quiet: Vec<&UnitTrial> = all
+        .iter()
+        .copied()
+        .filter(|t| matches!(t.case, Case::Null | Case::Outside { .. }))
+        .collect();
+    Randomized {
+        units,
+        seed,
+        rows,
+        named_at_2x: frac(&effects_at(&|a| a >= 2.0), &named),
+        named_at_1_5x: frac(&effects_at(&|a| (a - 1.5).abs() < 1e-9), &named),
+        pairs_both_named: frac(&pairs, &named),
+        false_attribution: frac(&quiet, &named),
+        thermal_within_0_05: frac(&all, &|t| t.thermal_gap_c <= 0.05),
+        network_followed: frac(&all, &|t| t.network_fits),
+        median_excess_closed: median(
+            all.iter()
+                .filter(|t| matches!(t.case, Case::Effect { .. }) && named(t))
+                .filter_map(|t| t.excess_closed)
+                .collect(),
+        )
+        .unwrap_or(f64::NAN),
+        skipped: Vec::new(),
+        trials,
+    }
+}
