@@ -156,6 +156,9 @@ pub fn draw_unit(seed: u64) -> TwinConfig {
     }
     b.warmup_tau_s = log(u(0.0, 1.0), 300.0, 3000.0);
     b.offset_dph = u(-1.0, 1.0);
+    // Frames at 100, 200 or 400 Hz (the diagnosis reads 1 Hz intervals; a
+    // slower output also simulates faster).
+    t.gyro.frame_rate_hz = [100.0, 200.0, 400.0][(u(0.0, 3.0) as usize).min(2)];
     let n = &mut t.noise;
     n.arw_deg_per_rt_h = log(u(0.0, 1.0), 0.001, 0.008);
     n.bias_instability_dph = log(u(0.0, 1.0), 0.0005, 0.01);

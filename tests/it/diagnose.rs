@@ -379,3 +379,56 @@ fn a_small_effect_is_inconclusive_and_the_deciding_run_decides_it() {
     assert!(d2["inconclusive"].is_null());
     assert!(!out2.join("deciding-run.toml").exists());
 }
+
+#[test]
+fn the_randomized_selfcheck_diagnoses_units_that_are_not_the_twin() {
+    // Two units drawn far from the twin: a null one and one with a
+    // hysteresis at its own noise, each diagnosed without a twin.
+    let dir = temp_dir("randomized");
+    let out = dir.join("sc");
+    let r = gyrobench(&[
+        "diagnose",
+        "selfcheck",
+        "--randomize",
+        "--units",
+        "2",
+        "--seed",
+        "1",
+        "--out",
+        s(&out),
+    ]);
+    assert_eq!(
+        r.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&r.stderr)
+    );
+    let sc = json(&out.join("randomized.json"));
+    let trials = sc["trials"].as_array().expect("trials");
+    assert_eq!(
+        trials.len() + sc["skipped"].as_array().expect("skipped").len(),
+        2
+    );
+    for t in trials {
+        // Each unit is its own: a noise of its own, a thermal layer that
+        // follows it.
+        assert!(t["noise_dph"].as_f64().expect("noise") > 0.0, "{t}");
+        assert!(t["thermal_gap_c"].as_f64().expect("thermal") < 0.05, "{t}");
+        if t["case"]["kind"] == "null" {
+            assert!(
+                t["accepted"].as_array().expect("accepted").is_empty(),
+                "{t}"
+            );
+        }
+    }
+    for k in [
+        "named_at_2x",
+        "named_at_1_5x",
+        "pairs_both_named",
+        "false_attribution",
+        "thermal_within_0_05",
+        "median_excess_closed",
+    ] {
+        assert!(sc.get(k).is_some(), "{k}");
+    }
+}
