@@ -15,7 +15,7 @@ use rand_xoshiro::Xoshiro256PlusPlus;
 use serde::Serialize;
 
 use super::data::RunData;
-use super::library::Effect;
+use super::library::{Effect, LIBRARY, MODEL4};
 use super::selfcheck::{contribution, inject, runs_of};
 use super::{Options, diagnose, diagnose_rate, visible_gap};
 use crate::study::StudyError;
@@ -30,18 +30,14 @@ pub const PAIR_AMPLITUDE: f64 = 2.0;
 /// twin's self-check).
 pub const OUTSIDE_AMPLITUDE: f64 = 3.0;
 
-/// The effects a model-4 reference leaves to find.
-pub const EFFECTS: [Effect; 6] = [
-    Effect::Hysteresis,
-    Effect::ThermalLag,
-    Effect::GSensitivity,
-    Effect::MagneticSensitivity,
-    Effect::AxisMisalignment,
-    Effect::ScaleFactorTemperature,
-];
+/// The effects a model-4 reference leaves to find: the library's, less
+/// model 4's own terms.
+pub fn effects() -> impl Iterator<Item = Effect> {
+    LIBRARY.iter().copied().filter(|e| !MODEL4.contains(e))
+}
 
-/// Pairs withheld together (ours: one of each kind - two between
-/// positions, a thermal and a positional one, two thermal ones).
+/// Pairs withheld together (ours: two effects between positions, and a
+/// thermal effect with a positional one, twice).
 const PAIRS: [(Effect, Effect); 3] = [
     (Effect::GSensitivity, Effect::Hysteresis),
     (Effect::MagneticSensitivity, Effect::AxisMisalignment),
@@ -90,7 +86,7 @@ pub enum Case {
 /// Every case, in the order trials cycle through them.
 pub fn cases() -> Vec<Case> {
     let mut out = vec![Case::Null];
-    for e in EFFECTS {
+    for e in effects() {
         for a in AMPLITUDES {
             out.push(Case::Effect {
                 effect: e.name().into(),

@@ -1328,7 +1328,11 @@ mod tests {
         ];
         taus.iter().all(|(v, (_, lo, hi))| (*lo..=*hi).contains(v))
             && (c.mount_tau_s == 0.0 || (SHAPE[0].1..=SHAPE[0].2).contains(&c.mount_tau_s))
-            && (0.0..=5.0).contains(&c.convection_gain)
+            && (SHAPE[5].1..=SHAPE[5].2).contains(&c.convection_gain)
+            && c.block_capacity_ratio
+                .iter()
+                .zip(&SHAPE[6..])
+                .all(|(v, (_, lo, hi))| (*lo..=*hi).contains(v))
             && [c.case_rise_c, c.block1_rise_c, c.block2_rise_c]
                 .iter()
                 .all(|r| (0.0..=RISE_MAX_C).contains(r))
