@@ -194,51 +194,106 @@ fn solve(g: &DMatrix<f64>, h: &DVector<f64>) -> DVector<f64> {
     }
 }
 
+/// A model's design matrix, row by row: the effects' columns (scaled to
+/// unit spread), one offset per run, one scale factor per rate run.
+struct Design<'d> {
+    data: &'d Data<'d>,
+    cols: Vec<Vec<f64>>,
+    scales: Vec<f64>,
+    /// Effect columns.
+    q: usize,
+    /// All columns.
+    p: usize,
+}
+
+impl<'d> Design<'d> {
+    fn new(data: &'d Data<'d>, model: &[(Effect, f64)]) -> Self {
+        let cols = data.columns(model);
+        let q = cols.len();
+        // A rate run's scale factor is the unit's, known from its
+        // calibration, not an effect: one per run with turning records, a
+        // nuisance (a misaligned axis, for one, reads every turn short by
+        // its cosine).
+        let p = q + data.runs.len() + data.turning_runs.len();
+        let n = data.y.len();
+        let scales = cols
+            .iter()
+            .map(|c| {
+                let m = c.iter().sum::<f64>() / n.max(1) as f64;
+                let r = (c.iter().map(|v| (v - m) * (v - m)).sum::<f64>() / n.max(1) as f64).sqrt();
+                if r > 1e-300 && r.is_finite() { r } else { 1.0 }
+            })
+            .collect();
+        Self {
+            data,
+            cols,
+            scales,
+            q,
+            p,
+        }
+    }
+
+    /// The fitted value of row `i` for coefficients `beta`.
+    fn predict(&self, i: usize, beta: &DVector<f64>) -> f64 {
+        let (data, q, nruns) = (self.data, self.q, self.data.runs.len());
+        let mut v = beta[q + data.run_of[i]];
+        for j in 0..q {
+            v += self.cols[j][i] / self.scales[j] * beta[j];
+        }
+        if let Some(t) = data.turning_of[i] {
+            v += data.reference[i] * 1e-5 * beta[q + nruns + t];
+        }
+        v
+    }
+
+    /// Gram matrix and right-hand side over rows `start..end`.
+    fn normal(&self, start: usize, end: usize) -> (DMatrix<f64>, DVector<f64>) {
+        let mut g = DMatrix::zeros(self.p, self.p);
+        let mut h = DVector::zeros(self.p);
+        let mut x = DVector::zeros(self.p);
+        for i in start..end {
+            self.row_into(i, &mut x);
+            g.syger(1.0, &x, &x, 1.0);
+            h.axpy(self.data.y[i], &x, 1.0);
+        }
+        g.fill_upper_triangle_with_lower_triangle();
+        (g, h)
+    }
+
+    fn row_into(&self, i: usize, x: &mut DVector<f64>) {
+        let (data, q, nruns) = (self.data, self.q, self.data.runs.len());
+        for j in 0..q {
+            x[j] = self.cols[j][i] / self.scales[j];
+        }
+        for j in q..self.p {
+            x[j] = 0.0;
+        }
+        x[q + data.run_of[i]] = 1.0;
+        if let Some(t) = data.turning_of[i] {
+            x[q + nruns + t] = data.reference[i] * 1e-5;
+        }
+    }
+}
+
 /// Fit `model` on all data and score it fold by fold.
 pub fn score(data: &Data<'_>, model: &[(Effect, f64)]) -> Scored {
-    let cols = data.columns(model);
-    let q = cols.len();
-    let nruns = data.runs.len();
-    // A rate run's scale factor is the unit's, known from its calibration,
-    // not an effect: one per run with turning records, a nuisance (a
-    // misaligned axis, for one, reads every turn short by its cosine).
-    let p = q + nruns + data.turning_runs.len();
+    let design = Design::new(data, model);
+    let (q, p, scales) = (design.q, design.p, &design.scales);
     let n = data.y.len();
-    let scales: Vec<f64> = cols
-        .iter()
-        .map(|c| {
-            let m = c.iter().sum::<f64>() / n.max(1) as f64;
-            let r = (c.iter().map(|v| (v - m) * (v - m)).sum::<f64>() / n.max(1) as f64).sqrt();
-            if r > 1e-300 && r.is_finite() { r } else { 1.0 }
-        })
-        .collect();
-    let row = |i: usize| -> DVector<f64> {
-        DVector::from_fn(p, |j, _| {
-            if j < q {
-                cols[j][i] / scales[j]
-            } else if j < q + nruns {
-                if data.run_of[i] == j - q { 1.0 } else { 0.0 }
-            } else if data.turning_of[i] == Some(j - q - nruns) {
-                // In units of 100,000 deg/h, near the others' size.
-                data.reference[i] * 1e-5
-            } else {
-                0.0
-            }
-        })
-    };
     // Per fold: Gram matrix, right-hand side, and the 60 s block means.
     let mut grams = Vec::with_capacity(data.folds.len());
     let mut blocks = Vec::with_capacity(data.folds.len());
     let mut g_all = DMatrix::zeros(p, p);
     let mut h_all = DVector::zeros(p);
+    let mut x = DVector::zeros(p);
     for f in &data.folds {
         let mut g = DMatrix::zeros(p, p);
         let mut h = DVector::zeros(p);
         let mut means: Vec<(DVector<f64>, f64)> = Vec::new();
         let mut acc = (DVector::zeros(p), 0.0, 0usize);
         for i in f.start..f.end {
-            let x = row(i);
-            g.ger(1.0, &x, &x, 1.0);
+            design.row_into(i, &mut x);
+            g.syger(1.0, &x, &x, 1.0);
             h.axpy(data.y[i], &x, 1.0);
             acc.0 += &x;
             acc.1 += data.y[i];
@@ -249,6 +304,7 @@ pub fn score(data: &Data<'_>, model: &[(Effect, f64)]) -> Scored {
                 acc = (DVector::zeros(p), 0.0, 0);
             }
         }
+        g.fill_upper_triangle_with_lower_triangle();
         g_all += &g;
         h_all += &h;
         grams.push((g, h));
@@ -266,7 +322,7 @@ pub fn score(data: &Data<'_>, model: &[(Effect, f64)]) -> Scored {
         let alone = folds_of_run(f.run) < 2;
         let mut r: Vec<f64> = blocks[k].iter().map(|(x, y)| y - x.dot(&beta)).collect();
         let mut rows: Vec<f64> = (f.start..f.end)
-            .map(|i| data.y[i] - row(i).dot(&beta))
+            .map(|i| data.y[i] - design.predict(i, &beta))
             .collect();
         if alone {
             let m = rows.iter().sum::<f64>() / rows.len().max(1) as f64;
@@ -278,7 +334,9 @@ pub fn score(data: &Data<'_>, model: &[(Effect, f64)]) -> Scored {
         fold_sse.push(r.iter().map(|v| v * v).sum());
         fold_blocks.push(r.len());
     }
-    let residual: Vec<f64> = (0..n).map(|i| data.y[i] - row(i).dot(&beta_all)).collect();
+    let residual: Vec<f64> = (0..n)
+        .map(|i| data.y[i] - design.predict(i, &beta_all))
+        .collect();
     let rss: f64 = residual.iter().map(|v| v * v).sum();
     let r1 = {
         let num: f64 = residual.windows(2).map(|w| w[0] * w[1]).sum();
@@ -334,9 +392,15 @@ pub fn score(data: &Data<'_>, model: &[(Effect, f64)]) -> Scored {
     }
 }
 
-/// In-sample sum of squares of a model (to choose nonlinear parameters).
+/// In-sample sum of squares of a model (to choose nonlinear parameters):
+/// one solve on all rows, none of the held-out folds.
 fn in_sample_sse(data: &Data<'_>, model: &[(Effect, f64)]) -> f64 {
-    score(data, model).residual.iter().map(|v| v * v).sum()
+    let design = Design::new(data, model);
+    let (g, h) = design.normal(0, data.y.len());
+    let beta = solve(&g, &h);
+    (0..data.y.len())
+        .map(|i| (data.y[i] - design.predict(i, &beta)).powi(2))
+        .sum()
 }
 
 /// `model` plus `effect`, its parameter chosen on the in-sample fit
