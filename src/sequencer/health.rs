@@ -28,12 +28,16 @@ pub const MAX_PLAUSIBLE_RATE_DPH: f64 = 3.6e6;
 /// count: about 40 counts a second axis up, 2 a second axis east), and
 /// its angle random walk moves it even at zero rate.
 pub const STUCK_AFTER_S: f64 = 5.0;
-/// The same for a stretch of zero counts (ours): near zero input (a
-/// position where the bias cancels the Earth rate) a quiet gyro's angle
-/// random walk takes its time to move a count: at 0.001 deg/sqrt(h) and
-/// 0.25 arcsec a count, about 17 s for one sigma; a minute of zeros is
-/// still a frozen output.
+/// The same for a stretch of small counts, [`SMALL_COUNTS`] or fewer a
+/// frame (ours): near zero input (a position where the bias cancels the
+/// Earth rate), or an input of nearly a whole number of counts a frame
+/// (at 100 frames a second and 0.25 arcsec a count, one count a frame is
+/// 7 deg/h: the Earth rate's range), a quiet gyro's angle random walk
+/// takes its time to move a count: at 0.001 deg/sqrt(h), about 17 s for one
+/// sigma; a minute of the same count is still a frozen output.
 pub const STUCK_AT_ZERO_AFTER_S: f64 = 60.0;
+/// Counts a frame up to which a stretch waits [`STUCK_AT_ZERO_AFTER_S`].
+pub const SMALL_COUNTS: i32 = 2;
 
 /// Runs of identical consecutive counts, mergeable tick by tick: what a
 /// frozen output leaves behind, however short the record's other part.
@@ -230,7 +234,7 @@ impl RecordHealth {
         }
         let (len, value) = self.runs.longest;
         let stuck_s = len as f64 * self.frame_dt_s;
-        let after = if value == 0 {
+        let after = if value.abs() <= SMALL_COUNTS {
             STUCK_AT_ZERO_AFTER_S
         } else {
             STUCK_AFTER_S
@@ -337,12 +341,18 @@ mod tests {
         brief.add(1_600, (0, 0), &stuck(1_600, 0), 0.0025, 0.25);
         brief.add(400, (-3, 4), &varied(400), 0.0025, 0.25);
         assert!(!brief.problem().is_some_and(|p| p.contains("stuck")));
-        // Zeros for 20 s: a quiet gyro near zero input; for 70 s: frozen.
-        for (zeros_s, frozen) in [(20u64, false), (70, true)] {
+        // Zeros (or one count a frame) for 20 s: a quiet gyro near zero
+        // input, or at a whole count a frame; for 70 s: frozen.
+        for (value, zeros_s, frozen) in [
+            (0, 20u64, false),
+            (0, 70, true),
+            (-1, 20, false),
+            (-1, 70, true),
+        ] {
             let mut quiet = RecordHealth::new(100.0);
             quiet.add(400, (-1, 1), &varied(400), 0.0025, 0.25);
             let n = zeros_s * 400;
-            quiet.add(n, (0, 0), &stuck(n, 0), 0.0025, 0.25);
+            quiet.add(n, (value, value), &stuck(n, value), 0.0025, 0.25);
             quiet.add(
                 40_000 - 400 - n,
                 (-1, 1),
