@@ -31,6 +31,11 @@ pub struct DiagnoseArgs {
     /// Where to write diagnosis.json, diagnosis.html, twin-updated.toml.
     #[arg(long)]
     out: Option<PathBuf>,
+    /// When the diagnosis is inconclusive: replications of the deciding
+    /// run to simulate its power with on the fitted unit (0: estimate it
+    /// from the observed statistic only).
+    #[arg(long, default_value_t = diagnose::POWER_REPLICATIONS)]
+    power_replications: usize,
 }
 
 #[derive(Debug, Subcommand)]
@@ -114,6 +119,7 @@ pub fn run(args: DiagnoseArgs) -> Result<Outcome> {
         &Options {
             twin: twin.clone(),
             fit_thermal: true,
+            power_replications: args.power_replications,
         },
     );
     std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
@@ -165,9 +171,13 @@ pub fn run(args: DiagnoseArgs) -> Result<Outcome> {
         outln!("no library effect is significant")?;
     }
     for e in &d.effects {
+        let name = match &e.temperature {
+            Some(t) => format!("{} ({t})", e.name),
+            None => e.name.clone(),
+        };
         outln!(
             "  {:<26} gap {:.5} -> {:.5} deg/h (shrink {:.0} %, p {})",
-            e.name,
+            name,
             e.held_out_gap_before_dph,
             e.held_out_gap_after_dph,
             100.0 * e.shrink,
@@ -188,11 +198,11 @@ pub fn run(args: DiagnoseArgs) -> Result<Outcome> {
         }
         if r.passes > 0 {
             outln!(
-                "  deciding run for {}: {} ({:.1} h of device time, power {:.0} %): {}",
+                "  deciding run for {}: {} ({:.1} h of device time, {}): {}",
                 r.effect,
                 r.what,
                 r.device_time_h,
-                100.0 * r.power,
+                r.power_phrase(),
                 out.join(&r.file).display()
             )?;
         } else {
@@ -218,6 +228,9 @@ pub fn run(args: DiagnoseArgs) -> Result<Outcome> {
     }
     if let Some(p) = d.unexplained.period_s {
         outln!("  unexplained: periodic, period {p:.0} s")?;
+    }
+    for o in &d.unexplained.outside {
+        outln!("  unexplained: {}", o.describe())?;
     }
     errln!("diagnosis in {}", out.display());
     Ok(Outcome::Success)

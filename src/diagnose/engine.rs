@@ -9,6 +9,9 @@
 //! Each fold's sums (Gram matrix, right-hand side, block means) are made
 //! once, so leaving a fold out costs one small solve.
 
+use std::collections::HashMap;
+use std::sync::{Arc, Mutex};
+
 use nalgebra::{DMatrix, DVector};
 
 use super::data::RunData;
@@ -66,7 +69,12 @@ pub struct Data<'a> {
     pub turning_runs: Vec<usize>,
     /// Kinematic reference of each row, deg/h.
     pub reference: Vec<f64>,
+    /// Stacked columns built so far, by effect and parameter (bits).
+    cache: ColumnCache,
 }
+
+/// Stacked columns by effect and parameter.
+type ColumnCache = Mutex<HashMap<(Effect, u64), Vec<Arc<Vec<f64>>>>>;
 
 impl<'a> Data<'a> {
     /// Stack the recorded samples of `runs`.
@@ -122,24 +130,87 @@ impl<'a> Data<'a> {
             turning_of,
             turning_runs,
             reference,
+            cache: Mutex::default(),
         }
     }
 
-    /// Stacked regressor columns of a model.
-    pub fn columns(&self, model: &[(Effect, f64)]) -> Vec<Vec<f64>> {
-        let mut cols: Vec<Vec<f64>> = Vec::new();
+    /// Stacked regressor columns of a model. Each effect's columns at a
+    /// parameter are built once per [`Data`] and shared (the selection
+    /// fits the same effects at the same parameters many times over).
+    pub fn columns(&self, model: &[(Effect, f64)]) -> Vec<Arc<Vec<f64>>> {
+        let mut cols = Vec::new();
         for &(e, p) in model {
-            let per_run: Vec<Vec<Vec<f64>>> = self.runs.iter().map(|r| e.columns(r, p)).collect();
-            for c in 0..e.terms().len() {
-                cols.push(
-                    per_run
-                        .iter()
-                        .flat_map(|cs| cs[c].iter().copied())
-                        .collect(),
-                );
-            }
+            let key = (e, p.to_bits());
+            let cached = self
+                .cache
+                .lock()
+                .unwrap_or_else(std::sync::PoisonError::into_inner)
+                .get(&key)
+                .cloned();
+            let built = cached.unwrap_or_else(|| {
+                let built: Vec<Arc<Vec<f64>>> = if e.is_outside() {
+                    vec![Arc::new(self.outside_column(e, p))]
+                } else {
+                    let per_run: Vec<Vec<Vec<f64>>> =
+                        self.runs.iter().map(|r| e.columns(r, p)).collect();
+                    (0..e.terms().len())
+                        .map(|c| {
+                            Arc::new(
+                                per_run
+                                    .iter()
+                                    .flat_map(|cs| cs[c].iter().copied())
+                                    .collect(),
+                            )
+                        })
+                        .collect()
+                };
+                self.cache
+                    .lock()
+                    .unwrap_or_else(std::sync::PoisonError::into_inner)
+                    .insert(key, built.clone());
+                built
+            });
+            cols.extend(built);
         }
         cols
+    }
+}
+
+impl Data<'_> {
+    /// The column of a disturbance outside the library: a step from row
+    /// `p` to the end of its run ([`Effect::BiasStep`]), or the time from
+    /// the middle of run `p`, in hours ([`Effect::BiasDrift`]).
+    fn outside_column(&self, e: Effect, p: f64) -> Vec<f64> {
+        let n = self.y.len();
+        let at = (p.max(0.0) as usize).min(n.saturating_sub(1));
+        match e {
+            Effect::BiasStep => (0..n)
+                .map(|i| f64::from(u8::from(i >= at && self.run_of[i] == self.run_of[at])))
+                .collect(),
+            _ => {
+                let run = p.max(0.0) as usize;
+                let times = || {
+                    self.runs
+                        .get(run)
+                        .into_iter()
+                        .flat_map(|r| r.samples.iter().map(|s| s.iv.time_s))
+                };
+                let (lo, hi) = times().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), t| {
+                    (a.min(t), b.max(t))
+                });
+                let mid = 0.5 * (lo + hi);
+                let mut t = times();
+                (0..n)
+                    .map(|i| {
+                        if self.run_of[i] == run {
+                            t.next().map_or(0.0, |t| (t - mid) / 3600.0)
+                        } else {
+                            0.0
+                        }
+                    })
+                    .collect()
+            }
+        }
     }
 }
 
@@ -198,7 +269,7 @@ fn solve(g: &DMatrix<f64>, h: &DVector<f64>) -> DVector<f64> {
 /// unit spread), one offset per run, one scale factor per rate run.
 struct Design<'d> {
     data: &'d Data<'d>,
-    cols: Vec<Vec<f64>>,
+    cols: Vec<Arc<Vec<f64>>>,
     scales: Vec<f64>,
     /// Effect columns.
     q: usize,
@@ -432,10 +503,57 @@ pub fn with_best_parameter(
                 .collect();
         }
     }
-    let choose = bases.len() > 1 || effect.grid().len() > 1;
+    // A memory effect's temperature (case, block, mean) is chosen first,
+    // with the free parameters as they are: each temperature's best value,
+    // refined; its width or time constant then jointly with them (every
+    // form against every free value would triple the cost for a choice the
+    // first pass makes as well).
+    let mut grid: Vec<f64> = effect.grid().to_vec();
+    if effect.has_forms() {
+        let mut best: Option<(f64, Vec<(Effect, f64)>)> = None;
+        for form in crate::twin::config::EffectTemperature::ALL {
+            let g: Vec<f64> = grid
+                .iter()
+                .copied()
+                .filter(|&p| effect.form(p) == Some(form))
+                .collect();
+            let found = best_on_grid(data, &[model.to_vec()], effect, &g, true)
+                .map(|(sse, m)| refine(data, sse, m, effect, &g));
+            if let Some((sse, m)) = found
+                && best.as_ref().is_none_or(|(x, _)| sse < *x)
+            {
+                best = Some((sse, m));
+            }
+        }
+        let Some((_, first)) = best else {
+            return model.to_vec();
+        };
+        if bases.len() == 1 {
+            return first;
+        }
+        let form = first.last().and_then(|m| effect.form(m.1));
+        grid.retain(|&p| effect.form(p) == form);
+    }
+    let choose = bases.len() > 1 || grid.len() > 1;
+    match best_on_grid(data, &bases, effect, &grid, choose) {
+        Some((sse, m)) if grid.len() > 1 => refine(data, sse, m, effect, &grid).1,
+        Some((_, m)) => m,
+        None => model.to_vec(),
+    }
+}
+
+/// The best of `bases` x `grid` by the in-sample fit (the first when
+/// there is nothing to `choose`).
+fn best_on_grid(
+    data: &Data<'_>,
+    bases: &[Vec<(Effect, f64)>],
+    effect: Effect,
+    grid: &[f64],
+    choose: bool,
+) -> Option<(f64, Vec<(Effect, f64)>)> {
     let mut best: Option<(f64, Vec<(Effect, f64)>)> = None;
-    for b in &bases {
-        for &p in effect.grid() {
+    for b in bases {
+        for &p in grid {
             let mut m = b.clone();
             m.push((effect, p));
             let sse = if choose { in_sample_sse(data, &m) } else { 0.0 };
@@ -444,7 +562,72 @@ pub fn with_best_parameter(
             }
         }
     }
-    best.map_or_else(|| model.to_vec(), |(_, m)| m)
+    best
+}
+
+/// `model` (the effect last, at a value of `grid`) with the effect's value
+/// moved to the geometric middle toward either neighbour on the grid when
+/// that fits better: the grid's steps of 2-3x halved, so a play of 12
+/// degC is not taken for 8 or 16.
+fn refine(
+    data: &Data<'_>,
+    sse: f64,
+    model: Vec<(Effect, f64)>,
+    effect: Effect,
+    grid: &[f64],
+) -> (f64, Vec<(Effect, f64)>) {
+    let Some(&(_, p)) = model.last() else {
+        return (sse, model);
+    };
+    let value = effect.value(p);
+    let pack = |v: f64| match effect.form(p) {
+        Some(t) => super::library::pack(t, v),
+        None => v,
+    };
+    let mut values: Vec<f64> = grid.iter().map(|&g| effect.value(g)).collect();
+    values.sort_by(f64::total_cmp);
+    let Some(i) = values.iter().position(|&v| v == value) else {
+        return (sse, model);
+    };
+    let mut best = (sse, model);
+    for j in [i.checked_sub(1), Some(i + 1)].into_iter().flatten() {
+        let Some(&other) = values.get(j) else {
+            continue;
+        };
+        let mut m = best.1.clone();
+        if let Some(last) = m.last_mut() {
+            last.1 = pack((value * other).sqrt());
+        }
+        let sse = in_sample_sse(data, &m);
+        if sse < best.0 {
+            best = (sse, m);
+        }
+    }
+    best
+}
+
+/// `model` with the parameters of its `free` effects chosen again on the
+/// in-sample fit (as [`with_best_parameter`] does with a candidate): for a
+/// model that gained a term with no parameter grid of its own (an outside
+/// disturbance).
+pub fn refit_free(data: &Data<'_>, model: &[(Effect, f64)], free: &[Effect]) -> Vec<(Effect, f64)> {
+    let mut best = model.to_vec();
+    for &f in free {
+        let Some(i) = model.iter().position(|m| m.0 == f) else {
+            continue;
+        };
+        let mut best_sse = f64::INFINITY;
+        for &p in f.grid() {
+            let mut m = best.clone();
+            m[i].1 = p;
+            let sse = in_sample_sse(data, &m);
+            if sse < best_sse {
+                best_sse = sse;
+                best = m;
+            }
+        }
+    }
+    best
 }
 
 /// Whether an effect's regressors vary within a run at all (relative to

@@ -331,11 +331,11 @@ pub fn headline(d: &Diagnosis) -> String {
             let r = &i.deciding_run;
             if r.passes > 0 {
                 format!(
-                    " Inconclusive: {} improves it but misses the bar; {} would decide ({:.1} h of device time, power {:.0} %, {}).",
+                    " Inconclusive: {} improves it but misses the bar; {} would decide ({:.1} h of device time, {}, {}).",
                     r.effect,
                     r.what,
                     r.device_time_h,
-                    100.0 * r.power,
+                    r.power_phrase(),
                     r.file
                 )
             } else {
@@ -345,8 +345,14 @@ pub fn headline(d: &Diagnosis) -> String {
                 )
             }
         });
+        let outside: String = d
+            .unexplained
+            .outside
+            .iter()
+            .map(|o| format!(" The residual holds {}.", o.describe()))
+            .collect();
         format!(
-            " No effect of the library explains the rate gap of {:.5} deg/h held out{place}{period}.{confounded}{undecided}",
+            " No effect of the library explains the rate gap of {:.5} deg/h held out{place}{period}.{outside}{confounded}{undecided}",
             r.gap_dph
         )
     } else {
@@ -390,6 +396,11 @@ pub fn render(d: &Diagnosis) -> String {
                 Some(u) if u.is_finite() => format!("{k} = {v:.4e} &plusmn; {u:.1e}"),
                 _ => format!("{k} = {v:.4}"),
             })
+            .chain(
+                e.temperature
+                    .iter()
+                    .map(|t| format!("on the {t} temperature")),
+            )
             .collect();
         effects.push_str(&format!(
             "<tr><td>{}</td><td class=num>{:.5}</td><td class=num>{:.5}</td><td class=num>{:.0} %</td><td class=num>{}</td><td>{}</td></tr>\n",
@@ -448,11 +459,11 @@ pub fn render(d: &Diagnosis) -> String {
         let r = &i.deciding_run;
         let decide = if r.passes > 0 {
             format!(
-                "The run that would decide for {}: {} ({:.1} h of device time; power {:.0} % if the effect is as large as fitted), written as <code>{}</code>, ready for <code>gyrobench run</code>.",
+                "The run that would decide for {}: {} ({:.1} h of device time; {}, if the effect is as large as fitted), written as <code>{}</code>, ready for <code>gyrobench run</code>.",
                 esc(&r.effect),
                 esc(&r.what),
                 r.device_time_h,
-                100.0 * r.power,
+                esc(&r.power_phrase()),
                 esc(&r.file)
             )
         } else {
@@ -507,7 +518,11 @@ pub fn render(d: &Diagnosis) -> String {
         period = u.period_s.map_or(String::new(), |p| format!(
             "; periodic, period {p:.0} s ({:.0} % of its variance)",
             100.0 * u.periodic_fraction
-        )),
+        )) + &u
+            .outside
+            .iter()
+            .map(|o| format!(". Held as a nuisance: {}", esc(&o.describe())))
+            .collect::<String>(),
     );
     page("Sim-to-real diagnosis", "", &body)
 }

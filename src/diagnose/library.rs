@@ -3,9 +3,12 @@
 //! orientation and the site), mirroring how the twin produces it so a
 //! fitted coefficient maps back to a twin parameter.
 
+use std::sync::LazyLock;
+
 use super::data::{RunData, Sample};
 use crate::analysis::figures::derivative_by_time;
 use crate::analysis::model::DERIVATIVE_HALF_WINDOW_S;
+use crate::twin::config::EffectTemperature;
 
 /// Every effect the diagnosis knows, by its library name.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
@@ -20,9 +23,10 @@ pub enum Effect {
     CaseTemperature,
     /// Block gradient dT (model 4's first term; in the base, not a candidate).
     Gradient,
-    /// Play operator on the case temperature.
+    /// Play operator on the case or block temperature, or their mean.
     Hysteresis,
-    /// The case temperature through a first-order lag.
+    /// The case or block temperature, or their mean, through a first-order
+    /// lag.
     ThermalLag,
     /// Gravity in the body frame.
     GSensitivity,
@@ -33,6 +37,14 @@ pub enum Effect {
     AxisMisalignment,
     /// Scale factor drifting with the block temperature (times the input rate).
     ScaleFactorTemperature,
+    /// Outside the library: a jump of the bias within one run (a ring laser
+    /// gyro's mode hop). Its parameter is the stacked row the jump is at;
+    /// [`super::engine::Data::columns`] builds it (never a candidate).
+    BiasStep,
+    /// Outside the library: the bias drifting linearly through one run.
+    /// Its parameter is the run's index; built by
+    /// [`super::engine::Data::columns`] (never a candidate).
+    BiasDrift,
 }
 
 /// The candidates named in diagnosis.md, in its order.
@@ -59,10 +71,49 @@ pub const MODEL4: [Effect; 5] = [
 ];
 
 /// Grids of the one nonlinear parameter some effects have (ours: spans
-/// the time constants and play widths a gyro on a -40..+50 cycle shows).
+/// the time constants and play widths a gyro on a -40..+50 cycle shows;
+/// a play wider than 16 degC on a 90 degC swing, or a lag longer than 4 h
+/// on a day's cycle, is hardly told from a temperature term).
 const SELF_HEATING_TAU_S: [f64; 6] = [150.0, 300.0, 600.0, 1200.0, 2400.0, 4800.0];
-const HYSTERESIS_WIDTH_C: [f64; 5] = [0.5, 1.0, 2.0, 4.0, 8.0];
-const THERMAL_LAG_TAU_S: [f64; 5] = [300.0, 900.0, 1800.0, 3600.0, 7200.0];
+const HYSTERESIS_WIDTH_C: [f64; 6] = [0.5, 1.0, 2.0, 4.0, 8.0, 16.0];
+const THERMAL_LAG_TAU_S: [f64; 6] = [300.0, 900.0, 1800.0, 3600.0, 7200.0, 14_400.0];
+
+/// A memory effect (hysteresis, thermal lag) acts on the case, the block or
+/// their mean: its one parameter carries the temperature too, as the value
+/// plus this stride times the temperature's index in
+/// [`EffectTemperature::ALL`], so a model stays a list of (effect,
+/// parameter). Widths and time constants are far below it.
+const FORM_STRIDE: f64 = 1e6;
+
+/// A memory effect's parameter: `value` on temperature `t`.
+pub fn pack(t: EffectTemperature, value: f64) -> f64 {
+    let k = EffectTemperature::ALL
+        .iter()
+        .position(|x| *x == t)
+        .unwrap_or(0);
+    value + FORM_STRIDE * k as f64
+}
+
+/// The temperature and the value of a memory effect's parameter.
+pub fn unpack(p: f64) -> (EffectTemperature, f64) {
+    let k = (p / FORM_STRIDE).floor();
+    let t = EffectTemperature::ALL
+        .get(k.max(0.0) as usize)
+        .copied()
+        .unwrap_or_default();
+    (t, p - FORM_STRIDE * k.max(0.0))
+}
+
+/// Every temperature with every value of a grid.
+fn forms(values: &[f64]) -> Vec<f64> {
+    EffectTemperature::ALL
+        .iter()
+        .flat_map(|&t| values.iter().map(move |&v| pack(t, v)))
+        .collect()
+}
+
+static HYSTERESIS_GRID: LazyLock<Vec<f64>> = LazyLock::new(|| forms(&HYSTERESIS_WIDTH_C));
+static THERMAL_LAG_GRID: LazyLock<Vec<f64>> = LazyLock::new(|| forms(&THERMAL_LAG_TAU_S));
 
 impl Effect {
     /// Library name (diagnosis.md).
@@ -79,6 +130,8 @@ impl Effect {
             Self::MagneticSensitivity => "magnetic_sensitivity",
             Self::AxisMisalignment => "axis_misalignment",
             Self::ScaleFactorTemperature => "scale_factor_temperature",
+            Self::BiasStep => "bias_step",
+            Self::BiasDrift => "bias_drift",
         }
     }
 
@@ -95,8 +148,8 @@ impl Effect {
     pub fn grid(self) -> &'static [f64] {
         match self {
             Self::SelfHeating => &SELF_HEATING_TAU_S,
-            Self::Hysteresis => &HYSTERESIS_WIDTH_C,
-            Self::ThermalLag => &THERMAL_LAG_TAU_S,
+            Self::Hysteresis => &HYSTERESIS_GRID,
+            Self::ThermalLag => &THERMAL_LAG_GRID,
             _ => &[f64::NAN],
         }
     }
@@ -115,6 +168,8 @@ impl Effect {
             Self::MagneticSensitivity => &["x_dph_per_ut", "y_dph_per_ut", "z_dph_per_ut"],
             Self::AxisMisalignment => &["earth_y", "earth_z"],
             Self::ScaleFactorTemperature => &["per_c"],
+            Self::BiasStep => &["step_dph"],
+            Self::BiasDrift => &["drift_dph"],
         }
     }
 
@@ -133,7 +188,32 @@ impl Effect {
         }
     }
 
-    /// Regressor columns over one run's samples, for parameter `p`.
+    /// Whether its parameter carries a temperature ([`pack`]).
+    pub fn has_forms(self) -> bool {
+        matches!(self, Self::Hysteresis | Self::ThermalLag)
+    }
+
+    /// The temperature a parameter `p` of this effect acts on (memory
+    /// effects only).
+    pub fn form(self, p: f64) -> Option<EffectTemperature> {
+        self.has_forms().then(|| unpack(p).0)
+    }
+
+    /// The nonlinear parameter's value (the width or time constant of a
+    /// memory effect, without its temperature).
+    pub fn value(self, p: f64) -> f64 {
+        if self.has_forms() { unpack(p).1 } else { p }
+    }
+
+    /// Whether this is a disturbance outside the library (a nuisance the
+    /// selection weighs a candidate against, never named as an effect).
+    pub fn is_outside(self) -> bool {
+        matches!(self, Self::BiasStep | Self::BiasDrift)
+    }
+
+    /// Regressor columns over one run's samples, for parameter `p` (the
+    /// outside disturbances span runs and are built from the stacked data:
+    /// here they are zero).
     pub fn columns(self, run: &RunData, p: f64) -> Vec<Vec<f64>> {
         let s = &run.samples;
         let col = |f: &dyn Fn(&Sample) -> f64| -> Vec<f64> { s.iter().map(f).collect() };
@@ -143,8 +223,14 @@ impl Effect {
             Self::GradientRate => vec![gradient_rate(s)],
             Self::CaseTemperature => vec![col(&|x| x.iv.tcase_c)],
             Self::SelfHeating => vec![col(&|x| (-x.iv.time_s / p).exp())],
-            Self::Hysteresis => vec![play(s, p)],
-            Self::ThermalLag => vec![lag(s, p)],
+            Self::Hysteresis => {
+                let (t, w) = unpack(p);
+                vec![play(s, t, w)]
+            }
+            Self::ThermalLag => {
+                let (t, tau) = unpack(p);
+                vec![lag(s, t, tau)]
+            }
             Self::GSensitivity => (0..3).map(|i| col(&|x| x.gravity_body()[i])).collect(),
             Self::MagneticSensitivity => (0..3)
                 .map(|i| col(&|x| x.magnetic_body(&run.site)[i]))
@@ -155,6 +241,7 @@ impl Effect {
             Self::ScaleFactorTemperature => vec![col(&|x| {
                 x.iv.reference_dph * (0.5 * (x.iv.t1_c + x.iv.t2_c) - 20.0)
             })],
+            Self::BiasStep | Self::BiasDrift => vec![vec![0.0; s.len()]],
         }
     }
 }
@@ -167,13 +254,18 @@ fn gradient_rate(s: &[Sample]) -> Vec<f64> {
     derivative_by_time(&t, &g, DERIVATIVE_HALF_WINDOW_S)
 }
 
-/// Play (backlash) operator of width `w` on the case temperature,
-/// normalised as the twin's hysteresis: (y - T_K) / w, in -1..1.
-fn play(s: &[Sample], w: f64) -> Vec<f64> {
+/// A sample's temperature `t` (case, block or mean), from its sensors.
+fn temperature(x: &Sample, t: EffectTemperature) -> f64 {
+    t.of(x.iv.tcase_c, x.iv.t1_c, x.iv.t2_c)
+}
+
+/// Play (backlash) operator of width `w` on temperature `form`,
+/// normalised as the twin's hysteresis: (y - T) / w, in -1..1.
+fn play(s: &[Sample], form: EffectTemperature, w: f64) -> Vec<f64> {
     let mut y: Option<f64> = None;
     s.iter()
         .map(|x| {
-            let t = x.iv.tcase_c;
+            let t = temperature(x, form);
             let v = y.get_or_insert(t);
             *v = v.clamp(t - w, t + w);
             (*v - t) / w
@@ -181,13 +273,13 @@ fn play(s: &[Sample], w: f64) -> Vec<f64> {
         .collect()
 }
 
-/// The case temperature through a first-order lag of `tau` s.
-fn lag(s: &[Sample], tau: f64) -> Vec<f64> {
+/// Temperature `form` through a first-order lag of `tau` s.
+fn lag(s: &[Sample], form: EffectTemperature, tau: f64) -> Vec<f64> {
     let mut y: Option<f64> = None;
     let mut last_t: Option<f64> = None;
     s.iter()
         .map(|x| {
-            let t = x.iv.tcase_c;
+            let t = temperature(x, form);
             let dt = last_t.map_or(1.0, |l| (x.iv.time_s - l).max(0.0));
             last_t = Some(x.iv.time_s);
             let v = y.get_or_insert(t);

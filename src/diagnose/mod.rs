@@ -137,6 +137,10 @@ pub struct Accepted {
     pub shrink: f64,
     /// One-sided p-value of the fold-by-fold improvement.
     pub p_value: f64,
+    /// The temperature a memory effect acts on: `case`, `block` (the mean
+    /// of the two blocks) or `mean` (of block and case); none for the others.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub temperature: Option<String>,
 }
 
 /// Two effects the runs cannot tell apart.
@@ -159,6 +163,57 @@ pub struct Unexplained {
     pub period_s: Option<f64>,
     /// Fraction of the residual's variance the periodic fit explains.
     pub periodic_fraction: f64,
+    /// Disturbances outside the library that explained more, held out,
+    /// than the best library candidate (which was then not named): held as
+    /// nuisances, in the order found.
+    pub outside: Vec<OutsideFound>,
+}
+
+/// A disturbance outside the library found in the rate residual.
+#[derive(Debug, Clone, Serialize)]
+pub struct OutsideFound {
+    /// `bias_step` (a jump of the bias: a mode hop) or `bias_drift` (the
+    /// bias drifting linearly through a run).
+    pub kind: String,
+    /// The run it is in.
+    pub run: String,
+    /// Time of the jump in the run, s (steps).
+    pub at_s: Option<f64>,
+    /// The jump, deg/h (steps), or the drift, deg/h per hour (drifts).
+    pub size_dph: f64,
+    /// Share of the held-out sum of squares it removed.
+    pub improvement: f64,
+    /// p-value of that improvement.
+    pub p_value: f64,
+    /// The library candidate it explained more than (not named).
+    pub instead_of: String,
+    /// The candidate's share of the held-out sum of squares.
+    pub instead_of_improvement: f64,
+}
+
+impl OutsideFound {
+    /// One sentence for the terminal and the page.
+    pub fn describe(&self) -> String {
+        let what = match self.at_s {
+            Some(t) => format!(
+                "a bias jump of {:+.4} deg/h at {:.2} h into {}",
+                self.size_dph,
+                t / 3600.0,
+                self.run
+            ),
+            None => format!(
+                "a bias drift of {:+.4} deg/h per hour through {}",
+                self.size_dph, self.run
+            ),
+        };
+        format!(
+            "{what}, outside the library: it removes {:.0} % of the held-out sum of squares (p {:.2e}), more than {} would ({:.0} %), which is not named",
+            100.0 * self.improvement,
+            self.p_value,
+            self.instead_of,
+            100.0 * self.instead_of_improvement
+        )
+    }
 }
 
 /// A candidate's score at the first selection step.
@@ -211,15 +266,43 @@ pub struct DecidingRun {
     /// Device time, h.
     pub device_time_h: f64,
     /// Chance that the candidate passes the bar with that run added, if it
-    /// is as large as fitted (normal approximation of the test's
-    /// statistic, growing with the square root of the information).
+    /// is as large as fitted: simulated when `replications` > 0, else
+    /// estimated (normal approximation of the test's statistic, growing
+    /// with the square root of the information).
     pub power: f64,
+    /// Replications of the deciding run the power was simulated with (0:
+    /// estimated only). Each is the fitted unit run again: the candidate
+    /// model's fitted values on the run where it acts most, plus that
+    /// run's residual drawn in 15 min blocks, diagnosed with the recorded
+    /// run by the same test and bars.
+    pub replications: usize,
+    /// The estimate from the observed statistic, for comparison.
+    pub estimated_power: f64,
     /// Share of the held-out sum of squares the candidate removes in the run
     /// it acts most in: what repeating that run approaches.
     pub share_ceiling: f64,
     /// The procedure file `diagnose --out DIR` writes (`deciding-run.toml`;
     /// empty when no repeat decides).
     pub file: String,
+}
+
+impl DecidingRun {
+    /// How its power was found, in words.
+    pub fn power_phrase(&self) -> String {
+        if self.replications > 0 {
+            format!(
+                "power {:.0} % in {} simulated replications on the fitted unit (estimated {:.0} %)",
+                100.0 * self.power,
+                self.replications,
+                100.0 * self.estimated_power
+            )
+        } else {
+            format!(
+                "power {:.0} %, estimated from the observed statistic",
+                100.0 * self.power
+            )
+        }
+    }
 }
 
 /// `diagnosis.json`.
@@ -278,7 +361,14 @@ pub struct Options {
     /// values as the start), for `twin-updated.toml`. Without a twin the
     /// fitted network is the thermal reference and is always fitted.
     pub fit_thermal: bool,
+    /// Replications to simulate an inconclusive step's deciding run with
+    /// (0: its power is only estimated from the observed statistic).
+    pub power_replications: usize,
 }
+
+/// Replications `gyrobench diagnose` simulates a deciding run with (ours:
+/// a power of 80 % is then known within about +-6 %).
+pub const POWER_REPLICATIONS: usize = 40;
 
 /// The reference model: model 4, or the twin's enabled terms and effects.
 fn reference(twin: Option<&TwinConfig>) -> Vec<(Effect, Option<f64>)> {
@@ -307,11 +397,18 @@ fn reference(twin: Option<&TwinConfig>) -> Vec<(Effect, Option<f64>)> {
     if on(fx.hysteresis.as_ref().map(|h| h.enabled)) {
         m.push((
             Effect::Hysteresis,
-            fx.hysteresis.as_ref().map(|h| h.width_c),
+            fx.hysteresis
+                .as_ref()
+                .map(|h| library::pack(h.temperature, h.width_c)),
         ));
     }
     if on(fx.thermal_lag.as_ref().map(|h| h.enabled)) {
-        m.push((Effect::ThermalLag, fx.thermal_lag.as_ref().map(|h| h.tau_s)));
+        m.push((
+            Effect::ThermalLag,
+            fx.thermal_lag
+                .as_ref()
+                .map(|h| library::pack(h.temperature, h.tau_s)),
+        ));
     }
     for (x, e) in [
         (
@@ -381,7 +478,7 @@ fn parameters(s: &Scored, effect: Effect) -> (BTreeMap<String, f64>, BTreeMap<St
                 errs.insert((*t).to_owned(), s.stderr[at + i]);
             }
             if let Some(name) = e.parameter() {
-                vals.insert(name.to_owned(), p);
+                vals.insert(name.to_owned(), e.value(p));
             }
         }
         at += n;
@@ -492,6 +589,137 @@ fn periodicity(data: &Data<'_>, residual: &[f64]) -> (Option<f64>, f64) {
     best
 }
 
+/// Most disturbances outside the library held as nuisances (ours).
+const MAX_OUTSIDE: usize = 2;
+/// Rows kept clear of a record's ends by a bias jump (ours: 1 min). A change
+/// that comes with a position change is the position's, as far as these
+/// runs can tell: a positional effect is preferred there.
+const STEP_CLEAR_ROWS: usize = 60;
+/// Fewest rows on either side of a bias jump in its run (ours: 10 min).
+const STEP_SIDE_ROWS: usize = 600;
+
+/// The disturbance outside the library that explains the most of
+/// `current`'s in-sample residual: the best single bias jump over all runs
+/// (by the cumulative-sum statistic, searched minute by minute away from
+/// record ends), or a linear drift through every run; scored held out with
+/// the model, as a candidate is.
+fn outside_rival(
+    data: &Data<'_>,
+    current: &Scored,
+    free: &[Effect],
+) -> Option<(Effect, Scored, f64, f64)> {
+    let e = &current.residual;
+    let n = e.len();
+    let mut step: Option<(f64, usize)> = None;
+    let mut drifts: Vec<usize> = Vec::new();
+    let mut start = 0;
+    while start < n {
+        let r = data.run_of[start];
+        let end = (start..n).find(|&i| data.run_of[i] != r).unwrap_or(n);
+        let rows = end - start;
+        let mean = e[start..end].iter().sum::<f64>() / rows.max(1) as f64;
+        // Jumps: the gain of a step at k (run offset fitted) is
+        // S_k^2 rows / (m (rows - m)), S_k the sum of the centred residual
+        // from k on, m = rows from k on.
+        let mut tail = 0.0;
+        let samples = &data.runs[r].samples;
+        for k in (start + 1..end).rev() {
+            tail += e[k] - mean;
+            let m = end - k;
+            let at = k - start;
+            if m < STEP_SIDE_ROWS
+                || rows - m < STEP_SIDE_ROWS
+                || (end - k) % engine::AVERAGING_S != 0
+            {
+                continue;
+            }
+            let clear = |a: usize, b: usize| samples[a].record == samples[b].record;
+            if !clear(
+                at.saturating_sub(STEP_CLEAR_ROWS),
+                (at + STEP_CLEAR_ROWS).min(rows - 1),
+            ) {
+                continue;
+            }
+            let gain = tail * tail * rows as f64 / (m as f64 * (rows - m) as f64);
+            if step.is_none_or(|(g, _)| gain > g) {
+                step = Some((gain, k));
+            }
+        }
+        if rows > 2 * STEP_SIDE_ROWS {
+            drifts.push(r);
+        }
+        start = end;
+    }
+    // A drift goes through every run (a slow change of the unit, not of one
+    // run): one slope per run.
+    let rivals = step
+        .map(|(_, k)| vec![(Effect::BiasStep, k as f64)])
+        .into_iter()
+        .chain((!drifts.is_empty()).then(|| {
+            drifts
+                .iter()
+                .map(|&r| (Effect::BiasDrift, r as f64))
+                .collect()
+        }));
+    rivals
+        .map(|terms| {
+            let mut model = current.model.clone();
+            model.extend(&terms);
+            let s = score(data, &engine::refit_free(data, &model, free));
+            let (gain, p) = improvement(current, &s);
+            (terms[0].0, s, gain, p)
+        })
+        .max_by(|a, b| a.2.total_cmp(&b.2))
+}
+
+/// The reports of an outside disturbance held in `s` (its terms from the
+/// `from`-th on, of kind `o`): one per run it is in.
+fn outside_found(
+    data: &Data<'_>,
+    s: &Scored,
+    from: usize,
+    o: Effect,
+    share: f64,
+    p_value: f64,
+    instead_of: (Effect, f64),
+) -> Vec<OutsideFound> {
+    let mut term = 0;
+    let mut out = Vec::new();
+    for (k, &(e, param)) in s.model.iter().enumerate() {
+        term += e.terms().len();
+        if k < from || e != o {
+            continue;
+        }
+        let coeff = s.coeffs.get(term - 1).copied().unwrap_or(f64::NAN);
+        let (run, at_s) = if o == Effect::BiasStep {
+            let row = (param as usize).min(data.run_of.len().saturating_sub(1));
+            let r = data.run_of[row];
+            let first = data.run_of.iter().position(|&x| x == r).unwrap_or(0);
+            (
+                r,
+                data.runs[r].samples.get(row - first).map(|x| x.iv.time_s),
+            )
+        } else {
+            (param as usize, None)
+        };
+        out.push(OutsideFound {
+            kind: o.name().into(),
+            run: data
+                .runs
+                .get(run)
+                .map(|r| r.name.clone())
+                .unwrap_or_default(),
+            at_s,
+            size_dph: coeff,
+            improvement: share,
+            p_value,
+            instead_of: instead_of.0.name().into(),
+            instead_of_improvement: instead_of.1,
+        });
+    }
+    out
+}
+
 /// Share of the total above which a periodic fit is reported (ours).
 pub const PERIODIC_ABOVE: f64 = 0.3;
 
@@ -557,6 +785,8 @@ pub(crate) fn diagnose_rate(runs: &[RunData], opts: &Options) -> Diagnosis {
     let mut accepted: Vec<Effect> = Vec::new();
     let mut confounded: Vec<Confounded> = Vec::new();
     let mut step_scores: Vec<(Effect, Scored, f64, f64)> = first;
+    let mut outside: Vec<OutsideFound> = Vec::new();
+    let mut held_outside = 0;
     while effects.len() < MAX_EFFECTS && !remaining.is_empty() {
         let level = ALPHA / remaining.len() as f64;
         let passing: Vec<&(Effect, Scored, f64, f64)> = step_scores
@@ -573,7 +803,42 @@ pub(crate) fn diagnose_rate(runs: &[RunData], opts: &Options) -> Diagnosis {
             .filter(|x| x.2 >= (1.0 - TIE) * top)
             .min_by_key(|x| (x.0.complexity(), LIBRARY.iter().position(|e| *e == x.0)))
             .map(|x| (*x).clone());
-        let Some((e, s, _, p)) = best else { break };
+        let Some((e, s, cand_gain, p)) = best else {
+            break;
+        };
+        // A candidate is named only when it explains more than a
+        // disturbance outside the library would (a bias jump or a drift
+        // through a run, which a thermal or positional term can partly
+        // mimic); when the disturbance explains more, it is held as a
+        // nuisance and reported, and selection goes on over it.
+        if held_outside < MAX_OUTSIDE
+            && let Some((o, os, ogain, op)) = outside_rival(&data, &current, &free)
+            && op < level
+            && ogain > MIN_GAIN * current.sse()
+            && ogain >= cand_gain
+        {
+            let found = outside_found(
+                &data,
+                &os,
+                current.model.len(),
+                o,
+                ogain / current.sse(),
+                op,
+                (e, cand_gain / current.sse()),
+            );
+            outside.extend(found);
+            held_outside += 1;
+            current = os;
+            step_scores = remaining
+                .iter()
+                .map(|&c| {
+                    let s = score(&data, &with_best_parameter(&data, &current.model, c, &free));
+                    let (gain, p) = improvement(&current, &s);
+                    (c, s, gain, p)
+                })
+                .collect();
+            continue;
+        }
         let before = current.gap();
         let after = s.gap();
         let (parameters, uncertainties) = parameters(&s, e);
@@ -585,6 +850,12 @@ pub(crate) fn diagnose_rate(runs: &[RunData], opts: &Options) -> Diagnosis {
             held_out_gap_after_dph: after,
             shrink: ((before - after) / before).clamp(0.0, 1.0),
             p_value: p,
+            temperature: s
+                .model
+                .iter()
+                .find(|m| m.0 == e)
+                .and_then(|m| e.form(m.1))
+                .map(|t| t.name().to_owned()),
         });
         // A candidate that was as good alone but adds nothing now, while
         // the accepted one would add nothing over it either, explains the
@@ -629,11 +900,18 @@ pub(crate) fn diagnose_rate(runs: &[RunData], opts: &Options) -> Diagnosis {
         }
     }
     let level = ALPHA / remaining.len().max(1) as f64;
-    let (inconclusive, deciding_procedure) =
-        match inconclusive(&data, &remaining, &step_scores, &current, level) {
-            Some((i, text)) => (Some(i), text),
-            None => (None, None),
-        };
+    let (inconclusive, deciding_procedure) = match inconclusive(
+        &data,
+        &remaining,
+        &step_scores,
+        &current,
+        level,
+        &free,
+        opts.power_replications,
+    ) {
+        Some((i, text)) => (Some(i), text),
+        None => (None, None),
+    };
     let where_ = segments(&data, &base.fold_sse, &base.fold_blocks);
     let left = segments(&data, &current.fold_sse, &current.fold_blocks);
     let (period, frac) = periodicity(&data, &current.residual);
@@ -662,6 +940,7 @@ pub(crate) fn diagnose_rate(runs: &[RunData], opts: &Options) -> Diagnosis {
             r#where: left.into_iter().take(3).collect(),
             period_s: period.filter(|_| frac >= PERIODIC_ABOVE),
             periodic_fraction: frac,
+            outside,
         },
         candidates,
         not_identifiable: not_identifiable
@@ -710,6 +989,8 @@ fn inconclusive(
     step_scores: &[(Effect, Scored, f64, f64)],
     current: &Scored,
     level: f64,
+    free: &[Effect],
+    replications: usize,
 ) -> Option<(Inconclusive, Option<String>)> {
     use statrs::distribution::{ContinuousCDF, Normal};
     let runs = data.runs;
@@ -756,10 +1037,33 @@ fn inconclusive(
         let info = (1 + k) as f64 * SHARE_MARGIN * g_star.max(0.0) / gain.max(f64::MIN_POSITIVE);
         normal.cdf(z_obs * info.sqrt() - z_bar)
     };
-    let passes = (1..=MAX_PASSES)
+    let e = best.0;
+    let estimated = (1..=MAX_PASSES)
         .find(|&k| power(k) >= DECIDING_POWER)
         .unwrap_or(MAX_PASSES);
-    let e = best.0;
+    // The estimate sizes the run; a simulation, when asked for, checks it
+    // and adds passes until the simulated power is reached.
+    let mut passes = estimated;
+    let mut simulated = None;
+    if replications > 0 && power(estimated) >= DECIDING_POWER {
+        let sim = Simulation {
+            data,
+            current,
+            candidate: &best.1,
+            effect: e,
+            run: r_star,
+            free,
+            level,
+        };
+        loop {
+            let p = sim.power(passes, replications);
+            simulated = Some(p);
+            if p >= DECIDING_POWER || passes >= MAX_PASSES {
+                break;
+            }
+            passes += 1;
+        }
+    }
     let positional = matches!(
         e,
         Effect::GSensitivity | Effect::MagneticSensitivity | Effect::AxisMisalignment
@@ -800,16 +1104,22 @@ fn inconclusive(
             ),
         )
     };
-    let achievable = power(passes);
+    let achievable = simulated.unwrap_or_else(|| power(passes));
     let (what, passes, device_time_h) = if achievable < DECIDING_POWER {
         (
             format!(
-                "no repeat of these runs decides: where it acts most ({}) it removes {:.0} % of the held-out sum of squares of 60 s means, a fifth less counted for its scatter, and an effect must remove {:.0} % (MIN_GAIN) with a power of {:.0} % ({:.0} % at {MAX_PASSES} passes); an effect this small beside the noise of 60 s means needs a quieter unit or a run where it is larger (other positions, a wider temperature range)",
+                "no repeat of these runs decides: where it acts most ({}) it removes {:.0} % of the held-out sum of squares of 60 s means, a fifth less counted for its scatter, and an effect must remove {:.0} % (MIN_GAIN) with a power of {:.0} % ({:.0} % at {} passes{}); an effect this small beside the noise of 60 s means needs a quieter unit or a run where it is larger (other positions, a wider temperature range)",
                 runs[r_star].name,
                 100.0 * ceiling,
                 100.0 * MIN_GAIN,
                 100.0 * DECIDING_POWER,
-                100.0 * achievable
+                100.0 * achievable,
+                passes,
+                if simulated.is_some() {
+                    ", simulated"
+                } else {
+                    ""
+                }
             ),
             0,
             0.0,
@@ -839,6 +1149,8 @@ fn inconclusive(
                 passes,
                 device_time_h,
                 power: achievable,
+                replications: if simulated.is_some() { replications } else { 0 },
+                estimated_power: power(estimated),
                 share_ceiling: ceiling,
                 file: if passes > 0 {
                     "deciding-run.toml".into()
@@ -849,6 +1161,87 @@ fn inconclusive(
         },
         text,
     ))
+}
+
+/// A deciding run simulated on the fitted unit.
+struct Simulation<'a> {
+    data: &'a Data<'a>,
+    /// The model selection stopped at.
+    current: &'a Scored,
+    /// It with the candidate: the fitted unit.
+    candidate: &'a Scored,
+    effect: Effect,
+    /// The run the candidate acts most in (the deciding run repeats it).
+    run: usize,
+    free: &'a [Effect],
+    level: f64,
+}
+
+impl Simulation<'_> {
+    /// Block of the residual drawn at a time, rows (the folds' length).
+    const BLOCK: usize = engine::FOLD_MAX_S;
+
+    /// Share of `replications` in which the candidate passes both bars
+    /// when the recorded run is diagnosed with `passes` repeats of it, each
+    /// the fitted unit's values on that run's inputs plus the run's own
+    /// residual (under the candidate model) drawn in blocks, so its
+    /// autocorrelation and flicker come along.
+    fn power(&self, passes: usize, replications: usize) -> f64 {
+        use rand::{RngExt, SeedableRng};
+        let d = self.data;
+        let rows: Vec<usize> = (0..d.run_of.len())
+            .filter(|&i| d.run_of[i] == self.run)
+            .collect();
+        let n = rows.len();
+        if n == 0 || replications == 0 {
+            return 0.0;
+        }
+        let fitted: Vec<f64> = rows
+            .iter()
+            .map(|&i| d.y[i] - self.candidate.residual[i])
+            .collect();
+        let resid: Vec<f64> = rows.iter().map(|&i| self.candidate.residual[i]).collect();
+        // Outside disturbances were held at rows of these runs: not
+        // carried over.
+        let base: Vec<(Effect, f64)> = self
+            .current
+            .model
+            .iter()
+            .filter(|m| !m.0.is_outside())
+            .copied()
+            .collect();
+        let recorded = &d.runs[self.run];
+        let mut rng = rand_xoshiro::Xoshiro256PlusPlus::seed_from_u64(0x00de_c1de ^ passes as u64);
+        let mut decided = 0;
+        for _ in 0..replications {
+            let mut runs = vec![recorded.clone()];
+            for k in 0..passes {
+                let mut copy = recorded.clone();
+                copy.name = format!("{} (simulated pass {})", recorded.name, k + 1);
+                let mut j = 0;
+                while j < n {
+                    let at = rng.random_range(0..n);
+                    for b in 0..Self::BLOCK.min(n - j) {
+                        let s = &mut copy.samples[j + b];
+                        s.iv.rate_dph = s.iv.reference_dph + fitted[j + b] + resid[(at + b) % n];
+                    }
+                    j += Self::BLOCK;
+                }
+                runs.push(copy);
+            }
+            let sim = Data::new(&runs);
+            let before = score(&sim, &engine::refit_free(&sim, &base, self.free));
+            let after = score(
+                &sim,
+                &with_best_parameter(&sim, &base, self.effect, self.free),
+            );
+            let (gain, p) = improvement(&before, &after);
+            if p < self.level && gain > MIN_GAIN * before.sse() {
+                decided += 1;
+            }
+        }
+        f64::from(decided) / replications as f64
+    }
 }
 
 /// The orientation procedure with its positions taken `passes` times (the
@@ -894,6 +1287,12 @@ pub fn updated_twin(base: &TwinConfig, d: &Diagnosis) -> TwinConfig {
         t.thermal = fitted.clone();
     }
     let get = |a: &Accepted, k: &str| a.parameters.get(k).copied().unwrap_or(0.0);
+    let form = |a: &Accepted| {
+        tc::EffectTemperature::ALL
+            .into_iter()
+            .find(|t| a.temperature.as_deref() == Some(t.name()))
+            .unwrap_or_default()
+    };
     for a in &d.effects {
         match Effect::from_name(&a.name) {
             Some(Effect::Hysteresis) => {
@@ -901,6 +1300,8 @@ pub fn updated_twin(base: &TwinConfig, d: &Diagnosis) -> TwinConfig {
                     enabled: true,
                     amplitude_dph: get(a, "amplitude_dph"),
                     width_c: get(a, "width_c"),
+                    temperature: form(a),
+                    shape: tc::HysteresisShape::Play,
                 });
             }
             Some(Effect::ThermalLag) => {
@@ -909,6 +1310,8 @@ pub fn updated_twin(base: &TwinConfig, d: &Diagnosis) -> TwinConfig {
                     coeff_dph_per_c: get(a, "coeff_dph_per_c"),
                     tau_s: get(a, "tau_s"),
                     reference_c: 20.0,
+                    temperature: form(a),
+                    order: 1,
                 });
             }
             Some(Effect::GSensitivity) => {
@@ -965,7 +1368,8 @@ pub fn updated_twin(base: &TwinConfig, d: &Diagnosis) -> TwinConfig {
                 t.bias.terms.case_temperature = true;
                 t.bias.k4_dph_per_c = get(a, "k4_dph_per_c");
             }
-            Some(Effect::Gradient) | None => {}
+            // Outside disturbances are never accepted effects.
+            Some(Effect::Gradient | Effect::BiasStep | Effect::BiasDrift) | None => {}
         }
     }
     t

@@ -15,11 +15,12 @@ use rand_xoshiro::Xoshiro256PlusPlus;
 use serde::Serialize;
 
 use super::data::RunData;
-use super::library::{Effect, LIBRARY, MODEL4};
+use super::library::{Effect, LIBRARY, MODEL4, pack};
 use super::selfcheck::{contribution, inject, runs_of};
 use super::{Options, diagnose, diagnose_rate, visible_gap};
 use crate::study::StudyError;
 use crate::twin::TwinConfig;
+use crate::twin::config::{EffectTemperature, HysteresisShape};
 
 /// Amplitudes of a withheld effect, in units of the unit's own noise of
 /// 60 s means (its null runs' held-out gap).
@@ -169,6 +170,58 @@ pub fn draw_unit(seed: u64) -> TwinConfig {
     t
 }
 
+/// The form of a unit's memory effects, drawn so the library does not meet
+/// its own equations: the temperature they act on, a smooth loop as often
+/// as a sharp play, lags of one to three filters in cascade, widths and
+/// time constants over the range a unit can have.
+#[derive(Debug, Clone, Copy)]
+struct Form {
+    temperature: EffectTemperature,
+    shape: HysteresisShape,
+    width_c: f64,
+    order: u8,
+    tau_s: f64,
+}
+
+impl Form {
+    /// Give the enabled memory effects of `t` this form.
+    fn apply(&self, t: &mut TwinConfig) {
+        if let Some(h) = t.effects.hysteresis.as_mut() {
+            h.temperature = self.temperature;
+            h.shape = self.shape;
+            h.width_c = self.width_c;
+        }
+        if let Some(l) = t.effects.thermal_lag.as_mut() {
+            l.temperature = self.temperature;
+            l.order = self.order;
+            l.tau_s = self.tau_s;
+        }
+    }
+}
+
+fn draw_form(seed: u64) -> Form {
+    let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed ^ 0x00f0_12a5);
+    let mut u = |lo: f64, hi: f64| lo + (hi - lo) * rng.random::<f64>();
+    let log = |x: f64, lo: f64, hi: f64| (lo.ln() + (hi.ln() - lo.ln()) * x).exp();
+    let temperature = EffectTemperature::ALL[(u(0.0, 3.0) as usize).min(2)];
+    let shape = if u(0.0, 1.0) < 0.5 {
+        HysteresisShape::Play
+    } else {
+        HysteresisShape::Smooth
+    };
+    let width_c = log(u(0.0, 1.0), 0.5, 20.0);
+    let order = (u(1.0, 4.0) as u8).clamp(1, 3);
+    // The cascade's mean delay, order x tau, within 5 min to 3 h.
+    let tau_s = log(u(0.0, 1.0), 300.0, 10_800.0) / f64::from(order);
+    Form {
+        temperature,
+        shape,
+        width_c,
+        order,
+        tau_s,
+    }
+}
+
 /// A disturbance outside the library, added to the runs' rates: `a` deg/h
 /// RMS over the runs' 60 s means (approximately).
 fn disturb(runs: &mut [RunData], d: Outside, a: f64, seed: u64) {
@@ -212,6 +265,12 @@ pub struct UnitTrial {
     pub accepted: Vec<String>,
     /// The inconclusive step's first candidate, if any.
     pub inconclusive: Option<String>,
+    /// The drawn form of the withheld memory effects (hysteresis, thermal
+    /// lag), when the case has one.
+    pub form: Option<String>,
+    /// Disturbances outside the library held instead of a candidate
+    /// (`bias_step`, `bias_drift`).
+    pub outside: Vec<String>,
     /// Rate gap before and after, deg/h.
     pub gap_before_dph: f64,
     /// After.
@@ -277,16 +336,26 @@ fn trial(seed: u64, case: &Case) -> Result<UnitTrial, StudyError> {
     let opts = Options {
         twin: None,
         fit_thermal: true,
+        power_replications: 0,
     };
     let noise = diagnose_rate(&null_runs, &opts).layers.rate.gap_dph;
+    let form = draw_form(seed);
     let coefficient = |e: Effect, amp: f64| {
+        // The library form nearest the drawn one: its temperature, and the
+        // cascade's mean delay for a lag (a smooth loop's mean width is
+        // its width), so the amplitude is in noise units near enough.
         let p = match e {
-            Effect::Hysteresis => 2.0,
-            Effect::ThermalLag => 1800.0,
+            Effect::Hysteresis => pack(form.temperature, form.width_c),
+            Effect::ThermalLag => pack(form.temperature, form.tau_s * f64::from(form.order)),
             _ => f64::NAN,
         };
         let gap = visible_gap(&null_runs, &opts, &contribution(&null_runs, e, p));
         if gap > 0.0 { amp * noise / gap } else { 0.0 }
+    };
+    let with = |data: &TwinConfig, e: Effect, amp: f64| {
+        let mut d = inject(data, e, coefficient(e, amp)).0;
+        form.apply(&mut d);
+        d
     };
     let mut data = unit.clone();
     let mut outside = None;
@@ -294,13 +363,13 @@ fn trial(seed: u64, case: &Case) -> Result<UnitTrial, StudyError> {
         Case::Null => {}
         Case::Effect { effect, amplitude } => {
             if let Some(e) = Effect::from_name(effect) {
-                data = inject(&data, e, coefficient(e, *amplitude)).0;
+                data = with(&data, e, *amplitude);
             }
         }
         Case::Pair { effects } => {
             for name in effects {
                 if let Some(e) = Effect::from_name(name) {
-                    data = inject(&data, e, coefficient(e, PAIR_AMPLITUDE)).0;
+                    data = with(&data, e, PAIR_AMPLITUDE);
                 }
             }
         }
@@ -335,6 +404,41 @@ fn trial(seed: u64, case: &Case) -> Result<UnitTrial, StudyError> {
             .inconclusive
             .as_ref()
             .and_then(|i| i.candidates.first().map(|c| c.name.clone())),
+        form: {
+            let names: Vec<&str> = match case {
+                Case::Effect { effect, .. } => vec![effect.as_str()],
+                Case::Pair { effects } => effects.iter().map(String::as_str).collect(),
+                _ => Vec::new(),
+            };
+            let mut parts = Vec::new();
+            if names.contains(&"hysteresis") {
+                parts.push(format!(
+                    "hysteresis on the {} temperature, {:?} loop, width {:.2} degC",
+                    form.temperature.name(),
+                    form.shape,
+                    form.width_c
+                ));
+            }
+            if names.contains(&"thermal_lag") {
+                parts.push(format!(
+                    "thermal_lag on the {} temperature, {} filter(s) of {:.0} s",
+                    form.temperature.name(),
+                    form.order,
+                    form.tau_s
+                ));
+            }
+            (!parts.is_empty()).then(|| parts.join("; "))
+        },
+        outside: {
+            let mut kinds: Vec<String> = d
+                .unexplained
+                .outside
+                .iter()
+                .map(|o| o.kind.clone())
+                .collect();
+            kinds.dedup();
+            kinds
+        },
         gap_before_dph: before,
         gap_after_dph: after,
         excess_closed,
@@ -482,5 +586,59 @@ fn summarise(units: usize, seed: u64, trials: Vec<UnitTrial>) -> Randomized {
         .unwrap_or(f64::NAN),
         skipped: Vec::new(),
         trials,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::twin::config::EffectTemperature;
+
+    /// Units of the randomised self-check (seed 1) where, before the
+    /// selection weighed candidates against disturbances outside the
+    /// library, a bias jump was named `scale_factor_temperature` and a
+    /// drift `thermal_lag`.
+    #[test]
+    fn a_bias_jump_and_a_drift_are_held_as_outside_not_named() {
+        for (seed, d, kind) in [
+            (100, Outside::Step, "bias_step"),
+            (31, Outside::Drift, "bias_drift"),
+        ] {
+            let t = trial(seed, &Case::Outside { disturbance: d }).expect("runs");
+            assert!(t.accepted.is_empty(), "seed {seed}: {:?}", t.accepted);
+            assert_eq!(t.outside, [kind], "seed {seed}");
+        }
+    }
+
+    #[test]
+    fn memory_in_the_block_with_a_wide_loop_is_named_with_its_form() {
+        let mut unit = TwinConfig::default_rl16();
+        let h = unit
+            .effects
+            .hysteresis
+            .as_mut()
+            .expect("the default twin has a hysteresis section");
+        h.enabled = true;
+        h.temperature = EffectTemperature::Block;
+        h.width_c = 12.0;
+        // About 3x the noise of 60 s means: a loop this wide acts in a
+        // small part of the cycle.
+        h.amplitude_dph = 0.15;
+        let runs = runs_of(&unit, 5, false).expect("runs");
+        let opts = Options {
+            twin: None,
+            fit_thermal: false,
+            power_replications: 0,
+        };
+        let d = diagnose_rate(&runs, &opts);
+        let e = d.effects.first().expect("an effect named");
+        assert_eq!(e.name, "hysteresis", "{:?}", d.effects);
+        assert_eq!(e.temperature.as_deref(), Some("block"), "{e:?}");
+        let width = e.parameters["width_c"];
+        assert!((8.0..=16.0).contains(&width), "width {width} (unit: 12)");
+        // The updated twin carries the form.
+        let updated = super::super::updated_twin(&TwinConfig::default_rl16(), &d);
+        let h = updated.effects.hysteresis.expect("hysteresis enabled");
+        assert_eq!(h.temperature, EffectTemperature::Block);
     }
 }

@@ -241,6 +241,7 @@ fn size(runs: &[RunData], e: Effect, p: f64, reference: &TwinConfig) -> Size {
     let opts = Options {
         twin: Some(reference.clone()),
         fit_thermal: false,
+        power_replications: 0,
     };
     Size {
         visible: super::visible_gap(runs, &opts, &c),
@@ -260,6 +261,8 @@ pub(crate) fn inject(base: &TwinConfig, e: Effect, a: f64) -> (TwinConfig, TwinC
                 enabled: true,
                 amplitude_dph: a,
                 width_c: 2.0,
+                temperature: tc::EffectTemperature::Case,
+                shape: tc::HysteresisShape::Play,
             });
         }
         Effect::ThermalLag => {
@@ -268,6 +271,8 @@ pub(crate) fn inject(base: &TwinConfig, e: Effect, a: f64) -> (TwinConfig, TwinC
                 coeff_dph_per_c: a,
                 tau_s: 1800.0,
                 reference_c: 20.0,
+                temperature: tc::EffectTemperature::Case,
+                order: 1,
             });
         }
         Effect::GSensitivity => {
@@ -314,7 +319,10 @@ pub(crate) fn inject(base: &TwinConfig, e: Effect, a: f64) -> (TwinConfig, TwinC
             data.bias.k4_dph_per_c = a;
             reference.bias.terms.case_temperature = false;
         }
-        Effect::Gradient => {}
+        // Not injectable: model 4's own first term, and the disturbances
+        // outside the library (the randomised self-check adds those to
+        // the rates).
+        Effect::Gradient | Effect::BiasStep | Effect::BiasDrift => {}
     }
     (data, reference)
 }
@@ -334,6 +342,7 @@ fn trial(
             // The self-check is about the rate layer.
             twin: Some(reference.clone()),
             fit_thermal: false,
+            power_replications: 0,
         },
     );
     let accepted: Vec<String> = d.effects.iter().map(|e| e.name.clone()).collect();

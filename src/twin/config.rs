@@ -313,8 +313,69 @@ pub struct EffectsConfig {
     pub periodic: Option<Periodic>,
 }
 
-/// `amplitude * (y - T_K) / width`, y the play (backlash) operator of T_K
-/// with half-width `width_c`: `-amplitude` while heating, `+amplitude` while cooling.
+/// The temperature a memory effect (hysteresis, thermal lag) acts on.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum EffectTemperature {
+    /// The case, T_K.
+    #[default]
+    Case,
+    /// The block: the mean of the two blocks, (T1 + T2) / 2.
+    Block,
+    /// The mean of the block and the case.
+    Mean,
+}
+
+impl EffectTemperature {
+    /// Every form, in the order the diagnosis tries them.
+    pub const ALL: [Self; 3] = [Self::Case, Self::Block, Self::Mean];
+
+    /// Its name in the configuration and the diagnosis.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Case => "case",
+            Self::Block => "block",
+            Self::Mean => "mean",
+        }
+    }
+
+    /// Its value from the case and the two block temperatures, degC.
+    pub fn of(self, case_c: f64, t1_c: f64, t2_c: f64) -> f64 {
+        let block = 0.5 * (t1_c + t2_c);
+        match self {
+            Self::Case => case_c,
+            Self::Block => block,
+            Self::Mean => 0.5 * (block + case_c),
+        }
+    }
+
+    fn is_case(&self) -> bool {
+        *self == Self::Case
+    }
+}
+
+/// The shape of a hysteresis loop.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum HysteresisShape {
+    /// One play (backlash) operator: sharp corners.
+    #[default]
+    Play,
+    /// The mean of plays of half-widths 0.25 to 1.75 times `width_c`: the
+    /// loop's corners rounded, as a unit's many internal memories would
+    /// make them (the diagnosis library has only the sharp play).
+    Smooth,
+}
+
+impl HysteresisShape {
+    fn is_play(&self) -> bool {
+        *self == Self::Play
+    }
+}
+
+/// `amplitude * (y - T) / width`, y the play (backlash) operator of a
+/// temperature T (`temperature`, the case unless said) with half-width
+/// `width_c`: `-amplitude` while heating, `+amplitude` while cooling.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Hysteresis {
@@ -324,9 +385,17 @@ pub struct Hysteresis {
     pub amplitude_dph: f64,
     /// Half-width of the play operator, degC.
     pub width_c: f64,
+    /// The temperature the memory is of.
+    #[serde(default, skip_serializing_if = "EffectTemperature::is_case")]
+    pub temperature: EffectTemperature,
+    /// The loop's shape.
+    #[serde(default, skip_serializing_if = "HysteresisShape::is_play")]
+    pub shape: HysteresisShape,
 }
 
-/// `coeff * (lag(T_K) - reference)`, lag a first-order filter with `tau_s`.
+/// `coeff * (lag(T) - reference)`, lag `order` first-order filters of
+/// `tau_s` in cascade on a temperature T (`temperature`, the case unless
+/// said).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ThermalLag {
@@ -338,6 +407,21 @@ pub struct ThermalLag {
     pub tau_s: f64,
     /// Temperature at which the term is zero, degC.
     pub reference_c: f64,
+    /// The temperature lagged.
+    #[serde(default, skip_serializing_if = "EffectTemperature::is_case")]
+    pub temperature: EffectTemperature,
+    /// Filters in cascade (1-3; the diagnosis library has only the first
+    /// order).
+    #[serde(default = "first_order", skip_serializing_if = "is_first_order")]
+    pub order: u8,
+}
+
+fn first_order() -> u8 {
+    1
+}
+
+fn is_first_order(o: &u8) -> bool {
+    *o == 1
 }
 
 /// `k . g_body`, g in units of g.
@@ -519,6 +603,7 @@ impl EffectsConfig {
         if let Some(l) = &self.thermal_lag {
             c.finite(l.coeff_dph_per_c, "effects.thermal_lag.coeff_dph_per_c")?;
             c.positive(l.tau_s, "effects.thermal_lag.tau_s")?;
+            c.within(f64::from(l.order), 1.0, 3.0, "effects.thermal_lag.order")?;
             c.finite(l.reference_c, "effects.thermal_lag.reference_c")?;
         }
         if let Some(g) = &self.g_sensitivity {

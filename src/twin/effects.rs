@@ -3,7 +3,7 @@
 
 use nalgebra::{Rotation3, Vector3};
 
-use super::config::EffectsConfig;
+use super::config::{EffectsConfig, HysteresisShape};
 
 /// Inputs an effect may depend on at one thermal step.
 #[derive(Debug, Clone, Copy)]
@@ -14,6 +14,8 @@ pub struct EffectInputs {
     pub t_s: f64,
     /// Case temperature T_K, degC.
     pub case_c: f64,
+    /// The two block temperatures, degC.
+    pub blocks_c: [f64; 2],
     /// Gravity in the body frame, g.
     pub gravity_body_g: Vector3<f64>,
     /// Earth's field in the body frame, microtesla.
@@ -24,9 +26,15 @@ pub struct EffectInputs {
 #[derive(Debug, Clone)]
 pub struct Effects {
     cfg: EffectsConfig,
-    play_c: Option<f64>,
-    lag_c: Option<f64>,
+    /// The play operators' states (one, or one per width of a smooth loop).
+    play_c: Option<Vec<f64>>,
+    /// The lag filters' states, in cascade.
+    lag_c: Option<Vec<f64>>,
 }
+
+/// Half-widths of a smooth loop's plays, as multiples of its `width_c`
+/// (their mean normalised output is the loop).
+const SMOOTH_PLAYS: [f64; 7] = [0.25, 0.5, 0.75, 1.0, 1.25, 1.5, 1.75];
 
 impl Effects {
     /// Keep only the enabled effects.
@@ -83,14 +91,32 @@ impl Effects {
     pub fn step_bias_dph(&mut self, x: &EffectInputs) -> f64 {
         let mut bias = 0.0;
         if let Some(h) = &self.cfg.hysteresis {
-            let y = self.play_c.get_or_insert(x.case_c);
-            *y = y.clamp(x.case_c - h.width_c, x.case_c + h.width_c);
-            bias += h.amplitude_dph * (*y - x.case_c) / h.width_c;
+            let t = h.temperature.of(x.case_c, x.blocks_c[0], x.blocks_c[1]);
+            let widths: &[f64] = match h.shape {
+                HysteresisShape::Play => &[1.0],
+                HysteresisShape::Smooth => &SMOOTH_PLAYS,
+            };
+            let ys = self.play_c.get_or_insert_with(|| vec![t; widths.len()]);
+            let mut out = 0.0;
+            for (y, k) in ys.iter_mut().zip(widths) {
+                let w = h.width_c * k;
+                *y = y.clamp(t - w, t + w);
+                out += (*y - t) / w;
+            }
+            bias += h.amplitude_dph * out / widths.len() as f64;
         }
         if let Some(l) = &self.cfg.thermal_lag {
-            let lag = self.lag_c.get_or_insert(x.case_c);
-            *lag += (x.case_c - *lag) * (-(-x.dt_s / l.tau_s).exp_m1());
-            bias += l.coeff_dph_per_c * (*lag - l.reference_c);
+            let t = l.temperature.of(x.case_c, x.blocks_c[0], x.blocks_c[1]);
+            let lags = self
+                .lag_c
+                .get_or_insert_with(|| vec![t; usize::from(l.order.max(1))]);
+            let a = -(-x.dt_s / l.tau_s).exp_m1();
+            let mut input = t;
+            for y in lags.iter_mut() {
+                *y += (input - *y) * a;
+                input = *y;
+            }
+            bias += l.coeff_dph_per_c * (input - l.reference_c);
         }
         if let Some(g) = &self.cfg.g_sensitivity {
             bias += Vector3::from(g.coeff_dph_per_g).dot(&x.gravity_body_g);
@@ -109,12 +135,14 @@ impl Effects {
 mod tests {
     use super::*;
     use crate::twin::TwinConfig;
+    use crate::twin::config::EffectTemperature;
 
     fn inputs(case_c: f64) -> EffectInputs {
         EffectInputs {
             dt_s: 1.0,
             t_s: 0.0,
             case_c,
+            blocks_c: [case_c; 2],
             gravity_body_g: Vector3::zeros(),
             magnetic_body_ut: Vector3::zeros(),
         }
@@ -150,5 +178,84 @@ mod tests {
             b = e.step_bias_dph(&inputs(50.0 - f64::from(i) * 0.5));
         }
         assert!((b - amp).abs() < 1e-12, "cooling branch: {b}");
+    }
+
+    #[test]
+    fn memory_acts_on_the_temperature_it_is_of() {
+        let mut cfg = TwinConfig::default_rl16().effects;
+        let h = cfg.hysteresis.as_mut().expect("fixture has hysteresis");
+        h.enabled = true;
+        h.temperature = EffectTemperature::Block;
+        let amp = h.amplitude_dph;
+        let mut e = Effects::new(&cfg);
+        // The case heats, the blocks stay: a loop on the block says nothing.
+        let mut b = 0.0;
+        for i in 0..=100 {
+            let mut x = inputs(f64::from(i) * 0.5);
+            x.blocks_c = [0.0, 0.0];
+            b = e.step_bias_dph(&x);
+        }
+        assert!(b.abs() < 1e-12, "block loop moved with the case: {b}");
+        // The blocks heat: it does.
+        for i in 0..=100 {
+            let mut x = inputs(50.0);
+            x.blocks_c = [f64::from(i) * 0.5; 2];
+            b = e.step_bias_dph(&x);
+        }
+        assert!((b + amp).abs() < 1e-12, "heating branch of the block: {b}");
+    }
+
+    #[test]
+    fn a_smooth_loop_rounds_the_corners_a_play_has() {
+        let turn = |shape: HysteresisShape| {
+            let mut cfg = TwinConfig::default_rl16().effects;
+            let h = cfg.hysteresis.as_mut().expect("fixture has hysteresis");
+            h.enabled = true;
+            h.shape = shape;
+            let (amp, width) = (h.amplitude_dph, h.width_c);
+            let mut e = Effects::new(&cfg);
+            for i in 0..=100 {
+                e.step_bias_dph(&inputs(f64::from(i) * 0.5));
+            }
+            // Turn back by half the width, then by four times it.
+            let half = e.step_bias_dph(&inputs(50.0 - 0.5 * width)) / amp;
+            let far = e.step_bias_dph(&inputs(50.0 - 4.0 * width)) / amp;
+            (half, far)
+        };
+        let (play_half, play_far) = turn(HysteresisShape::Play);
+        let (smooth_half, smooth_far) = turn(HysteresisShape::Smooth);
+        // A play holds its state inside the width; the narrower plays of a
+        // smooth loop have already started to turn.
+        assert!((play_half + 0.5).abs() < 1e-12, "{play_half}");
+        assert!(smooth_half > play_half + 0.05, "{smooth_half}");
+        // Far past the width both sit on the cooling branch.
+        assert!((play_far - 1.0).abs() < 1e-12, "{play_far}");
+        assert!((smooth_far - 1.0).abs() < 1e-12, "{smooth_far}");
+    }
+
+    #[test]
+    fn a_cascade_of_lags_starts_slower_than_one() {
+        let after_one_tau = |order: u8| {
+            let mut cfg = TwinConfig::default_rl16().effects;
+            let l = cfg.thermal_lag.as_mut().expect("fixture has a lag");
+            l.enabled = true;
+            l.order = order;
+            l.reference_c = 0.0;
+            let (k, tau) = (l.coeff_dph_per_c, l.tau_s);
+            let mut e = Effects::new(&cfg);
+            e.step_bias_dph(&inputs(0.0));
+            let mut b = 0.0;
+            let steps = tau as usize;
+            for _ in 0..steps {
+                b = e.step_bias_dph(&inputs(1.0));
+            }
+            b / k
+        };
+        // A unit step through one lag: 1 - e^-1 after tau; through two:
+        // 1 - 2 e^-1.
+        let one = after_one_tau(1);
+        let two = after_one_tau(2);
+        assert!((one - (1.0 - (-1.0_f64).exp())).abs() < 1e-3, "{one}");
+        assert!((two - (1.0 - 2.0 * (-1.0_f64).exp())).abs() < 1e-3, "{two}");
     }
 }

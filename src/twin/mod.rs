@@ -402,6 +402,7 @@ impl Twin {
             dt_s: dt,
             t_s,
             case_c: th.case_c,
+            blocks_c: [th.t1_c, th.t2_c],
             gravity_body_g: self.gravity_body_g,
             magnetic_body_ut: self.magnetic_body_ut,
         });

@@ -331,7 +331,15 @@ fn a_small_effect_is_inconclusive_and_the_deciding_run_decides_it() {
         logs.push(run.join("run.mcap"));
     }
     let out = dir.join("d");
-    let r = gyrobench(&["diagnose", s(&logs[0]), s(&logs[1]), "--out", s(&out)]);
+    let r = gyrobench(&[
+        "diagnose",
+        s(&logs[0]),
+        s(&logs[1]),
+        "--power-replications",
+        "20",
+        "--out",
+        s(&out),
+    ]);
     assert_eq!(r.status.code(), Some(0));
     let stdout = String::from_utf8_lossy(&r.stdout).to_string();
     let d = json(&out.join("diagnosis.json"));
@@ -341,7 +349,11 @@ fn a_small_effect_is_inconclusive_and_the_deciding_run_decides_it() {
     let c = &inc["candidates"][0];
     assert!(c["p_value"].as_f64().expect("p") >= c["level"].as_f64().expect("level"));
     let run = &inc["deciding_run"];
+    // Its power simulated on the fitted unit, the estimate beside it.
     assert!(run["power"].as_f64().expect("power") >= 0.8, "{run}");
+    assert_eq!(run["replications"], 20, "{run}");
+    assert!(run["estimated_power"].as_f64().is_some(), "{run}");
+    assert!(stdout.contains("simulated replications"), "{stdout}");
     assert!(
         stdout.contains("deciding run for axis_misalignment"),
         "{stdout}"
