@@ -53,6 +53,50 @@ impl Sample {
     }
 }
 
+/// Turning between consecutive 1 Hz intervals beyond which the table was
+/// moving, deg (ours: far above an encoder's jitter, far below a move).
+pub const MOVING_DEG: f64 = 0.05;
+
+/// The samples taken while the table was still: a sample whose orientation
+/// differs from a neighbour's by more than [`MOVING_DEG`] was taken during
+/// a move (its 1 Hz means mix positions, and the Earth-rate reference of
+/// one orientation does not hold), unless its step turns the table on
+/// purpose (a rate record). A live run records nothing while moving; an
+/// imported one may have its moves in a record (the interchange CSV labels
+/// them with the step that made them).
+fn without_moves(samples: Vec<Sample>) -> Vec<Sample> {
+    let turn = |a: &Orientation, b: &Orientation| {
+        [
+            a.azimuth_deg - b.azimuth_deg,
+            a.elevation_deg - b.elevation_deg,
+            a.roll_deg - b.roll_deg,
+        ]
+        .iter()
+        .map(|d| (d + 180.0).rem_euclid(360.0) - 180.0)
+        .fold(0.0, |m: f64, d| m.max(d.abs()))
+    };
+    // Neighbours a second apart (a live run's records are apart by the
+    // move between them, which is not in them).
+    let apart = |a: &Sample, b: &Sample| {
+        turn(&a.orientation, &b.orientation) > MOVING_DEG
+            && (a.iv.time_s - b.iv.time_s).abs() <= 1.5
+    };
+    let moving: Vec<bool> = (0..samples.len())
+        .map(|i| {
+            let prev = i
+                .checked_sub(1)
+                .is_some_and(|j| apart(&samples[i], &samples[j]));
+            let next = samples.get(i + 1).is_some_and(|n| apart(&samples[i], n));
+            (prev || next) && !crate::procedure::is_rate_record_key(&samples[i].step)
+        })
+        .collect();
+    samples
+        .into_iter()
+        .zip(moving)
+        .filter_map(|(s, m)| (!m).then_some(s))
+        .collect()
+}
+
 /// Load a run's log (live, simulated or imported).
 pub fn load(path: &Path) -> Result<RunData, ReplayError> {
     let log_err = |message: String| ReplayError::Log {
@@ -98,6 +142,7 @@ pub fn load(path: &Path) -> Result<RunData, ReplayError> {
         Ok(())
     })?;
     let site = site.ok_or_else(|| log_err("no site in the run metadata".into()))?;
+    let samples = without_moves(samples);
     if samples.len() < 60 {
         return Err(log_err(
             "fewer than 60 recorded seconds: nothing to diagnose".into(),
@@ -108,4 +153,56 @@ pub fn load(path: &Path) -> Result<RunData, ReplayError> {
         site,
         samples,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn sample(t: f64, roll: f64, record: &str, step: &str) -> Sample {
+        Sample {
+            iv: Interval {
+                time_s: t,
+                ..Interval::default()
+            },
+            orientation: Orientation::new(0.0, 90.0, roll),
+            record: record.into(),
+            step: step.into(),
+        }
+    }
+
+    #[test]
+    fn a_move_inside_a_record_is_left_out_and_records_apart_are_kept() {
+        let mut s = Vec::new();
+        // Still at -90, a move to 0 in 1 Hz rows (an imported run's), still
+        // at 0 (encoder jitter of 0.001 deg), then a record 30 s later at
+        // 180 (a live run's: the move is not in the log), and a turning
+        // rate record.
+        for k in 0..10 {
+            s.push(sample(f64::from(k), -90.0, "a", "main.1"));
+        }
+        for (k, roll) in [-85.0, -50.0, -10.0].into_iter().enumerate() {
+            s.push(sample(10.0 + k as f64, roll, "main.2", "main.2"));
+        }
+        for k in 0..10 {
+            let jitter = 0.001 * f64::from(k % 2);
+            s.push(sample(13.0 + f64::from(k), jitter, "b", "main.3"));
+        }
+        for k in 0..10 {
+            s.push(sample(53.0 + f64::from(k), 180.0, "c", "main.4"));
+        }
+        for k in 0..10 {
+            let t = 70.0 + f64::from(k);
+            s.push(sample(t, 10.0 * t, "d", "main.5.record"));
+        }
+        let kept = without_moves(s);
+        let count = |r: &str| kept.iter().filter(|x| x.record == r).count();
+        // The last row still at -90 sees the move begin; the first at 0
+        // sees it end: both mix positions in their 1 Hz means.
+        assert_eq!(count("a"), 9);
+        assert_eq!(count("main.2"), 0);
+        assert_eq!(count("b"), 9);
+        assert_eq!(count("c"), 10);
+        assert_eq!(count("d"), 10);
+    }
 }

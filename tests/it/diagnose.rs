@@ -163,6 +163,50 @@ fn a_withheld_effect_is_found_and_the_updated_twin_closes_the_gap() {
     let tau = updated["thermal"]["case_tau_s"].as_float().expect("tau");
     assert!((tau - fitted_tau).abs() < 1e-6, "{tau}");
 
+    // The same runs through the interchange CSV (a lab's own recording):
+    // exported, imported at the twin's site and diagnosed, the effect is
+    // found again. The CSV carries the table's moves inside the steps that
+    // made them; the diagnosis leaves them out.
+    let site_toml = {
+        let text = std::fs::read_to_string(&twin).expect("twin");
+        let start = text.find("[site]").expect("a site");
+        let end = text[start + 1..]
+            .find("\n[")
+            .map_or(text.len(), |k| start + 1 + k);
+        text[start..end].to_owned()
+    };
+    let site = dir.join("site.toml");
+    std::fs::write(&site, site_toml).expect("site");
+    let mut imported = Vec::new();
+    for (k, log) in logs.iter().enumerate() {
+        let csv = dir.join(format!("run{k}.csv"));
+        let back = dir.join(format!("run{k}-imported.mcap"));
+        assert_eq!(
+            gyrobench(&["export", s(log), "-o", s(&csv)]).status.code(),
+            Some(0)
+        );
+        let r = gyrobench(&["import", s(&csv), "--site", s(&site), "-o", s(&back)]);
+        assert!(
+            r.status.code() == Some(0),
+            "{}",
+            String::from_utf8_lossy(&r.stderr)
+        );
+        imported.push(back);
+    }
+    let fifth = dir.join("d5");
+    let r = gyrobench(&[
+        "diagnose",
+        s(&imported[0]),
+        s(&imported[1]),
+        "--out",
+        s(&fifth),
+    ]);
+    assert_eq!(r.status.code(), Some(0));
+    let d5 = json(&fifth.join("diagnosis.json"));
+    let gap5 = d5["layers"]["rate"]["gap_dph"].as_f64().expect("gap_dph");
+    assert!(gap5 < 2.0 * gap, "imported: {gap5} deg/h against {gap}");
+    assert_eq!(d5["effects"][0]["name"], "hysteresis", "{}", d5["effects"]);
+
     // Bad input: a clear error.
     std::fs::write(dir.join("junk.mcap"), b"junk").expect("junk");
     let r = gyrobench(&[
