@@ -598,11 +598,13 @@ impl EffectsConfig {
     fn validate(&self, c: &Checker<'_>) -> Result<(), ConfigError> {
         if let Some(h) = &self.hysteresis {
             c.finite(h.amplitude_dph, "effects.hysteresis.amplitude_dph")?;
-            c.positive(h.width_c, "effects.hysteresis.width_c")?;
+            // Up to 1000 degC / 11 days: the diagnosis carries the value
+            // with its temperature in one number below 1e6.
+            c.within(h.width_c, 1e-3, 1000.0, "effects.hysteresis.width_c")?;
         }
         if let Some(l) = &self.thermal_lag {
             c.finite(l.coeff_dph_per_c, "effects.thermal_lag.coeff_dph_per_c")?;
-            c.positive(l.tau_s, "effects.thermal_lag.tau_s")?;
+            c.within(l.tau_s, 1e-3, 1e6 - 1.0, "effects.thermal_lag.tau_s")?;
             c.within(f64::from(l.order), 1.0, 3.0, "effects.thermal_lag.order")?;
             c.finite(l.reference_c, "effects.thermal_lag.reference_c")?;
         }
