@@ -591,6 +591,25 @@ fn periodicity(data: &Data<'_>, residual: &[f64]) -> (Option<f64>, f64) {
 
 /// Most disturbances outside the library held as nuisances (ours).
 const MAX_OUTSIDE: usize = 2;
+/// Every candidate of `remaining` added to `over` (its parameter chosen
+/// jointly with the `free` ones) and scored held out: the effect, its fit,
+/// the held-out improvement and its p-value.
+fn each_against(
+    data: &Data<'_>,
+    remaining: &[Effect],
+    over: &Scored,
+    free: &[Effect],
+) -> Vec<(Effect, Scored, f64, f64)> {
+    remaining
+        .iter()
+        .map(|&e| {
+            let s = score(data, &with_best_parameter(data, &over.model, e, free));
+            let (gain, p) = improvement(over, &s);
+            (e, s, gain, p)
+        })
+        .collect()
+}
+
 /// Rows kept clear of a record's ends by a bias jump (ours: 1 min). A change
 /// that comes with a position change is the position's, as far as these
 /// runs can tell: a positional effect is preferred there.
@@ -763,14 +782,7 @@ pub(crate) fn diagnose_rate(runs: &[RunData], opts: &Options) -> Diagnosis {
         .partition(|&e| engine::identifiable(&data, e, e.grid()[0]));
 
     // First step: every candidate against the reference.
-    let first: Vec<(Effect, Scored, f64, f64)> = remaining
-        .iter()
-        .map(|&e| {
-            let s = score(&data, &with_best_parameter(&data, &base_model, e, &free));
-            let (gain, p) = improvement(&base, &s);
-            (e, s, gain, p)
-        })
-        .collect();
+    let first = each_against(&data, &remaining, &base, &free);
     let candidates = first
         .iter()
         .map(|(e, s, _, p)| CandidateScore {
@@ -829,14 +841,7 @@ pub(crate) fn diagnose_rate(runs: &[RunData], opts: &Options) -> Diagnosis {
             outside.extend(found);
             held_outside += 1;
             current = os;
-            step_scores = remaining
-                .iter()
-                .map(|&c| {
-                    let s = score(&data, &with_best_parameter(&data, &current.model, c, &free));
-                    let (gain, p) = improvement(&current, &s);
-                    (c, s, gain, p)
-                })
-                .collect();
+            step_scores = each_against(&data, &remaining, &current, &free);
             continue;
         }
         let before = current.gap();
@@ -874,14 +879,7 @@ pub(crate) fn diagnose_rate(runs: &[RunData], opts: &Options) -> Diagnosis {
         accepted.push(e);
         remaining.retain(|x| *x != e);
         current = s;
-        step_scores = remaining
-            .iter()
-            .map(|&o| {
-                let s = score(&data, &with_best_parameter(&data, &current.model, o, &free));
-                let (gain, p) = improvement(&current, &s);
-                (o, s, gain, p)
-            })
-            .collect();
+        step_scores = each_against(&data, &remaining, &current, &free);
         let level = ALPHA / remaining.len().max(1) as f64;
         let adds = |gain: f64, p: f64, over: &Scored| p < level && gain > MIN_GAIN * over.sse();
         for (o, alone) in rivals {
