@@ -197,12 +197,27 @@ fn a_device_run_stopped_by_sigterm_or_killed_through_sim_serve_ends_safe_and_res
     child.wait().expect("reaped");
     assert!(!out.join("report.json").exists());
     let r = gyrobench(&["run", "--resume", s(&out)]);
+    let report = json(&out.join("report.json"));
+    // A judged unit (0 or 3). A served link at 200x on a loaded host may
+    // lose frames; the run then says so and ends in error (1), which is
+    // the honest outcome, not a failed resume.
+    let host_lost_frames = {
+        let text = report.to_string();
+        [
+            "% missing)",
+            "the gyro link lost or corrupted",
+            "the host fell behind",
+        ]
+        .iter()
+        .any(|why| text.contains(why))
+    };
     assert!(
-        r.status.code().is_some_and(|c| c == 0 || c == 3),
+        r.status
+            .code()
+            .is_some_and(|c| c == 0 || c == 3 || (c == 1 && host_lost_frames)),
         "{}",
         stderr(&r)
     );
-    let report = json(&out.join("report.json"));
     assert_eq!(
         report["bench_left"]["verified"], true,
         "{}",
