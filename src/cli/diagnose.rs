@@ -186,12 +186,13 @@ pub fn run(args: DiagnoseArgs) -> Result<Outcome> {
     }
     if let Some(i) = &d.inconclusive {
         let r = &i.deciding_run;
-        outln!("inconclusive: these improve the held-out gap but miss the bar")?;
+        outln!("inconclusive: these improve the held-out gap but miss a bar")?;
         for c in &i.candidates {
             outln!(
-                "  {:<26} removes {:.0} % of it, p {:.4} (bar {:.4})",
+                "  {:<26} removes {:.0} % of it (bar {:.0} %), p {:.4} (bar {:.4})",
                 c.name,
                 100.0 * c.improvement,
+                100.0 * diagnose::MIN_GAIN,
                 c.p_value,
                 c.level
             )?;
@@ -355,10 +356,11 @@ fn run_randomized(a: &SelfcheckArgs) -> Result<Outcome> {
         &serde_json::to_string_pretty(&r)?,
     )?;
     outln!(
-        "named first: {:.0} % at >= 2x, {:.0} % at 1.5x; pairs both named {:.0} %; false attribution {:.0} %; thermal layer within 0.05 degC {:.0} % (network form {:.0} %); median excess closed {:.0} %",
+        "named first: {:.0} % at >= 2x, {:.0} % at 1.5x; pairs both named {:.0} % (or reported confounded with a named one {:.0} %); false attribution {:.0} %; thermal layer within 0.05 degC {:.0} % (network form {:.0} %); median excess closed {:.0} %",
         100.0 * r.named_at_2x,
         100.0 * r.named_at_1_5x,
         100.0 * r.pairs_both_named,
+        100.0 * r.pairs_named_or_confounded,
         100.0 * r.false_attribution,
         100.0 * r.thermal_within_0_05,
         100.0 * r.network_followed,

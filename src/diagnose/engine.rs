@@ -235,6 +235,9 @@ pub struct Scored {
     pub block_residual: Vec<(usize, f64)>,
     /// Parameters fitted (terms and run offsets).
     pub parameters: usize,
+    /// Degrees of freedom the fit spends on the record means (see
+    /// [`between_spent`]).
+    pub between_spent: f64,
     /// Record of each fold (folds cut from one record share it).
     pub fold_record: Vec<usize>,
 }
@@ -425,6 +428,10 @@ pub fn score(data: &Data<'_>, model: &[(Effect, f64)]) -> Scored {
     let coeffs = (0..p)
         .map(|j| beta_all[j] / if j < q { scales[j] } else { 1.0 })
         .collect();
+    let fold_record = record_ids(data);
+    let between_spent = inv.as_ref().map_or(p as f64, |g_inv| {
+        between_spent(&blocks, &fold_record, g_inv)
+    });
     let block_residual = data
         .folds
         .iter()
@@ -445,22 +452,62 @@ pub fn score(data: &Data<'_>, model: &[(Effect, f64)]) -> Scored {
         held_out,
         block_residual,
         parameters: p,
-        fold_record: {
-            let mut id = 0;
-            data.folds
-                .iter()
-                .enumerate()
-                .map(|(k, f)| {
-                    if k > 0
-                        && (data.folds[k - 1].run != f.run || data.folds[k - 1].record != f.record)
-                    {
-                        id += 1;
-                    }
-                    id
-                })
-                .collect()
-        },
+        between_spent,
+        fold_record,
     }
+}
+
+/// Record of each fold (folds cut from one record share it).
+fn record_ids(data: &Data<'_>) -> Vec<usize> {
+    let mut id = 0;
+    data.folds
+        .iter()
+        .enumerate()
+        .map(|(k, f)| {
+            if k > 0 && (data.folds[k - 1].run != f.run || data.folds[k - 1].record != f.record) {
+                id += 1;
+            }
+            id
+        })
+        .collect()
+}
+
+/// Degrees of freedom a model spends on the record means: the summed
+/// leverage of the fitted record means, `sum_r N_r m_r' G^-1 m_r` (`m_r`
+/// the record's mean regressor row, `N_r` its rows, `G` the Gram matrix of
+/// every row). A per-run offset spends one; a term that varies only
+/// within records (a thermal term at a steady temperature) spends next to
+/// nothing, a term that varies only between records spends up to one per
+/// parameter. Counting every parameter against the record means instead
+/// leaves an effect between nine positions a handful of degrees of
+/// freedom, most of them taken by terms that do not live there.
+fn between_spent(
+    blocks: &[Vec<(DVector<f64>, f64)>],
+    fold_record: &[usize],
+    g_inv: &DMatrix<f64>,
+) -> f64 {
+    let mut spent = 0.0;
+    let mut k = 0;
+    while k < blocks.len() {
+        let record = fold_record[k];
+        let mut sum: Option<DVector<f64>> = None;
+        let mut n = 0usize;
+        while k < blocks.len() && fold_record[k] == record {
+            for (x, _) in &blocks[k] {
+                match sum.as_mut() {
+                    Some(s) => *s += x,
+                    None => sum = Some(x.clone()),
+                }
+                n += 1;
+            }
+            k += 1;
+        }
+        if let Some(s) = sum {
+            let m = s / n as f64;
+            spent += (n * AVERAGING_S) as f64 * m.dot(&(g_inv * &m));
+        }
+    }
+    spent
 }
 
 /// In-sample sum of squares of a model (to choose nonlinear parameters):
@@ -680,6 +727,9 @@ pub const NEWEY_WEST_LAGS: usize = 20;
 /// Lags of the long-run variance of the record means (ours: 2 records: a
 /// slow disturbance moves neighbouring records together).
 pub const BETWEEN_LAGS: usize = 2;
+/// A candidate that adds less than this to the degrees of freedom spent on
+/// the record means does not live between records: no between-record test.
+const MIN_BETWEEN_DOF: f64 = 0.05;
 
 /// Does `better` (base plus a candidate) beat `base`? Returns the held-out
 /// improvement (reduction of the held-out sum of squares of 60 s means)
@@ -690,7 +740,9 @@ pub const BETWEEN_LAGS: usize = 2;
 /// - between records: one value per record (a position's or a thermal
 ///   segment's mean: the slow part of the noise, flicker, moves whole
 ///   records), their number cut by the record means' own long-run
-///   variance ([`BETWEEN_LAGS`]);
+///   variance ([`BETWEEN_LAGS`]); the degrees of freedom are those each
+///   model spends on the record means ([`between_spent`]), not its
+///   parameter count;
 /// - within records: the sample size cut by the deviations' long-run
 ///   variance (Newey-West, Bartlett weights, [`NEWEY_WEST_LAGS`]).
 pub fn improvement(base: &Scored, better: &Scored) -> (f64, f64) {
@@ -703,7 +755,17 @@ pub fn improvement(base: &Scored, better: &Scored) -> (f64, f64) {
     let p_within = f_test(rss(&w0), rss(&w1), q, n_eff - q);
     let (g0, g1) = (record_means(base), record_means(better));
     let n_records = g1.len() as f64 / long_run_factor(&g1, BETWEEN_LAGS);
-    let p_between = f_test(rss(&g0), rss(&g1), q, n_records - better.parameters as f64);
+    let q_between = better.between_spent - base.between_spent;
+    let p_between = if q_between < MIN_BETWEEN_DOF {
+        1.0
+    } else {
+        f_test(
+            rss(&g0),
+            rss(&g1),
+            q_between,
+            n_records - better.between_spent,
+        )
+    };
     (gain, (2.0 * p_within.min(p_between)).min(1.0))
 }
 

@@ -331,7 +331,7 @@ pub fn headline(d: &Diagnosis) -> String {
             let r = &i.deciding_run;
             if r.passes > 0 {
                 format!(
-                    " Inconclusive: {} improves it but misses the bar; {} would decide ({:.1} h of device time, {}, {}).",
+                    " Inconclusive: {} improves it but misses a bar; {} would decide ({:.1} h of device time, {}, {}).",
                     r.effect,
                     r.what,
                     r.device_time_h,
@@ -340,7 +340,7 @@ pub fn headline(d: &Diagnosis) -> String {
                 )
             } else {
                 format!(
-                    " Inconclusive: {} improves it but misses the bar, and {}.",
+                    " Inconclusive: {} improves it but misses a bar, and {}.",
                     r.effect, r.what
                 )
             }
@@ -373,8 +373,30 @@ pub fn headline(d: &Diagnosis) -> String {
             .next()
             .map(|c| c.to_uppercase().chain(initial).collect())
             .unwrap_or_default();
+        // Effects these runs cannot tell from a named one: said here, not
+        // only in the list below.
+        let mut could_be: Vec<&str> = Vec::new();
+        for c in &d.confounded {
+            for (a, b) in [(0, 1), (1, 0)] {
+                let named = d.effects.iter().any(|e| e.name == c.effects[a]);
+                let other = c.effects[b].as_str();
+                if named && !d.effects.iter().any(|e| e.name == other) && !could_be.contains(&other)
+                {
+                    could_be.push(other);
+                }
+            }
+        }
+        let could_be = if could_be.is_empty() {
+            String::new()
+        } else {
+            format!(
+                " These runs cannot tell {} from {} (see Confounded for the run that would).",
+                if d.effects.len() == 1 { "it" } else { "them" },
+                could_be.join(" or ")
+            )
+        };
         format!(
-            " {} explain{} it: with {} the held-out rate gap shrinks from {:.5} to {:.5} deg/h ({shrink:.0} % smaller).{rest}",
+            " {} explain{} it: with {} the held-out rate gap shrinks from {:.5} to {:.5} deg/h ({shrink:.0} % smaller).{rest}{could_be}",
             names,
             if d.effects.len() == 1 { "s" } else { "" },
             if d.effects.len() == 1 { "it" } else { "them" },
@@ -470,7 +492,8 @@ pub fn render(d: &Diagnosis) -> String {
             format!("For {}: {}.", esc(&r.effect), esc(&r.what))
         };
         confounded.push_str(&format!(
-            "<h2>Inconclusive</h2><p>These improve the held-out gap but miss the bar. {decide}</p>\n<table><tr><th>candidate</th><th>held-out gap with it</th><th>removes</th><th>p</th><th>bar</th></tr>{rows}</table>\n"
+            "<h2>Inconclusive</h2><p>These improve the held-out gap but miss a bar: an effect must remove {:.0} % of the held-out sum of squares and its p-value be under the bar. {decide}</p>\n<table><tr><th>candidate</th><th>held-out gap with it</th><th>removes</th><th>p</th><th>bar</th></tr>{rows}</table>\n",
+            100.0 * super::MIN_GAIN
         ));
     }
     let candidates: String = d

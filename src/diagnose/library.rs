@@ -296,7 +296,7 @@ pub fn separate_with(a: Effect, b: Effect) -> String {
     use Effect::*;
     let pair = |x: Effect, y: Effect| (a == x && b == y) || (a == y && b == x);
     if pair(AxisMisalignment, GSensitivity) || pair(AxisMisalignment, MagneticSensitivity) {
-        "positions with the sensitive axis horizontal pointing north and south (Earth rate along the axis changes sign, gravity does not), or the same positions at another latitude".into()
+        "a rate-table run with the sensitive axis horizontal, turning about the vertical one way and the other at two rolls 90 deg apart (a misaligned axis reads a share of the table rate that changes sign with it; what gravity and the magnetic field add does not), or the same positions at another latitude: at one site Earth rate lies in the plane of gravity and the magnetic field, so no static position tells a misalignment from a mix of g- and magnetic sensitivity".into()
     } else if pair(GSensitivity, MagneticSensitivity) {
         "a run with the magnetic field changed (a Helmholtz coil or a mu-metal shield), or roll positions about a north-pointing axis".into()
     } else if pair(Hysteresis, ThermalLag) {

@@ -610,6 +610,66 @@ fn each_against(
         .collect()
 }
 
+/// A swap explains as much as the accepted effect when it leaves no more
+/// than this fraction of what the effect removed (held-out sum of squares)
+/// unexplained (ours: a fifth; two sets that are one at these positions
+/// differ by their parameter count and the noise).
+const SWAP_WITHIN: f64 = 0.2;
+
+/// Accepted effects that a candidate left out could stand in for, given
+/// the rest of the final model: the swap (the accepted effect out, the
+/// candidate in) explains as much, held out, and neither adds over the
+/// other. The step-by-step check above compares candidates alone; this one
+/// sees the sets: Earth rate lies in the plane of gravity and the magnetic
+/// field (physics.md), so with a magnetic sensitivity accepted, a
+/// misalignment and a g-sensitivity explain the same rest at every
+/// position of one site.
+fn swaps(
+    data: &Data<'_>,
+    accepted: &[Effect],
+    step_scores: &[(Effect, Scored, f64, f64)],
+    current: &Scored,
+    free: &[Effect],
+    known: &[Confounded],
+) -> Vec<Confounded> {
+    let level = ALPHA / step_scores.len().max(1) as f64;
+    let reported = |a: Effect, b: Effect, out: &[Confounded]| {
+        known.iter().chain(out).any(|c| {
+            let names = [a.name(), b.name()];
+            names.contains(&c.effects[0].as_str()) && names.contains(&c.effects[1].as_str())
+        })
+    };
+    let mut out = Vec::new();
+    for &e in accepted {
+        let rest: Vec<(Effect, f64)> = current.model.iter().copied().filter(|m| m.0 != e).collect();
+        let contribution = score(data, &rest).sse() - current.sse();
+        if contribution <= 0.0 {
+            continue;
+        }
+        for &(o, _, _, p) in step_scores {
+            // A candidate that adds over the final model is told apart.
+            if reported(e, o, &out) || p < level {
+                continue;
+            }
+            let swapped = score(data, &with_best_parameter(data, &rest, o, free));
+            // The swap must explain nearly what the accepted effect did...
+            if swapped.sse() - current.sse() > SWAP_WITHIN * contribution {
+                continue;
+            }
+            // ...and the accepted effect add nothing significant over it.
+            let back = score(data, &with_best_parameter(data, &swapped.model, e, free));
+            let (_, pv) = improvement(&swapped, &back);
+            if pv >= level {
+                out.push(Confounded {
+                    effects: [e.name().into(), o.name().into()],
+                    separate_with: separate_with(e, o),
+                });
+            }
+        }
+    }
+    out
+}
+
 /// Rows kept clear of a record's ends by a bias jump (ours: 1 min). A change
 /// that comes with a position change is the position's, as far as these
 /// runs can tell: a positional effect is preferred there.
@@ -880,16 +940,17 @@ pub(crate) fn diagnose_rate(runs: &[RunData], opts: &Options) -> Diagnosis {
         remaining.retain(|x| *x != e);
         current = s;
         step_scores = each_against(&data, &remaining, &current, &free);
+        // Told apart when either adds significantly over the other (the
+        // relevance bar is for naming, not for telling apart).
         let level = ALPHA / remaining.len().max(1) as f64;
-        let adds = |gain: f64, p: f64, over: &Scored| p < level && gain > MIN_GAIN * over.sse();
         for (o, alone) in rivals {
             let still = step_scores
                 .iter()
                 .find(|x| x.0 == o)
-                .is_some_and(|x| adds(x.2, x.3, &current));
+                .is_some_and(|x| x.3 < level);
             let both = score(&data, &with_best_parameter(&data, &alone.model, e, &free));
-            let (gain, p) = improvement(&alone, &both);
-            if !still && !adds(gain, p, &alone) {
+            let (_, p) = improvement(&alone, &both);
+            if !still && p >= level {
                 confounded.push(Confounded {
                     effects: [e.name().into(), o.name().into()],
                     separate_with: separate_with(e, o),
@@ -897,6 +958,14 @@ pub(crate) fn diagnose_rate(runs: &[RunData], opts: &Options) -> Diagnosis {
             }
         }
     }
+    confounded.extend(swaps(
+        &data,
+        &accepted,
+        &step_scores,
+        &current,
+        &free,
+        &confounded,
+    ));
     let level = ALPHA / remaining.len().max(1) as f64;
     let (inconclusive, deciding_procedure) = match inconclusive(
         &data,
@@ -1052,6 +1121,11 @@ fn inconclusive(
             run: r_star,
             free,
             level,
+            rivals: remaining
+                .iter()
+                .copied()
+                .filter(|&r| r != e && r.grid()[0].is_nan())
+                .collect(),
         };
         loop {
             let p = sim.power(passes, replications);
@@ -1173,14 +1247,18 @@ struct Simulation<'a> {
     run: usize,
     free: &'a [Effect],
     level: f64,
+    /// Candidates left with no parameter to choose (cheap to score): the
+    /// candidate is named only when none of them explains more.
+    rivals: Vec<Effect>,
 }
 
 impl Simulation<'_> {
     /// Block of the residual drawn at a time, rows (the folds' length).
     const BLOCK: usize = engine::FOLD_MAX_S;
 
-    /// Share of `replications` in which the candidate passes both bars
-    /// when the recorded run is diagnosed with `passes` repeats of it, each
+    /// Share of `replications` in which the candidate passes both bars,
+    /// and explains more than any rival left, when the recorded run is
+    /// diagnosed with `passes` repeats of it, each
     /// the fitted unit's values on that run's inputs plus the run's own
     /// residual (under the candidate model) drawn in blocks, so its
     /// autocorrelation and flicker come along.
@@ -1234,7 +1312,15 @@ impl Simulation<'_> {
                 &with_best_parameter(&sim, &base, self.effect, self.free),
             );
             let (gain, p) = improvement(&before, &after);
-            if p < self.level && gain > MIN_GAIN * before.sse() {
+            // Named: both bars passed, and no rival explains more (a
+            // g-sensitivity can take a small misalignment's place).
+            let named = p < self.level
+                && gain > MIN_GAIN * before.sse()
+                && self.rivals.iter().all(|&r| {
+                    let rival = score(&sim, &with_best_parameter(&sim, &base, r, self.free));
+                    (1.0 - TIE) * (before.sse() - rival.sse()) <= gain
+                });
+            if named {
                 decided += 1;
             }
         }

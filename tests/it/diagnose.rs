@@ -346,7 +346,7 @@ fn the_separating_run_shows_a_scale_factor_drift() {
 fn a_small_effect_is_inconclusive_and_the_deciding_run_decides_it() {
     // An axis misalignment of 3 arcmin (about 0.6 of the noise of 60 s
     // means between positions): with the study's runs it improves the
-    // held-out gap but misses the bar.
+    // held-out gap but misses a bar.
     let dir = temp_dir("inconclusive");
     let default = String::from_utf8(gyrobench(&["twin", "default-config"]).stdout).expect("utf-8");
     let with = default.replacen(
@@ -391,7 +391,12 @@ fn a_small_effect_is_inconclusive_and_the_deciding_run_decides_it() {
     let inc = &d["inconclusive"];
     assert_eq!(inc["candidates"][0]["name"], "axis_misalignment", "{inc}");
     let c = &inc["candidates"][0];
-    assert!(c["p_value"].as_f64().expect("p") >= c["level"].as_f64().expect("level"));
+    // It misses a bar: significance, or the held-out share (MIN_GAIN).
+    assert!(
+        c["p_value"].as_f64().expect("p") >= c["level"].as_f64().expect("level")
+            || c["improvement"].as_f64().expect("improvement") < gyrobench::diagnose::MIN_GAIN,
+        "{c}"
+    );
     let run = &inc["deciding_run"];
     // Its power simulated on the fitted unit, the estimate beside it.
     assert!(run["power"].as_f64().expect("power") >= 0.8, "{run}");
@@ -430,7 +435,28 @@ fn a_small_effect_is_inconclusive_and_the_deciding_run_decides_it() {
     ]);
     assert_eq!(r.status.code(), Some(0));
     let d2 = json(&out2.join("diagnosis.json"));
-    assert_eq!(d2["effects"][0]["name"], "axis_misalignment", "{d2}");
+    // The run decides at the simulated power (80 % or more), not always:
+    // the effect is named, or an effect these positions cannot tell from
+    // it is, and the diagnosis says the two are confounded.
+    let named = d2["effects"][0]["name"].as_str().expect("an effect named");
+    let told_confounded = d2["confounded"]
+        .as_array()
+        .expect("confounded")
+        .iter()
+        .any(|c| {
+            let pair = c["effects"].to_string();
+            pair.contains(named) && pair.contains("axis_misalignment")
+        });
+    assert!(named == "axis_misalignment" || told_confounded, "{d2}");
+    // ...and says so where it is read first.
+    if named != "axis_misalignment" {
+        let stdout = String::from_utf8_lossy(&r.stdout).to_string();
+        let first = stdout.lines().next().unwrap_or_default();
+        assert!(
+            first.contains("cannot tell it from") && first.contains("axis_misalignment"),
+            "{first}"
+        );
+    }
     // A diagnosis that is not inconclusive leaves no deciding run behind.
     assert!(d2["inconclusive"].is_null());
     assert!(!out2.join("deciding-run.toml").exists());
