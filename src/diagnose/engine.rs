@@ -819,3 +819,46 @@ fn record_means(s: &Scored) -> Vec<(usize, f64)> {
         .map(|(r, sum, n)| (r, sum / n as f64))
         .collect()
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Degrees of freedom spent on the record means by the columns of
+    /// `cols` (each a function of record and row), three records of two
+    /// 60 s blocks each, one fold per record.
+    fn spent(cols: &[&dyn Fn(usize, usize) -> f64]) -> f64 {
+        let p = cols.len();
+        let mut g = DMatrix::zeros(p, p);
+        let mut blocks = Vec::new();
+        for r in 0..3 {
+            let mut means = Vec::new();
+            for b in 0..2 {
+                let mut sum = DVector::zeros(p);
+                for i in b * AVERAGING_S..(b + 1) * AVERAGING_S {
+                    let x = DVector::from_iterator(p, cols.iter().map(|c| c(r, i)));
+                    g += &x * x.transpose();
+                    sum += x;
+                }
+                means.push((sum / AVERAGING_S as f64, 0.0));
+            }
+            blocks.push(means);
+        }
+        let g_inv = g.try_inverse().expect("columns apart");
+        between_spent(&blocks, &[0, 1, 2], &g_inv)
+    }
+
+    #[test]
+    fn only_what_varies_between_records_spends_their_degrees_of_freedom() {
+        let offset = |_: usize, _: usize| 1.0;
+        let between = |r: usize, _: usize| r as f64 - 1.0;
+        let within = |_: usize, i: usize| if i.is_multiple_of(2) { 1.0 } else { -1.0 };
+        let close = |a: f64, b: f64| (a - b).abs() < 1e-9;
+        assert!(close(spent(&[&offset]), 1.0));
+        assert!(close(spent(&[&offset, &between]), 2.0));
+        // A term that moves within records only spends nothing there,
+        // although it is a parameter of the model.
+        assert!(close(spent(&[&offset, &within]), 1.0));
+        assert!(close(spent(&[&offset, &between, &within]), 2.0));
+    }
+}
