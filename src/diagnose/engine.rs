@@ -149,7 +149,10 @@ impl<'a> Data<'a> {
                 .cloned();
             let built = cached.unwrap_or_else(|| {
                 let built: Vec<Arc<Vec<f64>>> = if e.is_outside() {
-                    vec![Arc::new(self.outside_column(e, p))]
+                    self.outside_columns(e, p)
+                        .into_iter()
+                        .map(Arc::new)
+                        .collect()
                 } else {
                     let per_run: Vec<Vec<Vec<f64>>> =
                         self.runs.iter().map(|r| e.columns(r, p)).collect();
@@ -177,38 +180,58 @@ impl<'a> Data<'a> {
 }
 
 impl Data<'_> {
-    /// The column of a disturbance outside the library: a step from row
-    /// `p` to the end of its run ([`Effect::BiasStep`]), or the time from
-    /// the middle of run `p`, in hours ([`Effect::BiasDrift`]).
-    fn outside_column(&self, e: Effect, p: f64) -> Vec<f64> {
+    /// The columns of a disturbance outside the library: a step from row
+    /// `p` to the end of its run ([`Effect::BiasStep`]), the time from the
+    /// middle of run `p`, in hours ([`Effect::BiasDrift`]), or the sine and
+    /// cosine of the time through one run at a period
+    /// ([`Effect::Periodic`], [`super::library::pack_periodic`]).
+    fn outside_columns(&self, e: Effect, p: f64) -> Vec<Vec<f64>> {
         let n = self.y.len();
-        let at = (p.max(0.0) as usize).min(n.saturating_sub(1));
+        let in_run = |run: usize, f: &dyn Fn(f64) -> f64| -> Vec<f64> {
+            let mut t = self
+                .runs
+                .get(run)
+                .into_iter()
+                .flat_map(|r| r.samples.iter().map(|s| s.iv.time_s));
+            (0..n)
+                .map(|i| {
+                    if self.run_of[i] == run {
+                        t.next().map_or(0.0, f)
+                    } else {
+                        0.0
+                    }
+                })
+                .collect()
+        };
         match e {
-            Effect::BiasStep => (0..n)
-                .map(|i| f64::from(u8::from(i >= at && self.run_of[i] == self.run_of[at])))
-                .collect(),
+            Effect::BiasStep => {
+                let at = (p.max(0.0) as usize).min(n.saturating_sub(1));
+                vec![
+                    (0..n)
+                        .map(|i| f64::from(u8::from(i >= at && self.run_of[i] == self.run_of[at])))
+                        .collect(),
+                ]
+            }
+            Effect::Periodic => {
+                let (run, period) = super::library::unpack_periodic(p);
+                let w = std::f64::consts::TAU / period;
+                vec![
+                    in_run(run, &|t| (w * t).sin()),
+                    in_run(run, &|t| (w * t).cos()),
+                ]
+            }
             _ => {
                 let run = p.max(0.0) as usize;
-                let times = || {
-                    self.runs
-                        .get(run)
-                        .into_iter()
-                        .flat_map(|r| r.samples.iter().map(|s| s.iv.time_s))
-                };
-                let (lo, hi) = times().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), t| {
-                    (a.min(t), b.max(t))
-                });
+                let (lo, hi) = self
+                    .runs
+                    .get(run)
+                    .into_iter()
+                    .flat_map(|r| r.samples.iter().map(|s| s.iv.time_s))
+                    .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), t| {
+                        (a.min(t), b.max(t))
+                    });
                 let mid = 0.5 * (lo + hi);
-                let mut t = times();
-                (0..n)
-                    .map(|i| {
-                        if self.run_of[i] == run {
-                            t.next().map_or(0.0, |t| (t - mid) / 3600.0)
-                        } else {
-                            0.0
-                        }
-                    })
-                    .collect()
+                vec![in_run(run, &|t| (t - mid) / 3600.0)]
             }
         }
     }

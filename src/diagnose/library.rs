@@ -45,6 +45,27 @@ pub enum Effect {
     /// Its parameter is the run's index; built by
     /// [`super::engine::Data::columns`] (never a candidate).
     BiasDrift,
+    /// Outside the library: a sine of the bias through one run, its phase
+    /// free (a lab's air-conditioning cycle, a periodic supply). Its
+    /// parameter packs the run's index and the period ([`pack_periodic`]);
+    /// built by [`super::engine::Data::columns`] (never a candidate).
+    Periodic,
+}
+
+/// Packing of a periodic disturbance's run and period in one parameter:
+/// `run * PERIODIC_PACK + period_s` (periods are shorter than a run, far
+/// below this).
+const PERIODIC_PACK: f64 = 1.0e7;
+
+/// A periodic disturbance's parameter for run `run` at `period_s`.
+pub fn pack_periodic(run: usize, period_s: f64) -> f64 {
+    run as f64 * PERIODIC_PACK + period_s.clamp(1.0, PERIODIC_PACK - 1.0)
+}
+
+/// A periodic disturbance's run and period.
+pub fn unpack_periodic(p: f64) -> (usize, f64) {
+    let run = (p / PERIODIC_PACK).floor().max(0.0);
+    (run as usize, p - run * PERIODIC_PACK)
 }
 
 /// The candidates named in diagnosis.md, in its order.
@@ -132,6 +153,7 @@ impl Effect {
             Self::ScaleFactorTemperature => "scale_factor_temperature",
             Self::BiasStep => "bias_step",
             Self::BiasDrift => "bias_drift",
+            Self::Periodic => "periodic",
         }
     }
 
@@ -170,6 +192,7 @@ impl Effect {
             Self::ScaleFactorTemperature => &["per_c"],
             Self::BiasStep => &["step_dph"],
             Self::BiasDrift => &["drift_dph"],
+            Self::Periodic => &["sin_dph", "cos_dph"],
         }
     }
 
@@ -208,7 +231,7 @@ impl Effect {
     /// Whether this is a disturbance outside the library (a nuisance the
     /// selection weighs a candidate against, never named as an effect).
     pub fn is_outside(self) -> bool {
-        matches!(self, Self::BiasStep | Self::BiasDrift)
+        matches!(self, Self::BiasStep | Self::BiasDrift | Self::Periodic)
     }
 
     /// Regressor columns over one run's samples, for parameter `p` (the
@@ -241,7 +264,9 @@ impl Effect {
             Self::ScaleFactorTemperature => vec![col(&|x| {
                 x.iv.reference_dph * (0.5 * (x.iv.t1_c + x.iv.t2_c) - 20.0)
             })],
-            Self::BiasStep | Self::BiasDrift => vec![vec![0.0; s.len()]],
+            Self::BiasStep | Self::BiasDrift | Self::Periodic => {
+                vec![vec![0.0; s.len()]; self.terms().len()]
+            }
         }
     }
 }

@@ -25,7 +25,7 @@ use serde::Serialize;
 use crate::twin::TwinConfig;
 use data::RunData;
 use engine::{Data, Scored, improvement, score, with_best_parameter};
-use library::{Effect, LIBRARY, MODEL4, separate_with};
+use library::{Effect, LIBRARY, MODEL4, pack_periodic, separate_with, unpack_periodic};
 
 /// Family-wise significance level of the selection (ours): each step
 /// tests every remaining candidate at 0.05 / their number (Bonferroni).
@@ -172,14 +172,18 @@ pub struct Unexplained {
 /// A disturbance outside the library found in the rate residual.
 #[derive(Debug, Clone, Serialize)]
 pub struct OutsideFound {
-    /// `bias_step` (a jump of the bias: a mode hop) or `bias_drift` (the
-    /// bias drifting linearly through a run).
+    /// `bias_step` (a jump of the bias: a mode hop), `bias_drift` (the
+    /// bias drifting linearly through a run) or `periodic` (a sine of the
+    /// bias through a run: the lab's air conditioning, a supply).
     pub kind: String,
     /// The run it is in.
     pub run: String,
     /// Time of the jump in the run, s (steps).
     pub at_s: Option<f64>,
-    /// The jump, deg/h (steps), or the drift, deg/h per hour (drifts).
+    /// Period, s (periodic).
+    pub period_s: Option<f64>,
+    /// The jump, deg/h (steps), the drift, deg/h per hour (drifts), or the
+    /// sine's amplitude, deg/h (periodic).
     pub size_dph: f64,
     /// Share of the held-out sum of squares it removed.
     pub improvement: f64,
@@ -194,14 +198,20 @@ pub struct OutsideFound {
 impl OutsideFound {
     /// One sentence for the terminal and the page.
     pub fn describe(&self) -> String {
-        let what = match self.at_s {
-            Some(t) => format!(
+        let what = match (self.at_s, self.period_s) {
+            (Some(t), _) => format!(
                 "a bias jump of {:+.4} deg/h at {:.2} h into {}",
                 self.size_dph,
                 t / 3600.0,
                 self.run
             ),
-            None => format!(
+            (None, Some(period)) => format!(
+                "a periodic bias of {:.4} deg/h amplitude, period {:.0} min, through {}",
+                self.size_dph,
+                period / 60.0,
+                self.run
+            ),
+            (None, None) => format!(
                 "a bias drift of {:+.4} deg/h per hour through {}",
                 self.size_dph, self.run
             ),
@@ -730,7 +740,19 @@ fn outside_rival(
         start = end;
     }
     // A drift goes through every run (a slow change of the unit, not of one
-    // run): one slope per run.
+    // run): one slope per run. So does a periodic disturbance (the lab's,
+    // not the unit's: the same period, its phase free in each run that
+    // holds a whole cycle of it).
+    let period = periodicity(data, e).0;
+    let cycles: Vec<(Effect, f64)> = period
+        .into_iter()
+        .flat_map(|period| {
+            data.runs.iter().enumerate().filter_map(move |(r, run)| {
+                let span = run.samples.last()?.iv.time_s - run.samples.first()?.iv.time_s;
+                (span >= period).then(|| (Effect::Periodic, pack_periodic(r, period)))
+            })
+        })
+        .collect();
     let rivals = step
         .map(|(_, k)| vec![(Effect::BiasStep, k as f64)])
         .into_iter()
@@ -739,7 +761,8 @@ fn outside_rival(
                 .iter()
                 .map(|&r| (Effect::BiasDrift, r as f64))
                 .collect()
-        }));
+        }))
+        .chain((!cycles.is_empty()).then_some(cycles));
     rivals
         .map(|terms| {
             let mut model = current.model.clone();
@@ -769,17 +792,20 @@ fn outside_found(
         if k < from || e != o {
             continue;
         }
-        let coeff = s.coeffs.get(term - 1).copied().unwrap_or(f64::NAN);
-        let (run, at_s) = if o == Effect::BiasStep {
-            let row = (param as usize).min(data.run_of.len().saturating_sub(1));
-            let r = data.run_of[row];
-            let first = data.run_of.iter().position(|&x| x == r).unwrap_or(0);
-            (
-                r,
-                data.runs[r].samples.get(row - first).map(|x| x.iv.time_s),
-            )
-        } else {
-            (param as usize, None)
+        let coeff = |back: usize| s.coeffs.get(term - back).copied().unwrap_or(f64::NAN);
+        let (run, at_s, period_s, size) = match o {
+            Effect::BiasStep => {
+                let row = (param as usize).min(data.run_of.len().saturating_sub(1));
+                let r = data.run_of[row];
+                let first = data.run_of.iter().position(|&x| x == r).unwrap_or(0);
+                let at = data.runs[r].samples.get(row - first).map(|x| x.iv.time_s);
+                (r, at, None, coeff(1))
+            }
+            Effect::Periodic => {
+                let (r, period) = unpack_periodic(param);
+                (r, None, Some(period), coeff(2).hypot(coeff(1)))
+            }
+            _ => (param as usize, None, None, coeff(1)),
         };
         out.push(OutsideFound {
             kind: o.name().into(),
@@ -789,7 +815,8 @@ fn outside_found(
                 .map(|r| r.name.clone())
                 .unwrap_or_default(),
             at_s,
-            size_dph: coeff,
+            period_s,
+            size_dph: size,
             improvement: share,
             p_value,
             instead_of: instead_of.0.name().into(),
@@ -1453,7 +1480,8 @@ pub fn updated_twin(base: &TwinConfig, d: &Diagnosis) -> TwinConfig {
                 t.bias.k4_dph_per_c = get(a, "k4_dph_per_c");
             }
             // Outside disturbances are never accepted effects.
-            Some(Effect::Gradient | Effect::BiasStep | Effect::BiasDrift) | None => {}
+            Some(Effect::Gradient | Effect::BiasStep | Effect::BiasDrift | Effect::Periodic)
+            | None => {}
         }
     }
     t

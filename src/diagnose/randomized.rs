@@ -627,6 +627,28 @@ mod tests {
         }
     }
 
+    /// Units of the randomised self-check (seed 1) where, before a
+    /// periodic disturbance was among the rivals outside the library, a
+    /// slow sine through the runs was named `hysteresis`.
+    #[test]
+    fn a_slow_sine_is_held_as_periodic_not_named_hysteresis() {
+        for seed in [204, 239] {
+            let t = trial(
+                seed,
+                &Case::Outside {
+                    disturbance: Outside::Periodic,
+                },
+            )
+            .expect("runs");
+            assert!(t.accepted.is_empty(), "seed {seed}: {:?}", t.accepted);
+            assert!(
+                t.outside.iter().any(|k| k == "periodic"),
+                "seed {seed}: {:?}",
+                t.outside
+            );
+        }
+    }
+
     /// A magnetic sensitivity and a misalignment together (seeds 27 and
     /// 202 of the randomised self-check): at one site Earth rate lies in
     /// the plane of gravity and the magnetic field, so two of the three

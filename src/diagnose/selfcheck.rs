@@ -322,7 +322,7 @@ pub(crate) fn inject(base: &TwinConfig, e: Effect, a: f64) -> (TwinConfig, TwinC
         // Not injectable: model 4's own first term, and the disturbances
         // outside the library (the randomised self-check adds those to
         // the rates).
-        Effect::Gradient | Effect::BiasStep | Effect::BiasDrift => {}
+        Effect::Gradient | Effect::BiasStep | Effect::BiasDrift | Effect::Periodic => {}
     }
     (data, reference)
 }
