@@ -620,6 +620,69 @@ fn each_against(
         .collect()
 }
 
+/// Candidates a joint step pairs: the best by held-out gain alone.
+const JOINT_FROM: usize = 3;
+
+/// Two candidates that pass together where neither passes alone: each
+/// pair of the [`JOINT_FROM`] best (by held-out gain, positive) is refitted
+/// jointly with the model and tested as one step of both effects' terms,
+/// at a bar corrected for every pair the candidates left could form
+/// (0.05 / (k (k - 1) / 2)), and must clear `MIN_GAIN`; each of the two
+/// must improve on the other alone, held out, and the pair must add
+/// significantly over the best candidate alone (parsimony: two effects
+/// that together mimic a third, a g- and a magnetic sensitivity standing
+/// in for a misalignment, are not named over it). Two effects that partly
+/// cancel in the runs (a misalignment against a magnetic sensitivity at
+/// some positions) are found so; the best pair, by held-out gain, first
+/// by its better member.
+fn joint_step(
+    data: &Data<'_>,
+    step_scores: &[(Effect, Scored, f64, f64)],
+    current: &Scored,
+    free: &[Effect],
+) -> Option<((Effect, Effect), Scored, f64)> {
+    let k = step_scores.len();
+    if k < 2 {
+        return None;
+    }
+    let level = ALPHA / (k * (k - 1) / 2) as f64;
+    let mut top: Vec<&(Effect, Scored, f64, f64)> =
+        step_scores.iter().filter(|x| x.2 > 0.0).collect();
+    top.sort_by(|x, y| y.2.total_cmp(&x.2));
+    top.truncate(JOINT_FROM);
+    let mut best: Option<((Effect, Effect), Scored, f64, f64)> = None;
+    for (i, a) in top.iter().enumerate() {
+        for b in &top[i + 1..] {
+            let model = with_best_parameter(data, &a.1.model, b.0, free);
+            let joint = score(data, &model);
+            let (gain, p) = improvement(current, &joint);
+            let both_matter = joint.sse() < a.1.sse() && joint.sse() < b.1.sse();
+            // Over the best single candidate (`top[0]`; within the pair
+            // when it is `a`).
+            let over_best = || {
+                let with_best = if a.0 == top[0].0 {
+                    joint.clone()
+                } else {
+                    score(
+                        data,
+                        &with_best_parameter(data, &joint.model, top[0].0, free),
+                    )
+                };
+                improvement(&top[0].1, &with_best).1 < level
+            };
+            if p < level
+                && gain > MIN_GAIN * current.sse()
+                && both_matter
+                && best.as_ref().is_none_or(|x| gain > x.3)
+                && over_best()
+            {
+                best = Some(((a.0, b.0), joint, p, gain));
+            }
+        }
+    }
+    best.map(|(pair, joint, p, _)| (pair, joint, p))
+}
+
 /// A swap explains as much as the accepted effect when it leaves no more
 /// than this fraction of what the effect removed (held-out sum of squares)
 /// unexplained (ours: a fifth; two sets that are one at these positions
@@ -903,7 +966,50 @@ pub(crate) fn diagnose_rate(runs: &[RunData], opts: &Options) -> Diagnosis {
             .min_by_key(|x| (x.0.complexity(), LIBRARY.iter().position(|e| *e == x.0)))
             .map(|x| (*x).clone());
         let Some((e, s, cand_gain, p)) = best else {
-            break;
+            // No candidate passes alone: two effects that act together
+            // (and partly cancel) may still pass jointly.
+            if effects.len() + 2 > MAX_EFFECTS {
+                break;
+            }
+            let Some(((a, b), joint, p)) = joint_step(&data, &step_scores, &current, &free) else {
+                break;
+            };
+            // The pair is weighed against a disturbance outside the library
+            // as a single candidate is.
+            if outside_rival(&data, &current, &free).is_some_and(|(_, _, ogain, op)| {
+                op < level
+                    && ogain > MIN_GAIN * current.sse()
+                    && ogain >= current.sse() - joint.sse()
+            }) {
+                break;
+            }
+            let first = step_scores
+                .iter()
+                .find(|x| x.0 == a)
+                .map_or(current.gap(), |x| x.1.gap());
+            for (x, before, after) in [(a, current.gap(), first), (b, first, joint.gap())] {
+                let (parameters, uncertainties) = parameters(&joint, x);
+                effects.push(Accepted {
+                    name: x.name().into(),
+                    parameters,
+                    uncertainties,
+                    held_out_gap_before_dph: before,
+                    held_out_gap_after_dph: after,
+                    shrink: ((before - after) / before).clamp(0.0, 1.0),
+                    p_value: p,
+                    temperature: joint
+                        .model
+                        .iter()
+                        .find(|m| m.0 == x)
+                        .and_then(|m| x.form(m.1))
+                        .map(|t| t.name().to_owned()),
+                });
+                accepted.push(x);
+                remaining.retain(|r| *r != x);
+            }
+            current = joint;
+            step_scores = each_against(&data, &remaining, &current, &free);
+            continue;
         };
         // A candidate is named only when it explains more than a
         // disturbance outside the library would (a bias jump or a drift
