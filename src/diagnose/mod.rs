@@ -143,6 +143,29 @@ pub struct Accepted {
     pub temperature: Option<String>,
 }
 
+impl Accepted {
+    /// Effect `e` as fitted in `s`, which took the held-out gap from
+    /// `before` to `after` with p-value `p_value`.
+    fn fitted(s: &Scored, e: Effect, before: f64, after: f64, p_value: f64) -> Self {
+        let (parameters, uncertainties) = parameters(s, e);
+        Self {
+            name: e.name().into(),
+            parameters,
+            uncertainties,
+            held_out_gap_before_dph: before,
+            held_out_gap_after_dph: after,
+            shrink: ((before - after) / before).clamp(0.0, 1.0),
+            p_value,
+            temperature: s
+                .model
+                .iter()
+                .find(|m| m.0 == e)
+                .and_then(|m| e.form(m.1))
+                .map(|t| t.name().to_owned()),
+        }
+    }
+}
+
 /// Two effects the runs cannot tell apart.
 #[derive(Debug, Clone, Serialize)]
 pub struct Confounded {
@@ -988,22 +1011,7 @@ pub(crate) fn diagnose_rate(runs: &[RunData], opts: &Options) -> Diagnosis {
                 .find(|x| x.0 == a)
                 .map_or(current.gap(), |x| x.1.gap());
             for (x, before, after) in [(a, current.gap(), first), (b, first, joint.gap())] {
-                let (parameters, uncertainties) = parameters(&joint, x);
-                effects.push(Accepted {
-                    name: x.name().into(),
-                    parameters,
-                    uncertainties,
-                    held_out_gap_before_dph: before,
-                    held_out_gap_after_dph: after,
-                    shrink: ((before - after) / before).clamp(0.0, 1.0),
-                    p_value: p,
-                    temperature: joint
-                        .model
-                        .iter()
-                        .find(|m| m.0 == x)
-                        .and_then(|m| x.form(m.1))
-                        .map(|t| t.name().to_owned()),
-                });
+                effects.push(Accepted::fitted(&joint, x, before, after, p));
                 accepted.push(x);
                 remaining.retain(|r| *r != x);
             }
@@ -1037,24 +1045,7 @@ pub(crate) fn diagnose_rate(runs: &[RunData], opts: &Options) -> Diagnosis {
             step_scores = each_against(&data, &remaining, &current, &free);
             continue;
         }
-        let before = current.gap();
-        let after = s.gap();
-        let (parameters, uncertainties) = parameters(&s, e);
-        effects.push(Accepted {
-            name: e.name().into(),
-            parameters,
-            uncertainties,
-            held_out_gap_before_dph: before,
-            held_out_gap_after_dph: after,
-            shrink: ((before - after) / before).clamp(0.0, 1.0),
-            p_value: p,
-            temperature: s
-                .model
-                .iter()
-                .find(|m| m.0 == e)
-                .and_then(|m| e.form(m.1))
-                .map(|t| t.name().to_owned()),
-        });
+        effects.push(Accepted::fitted(&s, e, current.gap(), s.gap(), p));
         // A candidate that was as good alone but adds nothing now, while
         // the accepted one would add nothing over it either, explains the
         // same thing with these runs: confounded with the accepted one.

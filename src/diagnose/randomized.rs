@@ -649,48 +649,40 @@ mod tests {
         }
     }
 
-    /// A magnetic sensitivity and a misalignment that partly cancel at
-    /// the positions (seeds 62 and 132 of the randomised self-check):
-    /// neither passes alone, and before the joint step nothing was named.
-    /// Tested together, two of the three positional effects are named
-    /// (the third explains the runs alike, at one site).
+    /// A randomised unit with a magnetic sensitivity and a misalignment
+    /// together: two of the three positional effects named (at one site
+    /// the third explains the runs alike).
+    fn magnetic_and_misalignment(seed: u64) -> UnitTrial {
+        let effects = [
+            Effect::MagneticSensitivity.name().to_owned(),
+            Effect::AxisMisalignment.name().to_owned(),
+        ];
+        let t = trial(seed, &Case::Pair { effects }).expect("runs");
+        let positional = ["g_sensitivity", "magnetic_sensitivity", "axis_misalignment"];
+        assert_eq!(t.accepted.len(), 2, "seed {seed}: {t:?}");
+        assert!(
+            t.accepted.iter().all(|a| positional.contains(&a.as_str())),
+            "seed {seed}: {t:?}"
+        );
+        t
+    }
+
+    /// The two partly cancel at the positions (seeds 62 and 132 of the
+    /// randomised self-check): neither passes alone, and before the joint
+    /// step nothing was named.
     #[test]
     fn a_pair_that_cancels_alone_is_named_together() {
-        let positional = ["g_sensitivity", "magnetic_sensitivity", "axis_misalignment"];
         for seed in [62, 132] {
-            let effects = [
-                Effect::MagneticSensitivity.name().to_owned(),
-                Effect::AxisMisalignment.name().to_owned(),
-            ];
-            let t = trial(seed, &Case::Pair { effects }).expect("runs");
-            assert_eq!(t.accepted.len(), 2, "seed {seed}: {:?}", t.accepted);
-            assert!(
-                t.accepted.iter().all(|a| positional.contains(&a.as_str())),
-                "seed {seed}: {:?}",
-                t.accepted
-            );
+            magnetic_and_misalignment(seed);
         }
     }
 
-    /// A magnetic sensitivity and a misalignment together (seeds 27 and
-    /// 202 of the randomised self-check): at one site Earth rate lies in
-    /// the plane of gravity and the magnetic field, so two of the three
-    /// positional effects explain the runs alike; the diagnosis names two
-    /// and reports the third confounded with a named one.
+    /// Seeds 27 and 202: the diagnosis names two of the three positional
+    /// effects and reports the third confounded with a named one.
     #[test]
     fn a_pair_that_one_site_cannot_separate_is_reported_confounded() {
-        let positional = ["g_sensitivity", "magnetic_sensitivity", "axis_misalignment"];
         for seed in [27, 202] {
-            let effects = [
-                Effect::MagneticSensitivity.name().to_owned(),
-                Effect::AxisMisalignment.name().to_owned(),
-            ];
-            let t = trial(seed, &Case::Pair { effects }).expect("runs");
-            assert_eq!(t.accepted.len(), 2, "{t:?}");
-            assert!(
-                t.accepted.iter().all(|a| positional.contains(&a.as_str())),
-                "{t:?}"
-            );
+            let t = magnetic_and_misalignment(seed);
             let summary = summarise(1, seed, vec![t.clone()]);
             assert_eq!(summary.pairs_named_or_confounded, 1.0, "{t:?}");
         }

@@ -496,16 +496,49 @@ fn grid() -> Vec<Shape> {
 /// Identify the network on the blocks outside `held_out` from the grid of
 /// starts (and `prior`, a twin's network, as one more).
 fn identify(runs: &[Vec<Block>], held_out: Option<usize>, prior: Option<&Shape>) -> Shape {
-    let cost = Cost { runs, held_out };
-    let starts: Vec<Vec<f64>> = grid()
-        .into_iter()
-        .chain(prior.copied())
-        .map(|q| q.to_vec())
-        .collect();
-    let p = multistart(cost, &starts, 6, (150, 800));
+    let starts: Vec<Shape> = grid().into_iter().chain(prior.copied()).collect();
+    search_shape(runs, held_out, &starts, 6, (150, 800))
+}
+
+/// The network's shape searched from `starts` ([`multistart`]) on the
+/// blocks outside `held_out`, within bounds.
+fn search_shape(
+    runs: &[Vec<Block>],
+    held_out: Option<usize>,
+    starts: &[Shape],
+    keep: usize,
+    iters: (u64, u64),
+) -> Shape {
+    let starts: Vec<Vec<f64>> = starts.iter().map(|q| q.to_vec()).collect();
+    let p = multistart(Cost { runs, held_out }, &starts, keep, iters);
     let mut q = [0.0; 8];
     q.copy_from_slice(&p);
     clamp_shape(&q).0
+}
+
+/// `f` over `jobs` on two threads (the jobs dealt alternately), the
+/// results in the jobs' order.
+fn on_two_threads<J: Sync, R: Send>(jobs: &[J], f: impl Fn(&J) -> R + Sync) -> Vec<R> {
+    let f = &f;
+    let mut out: Vec<(usize, R)> = std::thread::scope(|s| {
+        let handles: Vec<_> = (0..2)
+            .map(|w| {
+                s.spawn(move || {
+                    jobs.iter()
+                        .enumerate()
+                        .filter(|(i, _)| i % 2 == w)
+                        .map(|(i, j)| (i, f(j)))
+                        .collect::<Vec<_>>()
+                })
+            })
+            .collect();
+        handles
+            .into_iter()
+            .flat_map(|h| h.join().unwrap_or_default())
+            .collect()
+    });
+    out.sort_by_key(|o| o.0);
+    out.into_iter().map(|o| o.1).collect()
 }
 
 /// Another fit's optimum must cost this fraction of a fit's own or less
@@ -546,37 +579,15 @@ fn cross_started(data: &[Vec<Block>], shapes: Vec<Shape>) -> Vec<Shape> {
             (i, other.filter(|o| o.1 < CROSS_BETTER * own).map(|o| o.0))
         })
         .collect();
-    let mut out = shapes;
-    let searched: Vec<(usize, Shape)> = std::thread::scope(|s| {
-        let handles: Vec<_> = (0..2)
-            .map(|w| {
-                let better = &better;
-                s.spawn(move || {
-                    better
-                        .iter()
-                        .filter_map(|(i, q)| Some((*i, (*q)?)))
-                        .enumerate()
-                        .filter(|(n, _)| n % 2 == w)
-                        .map(|(_, (i, q))| {
-                            let cost = Cost {
-                                runs: data,
-                                held_out: fold(i),
-                            };
-                            let p = multistart(cost, &[q.to_vec()], 1, CROSS_ITERS);
-                            let mut found = [0.0; 8];
-                            found.copy_from_slice(&p);
-                            (i, clamp_shape(&found).0)
-                        })
-                        .collect::<Vec<_>>()
-                })
-            })
-            .collect();
-        handles
-            .into_iter()
-            .flat_map(|h| h.join().unwrap_or_default())
-            .collect()
+    let jobs: Vec<(usize, Shape)> = better
+        .into_iter()
+        .filter_map(|(i, q)| Some((i, q?)))
+        .collect();
+    let searched = on_two_threads(&jobs, |&(i, q)| {
+        search_shape(data, fold(i), &[q], 1, CROSS_ITERS)
     });
-    for (i, q) in searched {
+    let mut out = shapes;
+    for (&(i, _), q) in jobs.iter().zip(searched) {
         out[i] = q;
     }
     out
@@ -933,41 +944,24 @@ pub fn fitted_network(runs: &[RunData], base: &ThermalConfig, prior: bool) -> Fi
         .map(Job::Network)
         .chain(folds.map(Job::Modal))
         .collect();
-    // Independent fits: two threads, the jobs dealt alternately.
-    let mut outs: Vec<(usize, Out)> = std::thread::scope(|s| {
-        let handles: Vec<_> = (0..2)
-            .map(|w| {
-                let (data, jobs, prior) = (&data, &jobs, prior.as_ref());
-                s.spawn(move || {
-                    jobs.iter()
-                        .enumerate()
-                        .filter(|(i, _)| i % 2 == w)
-                        .map(|(i, j)| match *j {
-                            Job::Network(k) => (i, Out::Network(identify(data, k, prior))),
-                            Job::Modal(k) => (i, Out::Modal(identify_modes(data, k))),
-                        })
-                        .collect::<Vec<_>>()
-                })
-            })
-            .collect();
-        handles
-            .into_iter()
-            .flat_map(|h| h.join().unwrap_or_default())
-            .collect()
+    // Independent fits on two threads.
+    let prior = prior.as_ref();
+    let outs = on_two_threads(&jobs, |j| match *j {
+        Job::Network(k) => Out::Network(identify(&data, k, prior)),
+        Job::Modal(k) => Out::Modal(identify_modes(&data, k)),
     });
-    outs.sort_by_key(|o| o.0);
     let shapes: Vec<Shape> = outs
         .iter()
-        .filter_map(|o| match o.1 {
-            Out::Network(q) => Some(q),
+        .filter_map(|o| match o {
+            Out::Network(q) => Some(*q),
             Out::Modal(_) => None,
         })
         .collect();
     let shapes = cross_started(&data, shapes);
     let modes: Vec<[f64; MODES]> = outs
         .iter()
-        .filter_map(|o| match o.1 {
-            Out::Modal(t) => Some(t),
+        .filter_map(|o| match o {
+            Out::Modal(t) => Some(*t),
             Out::Network(_) => None,
         })
         .collect();
