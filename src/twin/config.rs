@@ -190,6 +190,15 @@ pub struct ThermalConfig {
     /// (0: the blocks follow the case without warming or cooling it back).
     #[serde(default)]
     pub block_capacity_ratio: [f64; 2],
+    /// Time constant of a heat sink on the case (a baseplate, a bracket:
+    /// a mass the case warms and cools that the air does not reach), s; 0
+    /// = none.
+    #[serde(default)]
+    pub sink_tau_s: f64,
+    /// The sink's heat capacity over the case's: its heat flows back into
+    /// the case (0 = none).
+    #[serde(default)]
+    pub sink_capacity_ratio: f64,
 }
 
 fn unit_gain() -> f64 {
@@ -541,6 +550,13 @@ impl TwinConfig {
                 &format!("thermal.block_capacity_ratio[{k}]"),
             )?;
         }
+        c.non_negative(th.sink_tau_s, "thermal.sink_tau_s")?;
+        c.within(
+            th.sink_capacity_ratio,
+            0.0,
+            100.0,
+            "thermal.sink_capacity_ratio",
+        )?;
         for (k, v) in th.sensor_offset_c.iter().enumerate() {
             c.within(*v, -20.0, 20.0, &format!("thermal.sensor_offset_c[{k}]"))?;
         }

@@ -99,7 +99,8 @@ impl ChamberAir {
 }
 
 /// Case (housing) node and two block nodes carrying sensors T1 and T2,
-/// with an optional mount node between the air and the case.
+/// with an optional mount node between the air and the case and an
+/// optional heat sink on the case.
 #[derive(Debug, Clone)]
 pub struct ThermalNetwork {
     cfg: ThermalConfig,
@@ -111,6 +112,8 @@ pub struct ThermalNetwork {
     pub t1_c: f64,
     /// Block node 2 temperature (sensor T2), degC.
     pub t2_c: f64,
+    /// Heat-sink node (follows the case when the network has none), degC.
+    pub sink_c: f64,
     /// d(T1 - T2)/dt over the last step, degC/s.
     pub ddt_dt_c_per_s: f64,
 }
@@ -125,6 +128,7 @@ impl ThermalNetwork {
             case_c: temp_c,
             t1_c: temp_c,
             t2_c: temp_c,
+            sink_c: temp_c,
             ddt_dt_c_per_s: 0.0,
         }
     }
@@ -142,20 +146,34 @@ impl ThermalNetwork {
             self.mount_c = air_c;
         }
         let [r1, r2] = c.block_capacity_ratio;
-        if r1 > 0.0 || r2 > 0.0 {
-            // The blocks' heat flows back into the case in proportion to
-            // their capacities.
+        let bs = if c.sink_tau_s > 0.0 {
+            c.sink_capacity_ratio / c.sink_tau_s
+        } else {
+            0.0
+        };
+        if r1 > 0.0 || r2 > 0.0 || bs > 0.0 {
+            // The blocks' and the sink's heat flows back into the case in
+            // proportion to their capacities.
             let kk = 1.0 / c.case_tau_s;
             let (b1, b2) = (r1 / c.block1_tau_s, r2 / c.block2_tau_s);
-            let eq = (kk * (self.mount_c + c.case_rise_c * on) + b1 * self.t1_c + b2 * self.t2_c)
-                / (kk + b1 + b2);
-            relax(&mut self.case_c, eq, dt_s * (kk + b1 + b2));
+            let eq = (kk * (self.mount_c + c.case_rise_c * on)
+                + b1 * self.t1_c
+                + b2 * self.t2_c
+                + bs * self.sink_c)
+                / (kk + b1 + b2 + bs);
+            relax(&mut self.case_c, eq, dt_s * (kk + b1 + b2 + bs));
         } else {
             relax(
                 &mut self.case_c,
                 self.mount_c + c.case_rise_c * on,
                 dt_s / c.case_tau_s,
             );
+        }
+
+        if c.sink_tau_s > 0.0 {
+            relax(&mut self.sink_c, self.case_c, dt_s / c.sink_tau_s);
+        } else {
+            self.sink_c = self.case_c;
         }
 
         let k1 = 1.0 / c.block1_tau_s;
@@ -185,7 +203,7 @@ impl ThermalNetwork {
         );
         let kc = convection / cfg.coupling_tau_s;
         // Heat balance of the case, block 1 and block 2 (the mount node
-        // settles at the air it sees).
+        // settles at the air it sees, the sink at the case).
         let a =
             nalgebra::Matrix3::new(kk + b1 + b2, -b1, -b2, -k1, k1 + kc, -kc, -k2, -kc, k2 + kc);
         let rhs = nalgebra::Vector3::new(
@@ -268,17 +286,19 @@ mod tests {
         other.mount_tau_s = 400.0;
         other.air_gain = 1.03;
         other.block_capacity_ratio = [0.3, 0.15];
+        other.sink_tau_s = 600.0;
+        other.sink_capacity_ratio = 0.8;
         for (cfg, convection) in [
             (TwinConfig::default_rl16().thermal, 1.0),
             (TwinConfig::default_rl16().thermal, 1.5),
             (other, 1.2),
         ] {
             let mut net = ThermalNetwork::soaked(&cfg, -40.0);
-            for _ in 0..(40_000.0 / 0.1) as usize {
+            for _ in 0..(100_000.0 / 0.1) as usize {
                 net.step(0.1, -40.0, true, convection);
             }
             let (case, t1, t2) = ThermalNetwork::steady_state(&cfg, -40.0, convection);
-            assert!((net.case_c - case).abs() < 1e-6);
+            assert!((net.case_c - case).abs() < 1e-6, "{} vs {case}", net.case_c);
             assert!((net.t1_c - t1).abs() < 1e-4, "{} vs {t1}", net.t1_c);
             assert!((net.t2_c - t2).abs() < 1e-4, "{} vs {t2}", net.t2_c);
             assert!(net.ddt_dt_c_per_s.abs() < 1e-7);
