@@ -199,6 +199,11 @@ pub struct ThermalConfig {
     /// the case (0 = none).
     #[serde(default)]
     pub sink_capacity_ratio: f64,
+    /// Heat capacity of block node 1 over block node 2's (1: equal): the
+    /// conductance between them is one, so block 2's exchange time
+    /// constant is `coupling_tau_s` over this.
+    #[serde(default = "unit_gain")]
+    pub block_capacity_1_over_2: f64,
 }
 
 fn unit_gain() -> f64 {
@@ -556,6 +561,12 @@ impl TwinConfig {
             0.0,
             100.0,
             "thermal.sink_capacity_ratio",
+        )?;
+        c.within(
+            th.block_capacity_1_over_2,
+            0.01,
+            100.0,
+            "thermal.block_capacity_1_over_2",
         )?;
         for (k, v) in th.sensor_offset_c.iter().enumerate() {
             c.within(*v, -20.0, 20.0, &format!("thermal.sensor_offset_c[{k}]"))?;

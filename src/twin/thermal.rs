@@ -179,11 +179,13 @@ impl ThermalNetwork {
         let k1 = 1.0 / c.block1_tau_s;
         let k2 = 1.0 / c.block2_tau_s;
         let kc = convection / c.coupling_tau_s;
+        // One conductance between the blocks, seen from both ends.
+        let kc2 = kc * c.block_capacity_1_over_2;
         let (t1, t2) = (self.t1_c, self.t2_c);
         let eq1 = (k1 * (self.case_c + c.block1_rise_c * on) + kc * t2) / (k1 + kc);
-        let eq2 = (k2 * (self.case_c + c.block2_rise_c * on) + kc * t1) / (k2 + kc);
+        let eq2 = (k2 * (self.case_c + c.block2_rise_c * on) + kc2 * t1) / (k2 + kc2);
         relax(&mut self.t1_c, eq1, dt_s * (k1 + kc));
-        relax(&mut self.t2_c, eq2, dt_s * (k2 + kc));
+        relax(&mut self.t2_c, eq2, dt_s * (k2 + kc2));
         self.ddt_dt_c_per_s = ((self.t1_c - self.t2_c) - dt_before) / dt_s;
     }
 
@@ -202,10 +204,20 @@ impl ThermalNetwork {
             cfg.block_capacity_ratio[1] * k2,
         );
         let kc = convection / cfg.coupling_tau_s;
+        let kc2 = kc * cfg.block_capacity_1_over_2;
         // Heat balance of the case, block 1 and block 2 (the mount node
         // settles at the air it sees, the sink at the case).
-        let a =
-            nalgebra::Matrix3::new(kk + b1 + b2, -b1, -b2, -k1, k1 + kc, -kc, -k2, -kc, k2 + kc);
+        let a = nalgebra::Matrix3::new(
+            kk + b1 + b2,
+            -b1,
+            -b2,
+            -k1,
+            k1 + kc,
+            -kc,
+            -k2,
+            -kc2,
+            k2 + kc2,
+        );
         let rhs = nalgebra::Vector3::new(
             kk * (cfg.air_gain * air_c + cfg.case_rise_c),
             k1 * cfg.block1_rise_c,
@@ -288,6 +300,7 @@ mod tests {
         other.block_capacity_ratio = [0.3, 0.15];
         other.sink_tau_s = 600.0;
         other.sink_capacity_ratio = 0.8;
+        other.block_capacity_1_over_2 = 2.5;
         for (cfg, convection) in [
             (TwinConfig::default_rl16().thermal, 1.0),
             (TwinConfig::default_rl16().thermal, 1.5),
