@@ -167,6 +167,9 @@ pub fn draw_unit(seed: u64) -> TwinConfig {
     t.site.latitude_deg = lat;
     let b0 = u(25.0, 35.0);
     t.site.magnetic_field_ned_ut = [b0 * l.cos(), u(-3.0, 3.0), 2.0 * b0 * l.sin()];
+    // Blocks of unequal capacity on one conductance (drawn last, so the
+    // rest of a seed's unit stays what it was).
+    t.thermal.block_capacity_1_over_2 = log(u(0.0, 1.0), 0.2, 5.0);
     t
 }
 
