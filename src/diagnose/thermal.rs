@@ -280,7 +280,7 @@ where
     let Some(first) = run.first() else {
         return Vec::new();
     };
-    let mut cache: Vec<(f64, SMatrix<f64, N, N>, Nodes<N>)> = Vec::new();
+    let mut cache: Vec<(f64, SMatrix<f64, N, N>, Nodes<N>, BlockStep<N>)> = Vec::new();
     let mut x = Nodes::<N>::zeros();
     for i in 0..N {
         x[(i, 0)] = first.air_c[0];
@@ -294,39 +294,125 @@ where
     run.iter()
         .map(|b| {
             let convection = 1.0 + q[5] * b.gravity_along_axis;
-            let (phi, gamma) = match cache.iter().find(|c| c.0 == convection) {
-                Some(c) => (c.1, c.2),
+            let k = match cache.iter().position(|c| c.0 == convection) {
+                Some(k) => k,
                 None => {
                     let (p, g) = discretize::<N, M>(q, convection, STEP_S);
-                    cache.push((convection, p, g));
-                    (p, g)
+                    cache.push((convection, p, g, BlockStep::new(&p, &g)));
+                    cache.len() - 1
                 }
             };
+            let (_, phi, gamma, whole) = &cache[k];
             // Up to the block (gaps between records) on its first air.
             while t < b.start_s - 1e-9 {
                 let dt = (b.start_s - t).min(STEP_S);
                 if dt == STEP_S {
-                    advance(&mut x, &phi, &gamma, b.air_c[0]);
+                    advance(&mut x, phi, gamma, b.air_c[0]);
                 } else {
                     let (p, g) = discretize::<N, M>(q, convection, dt);
                     advance(&mut x, &p, &g, b.air_c[0]);
                 }
                 t += dt;
             }
+            t += STEP_S * b.air_c.len() as f64;
+            if let Ok(air) = <&[f64; BLOCK_STEPS]>::try_from(b.air_c.as_slice()) {
+                return whole.apply(&mut x, air);
+            }
             let mut acc = Nodes::<N>::zeros();
-            let mut n = 0.0;
             for &air in &b.air_c {
                 let before = x;
-                advance(&mut x, &phi, &gamma, air);
-                acc += (before + x) * (0.5 * STEP_S);
-                n += STEP_S;
-                t += STEP_S;
+                advance(&mut x, phi, gamma, air);
+                acc += (before + x) * 0.5;
             }
-            let acc = acc / n;
-            // Sensors: T1 on block 1, T2 on block 2, TK on the case.
-            [2usize, 3, 1].map(|node| [0, 1, 2, 3].map(|j| acc[(node, j)]))
+            let acc = acc / b.air_c.len().max(1) as f64;
+            SENSOR_NODES.map(|node| [0, 1, 2, 3].map(|j| acc[(node, j)]))
         })
         .collect()
+}
+
+/// Nodes of T1, T2 and TK: block 1, block 2, the case.
+const SENSOR_NODES: [usize; 3] = [2, 3, 1];
+/// Steps of [`STEP_S`] in a block.
+const BLOCK_STEPS: usize = AVERAGING_S / STEP_S as usize;
+
+/// A whole block of [`BLOCK_STEPS`] steps as one linear map: the state at
+/// its end and the sensor nodes' mean over it (the steps' trapezoids)
+/// from the state at its start, the air of each step and the rises. The
+/// same arithmetic as stepping through the block, a quarter of the work.
+struct BlockStep<const N: usize> {
+    end: SMatrix<f64, N, N>,
+    mean: SMatrix<f64, 3, N>,
+    /// Per step, its air's weight on the end state and on the mean.
+    air_end: [SVector<f64, N>; BLOCK_STEPS],
+    air_mean: [SVector<f64, 3>; BLOCK_STEPS],
+    /// The rises' (held over the block) on the end state and the mean.
+    rise_end: SMatrix<f64, N, 3>,
+    rise_mean: SMatrix<f64, 3, 3>,
+}
+
+impl<const N: usize> BlockStep<N> {
+    fn new(phi: &SMatrix<f64, N, N>, gamma: &Nodes<N>) -> Self {
+        const K: usize = BLOCK_STEPS;
+        // pow[k] = phi^k.
+        let mut pow = vec![SMatrix::<f64, N, N>::identity()];
+        for k in 1..=K {
+            pow.push(phi * pow[k - 1]);
+        }
+        // The trapezoids' weights on the states 0..=K, over the block.
+        let w = |k: usize| if k == 0 || k == K { 0.5 } else { 1.0 } / K as f64;
+        let rows =
+            |m: &SMatrix<f64, N, N>| SMatrix::<f64, 3, N>::from_fn(|r, c| m[(SENSOR_NODES[r], c)]);
+        let mean_full = (0..=K).fold(SMatrix::<f64, N, N>::zeros(), |a, k| a + pow[k] * w(k));
+        // An input at step j reaches state k > j through phi^(k - 1 - j).
+        let after = |j: usize| {
+            let end = pow[K - 1 - j];
+            let mean = ((j + 1)..=K).fold(SMatrix::<f64, N, N>::zeros(), |a, k| {
+                a + pow[k - 1 - j] * w(k)
+            });
+            (end, mean)
+        };
+        let g_air: SVector<f64, N> = gamma.column(0).into_owned();
+        let g_rise: SMatrix<f64, N, 3> = gamma.fixed_columns::<3>(1).into_owned();
+        let mut air_end = [SVector::<f64, N>::zeros(); K];
+        let mut air_mean = [SVector::<f64, 3>::zeros(); K];
+        let (mut sum_end, mut sum_mean) = (SMatrix::<f64, N, N>::zeros(), SMatrix::zeros());
+        for j in 0..K {
+            let (end, mean) = after(j);
+            air_end[j] = end * g_air;
+            air_mean[j] = rows(&mean) * g_air;
+            sum_end += end;
+            sum_mean += mean;
+        }
+        Self {
+            end: pow[K],
+            mean: rows(&mean_full),
+            air_end,
+            air_mean,
+            rise_end: sum_end * g_rise,
+            rise_mean: rows(&sum_mean) * g_rise,
+        }
+    }
+
+    /// Step `x` over the block with the air of each step; the sensors'
+    /// mean responses.
+    fn apply(&self, x: &mut Nodes<N>, air: &[f64; BLOCK_STEPS]) -> [[f64; 4]; 3] {
+        let mut mean = self.mean * *x;
+        let mut end = self.end * *x;
+        for (j, &a) in air.iter().enumerate() {
+            let mut c = end.column_mut(0);
+            c.axpy(a, &self.air_end[j], 1.0);
+            let mut m = mean.column_mut(0);
+            m.axpy(a, &self.air_mean[j], 1.0);
+        }
+        for r in 0..3 {
+            let mut c = end.column_mut(r + 1);
+            c += self.rise_end.column(r);
+            let mut m = mean.column_mut(r + 1);
+            m += self.rise_mean.column(r);
+        }
+        *x = end;
+        [0, 1, 2].map(|s| [0, 1, 2, 3].map(|j| mean[(s, j)]))
+    }
 }
 
 /// The linear quantities given the responses: air gain, the three rises,
@@ -1615,6 +1701,31 @@ mod tests {
             run_of(&unit, &cycle, seed * 2, "cycle"),
             run_of(&unit, &flat, seed * 2 + 1, "flat"),
         ]
+    }
+
+    #[test]
+    fn a_block_as_one_map_is_the_block_stepped() {
+        let mut q = shape_of(&TwinConfig::default_rl16().thermal);
+        (q[0], q[6], q[8], q[9], q[10]) = (300f64.ln(), 0.4, 2000f64.ln(), 1.5, 0.5f64.ln());
+        let (phi, gamma) = discretize::<5, 9>(&q, 1.3, STEP_S);
+        let air = [20.0, 21.5, 23.0, 22.0, 19.0, 18.5];
+        let mut x = Nodes::<5>::from_fn(|i, j| (i * 4 + j) as f64 * 0.1 + 15.0);
+        let mut stepped = x;
+        let mut acc = Nodes::<5>::zeros();
+        for &a in &air {
+            let before = stepped;
+            let mut u = gamma;
+            u.column_mut(0).scale_mut(a);
+            stepped = phi * stepped + u;
+            acc += (before + stepped) * (0.5 / air.len() as f64);
+        }
+        let mean = BlockStep::new(&phi, &gamma).apply(&mut x, &air);
+        assert!((x - stepped).abs().max() < 1e-9, "{x} vs {stepped}");
+        for (s, node) in SENSOR_NODES.iter().enumerate() {
+            for j in 0..4 {
+                assert!((mean[s][j] - acc[(*node, j)]).abs() < 1e-9);
+            }
+        }
     }
 
     #[test]
