@@ -2,14 +2,13 @@
 //! chamber air. With a twin, its own thermal network is driven by the
 //! measured air and orientation (nothing fitted). Without, the same network
 //! form (case node, two coupled block nodes, self-heating rises, convection
-//! with the sensor axis vertical, a mount, a heat sink, blocks of unequal
-//! capacity) with its
-//! parameters fitted to the runs by Nelder-Mead (argmin) from a grid of
-//! starts within bounds, and scored held
-//! out: each run's 60 s blocks are cut into [`FOLDS`] contiguous stretches
-//! and each stretch is predicted with parameters fitted on the others (the
-//! network runs through every stretch on the measured air; only the fit
-//! leaves the stretch out).
+//! with the sensor axis vertical, a mount; a heat sink and blocks of
+//! unequal capacity when the simpler network misses) with its parameters
+//! fitted to the runs by Nelder-Mead (argmin) from a grid of starts within
+//! bounds, and scored held out: each run's 60 s blocks are cut into
+//! [`FOLDS`] contiguous stretches and each stretch is predicted with
+//! parameters fitted on the others (the network runs through every stretch
+//! on the measured air; only the fit leaves the stretch out).
 
 use std::collections::BTreeMap;
 
@@ -511,9 +510,9 @@ fn predict(rb: &[[f64; 4]; 3], lin: &Linear) -> [f64; 3] {
 struct Cost<'a> {
     runs: &'a [Vec<Block>],
     held_out: Option<usize>,
-    /// The full form is searched: the heat sink's two quantities and the
-    /// blocks' capacity ratio too (without, the network has no sink and
-    /// blocks of equal capacity).
+    /// The full form is searched: the heat sink's two quantities and block
+    /// 1's capacity over block 2's too (without, the network has no sink
+    /// and blocks of equal capacity).
     full: bool,
 }
 
@@ -1213,13 +1212,10 @@ pub fn fitted_network(runs: &[RunData], base: &ThermalConfig, prior: bool) -> Fi
     // of unequal capacity: the full form takes both, searched only then
     // (the simpler network is kept when it follows; the full one is kept
     // when it predicts the held-out quarters better).
-    let missed = |n: &NetworkHeldOut| {
-        let gap = quadratic_mean(&n.held.per_sensor_c);
-        gap.is_nan() || gap > FORM_MISFIT_C
-    };
-    if missed(&net) && !is_full(&net.all) {
+    let gap = |n: &NetworkHeldOut| quadratic_mean(&n.held.per_sensor_c);
+    let missed = gap(&net).is_nan() || gap(&net) > FORM_MISFIT_C;
+    if missed && !is_full(&net.all) {
         let full = network_held_out(runs, &data, &in_full_form(&data, &shapes), net.all);
-        let gap = |n: &NetworkHeldOut| quadratic_mean(&n.held.per_sensor_c);
         if gap(&full) < gap(&net) || gap(&net).is_nan() {
             net = full;
         }
