@@ -41,7 +41,7 @@ struct Block {
     start_s: f64,
     end_s: f64,
     /// Air over each [`STEP_S`] of the block.
-    air_c: Vec<f64>,
+    air_c: [f64; BLOCK_STEPS],
     gravity_along_axis: f64,
     measured: [f64; 3],
     fold: usize,
@@ -72,10 +72,10 @@ fn blocks(runs: &[RunData], axis: Vector3<f64>) -> Vec<Vec<Block>> {
                 out.push(Block {
                     start_s: c[0].iv.time_s - 0.5,
                     end_s: c[c.len() - 1].iv.time_s + 0.5,
-                    air_c: c
-                        .chunks(STEP_S as usize)
-                        .map(|p| p.iter().map(|x| x.iv.chamber_c).sum::<f64>() / p.len() as f64)
-                        .collect(),
+                    air_c: std::array::from_fn(|k| {
+                        let p = &c[k * STEP_S as usize..(k + 1) * STEP_S as usize];
+                        p.iter().map(|x| x.iv.chamber_c).sum::<f64>() / p.len() as f64
+                    }),
                     gravity_along_axis: mean(&|x| x.gravity_body().dot(&axis).abs()),
                     measured: [
                         mean(&|x| x.iv.t1_c),
@@ -313,18 +313,8 @@ where
                 }
                 t += dt;
             }
-            t += STEP_S * b.air_c.len() as f64;
-            if let Ok(air) = <&[f64; BLOCK_STEPS]>::try_from(b.air_c.as_slice()) {
-                return whole.apply(&mut x, air);
-            }
-            let mut acc = Nodes::<N>::zeros();
-            for &air in &b.air_c {
-                let before = x;
-                advance(&mut x, phi, gamma, air);
-                acc += (before + x) * 0.5;
-            }
-            let acc = acc / b.air_c.len().max(1) as f64;
-            SENSOR_NODES.map(|node| [0, 1, 2, 3].map(|j| acc[(node, j)]))
+            t += STEP_S * BLOCK_STEPS as f64;
+            whole.apply(&mut x, &b.air_c)
         })
         .collect()
 }
@@ -333,6 +323,7 @@ where
 const SENSOR_NODES: [usize; 3] = [2, 3, 1];
 /// Steps of [`STEP_S`] in a block.
 const BLOCK_STEPS: usize = AVERAGING_S / STEP_S as usize;
+const _: () = assert!(BLOCK_STEPS * STEP_S as usize == AVERAGING_S);
 
 /// A whole block of [`BLOCK_STEPS`] steps as one linear map: the state at
 /// its end and the sensor nodes' mean over it (the steps' trapezoids)

@@ -181,7 +181,7 @@ pub struct ThermalConfig {
     /// The air the unit sees per degC of the chamber's air reading (1: the
     /// reading is that air; a chamber sensor with a gain error, or a
     /// workspace gradient, shows as a few percent off).
-    #[serde(default = "unit_gain")]
+    #[serde(default = "one")]
     pub air_gain: f64,
     /// Offsets of the T1, T2 and TK readings, degC.
     #[serde(default)]
@@ -202,11 +202,11 @@ pub struct ThermalConfig {
     /// Heat capacity of block node 1 over block node 2's (1: equal): the
     /// conductance between them is one, so block 2's exchange time
     /// constant is `coupling_tau_s` over this.
-    #[serde(default = "unit_gain")]
+    #[serde(default = "one")]
     pub block_capacity_1_over_2: f64,
 }
 
-fn unit_gain() -> f64 {
+fn one() -> f64 {
     1.0
 }
 
@@ -556,6 +556,11 @@ impl TwinConfig {
             )?;
         }
         c.non_negative(th.sink_tau_s, "thermal.sink_tau_s")?;
+        c.ensure(
+            th.sink_capacity_ratio == 0.0 || th.sink_tau_s > 0.0,
+            "thermal.sink_capacity_ratio",
+            "a heat sink needs thermal.sink_tau_s above 0 (or set the ratio to 0: no sink)",
+        )?;
         c.within(
             th.sink_capacity_ratio,
             0.0,
@@ -764,6 +769,15 @@ mod tests {
         let msg = err.to_string();
         assert!(msg.contains("`thermal.block1_tau_s` must be"), "{msg}");
         assert_eq!(err.line(), Some(line_of("block1_tau_s")));
+    }
+
+    #[test]
+    fn a_sink_ratio_without_a_sink_is_refused() {
+        let err = with("case_tau_s", "sink_capacity_ratio = 2.0\ncase_tau_s")
+            .expect_err("a ratio with no sink time constant");
+        let msg = err.to_string();
+        assert!(msg.contains("`thermal.sink_capacity_ratio`"), "{msg}");
+        assert!(msg.contains("sink_tau_s above 0"), "{msg}");
     }
 
     #[test]
