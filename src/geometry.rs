@@ -248,6 +248,12 @@ impl TableGeometry {
             + ro * self.inner_axis().into_inner() * rates.inner_deg
     }
 
+    /// The table's angular velocity in the body frame, deg/h (what a
+    /// misaligned sensitive axis picks a share of while the table turns).
+    pub fn table_rate_body_dph(&self, a: TableAngles, rates: TableAngles) -> Vector3<f64> {
+        self.rotation(a).inverse() * self.angular_velocity_ned_dps(a, rates) * DPS_TO_DPH
+    }
+
     /// Rate the nominal sensitive axis sees from Earth rotation and table
     /// motion, deg/h (what a perfectly aligned gyro would read).
     pub fn kinematic_rate_dph(&self, site: &Site, a: TableAngles, rates: TableAngles) -> f64 {
@@ -443,5 +449,39 @@ mod tests {
         );
         let x = g.rotation(a) * Vector3::x();
         assert!((w.dot(&x) - 10.0).abs() < 1e-9);
+    }
+
+    /// The outer axis turning with the sensitive axis horizontal: the
+    /// table rate lies across the sensitive axis, fixed in the body, on one
+    /// transverse axis at the inner axis at 0 deg and on the other at 90
+    /// deg (a misaligned axis reads it).
+    #[test]
+    fn the_outer_axis_turns_across_the_sensitive_axis() {
+        let g = TableGeometry::study();
+        let rates = TableAngles {
+            outer_deg: 5.0,
+            inner_deg: 0.0,
+        };
+        let mut seen = Vec::new();
+        for inner in [0.0, 90.0] {
+            for outer in [0.0, 37.0, 200.0] {
+                let a = TableAngles {
+                    outer_deg: outer,
+                    inner_deg: inner,
+                };
+                let w = g.table_rate_body_dph(a, rates);
+                assert!(w.x.abs() < 1e-9, "{w}");
+                assert!((w.norm() - 18_000.0).abs() < 1e-6, "{w}");
+                seen.push(w);
+            }
+            // Fixed in the body while the outer axis turns.
+            assert!((seen[seen.len() - 1] - seen[seen.len() - 3]).norm() < 1e-6);
+        }
+        assert!(
+            seen[0].dot(&seen[3]).abs() < 1e-6,
+            "{} {}",
+            seen[0],
+            seen[3]
+        );
     }
 }

@@ -15,10 +15,11 @@ use crate::analysis::study::{ThermalFigures, self_heating_dph, thermal_figures};
 use crate::bench::BenchConfig;
 use crate::clock::Pacing;
 use crate::config::{ConfigError, Source};
-use crate::geometry::Orientation;
+use crate::geometry::{Orientation, TableGeometry};
 use crate::procedure::Procedure;
 use crate::sequencer::{self, BenchState, Quiet, RunError, Sink, Tick};
 use crate::twin::TwinConfig;
+use nalgebra::Vector3;
 
 /// The study's thermal cycle, as shipped.
 pub const THERMAL_CYCLE_TOML: &str = include_str!("../procedures/thermal_cycle.toml");
@@ -27,10 +28,26 @@ pub const ORIENTATION_TOML: &str = include_str!("../procedures/orientation.toml"
 /// The run that separates what those two cannot (thermal lag,
 /// scale-factor drift), as shipped.
 pub const SEPARATING_TOML: &str = include_str!("../procedures/separating.toml");
+/// The run that separates an axis misalignment from g- and magnetic
+/// sensitivity (the outer axis turning both ways), as shipped.
+pub const MISALIGNMENT_TOML: &str = include_str!("../procedures/misalignment.toml");
 /// The rate transfer at three temperatures: the run that measures the
 /// scale factor's temperature coefficient directly, as shipped.
 pub const RATE_TEMPERATURES_TOML: &str =
     include_str!("../procedures/rate_transfer_temperatures.toml");
+
+/// A shipped procedure by its path under the project (`procedures/...`),
+/// for the runs the diagnosis names; none when it is not one of these.
+pub fn shipped_procedure(path: &str) -> Option<&'static str> {
+    Some(match path {
+        "procedures/thermal_cycle.toml" => THERMAL_CYCLE_TOML,
+        "procedures/orientation.toml" => ORIENTATION_TOML,
+        "procedures/separating.toml" => SEPARATING_TOML,
+        "procedures/misalignment.toml" => MISALIGNMENT_TOML,
+        "procedures/rate_transfer_temperatures.toml" => RATE_TEMPERATURES_TOML,
+        _ => return None,
+    })
+}
 
 /// One recorded 1 Hz interval with its record label and the orientation.
 #[derive(Debug, Clone)]
@@ -43,19 +60,41 @@ pub struct Sample {
     pub orientation: Orientation,
     /// Key of the procedure step it was recorded in.
     pub step: String,
+    /// The table's angular velocity in the body frame at the end of the
+    /// interval, deg/h (zero at rest).
+    pub table_rate_body_dph: Vector3<f64>,
 }
 
 /// Keeps the recorded intervals with their orientation (no log file).
-#[derive(Debug, Default)]
+#[derive(Debug)]
 struct Collect {
+    geometry: TableGeometry,
     orientation: Option<Orientation>,
+    table_rate_body_dph: Vector3<f64>,
     step: String,
     samples: Vec<Sample>,
+}
+
+impl Collect {
+    fn new(geometry: TableGeometry) -> Self {
+        Self {
+            geometry,
+            orientation: None,
+            table_rate_body_dph: Vector3::zeros(),
+            step: String::new(),
+            samples: Vec::new(),
+        }
+    }
 }
 
 impl Sink for Collect {
     fn tick(&mut self, tick: &Tick, _: Option<&str>, step: &str) -> std::io::Result<()> {
         self.orientation = tick.state.as_ref().map(|s: &BenchState| s.orientation);
+        if let Some(s) = &tick.state {
+            self.table_rate_body_dph = self
+                .geometry
+                .table_rate_body_dph(s.table.angles, s.table.rates);
+        }
         step.clone_into(&mut self.step);
         Ok(())
     }
@@ -67,6 +106,7 @@ impl Sink for Collect {
                 record: record.to_owned(),
                 orientation,
                 step: self.step.clone(),
+                table_rate_body_dph: self.table_rate_body_dph,
             });
         }
         Ok(())
@@ -131,9 +171,9 @@ pub enum StudyError {
     /// The shipped procedure does not fit the embedded bench.
     #[error(transparent)]
     Procedure(#[from] ConfigError),
-    /// The run stopped.
-    #[error("the thermal cycle stopped in step {}: {}", .0.step, .0.message)]
-    Run(RunError),
+    /// The run stopped (the procedure's name, why).
+    #[error("{0} stopped in step {step}: {message}", step = .1.step, message = .1.message)]
+    Run(String, RunError),
     /// The compensation fit failed.
     #[error(transparent)]
     Fit(#[from] FitError),
@@ -152,22 +192,25 @@ pub fn simulate(
     let mut bench =
         crate::session::embedded_bench(cfg, seed, Pacing::Max, &[], bench_cfg.limits.clone());
     let opts = crate::session::options(&bench_cfg, None, Arc::default(), None);
-    let mut sink = Collect::default();
+    let mut sink = Collect::new(bench_cfg.table.geometry);
     // No timers or I/O are awaited on the embedded bench: a plain executor will do.
     let rt = tokio::runtime::Builder::new_current_thread()
         .build()
         .map_err(|e| {
-            StudyError::Run(RunError {
-                device: None,
-                step: "start".into(),
-                message: e.to_string(),
-            })
+            StudyError::Run(
+                name.to_owned(),
+                RunError {
+                    device: None,
+                    step: "start".into(),
+                    message: e.to_string(),
+                },
+            )
         })?;
     let result = rt.block_on(sequencer::run(
         &procedure, &mut bench, &mut sink, &mut Quiet, &opts,
     ));
     if let Some(e) = result.error.clone() {
-        return Err(StudyError::Run(e));
+        return Err(StudyError::Run(name.to_owned(), e));
     }
     Ok((result, sink.samples))
 }
@@ -182,9 +225,8 @@ pub fn run_study(cfg: &TwinConfig, seed: u64) -> Result<(StudyReport, Vec<Sample
         seed,
     )?;
     let sink = Collect {
-        orientation: None,
-        step: String::new(),
         samples,
+        ..Collect::new(cfg.table.geometry)
     };
     let series: Vec<Interval> = sink.samples.iter().map(|s| s.interval).collect();
     let report = StudyReport {

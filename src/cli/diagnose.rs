@@ -65,7 +65,11 @@ struct SelfcheckArgs {
     /// Add procedures/separating.toml (axis down, two ramp rates, a pause
     /// mid-ramp) and procedures/rate_transfer_temperatures.toml (the rate
     /// ladder at -40, +20, +50 degC) to each trial: the runs that make
-    /// thermal_lag and scale_factor_temperature identifiable.
+    /// thermal_lag and scale_factor_temperature identifiable. With
+    /// --randomize: a trial whose diagnosis reports a pair confounded and
+    /// names a shipped procedure that separates it (misalignment.toml,
+    /// separating.toml) goes on to that run on the same unit and is
+    /// diagnosed again with it.
     #[arg(long)]
     separating: bool,
     /// What an amplitude of 1 is: the held-out gap the effect alone opens
@@ -331,7 +335,7 @@ fn run_randomized(a: &SelfcheckArgs) -> Result<Outcome> {
         a.units,
         a.seed
     );
-    let r = randomized::run(a.units, a.seed, &|done, _, t| {
+    let r = randomized::run(a.units, a.seed, a.separating, &|done, _, t| {
         let line = format!(
             "[{done}/{}] seed {} {}: named {} / inconclusive {} (thermal {:.3} degC)",
             a.units,
@@ -344,7 +348,17 @@ fn run_randomized(a: &SelfcheckArgs) -> Result<Outcome> {
             },
             t.inconclusive.as_deref().unwrap_or("-"),
             t.thermal_gap_c
-        );
+        ) + &t.with_separating_run.as_ref().map_or(String::new(), |r| {
+            format!(
+                "; with {}: named {}",
+                r.procedures.join(", "),
+                if r.accepted.is_empty() {
+                    "nothing".to_owned()
+                } else {
+                    r.accepted.join(", ")
+                }
+            )
+        });
         bar.println(&line);
         bar.set(done as u64, line);
     })
@@ -356,12 +370,14 @@ fn run_randomized(a: &SelfcheckArgs) -> Result<Outcome> {
         &serde_json::to_string_pretty(&r)?,
     )?;
     outln!(
-        "named first: {:.0} % at >= 2x, {:.0} % at 1.5x; pairs both named {:.0} % (or reported confounded with a named one {:.0} %); false attribution {:.0} %; thermal layer within 0.05 degC {:.0} % (network form {:.0} %); median excess closed {:.0} %",
+        "named first: {:.0} % at >= 2x, {:.0} % at 1.5x; pairs both named {:.0} % (or reported confounded with a named one {:.0} %; both named with the separating run a confounded pair names {:.0} %); false attribution {:.0} % ({:.0} % with the separating runs); thermal layer within 0.05 degC {:.0} % (network form {:.0} %); median excess closed {:.0} %",
         100.0 * r.named_at_2x,
         100.0 * r.named_at_1_5x,
         100.0 * r.pairs_both_named,
         100.0 * r.pairs_named_or_confounded,
+        100.0 * r.pairs_both_named_with_separating_run,
         100.0 * r.false_attribution,
+        100.0 * r.false_attribution_with_separating_run,
         100.0 * r.thermal_within_0_05,
         100.0 * r.network_followed,
         100.0 * r.median_excess_closed
@@ -371,13 +387,22 @@ fn run_randomized(a: &SelfcheckArgs) -> Result<Outcome> {
     }
     for row in &r.rows {
         outln!(
-            "  {:<48} {:>3} units  named {:>4.0} %  inconclusive {:>4.0} %  excess closed {}",
+            "  {:<48} {:>3} units  named {:>4.0} %  inconclusive {:>4.0} %  excess closed {}{}",
             row.case,
             row.trials,
             100.0 * row.named,
             100.0 * row.inconclusive,
             row.median_excess_closed
-                .map_or("-".to_owned(), |m| format!("{:.0} %", 100.0 * m))
+                .map_or("-".to_owned(), |m| format!("{:.0} %", 100.0 * m)),
+            if row.separating_runs > 0 {
+                format!(
+                    "  (separating run in {}: named {:.0} %)",
+                    row.separating_runs,
+                    100.0 * row.named_with_separating_run
+                )
+            } else {
+                String::new()
+            }
         )?;
     }
     errln!("self-check in {}", a.out.display());

@@ -6,9 +6,9 @@ use std::path::Path;
 use nalgebra::Vector3;
 
 use crate::analysis::series::Interval;
-use crate::geometry::{Orientation, Site, gravity_ned_g};
+use crate::geometry::{Orientation, Site, TableAngles, TableGeometry, gravity_ned_g};
 use crate::runlog::meta::RunMeta;
-use crate::runlog::replay::ReplayError;
+use crate::runlog::replay::{ReplayError, logged_bench};
 use crate::runlog::schema::{RUN_META, Rate1Hz, TableState, topics};
 use crate::runlog::{self, Item};
 
@@ -23,6 +23,10 @@ pub struct Sample {
     pub record: String,
     /// Procedure step key.
     pub step: String,
+    /// The table's angular velocity in the body frame, deg/h (zero at
+    /// rest; a rate record's turning, which a misaligned axis reads a
+    /// share of).
+    pub table_rate_body_dph: Vector3<f64>,
 }
 
 /// A run.
@@ -50,6 +54,12 @@ impl Sample {
     /// The Earth rate in the body frame, deg/h.
     pub fn earth_rate_body(&self, site: &Site) -> Vector3<f64> {
         self.orientation.rotation().inverse() * site.earth_rate_ned_dph()
+    }
+
+    /// The body's whole angular velocity, Earth and table, in the body
+    /// frame, deg/h.
+    pub fn inertial_rate_body(&self, site: &Site) -> Vector3<f64> {
+        self.earth_rate_body(site) + self.table_rate_body_dph
     }
 }
 
@@ -104,8 +114,12 @@ pub fn load(path: &Path) -> Result<RunData, ReplayError> {
         message,
     };
     let mut site: Option<Site> = None;
+    // The logged bench's table geometry, needed only for a turning record.
+    let mut geometry: Option<Result<TableGeometry, String>> = None;
     let mut table: Option<TableState> = None;
-    let mut samples = Vec::new();
+    // Each recorded sample with the table's angles and rates it was taken
+    // at (turned into a body rate once the logged bench is known).
+    let mut samples: Vec<(Sample, TableAngles, TableAngles)> = Vec::new();
     runlog::read(path, |item| {
         match item {
             Item::Meta { name, entries } if name == RUN_META => {
@@ -114,6 +128,7 @@ pub fn load(path: &Path) -> Result<RunData, ReplayError> {
                     serde_json::from_str(&meta.site_json)
                         .map_err(|e| format!("the run metadata's site: {e}"))?,
                 );
+                geometry = Some(logged_bench(&meta).map(|b| b.table.geometry));
             }
             Item::Message { topic, data, .. } if topic == topics::TABLE => {
                 table = Some(
@@ -130,18 +145,53 @@ pub fn load(path: &Path) -> Result<RunData, ReplayError> {
                 let Some(record) = r.record.clone() else {
                     return Ok(());
                 };
-                samples.push(Sample {
-                    iv: r.interval(),
-                    orientation: Orientation::new(t.azimuth_deg, t.elevation_deg, t.roll_deg),
-                    record,
-                    step: t.step.clone(),
-                });
+                samples.push((
+                    Sample {
+                        iv: r.interval(),
+                        orientation: Orientation::new(t.azimuth_deg, t.elevation_deg, t.roll_deg),
+                        record,
+                        step: t.step.clone(),
+                        table_rate_body_dph: Vector3::zeros(),
+                    },
+                    TableAngles {
+                        outer_deg: t.outer_deg,
+                        inner_deg: t.inner_deg,
+                    },
+                    TableAngles {
+                        outer_deg: t.outer_rate_dps,
+                        inner_deg: t.inner_rate_dps,
+                    },
+                ));
             }
             _ => {}
         }
         Ok(())
     })?;
     let site = site.ok_or_else(|| log_err("no site in the run metadata".into()))?;
+    let samples = samples
+        .into_iter()
+        .map(|(mut s, angles, rates)| {
+            if rates.outer_deg != 0.0 || rates.inner_deg != 0.0 {
+                let g = match &geometry {
+                    Some(Ok(g)) => g,
+                    Some(Err(e)) => {
+                        return Err(log_err(format!(
+                            "record {:?} turns the table: {e}",
+                            s.record
+                        )));
+                    }
+                    None => {
+                        return Err(log_err(format!(
+                            "record {:?} turns the table, and the run metadata has no bench",
+                            s.record
+                        )));
+                    }
+                };
+                s.table_rate_body_dph = g.table_rate_body_dph(angles, rates);
+            }
+            Ok(s)
+        })
+        .collect::<Result<Vec<_>, _>>()?;
     let samples = without_moves(samples);
     if samples.len() < 60 {
         return Err(log_err(
@@ -168,6 +218,7 @@ mod tests {
             orientation: Orientation::new(0.0, 90.0, roll),
             record: record.into(),
             step: step.into(),
+            table_rate_body_dph: Vector3::zeros(),
         }
     }
 

@@ -32,7 +32,7 @@ pub enum Effect {
     GSensitivity,
     /// The Earth's magnetic field in the body frame.
     MagneticSensitivity,
-    /// Earth rate on the body's transverse axes (the sensitive axis off by
+    /// Earth and table rate on the body's transverse axes (the sensitive axis off by
     /// small angles).
     AxisMisalignment,
     /// Scale factor drifting with the block temperature (times the input rate).
@@ -259,7 +259,7 @@ impl Effect {
                 .map(|i| col(&|x| x.magnetic_body(&run.site)[i]))
                 .collect(),
             Self::AxisMisalignment => (1..3)
-                .map(|i| col(&|x| x.earth_rate_body(&run.site)[i]))
+                .map(|i| col(&|x| x.inertial_rate_body(&run.site)[i]))
                 .collect(),
             Self::ScaleFactorTemperature => vec![col(&|x| {
                 x.iv.reference_dph * (0.5 * (x.iv.t1_c + x.iv.t2_c) - 20.0)
@@ -314,6 +314,20 @@ fn lag(s: &[Sample], form: EffectTemperature, tau: f64) -> Vec<f64> {
         .collect()
 }
 
+/// The shipped procedure that tells two effects apart, when there is one
+/// (run it on the same unit and diagnose it with the runs that could not).
+pub fn separating_procedure(a: Effect, b: Effect) -> Option<&'static str> {
+    use Effect::*;
+    let pair = |x: Effect, y: Effect| (a == x && b == y) || (a == y && b == x);
+    if pair(AxisMisalignment, GSensitivity) || pair(AxisMisalignment, MagneticSensitivity) {
+        Some("procedures/misalignment.toml")
+    } else if a == ScaleFactorTemperature || b == ScaleFactorTemperature {
+        Some("procedures/separating.toml")
+    } else {
+        None
+    }
+}
+
 /// Which extra position or run would tell two effects apart (ours, from
 /// the geometry of physics.md: Earth rate, gravity and the magnetic field
 /// lie nearly in the north-down plane).
@@ -321,7 +335,7 @@ pub fn separate_with(a: Effect, b: Effect) -> String {
     use Effect::*;
     let pair = |x: Effect, y: Effect| (a == x && b == y) || (a == y && b == x);
     if pair(AxisMisalignment, GSensitivity) || pair(AxisMisalignment, MagneticSensitivity) {
-        "a rate-table run with the sensitive axis horizontal, turning about the vertical one way and the other at two rolls 90 deg apart (a misaligned axis reads a share of the table rate that changes sign with it; what gravity and the magnetic field add does not), or the same positions at another latitude: at one site Earth rate lies in the plane of gravity and the magnetic field, so no static position tells a misalignment from a mix of g- and magnetic sensitivity".into()
+        "procedures/misalignment.toml, diagnosed with these runs: the axis horizontal, the outer axis turning one way and the other at two rolls 90 deg apart (a misaligned axis reads a share of the table rate that changes sign with it; what gravity and the magnetic field add does not). At one site Earth rate lies in the plane of gravity and the magnetic field, so no static position tells a misalignment from a mix of g- and magnetic sensitivity".into()
     } else if pair(GSensitivity, MagneticSensitivity) {
         "a run with the magnetic field changed (a Helmholtz coil or a mu-metal shield), or roll positions about a north-pointing axis".into()
     } else if pair(Hysteresis, ThermalLag) {
@@ -332,7 +346,7 @@ pub fn separate_with(a: Effect, b: Effect) -> String {
     {
         "no temperature profile alone: only the part of a case-temperature lag that model 4's block-gradient terms cannot follow tells them apart (a fifth of it in the study's thermal cycle; ramps at two rates and a pause mid-ramp did not add to it in the self-check); a temperature measured where the lag acts would".into()
     } else if a == ScaleFactorTemperature || b == ScaleFactorTemperature {
-        "the thermal cycle repeated axis down (procedures/separating.toml): the Earth rate on the axis changes sign and a scale-factor drift with it, a bias drift does not".into()
+        "procedures/separating.toml, the thermal cycle repeated axis down: the Earth rate on the axis changes sign and a scale-factor drift with it, a bias drift does not".into()
     } else if pair(SelfHeating, CaseTemperature) || pair(SelfHeating, ThermalLag) {
         "a power-on at another chamber temperature (a cold start after a soak at -20 degC)".into()
     } else {

@@ -15,8 +15,8 @@ use rand_xoshiro::Xoshiro256PlusPlus;
 use serde::Serialize;
 
 use super::data::RunData;
-use super::library::{Effect, LIBRARY, MODEL4, pack};
-use super::selfcheck::{contribution, inject, runs_of};
+use super::library::{Effect, LIBRARY, MODEL4, pack, separating_procedure};
+use super::selfcheck::{contribution, inject, runs_of, to_run};
 use super::{Options, diagnose, diagnose_rate, visible_gap};
 use crate::study::StudyError;
 use crate::twin::TwinConfig;
@@ -276,6 +276,10 @@ pub struct UnitTrial {
     pub outside: Vec<String>,
     /// Pairs reported as confounded (these runs cannot tell them apart).
     pub confounded: Vec<[String; 2]>,
+    /// When a confounded pair names a shipped procedure that separates it,
+    /// what the diagnosis accepts once that run, simulated on the same
+    /// unit, is diagnosed with the others (as the engineer would go on).
+    pub with_separating_run: Option<SeparatingRun>,
     /// Rate gap before and after, deg/h.
     pub gap_before_dph: f64,
     /// After.
@@ -287,6 +291,17 @@ pub struct UnitTrial {
     pub thermal_gap_c: f64,
     /// The twin's network form followed (no `form_misfit`).
     pub network_fits: bool,
+}
+
+/// The separating run a trial went on to.
+#[derive(Debug, Clone, Serialize)]
+pub struct SeparatingRun {
+    /// The procedures run (shipped paths).
+    pub procedures: Vec<String>,
+    /// Accepted effects, in order, with them.
+    pub accepted: Vec<String>,
+    /// Pairs still reported as confounded.
+    pub confounded: Vec<[String; 2]>,
 }
 
 /// Rates over a set of trials.
@@ -304,6 +319,11 @@ pub struct Row {
     pub inconclusive: f64,
     /// Median of the excess gap closed where named.
     pub median_excess_closed: Option<f64>,
+    /// Named as in `named`, after the separating run where a confounded
+    /// pair named one ([`UnitTrial::with_separating_run`]).
+    pub named_with_separating_run: f64,
+    /// Trials that went on to a separating run.
+    pub separating_runs: usize,
 }
 
 /// The randomised self-check's result.
@@ -324,6 +344,11 @@ pub struct Randomized {
     /// Each effect of a pair named, or reported confounded with a named
     /// one (the runs cannot tell them apart, and the diagnosis says so).
     pub pairs_named_or_confounded: f64,
+    /// Both effects named (pairs) once the separating run a confounded
+    /// pair names is diagnosed with the others.
+    pub pairs_both_named_with_separating_run: f64,
+    /// Anything accepted on null and outside units, the same way.
+    pub false_attribution_with_separating_run: f64,
     /// Anything accepted on null and outside units.
     pub false_attribution: f64,
     /// Units whose thermal layer is within 0.05 degC held out.
@@ -338,7 +363,7 @@ pub struct Randomized {
     pub trials: Vec<UnitTrial>,
 }
 
-fn trial(seed: u64, case: &Case) -> Result<UnitTrial, StudyError> {
+fn trial(seed: u64, case: &Case, go_on_to_separate: bool) -> Result<UnitTrial, StudyError> {
     let unit = draw_unit(seed);
     let null_runs = runs_of(&unit, seed, false)?;
     let opts = Options {
@@ -398,6 +423,11 @@ fn trial(seed: u64, case: &Case) -> Result<UnitTrial, StudyError> {
     }
     let d = diagnose(&runs, &opts);
     let accepted: Vec<String> = d.effects.iter().map(|e| e.name.clone()).collect();
+    let with_separating_run = if go_on_to_separate {
+        go_on(&d, runs, &data, seed, &opts)?
+    } else {
+        None
+    };
     let (before, after) = (d.layers.rate.gap_dph, d.layers.rate.gap_after_dph);
     let excess_closed = (matches!(case, Case::Effect { .. } | Case::Pair { .. }) && before > noise)
         .then(|| {
@@ -448,6 +478,7 @@ fn trial(seed: u64, case: &Case) -> Result<UnitTrial, StudyError> {
             kinds
         },
         confounded: d.confounded.iter().map(|c| c.effects.clone()).collect(),
+        with_separating_run,
         gap_before_dph: before,
         gap_after_dph: after,
         excess_closed,
@@ -456,11 +487,55 @@ fn trial(seed: u64, case: &Case) -> Result<UnitTrial, StudyError> {
     })
 }
 
+/// What the engineer does next when the diagnosis reports a pair confounded
+/// and names a shipped procedure that separates it: run it on the same unit
+/// (simulated on `data`, the unit with what was withheld) and diagnose it
+/// with the runs that could not.
+fn go_on(
+    d: &super::Diagnosis,
+    mut runs: Vec<RunData>,
+    data: &TwinConfig,
+    seed: u64,
+    opts: &Options,
+) -> Result<Option<SeparatingRun>, StudyError> {
+    let mut procedures: Vec<&'static str> = d
+        .confounded
+        .iter()
+        .filter_map(|c| {
+            let [a, b] = &c.effects;
+            separating_procedure(Effect::from_name(a)?, Effect::from_name(b)?)
+        })
+        .collect();
+    procedures.sort_unstable();
+    procedures.dedup();
+    if procedures.is_empty() {
+        return Ok(None);
+    }
+    for (k, path) in procedures.iter().enumerate() {
+        let Some(text) = crate::study::shipped_procedure(path) else {
+            continue;
+        };
+        // Seeds apart from the first runs' (runs_of takes seed + k * 1e6).
+        let s = seed.wrapping_add(1_000_000 * (10 + k as u64));
+        let (_, samples) = crate::study::simulate(text, path, data, s)?;
+        runs.push(to_run(samples, &format!("{path} (seed {s})"), data));
+    }
+    let after = diagnose(&runs, opts);
+    Ok(Some(SeparatingRun {
+        procedures: procedures.iter().map(|p| (*p).to_owned()).collect(),
+        accepted: after.effects.iter().map(|e| e.name.clone()).collect(),
+        confounded: after.confounded.iter().map(|c| c.effects.clone()).collect(),
+    }))
+}
+
 /// Run `units` trials from `seed`, cycling through [`cases`]; `progress`
-/// hears of each as it ends.
+/// hears of each as it ends. With `go_on_to_separate`, a trial whose
+/// diagnosis names a shipped separating procedure for a confounded pair
+/// goes on to it ([`UnitTrial::with_separating_run`]).
 pub fn run(
     units: usize,
     seed: u64,
+    go_on_to_separate: bool,
     progress: &(dyn Fn(usize, usize, &UnitTrial) + Sync),
 ) -> Result<Randomized, StudyError> {
     let design = cases();
@@ -478,7 +553,7 @@ pub fn run(
                         break;
                     }
                     let case = &design[k % design.len()];
-                    let r = trial(seed + k as u64, case);
+                    let r = trial(seed + k as u64, case, go_on_to_separate);
                     if let Ok(t) = &r {
                         let done = finished.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
                         progress(done, units, t);
@@ -529,10 +604,19 @@ fn summarise(units: usize, seed: u64, trials: Vec<UnitTrial>) -> Randomized {
         };
         groups.entry(key).or_default().push(t);
     }
-    let named = |t: &UnitTrial| match &t.case {
-        Case::Effect { effect, .. } => t.accepted.first() == Some(effect),
-        Case::Pair { effects } => effects.iter().all(|e| t.accepted.contains(e)),
-        _ => !t.accepted.is_empty(),
+    let named_in = |t: &UnitTrial, accepted: &[String]| match &t.case {
+        Case::Effect { effect, .. } => accepted.first() == Some(effect),
+        Case::Pair { effects } => effects.iter().all(|e| accepted.contains(e)),
+        _ => !accepted.is_empty(),
+    };
+    let named = |t: &UnitTrial| named_in(t, &t.accepted);
+    let named_after = |t: &UnitTrial| {
+        named_in(
+            t,
+            t.with_separating_run
+                .as_ref()
+                .map_or(&t.accepted, |r| &r.accepted),
+        )
     };
     let undecided = |t: &UnitTrial| match &t.case {
         Case::Effect { effect, .. } => {
@@ -567,6 +651,8 @@ fn summarise(units: usize, seed: u64, trials: Vec<UnitTrial>) -> Randomized {
                     .filter_map(|t| t.excess_closed)
                     .collect(),
             ),
+            named_with_separating_run: frac(v, &named_after),
+            separating_runs: v.iter().filter(|t| t.with_separating_run.is_some()).count(),
         })
         .collect();
     let all: Vec<&UnitTrial> = trials.iter().collect();
@@ -594,7 +680,9 @@ fn summarise(units: usize, seed: u64, trials: Vec<UnitTrial>) -> Randomized {
         named_at_1_5x: frac(&effects_at(&|a| (a - 1.5).abs() < 1e-9), &named),
         pairs_both_named: frac(&pairs, &named),
         pairs_named_or_confounded: frac(&pairs, &accounted),
+        pairs_both_named_with_separating_run: frac(&pairs, &named_after),
         false_attribution: frac(&quiet, &named),
+        false_attribution_with_separating_run: frac(&quiet, &named_after),
         thermal_within_0_05: frac(&all, &|t| t.thermal_gap_c <= 0.05),
         network_followed: frac(&all, &|t| t.network_fits),
         median_excess_closed: median(
@@ -624,7 +712,7 @@ mod tests {
             (100, Outside::Step, "bias_step"),
             (31, Outside::Drift, "bias_drift"),
         ] {
-            let t = trial(seed, &Case::Outside { disturbance: d }).expect("runs");
+            let t = trial(seed, &Case::Outside { disturbance: d }, false).expect("runs");
             assert!(t.accepted.is_empty(), "seed {seed}: {:?}", t.accepted);
             assert_eq!(t.outside, [kind], "seed {seed}");
         }
@@ -641,6 +729,7 @@ mod tests {
                 &Case::Outside {
                     disturbance: Outside::Periodic,
                 },
+                false,
             )
             .expect("runs");
             assert!(t.accepted.is_empty(), "seed {seed}: {:?}", t.accepted);
@@ -660,7 +749,7 @@ mod tests {
             Effect::MagneticSensitivity.name().to_owned(),
             Effect::AxisMisalignment.name().to_owned(),
         ];
-        let t = trial(seed, &Case::Pair { effects }).expect("runs");
+        let t = trial(seed, &Case::Pair { effects }, true).expect("runs");
         let positional = ["g_sensitivity", "magnetic_sensitivity", "axis_misalignment"];
         assert_eq!(t.accepted.len(), 2, "seed {seed}: {t:?}");
         assert!(
@@ -681,13 +770,18 @@ mod tests {
     }
 
     /// Seeds 27 and 202: the diagnosis names two of the three positional
-    /// effects and reports the third confounded with a named one.
+    /// effects and reports the third confounded with a named one; the
+    /// self-check goes on to the run that confound names
+    /// (`procedures/misalignment.toml`), and with it both are named.
     #[test]
     fn a_pair_that_one_site_cannot_separate_is_reported_confounded() {
         for seed in [27, 202] {
             let t = magnetic_and_misalignment(seed);
             let summary = summarise(1, seed, vec![t.clone()]);
             assert_eq!(summary.pairs_named_or_confounded, 1.0, "{t:?}");
+            let after = t.with_separating_run.as_ref().expect("a separating run");
+            assert_eq!(after.procedures, ["procedures/misalignment.toml"], "{t:?}");
+            assert_eq!(summary.pairs_both_named_with_separating_run, 1.0, "{t:?}");
         }
     }
 

@@ -145,7 +145,7 @@ pub struct SelfCheck {
     pub trials: Vec<Trial>,
 }
 
-fn to_run(samples: Vec<crate::study::Sample>, name: &str, twin: &TwinConfig) -> RunData {
+pub(crate) fn to_run(samples: Vec<crate::study::Sample>, name: &str, twin: &TwinConfig) -> RunData {
     RunData {
         name: name.into(),
         site: twin.site,
@@ -156,6 +156,7 @@ fn to_run(samples: Vec<crate::study::Sample>, name: &str, twin: &TwinConfig) -> 
                 orientation: s.orientation,
                 step: s.step,
                 record: s.record,
+                table_rate_body_dph: s.table_rate_body_dph,
             })
             .collect(),
     }

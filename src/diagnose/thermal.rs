@@ -1648,6 +1648,7 @@ mod tests {
                 orientation,
                 record: format!("r{record}"),
                 step: format!("s{record}"),
+                table_rate_body_dph: nalgebra::Vector3::zeros(),
             });
         }
         RunData {
@@ -1790,6 +1791,7 @@ mod tests {
                 // The table turns between records.
                 record: if up { "r2" } else { "r1" }.into(),
                 step: "s".into(),
+                table_rate_body_dph: nalgebra::Vector3::zeros(),
             });
         }
         let runs = [RunData {

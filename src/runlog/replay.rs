@@ -169,22 +169,29 @@ pub struct Logged {
     pub twin: Option<TwinConfig>,
 }
 
-/// Parse the `run` metadata's configuration; errors say which part.
-pub fn logged(meta: &RunMeta) -> Result<Logged, String> {
-    let src = |k: &str, t: &str| Source::from_text(&format!("{k} (in the log)"), t);
-    // Format 1 logs of the embedded bench left bench_toml empty.
-    let bench = if meta.bench_toml.trim().is_empty() {
+/// The bench a run logged in its `run` metadata (`bench_toml`; the
+/// embedded bench for a format 1 log that left it empty).
+pub fn logged_bench(meta: &RunMeta) -> Result<BenchConfig, String> {
+    if meta.bench_toml.trim().is_empty() {
         if meta.format >= 2 || !meta.is_embedded() {
             return Err(format!(
                 "no bench configuration in the log's run metadata (bench {:?})",
                 meta.bench
             ));
         }
-        BenchConfig::embedded()
-    } else {
-        BenchConfig::from_source(&src("bench_toml", &meta.bench_toml))
-            .map_err(|e| format!("the logged bench configuration: {e}"))?
-    };
+        return Ok(BenchConfig::embedded());
+    }
+    BenchConfig::from_source(&Source::from_text(
+        "bench_toml (in the log)",
+        &meta.bench_toml,
+    ))
+    .map_err(|e| format!("the logged bench configuration: {e}"))
+}
+
+/// Parse the `run` metadata's configuration; errors say which part.
+pub fn logged(meta: &RunMeta) -> Result<Logged, String> {
+    let src = |k: &str, t: &str| Source::from_text(&format!("{k} (in the log)"), t);
+    let bench = logged_bench(meta)?;
     if meta.procedure_toml.trim().is_empty() {
         return Err("no procedure in the log's run metadata".to_owned());
     }

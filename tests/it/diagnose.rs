@@ -318,6 +318,116 @@ fn the_quick_selfcheck_finds_the_effect_and_nothing_in_null_or_outside_runs() {
     std::fs::remove_dir_all(&dir).expect("cleanup");
 }
 
+/// A misalignment with a magnetic sensitivity: the study's two runs cannot
+/// tell the misalignment from a mix of g- and magnetic sensitivity (Earth
+/// rate lies in the plane of gravity and the field) and say so, naming
+/// `procedures/misalignment.toml`; with that run diagnosed too, both are
+/// named and the misalignment comes out at the twin's angles.
+#[test]
+fn the_misalignment_run_tells_a_misalignment_from_magnetic_sensitivity() {
+    let dir = temp_dir("diagnose-misalignment");
+    let default = String::from_utf8(gyrobench(&["twin", "default-config"]).stdout).expect("utf-8");
+    let with = default
+        .replacen(
+            "[effects.magnetic_sensitivity]\nenabled = false\ncoeff_dph_per_ut = [0.0, 0.001, 0.001]",
+            "[effects.magnetic_sensitivity]\nenabled = true\ncoeff_dph_per_ut = [0.0, 0.003, 0.0025]",
+            1,
+        )
+        .replacen(
+            "[effects.axis_misalignment]\nenabled = false\nabout_y_arcmin = 2.0\nabout_z_arcmin = 2.0",
+            "[effects.axis_misalignment]\nenabled = true\nabout_y_arcmin = 25.0\nabout_z_arcmin = 20.0",
+            1,
+        );
+    assert_eq!(
+        with.matches("enabled = true").count(),
+        default.matches("enabled = true").count() + 2
+    );
+    let twin = dir.join("twin.toml");
+    std::fs::write(&twin, with).expect("twin");
+    let mut logs = Vec::new();
+    for p in ["thermal_cycle", "orientation", "misalignment"] {
+        let procedure = format!("{}/procedures/{p}.toml", env!("CARGO_MANIFEST_DIR"));
+        let run = dir.join(p);
+        let r = gyrobench(&[
+            "run",
+            &procedure,
+            "--twin",
+            s(&twin),
+            "--seed",
+            "7",
+            "--out",
+            s(&run),
+        ]);
+        assert_eq!(
+            r.status.code(),
+            Some(0),
+            "{p}: {}",
+            String::from_utf8_lossy(&r.stderr)
+        );
+        logs.push(run.join("run.mcap"));
+    }
+    let diagnosed = |n: usize| {
+        let out = dir.join(format!("d{n}"));
+        let mut args = vec!["diagnose"];
+        args.extend(logs[..n].iter().map(|l| s(l)));
+        args.extend(["--out", s(&out)]);
+        let r = gyrobench(&args);
+        assert_eq!(
+            r.status.code(),
+            Some(0),
+            "{}",
+            String::from_utf8_lossy(&r.stderr)
+        );
+        (json(&out.join("diagnosis.json")), out)
+    };
+    let names = |d: &serde_json::Value| -> Vec<String> {
+        d["effects"]
+            .as_array()
+            .expect("effects")
+            .iter()
+            .map(|e| e["name"].as_str().expect("name").to_owned())
+            .collect()
+    };
+
+    let (two, _) = diagnosed(2);
+    let told = two["confounded"]
+        .as_array()
+        .expect("confounded")
+        .iter()
+        .find(|c| {
+            c["effects"]
+                .as_array()
+                .is_some_and(|e| e.iter().any(|x| x == "axis_misalignment"))
+        })
+        .unwrap_or_else(|| panic!("no confound with the misalignment: {two}"));
+    assert!(
+        told["separate_with"]
+            .as_str()
+            .is_some_and(|w| w.contains("procedures/misalignment.toml")),
+        "{told}"
+    );
+
+    let (three, out) = diagnosed(3);
+    let named = names(&three);
+    assert!(
+        named.contains(&"axis_misalignment".to_owned())
+            && named.contains(&"magnetic_sensitivity".to_owned()),
+        "{named:?}: {}",
+        three["confounded"]
+    );
+    let updated = std::fs::read_to_string(out.join("twin-updated.toml")).expect("twin-updated");
+    let table: toml::Table = updated.parse().expect("toml");
+    let m = &table["effects"]["axis_misalignment"];
+    for (k, truth) in [("about_y_arcmin", 25.0), ("about_z_arcmin", 20.0)] {
+        let v = m[k].as_float().expect(k);
+        assert!(
+            (v - truth).abs() < 0.5,
+            "{k}: {v} arcmin, the twin's {truth}"
+        );
+    }
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
+
 /// With the study's runs a scale-factor drift hides in the temperature
 /// terms; the axis-down run of `procedures/separating.toml` shows it.
 #[test]
