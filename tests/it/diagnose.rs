@@ -318,6 +318,38 @@ fn the_quick_selfcheck_finds_the_effect_and_nothing_in_null_or_outside_runs() {
     std::fs::remove_dir_all(&dir).expect("cleanup");
 }
 
+/// The shipped `procedures` run on `twin` (seed 7) into `dir`; their logs.
+fn runs_on(
+    dir: &std::path::Path,
+    twin: &std::path::Path,
+    procedures: &[&str],
+) -> Vec<std::path::PathBuf> {
+    procedures
+        .iter()
+        .map(|p| {
+            let procedure = format!("{}/procedures/{p}.toml", env!("CARGO_MANIFEST_DIR"));
+            let run = dir.join(p);
+            let r = gyrobench(&[
+                "run",
+                &procedure,
+                "--twin",
+                s(twin),
+                "--seed",
+                "7",
+                "--out",
+                s(&run),
+            ]);
+            assert_eq!(
+                r.status.code(),
+                Some(0),
+                "{p}: {}",
+                String::from_utf8_lossy(&r.stderr)
+            );
+            run.join("run.mcap")
+        })
+        .collect()
+}
+
 /// A misalignment with a magnetic sensitivity: the study's two runs cannot
 /// tell the misalignment from a mix of g- and magnetic sensitivity (Earth
 /// rate lies in the plane of gravity and the field) and say so, naming
@@ -344,28 +376,11 @@ fn the_misalignment_run_tells_a_misalignment_from_magnetic_sensitivity() {
     );
     let twin = dir.join("twin.toml");
     std::fs::write(&twin, with).expect("twin");
-    let mut logs = Vec::new();
-    for p in ["thermal_cycle", "orientation", "misalignment"] {
-        let procedure = format!("{}/procedures/{p}.toml", env!("CARGO_MANIFEST_DIR"));
-        let run = dir.join(p);
-        let r = gyrobench(&[
-            "run",
-            &procedure,
-            "--twin",
-            s(&twin),
-            "--seed",
-            "7",
-            "--out",
-            s(&run),
-        ]);
-        assert_eq!(
-            r.status.code(),
-            Some(0),
-            "{p}: {}",
-            String::from_utf8_lossy(&r.stderr)
-        );
-        logs.push(run.join("run.mcap"));
-    }
+    let logs = runs_on(
+        &dir,
+        &twin,
+        &["thermal_cycle", "orientation", "misalignment"],
+    );
     let diagnosed = |n: usize| {
         let out = dir.join(format!("d{n}"));
         let mut args = vec!["diagnose"];
@@ -467,23 +482,7 @@ fn a_small_effect_is_inconclusive_and_the_deciding_run_decides_it() {
     assert_ne!(with, default);
     let twin = dir.join("misaligned.toml");
     std::fs::write(&twin, with).expect("twin");
-    let mut logs = Vec::new();
-    for p in ["thermal_cycle", "orientation"] {
-        let procedure = format!("{}/procedures/{p}.toml", env!("CARGO_MANIFEST_DIR"));
-        let run = dir.join(p);
-        let r = gyrobench(&[
-            "run",
-            &procedure,
-            "--twin",
-            s(&twin),
-            "--seed",
-            "7",
-            "--out",
-            s(&run),
-        ]);
-        assert_eq!(r.status.code(), Some(0));
-        logs.push(run.join("run.mcap"));
-    }
+    let logs = runs_on(&dir, &twin, &["thermal_cycle", "orientation"]);
     let out = dir.join("d");
     let r = gyrobench(&[
         "diagnose",
