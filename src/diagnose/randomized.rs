@@ -520,7 +520,9 @@ fn go_on(
         let (_, samples) = crate::study::simulate(text, path, data, s)?;
         runs.push(to_run(samples, &format!("{path} (seed {s})"), data));
     }
-    let after = diagnose(&runs, opts);
+    // Only the rate layer's verdict is read: the thermal layer, which the
+    // first diagnosis already measured, is not fitted again.
+    let after = diagnose_rate(&runs, opts);
     Ok(Some(SeparatingRun {
         procedures: procedures.iter().map(|p| (*p).to_owned()).collect(),
         accepted: after.effects.iter().map(|e| e.name.clone()).collect(),
