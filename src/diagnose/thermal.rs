@@ -34,6 +34,19 @@ pub const FOLDS: usize = 4;
 /// shortest time constant the network is started from).
 const STEP_S: f64 = 10.0;
 
+/// Blocks that start this soon after power-on are in every fold's
+/// training and scored by none (ours: 10 min). They hold what no other
+/// stretch does: the sensors read the air plus their offsets before the
+/// self-heating has risen, so they tell an offset from a rise. A run
+/// recorded elsewhere often starts its records after the warm-up (an
+/// imported orientation run at 35 min), leaving one run with a power-on;
+/// with its first minutes held out, the offsets and the fast modes'
+/// share of the rise were the prior's guess, and the held-out gap of a
+/// unit the models fit to 0.01 degC read 0.04-0.6 degC.
+const PINNED_S: f64 = 600.0;
+/// The fold of such a block.
+const PINNED: usize = FOLDS;
+
 /// One 60 s block of a run: its span, the mean air and convection factor
 /// input, and the measured means of T1, T2, TK.
 #[derive(Debug, Clone)]
@@ -43,6 +56,9 @@ struct Block {
     /// Air over each [`STEP_S`] of the block.
     air_c: [f64; BLOCK_STEPS],
     gravity_along_axis: f64,
+    /// |gravity| along each body axis (x, y, z): the modal model's
+    /// convection inputs, since a unit's convection may follow any of them.
+    gravity_abs: [f64; 3],
     measured: [f64; 3],
     fold: usize,
 }
@@ -77,6 +93,7 @@ fn blocks(runs: &[RunData], axis: Vector3<f64>) -> Vec<Vec<Block>> {
                         p.iter().map(|x| x.iv.chamber_c).sum::<f64>() / p.len() as f64
                     }),
                     gravity_along_axis: mean(&|x| x.gravity_body().dot(&axis).abs()),
+                    gravity_abs: std::array::from_fn(|k| mean(&|x| x.gravity_body()[k].abs())),
                     measured: [
                         mean(&|x| x.iv.t1_c),
                         mean(&|x| x.iv.t2_c),
@@ -89,9 +106,14 @@ fn blocks(runs: &[RunData], axis: Vector3<f64>) -> Vec<Vec<Block>> {
             let n = out.len().max(1);
             // Each run's quarters in turn, the first quarter of run r in
             // fold r: the warm-ups (where the rises show apart from the
-            // offsets) are never all held out together.
+            // offsets) are never all held out together, and their first
+            // minutes never at all (PINNED_S).
             for (k, b) in out.iter_mut().enumerate() {
-                b.fold = (k * FOLDS / n + r) % FOLDS;
+                b.fold = if b.start_s < PINNED_S {
+                    PINNED
+                } else {
+                    (k * FOLDS / n + r) % FOLDS
+                };
             }
             out
         })
@@ -854,8 +876,14 @@ fn to_config(base: &ThermalConfig, q: &Shape, lin: &Linear) -> ThermalConfig {
 pub const MODES: usize = 4;
 /// Bounds of a mode's time constant, s (ours).
 const MODE_TAU_S: (f64, f64) = (30.0, 36_000.0);
+/// Convection inputs the modal model chooses from: the share of gravity
+/// along each body axis (where a unit's convection acts is its own: the
+/// twin's follows the sensor axis, another unit's the sensitive axis).
+/// One is taken (all three at once over-fit the positions a held-out
+/// stretch leaves unseen).
+const CONV_INPUTS: usize = 3;
 /// Regressors per mode: the air through the mode's lag, the power-on step,
-/// the convection factor through the lag.
+/// the convection input through the lag.
 const PER_MODE: usize = 3;
 /// Unknowns per sensor: the regressors' weights and the offset.
 const MODAL_UNKNOWNS: usize = PER_MODE * MODES + 1;
@@ -875,25 +903,30 @@ fn clamp_modes(p: &[f64]) -> ([f64; MODES], f64) {
 
 /// A block's regressors for modes `tau`: each is the block's mean of the
 /// air through a first-order lag (soaked at the first air), of the step
-/// 1 - exp(-t / tau) from power-on, and of the orientation's vertical share
-/// of the sensor axis through the lag. Exact for the air held over each
-/// 10 s.
-fn modal_regressors(tau: &[f64; MODES], run: &[Block]) -> Vec<[f64; PER_MODE * MODES]> {
+/// 1 - exp(-t / tau) from power-on, and of the orientation's convection
+/// input (gravity's share along body axis `axis`) through the lag. Exact
+/// for the air held over each 10 s.
+fn modal_regressors(
+    tau: &[f64; MODES],
+    run: &[Block],
+    axis: usize,
+) -> Vec<[f64; PER_MODE * MODES]> {
     let Some(first) = run.first() else {
         return Vec::new();
     };
+    let axis = axis.min(CONV_INPUTS - 1);
     let mut air = [first.air_c[0]; MODES];
-    let mut grav = [first.gravity_along_axis; MODES];
+    let mut grav = [first.gravity_abs[axis]; MODES];
     let mut t = 0.0;
     let decay = tau.map(|tm| (-STEP_S / tm).exp());
     run.iter()
         .map(|b| {
             let span = b.air_c.len() as f64 * STEP_S;
-            let g = b.gravity_along_axis;
             let mut out = [0.0; PER_MODE * MODES];
             for m in 0..MODES {
                 let tm = tau[m];
                 // Through a gap on the block's first air and orientation.
+                let g = b.gravity_abs[axis];
                 if b.start_s > t {
                     let a = (-(b.start_s - t) / tm).exp();
                     air[m] = b.air_c[0] + (air[m] - b.air_c[0]) * a;
@@ -931,6 +964,8 @@ const MODAL_RIDGE_OFFSET: f64 = 1.0;
 struct ModalCost<'a> {
     runs: &'a [Vec<Block>],
     held_out: Option<usize>,
+    /// The convection input's body axis (0 x, 1 y, 2 z).
+    axis: usize,
 }
 
 impl ModalCost<'_> {
@@ -938,8 +973,11 @@ impl ModalCost<'_> {
     /// residuals of every block.
     fn fit_at(&self, tau: &[f64; MODES]) -> Vec<Vec<[f64; 3]>> {
         type V = SVector<f64, MODAL_UNKNOWNS>;
-        let regs: Vec<Vec<[f64; PER_MODE * MODES]>> =
-            self.runs.iter().map(|r| modal_regressors(tau, r)).collect();
+        let regs: Vec<Vec<[f64; PER_MODE * MODES]>> = self
+            .runs
+            .iter()
+            .map(|r| modal_regressors(tau, r, self.axis))
+            .collect();
         let x_of = |r: &[f64; PER_MODE * MODES]| {
             let mut x = V::zeros();
             x.fixed_rows_mut::<{ PER_MODE * MODES }>(0)
@@ -997,6 +1035,16 @@ impl CostFunction for ModalCost<'_> {
     }
 }
 
+/// Sum of squares of the residuals in fold `k`.
+fn held_out_sse(runs: &[Vec<Block>], res: &[Vec<[f64; 3]>], k: usize) -> f64 {
+    runs.iter()
+        .zip(res)
+        .flat_map(|(run, r)| run.iter().zip(r))
+        .filter(|(b, _)| b.fold == k)
+        .map(|(_, v)| v.iter().map(|x| x * x).sum::<f64>())
+        .sum()
+}
+
 /// Sum of squares of the residuals outside `held_out`.
 fn training_sse(runs: &[Vec<Block>], res: &[Vec<[f64; 3]>], held_out: Option<usize>) -> f64 {
     let mut sse = 0.0;
@@ -1012,7 +1060,7 @@ fn training_sse(runs: &[Vec<Block>], res: &[Vec<[f64; 3]>], held_out: Option<usi
 
 /// The modal model's modes on the blocks outside `held_out`, from a few
 /// spreads of four time constants (ours: 30 s to 6 h between them).
-fn identify_modes(runs: &[Vec<Block>], held_out: Option<usize>) -> [f64; MODES] {
+fn identify_modes(runs: &[Vec<Block>], held_out: Option<usize>, axis: usize) -> [f64; MODES] {
     let starts: Vec<Vec<f64>> = [
         [40.0f64, 200.0, 1000.0, 5000.0],
         [80.0, 400.0, 2000.0, 10_000.0],
@@ -1023,7 +1071,12 @@ fn identify_modes(runs: &[Vec<Block>], held_out: Option<usize>) -> [f64; MODES] 
     .iter()
     .map(|s| s.iter().map(|v| v.ln()).collect())
     .collect();
-    let p = multistart(ModalCost { runs, held_out }, &starts, 2, (300, 600));
+    let cost = ModalCost {
+        runs,
+        held_out,
+        axis,
+    };
+    let p = multistart(cost, &starts, 2, (300, 600));
     clamp_modes(&p).0
 }
 
@@ -1141,6 +1194,12 @@ fn held_out(runs: &[RunData], data: &[Vec<Block>], fold_res: &[Vec<Vec<[f64; 3]>
         .collect();
     stretches.sort_by(|a, b| b.rms_c.total_cmp(&a.rms_c));
     stretches.truncate(3);
+    // Blocks no fold scores (the first minutes after power-on) have no
+    // held-out residual to show.
+    for (run, out) in data.iter().zip(&mut series) {
+        let mut scored = run.iter().map(|b| b.fold < FOLDS);
+        out.retain(|_| scored.next().unwrap_or(false));
+    }
     HeldOut {
         per_sensor_c,
         series,
@@ -1165,24 +1224,77 @@ pub fn fitted_network(runs: &[RunData], base: &ThermalConfig, prior: bool) -> Fi
     let prior = prior.then(|| shape_of(base));
     enum Job {
         Network(Option<usize>),
-        Modal(Option<usize>),
+        Modal(Option<usize>, usize),
     }
     enum Out {
         Network(Shape),
         Modal([f64; MODES]),
     }
     let folds = std::iter::once(None).chain((0..FOLDS).map(Some));
+    // The modal model's convection input first along the twin's sensor
+    // axis: its fits run alongside the network's.
+    let base_axis = (0..CONV_INPUTS)
+        .max_by(|&a, &b| {
+            base.sensor_axis_body[a]
+                .abs()
+                .total_cmp(&base.sensor_axis_body[b].abs())
+        })
+        .unwrap_or(1);
     let jobs: Vec<Job> = folds
         .clone()
         .map(Job::Network)
-        .chain(folds.map(Job::Modal))
+        .chain(folds.clone().map(|k| Job::Modal(k, base_axis)))
         .collect();
     // Independent fits on two threads.
     let prior = prior.as_ref();
-    let outs = on_two_threads(&jobs, |j| match *j {
+    let run = |j: &Job| match *j {
         Job::Network(k) => Out::Network(identify(&data, k, prior)),
-        Job::Modal(k) => Out::Modal(identify_modes(&data, k)),
-    });
+        Job::Modal(k, axis) => Out::Modal(identify_modes(&data, k, axis)),
+    };
+    let outs = on_two_threads(&jobs, run);
+    let mut modes: Vec<[f64; MODES]> = outs
+        .iter()
+        .filter_map(|o| match o {
+            Out::Modal(t) => Some(*t),
+            Out::Network(_) => None,
+        })
+        .collect();
+    // A unit's convection may follow another body axis (the sensitive
+    // axis, say): the axis whose model predicts the held-out quarters
+    // best at the time constants found on all the runs (a cheap stand-in
+    // for fitting every fold with every axis) is taken, its modes
+    // searched again when it is not the first. By the in-sample fit, an
+    // axis that changes once in the orientation run (the sensitive axis,
+    // vertical then horizontal) took the warm-up's tail and lost 0.05 degC
+    // held out on units with no convection at all.
+    let all_modes = modes.first().copied().unwrap_or([600.0; MODES]);
+    let axis = (0..CONV_INPUTS)
+        .map(|a| {
+            let held: f64 = (0..FOLDS)
+                .map(|k| {
+                    let res = ModalCost {
+                        runs: &data,
+                        held_out: Some(k),
+                        axis: a,
+                    }
+                    .fit_at(&all_modes);
+                    held_out_sse(&data, &res, k)
+                })
+                .sum();
+            (a, held)
+        })
+        .min_by(|x, y| x.1.total_cmp(&y.1))
+        .map_or(base_axis, |x| x.0);
+    if axis != base_axis {
+        let again: Vec<Job> = folds.map(|k| Job::Modal(k, axis)).collect();
+        modes = on_two_threads(&again, run)
+            .iter()
+            .filter_map(|o| match o {
+                Out::Modal(t) => Some(*t),
+                Out::Network(_) => None,
+            })
+            .collect();
+    }
     let shapes: Vec<Shape> = outs
         .iter()
         .filter_map(|o| match o {
@@ -1191,13 +1303,6 @@ pub fn fitted_network(runs: &[RunData], base: &ThermalConfig, prior: bool) -> Fi
         })
         .collect();
     let shapes = cross_started(&data, shapes, prior.is_some_and(is_full));
-    let modes: Vec<[f64; MODES]> = outs
-        .iter()
-        .filter_map(|o| match o {
-            Out::Modal(t) => Some(*t),
-            Out::Network(_) => None,
-        })
-        .collect();
     let mut net = network_held_out(runs, &data, &shapes, shape_of(base));
     // A network that misses may have a heat sink on the case or blocks
     // of unequal capacity: the full form takes both, searched only then
@@ -1222,6 +1327,7 @@ pub fn fitted_network(runs: &[RunData], base: &ThermalConfig, prior: bool) -> Fi
             ModalCost {
                 runs: &data,
                 held_out: Some(k),
+                axis,
             }
             .fit_at(&tau)
         })
@@ -1438,6 +1544,7 @@ mod tests {
 
     /// A linear network: `C dT/dt = G_air (air - T) + sum G_ij (T_j - T_i)
     /// + Q`, with the sensors on nodes.
+    #[derive(Clone)]
     struct Unit {
         /// Per node: capacitance (s per unit conductance), conductance to
         /// the air, heat input (degC per unit conductance).
@@ -1454,6 +1561,17 @@ mod tests {
         /// Chamber reading = gain * air + bias.
         air_gain: f64,
         air_bias: f64,
+        /// Convection: link `.0`'s conductance times `1 + .1` while the
+        /// sensitive axis is horizontal.
+        convection: Option<(usize, f64)>,
+        /// Nothing recorded before this time in the run at one
+        /// temperature (an orientation run whose records begin after its
+        /// warm-up), s.
+        flat_from_s: usize,
+        /// That run turns through the study's nine positions (four
+        /// azimuths axis up, four rolls axis horizontal, 55 deg), not four
+        /// azimuths each way.
+        study_positions: bool,
     }
 
     fn draw_unit(seed: u64) -> Unit {
@@ -1548,6 +1666,9 @@ mod tests {
             lsb_c,
             air_gain,
             air_bias,
+            convection: None,
+            flat_from_s: 0,
+            study_positions: false,
         }
     }
 
@@ -1581,40 +1702,39 @@ mod tests {
     }
 
     fn run_of(unit: &Unit, air: &[f64], seed: u64, name: &str) -> RunData {
-        let n = unit.cap.len();
-        let mut a = DMatrix::<f64>::zeros(n, n);
-        let mut b = DMatrix::<f64>::zeros(n, 2);
-        for i in 0..n {
-            a[(i, i)] -= unit.to_air[i] / unit.cap[i];
-            b[(i, 0)] = unit.to_air[i] / unit.cap[i];
-            b[(i, 1)] = unit.heat[i] / unit.cap[i];
-        }
-        // The case's heat is a rise above its air coupling.
-        b[(0, 1)] = unit.heat[0] / unit.cap[0];
-        for &(i, j, g) in &unit.links {
-            a[(i, i)] -= g / unit.cap[i];
-            a[(i, j)] += g / unit.cap[i];
-            a[(j, j)] -= g / unit.cap[j];
-            a[(j, i)] += g / unit.cap[j];
-        }
-        let mut m = DMatrix::<f64>::zeros(n + 2, n + 2);
-        m.view_mut((0, 0), (n, n)).copy_from(&a);
-        m.view_mut((0, n), (n, 2)).copy_from(&b);
-        let e = m.exp();
-        let (phi, gamma) = (
-            e.view((0, 0), (n, n)).into_owned(),
-            e.view((0, n), (n, 2)).into_owned(),
-        );
+        let flat = air.len() == 9 * 1500;
+        // The share of the convection (the sensitive axis horizontal, as
+        // 1 - |sin elevation|): 1 at the rolls, 0.43 at 55 deg.
+        let horizontal = |t: usize| match (flat, (t / 1500) % 9) {
+            (true, 4..8) => 1,
+            (true, 8) if unit.study_positions => 2,
+            (true, 8) => 1,
+            _ => 0,
+        };
+        let gain = unit.convection.map_or(0.0, |c| c.1);
+        let maps = [
+            1.0,
+            1.0 + gain,
+            1.0 + gain * (1.0 - 35f64.to_radians().sin()),
+        ]
+        .map(|f| {
+            let mut u = unit.clone();
+            if let Some((link, _)) = unit.convection {
+                u.links[link].2 *= f;
+            }
+            step_map(&u)
+        });
         let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
         // Soaked, unpowered, then powered at t = 0.
-        let mut x = nalgebra::DVector::<f64>::from_element(n, air[0]);
+        let mut x = nalgebra::DVector::<f64>::from_element(unit.cap.len(), air[0]);
         let mut samples = Vec::new();
         for (t, &air_c) in air.iter().enumerate() {
             let u = nalgebra::DVector::from_vec(vec![air_c, 1.0]);
-            x = &phi * &x + &gamma * u;
+            let (phi, gamma) = &maps[horizontal(t)];
+            x = phi * &x + gamma * u;
             let record = t / 3600;
             // A minute between records unrecorded, and rows lost at random.
-            if t % 3600 < 60 || rng.random::<f64>() < 0.002 {
+            if t % 3600 < 60 || rng.random::<f64>() < 0.002 || (flat && t < unit.flat_from_s) {
                 continue;
             }
             let mut read = |k: usize| {
@@ -1625,7 +1745,13 @@ mod tests {
             };
             let (t1, t2, tk) = (read(0), read(1), read(2));
             let position = (t / 1500) % 9;
-            let orientation = if air.len() == 9 * 1500 {
+            let orientation = if flat && unit.study_positions {
+                match position {
+                    0..4 => Orientation::new(90.0 * position as f64, 90.0, 0.0),
+                    4..8 => Orientation::new(90.0, 0.0, 90.0 * (position - 4) as f64),
+                    _ => Orientation::new(90.0, 35.0, 0.0),
+                }
+            } else if flat {
                 Orientation::new(
                     90.0 * (position % 4) as f64,
                     if position < 4 { 90.0 } else { 0.0 },
@@ -1656,6 +1782,35 @@ mod tests {
             site: TwinConfig::default_rl16().site,
             samples,
         }
+    }
+
+    /// The unit's exact one-second map: the state's and the inputs' (air,
+    /// power) matrices.
+    fn step_map(unit: &Unit) -> (DMatrix<f64>, DMatrix<f64>) {
+        let n = unit.cap.len();
+        let mut a = DMatrix::<f64>::zeros(n, n);
+        let mut b = DMatrix::<f64>::zeros(n, 2);
+        for i in 0..n {
+            a[(i, i)] -= unit.to_air[i] / unit.cap[i];
+            b[(i, 0)] = unit.to_air[i] / unit.cap[i];
+            b[(i, 1)] = unit.heat[i] / unit.cap[i];
+        }
+        // The case's heat is a rise above its air coupling.
+        b[(0, 1)] = unit.heat[0] / unit.cap[0];
+        for &(i, j, g) in &unit.links {
+            a[(i, i)] -= g / unit.cap[i];
+            a[(i, j)] += g / unit.cap[i];
+            a[(j, j)] -= g / unit.cap[j];
+            a[(j, i)] += g / unit.cap[j];
+        }
+        let mut m = DMatrix::<f64>::zeros(n + 2, n + 2);
+        m.view_mut((0, 0), (n, n)).copy_from(&a);
+        m.view_mut((0, n), (n, 2)).copy_from(&b);
+        let e = m.exp();
+        (
+            e.view((0, 0), (n, n)).into_owned(),
+            e.view((0, n), (n, 2)).into_owned(),
+        )
     }
 
     fn within_bounds(c: &ThermalConfig) -> bool {
@@ -1852,6 +2007,37 @@ mod tests {
             if seed == 17 {
                 let n = layer.fitted.as_ref().expect("unequal blocks follow");
                 assert!(n.block_capacity_1_over_2 > 2.0, "{n:?}");
+            }
+        }
+    }
+
+    /// A unit whose convection follows the sensitive axis (a block's
+    /// conductance to the case a fifth higher while the axis is
+    /// horizontal: not the twin's sensor axis, not its block coupling),
+    /// its run at one temperature recorded only from 35 min on, as an
+    /// imported orientation run is. With the convection input on the
+    /// twin's sensor axis the modal model missed such units by 0.1-0.15
+    /// degC held out, and with the warm-up's first minutes held out it
+    /// missed them even without convection (by up to 0.6 degC in the
+    /// warm-up).
+    #[test]
+    fn convection_along_another_axis_and_records_after_the_warm_up_are_followed() {
+        for seed in [4, 5] {
+            let [cycle, flat] = air_profiles();
+            let mut unit = draw_unit(seed);
+            // Block 1 4 degC above the case when powered.
+            unit.heat[1] = 4.0;
+            unit.convection = Some((0, 0.2));
+            unit.flat_from_s = 2100;
+            unit.study_positions = true;
+            let runs = [
+                run_of(&unit, &cycle, seed * 2, "cycle"),
+                run_of(&unit, &flat, seed * 2 + 1, "flat"),
+            ];
+            let layer = layer(&runs, None, false);
+            assert!(layer.gap_c < FORM_MISFIT_C, "seed {seed}: {}", layer.gap_c);
+            if let Some(n) = &layer.fitted {
+                assert!(within_bounds(n), "seed {seed}: {n:?}");
             }
         }
     }
