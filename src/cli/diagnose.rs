@@ -154,7 +154,7 @@ pub fn run(args: DiagnoseArgs) -> Result<Outcome> {
     let th = &d.layers.thermal;
     let network = match (&th.form_misfit, th.fitted_gap_c) {
         (Some(m), _) => format!(
-            " (the twin's network form cannot follow the runs: {:.4} degC held out, most in {} {} from {:.0} s; twin-updated.toml keeps the thermal network it had)",
+            " by the modal model (the twin's network form cannot follow the runs: {:.4} degC held out, most in {} {} from {:.0} s; twin-updated.toml keeps the thermal network it had)",
             m.gap_c,
             m.r#where.first().map_or("", |w| w.run.as_str()),
             m.r#where.first().map_or("", |w| w.sensor.as_str()),
@@ -166,7 +166,7 @@ pub fn run(args: DiagnoseArgs) -> Result<Outcome> {
         _ => String::new(),
     };
     outln!(
-        "rate layer: held-out gap {:.5} deg/h -> {:.5} deg/h; thermal layer: {:.4} degC{network}",
+        "rate layer: held-out gap {:.5} deg/h -> {:.5} deg/h; thermal layer: {:.4} degC held out{network}",
         d.layers.rate.gap_dph,
         d.layers.rate.gap_after_dph,
         th.gap_c,

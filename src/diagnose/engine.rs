@@ -535,7 +535,7 @@ fn between_spent(
 
 /// In-sample sum of squares of a model (to choose nonlinear parameters):
 /// one solve on all rows, none of the held-out folds.
-fn in_sample_sse(data: &Data<'_>, model: &[(Effect, f64)]) -> f64 {
+pub fn in_sample_sse(data: &Data<'_>, model: &[(Effect, f64)]) -> f64 {
     let design = Design::new(data, model);
     let (g, h) = design.normal(0, data.y.len());
     let beta = solve(&g, &h);

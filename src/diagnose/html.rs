@@ -283,30 +283,48 @@ pub fn headline(d: &Diagnosis) -> String {
             t.gap_c
         )
     } else {
+        // When the network form misses, the layer matches by the modal
+        // model: said, so the line below it does not read as a second verdict.
+        let by = t.form_misfit.as_ref().map_or(String::new(), |m| {
+            format!(
+                " by the linear model of the sensors; the twin's network form misses by {:.3} degC",
+                m.gap_c
+            )
+        });
         format!(
-            "The thermal layer matches ({:.3} degC held out); the gap is in the rate layer.",
+            "The thermal layer matches ({:.3} degC held out{by}); the gap is in the rate layer.",
             t.gap_c
         )
     };
     let noise = noise_of_means(d);
     let at_noise = |gap: f64| noise.is_some_and(|n| gap <= 1.5 * n);
-    let noise_text = noise.map_or(String::new(), |n| {
-        format!("the noise of 60 s means alone, about {n:.5} deg/h")
-    });
+    // The ratio said, not only "at the noise": a gap 1.4 times it still
+    // leaves room for something small.
+    let noise_text = |gap: f64| {
+        noise.map_or(String::new(), |n| {
+            format!(
+                "{:.2} times the noise of 60 s means alone (about {n:.5} deg/h)",
+                gap / n
+            )
+        })
+    };
     if d.effects.is_empty()
         && d.inconclusive.is_none()
         && at_noise(r.gap_dph)
         && t.gap_c <= THERMAL_GAP_C
     {
         return format!(
-            "Simulator and runs agree: the thermal layer matches ({:.3} degC held out) and the rate gap of {:.5} deg/h held out is at {noise_text}, so nothing is left for an effect to explain.",
-            t.gap_c, r.gap_dph
+            "Simulator and runs agree: the thermal layer matches ({:.3} degC held out) and the rate gap of {:.5} deg/h held out is {}, so nothing is left for an effect to explain.",
+            t.gap_c,
+            r.gap_dph,
+            noise_text(r.gap_dph)
         );
     }
     let rate = if d.effects.is_empty() && d.inconclusive.is_none() && at_noise(r.gap_dph) {
         format!(
-            " The rate gap of {:.5} deg/h held out is at {noise_text}.",
-            r.gap_dph
+            " The rate gap of {:.5} deg/h held out is {}.",
+            r.gap_dph,
+            noise_text(r.gap_dph)
         )
     } else if d.effects.is_empty() {
         let place = d.r#where.first().map_or(String::new(), |g| {
@@ -363,7 +381,7 @@ pub fn headline(d: &Diagnosis) -> String {
             0.0
         };
         let rest = if at_noise(d.unexplained.gap_dph) {
-            format!(" What remains is at {noise_text}.")
+            format!(" What remains is {}.", noise_text(d.unexplained.gap_dph))
         } else {
             format!(" {:.5} deg/h remain unexplained.", d.unexplained.gap_dph)
         };

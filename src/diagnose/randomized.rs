@@ -720,6 +720,44 @@ mod tests {
         }
     }
 
+    /// A jump of the bias in the thermal cycle's cold soak, where no
+    /// library term follows it: no candidate passes, so selection used
+    /// never to weigh a disturbance outside the library, and the runs
+    /// were said to be at the noise with nothing named. The jump is now
+    /// reported, where and how large.
+    #[test]
+    fn a_bias_jump_no_candidate_takes_is_reported_where_and_how_large() {
+        let unit = draw_unit(7);
+        let mut runs = runs_of(&unit, 7, false).expect("runs");
+        let (at_s, size_dph) = (4.2 * 3600.0, 0.2);
+        for s in &mut runs[0].samples {
+            if s.iv.time_s >= at_s {
+                s.iv.rate_dph += size_dph;
+            }
+        }
+        let opts = Options {
+            twin: None,
+            fit_thermal: false,
+            power_replications: 0,
+        };
+        let d = diagnose_rate(&runs, &opts);
+        assert!(d.effects.is_empty(), "{:?}", d.effects);
+        let jump = d
+            .unexplained
+            .outside
+            .iter()
+            .find(|o| o.kind == "bias_step")
+            .unwrap_or_else(|| panic!("no jump reported: {:?}", d.unexplained.outside));
+        let t = jump.at_s.expect("a jump has a time");
+        assert!((t - at_s).abs() < 300.0, "at {t} s, not {at_s} s");
+        assert!(
+            (jump.size_dph - size_dph).abs() < 0.25 * size_dph,
+            "size {}",
+            jump.size_dph
+        );
+        assert!(d.inconclusive.is_none(), "{:?}", d.inconclusive);
+    }
+
     /// Units of the randomised self-check (seed 1) where, before a
     /// periodic disturbance was among the rivals outside the library, a
     /// slow sine through the runs was named `hysteresis`.
