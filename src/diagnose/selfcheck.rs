@@ -65,7 +65,8 @@ pub struct Trial {
     /// Fraction of the injected effect's excess gap (over the null runs'
     /// gap) closed: (before^2 - after^2) / (before^2 - null^2).
     pub excess_closed: Option<f64>,
-    /// Period reported as unexplained, s.
+    /// Period the diagnosis reports: of a periodic disturbance it held
+    /// outside the library, else of the residual left unexplained, s.
     pub period_s: Option<f64>,
     /// Every candidate against the reference: name, held-out gap, p-value.
     pub candidates: Vec<(String, f64, f64)>,
@@ -363,7 +364,12 @@ fn trial(
         gap_before_dph: before,
         gap_after_dph: after,
         excess_closed,
-        period_s: d.unexplained.period_s,
+        period_s: d
+            .unexplained
+            .outside
+            .iter()
+            .find_map(|o| o.period_s)
+            .or(d.unexplained.period_s),
         candidates: d
             .candidates
             .iter()
