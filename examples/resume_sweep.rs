@@ -2,11 +2,14 @@
 //! acceptance) on the embedded bench at full speed: interrupted at every
 //! step boundary and mid-step, by each fault kind, and resumed; every
 //! resumed run checked (`tests/it/sweep.rs`). Prints the table
-//! `docs/procedures.md` shows and exits non-zero on any problem.
+//! `docs/procedures.md` shows and exits non-zero on any problem. A third
+//! argument N plays each fault at every Nth of its points only (CI's
+//! shorter sweep; the default, 1, is the whole sweep).
 //!
 //! ```sh
 //! cargo build --release
 //! cargo run --release --example resume_sweep -- target/release/gyrobench procedures/acceptance.toml
+//! cargo run --release --example resume_sweep -- target/release/gyrobench procedures/acceptance.toml 3
 //! ```
 
 #![expect(
@@ -25,6 +28,14 @@ fn main() -> std::process::ExitCode {
     let procedure = args
         .next()
         .unwrap_or_else(|| "procedures/acceptance.toml".into());
+    let every: usize = match args.next().map(|a| a.parse::<usize>()) {
+        None => 1,
+        Some(Ok(n)) if n >= 1 => n,
+        Some(_) => {
+            eprintln!("resume_sweep: the third argument is a whole number >= 1 (every Nth point)");
+            return std::process::ExitCode::from(2);
+        }
+    };
     let dir = std::env::temp_dir().join(format!("gyrobench-resume-sweep-{}", std::process::id()));
     let jobs = std::thread::available_parallelism().map_or(2, usize::from);
     let sweep = sweep::Sweep {
@@ -33,10 +44,10 @@ fn main() -> std::process::ExitCode {
         dir: dir.clone(),
         seeds: (1..=16).collect(),
         faults: vec![
-            ("process-kill".into(), 1),
-            ("chamber-alarm".into(), 3),
-            ("table-interlock".into(), 5),
-            ("gyro-silent".into(), 5),
+            ("process-kill".into(), every),
+            ("chamber-alarm".into(), 3 * every),
+            ("table-interlock".into(), 5 * every),
+            ("gyro-silent".into(), 5 * every),
         ],
         jobs,
     };
