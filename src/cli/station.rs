@@ -114,6 +114,9 @@ pub fn run(args: StationArgs) -> Result<Outcome> {
                 "warning: the station listens on {addr}, beyond this computer: anyone with the URL below (its token) can run the bench"
             );
         }
+        // The handlers are in place before the URL is printed: whoever reads
+        // it may send SIGTERM at once, and the station must stop cleanly.
+        let stop = stop_signal().context("installing the Ctrl-C and SIGTERM handlers")?;
         outln!("station http://{addr}/?token={token}")?;
         errln!("open the URL above in a browser; Ctrl-C stops the station");
         if let Some(b) = &banner {
@@ -123,7 +126,7 @@ pub fn run(args: StationArgs) -> Result<Outcome> {
         let stopping = station.clone();
         axum::serve(listener, app)
             .with_graceful_shutdown(async move {
-                stop_signal().await;
+                stop.await;
                 errln!("stopping: a run going on is aborted and its cleanup runs first");
                 stopping.shut_down().await;
             })
@@ -133,18 +136,16 @@ pub fn run(args: StationArgs) -> Result<Outcome> {
     Ok(Outcome::Success)
 }
 
-/// Ctrl-C or SIGTERM.
-async fn stop_signal() {
+/// Ctrl-C or SIGTERM: both handlers installed when this returns, so a
+/// signal that comes before the future is first polled is not lost.
+fn stop_signal() -> std::io::Result<impl std::future::Future<Output = ()>> {
     use tokio::signal::unix::{SignalKind, signal};
-    match signal(SignalKind::terminate()) {
-        Ok(mut term) => {
-            tokio::select! {
-                _ = tokio::signal::ctrl_c() => {}
-                _ = term.recv() => {}
-            }
+    let mut term = signal(SignalKind::terminate())?;
+    let mut int = signal(SignalKind::interrupt())?;
+    Ok(async move {
+        tokio::select! {
+            _ = int.recv() => {}
+            _ = term.recv() => {}
         }
-        Err(_) => {
-            let _ = tokio::signal::ctrl_c().await;
-        }
-    }
+    })
 }
