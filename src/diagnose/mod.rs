@@ -940,6 +940,35 @@ fn outside_found(
     out
 }
 
+/// The best outside disturbance over `current` when it passes the bars
+/// (p below `level`, a gain above `MIN_GAIN`) and explains at least as much
+/// as `candidate` (a library effect and its gain, which is then not named):
+/// the model holding it and its reports.
+fn outside_instead(
+    data: &Data<'_>,
+    current: &Scored,
+    free: &[Effect],
+    level: f64,
+    candidate: (Effect, f64),
+) -> Option<(Scored, Vec<OutsideFound>)> {
+    let (o, os, gain, p) = outside_rival(data, current, free)?;
+    // Written as the bars, so a NaN fails them.
+    let passes = p < level && gain > MIN_GAIN * current.sse() && gain >= candidate.1;
+    if !passes {
+        return None;
+    }
+    let found = outside_found(
+        data,
+        &os,
+        current.model.len(),
+        o,
+        gain / current.sse(),
+        p,
+        (candidate.0, candidate.1 / current.sse()),
+    );
+    Some((os, found))
+}
+
 /// Share of the total above which a periodic fit is reported (ours).
 pub const PERIODIC_ABOVE: f64 = 0.3;
 
@@ -1057,20 +1086,9 @@ pub(crate) fn diagnose_rate(runs: &[RunData], opts: &Options) -> Diagnosis {
         // mimic); when the disturbance explains more, it is held as a
         // nuisance and reported, and selection goes on over it.
         if held_outside < MAX_OUTSIDE
-            && let Some((o, os, ogain, op)) = outside_rival(&data, &current, &free)
-            && op < level
-            && ogain > MIN_GAIN * current.sse()
-            && ogain >= cand_gain
+            && let Some((os, found)) =
+                outside_instead(&data, &current, &free, level, (e, cand_gain))
         {
-            let found = outside_found(
-                &data,
-                &os,
-                current.model.len(),
-                o,
-                ogain / current.sse(),
-                op,
-                (e, cand_gain / current.sse()),
-            );
             outside.extend(found);
             held_outside += 1;
             current = os;
@@ -1126,21 +1144,16 @@ pub(crate) fn diagnose_rate(runs: &[RunData], opts: &Options) -> Diagnosis {
         .max_by(|a, b| a.2.total_cmp(&b.2))
         .map(|x| (x.0, x.2));
     if held_outside < MAX_OUTSIDE
-        && let Some((left, left_gain)) = best_left
-        && let Some((o, os, ogain, op)) = outside_rival(&data, &current, &free)
-        && op < ALPHA / remaining.len().max(1) as f64
-        && ogain > MIN_GAIN * current.sse()
-        && ogain >= left_gain
-    {
-        outside.extend(outside_found(
+        && let Some(left) = best_left
+        && let Some((os, found)) = outside_instead(
             &data,
-            &os,
-            current.model.len(),
-            o,
-            ogain / current.sse(),
-            op,
-            (left, left_gain / current.sse()),
-        ));
+            &current,
+            &free,
+            ALPHA / remaining.len().max(1) as f64,
+            left,
+        )
+    {
+        outside.extend(found);
         current = os;
         step_scores = each_against(&data, &remaining, &current, &free);
     }
