@@ -14,6 +14,7 @@ pub mod data;
 pub mod engine;
 pub mod html;
 pub mod library;
+mod lsq;
 pub mod randomized;
 pub mod selfcheck;
 pub mod thermal;

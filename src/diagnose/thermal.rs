@@ -4,8 +4,9 @@
 //! form (case node, two coupled block nodes, self-heating rises, convection
 //! with the sensor axis vertical, a mount; a heat sink and blocks of
 //! unequal capacity when the simpler network misses) with its parameters
-//! fitted to the runs by Nelder-Mead (argmin) from a grid of starts within
-//! bounds, and scored held out: each run's 60 s blocks are cut into
+//! fitted to the runs by Nelder-Mead (argmin) from a grid of starts and
+//! settled by Levenberg-Marquardt (`lsq`), within bounds, and scored held
+//! out: each run's 60 s blocks are cut into
 //! [`FOLDS`] contiguous stretches and each stretch is predicted with
 //! parameters fitted on the others (the network runs through every stretch
 //! on the measured air; only the fit leaves the stretch out).
@@ -20,6 +21,7 @@ use serde::Serialize;
 use super::ThermalLayer;
 use super::data::RunData;
 use super::engine::AVERAGING_S;
+use super::lsq;
 use crate::twin::TwinConfig;
 use crate::twin::config::ThermalConfig;
 use crate::twin::thermal::ThermalNetwork;
@@ -572,6 +574,41 @@ impl Cost<'_> {
     }
 }
 
+/// The residuals of the blocks outside `held_out`, flattened.
+fn training_residuals(
+    runs: &[Vec<Block>],
+    res: &[Vec<[f64; 3]>],
+    held_out: Option<usize>,
+) -> Vec<f64> {
+    runs.iter()
+        .zip(res)
+        .flat_map(|(run, r)| run.iter().zip(r))
+        .filter(|(b, _)| Some(b.fold) != held_out)
+        .flat_map(|(_, v)| *v)
+        .collect()
+}
+
+impl Squares for Cost<'_> {
+    fn residuals(&self, p: &[f64]) -> Vec<f64> {
+        let (q, _) = self.shape(p);
+        training_residuals(self.runs, &self.fit_at(&q).1, self.held_out)
+    }
+
+    fn bounds(&self) -> (Vec<f64>, Vec<f64>) {
+        SHAPE[..self.len()]
+            .iter()
+            .enumerate()
+            .map(|(i, &(_, lo, hi))| {
+                if LOG_SCALED.contains(&i) {
+                    (lo.ln(), hi.ln())
+                } else {
+                    (lo, hi)
+                }
+            })
+            .unzip()
+    }
+}
+
 impl CostFunction for Cost<'_> {
     type Param = Vec<f64>;
     type Output = f64;
@@ -628,40 +665,43 @@ where
         .unwrap_or_else(fallback)
 }
 
-/// Every start scored, the best `keep` searched, the winner searched again
-/// (a simplex that collapsed early gets a fresh one).
-fn multistart<C>(cost: C, starts: &[Vec<f64>], keep: usize, iters: (u64, u64)) -> Vec<f64>
-where
-    C: CostFunction<Param = Vec<f64>, Output = f64> + Clone,
-{
+/// A cost that is a sum of squares of residuals, its searched quantities
+/// within box bounds: searched by the simplex, settled by
+/// [`lsq::minimize`].
+trait Squares: CostFunction<Param = Vec<f64>, Output = f64> + Clone {
+    /// The residuals the cost sums the squares of, at `p` (within bounds).
+    fn residuals(&self, p: &[f64]) -> Vec<f64>;
+    /// The searched quantities' lower and upper bounds.
+    fn bounds(&self) -> (Vec<f64>, Vec<f64>);
+}
+
+/// Every start scored, the best `keep` searched by the simplex for
+/// `iters` iterations, the best of them settled by Levenberg-Marquardt
+/// within the bounds (at most [`SETTLE_ITERS`] Jacobians).
+fn multistart<C: Squares>(cost: C, starts: &[Vec<f64>], keep: usize, iters: u64) -> Vec<f64> {
     let mut scored: Vec<(&Vec<f64>, f64)> = starts
         .iter()
         .map(|q| (q, cost.cost(q).unwrap_or(f64::MAX)))
         .collect();
     scored.sort_by(|a, b| a.1.total_cmp(&b.1));
-    let mut best = scored
+    let best = scored
         .iter()
         .take(keep)
-        .map(|(q, _)| search(cost.clone(), q, iters.0))
+        .map(|(q, _)| search(cost.clone(), q, iters))
         .min_by(|a, b| a.1.total_cmp(&b.1))
         .unwrap_or_else(|| (starts[0].clone(), f64::MAX));
-    // Fresh simplices until one no longer improves by a part in 10^4.
-    for _ in 0..RESTARTS {
-        let next = search(cost.clone(), &best.0, iters.1);
-        let gained = best.1 - next.1;
-        if next.1 < best.1 {
-            best = next;
-        }
-        if gained.is_nan() || gained <= 1e-4 * best.1 {
-            break;
-        }
+    let (lo, hi) = cost.bounds();
+    let settled = lsq::minimize(|p| cost.residuals(p), &best.0, &lo, &hi, SETTLE_ITERS);
+    if settled.1 <= best.1 {
+        settled.0
+    } else {
+        best.0
     }
-    best.0
 }
 
-/// Most fresh simplices after the first search (ours: the study's runs
-/// settle within two).
-const RESTARTS: usize = 4;
+/// Most Jacobians of the settling search (ours: the study's runs settle
+/// in 11 to 26; each is one evaluation per searched quantity).
+const SETTLE_ITERS: usize = 100;
 
 /// The starts: a coarse grid over the shapes a unit can have, not the
 /// RL-16 defaults (ours: case 600-5000 s, blocks 150-2000 s, weak and
@@ -701,7 +741,7 @@ fn grid() -> Vec<Shape> {
 fn identify(runs: &[Vec<Block>], held_out: Option<usize>, prior: Option<&Shape>) -> Shape {
     let starts: Vec<Shape> = grid().into_iter().chain(prior.copied()).collect();
     let full = prior.is_some_and(is_full);
-    search_shape(runs, held_out, full, &starts, 6, (150, 800))
+    search_shape(runs, held_out, full, &starts, 6, 150)
 }
 
 /// The network's shape searched from `starts` ([`multistart`]) on the
@@ -713,7 +753,7 @@ fn search_shape(
     full: bool,
     starts: &[Shape],
     keep: usize,
-    iters: (u64, u64),
+    iters: u64,
 ) -> Shape {
     let cost = Cost {
         runs,
@@ -758,7 +798,7 @@ fn in_full_form(data: &[Vec<Block>], shapes: &[Shape]) -> Vec<Shape> {
                 q
             })
             .collect();
-        search_shape(data, fold(i), true, &starts, 2, (150, 800))
+        search_shape(data, fold(i), true, &starts, 2, 150)
     });
     cross_started(data, searched, true)
 }
@@ -792,10 +832,9 @@ fn on_two_threads<J: Sync, R: Send>(jobs: &[J], f: impl Fn(&J) -> R + Sync) -> V
 /// to be searched from (ours: a basin 10 % better; the lost fits were 2 to
 /// 600 times worse).
 const CROSS_BETTER: f64 = 0.9;
-/// Iterations of the search from another fit's optimum, first and on each
-/// fresh simplex (ours: it starts in the right basin; on ten randomised
-/// units 150 / 200 ends at the cost 150 / 800 does, in half the time).
-const CROSS_ITERS: (u64, u64) = (150, 200);
+/// Simplex iterations of the search from another fit's optimum before it
+/// is settled (ours: it starts in the right basin).
+const CROSS_ITERS: u64 = 150;
 
 /// The network fits (on all the runs, then with each fold held out) each
 /// searched again from whichever of the others' optima fits its own
@@ -1023,6 +1062,18 @@ impl ModalCost<'_> {
     }
 }
 
+impl Squares for ModalCost<'_> {
+    fn residuals(&self, p: &[f64]) -> Vec<f64> {
+        let (tau, _) = clamp_modes(p);
+        training_residuals(self.runs, &self.fit_at(&tau), self.held_out)
+    }
+
+    fn bounds(&self) -> (Vec<f64>, Vec<f64>) {
+        let (lo, hi) = (MODE_TAU_S.0.ln(), MODE_TAU_S.1.ln());
+        (vec![lo; MODES], vec![hi; MODES])
+    }
+}
+
 impl CostFunction for ModalCost<'_> {
     type Param = Vec<f64>;
     type Output = f64;
@@ -1076,7 +1127,7 @@ fn identify_modes(runs: &[Vec<Block>], held_out: Option<usize>, axis: usize) -> 
         held_out,
         axis,
     };
-    let p = multistart(cost, &starts, 2, (300, 600));
+    let p = multistart(cost, &starts, 2, 300);
     clamp_modes(&p).0
 }
 
