@@ -55,8 +55,9 @@ pub struct Fold {
 pub struct Data<'a> {
     /// The runs.
     pub runs: &'a [RunData],
-    /// Earth-removed bias, deg/h, all runs stacked.
-    pub y: Vec<f64>,
+    /// Earth-removed bias, deg/h, all runs stacked (another signal only
+    /// through [`Data::with_data`]: sums of it are kept).
+    y: Vec<f64>,
     /// Run of each row.
     pub run_of: Vec<usize>,
     /// The folds, in row order.
@@ -71,10 +72,55 @@ pub struct Data<'a> {
     pub reference: Vec<f64>,
     /// Stacked columns built so far, by effect and parameter (bits).
     cache: ColumnCache,
+    /// Sums of the columns every model has (run offsets, scale factors).
+    fixed: FixedSums,
+    /// Each effect column's sums against those and the data, and the
+    /// cross products of effect columns, as they are asked for.
+    stats: Mutex<ColumnStats>,
 }
 
 /// Stacked columns by effect and parameter.
 type ColumnCache = Mutex<HashMap<(Effect, u64), Vec<Arc<Vec<f64>>>>>;
+
+/// One stacked effect column: effect, parameter (bits), term.
+type ColumnKey = (Effect, u64, usize);
+
+/// What the Gram matrix needs of the columns every model has: per run its
+/// rows and the sum of its data; per rate run (as [`Data::turning_runs`])
+/// the sums of its scale-factor column, of its square and of its product
+/// with the data.
+#[derive(Debug, Default)]
+struct FixedSums {
+    rows: Vec<f64>,
+    y: Vec<f64>,
+    turn: Vec<f64>,
+    turn_sq: Vec<f64>,
+    turn_y: Vec<f64>,
+}
+
+/// One effect column's spread (its scale in the design) and sums: per run,
+/// against each rate run's scale-factor column, against the data, and of
+/// its square.
+#[derive(Debug)]
+struct ColumnSums {
+    scale: f64,
+    run: Vec<f64>,
+    turn: Vec<f64>,
+    y: f64,
+    sq: f64,
+}
+
+#[derive(Debug, Default)]
+struct ColumnStats {
+    single: HashMap<ColumnKey, Arc<ColumnSums>>,
+    pair: HashMap<(ColumnKey, ColumnKey), f64>,
+}
+
+/// The scale-factor column's value at a rate record's row: the kinematic
+/// reference, scaled to sit near the others.
+fn turn_value(reference_dph: f64) -> f64 {
+    reference_dph * 1e-5
+}
 
 impl<'a> Data<'a> {
     /// Stack the recorded samples of `runs`.
@@ -131,13 +177,64 @@ impl<'a> Data<'a> {
             turning_runs,
             reference,
             cache: Mutex::default(),
+            fixed: FixedSums::default(),
+            stats: Mutex::default(),
         }
+        .with_fixed_sums()
+    }
+
+    /// The same runs with `y` as the data (one value per row): a signal
+    /// fitted as if it were the data. `None` when its length is not the
+    /// rows'.
+    pub fn with_data(self, y: Vec<f64>) -> Option<Self> {
+        (y.len() == self.y.len()).then(|| {
+            Self {
+                y,
+                stats: Mutex::default(),
+                ..self
+            }
+            .with_fixed_sums()
+        })
+    }
+
+    fn with_fixed_sums(mut self) -> Self {
+        let (nruns, nturn) = (self.runs.len(), self.turning_runs.len());
+        let mut fixed = FixedSums {
+            rows: vec![0.0; nruns],
+            y: vec![0.0; nruns],
+            turn: vec![0.0; nturn],
+            turn_sq: vec![0.0; nturn],
+            turn_y: vec![0.0; nturn],
+        };
+        for (i, &v) in self.y.iter().enumerate() {
+            let r = self.run_of[i];
+            fixed.rows[r] += 1.0;
+            fixed.y[r] += v;
+            if let Some(t) = self.turning_of[i] {
+                let x = turn_value(self.reference[i]);
+                fixed.turn[t] += x;
+                fixed.turn_sq[t] += x * x;
+                fixed.turn_y[t] += x * v;
+            }
+        }
+        self.fixed = fixed;
+        self
     }
 
     /// Stacked regressor columns of a model. Each effect's columns at a
     /// parameter are built once per [`Data`] and shared (the selection
     /// fits the same effects at the same parameters many times over).
     pub fn columns(&self, model: &[(Effect, f64)]) -> Vec<Arc<Vec<f64>>> {
+        self.keyed_columns(model).into_iter().map(|c| c.1).collect()
+    }
+
+    /// The data, one value per row (runs stacked).
+    pub fn y(&self) -> &[f64] {
+        &self.y
+    }
+
+    /// [`Data::columns`] with each column's key.
+    fn keyed_columns(&self, model: &[(Effect, f64)]) -> Vec<(ColumnKey, Arc<Vec<f64>>)> {
         let mut cols = Vec::new();
         for &(e, p) in model {
             let key = (e, p.to_bits());
@@ -173,9 +270,63 @@ impl<'a> Data<'a> {
                     .insert(key, built.clone());
                 built
             });
-            cols.extend(built);
+            cols.extend(
+                built
+                    .into_iter()
+                    .enumerate()
+                    .map(|(t, c)| ((e, p.to_bits(), t), c)),
+            );
         }
         cols
+    }
+
+    fn lock_stats(&self) -> std::sync::MutexGuard<'_, ColumnStats> {
+        self.stats
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+    }
+
+    /// A column's spread and sums, made once per [`Data`].
+    fn column_sums(&self, key: ColumnKey, c: &[f64]) -> Arc<ColumnSums> {
+        if let Some(s) = self.lock_stats().single.get(&key) {
+            return Arc::clone(s);
+        }
+        let n = self.y.len().max(1) as f64;
+        let mean = c.iter().sum::<f64>() / n;
+        let spread = (c.iter().map(|v| (v - mean) * (v - mean)).sum::<f64>() / n).sqrt();
+        let mut sums = ColumnSums {
+            scale: if spread > 1e-300 && spread.is_finite() {
+                spread
+            } else {
+                1.0
+            },
+            run: vec![0.0; self.runs.len()],
+            turn: vec![0.0; self.turning_runs.len()],
+            y: 0.0,
+            sq: 0.0,
+        };
+        for (i, &v) in c.iter().enumerate() {
+            sums.run[self.run_of[i]] += v;
+            sums.y += v * self.y[i];
+            sums.sq += v * v;
+            if let Some(t) = self.turning_of[i] {
+                sums.turn[t] += v * turn_value(self.reference[i]);
+            }
+        }
+        let sums = Arc::new(sums);
+        self.lock_stats().single.insert(key, Arc::clone(&sums));
+        sums
+    }
+
+    /// The cross product of two effect columns, made once per [`Data`].
+    fn cross(&self, a: (ColumnKey, &[f64]), b: (ColumnKey, &[f64])) -> f64 {
+        let key = if a.0 <= b.0 { (a.0, b.0) } else { (b.0, a.0) };
+        if let Some(&v) = self.lock_stats().pair.get(&key) {
+            return v;
+        }
+        let v = a.1.iter().zip(b.1).map(|(x, y)| x * y).sum();
+        self.lock_stats().pair.insert(key, v);
+        v
     }
 }
 
@@ -305,22 +456,18 @@ struct Design<'d> {
 
 impl<'d> Design<'d> {
     fn new(data: &'d Data<'d>, model: &[(Effect, f64)]) -> Self {
-        let cols = data.columns(model);
+        let keyed = data.keyed_columns(model);
+        let scales = keyed
+            .iter()
+            .map(|(k, c)| data.column_sums(*k, c).scale)
+            .collect();
+        let cols: Vec<Arc<Vec<f64>>> = keyed.into_iter().map(|c| c.1).collect();
         let q = cols.len();
         // A rate run's scale factor is the unit's, known from its
         // calibration, not an effect: one per run with turning records, a
         // nuisance (a misaligned axis, for one, reads every turn short by
         // its cosine).
         let p = q + data.runs.len() + data.turning_runs.len();
-        let n = data.y.len();
-        let scales = cols
-            .iter()
-            .map(|c| {
-                let m = c.iter().sum::<f64>() / n.max(1) as f64;
-                let r = (c.iter().map(|v| (v - m) * (v - m)).sum::<f64>() / n.max(1) as f64).sqrt();
-                if r > 1e-300 && r.is_finite() { r } else { 1.0 }
-            })
-            .collect();
         Self {
             data,
             cols,
@@ -338,23 +485,9 @@ impl<'d> Design<'d> {
             v += self.cols[j][i] / self.scales[j] * beta[j];
         }
         if let Some(t) = data.turning_of[i] {
-            v += data.reference[i] * 1e-5 * beta[q + nruns + t];
+            v += turn_value(data.reference[i]) * beta[q + nruns + t];
         }
         v
-    }
-
-    /// Gram matrix and right-hand side over rows `start..end`.
-    fn normal(&self, start: usize, end: usize) -> (DMatrix<f64>, DVector<f64>) {
-        let mut g = DMatrix::zeros(self.p, self.p);
-        let mut h = DVector::zeros(self.p);
-        let mut x = DVector::zeros(self.p);
-        for i in start..end {
-            self.row_into(i, &mut x);
-            g.syger(1.0, &x, &x, 1.0);
-            h.axpy(self.data.y[i], &x, 1.0);
-        }
-        g.fill_upper_triangle_with_lower_triangle();
-        (g, h)
     }
 
     fn row_into(&self, i: usize, x: &mut DVector<f64>) {
@@ -367,7 +500,7 @@ impl<'d> Design<'d> {
         }
         x[q + data.run_of[i]] = 1.0;
         if let Some(t) = data.turning_of[i] {
-            x[q + nruns + t] = data.reference[i] * 1e-5;
+            x[q + nruns + t] = turn_value(data.reference[i]);
         }
     }
 }
@@ -534,11 +667,56 @@ fn between_spent(
 }
 
 /// In-sample sum of squares of a model (to choose nonlinear parameters):
-/// one solve on all rows, none of the held-out folds.
+/// one solve on all rows, none of the held-out folds. The Gram matrix is
+/// put together from sums kept per column and per pair of columns (the
+/// selection asks for the same base model with each candidate many
+/// times: only the candidate's products with the others are new).
 pub fn in_sample_sse(data: &Data<'_>, model: &[(Effect, f64)]) -> f64 {
-    let design = Design::new(data, model);
-    let (g, h) = design.normal(0, data.y.len());
+    let cols = data.keyed_columns(model);
+    let sums: Vec<Arc<ColumnSums>> = cols
+        .iter()
+        .map(|(k, c)| data.column_sums(*k, c))
+        .collect();
+    let (q, nruns, fx) = (cols.len(), data.runs.len(), &data.fixed);
+    let p = q + nruns + data.turning_runs.len();
+    let mut g = DMatrix::zeros(p, p);
+    let mut h = DVector::zeros(p);
+    for a in 0..q {
+        let sa = &sums[a];
+        for b in 0..a {
+            let d = data.cross((cols[a].0, &cols[a].1), (cols[b].0, &cols[b].1));
+            g[(a, b)] = d / (sa.scale * sums[b].scale);
+        }
+        g[(a, a)] = sa.sq / (sa.scale * sa.scale);
+        for r in 0..nruns {
+            g[(q + r, a)] = sa.run[r] / sa.scale;
+        }
+        for (t, v) in sa.turn.iter().enumerate() {
+            g[(q + nruns + t, a)] = v / sa.scale;
+        }
+        h[a] = sa.y / sa.scale;
+    }
+    for r in 0..nruns {
+        g[(q + r, q + r)] = fx.rows[r];
+        h[q + r] = fx.y[r];
+    }
+    for (t, &r) in data.turning_runs.iter().enumerate() {
+        let k = q + nruns + t;
+        g[(k, q + r)] = fx.turn[t];
+        g[(k, k)] = fx.turn_sq[t];
+        h[k] = fx.turn_y[t];
+    }
+    g.fill_upper_triangle_with_lower_triangle();
     let beta = solve(&g, &h);
+    // The residuals row by row: `y'y - 2 b'h + b'G b` cancels to noise
+    // on these columns (uncentred, with an offset per run).
+    let design = Design {
+        data,
+        scales: sums.iter().map(|s| s.scale).collect(),
+        cols: cols.into_iter().map(|c| c.1).collect(),
+        q,
+        p,
+    };
     (0..data.y.len())
         .map(|i| (data.y[i] - design.predict(i, &beta)).powi(2))
         .sum()
@@ -846,6 +1024,59 @@ fn record_means(s: &Scored) -> Vec<(usize, f64)> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The in-sample sum of squares row by row: the Gram matrix of every
+    /// row and the residual of every row.
+    fn in_sample_sse_by_rows(data: &Data<'_>, model: &[(Effect, f64)]) -> f64 {
+        let design = Design::new(data, model);
+        let mut g = DMatrix::zeros(design.p, design.p);
+        let mut h = DVector::zeros(design.p);
+        let mut x = DVector::zeros(design.p);
+        for i in 0..data.y.len() {
+            design.row_into(i, &mut x);
+            g.syger(1.0, &x, &x, 1.0);
+            h.axpy(data.y[i], &x, 1.0);
+        }
+        g.fill_upper_triangle_with_lower_triangle();
+        let beta = solve(&g, &h);
+        (0..data.y.len())
+            .map(|i| (data.y[i] - design.predict(i, &beta)).powi(2))
+            .sum()
+    }
+
+    /// The sums kept per column and pair give the sum of squares the rows
+    /// give, for models of thermal, orientation and rate terms (a rate run
+    /// brings its scale factor), asked for in any order, on the runs' data
+    /// and on another signal fitted as if it were the data.
+    #[test]
+    fn the_in_sample_fit_from_kept_sums_is_the_fit_from_the_rows() {
+        use super::super::library::{LIBRARY, MODEL4};
+        let twin = crate::twin::TwinConfig::default_rl16();
+        let runs = super::super::selfcheck::runs_of(&twin, 3, true).expect("runs");
+        let data = Data::new(&runs);
+        assert!(!data.turning_runs.is_empty());
+        let signal: Vec<f64> = (0..data.y.len()).map(|i| (i as f64 * 1e-3).sin()).collect();
+        let other = Data::new(&runs).with_data(signal).expect("one value per row");
+        assert!(Data::new(&runs).with_data(vec![0.0; 3]).is_none());
+        let base: Vec<(Effect, f64)> = MODEL4.iter().map(|&e| (e, e.grid()[0])).collect();
+        let mut models = vec![Vec::new(), base.clone()];
+        for e in LIBRARY {
+            for &p in e.grid().iter().take(2) {
+                let mut m = base.clone();
+                m.push((e, p));
+                models.push(m);
+            }
+        }
+        // Twice: the second pass reads every sum from what was kept.
+        for data in [&data, &other] {
+            for _ in 0..2 {
+                for m in models.iter().rev() {
+                    let (kept, rows) = (in_sample_sse(data, m), in_sample_sse_by_rows(data, m));
+                    assert!((kept - rows).abs() <= 1e-9 * rows, "{m:?}: {kept} against {rows}");
+                }
+            }
+        }
+    }
 
     /// Degrees of freedom spent on the record means by the columns of
     /// `cols` (each a function of record and row), three records of two

@@ -492,11 +492,9 @@ fn build(data: &Data<'_>, spec: &[(Effect, Option<f64>)]) -> Vec<(Effect, f64)> 
 /// the data, noise-free. What the reference's refitted terms can
 /// reproduce does not count; the self-check states its amplitudes in it.
 pub fn visible_gap(runs: &[RunData], opts: &Options, signal: &[f64]) -> f64 {
-    let mut data = Data::new(runs);
-    if signal.len() != data.y.len() {
+    let Some(data) = Data::new(runs).with_data(signal.to_vec()) else {
         return f64::NAN;
-    }
-    data.y = signal.to_vec();
+    };
     let model = build(&data, &reference(opts.twin.as_ref()));
     score(&data, &model).gap()
 }
@@ -1494,7 +1492,7 @@ impl Simulation<'_> {
         }
         let fitted: Vec<f64> = rows
             .iter()
-            .map(|&i| d.y[i] - self.candidate.residual[i])
+            .map(|&i| d.y()[i] - self.candidate.residual[i])
             .collect();
         let resid: Vec<f64> = rows.iter().map(|&i| self.candidate.residual[i]).collect();
         // Outside disturbances were held at rows of these runs: not
