@@ -189,9 +189,40 @@ pub fn simulate(
 ) -> Result<(crate::sequencer::RunResult, Vec<Sample>), StudyError> {
     let bench_cfg = BenchConfig::embedded();
     let procedure = Procedure::from_source(&Source::from_text(name, text), &bench_cfg)?;
+    run_on_twin(&procedure, &bench_cfg, name, cfg, seed)
+}
+
+/// [`simulate`] for the recorded samples alone: the procedure's measure
+/// steps (which take no device time) are left out, so no figure is
+/// computed that nobody reads (the self-checks run thousands of runs).
+pub fn simulate_samples(
+    text: &str,
+    name: &str,
+    cfg: &TwinConfig,
+    seed: u64,
+) -> Result<Vec<Sample>, StudyError> {
+    let bench_cfg = BenchConfig::embedded();
+    let mut procedure = Procedure::from_source(&Source::from_text(name, text), &bench_cfg)?;
+    for steps in [
+        &mut procedure.setup,
+        &mut procedure.main,
+        &mut procedure.cleanup,
+    ] {
+        steps.retain(|s| !matches!(s.kind, crate::procedure::StepKind::Measure(_)));
+    }
+    Ok(run_on_twin(&procedure, &bench_cfg, name, cfg, seed)?.1)
+}
+
+fn run_on_twin(
+    procedure: &Procedure,
+    bench_cfg: &BenchConfig,
+    name: &str,
+    cfg: &TwinConfig,
+    seed: u64,
+) -> Result<(crate::sequencer::RunResult, Vec<Sample>), StudyError> {
     let mut bench =
         crate::session::embedded_bench(cfg, seed, Pacing::Max, &[], bench_cfg.limits.clone());
-    let opts = crate::session::options(&bench_cfg, None, Arc::default(), None);
+    let opts = crate::session::options(bench_cfg, None, Arc::default(), None);
     let mut sink = Collect::new(bench_cfg.table.geometry);
     // No timers or I/O are awaited on the embedded bench: a plain executor will do.
     let rt = tokio::runtime::Builder::new_current_thread()
@@ -207,7 +238,7 @@ pub fn simulate(
             )
         })?;
     let result = rt.block_on(sequencer::run(
-        &procedure, &mut bench, &mut sink, &mut Quiet, &opts,
+        procedure, &mut bench, &mut sink, &mut Quiet, &opts,
     ));
     if let Some(e) = result.error.clone() {
         return Err(StudyError::Run(name.to_owned(), e));

@@ -673,10 +673,7 @@ fn between_spent(
 /// times: only the candidate's products with the others are new).
 pub fn in_sample_sse(data: &Data<'_>, model: &[(Effect, f64)]) -> f64 {
     let cols = data.keyed_columns(model);
-    let sums: Vec<Arc<ColumnSums>> = cols
-        .iter()
-        .map(|(k, c)| data.column_sums(*k, c))
-        .collect();
+    let sums: Vec<Arc<ColumnSums>> = cols.iter().map(|(k, c)| data.column_sums(*k, c)).collect();
     let (q, nruns, fx) = (cols.len(), data.runs.len(), &data.fixed);
     let p = q + nruns + data.turning_runs.len();
     let mut g = DMatrix::zeros(p, p);
@@ -1056,7 +1053,9 @@ mod tests {
         let data = Data::new(&runs);
         assert!(!data.turning_runs.is_empty());
         let signal: Vec<f64> = (0..data.y.len()).map(|i| (i as f64 * 1e-3).sin()).collect();
-        let other = Data::new(&runs).with_data(signal).expect("one value per row");
+        let other = Data::new(&runs)
+            .with_data(signal)
+            .expect("one value per row");
         assert!(Data::new(&runs).with_data(vec![0.0; 3]).is_none());
         let base: Vec<(Effect, f64)> = MODEL4.iter().map(|&e| (e, e.grid()[0])).collect();
         let mut models = vec![Vec::new(), base.clone()];
@@ -1072,7 +1071,10 @@ mod tests {
             for _ in 0..2 {
                 for m in models.iter().rev() {
                     let (kept, rows) = (in_sample_sse(data, m), in_sample_sse_by_rows(data, m));
-                    assert!((kept - rows).abs() <= 1e-9 * rows, "{m:?}: {kept} against {rows}");
+                    assert!(
+                        (kept - rows).abs() <= 1e-9 * rows,
+                        "{m:?}: {kept} against {rows}"
+                    );
                 }
             }
         }

@@ -517,7 +517,7 @@ fn go_on(
         };
         // Seeds apart from the first runs' (runs_of takes seed + k * 1e6).
         let s = seed.wrapping_add(1_000_000 * (10 + k as u64));
-        let (_, samples) = crate::study::simulate(text, path, data, s)?;
+        let samples = crate::study::simulate_samples(text, path, data, s)?;
         runs.push(to_run(samples, &format!("{path} (seed {s})"), data));
     }
     // Only the rate layer's verdict is read: the thermal layer, which the

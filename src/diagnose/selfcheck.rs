@@ -14,7 +14,7 @@ use super::library::{Effect, LIBRARY};
 use super::{Options, diagnose};
 use crate::study::{
     ORIENTATION_TOML, RATE_TEMPERATURES_TOML, SEPARATING_TOML, StudyError, THERMAL_CYCLE_TOML,
-    simulate,
+    simulate_samples,
 };
 use crate::twin::TwinConfig;
 use crate::twin::config as tc;
@@ -185,7 +185,7 @@ pub(crate) fn runs_of(
         .enumerate()
         .map(|(k, (text, name))| {
             let s = seed.wrapping_add(1_000_000 * k as u64);
-            let (_, samples) = simulate(text, name, twin, s)?;
+            let samples = simulate_samples(text, name, twin, s)?;
             Ok(to_run(samples, &format!("{name} (seed {s})"), twin))
         })
         .collect()
