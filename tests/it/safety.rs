@@ -70,7 +70,14 @@ fn a_cleanup_ramp_the_host_steps_reaches_its_set_point_and_is_read_back() {
     let p = write(&dir, "ramped.toml", RAMPED);
     let out = dir.join("run");
     let r = gyrobench(&["run", s(&p), "--bench", s(&bench), "--out", s(&out)]);
-    assert_eq!(r.status.code(), Some(0), "{}", stderr(&r));
+    // Both streams on failure: the summary (stdout) says how the run ended.
+    assert_eq!(
+        r.status.code(),
+        Some(0),
+        "{}\n{}",
+        String::from_utf8_lossy(&r.stdout),
+        stderr(&r)
+    );
     let report = json(&out.join("report.json"));
     let left = &report["bench_left"];
     assert_eq!(left["verified"], true, "{left}");
