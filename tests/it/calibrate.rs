@@ -60,6 +60,7 @@ unit = "deg/h"
 
 #[test]
 fn calibration_recovers_the_twin_and_its_file_compensates_a_new_run() {
+    let _busy = crate::common::busy_turn();
     let dir = temp_dir("calibrate");
     let procedure = dir.join("cycle.toml");
     std::fs::write(&procedure, CYCLE).expect("procedure");

@@ -6,6 +6,7 @@ use crate::common::{json, s};
 
 #[test]
 fn a_withheld_effect_is_found_and_the_updated_twin_closes_the_gap() {
+    let _busy = crate::common::busy_turn();
     let dir = temp_dir("diagnose");
     let default = String::from_utf8(gyrobench(&["twin", "default-config"]).stdout).expect("utf-8");
     let with = default.replacen(
@@ -278,6 +279,7 @@ fn power_at_3x(sc: &serde_json::Value, effect: &str) -> serde_json::Value {
 /// The quick version of the self-check: one run per case, one effect.
 #[test]
 fn the_quick_selfcheck_finds_the_effect_and_nothing_in_null_or_outside_runs() {
+    let _busy = crate::common::busy_turn();
     let dir = temp_dir("selfcheck");
     let sc = quick_selfcheck(&dir, "hysteresis,case_temperature", &[]);
     assert_eq!(sc["periodic_attributed"], 0.0, "{}", sc["trials"]);
@@ -357,6 +359,7 @@ fn runs_on(
 /// named and the misalignment comes out at the twin's angles.
 #[test]
 fn the_misalignment_run_tells_a_misalignment_from_magnetic_sensitivity() {
+    let _busy = crate::common::busy_turn();
     let dir = temp_dir("diagnose-misalignment");
     let default = String::from_utf8(gyrobench(&["twin", "default-config"]).stdout).expect("utf-8");
     let with = default
@@ -447,6 +450,7 @@ fn the_misalignment_run_tells_a_misalignment_from_magnetic_sensitivity() {
 /// terms; the axis-down run of `procedures/separating.toml` shows it.
 #[test]
 fn the_separating_run_shows_a_scale_factor_drift() {
+    let _busy = crate::common::busy_turn();
     let dir = temp_dir("selfcheck-separating");
     let mut shown = Vec::new();
     for extra in [&[][..], &["--separating"][..]] {
@@ -469,6 +473,7 @@ fn the_separating_run_shows_a_scale_factor_drift() {
 
 #[test]
 fn a_small_effect_is_inconclusive_and_the_deciding_run_decides_it() {
+    let _busy = crate::common::busy_turn();
     // An axis misalignment of 3 arcmin (about 0.6 of the noise of 60 s
     // means between positions): with the study's runs it improves the
     // held-out gap but misses a bar.
@@ -573,6 +578,7 @@ fn a_small_effect_is_inconclusive_and_the_deciding_run_decides_it() {
 
 #[test]
 fn the_randomized_selfcheck_diagnoses_units_that_are_not_the_twin() {
+    let _busy = crate::common::busy_turn();
     // Two units drawn far from the twin: a null one and one with a
     // hysteresis at its own noise, each diagnosed without a twin.
     let dir = temp_dir("randomized");

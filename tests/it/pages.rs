@@ -62,6 +62,7 @@ fn media_boxes(pdf: &[u8]) -> Vec<(f64, f64)> {
 
 #[test]
 fn report_html_loads_in_chromium_with_every_chart_and_prints_on_a4() {
+    let _busy = crate::common::busy_turn();
     let Some(browser) = chromium() else {
         return;
     };

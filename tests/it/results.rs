@@ -449,6 +449,7 @@ fn a_server_that_goes_away_mid_run_loses_nothing_and_the_run_is_written_later() 
 
 #[test]
 fn eight_benches_write_one_postgres_store_at_once_and_lose_nothing() {
+    let _busy = crate::common::busy_turn();
     let Some(url) = postgres() else { return };
     let dir = temp_dir("results-eight");
     let p = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("procedures/smoke.toml");

@@ -123,6 +123,7 @@ fn an_interrupted_run_resumes_from_its_last_completed_step() {
 /// interrupted segment is taken again, and the bench is left safe.
 #[test]
 fn the_quick_fault_and_resume_sweep_finds_nothing_wrong() {
+    let _busy = crate::common::busy_turn();
     let dir = temp_dir("resume-sweep");
     let procedure = dir.join("mini.toml");
     std::fs::write(&procedure, MINI).expect("procedure");

@@ -330,7 +330,8 @@ fn a_procedure_through_sim_serve_over_tcp_and_ptys_gives_the_embedded_verdict() 
         assert_eq!(
             out.status.code(),
             Some(0),
-            "{scheme}: {}",
+            "{scheme}: {}\n{}",
+            String::from_utf8_lossy(&out.stdout),
             String::from_utf8_lossy(&out.stderr)
         );
         let got = report(&run_dir);

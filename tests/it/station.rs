@@ -132,6 +132,7 @@ const SMOKE: &str = r#"{"procedure":"smoke.toml","serial":"RL16-0042","operator"
 
 #[test]
 fn the_station_runs_a_procedure_from_start_to_report_and_refuses_what_it_must() {
+    let _busy = crate::common::busy_turn();
     let dir = temp_dir("station");
     let st = Served::start(&dir, &[]);
 
