@@ -221,20 +221,16 @@ impl<'a> Data<'a> {
         self
     }
 
-    /// Stacked regressor columns of a model. Each effect's columns at a
-    /// parameter are built once per [`Data`] and shared (the selection
-    /// fits the same effects at the same parameters many times over).
-    pub fn columns(&self, model: &[(Effect, f64)]) -> Vec<Arc<Vec<f64>>> {
-        self.keyed_columns(model).into_iter().map(|c| c.1).collect()
-    }
-
     /// The data, one value per row (runs stacked).
     pub fn y(&self) -> &[f64] {
         &self.y
     }
 
-    /// [`Data::columns`] with each column's key.
-    fn keyed_columns(&self, model: &[(Effect, f64)]) -> Vec<(ColumnKey, Arc<Vec<f64>>)> {
+    /// Stacked regressor columns of a model, each with its key. Each
+    /// effect's columns at a parameter are built once per [`Data`] and
+    /// shared (the selection fits the same effects at the same parameters
+    /// many times over).
+    fn columns(&self, model: &[(Effect, f64)]) -> Vec<(ColumnKey, Arc<Vec<f64>>)> {
         let mut cols = Vec::new();
         for &(e, p) in model {
             let key = (e, p.to_bits());
@@ -446,6 +442,8 @@ fn solve(g: &DMatrix<f64>, h: &DVector<f64>) -> DVector<f64> {
 /// unit spread), one offset per run, one scale factor per rate run.
 struct Design<'d> {
     data: &'d Data<'d>,
+    /// Each effect column's key (for its kept sums).
+    keys: Vec<ColumnKey>,
     cols: Vec<Arc<Vec<f64>>>,
     scales: Vec<f64>,
     /// Effect columns.
@@ -456,12 +454,12 @@ struct Design<'d> {
 
 impl<'d> Design<'d> {
     fn new(data: &'d Data<'d>, model: &[(Effect, f64)]) -> Self {
-        let keyed = data.keyed_columns(model);
+        let keyed = data.columns(model);
         let scales = keyed
             .iter()
             .map(|(k, c)| data.column_sums(*k, c).scale)
             .collect();
-        let cols: Vec<Arc<Vec<f64>>> = keyed.into_iter().map(|c| c.1).collect();
+        let (keys, cols): (Vec<ColumnKey>, Vec<Arc<Vec<f64>>>) = keyed.into_iter().unzip();
         let q = cols.len();
         // A rate run's scale factor is the unit's, known from its
         // calibration, not an effect: one per run with turning records, a
@@ -470,6 +468,7 @@ impl<'d> Design<'d> {
         let p = q + data.runs.len() + data.turning_runs.len();
         Self {
             data,
+            keys,
             cols,
             scales,
             q,
@@ -672,16 +671,20 @@ fn between_spent(
 /// selection asks for the same base model with each candidate many
 /// times: only the candidate's products with the others are new).
 pub fn in_sample_sse(data: &Data<'_>, model: &[(Effect, f64)]) -> f64 {
-    let cols = data.keyed_columns(model);
-    let sums: Vec<Arc<ColumnSums>> = cols.iter().map(|(k, c)| data.column_sums(*k, c)).collect();
-    let (q, nruns, fx) = (cols.len(), data.runs.len(), &data.fixed);
-    let p = q + nruns + data.turning_runs.len();
+    let design = Design::new(data, model);
+    let (keys, cols) = (&design.keys, &design.cols);
+    let sums: Vec<Arc<ColumnSums>> = keys
+        .iter()
+        .zip(cols)
+        .map(|(k, c)| data.column_sums(*k, c))
+        .collect();
+    let (q, p, nruns, fx) = (design.q, design.p, data.runs.len(), &data.fixed);
     let mut g = DMatrix::zeros(p, p);
     let mut h = DVector::zeros(p);
     for a in 0..q {
         let sa = &sums[a];
         for b in 0..a {
-            let d = data.cross((cols[a].0, &cols[a].1), (cols[b].0, &cols[b].1));
+            let d = data.cross((keys[a], &cols[a]), (keys[b], &cols[b]));
             g[(a, b)] = d / (sa.scale * sums[b].scale);
         }
         g[(a, a)] = sa.sq / (sa.scale * sa.scale);
@@ -707,13 +710,6 @@ pub fn in_sample_sse(data: &Data<'_>, model: &[(Effect, f64)]) -> f64 {
     let beta = solve(&g, &h);
     // The residuals row by row: `y'y - 2 b'h + b'G b` cancels to noise
     // on these columns (uncentred, with an offset per run).
-    let design = Design {
-        data,
-        scales: sums.iter().map(|s| s.scale).collect(),
-        cols: cols.into_iter().map(|c| c.1).collect(),
-        q,
-        p,
-    };
     (0..data.y.len())
         .map(|i| (data.y[i] - design.predict(i, &beta)).powi(2))
         .sum()
