@@ -141,18 +141,23 @@ impl std::fmt::Display for DeviceSpec {
 
 /// Open a serial port as a raw byte stream. `exclusive` locks the port
 /// against other openers (right for hardware; a pty is shared with the
-/// simulator that made it).
+/// simulator that made it). Bytes the port held before it was opened are
+/// discarded: they are from before this run (a free-running gyro's frames
+/// of minutes ago, a reply nobody waited for).
 pub fn open_serial(
     path: &str,
     baud: u32,
     exclusive: bool,
 ) -> std::io::Result<tokio_serial::SerialStream> {
-    use tokio_serial::SerialPortBuilderExt;
-    tokio_serial::new(path, baud)
+    use tokio_serial::{ClearBuffer, SerialPort, SerialPortBuilderExt};
+    let port = tokio_serial::new(path, baud)
         .timeout(Duration::from_millis(100))
         .exclusive(exclusive)
         .open_native_async()
-        .map_err(std::io::Error::from)
+        .map_err(std::io::Error::from)?;
+    port.clear(ClearBuffer::Input)
+        .map_err(std::io::Error::from)?;
+    Ok(port)
 }
 
 /// Open a transport for a spec (not `sim://`, which is no byte stream).

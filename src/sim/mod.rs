@@ -78,8 +78,18 @@ pub struct SimBench {
     pub chamber: ChamberState,
     /// Motion simulator.
     pub table: TableState,
-    gyro_tx: broadcast::Sender<Arc<Vec<u8>>>,
+    gyro_tx: broadcast::Sender<GyroChunk>,
     out: Vec<u8>,
+}
+
+/// Gyro bytes encoded together, with the wall time they were made at (the
+/// line drops what it could not send in time: [`gyro::serve_gyro`]).
+#[derive(Debug, Clone)]
+pub struct GyroChunk {
+    /// When the frames were encoded.
+    pub at: std::time::Instant,
+    /// The encoded frames.
+    pub bytes: Arc<Vec<u8>>,
 }
 
 impl SimBench {
@@ -129,12 +139,15 @@ impl SimBench {
         if !self.out.is_empty() {
             let bytes = std::mem::take(&mut self.out);
             // No subscriber = nobody on the cable: the bytes are gone.
-            let _ = self.gyro_tx.send(Arc::new(bytes));
+            let _ = self.gyro_tx.send(GyroChunk {
+                at: std::time::Instant::now(),
+                bytes: Arc::new(bytes),
+            });
         }
     }
 
     /// Subscribe to the gyro's byte stream.
-    pub fn subscribe_gyro(&self) -> broadcast::Receiver<Arc<Vec<u8>>> {
+    pub fn subscribe_gyro(&self) -> broadcast::Receiver<GyroChunk> {
         self.gyro_tx.subscribe()
     }
 

@@ -410,7 +410,13 @@ table = { outer_deg = 90.0, inner_deg = 0.0 }
             "--db",
             "none",
         ]);
-        assert_eq!(o.status.code(), Some(0), "{scheme}: {}", stderr(&o));
+        assert_eq!(
+            o.status.code(),
+            Some(0),
+            "{scheme}: {}\n{}",
+            stderr(&o),
+            String::from_utf8_lossy(&o.stdout)
+        );
         let report = json(&out.join("report.json"));
         let (sf, se) = figure(&report, "scale_factor_ppm");
         assert!(sf.abs() <= 3.0 * se + 1.0, "{scheme}: {sf} +- {se} ppm");
