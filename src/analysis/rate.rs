@@ -218,6 +218,49 @@ pub fn asymmetry_ppm(points: &[RatePoint]) -> Option<Figure> {
     })
 }
 
+/// Arcseconds in a radian.
+const ARCSEC_PER_RAD: f64 = 180.0 * 3600.0 / std::f64::consts::PI;
+
+/// A table rate under this, deg/h, is no turn (ours: a thousandth of a
+/// deg/s).
+const MIN_TURN_DPH: f64 = 3.6;
+
+/// Input axis misalignment, arcsec: the slope of the Earth-removed rate
+/// against the rate of a table axis turning across the sensitive axis
+/// (`(turn deg/h, record)` pairs), fitted with a common bias. A sensitive
+/// axis tilted by a small angle towards the turning axis reads that share
+/// of its rate, which changes sign with the direction; gravity, the field
+/// and Earth rate average the same over whole revolutions either way. None
+/// without three records, or without turns both ways.
+pub fn misalignment_arcsec(points: &[(f64, RatePoint)]) -> Option<Figure> {
+    let turns = |positive: bool| {
+        points.iter().any(|(w, _)| {
+            if positive {
+                *w > MIN_TURN_DPH
+            } else {
+                *w < -MIN_TURN_DPH
+            }
+        })
+    };
+    if points.len() < 3 || !turns(true) || !turns(false) {
+        return None;
+    }
+    let x = DMatrix::from_fn(
+        points.len(),
+        2,
+        |i, j| if j == 0 { points[i].0 } else { 1.0 },
+    );
+    let y = DVector::from_iterator(
+        points.len(),
+        points.iter().map(|(_, p)| p.output_dph - p.input_dph),
+    );
+    let (b, cov) = least_squares(&x, &y)?;
+    Some(Figure {
+        value: b[0] * ARCSEC_PER_RAD,
+        std_error: Some(cov[(0, 0)].max(0.0).sqrt() * ARCSEC_PER_RAD),
+    })
+}
+
 /// Scale factor change per degC of the block, ppm/degC: the fit
 /// `output = K0 input + c input (T - Tm) + B`, `c / K0`. None when the
 /// records span less than 1 degC.
@@ -368,6 +411,26 @@ mod tests {
             se_dph: 0.001,
             block_c: 20.0,
         }
+    }
+
+    #[test]
+    fn misalignment_is_the_slope_against_the_turn_and_needs_both_ways() {
+        // 100 arcsec of tilt, a bias of 0.3 deg/h, Earth rate 7 deg/h on
+        // the axis; +-5 deg/s ABBA with a little noise.
+        let tilt = 100.0 / ARCSEC_PER_RAD;
+        let at = |w: f64, noise: f64| (w, pt(7.0, 7.0 + 0.3 + tilt * w + noise));
+        let abba = [
+            at(18_000.0, 0.002),
+            at(-18_000.0, -0.001),
+            at(-18_000.0, 0.001),
+            at(18_000.0, -0.002),
+        ];
+        let f = misalignment_arcsec(&abba).expect("figure");
+        assert!((f.value - 100.0).abs() < 0.1, "{f:?}");
+        assert!(f.std_error.is_some_and(|se| se > 0.0 && se < 0.1), "{f:?}");
+        assert!(misalignment_arcsec(&abba[..2]).is_none(), "two records");
+        let one_way = [abba[0], abba[3], at(9_000.0, 0.0)];
+        assert!(misalignment_arcsec(&one_way).is_none(), "one direction");
     }
 
     const LADDER_DPS: [f64; 8] = [1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0, 200.0];

@@ -82,6 +82,10 @@ pub enum Metric {
     /// Smallest input giving at least 50 % of the expected output, deg/h
     /// (IEEE threshold), from the same fit.
     Threshold,
+    /// Tilt of the input axis towards the turning table axis, arcsec: the
+    /// slope of the Earth-removed rate against the rate of an axis turning
+    /// across the sensitive axis (records at that rate both ways).
+    AxisMisalignment,
 }
 
 impl Metric {
@@ -100,6 +104,7 @@ impl Metric {
             "scale_factor_temperature" => Self::ScaleFactorTemperature,
             "dead_band" => Self::DeadBand,
             "threshold" => Self::Threshold,
+            "axis_misalignment" => Self::AxisMisalignment,
             _ => return None,
         })
     }
@@ -592,7 +597,7 @@ impl Validator<'_> {
                              compensated_drift_pp, self_heating, mean_bias, \
                              temperature_sensitivity, temperature_rate_sensitivity, \
                              scale_factor, scale_factor_nonlinearity, scale_factor_asymmetry, \
-                             scale_factor_temperature, dead_band or threshold"
+                             scale_factor_temperature, dead_band, threshold or axis_misalignment"
                         ),
                     )
                 })?;

@@ -144,7 +144,9 @@ struct State<'a> {
     measurements: Vec<measure::Measurement>,
     pending: Option<(TickSums, Scales)>,
     chamber_c: f64,
-    table: Option<(f64, f64)>,
+    table: Option<(f64, f64, (f64, f64))>,
+    /// How far a record's ends may fall off its frames on the logged bench.
+    record_edge_s: f64,
     link: LinkStats,
     frames: u64,
     last_step: Option<String>,
@@ -252,6 +254,7 @@ impl State<'_> {
                     RunMeta::from_entries(entries).map_err(|e| self.log_err(e.to_string()))?;
                 let l = logged(&meta).map_err(|e| self.log_err(e))?;
                 self.coeffs = l.coeffs.as_ref().map(CoeffsFile::fit);
+                self.record_edge_s = l.bench.record_edge_s();
                 self.procedure = Some(l.procedure);
                 if let Some(prev) = &meta.previous_part {
                     if prev.contains('/') || prev.contains('\\') || prev.starts_with('.') {
@@ -318,7 +321,11 @@ impl State<'_> {
             }
             topics::TABLE => {
                 let m: TableState = serde_json::from_slice(data).map_err(|e| bad(topic, e))?;
-                self.table = Some((m.t_s, m.earth_rate_dph));
+                self.table = Some((
+                    m.t_s,
+                    m.earth_rate_dph,
+                    (m.outer_rate_dps, m.inner_rate_dps),
+                ));
             }
             topics::RATE_1HZ => {
                 // The live run wrote this interval from the tick just logged.
@@ -328,13 +335,14 @@ impl State<'_> {
                     self.records.push(m.interval(), m.record.as_deref());
                     return Ok(());
                 };
-                let Some((t_s, reference_dph)) = self.table else {
+                let Some((t_s, reference_dph, table_rates_dps)) = self.table else {
                     return Err(self.log_err("a 1 Hz interval without the state before it"));
                 };
                 let at = IntervalState {
                     t_s,
                     reference_dph,
                     chamber_c: self.chamber_c,
+                    table_rates_dps,
                 };
                 self.records.push_sums(
                     &sums,
@@ -400,7 +408,8 @@ impl State<'_> {
                     // A run of frames has its records' health judged; an
                     // imported run (1 Hz means only) has none to judge.
                     StepKind::Record { label, duration_s } if frames => {
-                        self.records.start_frames(label, *duration_s);
+                        self.records
+                            .start_frames(label, *duration_s, self.record_edge_s);
                     }
                     StepKind::Record { label, .. } => self.records.start(label),
                     StepKind::Measure(m) => {
@@ -475,6 +484,7 @@ pub fn replay(path: &Path, coeffs: Option<&Fit>) -> Result<Replayed, ReplayError
         pending: None,
         chamber_c: f64::NAN,
         table: None,
+        record_edge_s: 0.0,
         link: LinkStats::default(),
         frames: 0,
         last_step: None,
@@ -509,7 +519,7 @@ pub fn replay(path: &Path, coeffs: Option<&Fit>) -> Result<Replayed, ReplayError
                 .map_or(String::new(), |s| format!(" (the read stopped: {s})"))
         )));
     };
-    let last_state_s = st.table.map_or(0.0, |(t, _)| t);
+    let last_state_s = st.table.map_or(0.0, |(t, _, _)| t);
     let earlier_s = st.earlier.as_ref().map_or(0.0, |e| e.result.device_time_s);
     let (verdict, verdict_error) = crate::sequencer::verdict(&st.measurements);
     let (outcome, error, cleanup_completed, device_time_s, bench_left) = match st.result_meta {

@@ -28,6 +28,9 @@ pub struct Records {
     part_of: BTreeMap<String, u32>,
     /// The part records start in now (0 until set: the first).
     part: u32,
+    /// Sums of the table's axis rates (outer, inner, deg/s) over each
+    /// record's intervals, and their number.
+    turning: BTreeMap<String, (f64, f64, u64)>,
 }
 
 impl Records {
@@ -57,11 +60,12 @@ impl Records {
         parts.into_values().filter(|v| !v.is_empty()).collect()
     }
 
-    /// A record of frames starts: its health is watched from here.
-    pub fn start_frames(&mut self, label: &str, duration_s: f64) {
+    /// A record of frames starts: its health is watched from here; its
+    /// ends may fall `edge_s` off its frames' ([`RecordHealth::new`]).
+    pub fn start_frames(&mut self, label: &str, duration_s: f64, edge_s: f64) {
         self.start(label);
         self.health
-            .insert(label.to_owned(), RecordHealth::new(duration_s));
+            .insert(label.to_owned(), RecordHealth::new(duration_s, edge_s));
     }
 
     /// Forget what a record holds (it is recorded again from its start).
@@ -70,6 +74,7 @@ impl Records {
             v.clear();
         }
         self.health.remove(label);
+        self.turning.remove(label);
     }
 
     /// The health of a record of frames.
@@ -117,6 +122,7 @@ impl Records {
             t_s: state.t_s,
             reference_dph: state.reference_dph,
             chamber_c: state.chamber.air_c,
+            table_rates_dps: (state.table.rates.outer_deg, state.table.rates.inner_deg),
         };
         self.push_sums(&sums, &at, record, frame_dt_s, lsb_arcsec, temp_lsb_c)
     }
@@ -138,8 +144,29 @@ impl Records {
             h.add(sums.n, extremes, &sums.runs, frame_dt_s, lsb_arcsec);
         }
         let iv = sums.interval(at, frame_dt_s, lsb_arcsec, temp_lsb_c)?;
+        if let Some(label) = record {
+            let t = self.turning.entry(label.to_owned()).or_default();
+            t.0 += at.table_rates_dps.0;
+            t.1 += at.table_rates_dps.1;
+            t.2 += 1;
+        }
         self.push(iv, record);
         Some(iv)
+    }
+
+    /// Mean rate of the table axis that turned during a record, deg/s
+    /// (the faster of the two; none for a record without frames).
+    pub fn turn_rate_dps(&self, label: &str) -> Option<f64> {
+        let &(outer, inner, n) = self.turning.get(label)?;
+        if n == 0 {
+            return None;
+        }
+        let (outer, inner) = (outer / n as f64, inner / n as f64);
+        Some(if outer.abs() >= inner.abs() {
+            outer
+        } else {
+            inner
+        })
     }
 
     /// File an interval under `record` (and in the whole run).
@@ -175,6 +202,8 @@ pub struct IntervalState {
     pub reference_dph: f64,
     /// Chamber air, degC.
     pub chamber_c: f64,
+    /// Table axis rates (outer, inner), deg/s.
+    pub table_rates_dps: (f64, f64),
 }
 
 impl TickSums {
@@ -346,6 +375,19 @@ pub fn compute(m: &Measure, records: &Records, coeffs: Option<&Fit>, step: &str)
         Metric::Threshold => figure(
             rate::band_dph(&points(), rate::THRESHOLD_SHARE),
             "needs four or more records at small input rates",
+            &mut note,
+        ),
+        Metric::AxisMisalignment => figure(
+            rate::misalignment_arcsec(
+                &m.records
+                    .iter()
+                    .filter_map(|l| {
+                        let p = RatePoint::of(records.get(l)?)?;
+                        Some((records.turn_rate_dps(l)? * 3600.0, p))
+                    })
+                    .collect::<Vec<_>>(),
+            ),
+            "needs three or more records of frames with a table axis turning both ways",
             &mut note,
         ),
         Metric::BiasStability => Some(bias_stability(&bias, window)),
