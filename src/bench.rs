@@ -198,6 +198,11 @@ impl Limits {
     }
 }
 
+/// How much later than its neighbours a frame may reach the host, wall
+/// time, s (ours): what a record's frame count allows at its ends
+/// ([`BenchConfig::record_edge_s`]).
+pub const HOST_DELAY_S: f64 = 0.05;
+
 /// The embedded simulated bench (`fixtures/bench/embedded.toml`).
 pub const EMBEDDED_BENCH_TOML: &str = include_str!("../fixtures/bench/embedded.toml");
 
@@ -211,6 +216,23 @@ impl BenchConfig {
         )) {
             Ok(b) => b,
             Err(e) => unreachable!("embedded bench is invalid: {e}"),
+        }
+    }
+
+    /// Device time by which a record's ends may fall off its frames, s: a
+    /// record spans the host's clock and takes the frames that reach the
+    /// host meanwhile, late by the link's varying delay (a USB serial
+    /// adapter's latency timer, 16 ms by default on FTDI chips; the host's
+    /// scheduling; `sim serve`'s 5 ms ticks), and at `time_scale` N that
+    /// delay is N times more device time. [`HOST_DELAY_S`] of it on wall
+    /// time; none for the embedded gyro, whose frames are made on the
+    /// run's own clock. Frames lost inside a record show as gaps of the
+    /// sequence counter, which this does not excuse.
+    pub fn record_edge_s(&self) -> f64 {
+        if self.devices.gyro.spec.starts_with("sim://") {
+            0.0
+        } else {
+            HOST_DELAY_S * self.time_scale
         }
     }
 
@@ -451,6 +473,16 @@ mod tests {
     use super::*;
 
     const SIM: &str = include_str!("../fixtures/bench/sim-serve.toml");
+
+    #[test]
+    fn a_records_ends_may_move_by_the_hosts_delay_in_device_time() {
+        assert_eq!(BenchConfig::embedded().record_edge_s(), 0.0);
+        let mut served =
+            BenchConfig::from_source(&Source::from_text("sim-serve.toml", SIM)).expect("loads");
+        assert_eq!(served.record_edge_s(), HOST_DELAY_S * served.time_scale);
+        served.time_scale = 30.0;
+        assert!((served.record_edge_s() - 1.5).abs() < 1e-12);
+    }
 
     #[test]
     fn shipped_bench_files_load() {

@@ -34,6 +34,7 @@ pub struct DeviceBench {
     ramp: Option<SetPointRamp>,
     last_air_c: f64,
     frame_dt_s: f64,
+    record_edge_s: f64,
     lsb_arcsec: f64,
     temp_lsb_c: f64,
 }
@@ -95,6 +96,7 @@ impl DeviceBench {
             ramp: None,
             last_air_c: reading.set_point_c,
             frame_dt_s: 1.0 / cfg.devices.gyro.frame_rate_hz,
+            record_edge_s: cfg.record_edge_s(),
             lsb_arcsec: cfg.devices.gyro.lsb_arcsec,
             temp_lsb_c: layout.temp_lsb_c,
         })
@@ -145,6 +147,10 @@ impl BenchIo for DeviceBench {
 
     fn frame_dt_s(&self) -> f64 {
         self.frame_dt_s
+    }
+
+    fn record_edge_s(&self) -> f64 {
+        self.record_edge_s
     }
 
     fn lsb_arcsec(&self) -> f64 {

@@ -186,6 +186,11 @@ impl BenchIo for EmbeddedBench {
         self.twin.frame_dt_s()
     }
 
+    /// Frames are made on the run's own clock: a record holds exactly its own.
+    fn record_edge_s(&self) -> f64 {
+        0.0
+    }
+
     fn lsb_arcsec(&self) -> f64 {
         self.twin.config().gyro.lsb_arcsec
     }

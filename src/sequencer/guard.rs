@@ -47,6 +47,10 @@ impl<B: BenchIo> BenchIo for Guarded<B> {
         self.inner.frame_dt_s()
     }
 
+    fn record_edge_s(&self) -> f64 {
+        self.inner.record_edge_s()
+    }
+
     fn lsb_arcsec(&self) -> f64 {
         self.inner.lsb_arcsec()
     }

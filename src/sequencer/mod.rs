@@ -81,6 +81,10 @@ pub trait BenchIo: Send {
     fn is_simulated(&self) -> bool;
     /// Frame period, s.
     fn frame_dt_s(&self) -> f64;
+    /// Device time by which a record's ends may fall off its frames', s:
+    /// a record spans the host's clock, and frames reach the host late by
+    /// a varying delay ([`BenchConfig::record_edge_s`](crate::bench::BenchConfig::record_edge_s)).
+    fn record_edge_s(&self) -> f64;
     /// Angle per count, arcsec.
     fn lsb_arcsec(&self) -> f64;
     /// Temperature per LSB in frames, degC.
@@ -631,7 +635,8 @@ impl Run<'_> {
             }
             StepKind::Wait { duration_s } => self.run_for(*duration_s, None, key).await,
             StepKind::Record { label, duration_s } => {
-                self.records.start_frames(label, *duration_s);
+                self.records
+                    .start_frames(label, *duration_s, self.bench.record_edge_s());
                 let before = self.bench.link_stats();
                 self.run_for(*duration_s, Some(label), key).await?;
                 let link = health::link_delta(&before, &self.bench.link_stats());
