@@ -233,16 +233,9 @@ const MIN_TURN_DPH: f64 = 3.6;
 /// and Earth rate average the same over whole revolutions either way. None
 /// without three records, or without turns both ways.
 pub fn misalignment_arcsec(points: &[(f64, RatePoint)]) -> Option<Figure> {
-    let turns = |positive: bool| {
-        points.iter().any(|(w, _)| {
-            if positive {
-                *w > MIN_TURN_DPH
-            } else {
-                *w < -MIN_TURN_DPH
-            }
-        })
-    };
-    if points.len() < 3 || !turns(true) || !turns(false) {
+    let both_ways = points.iter().any(|(w, _)| *w > MIN_TURN_DPH)
+        && points.iter().any(|(w, _)| *w < -MIN_TURN_DPH);
+    if points.len() < 3 || !both_ways {
         return None;
     }
     let x = DMatrix::from_fn(

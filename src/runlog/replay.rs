@@ -133,6 +133,14 @@ struct Scales {
     temp_lsb_c: f64,
 }
 
+/// What an interval takes from the last `/table/state` before it.
+#[derive(Debug, Clone, Copy)]
+struct LoggedTable {
+    t_s: f64,
+    earth_rate_dph: f64,
+    rates_dps: (f64, f64),
+}
+
 struct State<'a> {
     path: &'a Path,
     coeffs_override: Option<&'a Fit>,
@@ -144,7 +152,7 @@ struct State<'a> {
     measurements: Vec<measure::Measurement>,
     pending: Option<(TickSums, Scales)>,
     chamber_c: f64,
-    table: Option<(f64, f64, (f64, f64))>,
+    table: Option<LoggedTable>,
     /// How far a record's ends may fall off its frames on the logged bench.
     record_edge_s: f64,
     link: LinkStats,
@@ -321,11 +329,11 @@ impl State<'_> {
             }
             topics::TABLE => {
                 let m: TableState = serde_json::from_slice(data).map_err(|e| bad(topic, e))?;
-                self.table = Some((
-                    m.t_s,
-                    m.earth_rate_dph,
-                    (m.outer_rate_dps, m.inner_rate_dps),
-                ));
+                self.table = Some(LoggedTable {
+                    t_s: m.t_s,
+                    earth_rate_dph: m.earth_rate_dph,
+                    rates_dps: (m.outer_rate_dps, m.inner_rate_dps),
+                });
             }
             topics::RATE_1HZ => {
                 // The live run wrote this interval from the tick just logged.
@@ -335,14 +343,14 @@ impl State<'_> {
                     self.records.push(m.interval(), m.record.as_deref());
                     return Ok(());
                 };
-                let Some((t_s, reference_dph, table_rates_dps)) = self.table else {
+                let Some(table) = self.table else {
                     return Err(self.log_err("a 1 Hz interval without the state before it"));
                 };
                 let at = IntervalState {
-                    t_s,
-                    reference_dph,
+                    t_s: table.t_s,
+                    reference_dph: table.earth_rate_dph,
                     chamber_c: self.chamber_c,
-                    table_rates_dps,
+                    table_rates_dps: table.rates_dps,
                 };
                 self.records.push_sums(
                     &sums,
@@ -519,7 +527,7 @@ pub fn replay(path: &Path, coeffs: Option<&Fit>) -> Result<Replayed, ReplayError
                 .map_or(String::new(), |s| format!(" (the read stopped: {s})"))
         )));
     };
-    let last_state_s = st.table.map_or(0.0, |(t, _, _)| t);
+    let last_state_s = st.table.map_or(0.0, |t| t.t_s);
     let earlier_s = st.earlier.as_ref().map_or(0.0, |e| e.result.device_time_s);
     let (verdict, verdict_error) = crate::sequencer::verdict(&st.measurements);
     let (outcome, error, cleanup_completed, device_time_s, bench_left) = match st.result_meta {

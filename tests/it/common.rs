@@ -303,3 +303,17 @@ pub fn wait_for(path: &Path) {
     }
     panic!("{} never appeared", path.display());
 }
+
+/// (value, standard error) of measurement `name` in `report`.
+pub fn figure(report: &serde_json::Value, name: &str) -> (f64, f64) {
+    let m = report["measurements"]
+        .as_array()
+        .expect("measurements")
+        .iter()
+        .find(|m| m["name"] == name)
+        .unwrap_or_else(|| panic!("no {name}: {report}"));
+    (
+        m["value"].as_f64().expect("a value"),
+        m["std_error"].as_f64().expect("a standard error"),
+    )
+}

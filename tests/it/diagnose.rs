@@ -2,7 +2,7 @@
 //! updated twin closes the gap, and the quick self-check holds its targets.
 
 use crate::cli::{gyrobench, temp_dir};
-use crate::common::{json, s};
+use crate::common::{figure, json, s};
 
 #[test]
 fn a_withheld_effect_is_found_and_the_updated_twin_closes_the_gap() {
@@ -395,16 +395,7 @@ fn the_misalignment_run_tells_a_misalignment_from_magnetic_sensitivity() {
         ("misalignment_roll000_arcsec", 20.0 * 60.0),
         ("misalignment_roll090_arcsec", 25.0 * 60.0),
     ] {
-        let m = report["measurements"]
-            .as_array()
-            .expect("measurements")
-            .iter()
-            .find(|m| m["name"] == name)
-            .unwrap_or_else(|| panic!("no {name}"));
-        let (v, se) = (
-            m["value"].as_f64().expect("value"),
-            m["std_error"].as_f64().expect("std_error"),
-        );
+        let (v, se) = figure(&report, name);
         assert!(
             (v - truth).abs() <= 3.0 * se + 1.0,
             "{name}: {v} +- {se}, the twin's {truth}"

@@ -13,7 +13,7 @@ use gyrobench::runlog::replay::replay;
 use gyrobench::twin::config::{RateResponseConfig, TwinConfig};
 
 use crate::cli::{gyrobench, temp_dir};
-use crate::common::{json, s, stderr, write};
+use crate::common::{figure, json, s, stderr, write};
 
 const PROCEDURES: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/procedures");
 
@@ -36,20 +36,6 @@ fn run(procedure: &str, twin: &Path, out: &Path) -> std::process::Output {
         "--db",
         "none",
     ])
-}
-
-/// (value, standard error) of measurement `name` in `report`.
-fn figure(report: &serde_json::Value, name: &str) -> (f64, f64) {
-    let m = report["measurements"]
-        .as_array()
-        .expect("measurements")
-        .iter()
-        .find(|m| m["name"] == name)
-        .unwrap_or_else(|| panic!("no {name}: {report}"));
-    (
-        m["value"].as_f64().expect("a value"),
-        m["std_error"].as_f64().expect("a standard error"),
-    )
 }
 
 /// The records of the run's log as the twin's truth would give them: the
