@@ -38,6 +38,107 @@ pub struct BenchConfig {
     /// Where this bench records its results (`docs/results.md`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub results: Option<ResultsSection>,
+    /// The bench's name in every record of its runs (default: the bench
+    /// file's name without `.toml`; `embedded` for the embedded bench).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub id: Option<String>,
+    /// What a run does when an instrument is past its calibration due
+    /// date: `warn` (the default: the verdict line and the report say so)
+    /// or `refuse` (the run does not start).
+    #[serde(default, skip_serializing_if = "OverduePolicy::is_warn")]
+    pub overdue_calibration: OverduePolicy,
+}
+
+/// `overdue_calibration`: a run on an instrument past its calibration due
+/// date is flagged, or refused.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum OverduePolicy {
+    /// Run, and flag it in the verdict line and the report.
+    #[default]
+    Warn,
+    /// Do not start.
+    Refuse,
+}
+
+impl OverduePolicy {
+    fn is_warn(&self) -> bool {
+        *self == Self::Warn
+    }
+}
+
+/// A calibration due date (`calibration_due = 2027-03-31`, a TOML date or
+/// a `"YYYY-MM-DD"` string).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct CalibrationDue(pub chrono::NaiveDate);
+
+impl std::fmt::Display for CalibrationDue {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}", self.0.format("%Y-%m-%d"))
+    }
+}
+
+impl Serialize for CalibrationDue {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_str(&self.to_string())
+    }
+}
+
+impl<'de> Deserialize<'de> for CalibrationDue {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        use serde::de::Error;
+        let expected = "a date, e.g. 2027-03-31";
+        let date = match toml::Value::deserialize(d)? {
+            toml::Value::Datetime(dt) => match (dt.date, dt.time) {
+                (Some(date), None) => chrono::NaiveDate::from_ymd_opt(
+                    i32::from(date.year),
+                    u32::from(date.month),
+                    u32::from(date.day),
+                ),
+                _ => None,
+            },
+            toml::Value::String(s) => chrono::NaiveDate::parse_from_str(s.trim(), "%Y-%m-%d").ok(),
+            _ => None,
+        };
+        date.map(Self)
+            .ok_or_else(|| D::Error::custom(format!("expected {expected}")))
+    }
+}
+
+/// An instrument of a run as the record keeps it: what it said it is and
+/// when its calibration is due.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Instrument {
+    /// `chamber` or `table`.
+    pub role: String,
+    /// Its spec in the bench file.
+    pub spec: String,
+    /// What it reported (none: it did not answer its identity query).
+    pub identity: Option<crate::protocol::Identity>,
+    /// Why it reported nothing.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub identity_error: Option<String>,
+    /// Calibration due date from the bench file, `YYYY-MM-DD`.
+    pub calibration_due: Option<String>,
+    /// Past its due date on the day the run started.
+    pub calibration_overdue: bool,
+}
+
+impl Instrument {
+    /// In words: `chamber Espec SCP-220,TEMP, firmware ..., calibration due 2027-03-31`.
+    pub fn describe(&self) -> String {
+        let who = match (&self.identity, &self.identity_error) {
+            (Some(i), _) => i.describe(),
+            (None, Some(e)) => format!("identity not reported ({e})"),
+            (None, None) => "identity not reported".into(),
+        };
+        let due = match (&self.calibration_due, self.calibration_overdue) {
+            (Some(d), true) => format!(", calibration OVERDUE since {d}"),
+            (Some(d), false) => format!(", calibration due {d}"),
+            (None, _) => ", no calibration due date in the bench file".into(),
+        };
+        format!("{} {who}{due}", self.role)
+    }
 }
 
 /// `[results]`: the results store of this bench.
@@ -107,6 +208,9 @@ pub struct ChamberDevice {
     pub timeout_s: f64,
     /// Attempts per request before the device is declared failed.
     pub attempts: u32,
+    /// When the chamber's sensor calibration is due (`docs/bench.md`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub calibration_due: Option<CalibrationDue>,
     /// How long a dropped link is reopened (with backoff) before the
     /// device is declared unreachable, s (default 180).
     #[serde(default = "reconnect_window_s")]
@@ -131,6 +235,9 @@ pub struct TableDevice {
     pub in_position_deg: f64,
     /// Time within tolerance before "in position", s.
     pub settle_s: f64,
+    /// When the table's encoder calibration is due (`docs/bench.md`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub calibration_due: Option<CalibrationDue>,
 }
 
 /// `[devices.gyro]`.
@@ -262,6 +369,13 @@ impl BenchConfig {
     fn validate(&self, src: &Source) -> Result<(), ConfigError> {
         let c = Checker::new(src);
         c.within(self.time_scale, 0.001, 1e4, "time_scale")?;
+        if let Some(id) = &self.id {
+            c.ensure(
+                crate::unit::check_serial(id).is_ok(),
+                "id",
+                "must be 1 to 64 printable characters",
+            )?;
+        }
         self.site.validate(&c, "site")?;
         self.table.geometry.validate(&c, "table.geometry")?;
         let d = &self.devices;
@@ -370,6 +484,57 @@ impl BenchConfig {
         }
         c.within(l.dut_max_c, -100.0, 300.0, "limits.dut_max_c")?;
         Ok(())
+    }
+
+    /// The bench's id for the record: `id`, else the bench file's name
+    /// without its extension (`label` is the file as named), else
+    /// `embedded`.
+    pub fn bench_id(&self, label: &str) -> String {
+        if let Some(id) = &self.id {
+            return id.clone();
+        }
+        if self.is_embedded() && label == "embedded" {
+            return "embedded".into();
+        }
+        Path::new(label)
+            .file_stem()
+            .map_or_else(|| label.to_owned(), |s| s.to_string_lossy().into_owned())
+    }
+
+    /// The chamber and the table as a run records them: their reported
+    /// identities, due dates, and whether each is past it on `today`.
+    pub fn instruments(
+        &self,
+        chamber: Result<crate::protocol::Identity, String>,
+        table: Result<crate::protocol::Identity, String>,
+        today: chrono::NaiveDate,
+    ) -> Vec<Instrument> {
+        let d = &self.devices;
+        [
+            (
+                "chamber",
+                &d.chamber.spec,
+                d.chamber.calibration_due,
+                chamber,
+            ),
+            ("table", &d.table.spec, d.table.calibration_due, table),
+        ]
+        .into_iter()
+        .map(|(role, spec, due, id)| {
+            let (identity, identity_error) = match id {
+                Ok(i) => (Some(i), None),
+                Err(e) => (None, Some(e)),
+            };
+            Instrument {
+                role: role.into(),
+                spec: spec.clone(),
+                identity,
+                identity_error,
+                calibration_due: due.map(|d| d.to_string()),
+                calibration_overdue: due.is_some_and(|d| today > d.0),
+            }
+        })
+        .collect()
     }
 
     /// The gyro frame layout in use.

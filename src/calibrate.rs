@@ -19,7 +19,7 @@ use crate::analysis::model::{Fit, FitError, ModelKind, MultiFit, collinear, fit_
 use crate::analysis::rate::RatePoint;
 use crate::analysis::series::Interval;
 use crate::analysis::study::DRIFT_SMOOTHING_S;
-use crate::coeffs::{CoeffsFile, Model1Coeffs, Model3Coeffs, Model4Coeffs, ScaleFactorCoeffs};
+use crate::coeffs::{CoefficientSet, ScaleFactorCoeffs};
 use crate::procedure::{Metric, StepKind};
 use crate::runlog::replay::{ReplayError, replay};
 
@@ -260,6 +260,10 @@ pub struct Collinear {
 /// The whole calibration.
 #[derive(Debug, Clone, Serialize)]
 pub struct Calibration {
+    /// The unit calibrated (none: runs of several units fitted together).
+    pub unit: Option<crate::coeffs::UnitSection>,
+    /// The set's version and provenance, once the caller knows them.
+    pub set: Option<crate::coeffs::SetSection>,
     /// Runs used.
     pub runs: Vec<String>,
     /// How the held-out figures were obtained.
@@ -436,6 +440,8 @@ pub fn calibrate(runs: &[RunSeries]) -> Result<Calibration, FitError> {
         ));
     }
     Ok(Calibration {
+        unit: None,
+        set: None,
         runs: runs.iter().map(|r| r.name.clone()).collect(),
         validation: if runs.len() >= 2 {
             format!("leave one run out over {} runs", runs.len())
@@ -451,11 +457,10 @@ pub fn calibrate(runs: &[RunSeries]) -> Result<Calibration, FitError> {
 }
 
 impl Calibration {
-    /// The coefficients file: model 4 for `run --coeffs`, models 3 and 1
-    /// beside it, and where they came from.
-    pub fn coeffs_file(&self) -> CoeffsFile {
-        let c = |i: usize| &self.fits[i].fit.coeffs;
-        let (m1, m3, m4) = (c(0), c(1), c(2));
+    /// The coefficient set (without its unit and provenance, which the
+    /// caller knows): model 4 for `run --coeffs`, models 3 and 1 beside
+    /// it, and how they were validated.
+    pub fn coefficient_set(&self) -> CoefficientSet {
         let mut info = toml::Table::new();
         info.insert(
             "runs".into(),
@@ -476,28 +481,18 @@ impl Calibration {
             let s = r.held_out.unwrap_or(r.in_sample);
             info.insert("model4_drift_pp_dph".into(), s.drift_pp_dph.into());
         }
-        CoeffsFile {
-            model4: Model4Coeffs {
-                k1_dph_per_c: m4[0],
-                k2_dph_per_c2: m4[1],
-                k3_dph_per_c_per_s: m4[2],
-                k4_dph_per_c: m4[3],
-                k5_dph: m4[4],
-                warmup_tau_s: self.fits[2].fit.warmup_tau_s.unwrap_or(600.0),
-                offset_dph: m4[5],
-            },
-            model3: Some(Model3Coeffs {
-                k1_dph_per_c: m3[0],
-                k2_dph_per_c2: m3[1],
-                k3_dph_per_c_per_s: m3[2],
-                offset_dph: m3[3],
-            }),
-            model1: Some(Model1Coeffs {
-                k1_dph_per_c3: m1[0],
-                k2_dph_per_c2: m1[1],
-                k3_dph_per_c: m1[2],
-                offset_dph: m1[3],
-            }),
+        let fit = |kind: ModelKind| {
+            self.fits
+                .iter()
+                .find(|f| f.fit.kind == kind)
+                .map(|f| &f.fit)
+        };
+        CoefficientSet {
+            unit: None,
+            set: None,
+            model4: fit(ModelKind::Model4).and_then(Fit::model4),
+            model3: fit(ModelKind::Model3).and_then(Fit::model3),
+            model1: fit(ModelKind::Model1).and_then(Fit::model1),
             scale_factor: None,
             calibration: Some(info),
         }
@@ -591,11 +586,56 @@ impl Calibration {
             )
             .render();
         let body = format!(
-            "<h1>Thermal compensation calibration</h1>\n<p class=headline>{}</p>\n{warnings}<p>Runs:</p><ul>{runs}</ul><p class=note>Validation: {}.</p>\n<h2>The study's progression</h2>\n<table><tr><th>model</th><th>held-out drift p-p, deg/h</th><th>held-out RMS</th><th>in-sample drift p-p</th><th>in-sample RMS</th></tr>\n{rows}</table>\n<p class=note>Drift = peak-to-peak of the residual smoothed over 600 s; each run's own offset (turn-on bias) removed.</p>\n{chart}<h2>Coefficients (all runs)</h2>\n<table><tr><th>model</th><th>term</th><th>value</th><th>standard error</th></tr>\n{coeffs}</table>\n",
+            "<h1>Thermal compensation calibration{}</h1>\n<p class=headline>{}</p>\n{warnings}{}<p>Runs:</p><ul>{runs}</ul><p class=note>Validation: {}.</p>\n<h2>The study's progression</h2>\n<table><tr><th>model</th><th>held-out drift p-p, deg/h</th><th>held-out RMS</th><th>in-sample drift p-p</th><th>in-sample RMS</th></tr>\n{rows}</table>\n<p class=note>Drift = peak-to-peak of the residual smoothed over 600 s; each run's own offset (turn-on bias) removed.</p>\n{chart}<h2>Coefficients (all runs)</h2>\n<table><tr><th>model</th><th>term</th><th>value</th><th>standard error</th></tr>\n{coeffs}</table>\n",
+            esc(&self.of_unit()),
             esc(&self.headline()),
+            self.identity_html(),
             esc(&self.validation)
         );
-        page("Thermal compensation calibration", "", &body)
+        page(&format!("Calibration{}", self.of_unit()), "", &body)
+    }
+
+    /// ` of RL-16 RL16-0042` (empty when the runs are of several units).
+    fn of_unit(&self) -> String {
+        self.unit.as_ref().map_or(String::new(), |u| {
+            format!(" of {} {}", u.dut_type, u.serial)
+        })
+    }
+
+    /// The set's identity on the page: unit, version, when, by what, and
+    /// each run with its log's SHA-256.
+    fn identity_html(&self) -> String {
+        use crate::view::esc;
+        let unit = match &self.unit {
+            Some(u) => format!("<b>{} {}</b>", esc(&u.dut_type), esc(&u.serial)),
+            None => "<b>no unit</b> (runs of several units fitted together: the set cannot be used without --coeffs-override)".into(),
+        };
+        let Some(set) = &self.set else {
+            return format!("<p class=note>Unit: {unit}.</p>\n");
+        };
+        let version = set.version.map_or_else(
+            || "not recorded in a results store".to_owned(),
+            |v| format!("set {v} in the results store"),
+        );
+        let runs: String = set
+            .fitted_on
+            .iter()
+            .map(|r| {
+                format!(
+                    "<tr><td>{}</td><td><code>{}</code></td><td><code>{}</code></td></tr>",
+                    esc(&r.log),
+                    esc(if r.run_id.is_empty() { "-" } else { &r.run_id }),
+                    esc(&r.log_sha256)
+                )
+            })
+            .collect();
+        format!(
+            "<p class=note>Unit: {unit} &middot; {} &middot; fitted {} by {} &middot; models {}</p>\n<table><tr><th>log</th><th>run id</th><th>log SHA-256</th></tr>\n{runs}</table>\n",
+            esc(&version),
+            esc(&crate::view::utc_seconds(&set.created_utc)),
+            esc(&set.software),
+            esc(&set.models.join(", "))
+        )
     }
 
     /// One sentence: what model 4 leaves, held out when it can be, against
@@ -640,7 +680,8 @@ impl Calibration {
             }
         };
         let mut s = format!(
-            "calibration on {} run(s), validation: {}\n\n  {:<8} {:>18} {:>14} {:>18} {:>14}\n",
+            "calibration{} on {} run(s), validation: {}\n\n  {:<8} {:>18} {:>14} {:>18} {:>14}\n",
+            self.of_unit(),
             self.runs.len(),
             self.validation,
             "model",

@@ -170,39 +170,50 @@ impl Source {
     /// Stage one: deserialize the raw structure.
     pub fn parse<T: DeserializeOwned>(&self) -> Result<T, ConfigError> {
         toml::from_str(&self.text).map_err(|e| {
-            let at = e.span().map(|s| self.refine(s, e.message())).unwrap_or(0);
+            let message = e.message().trim();
+            let (at, key) = e.span().map_or((0, None), |s| self.refine(s, message));
             let (line, column) = line_col(&self.text, at);
             ConfigError::Parse {
                 path: self.path.clone(),
                 line,
                 column,
-                message: e.message().trim().to_owned(),
+                message: match key {
+                    Some(k) if !message.contains(&format!("`{k}`")) => format!("`{k}`: {message}"),
+                    _ => message.to_owned(),
+                },
             }
         })
     }
 
-    /// Where in `span` an error really is: serde reports unknown keys of
-    /// internally tagged tables (procedure steps) at the whole table; the
+    /// Where in `span` an error really is, and the key it is about: serde
+    /// reports an unknown key, or a value of the wrong type, of an
+    /// internally tagged table (a procedure step) at the whole table; the
     /// key's own line inside it is more use to the reader.
-    fn refine(&self, span: std::ops::Range<usize>, message: &str) -> usize {
-        let key = message
+    fn refine(&self, span: std::ops::Range<usize>, message: &str) -> (usize, Option<String>) {
+        // The span may cover only the table's header: search on from it.
+        let Some(region) = self.text.get(span.start..) else {
+            return (span.start, None);
+        };
+        let unknown = message
             .strip_prefix("unknown field `")
             .and_then(|m| m.split('`').next());
-        // The span may cover only the table's header: search on from it.
-        let (Some(key), Some(region)) = (key, self.text.get(span.start..)) else {
-            return span.start;
-        };
+        let wrong = wrong_type_literals(message);
         let mut offset = span.start;
         for line in region.split_inclusive('\n') {
             let t = line.trim_start();
-            if t.strip_prefix(key)
-                .is_some_and(|rest| rest.trim_start().starts_with('='))
-            {
-                return offset + (line.len() - t.len());
+            if let Some((k, v)) = t.split_once('=') {
+                let (k, v) = (k.trim(), strip_comment(v).trim());
+                let hit = match unknown {
+                    Some(key) => k == key,
+                    None => !wrong.is_empty() && wrong.iter().any(|w| w == v),
+                };
+                if hit {
+                    return (offset + (line.len() - t.len()), Some(k.to_owned()));
+                }
             }
             offset += line.len();
         }
-        span.start
+        (span.start, None)
     }
 
     /// An error about the value at dotted `key` (e.g. `thermal.tau_case_s`,
@@ -232,6 +243,40 @@ impl Source {
             k = &k[..k.rfind('.')?];
         }
     }
+}
+
+/// The ways a value that serde calls the wrong type can be written in
+/// TOML (`invalid type: string "30", expected f64` -> `"30"`, `'30'`);
+/// none for other messages or values not written as a scalar.
+fn wrong_type_literals(message: &str) -> Vec<String> {
+    let Some(rest) = message.strip_prefix("invalid type: ") else {
+        return Vec::new();
+    };
+    let rest = rest.split(", expected").next().unwrap_or(rest);
+    if let Some(q) = rest.strip_prefix("string ") {
+        let inner = q.trim().trim_matches('"');
+        return vec![format!("\"{inner}\""), format!("'{inner}'")];
+    }
+    for kind in ["integer ", "floating point ", "boolean "] {
+        if let Some(v) = rest.strip_prefix(kind) {
+            return vec![v.trim().trim_matches('`').to_owned()];
+        }
+    }
+    Vec::new()
+}
+
+/// A TOML value without a comment after it (a `#` outside quotes).
+fn strip_comment(v: &str) -> &str {
+    let mut quote: Option<char> = None;
+    for (i, c) in v.char_indices() {
+        match (quote, c) {
+            (None, '"' | '\'') => quote = Some(c),
+            (Some(q), c) if c == q => quote = None,
+            (None, '#') => return &v[..i],
+            _ => {}
+        }
+    }
+    v
 }
 
 /// 1-based line and column of a byte offset.

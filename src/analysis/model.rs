@@ -15,6 +15,7 @@ use serde::{Deserialize, Serialize};
 
 use super::figures::derivative_by_time;
 use super::series::Interval;
+use crate::compensation::{Model1, Model3, Model4};
 
 /// Half-width of the window over which d(dT)/dt is estimated, s (ours).
 pub const DERIVATIVE_HALF_WINDOW_S: f64 = 30.0;
@@ -320,6 +321,70 @@ pub fn collinear(
         }
     }
     out
+}
+
+impl Fit {
+    /// Model 4's coefficients, when this is a model-4 fit.
+    pub fn model4(&self) -> Option<Model4> {
+        match (self.kind, self.coeffs.as_slice()) {
+            (ModelKind::Model4, &[k1, k2, k3, k4, k5, offset]) => Some(Model4 {
+                k1_dph_per_c: k1,
+                k2_dph_per_c2: k2,
+                k3_dph_per_c_per_s: k3,
+                k4_dph_per_c: k4,
+                k5_dph: k5,
+                warmup_tau_s: self.warmup_tau_s?,
+                offset_dph: offset,
+            }),
+            _ => None,
+        }
+    }
+
+    /// Model 3's coefficients, when this is a model-3 fit.
+    pub fn model3(&self) -> Option<Model3> {
+        match (self.kind, self.coeffs.as_slice()) {
+            (ModelKind::Model3, &[k1, k2, k3, offset]) => Some(Model3 {
+                k1_dph_per_c: k1,
+                k2_dph_per_c2: k2,
+                k3_dph_per_c_per_s: k3,
+                offset_dph: offset,
+            }),
+            _ => None,
+        }
+    }
+
+    /// Model 1's coefficients, when this is a model-1 fit.
+    pub fn model1(&self) -> Option<Model1> {
+        match (self.kind, self.coeffs.as_slice()) {
+            (ModelKind::Model1, &[k1, k2, k3, offset]) => Some(Model1 {
+                k1_dph_per_c3: k1,
+                k2_dph_per_c2: k2,
+                k3_dph_per_c: k3,
+                offset_dph: offset,
+            }),
+            _ => None,
+        }
+    }
+}
+
+impl From<&Model4> for Fit {
+    /// Model 4 as a fit that predicts with its coefficients (no residual
+    /// known).
+    fn from(m: &Model4) -> Self {
+        Self {
+            kind: ModelKind::Model4,
+            coeffs: vec![
+                m.k1_dph_per_c,
+                m.k2_dph_per_c2,
+                m.k3_dph_per_c_per_s,
+                m.k4_dph_per_c,
+                m.k5_dph,
+                m.offset_dph,
+            ],
+            warmup_tau_s: Some(m.warmup_tau_s),
+            rms_dph: f64::NAN,
+        }
+    }
 }
 
 impl Fit {

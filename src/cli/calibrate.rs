@@ -9,7 +9,10 @@ use anyhow::{Context, Result};
 use clap::Args;
 
 use super::{Outcome, Usage};
-use crate::calibrate::{ABSURD_OVER_RAW, calibrate, load, mixed_serials, scale_factor};
+use crate::calibrate::{
+    ABSURD_OVER_RAW, Calibration, calibrate, load, mixed_serials, scale_factor,
+};
+use crate::coeffs::{CoefficientSet, FittedOn, SetSection, UnitSection};
 use crate::fsutil::ensure_distinct;
 
 #[derive(Debug, Args)]
@@ -86,30 +89,84 @@ pub fn run(args: CalibrateArgs) -> Result<Outcome> {
         .filter(|r| !r.series.is_empty())
         .cloned()
         .collect();
-    if thermal.is_empty()
-        && let Some(sf) = sf
-    {
-        #[derive(serde::Serialize)]
-        struct ScaleFactorOnly {
-            scale_factor: crate::coeffs::ScaleFactorCoeffs,
+    let mut cal = if thermal.is_empty() && sf.is_some() {
+        None
+    } else {
+        let fitted = if thermal.is_empty() { &runs } else { &thermal };
+        Some(fit(fitted)?)
+    };
+    let mut set = cal
+        .as_ref()
+        .map_or_else(CoefficientSet::default, Calibration::coefficient_set);
+    set.scale_factor = sf;
+    set.unit = match (mixed.is_empty(), runs.first()) {
+        (true, Some(first)) => Some(UnitSection {
+            serial: first.serial.clone(),
+            dut_type: first.dut_type.clone(),
+        }),
+        _ => None,
+    };
+    set.set = Some(SetSection {
+        version: None,
+        created_utc: crate::clock::utc_now().to_rfc3339(),
+        software: crate::version::software(),
+        models: [
+            ("model4", set.model4.is_some()),
+            ("model3", set.model3.is_some()),
+            ("model1", set.model1.is_some()),
+            ("scale_factor", set.scale_factor.is_some()),
+        ]
+        .iter()
+        .filter(|(_, has)| *has)
+        .map(|(m, _)| (*m).to_owned())
+        .collect(),
+        fitted_on: fitted_on(&args.runs, &runs)?,
+    });
+    // The store gives the set its version before the file is written, so
+    // the file and the store hold the same text.
+    let text = match (&set.unit, &cal) {
+        (Some(_), Some(c)) => record(&args, &mut set, c)?,
+        (Some(_), None) => record_scale_factor(&args, &mut set)?,
+        (None, _) => set
+            .to_toml()
+            .context("writing the coefficient set as TOML")?,
+    };
+    crate::fsutil::write_output(&args.out, text.as_bytes())
+        .with_context(|| format!("writing {}", args.out.display()))?;
+    let Some(cal) = cal.as_mut() else {
+        if let Some(sf) = &sf {
+            outf!("{}", sf.render_text())?;
         }
-        let toml_text = format!(
-            "# Scale factor of the unit from rate-table runs, written by gyrobench calibrate.\n\
-             # No thermal runs were given: no compensation coefficients ([model4]).\n{}",
-            toml::to_string_pretty(&ScaleFactorOnly { scale_factor: sf })
-                .context("writing the scale factor as TOML")?
-        );
-        crate::fsutil::write_output(&args.out, toml_text.as_bytes())
-            .with_context(|| format!("writing {}", args.out.display()))?;
-        outf!("{}", sf.render_text())?;
         errln!(
             "scale factor in {} (rate runs only: give thermal runs too for compensation coefficients)",
             args.out.display()
         );
         return Ok(Outcome::Success);
+    };
+    cal.unit = set.unit.clone();
+    cal.set = set.set.clone();
+    crate::fsutil::write_output(&json_path, serde_json::to_string_pretty(&cal)?.as_bytes())
+        .with_context(|| format!("writing {}", json_path.display()))?;
+    crate::fsutil::write_output(&html_path, cal.render_html().as_bytes())
+        .with_context(|| format!("writing {}", html_path.display()))?;
+    outf!("{}", cal.render_text())?;
+    if let Some(sf) = &sf {
+        outf!("{}", sf.render_text())?;
     }
-    let runs = if thermal.is_empty() { runs } else { thermal };
-    let cal = calibrate(&runs).context("fitting the compensation models")?;
+    errln!(
+        "coefficients ({}) in {}, details in {} and {}",
+        set.describe(),
+        args.out.display(),
+        json_path.display(),
+        html_path.display()
+    );
+    Ok(Outcome::Success)
+}
+
+/// Fit the compensation models on the thermal runs, refusing fits that
+/// cannot be scored or are not plausible.
+fn fit(runs: &[crate::calibrate::RunSeries]) -> Result<Calibration> {
+    let cal = calibrate(runs).context("fitting the compensation models")?;
     let scored = cal
         .table
         .iter()
@@ -131,50 +188,50 @@ pub fn run(args: CalibrateArgs) -> Result<Outcome> {
             absurd.join("; ")
         );
     }
-    let mut file = cal.coeffs_file();
-    file.scale_factor = sf;
-    let toml_text = format!(
-        "# Thermal compensation coefficients written by gyrobench calibrate.\n# `gyrobench run --coeffs` compensates with [model4].\n{}",
-        toml::to_string_pretty(&file).context("writing the coefficients as TOML")?
-    );
-    crate::fsutil::write_output(&args.out, toml_text.as_bytes())
-        .with_context(|| format!("writing {}", args.out.display()))?;
-    crate::fsutil::write_output(&json_path, serde_json::to_string_pretty(&cal)?.as_bytes())
-        .with_context(|| format!("writing {}", json_path.display()))?;
-    crate::fsutil::write_output(&html_path, cal.render_html().as_bytes())
-        .with_context(|| format!("writing {}", html_path.display()))?;
-    outf!("{}", cal.render_text())?;
-    if let Some(sf) = &sf {
-        outf!("{}", sf.render_text())?;
-    }
-    if mixed.is_empty() {
-        record(&args, &runs, &cal, &toml_text);
-    }
-    errln!(
-        "coefficients in {}, details in {} and {}",
-        args.out.display(),
-        json_path.display(),
-        html_path.display()
-    );
-    Ok(Outcome::Success)
+    Ok(cal)
 }
 
-/// Record the coefficient set for the unit in the results store; a store
-/// that cannot be reached is a warning (the file is the record).
-fn record(
-    args: &CalibrateArgs,
-    runs: &[crate::calibrate::RunSeries],
-    cal: &crate::calibrate::Calibration,
-    toml_text: &str,
-) {
-    use crate::results::record::{CoefficientSet, part_key_of_log};
-    let Some(first) = runs.first() else { return };
+/// Each run the set is fitted on: its id and its log's SHA-256.
+fn fitted_on(paths: &[PathBuf], runs: &[crate::calibrate::RunSeries]) -> Result<Vec<FittedOn>> {
+    paths
+        .iter()
+        .zip(runs)
+        .map(|(p, r)| {
+            Ok(FittedOn {
+                run_id: r.run_id.clone(),
+                log_sha256: crate::results::record::sha256_file(p)
+                    .with_context(|| format!("reading {}", p.display()))?,
+                log: p.display().to_string(),
+            })
+        })
+        .collect()
+}
+
+/// Record the set for its unit in the results store, which numbers it;
+/// the set's text with its version. A store that cannot be reached is a
+/// warning (the file is the record, without a version).
+fn record(args: &CalibrateArgs, set: &mut CoefficientSet, cal: &Calibration) -> Result<String> {
     let held = cal
         .table
         .iter()
         .find(|r| r.model == "model4")
         .and_then(|r| r.held_out)
         .map(|s| s.drift_pp_dph);
+    store(args, set, &cal.validation, held)
+}
+
+/// [`record`] for a set of the scale factor alone.
+fn record_scale_factor(args: &CalibrateArgs, set: &mut CoefficientSet) -> Result<String> {
+    store(args, set, "rate-table runs (scale factor only)", None)
+}
+
+fn store(
+    args: &CalibrateArgs,
+    set: &mut CoefficientSet,
+    validation: &str,
+    held_out_drift_pp_dph: Option<f64>,
+) -> Result<String> {
+    use crate::results::record::{SetRecord, part_key_of_log};
     let sources = args
         .runs
         .iter()
@@ -186,26 +243,30 @@ fn record(
             )
         })
         .collect();
-    let set = CoefficientSet {
-        dut_type: &first.dut_type,
-        serial: &first.serial,
-        coeffs_toml: toml_text,
-        validation: &cal.validation,
-        held_out_drift_pp_dph: held,
+    let loc = crate::results::Location::resolve(args.db.as_deref(), None);
+    let rec = SetRecord {
+        validation,
+        held_out_drift_pp_dph,
         sources,
     };
-    let loc = crate::results::Location::resolve(args.db.as_deref(), None);
     match crate::results::Store::open(&loc).and_then(|s| match s {
         Some(mut s) => s
-            .record_coefficients(&set)
-            .map(|v| Some((v, s.name().to_owned()))),
+            .record_coefficients(set, &rec)
+            .map(|text| Some((text, s.name().to_owned()))),
         None => Ok(None),
     }) {
-        Ok(Some((v, name))) => errln!(
-            "coefficient set {v} of {} recorded in the results store {name}",
-            first.serial
-        ),
-        Ok(None) => {}
-        Err(e) => errln!("warning: {e}; the coefficients file is written"),
+        Ok(Some((text, name))) => {
+            errln!("{} recorded in the results store {name}", set.describe());
+            Ok(text)
+        }
+        Ok(None) => Ok(set
+            .to_toml()
+            .context("writing the coefficient set as TOML")?),
+        Err(e) => {
+            errln!("warning: {e}; the coefficients file is written without a store version");
+            Ok(set
+                .to_toml()
+                .context("writing the coefficient set as TOML")?)
+        }
     }
 }

@@ -36,6 +36,11 @@ pub struct DiagnoseArgs {
     /// from the observed statistic only).
     #[arg(long, default_value_t = diagnose::POWER_REPLICATIONS)]
     power_replications: usize,
+    /// Diagnose runs of different units together (refused otherwise: an
+    /// effect found could be a difference between the units); the
+    /// headline says so.
+    #[arg(long)]
+    allow_mixed_units: bool,
 }
 
 #[derive(Debug, Subcommand)]
@@ -90,6 +95,22 @@ struct SelfcheckArgs {
     out: PathBuf,
 }
 
+/// Each run's unit, `type serial`, from its log's metadata.
+fn units_of(paths: &[PathBuf]) -> Result<Vec<(PathBuf, String)>> {
+    paths
+        .iter()
+        .map(|p| {
+            let m = crate::runlog::meta::read_run_meta(p)
+                .map_err(|e| anyhow::anyhow!("{}: {e}", p.display()))?;
+            let u = m.unit().map_or_else(
+                || format!("{} {}", m.dut_type, m.dut_serial),
+                |u| format!("{} {}", u.dut_type, u.serial),
+            );
+            Ok((p.clone(), u))
+        })
+        .collect()
+}
+
 fn write(path: &Path, text: &str) -> Result<()> {
     crate::fsutil::write_atomic(path, text.as_bytes())
         .with_context(|| format!("writing {}", path.display()))
@@ -113,12 +134,32 @@ pub fn run(args: DiagnoseArgs) -> Result<Outcome> {
         Some(p) => Some(TwinConfig::load(p).context("loading the twin file")?),
         None => None,
     };
+    let units = units_of(&args.runs)?;
+    let distinct: std::collections::BTreeSet<&str> =
+        units.iter().map(|(_, u)| u.as_str()).collect();
+    let mixed_units = if distinct.len() > 1 {
+        let named: Vec<String> = units
+            .iter()
+            .map(|(p, u)| format!("{}: {u}", p.display()))
+            .collect();
+        if !args.allow_mixed_units {
+            return Err(Usage(format!(
+                "the runs are of {} units ({}); a diagnosis is of one unit: give one unit's runs, or --allow-mixed-units to diagnose them together anyway",
+                distinct.len(),
+                named.join(", ")
+            ))
+            .into());
+        }
+        named
+    } else {
+        Vec::new()
+    };
     let runs = args
         .runs
         .iter()
         .map(|p| data::load(p).map_err(anyhow::Error::from))
         .collect::<Result<Vec<_>>>()?;
-    let d = diagnose::diagnose(
+    let mut d = diagnose::diagnose(
         &runs,
         &Options {
             twin: twin.clone(),
@@ -126,6 +167,7 @@ pub fn run(args: DiagnoseArgs) -> Result<Outcome> {
             power_replications: args.power_replications,
         },
     );
+    d.mixed_units = mixed_units;
     std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
     write(
         &out.join("diagnosis.json"),

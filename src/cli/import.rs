@@ -7,7 +7,7 @@ use std::path::PathBuf;
 use anyhow::{Context, Result};
 use clap::Args;
 
-use super::Outcome;
+use super::{Outcome, Usage};
 use crate::fsutil::ensure_distinct;
 use crate::runlog::exchange::{export, import, load_site};
 
@@ -49,6 +49,9 @@ pub struct ExportArgs {
 }
 
 pub fn run_import(args: ImportArgs) -> Result<Outcome> {
+    if let Some(d) = &args.dut {
+        crate::unit::check_serial(d).map_err(|e| Usage(format!("--dut {d:?}: {e}")))?;
+    }
     ensure_distinct(&args.out, &[&args.csv, &args.site])?;
     let site = load_site(&args.site).context("reading the site file")?;
     let r = import(&args.csv, site, args.dut.as_deref(), &args.out)?;

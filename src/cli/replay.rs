@@ -8,7 +8,7 @@ use clap::Args;
 
 use super::{Outcome, Usage};
 use crate::clock::Stopwatch;
-use crate::coeffs::CoeffsFile;
+use crate::coeffs::Chosen;
 use crate::report::{Report, render_html};
 use crate::runlog::replay::replay;
 use crate::sequencer;
@@ -41,11 +41,15 @@ pub struct ReplayArgs {
 
 pub fn run(args: ReplayArgs) -> Result<Outcome> {
     let coeffs = match &args.coeffs {
-        Some(p) => Some(
-            CoeffsFile::load(p)
-                .context("loading the coefficients file")?
-                .fit(),
-        ),
+        Some(p) => {
+            let chosen = Chosen::from_file(p).context("loading the coefficient set")?;
+            Some(chosen.compensation().ok_or_else(|| {
+                Usage(format!(
+                    "{} holds no [model4]: a set of the scale factor alone compensates nothing",
+                    p.display()
+                ))
+            })?)
+        }
         None => None,
     };
     let watch = Stopwatch::start();
@@ -68,16 +72,10 @@ pub fn run(args: ReplayArgs) -> Result<Outcome> {
             r.result.frames as f64 / secs.max(1e-9) / 1e6
         );
     }
-    let seed = r.meta.seed.filter(|_| r.meta.is_embedded());
-    let report = Report::new(
-        &r.procedure,
-        &r.result,
-        &r.meta.dut_serial,
-        &r.meta.start_time_utc,
-        r.link,
-        seed,
-        &r.meta.bench,
-    );
+    let mut report = Report::new(&r.procedure, &r.result, &r.meta, r.link);
+    if let Some(c) = &coeffs {
+        report.coefficients = c.used.clone();
+    }
     let out = args.out.unwrap_or_else(|| {
         args.log
             .parent()

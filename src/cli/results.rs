@@ -29,7 +29,8 @@ pub struct FilterArgs {
     /// Procedure name (e.g. acceptance).
     #[arg(long)]
     procedure: Option<String>,
-    /// Outcome: running, pass, fail, error or aborted.
+    /// Outcome: running, pass, fail, error, aborted or reference (an
+    /// imported run).
     #[arg(long)]
     outcome: Option<String>,
     /// Bench (as the run named it) or station (host name).
@@ -41,15 +42,19 @@ pub struct FilterArgs {
     /// Runs started before this UTC time or date.
     #[arg(long)]
     until: Option<String>,
+    /// Count imported runs (stored as `reference`, never judged) in
+    /// trends, yields and exports too.
+    #[arg(long)]
+    include_reference: bool,
 }
 
 impl FilterArgs {
     fn filter(&self, latest_only: bool, limit: Option<usize>) -> Result<Filter> {
         if let Some(o) = &self.outcome
-            && !["running", "pass", "fail", "error", "aborted"].contains(&o.as_str())
+            && !["running", "pass", "fail", "error", "aborted", "reference"].contains(&o.as_str())
         {
             return Err(Usage(format!(
-                "--outcome {o:?}: expected running, pass, fail, error or aborted"
+                "--outcome {o:?}: expected running, pass, fail, error, aborted or reference"
             ))
             .into());
         }
@@ -72,6 +77,8 @@ impl FilterArgs {
             since: self.since.clone(),
             until: self.until.clone(),
             latest_only,
+            include_reference: self.include_reference
+                || self.outcome.as_deref() == Some("reference"),
             limit,
         })
     }
@@ -157,6 +164,27 @@ pub enum ResultsCommand {
         #[arg(long, value_name = "FILE")]
         csv: Option<PathBuf>,
     },
+    /// Whether the store tells the truth: every stored run checked against
+    /// its log (there, the same SHA-256, the same figures; recomputed from
+    /// the frames with --replay), and the logs below RUNS_DIR the store
+    /// lacks.
+    #[command(after_help = after_help!(
+        "gyrobench results verify runs/ --replay",
+        "0 the store and the logs agree, 3 they do not (each finding printed), 1 error (a store \
+         that cannot be reached), 2 usage"
+    ))]
+    Verify {
+        /// Check only the runs whose logs lie below this directory, and
+        /// list the logs there the store lacks.
+        runs_dir: Option<PathBuf>,
+        /// Recompute every run's figures from its log's frames (slower)
+        /// instead of reading its result record.
+        #[arg(long)]
+        replay: bool,
+        /// As JSON.
+        #[arg(long)]
+        json: bool,
+    },
     /// Index run directories from their logs (idempotent: what the store
     /// has is left alone; a run left running is completed).
     #[command(after_help = after_help!("gyrobench results sync runs/", store))]
@@ -234,9 +262,17 @@ pub fn run(args: ResultsArgs) -> Result<Outcome> {
             let t = store.trend(&measurement, &f)?;
             if let Some(path) = &html {
                 let points = store.trend_points(&measurement, &f, 5000)?;
+                let page_dir = path
+                    .parent()
+                    .filter(|d| !d.as_os_str().is_empty())
+                    .unwrap_or(std::path::Path::new("."))
+                    .to_owned();
+                let link = |p: &crate::results::query::TrendPoint| {
+                    crate::results::page::report_link(p, &page_dir)
+                };
                 crate::fsutil::write_output(
                     path,
-                    crate::results::page::trend_page(&t, &points).as_bytes(),
+                    crate::results::page::trend_page(&t, &points, &link).as_bytes(),
                 )
                 .with_context(|| format!("writing {}", path.display()))?;
                 errln!("chart page in {}", path.display());
@@ -262,16 +298,40 @@ pub fn run(args: ResultsArgs) -> Result<Outcome> {
                 errln!("{} run(s) as CSV in {}", rows.len(), path.display());
             }
         }
+        ResultsCommand::Verify {
+            runs_dir,
+            replay,
+            json,
+        } => {
+            if let Some(d) = &runs_dir
+                && !d.is_dir()
+            {
+                return Err(Usage(format!("{}: not a directory", d.display())).into());
+            }
+            let v = store.verify(runs_dir.as_deref(), replay)?;
+            if json {
+                outln!("{}", serde_json::to_string_pretty(&v)?)?;
+            } else {
+                outf!("{}", v.render_text())?;
+            }
+            if !v.clean() {
+                return Ok(Outcome::Fail);
+            }
+        }
         ResultsCommand::Sync { dirs } => {
             let mut failed_any = false;
             for d in &dirs {
                 anyhow::ensure!(d.is_dir(), "{}: not a directory", d.display());
-                let (added, there, failed) = store.sync_dir(d);
+                let synced = store.sync_dir(d);
                 outln!(
-                    "{}: {added} part(s) indexed, {there} already in {}",
+                    "{}: {} part(s) indexed, {} already in {} ({} of them unchanged since the last sync, not read)",
                     d.display(),
-                    store.name()
+                    synced.added,
+                    synced.there + synced.unchanged,
+                    store.name(),
+                    synced.unchanged
                 )?;
+                let failed = synced.failed;
                 for f in &failed {
                     errln!("warning: {f}");
                 }
@@ -385,12 +445,27 @@ pub fn render_unit(h: &UnitHistory) -> String {
     let mut s = format!("unit {}: {} run(s)\n", h.serial, h.runs.len());
     for r in &h.runs {
         s.push_str(&format!(
-            "{} {} {} {} ({})\n",
+            "{} {} {} {} ({})\n  by {} on bench {}, gyrobench {}; coefficients: {}{}\n",
             r.started_utc.get(..19).unwrap_or(&r.started_utc),
             r.procedure,
             r.outcome.to_uppercase(),
             r.id,
-            r.bench
+            r.bench,
+            if r.operator.is_empty() {
+                "(operator not given)"
+            } else {
+                &r.operator
+            },
+            if r.bench_id.is_empty() {
+                "-"
+            } else {
+                &r.bench_id
+            },
+            r.software,
+            r.coefficients.describe(),
+            r.calibration_overdue
+                .as_deref()
+                .map_or(String::new(), |o| format!("; {o} calibration OVERDUE"))
         ));
         let ms: Vec<MeasurementRow> = h
             .measurements
@@ -402,12 +477,14 @@ pub fn render_unit(h: &UnitHistory) -> String {
     }
     match &h.coefficients {
         Some(c) => s.push_str(&format!(
-            "coefficients: version {} of {} ({}; held-out drift {} deg/h) from {}\n{}",
+            "latest coefficient set: version {} of {} ({}; held-out drift {} deg/h; sha256 {})\n{}",
             c.version,
             c.created_utc,
             c.validation,
             opt(c.held_out_drift_pp_dph, 4),
-            c.source_runs,
+            c.sha256
+                .as_deref()
+                .map_or("-", |h| h.get(..12).unwrap_or(h)),
             c.coeffs_toml
         )),
         None => s.push_str("coefficients: none calibrated\n"),
@@ -417,8 +494,17 @@ pub fn render_unit(h: &UnitHistory) -> String {
 
 /// A trend as a small table.
 pub fn render_trend(t: &Trend) -> String {
+    let idx = |v: Option<f64>| v.map_or("-".to_owned(), |v| format!("{v:.2}"));
+    let why = if t.count < 2 {
+        " (needs two values)"
+    } else if t.sigma_within.is_none_or(|s| s <= 0.0) {
+        " (the values do not vary)"
+    } else {
+        ""
+    };
     format!(
-        "{} ({}): {} value(s) of {} judged\n  mean {}  sigma {}  min {}  max {}\n  limits [{}..{}]  yield {}  Cpk {}\n",
+        "{} ({}): {} value(s) of {} judged\n  mean {}  sigma {}  min {}  max {}\n  limits [{}..{}]  yield {}\n  \
+         Cpu {}  Cpl {}  Cpk {}  (sigma within {}, from moving ranges){why}\n  Ppu {}  Ppl {}  Ppk {}  (overall sigma)\n",
         t.name,
         t.unit,
         t.count,
@@ -431,10 +517,12 @@ pub fn render_trend(t: &Trend) -> String {
         lim(t.high),
         t.yield_fraction
             .map_or("-".into(), |y| format!("{:.1} %", 100.0 * y)),
-        match (t.cpk, t.low, t.high) {
-            (Some(c), _, _) => format!("{c:.2}"),
-            (None, Some(_), Some(_)) => "- (needs two values that differ)".into(),
-            _ => "- (needs both limits)".into(),
-        }
+        idx(t.within.upper),
+        idx(t.within.lower),
+        idx(t.within.k),
+        opt(t.sigma_within, 4),
+        idx(t.overall.upper),
+        idx(t.overall.lower),
+        idx(t.overall.k),
     )
 }

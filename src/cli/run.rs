@@ -11,7 +11,7 @@ use super::check::load_bench;
 use super::{Outcome, Usage};
 use crate::analysis::series::Interval;
 use crate::clock::Pacing;
-use crate::coeffs::CoeffsFile;
+use crate::coeffs::{Chosen, CoeffsSource};
 use crate::procedure::Procedure;
 use crate::runlog::live::{Live as LiveStream, LiveError};
 use crate::sequencer::embedded::Fault;
@@ -19,6 +19,7 @@ use crate::sequencer::{self, BenchState, Interrupt, Progress};
 use crate::session::rundir::RunDirError;
 use crate::session::{self, Place, Plan, SessionError};
 use crate::twin::TwinConfig;
+use crate::unit::{SIMULATED_SERIAL, check_operator, check_serial};
 
 #[derive(Debug, Args)]
 #[command(after_help = after_help!(
@@ -34,7 +35,7 @@ pub struct RunArgs {
     /// Continue the interrupted run in DIR from its last completed step,
     /// logging into a new part file beside the first (procedure, bench,
     /// twin, coefficients, seed and unit come from its log).
-    #[arg(long, value_name = "DIR", conflicts_with_all = ["procedure", "bench", "out", "seed", "coeffs", "twin", "dut", "operator", "force"])]
+    #[arg(long, value_name = "DIR", conflicts_with_all = ["procedure", "bench", "out", "seed", "coeffs", "coeffs_override", "twin", "dut", "operator", "force"])]
     resume: Option<PathBuf>,
     /// Bench file (default: the embedded simulated bench, on virtual time).
     #[arg(long)]
@@ -53,15 +54,24 @@ pub struct RunArgs {
     /// Seed of the simulated bench.
     #[arg(long, default_value_t = 1)]
     seed: u64,
-    /// Model-4 coefficients for compensation (default: fitted on the run).
-    #[arg(long)]
-    coeffs: Option<PathBuf>,
+    /// The unit's coefficient set to compensate with: a file `calibrate`
+    /// wrote, or `latest` for the unit's newest set in the results store
+    /// (default: model 4 fitted on the run's own records). A set of
+    /// another unit is refused.
+    #[arg(long, value_name = "FILE|latest")]
+    coeffs: Option<String>,
+    /// Use the --coeffs set although it is another unit's or names no
+    /// unit; REASON goes in the report and the results store.
+    #[arg(long, value_name = "REASON", requires = "coeffs")]
+    coeffs_override: Option<String>,
     /// Twin configuration of the simulated bench (default: the RL-16 twin).
     #[arg(long)]
     twin: Option<PathBuf>,
-    /// Serial number of the unit under test.
-    #[arg(long, default_value = "SIM-0001")]
-    dut: String,
+    /// Serial number of the unit under test (required with a bench file;
+    /// on the embedded simulated bench it defaults to SIMULATED, which
+    /// names no unit and no real bench accepts).
+    #[arg(long)]
+    dut: Option<String>,
     /// Who runs it (recorded in the log and the results store).
     #[arg(long, default_value = "")]
     operator: String,
@@ -111,6 +121,11 @@ impl Progress for Live {
     fn step(&mut self, s: &crate::procedure::Step, i: usize, n: usize) {
         self.bar
             .println(&format!("[{}/{n}] {}", i + 1, s.describe()));
+    }
+
+    fn restore(&mut self, s: &crate::procedure::Step, i: usize, n: usize) {
+        self.bar
+            .println(&format!("[restore {}/{n}] {}", i + 1, s.describe()));
     }
 
     fn prompt(&mut self, text: &str) {
@@ -198,15 +213,13 @@ fn fresh(args: &RunArgs, procedure_path: &std::path::Path, pacing: Pacing) -> Re
     if !bench_cfg.is_embedded() && !args.inject.is_empty() {
         return Err(Usage("--inject applies to the embedded simulated bench only".into()).into());
     }
+    let dut = serial(args.dut.as_deref(), bench_cfg.is_embedded())?;
+    check_operator(&args.operator).map_err(|e| Usage(format!("--operator: {e}")))?;
     let procedure =
         Procedure::load(procedure_path, &bench_cfg).context("checking the procedure")?;
     let twin = match &args.twin {
         Some(p) => TwinConfig::load(p).context("loading the twin file")?,
         None => TwinConfig::default_rl16(),
-    };
-    let coeffs_file = match &args.coeffs {
-        Some(p) => Some(CoeffsFile::load(p).context("loading the coefficients file")?),
-        None => None,
     };
     let faults = args
         .inject
@@ -217,6 +230,16 @@ fn fresh(args: &RunArgs, procedure_path: &std::path::Path, pacing: Pacing) -> Re
         args.db.as_deref(),
         bench_cfg.results.as_ref().and_then(|r| r.db.as_deref()),
     );
+    let coeffs = match args.coeffs.as_deref() {
+        None => None,
+        Some(choice) => Some(choose_coeffs(
+            choice,
+            args.coeffs_override.as_deref(),
+            &store,
+            &procedure.meta.dut_type,
+            &dut,
+        )?),
+    };
     Ok(Plan {
         station: session::station(&bench_cfg),
         store,
@@ -228,9 +251,9 @@ fn fresh(args: &RunArgs, procedure_path: &std::path::Path, pacing: Pacing) -> Re
             .map_or("embedded".into(), |p| p.display().to_string()),
         bench_cfg,
         twin,
-        coeffs_file,
+        coeffs,
         seed: args.seed,
-        dut: args.dut.clone(),
+        dut,
         operator: args.operator.clone(),
         speed: args.speed.clone(),
         pacing,
@@ -238,6 +261,104 @@ fn fresh(args: &RunArgs, procedure_path: &std::path::Path, pacing: Pacing) -> Re
         resume: None,
         live: None,
     })
+}
+
+/// The serial a run is recorded under: `--dut` (checked), or on the
+/// embedded bench [`SIMULATED_SERIAL`]; a real bench needs the unit's.
+fn serial(dut: Option<&str>, embedded: bool) -> Result<String> {
+    match dut {
+        Some(d) => {
+            check_serial(d).map_err(|e| Usage(format!("--dut {d:?}: {e}")))?;
+            if !embedded && d == SIMULATED_SERIAL {
+                return Err(Usage(format!(
+                    "--dut {SIMULATED_SERIAL} names no unit and is kept for the embedded simulated bench; give the serial of the unit on this bench"
+                ))
+                .into());
+            }
+            Ok(d.to_owned())
+        }
+        None if embedded => Ok(SIMULATED_SERIAL.to_owned()),
+        None => Err(Usage(
+            "a bench file drives real devices: give the unit's serial number with --dut SERIAL (as on its housing)".into(),
+        )
+        .into()),
+    }
+}
+
+/// The coefficient set `--coeffs` names (a file, or `latest` from the
+/// store), checked against the unit: another unit's set, or one naming
+/// none, needs `--coeffs-override REASON`.
+fn choose_coeffs(
+    choice: &str,
+    override_reason: Option<&str>,
+    store: &crate::results::Location,
+    dut_type: &str,
+    serial: &str,
+) -> Result<Chosen> {
+    let mut chosen = if choice == "latest" {
+        latest_set(store, dut_type, serial)?
+    } else {
+        Chosen::from_file(std::path::Path::new(choice)).context("loading the coefficient set")?
+    };
+    let from = chosen
+        .used
+        .from
+        .clone()
+        .unwrap_or_else(|| choice.to_owned());
+    match (
+        chosen.set.check_unit(&from, dut_type, serial),
+        override_reason,
+    ) {
+        (Ok(()), None) => {}
+        (Ok(()), Some(_)) => {
+            return Err(Usage(format!(
+                "--coeffs-override: {from} holds {}, this unit's own set; there is nothing to override",
+                chosen.set.describe()
+            ))
+            .into());
+        }
+        (Err(e @ crate::coeffs::SetMismatch::NoModel4 { .. }), _) => {
+            return Err(Usage(e.to_string()).into());
+        }
+        (Err(e), None) => return Err(Usage(e.to_string()).into()),
+        (Err(e), Some(reason)) => {
+            let reason = reason.trim();
+            if reason.is_empty() || reason.chars().any(char::is_control) || reason.len() > 500 {
+                return Err(Usage(
+                    "--coeffs-override needs a reason: one line of at most 500 characters".into(),
+                )
+                .into());
+            }
+            errln!("warning: {e}; used anyway: {reason}");
+            chosen.used.override_reason = Some(reason.to_owned());
+        }
+    }
+    Ok(chosen)
+}
+
+/// The unit's newest coefficient set in the results store.
+fn latest_set(store: &crate::results::Location, dut_type: &str, serial: &str) -> Result<Chosen> {
+    let Some(mut s) = crate::results::Store::open(store)
+        .context("opening the results store for --coeffs latest")?
+    else {
+        return Err(Usage(
+            "--coeffs latest reads the unit's sets from the results store; --db none names none"
+                .into(),
+        )
+        .into());
+    };
+    let Some((version, text)) = s.latest_coefficients(dut_type, serial)? else {
+        return Err(Usage(format!(
+            "the results store {} holds no coefficient set of {dut_type} {serial}; run `gyrobench calibrate` on the unit's runs first, or give --coeffs FILE",
+            s.name()
+        ))
+        .into());
+    };
+    let src = crate::config::Source::from_text(
+        &format!("coefficient set {version} of {serial} in {}", s.name()),
+        &text,
+    );
+    Ok(Chosen::from_source(&src, CoeffsSource::Store, s.name())?)
 }
 
 pub fn run(args: RunArgs) -> Result<Outcome> {
@@ -315,6 +436,7 @@ pub fn run(args: RunArgs) -> Result<Outcome> {
         rt.block_on(live.stop());
     }
     outf!("{}", finished.report.render_text())?;
+    outf!("  run directory: {}\n", finished.dir.display())?;
     match &finished.report_error {
         None => errln!("log and report in {}", finished.dir.display()),
         Some(e) => errln!(

@@ -275,6 +275,18 @@ fn allan_chart(d: &Diagnosis) -> String {
 /// the gap, which effect explains it and how far it shrinks, or that
 /// nothing in the library does and where the rest lies.
 pub fn headline(d: &Diagnosis) -> String {
+    let mixed = if d.mixed_units.is_empty() {
+        String::new()
+    } else {
+        format!(
+            "Runs of several units diagnosed as one, on request ({}): an effect may be a difference between the units. ",
+            d.mixed_units.join("; ")
+        )
+    };
+    format!("{mixed}{}", headline_of_one_unit(d))
+}
+
+fn headline_of_one_unit(d: &Diagnosis) -> String {
     let t = &d.layers.thermal;
     let r = &d.layers.rate;
     let thermal = if t.gap_c > THERMAL_GAP_C {

@@ -344,6 +344,11 @@ impl DecidingRun {
 pub struct Diagnosis {
     /// Runs diagnosed.
     pub runs: Vec<String>,
+    /// The units of the runs, when they are of more than one and were
+    /// diagnosed together on request (`--allow-mixed-units`): each run's
+    /// `name: type serial`.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub mixed_units: Vec<String>,
     /// How the held-out figures were made.
     pub protocol: String,
     /// Both layers.
@@ -419,7 +424,7 @@ fn reference(twin: Option<&TwinConfig>) -> Vec<(Effect, Option<f64>)> {
         (
             terms.self_heating,
             Effect::SelfHeating,
-            Some(t.bias.warmup_tau_s),
+            Some(t.bias.model4.warmup_tau_s),
         ),
     ] {
         if on {
@@ -1182,6 +1187,7 @@ pub(crate) fn diagnose_rate(runs: &[RunData], opts: &Options) -> Diagnosis {
     let (period, frac) = periodicity(&data, &current.residual);
     Diagnosis {
         runs: runs.iter().map(|r| r.name.clone()).collect(),
+        mixed_units: Vec::new(),
         protocol: format!(
             "blocked cross-validation, one fold per block of a record of at most 15 min ({} folds over {} run(s)); scores on 60 s means; a per-run offset is a nuisance fitted on the other folds of the run",
             data.folds.len(),
@@ -1664,20 +1670,20 @@ pub fn updated_twin(base: &TwinConfig, d: &Diagnosis) -> TwinConfig {
             }
             Some(Effect::SelfHeating) => {
                 t.bias.terms.self_heating = true;
-                t.bias.k5_dph = get(a, "k5_dph");
-                t.bias.warmup_tau_s = get(a, "warmup_tau_s");
+                t.bias.model4.k5_dph = get(a, "k5_dph");
+                t.bias.model4.warmup_tau_s = get(a, "warmup_tau_s");
             }
             Some(Effect::GradientRate) => {
                 t.bias.terms.gradient_rate = true;
-                t.bias.k3_dph_per_c_per_s = get(a, "k3_dph_per_c_per_s");
+                t.bias.model4.k3_dph_per_c_per_s = get(a, "k3_dph_per_c_per_s");
             }
             Some(Effect::GradientQuadratic) => {
                 t.bias.terms.gradient_quadratic = true;
-                t.bias.k2_dph_per_c2 = get(a, "k2_dph_per_c2");
+                t.bias.model4.k2_dph_per_c2 = get(a, "k2_dph_per_c2");
             }
             Some(Effect::CaseTemperature) => {
                 t.bias.terms.case_temperature = true;
-                t.bias.k4_dph_per_c = get(a, "k4_dph_per_c");
+                t.bias.model4.k4_dph_per_c = get(a, "k4_dph_per_c");
             }
             // Outside disturbances are never accepted effects.
             Some(Effect::Gradient | Effect::BiasStep | Effect::BiasDrift | Effect::Periodic)

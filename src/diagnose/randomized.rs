@@ -140,7 +140,7 @@ pub fn draw_unit(seed: u64) -> TwinConfig {
     th.sensor_noise_c = log(u(0.0, 1.0), 0.005, 0.1);
     t.gyro.temp_lsb_c = log(u(0.0, 1.0), 0.005, 0.1);
     // Model 4 within +-60 % of the study's, a sign changed one time in five.
-    let b = &mut t.bias;
+    let b = &mut t.bias.model4;
     for k in [
         &mut b.k1_dph_per_c,
         &mut b.k2_dph_per_c2,

@@ -306,19 +306,19 @@ pub(crate) fn inject(base: &TwinConfig, e: Effect, a: f64) -> (TwinConfig, TwinC
             });
         }
         Effect::SelfHeating => {
-            data.bias.k5_dph = a;
+            data.bias.model4.k5_dph = a;
             reference.bias.terms.self_heating = false;
         }
         Effect::GradientRate => {
-            data.bias.k3_dph_per_c_per_s = a;
+            data.bias.model4.k3_dph_per_c_per_s = a;
             reference.bias.terms.gradient_rate = false;
         }
         Effect::GradientQuadratic => {
-            data.bias.k2_dph_per_c2 = a;
+            data.bias.model4.k2_dph_per_c2 = a;
             reference.bias.terms.gradient_quadratic = false;
         }
         Effect::CaseTemperature => {
-            data.bias.k4_dph_per_c = a;
+            data.bias.model4.k4_dph_per_c = a;
             reference.bias.terms.case_temperature = false;
         }
         // Not injectable: model 4's own first term, and the disturbances
@@ -472,7 +472,7 @@ pub fn run(
     let mut coefficients: BTreeMap<(String, u64), f64> = BTreeMap::new();
     for &e in effects {
         let p = match e {
-            Effect::SelfHeating => base.bias.warmup_tau_s,
+            Effect::SelfHeating => base.bias.model4.warmup_tau_s,
             Effect::Hysteresis => 2.0,
             Effect::ThermalLag => 1800.0,
             _ => f64::NAN,

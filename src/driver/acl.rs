@@ -7,7 +7,7 @@
 use async_trait::async_trait;
 
 use super::link::{LineLink, Verdict};
-use super::{DeviceError, MotionTable, TableReading};
+use super::{DeviceError, Identity, MotionTable, TableReading};
 use crate::geometry::TableAngles;
 use crate::protocol::acl::{self, Axis, Command, ServoMode, stb};
 
@@ -133,6 +133,16 @@ impl MotionTable for AclTable {
             Command::Mode(Axis::Inner, ServoMode::Stop),
         ])
         .await
+    }
+
+    async fn identify(&mut self) -> Result<Identity, DeviceError> {
+        let reply = self
+            .link
+            .transact(&acl::encode(&[Command::Identify]), |l| {
+                Verdict::Ok(l.to_owned())
+            })
+            .await?;
+        Ok(acl::parse_identity(&reply))
     }
 }
 

@@ -3,7 +3,7 @@
 use async_trait::async_trait;
 
 use super::link::{LineLink, Verdict};
-use super::{Chamber, ChamberMode, ChamberReading, DeviceError};
+use super::{Chamber, ChamberMode, ChamberReading, DeviceError, Identity};
 use crate::protocol::espec::{self, Mode, ReplyError, Request};
 
 /// Plausible chamber air temperatures, degC; anything else is a fault.
@@ -105,6 +105,12 @@ impl Chamber for EspecChamber {
             ChamberMode::Constant => Mode::Constant,
         }))
         .await
+    }
+
+    async fn identify(&mut self) -> Result<Identity, DeviceError> {
+        let kind = self.ask(Request::Type, espec::parse_text).await?;
+        let rom = self.ask(Request::Rom, espec::parse_text).await?;
+        Ok(espec::parse_identity(&kind, &rom))
     }
 }
 

@@ -17,6 +17,7 @@ use std::time::Duration;
 use async_trait::async_trait;
 
 use crate::geometry::TableAngles;
+pub use crate::protocol::Identity;
 
 /// A device failure the caller cannot retry away.
 #[derive(Debug, thiserror::Error)]
@@ -219,6 +220,9 @@ pub trait Chamber: Send {
     async fn set_point(&mut self, temp_c: f64) -> Result<(), DeviceError>;
     /// Change the controller mode.
     async fn set_mode(&mut self, mode: ChamberMode) -> Result<(), DeviceError>;
+    /// Ask the controller what it is (model, firmware; its serial where
+    /// the protocol reports one).
+    async fn identify(&mut self) -> Result<Identity, DeviceError>;
 }
 
 /// Ramps a chamber whose controller has no ramp of its own by stepping its
@@ -308,6 +312,8 @@ pub trait MotionTable: Send {
     async fn rate(&mut self, inner: bool, rate_dps: f64) -> Result<(), DeviceError>;
     /// Controlled stop of both axes (the safe state).
     async fn stop(&mut self) -> Result<(), DeviceError>;
+    /// Ask the controller what it is (`*IDN?`).
+    async fn identify(&mut self) -> Result<Identity, DeviceError>;
 }
 
 /// Decides "in position": every axis within `tolerance_deg` of the target

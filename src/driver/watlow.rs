@@ -8,7 +8,7 @@ use tokio_modbus::client::{Context, Reader, Writer};
 use tokio_modbus::{ExceptionCode, Slave};
 
 use super::link::{Connector, LinkCounters, open_once};
-use super::{Chamber, ChamberMode, ChamberReading, DeviceError, RetryPolicy};
+use super::{Chamber, ChamberMode, ChamberReading, DeviceError, Identity, RetryPolicy};
 use crate::protocol::watlow::{self as w, decode_f32, encode_f32, mode};
 use crate::transport::BoxTransport;
 
@@ -205,6 +205,13 @@ impl Chamber for WatlowChamber {
             ChamberMode::Constant => mode::AUTO,
         };
         self.op(Op::Write(w::CONTROL_MODE, vec![v])).await.map(drop)
+    }
+
+    async fn identify(&mut self) -> Result<Identity, DeviceError> {
+        let words = self
+            .op(Op::Read(w::PART_NUMBER, w::PART_NUMBER_LEN))
+            .await?;
+        Ok(w::parse_identity(&words))
     }
 }
 

@@ -129,6 +129,26 @@ fn unknown_key_is_refused_with_its_line() {
 }
 
 #[test]
+fn a_value_of_the_wrong_type_in_a_step_is_reported_at_its_own_line_with_its_key() {
+    for (value, kind) in [("\"30\"", "string"), ("true", "boolean")] {
+        let t = SMOKE.replacen("duration_s = 30.0", &format!("duration_s = {value}"), 1);
+        let line = t
+            .lines()
+            .position(|l| l.starts_with("duration_s = ") && l.contains(value))
+            .expect("the line")
+            + 1;
+        let err = load("bad.toml", &t).expect_err("wrong type");
+        let msg = err.to_string();
+        assert_eq!(err.line(), Some(line), "{msg}");
+        assert!(
+            msg.starts_with(&format!("bad.toml:{line}:")) && msg.contains("`duration_s`"),
+            "{msg}"
+        );
+        assert!(msg.contains(kind), "{msg}");
+    }
+}
+
+#[test]
 fn measure_of_a_record_that_does_not_exist_is_refused() {
     let t = SMOKE.replacen("records = [\"{label}\"]", "records = [\"nowhere\"]", 1);
     refused(

@@ -326,6 +326,19 @@ pub fn parse_numbers(reply: &str, expected: usize) -> Option<Vec<f64>> {
     (v.len() == expected).then_some(v)
 }
 
+/// The identity in an `*IDN?` reply: `maker,model,serial,firmware` (the
+/// IEEE 488.2 form; missing fields are none).
+pub fn parse_identity(reply: &str) -> super::Identity {
+    let mut f = reply.trim().splitn(4, ',').map(super::clean_field);
+    super::Identity {
+        manufacturer: f.next().flatten(),
+        model: f.next().flatten(),
+        serial: f.next().flatten(),
+        firmware: f.next().flatten(),
+        raw: reply.trim().to_owned(),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -353,6 +353,26 @@ pub fn fmt_temp(v: f64) -> String {
     format!("{v:.1}")
 }
 
+/// The text of a reply to `TYPE?` or `ROM?` (a refusal is an error).
+pub fn parse_text(reply: &str) -> Result<String, ReplyError> {
+    match refusal(reply) {
+        Some(e) => Err(e),
+        None => Ok(reply.trim().to_owned()),
+    }
+}
+
+/// The identity in the replies to `TYPE?` (the controller type) and
+/// `ROM?` (its firmware); the controller reports no serial number.
+pub fn parse_identity(type_reply: &str, rom_reply: &str) -> super::Identity {
+    super::Identity {
+        manufacturer: Some("Espec".into()),
+        model: super::clean_field(type_reply),
+        serial: None,
+        firmware: super::clean_field(rom_reply),
+        raw: format!("TYPE? {} | ROM? {}", type_reply.trim(), rom_reply.trim()),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

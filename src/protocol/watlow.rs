@@ -20,6 +20,13 @@ pub const CONTROL_MODE: u16 = 2730;
 /// Profile state (149 running, 146 paused).
 pub const PROFILE_STATE: u16 = 16568;
 
+/// The controller's part number: [`PART_NUMBER_LEN`] registers from here,
+/// one ASCII character in each (zeros ignored), as the F4T's Modbus map
+/// gives it.
+pub const PART_NUMBER: u16 = 16;
+/// Registers of the part number.
+pub const PART_NUMBER_LEN: u16 = 15;
+
 /// Offset between loops.
 pub const LOOP_STRIDE: u16 = 160;
 
@@ -59,6 +66,36 @@ pub fn decode_f32(words: &[u16]) -> Option<f32> {
     let [lo, hi] = words else { return None };
     let v = f32::from_bits(u32::from(*lo) | (u32::from(*hi) << 16));
     v.is_finite().then_some(v)
+}
+
+/// The part number in its registers (one character a register).
+pub fn decode_string(words: &[u16]) -> String {
+    words
+        .iter()
+        .filter(|w| **w != 0)
+        .filter_map(|w| char::from_u32(u32::from(*w)))
+        .collect()
+}
+
+/// The registers holding `s` (one character a register, zero-padded to
+/// `len`).
+pub fn encode_string(s: &str, len: usize) -> Vec<u16> {
+    let mut v: Vec<u16> = s.bytes().map(u16::from).take(len).collect();
+    v.resize(len, 0);
+    v
+}
+
+/// The identity in the part number registers; the F4T's serial number and
+/// firmware sit in registers this driver does not read.
+pub fn parse_identity(words: &[u16]) -> super::Identity {
+    let part = decode_string(words);
+    super::Identity {
+        manufacturer: Some("Watlow".into()),
+        model: super::clean_field(&part),
+        serial: None,
+        firmware: None,
+        raw: format!("part number {part}"),
+    }
 }
 
 #[cfg(test)]

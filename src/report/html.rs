@@ -567,6 +567,35 @@ fn resolved(v: f64, digits: usize, unit: &str) -> String {
     }
 }
 
+/// A failed measurement with the limit it broke and by how much:
+/// `x = 0.0712 deg/h against a limit of 0.05 deg/h, 0.0212 deg/h over it`.
+pub fn outside_by(m: &Measurement) -> String {
+    let v = m.value;
+    let (limit_v, side) = match (v, m.low, m.high) {
+        (Some(x), _, Some(h)) if x > h => (Some(h), "over"),
+        (Some(x), Some(l), _) if x < l => (Some(l), "under"),
+        _ => (None, ""),
+    };
+    match (v, limit_v) {
+        (Some(x), Some(l)) => format!(
+            "{} = {} {u} against a limit of {} {u}, {} {u} {side} it",
+            m.name,
+            num(Some(x), 4),
+            limit(Some(l)),
+            num(Some((x - l).abs()), 4),
+            u = m.unit
+        ),
+        _ => format!(
+            "{} = {} {} (limits {}..{})",
+            m.name,
+            num(v, 4),
+            m.unit,
+            limit(m.low),
+            limit(m.high)
+        ),
+    }
+}
+
 /// One sentence under the verdict: what decided it.
 fn headline(r: &Report) -> String {
     let total = r.measurements.len();
@@ -601,9 +630,9 @@ fn headline(r: &Report) -> String {
             outside.len(),
             outside
                 .iter()
-                .map(|m| format!("{} = {} {}", m.name, num(m.value, 4), m.unit))
+                .map(|m| outside_by(m))
                 .collect::<Vec<_>>()
-                .join(", ")
+                .join("; ")
         ),
         Outcome::Error => format!(
             "The run did not complete: {}{}",
@@ -686,11 +715,27 @@ pub fn render_html(r: &Report, records: &Records) -> String {
         .flatten()
         .collect();
     let l = &r.link;
+    let overdue = if r.calibration_overdue.is_empty() {
+        String::new()
+    } else {
+        format!(
+            "<p class=box><b>{} calibration OVERDUE</b>: {}. The figures stand as measured; the record shows the instrument past its due date.</p>\n",
+            esc(&r.calibration_overdue.join(" and ")),
+            esc(&r
+                .instruments
+                .iter()
+                .filter(|i| i.calibration_overdue)
+                .map(crate::bench::Instrument::describe)
+                .collect::<Vec<_>>()
+                .join("; "))
+        )
+    };
     let body = format!(
-        r#"<div class=verdict style="background:{colour}">{word}</div>
+        r#"<div class=verdict style="background:{colour}">{word}</div>{overdue_tag}
 <h1>{proc} &mdash; {dut_type} {serial}</h1>
 <p class=headline>{headline}</p>
-{error}{bench_left}<p class=note>Spec: {spec}<br>Started {start} &middot; {hours:.2} h of device time &middot; {frames} frames &middot; bench {bench}{seed} &middot; gyrobench {version}</p>
+{overdue}{error}{bench_left}<p class=note>Spec: {spec}<br>Started {start} &middot; {hours:.2} h of device time &middot; {frames} frames &middot; bench {bench}{seed} &middot; gyrobench {version}</p>
+{record}
 {headline_chart}
 <h2>Measurements</h2>
 <table><tr><th>name</th><th>value</th><th>unit</th><th>low</th><th>high</th><th>outcome</th><th>step</th><th>note</th></tr>
@@ -716,7 +761,13 @@ pub fn render_html(r: &Report, records: &Records) -> String {
         frames = r.frames,
         bench = esc(&r.bench),
         seed = r.seed.map_or(String::new(), |s| format!(", seed {s}")),
-        version = esc(&r.software_version),
+        version = esc(&software(r)),
+        overdue_tag = if r.calibration_overdue.is_empty() {
+            ""
+        } else {
+            " <span class=verdict style=\"background:var(--error);font-size:1.2rem\">CALIBRATION OVERDUE</span>"
+        },
+        record = record(r),
         lf = l.frames,
         lost = l.lost_frames,
         crc = l.crc_errors,
@@ -725,7 +776,118 @@ pub fn render_html(r: &Report, records: &Records) -> String {
     );
     page(
         &format!("{} {}: {word}", r.procedure, r.dut.serial),
-        "",
+        &print_margins(r),
         &body,
+    )
+}
+
+/// `0.1.0 (1a2b3c4d5e6f)`, or the version alone for a log that names no
+/// revision.
+fn software(r: &Report) -> String {
+    if r.software_revision.is_empty() {
+        r.software_version.clone()
+    } else {
+        format!("{} ({})", r.software_version, r.software_revision)
+    }
+}
+
+/// The run's record: who ran it where, with which instruments and
+/// coefficients.
+fn record(r: &Report) -> String {
+    let or_dash = |s: &str| {
+        if s.is_empty() { "-".to_owned() } else { esc(s) }
+    };
+    let mut rows = format!(
+        "<tr><th>unit</th><td>{} {}{}</td></tr>\n<tr><th>run id</th><td><code>{}</code></td></tr>\n<tr><th>operator</th><td>{}</td></tr>\n<tr><th>bench</th><td>{} ({}) on {}{}</td></tr>\n<tr><th>software</th><td>gyrobench {}</td></tr>\n<tr><th>coefficients</th><td>{}</td></tr>\n",
+        esc(&r.dut.kind),
+        esc(&r.dut.serial),
+        if r.slot.is_empty() {
+            String::new()
+        } else {
+            format!(", slot {}", esc(&r.slot))
+        },
+        or_dash(&r.run_id),
+        if r.operator.is_empty() {
+            "not given".to_owned()
+        } else {
+            esc(&r.operator)
+        },
+        or_dash(&r.bench_id),
+        esc(&r.bench),
+        or_dash(&r.host),
+        if !r.station.is_empty() && r.station != r.host {
+            format!(", station {}", esc(&r.station))
+        } else {
+            String::new()
+        },
+        esc(&software(r)),
+        esc(&r.coefficients.describe()),
+    );
+    for i in &r.instruments {
+        let id = match (&i.identity, &i.identity_error) {
+            (Some(id), _) => id.describe(),
+            (None, Some(e)) => format!("did not identify itself: {e}"),
+            (None, None) => "did not identify itself".into(),
+        };
+        let due = match (&i.calibration_due, i.calibration_overdue) {
+            (Some(d), true) => format!("<b>calibration OVERDUE since {}</b>", esc(d)),
+            (Some(d), false) => format!("calibration due {}", esc(d)),
+            (None, _) => "no calibration due date in the bench file".into(),
+        };
+        rows.push_str(&format!(
+            "<tr><th>{}</th><td>{} <span class=note>({})</span><br>{due}</td></tr>\n",
+            esc(&i.role),
+            esc(&id),
+            esc(&i.spec),
+        ));
+    }
+    format!("<h2>Record</h2>\n<table class=record>\n{rows}</table>\n")
+}
+
+/// A CSS string: quoted, with what would end it or the style element
+/// escaped.
+fn css_string(s: &str) -> String {
+    let mut out = String::from("\"");
+    for c in s.chars() {
+        match c {
+            '"' | '\\' => {
+                out.push('\\');
+                out.push(c);
+            }
+            '<' => out.push_str("\\3c "),
+            '>' => out.push_str("\\3e "),
+            c if c.is_control() => {}
+            c => out.push(c),
+        }
+    }
+    out.push('"');
+    out
+}
+
+/// Printed, every A4 page names the unit and the run and says which page
+/// of how many it is.
+fn print_margins(r: &Report) -> String {
+    let who = format!(
+        "{} {} \u{b7} {} \u{b7} run {}",
+        r.dut.kind,
+        r.dut.serial,
+        r.procedure,
+        if r.run_id.is_empty() {
+            "-"
+        } else {
+            r.run_id.get(..12).unwrap_or(&r.run_id)
+        }
+    );
+    format!(
+        "@media print{{@page{{@top-left{{content:{};font:8pt system-ui,sans-serif;color:#555}}\
+         @top-right{{content:{} counter(page) \" of \" counter(pages);font:8pt system-ui,sans-serif;color:#555}}\
+         @bottom-left{{content:{};font:8pt system-ui,sans-serif;color:#555}}}}}}",
+        css_string(&who),
+        css_string(&format!(
+            "{} {} \u{b7} page ",
+            r.outcome_word(),
+            r.dut.serial
+        )),
+        css_string(&format!("run id {}", r.run_id)),
     )
 }

@@ -7,9 +7,12 @@ use serde::Serialize;
 
 use crate::analysis::allan::{Taus, analyse};
 use crate::analysis::series::Interval;
+use crate::bench::Instrument;
+use crate::coeffs::CoeffsUsed;
 use crate::geometry::{Orientation, TableAngles};
 use crate::procedure::{Metric, Procedure, StepKind};
 use crate::protocol::frame::LinkStats;
+use crate::runlog::meta::RunMeta;
 use crate::sequencer::measure::{Measurement, Records};
 use crate::sequencer::{BenchLeft, Outcome, RunError, RunResult};
 
@@ -34,6 +37,28 @@ pub struct Report {
     pub procedure: String,
     /// Unit under test.
     pub dut: Dut,
+    /// The unit's slot on the bench's fixture (empty: its only one).
+    pub slot: String,
+    /// The run's id (the same in every part; empty for a log of the
+    /// first format).
+    pub run_id: String,
+    /// Who ran it (empty when not given).
+    pub operator: String,
+    /// The bench's id.
+    pub bench_id: String,
+    /// The computer it ran on.
+    pub host: String,
+    /// The name the bench PC records its runs under.
+    pub station: String,
+    /// The gyrobench's source revision.
+    pub software_revision: String,
+    /// The chamber and the table as they reported themselves, with their
+    /// calibration due dates.
+    pub instruments: Vec<Instrument>,
+    /// Instruments past their calibration due date when the run started.
+    pub calibration_overdue: Vec<String>,
+    /// The coefficients the compensated figures use.
+    pub coefficients: CoeffsUsed,
     /// Every measurement.
     pub measurements: Vec<Measurement>,
     /// What ended the run, when it did not finish.
@@ -210,35 +235,44 @@ impl NoiseFigures {
 }
 
 impl Report {
-    /// Assemble the report of a run.
-    pub fn new(
-        p: &Procedure,
-        r: &RunResult,
-        serial: &str,
-        start_time_utc: &str,
-        link: LinkStats,
-        seed: Option<u64>,
-        bench: &str,
-    ) -> Self {
+    /// Assemble the report of a run from its procedure, its result and
+    /// its log's `run` metadata (so a replay of the log gives the same).
+    pub fn new(p: &Procedure, r: &RunResult, meta: &RunMeta, link: LinkStats) -> Self {
+        let unit = meta.unit();
         Self {
             outcome: r.outcome,
             procedure: p.meta.name.clone(),
             dut: Dut {
                 kind: p.meta.dut_type.clone(),
-                serial: serial.to_owned(),
+                serial: unit.map_or_else(|| meta.dut_serial.clone(), |u| u.serial.clone()),
             },
+            slot: unit.map_or(String::new(), |u| u.slot.clone()),
+            run_id: meta.run_id.clone(),
+            operator: meta.operator.clone(),
+            bench_id: meta.bench_id.clone(),
+            host: meta.host.clone(),
+            station: meta.station.clone(),
+            software_revision: meta.software_revision.clone(),
+            instruments: meta.instruments.clone(),
+            calibration_overdue: meta
+                .instruments
+                .iter()
+                .filter(|i| i.calibration_overdue)
+                .map(|i| i.role.clone())
+                .collect(),
+            coefficients: unit.map_or_else(CoeffsUsed::fitted, |u| u.coefficients.clone()),
             measurements: r.measurements.clone(),
             error: r.error.clone(),
             cleanup_completed: r.cleanup_completed,
             bench_left: r.bench_left.clone(),
             spec: p.meta.spec.clone(),
-            start_time_utc: start_time_utc.to_owned(),
+            start_time_utc: meta.start_time_utc.clone(),
             device_time_s: r.device_time_s,
             frames: r.frames,
             link,
-            seed,
-            bench: bench.to_owned(),
-            software_version: env!("CARGO_PKG_VERSION").to_owned(),
+            seed: meta.seed.filter(|_| meta.is_embedded()),
+            bench: meta.bench.clone(),
+            software_version: meta.software_version.clone(),
             noise: NoiseFigures::of(&r.measurements, &r.records),
             positions: Position::of(p),
         }
@@ -249,11 +283,25 @@ impl Report {
         serde_json::to_string_pretty(self).unwrap_or_else(|e| format!("{{\"error\":\"{e}\"}}"))
     }
 
+    /// What the verdict line adds about the instruments: ` (chamber
+    /// calibration OVERDUE)` when one was past its due date.
+    pub fn overdue_flag(&self) -> String {
+        if self.calibration_overdue.is_empty() {
+            String::new()
+        } else {
+            format!(
+                " ({} calibration OVERDUE)",
+                self.calibration_overdue.join(" and ")
+            )
+        }
+    }
+
     /// A short text summary for the terminal.
     pub fn render_text(&self) -> String {
         let mut s = format!(
-            "{}: {} on {} {} ({:.1} h device time, {} frames)\n",
+            "{}{}: {} on {} {} ({:.1} h device time, {} frames)\n",
             self.outcome_word(),
+            self.overdue_flag(),
             self.procedure,
             self.dut.kind,
             self.dut.serial,
@@ -296,6 +344,19 @@ impl Report {
         }
         if let Some(b) = &self.bench_left {
             s.push_str(&format!("  bench left: {}\n", b.summary));
+        }
+        if self
+            .measurements
+            .iter()
+            .any(|m| m.metric == Metric::CompensatedDriftPp)
+        {
+            s.push_str(&format!(
+                "  coefficients: {}\n",
+                self.coefficients.describe()
+            ));
+        }
+        for i in self.instruments.iter().filter(|i| i.calibration_overdue) {
+            s.push_str(&format!("  {}\n", i.describe()));
         }
         s
     }

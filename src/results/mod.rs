@@ -18,6 +18,7 @@ pub mod query;
 pub mod record;
 pub mod sql;
 pub mod sqlite;
+pub mod verify;
 
 use std::path::{Path, PathBuf};
 

@@ -1,31 +1,56 @@
 //! The trend chart page: a measurement's values across units in the order
-//! their runs started, with the limits (one self-contained page, plotters
-//! SVG, no scripts).
+//! their runs started, with the limits, the capability indices, and a
+//! table of every value with its unit, run and report (one self-contained
+//! page, plotters SVG, no scripts).
 
-use super::query::Trend;
-use crate::view::chart::Rule;
+use std::path::Path;
+
+use super::query::{Trend, TrendPoint};
+use crate::view::chart::{Link, Rule};
 use crate::view::{Chart, Marker, Series, esc, page};
 
-/// The page of `t`, with `points` (start time, serial, value, outcome),
-/// oldest first. Values are plotted in run order (an individuals chart):
-/// runs a second apart and runs a month apart are each a point of their own.
-pub fn trend_page(t: &Trend, points: &[(String, String, f64, String)]) -> String {
+/// The report of the run a point came from, as a link from a page in
+/// `page_dir`: relative when the report sits below it, else a file URL.
+pub fn report_link(p: &TrendPoint, page_dir: &Path) -> Option<String> {
+    let report = Path::new(&p.log_path).parent()?.join("report.html");
+    let abs_page = std::path::absolute(page_dir).ok()?;
+    Some(match report.strip_prefix(&abs_page) {
+        Ok(rel) => rel.display().to_string(),
+        Err(_) => format!("file://{}", report.display()),
+    })
+}
+
+/// The day of an RFC 3339 time, or `undated`.
+fn day(t: &str) -> String {
+    let d: String = t.chars().take(10).collect();
+    if d.len() == 10 { d } else { "undated".into() }
+}
+
+/// The page of `t`, with `points` oldest first; `link` gives each point's
+/// report. Values are plotted in run order (an individuals chart): runs a
+/// second apart and runs a month apart are each a point of their own, and
+/// the point's number is its row in the table below.
+pub fn trend_page(
+    t: &Trend,
+    points: &[TrendPoint],
+    link: &dyn Fn(&TrendPoint) -> Option<String>,
+) -> String {
     let at = |pass: bool| -> Vec<(f64, f64)> {
         points
             .iter()
             .enumerate()
-            .filter(|(_, p)| (p.3 == "pass") == pass)
-            .map(|(i, p)| ((i + 1) as f64, p.2))
+            .filter(|(_, p)| (p.outcome == "pass") == pass)
+            .map(|(i, p)| ((i + 1) as f64, p.value))
             .collect()
     };
-    let day = |p: Option<&(String, String, f64, String)>| {
-        p.map_or(String::new(), |p| p.0.chars().take(10).collect())
+    let x_desc = match (points.first(), points.last()) {
+        (Some(a), Some(b)) => format!(
+            "runs in the order they started, oldest first ({} to {})",
+            day(&a.started_utc),
+            day(&b.started_utc)
+        ),
+        _ => "runs in the order they started".into(),
     };
-    let x_desc = format!(
-        "runs in the order they started, oldest first ({} to {})",
-        day(points.first()),
-        day(points.last())
-    );
     // Points small enough that thousands stay points.
     let dot = match points.len() {
         0..=100 => 5,
@@ -53,14 +78,53 @@ pub fn trend_page(t: &Trend, points: &[(String, String, f64, String)]) -> String
             });
         }
     }
+    let mut rows = String::new();
+    for (i, p) in points.iter().enumerate() {
+        let href = link(p);
+        c = c.link(Link {
+            x: (i + 1) as f64,
+            y: p.value,
+            title: format!(
+                "#{} {} run {} ({}): {} {} {}",
+                i + 1,
+                p.serial,
+                short(&p.run),
+                day(&p.started_utc),
+                p.value,
+                t.unit,
+                p.outcome.to_uppercase()
+            ),
+            href: href.clone(),
+        });
+        let report = href.map_or("-".into(), |h| {
+            format!("<a href=\"{}\">report</a>", esc(&h))
+        });
+        rows.push_str(&format!(
+            "<tr class={o}><td class=num>{n}</td><td>{serial}</td><td><code>{run}</code></td><td>{start}</td><td class=num>{v}</td><td class=\"outcome {o}\">{word}</td><td>{report}</td></tr>\n",
+            n = i + 1,
+            serial = esc(&p.serial),
+            run = esc(&p.run),
+            start = esc(&crate::view::utc_seconds(&p.started_utc)),
+            v = p.value,
+            o = esc(&p.outcome),
+            word = esc(&p.outcome.to_uppercase()),
+        ));
+    }
     let chart = c.render();
     let f = |v: Option<f64>, d: usize| v.map_or("-".into(), |v| format!("{v:.d$}"));
     let body = format!(
         r#"<h1>{name}</h1>
-<table><tr><th>values</th><th>judged</th><th>mean</th><th>sigma</th><th>min</th><th>max</th><th>limits</th><th>yield</th><th>Cpk</th></tr>
-<tr><td class=num>{count}</td><td class=num>{judged}</td><td class=num>{mean}</td><td class=num>{sigma}</td><td class=num>{min}</td><td class=num>{max}</td><td class=num>{lo}..{hi}</td><td class=num>{yield_}</td><td class=num>{cpk}</td></tr></table>
+<table><tr><th>values</th><th>judged</th><th>mean</th><th>sigma</th><th>min</th><th>max</th><th>limits</th><th>yield</th></tr>
+<tr><td class=num>{count}</td><td class=num>{judged}</td><td class=num>{mean}</td><td class=num>{sigma}</td><td class=num>{min}</td><td class=num>{max}</td><td class=num>{lo}..{hi}</td><td class=num>{yield_}</td></tr></table>
+<table><tr><th></th><th>upper</th><th>lower</th><th>index</th><th>sigma</th></tr>
+<tr><td>capability (run to run)</td><td class=num>Cpu {cpu}</td><td class=num>Cpl {cpl}</td><td class=num>Cpk {cpk}</td><td class=num>{sw} (moving ranges / 1.128)</td></tr>
+<tr><td>performance (all data)</td><td class=num>Ppu {ppu}</td><td class=num>Ppl {ppl}</td><td class=num>Ppk {ppk}</td><td class=num>{sigma} (sample)</td></tr></table>
+<p class=note>A figure with one limit is judged on that side alone: Cpk is then Cpu (or Cpl), Ppk is Ppu (or Ppl). Definitions in docs/results.md.</p>
 {chart}
-<p class=note>{shown} value(s) shown (at most the 5,000 newest), each run's latest part; units: {unit}.</p>
+<p class=note>{shown} value(s) shown (at most the 5,000 newest), each run's latest part; units: {unit}. Point over a dot to see its unit and run; click it for the run's report.</p>
+<h2>Values</h2>
+<table><tr><th>#</th><th>unit</th><th>run</th><th>started (UTC)</th><th>value</th><th>outcome</th><th>report</th></tr>
+{rows}</table>
 "#,
         name = esc(&t.name),
         unit = esc(&t.unit),
@@ -75,8 +139,19 @@ pub fn trend_page(t: &Trend, points: &[(String, String, f64, String)]) -> String
         yield_ = t
             .yield_fraction
             .map_or("-".into(), |y| format!("{:.1} %", 100.0 * y)),
-        cpk = f(t.cpk, 2),
+        cpu = f(t.within.upper, 2),
+        cpl = f(t.within.lower, 2),
+        cpk = f(t.within.k, 2),
+        sw = f(t.sigma_within, 4),
+        ppu = f(t.overall.upper, 2),
+        ppl = f(t.overall.lower, 2),
+        ppk = f(t.overall.k, 2),
         shown = points.len(),
     );
     page(&format!("{}: trend", t.name), "", &body)
+}
+
+/// The first 12 characters of a run key (its run id's start).
+fn short(run: &str) -> &str {
+    run.get(..12).unwrap_or(run)
 }

@@ -27,13 +27,25 @@ pub struct Filter {
     pub until: Option<String>,
     /// Only each run's latest part.
     pub latest_only: bool,
+    /// Count imported runs (outcome `reference`) in trends and yields
+    /// (lists show them always).
+    pub include_reference: bool,
     /// At most this many rows (newest first); none: every row.
     pub limit: Option<usize>,
 }
 
 impl Filter {
-    /// `WHERE` clauses on `r` (runs) and `u` (units), with their values,
-    /// numbered from `$first`.
+    /// The clause that leaves imported runs (`reference`) out of figures.
+    fn reference_clause(&self) -> &'static str {
+        if self.include_reference {
+            ""
+        } else {
+            " AND ru.outcome <> 'reference'"
+        }
+    }
+
+    /// `WHERE` clauses on `r` (runs), `ru` (run units) and `u` (units),
+    /// with their values, numbered from `$first`.
     fn clauses(&self, first: usize) -> (String, Vec<Value>) {
         let mut sql = String::new();
         let mut params: Vec<Value> = Vec::new();
@@ -47,7 +59,7 @@ impl Filter {
         add("u.serial = $?", &self.serial, &mut params);
         add("u.dut_type = $?", &self.dut_type, &mut params);
         add("r.procedure_name = $?", &self.procedure, &mut params);
-        add("r.outcome = $?", &self.outcome, &mut params);
+        add("ru.outcome = $?", &self.outcome, &mut params);
         add("(r.bench = $? OR r.station = $?)", &self.bench, &mut params);
         add("r.started_utc >= $?", &self.since, &mut params);
         add("r.started_utc < $?", &self.until, &mut params);
@@ -87,27 +99,153 @@ pub struct RunRow {
     pub device_time_s: Option<f64>,
     /// What ended it, when it did not pass or fail.
     pub error: Option<String>,
+    /// The unit's slot on the bench (empty: the bench's only one).
+    pub slot: String,
+    /// The bench's id (empty for runs stored before schema 3).
+    pub bench_id: String,
+    /// The gyrobench version and revision that ran it.
+    pub software: String,
+    /// Instruments past their calibration due date, comma separated.
+    pub calibration_overdue: Option<String>,
+    /// The coefficients the unit's compensated figures used.
+    pub coefficients: StoredCoeffs,
 }
 
-const RUN_COLUMNS: &str = "r.id, r.started_utc, u.dut_type, u.serial, r.procedure_name, r.bench, \
-    r.station, r.operator, r.outcome, r.part, r.latest, r.device_time_s, r.error_message";
+/// The coefficients a run's unit used, as the store keeps them.
+#[derive(Debug, Clone, Default, PartialEq, Serialize)]
+pub struct StoredCoeffs {
+    /// `fitted`, `file` or `store` (none for runs stored before schema 3).
+    pub source: Option<String>,
+    /// The set's unit.
+    pub serial: Option<String>,
+    /// The set's version.
+    pub version: Option<i64>,
+    /// SHA-256 of the set's text.
+    pub sha256: Option<String>,
+    /// Why another unit's set was used.
+    pub override_reason: Option<String>,
+}
 
-fn run_row(r: &Row) -> RunRow {
-    let t = |i: usize| r.get(i).map_or(String::new(), Value::text);
+impl StoredCoeffs {
+    /// In words.
+    pub fn describe(&self) -> String {
+        let set = match (self.version, &self.serial) {
+            (Some(v), Some(s)) => format!("set {v} of {s}"),
+            (None, Some(s)) => format!("a set of {s} not in a store"),
+            _ => "a set naming no unit".into(),
+        };
+        let sha = self.sha256.as_deref().map_or(String::new(), |h| {
+            format!(" (sha256 {})", h.get(..12).unwrap_or(h))
+        });
+        let why = self
+            .override_reason
+            .as_deref()
+            .map_or(String::new(), |r| format!(", used for another unit: {r}"));
+        match self.source.as_deref() {
+            None => "not recorded".into(),
+            Some("fitted") => "fitted on the run's records".into(),
+            Some(_) => format!("{set}{sha}{why}"),
+        }
+    }
+}
+
+/// The columns of a run's row, each read back by its name.
+const RUN_COLUMNS: &[(&str, &str)] = &[
+    ("r.id", "id"),
+    ("r.started_utc", "started_utc"),
+    ("u.dut_type", "dut_type"),
+    ("u.serial", "serial"),
+    ("r.procedure_name", "procedure"),
+    ("r.bench", "bench"),
+    ("r.station", "station"),
+    ("r.operator", "operator"),
+    ("ru.outcome", "outcome"),
+    ("r.part", "part"),
+    ("r.latest", "latest"),
+    ("r.device_time_s", "device_time_s"),
+    ("r.error_message", "error"),
+    ("ru.slot", "slot"),
+    ("r.bench_id", "bench_id"),
+    ("r.software_version", "software_version"),
+    ("r.software_revision", "software_revision"),
+    ("r.calibration_overdue", "calibration_overdue"),
+    ("ru.coeffs_source", "coeffs_source"),
+    ("ru.coeffs_serial", "coeffs_serial"),
+    ("ru.coeffs_version", "coeffs_version"),
+    ("ru.coeffs_sha256", "coeffs_sha256"),
+    ("ru.coeffs_override_reason", "coeffs_override_reason"),
+];
+
+/// The select list of [`RUN_COLUMNS`].
+fn run_columns() -> String {
+    RUN_COLUMNS
+        .iter()
+        .map(|(expr, name)| format!("{expr} AS {name}"))
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+/// A row read by column name (the names of the select list it came from).
+struct Named<'a> {
+    names: &'a [(&'a str, &'a str)],
+    row: &'a Row,
+}
+
+impl Named<'_> {
+    fn value(&self, name: &str) -> Option<&Value> {
+        let i = self.names.iter().position(|(_, n)| *n == name)?;
+        self.row.get(i).filter(|v| **v != Value::Null)
+    }
+    fn text(&self, name: &str) -> String {
+        self.value(name).map_or(String::new(), Value::text)
+    }
+    fn opt_text(&self, name: &str) -> Option<String> {
+        self.value(name).map(Value::text).filter(|s| !s.is_empty())
+    }
+    fn int(&self, name: &str) -> Option<i64> {
+        self.value(name).and_then(Value::int)
+    }
+    fn real(&self, name: &str) -> Option<f64> {
+        self.value(name).and_then(Value::real)
+    }
+}
+
+fn run_row(row: &Row) -> RunRow {
+    let r = Named {
+        names: RUN_COLUMNS,
+        row,
+    };
+    let version = r.text("software_version");
+    let revision = r.text("software_revision");
     RunRow {
-        id: t(0),
-        started_utc: t(1),
-        dut_type: t(2),
-        serial: t(3),
-        procedure: t(4),
-        bench: t(5),
-        station: t(6),
-        operator: t(7),
-        outcome: t(8),
-        part: r.get(9).and_then(Value::int).unwrap_or(1),
-        latest: r.get(10).and_then(Value::int) == Some(1),
-        device_time_s: r.get(11).and_then(Value::real),
-        error: r.get(12).map(Value::text).filter(|s| !s.is_empty()),
+        id: r.text("id"),
+        started_utc: r.text("started_utc"),
+        dut_type: r.text("dut_type"),
+        serial: r.text("serial"),
+        procedure: r.text("procedure"),
+        bench: r.text("bench"),
+        station: r.text("station"),
+        operator: r.text("operator"),
+        outcome: r.text("outcome"),
+        part: r.int("part").unwrap_or(1),
+        latest: r.int("latest") == Some(1),
+        device_time_s: r.real("device_time_s"),
+        error: r.opt_text("error"),
+        slot: r.text("slot"),
+        bench_id: r.text("bench_id"),
+        software: if revision.is_empty() {
+            version
+        } else {
+            format!("{version} ({revision})")
+        },
+        calibration_overdue: r.opt_text("calibration_overdue"),
+        coefficients: StoredCoeffs {
+            source: r.opt_text("coeffs_source"),
+            serial: r.opt_text("coeffs_serial"),
+            version: r.int("coeffs_version"),
+            sha256: r.opt_text("coeffs_sha256"),
+            override_reason: r.opt_text("coeffs_override_reason"),
+        },
     }
 }
 
@@ -189,6 +327,8 @@ pub struct CoefficientRow {
     pub held_out_drift_pp_dph: Option<f64>,
     /// The runs it came from (JSON list of [part key, log path]).
     pub source_runs: String,
+    /// SHA-256 of its text (none for sets stored before schema 3).
+    pub sha256: Option<String>,
     /// The coefficients file.
     pub coeffs_toml: String,
 }
@@ -218,9 +358,62 @@ pub struct Trend {
     pub low: Option<f64>,
     /// The limits of the newest measurement.
     pub high: Option<f64>,
-    /// Process capability min(USL - mean, mean - LSL) / (3 sigma), where
-    /// both limits exist.
-    pub cpk: Option<f64>,
+    /// Sigma from run to run: the mean moving range of consecutive values
+    /// in run order over d2 = 1.128.
+    pub sigma_within: Option<f64>,
+    /// Capability on `sigma_within` (Cpu, Cpl, Cpk).
+    pub within: Capability,
+    /// Performance on the overall `sigma` (Ppu, Ppl, Ppk).
+    pub overall: Capability,
+}
+
+/// d2 of a moving range of two: E[|x1 - x2|] = 1.128 sigma.
+pub const D2_MOVING_RANGE: f64 = 1.128;
+
+/// One-sided and two-sided indices of one spread (`docs/results.md`):
+/// `upper = (USL - mean) / 3 sigma`, `lower = (mean - LSL) / 3 sigma`,
+/// `k` the smaller of those that exist (a figure with one limit is judged
+/// on that one).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
+pub struct Capability {
+    /// Against the upper limit (Cpu, Ppu).
+    pub upper: Option<f64>,
+    /// Against the lower limit (Cpl, Ppl).
+    pub lower: Option<f64>,
+    /// The smaller (Cpk, Ppk).
+    pub k: Option<f64>,
+}
+
+impl Capability {
+    fn of(mean: Option<f64>, sigma: Option<f64>, low: Option<f64>, high: Option<f64>) -> Self {
+        let (Some(m), Some(s)) = (mean, sigma.filter(|s| *s > 0.0)) else {
+            return Self::default();
+        };
+        let upper = high.map(|h| (h - m) / (3.0 * s));
+        let lower = low.map(|l| (m - l) / (3.0 * s));
+        let k = match (upper, lower) {
+            (Some(u), Some(l)) => Some(u.min(l)),
+            (u, l) => u.or(l),
+        };
+        Self { upper, lower, k }
+    }
+}
+
+/// A value of a trend, with the run it came from.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct TrendPoint {
+    /// UTC start of the run's part.
+    pub started_utc: String,
+    /// The unit.
+    pub serial: String,
+    /// The value.
+    pub value: f64,
+    /// `pass`, `fail` or `error`.
+    pub outcome: String,
+    /// The run part's key.
+    pub run: String,
+    /// Its log (the report sits beside it).
+    pub log_path: String,
 }
 
 /// The run of a part's key `RUN_ID.PART`.
@@ -237,8 +430,9 @@ impl Store {
     pub fn list(&mut self, f: &Filter) -> Result<Vec<RunRow>, StoreError> {
         let (clauses, mut params) = f.clauses(1);
         let mut sql = format!(
-            "SELECT {RUN_COLUMNS} FROM runs r JOIN units u ON u.id = r.unit_id WHERE 1 = 1{clauses} \
-             ORDER BY r.started_utc DESC, r.id DESC"
+            "SELECT {} FROM runs r JOIN run_units ru ON ru.run = r.id JOIN units u ON u.id = ru.unit_id WHERE 1 = 1{clauses} \
+             ORDER BY r.started_utc DESC, r.id DESC",
+            run_columns()
         );
         if let Some(n) = f.limit {
             params.push((n as i64).into());
@@ -257,8 +451,9 @@ impl Store {
         let store = self.name.clone();
         let rows = self.sql().query(
             &format!(
-                "SELECT {RUN_COLUMNS} FROM runs r JOIN units u ON u.id = r.unit_id \
-                 WHERE r.id = $1 OR r.id LIKE $2 ORDER BY r.id LIMIT 50"
+                "SELECT {} FROM runs r JOIN run_units ru ON ru.run = r.id JOIN units u ON u.id = ru.unit_id \
+                 WHERE r.id = $1 OR r.id LIKE $2 ORDER BY r.id LIMIT 50",
+                run_columns()
             ),
             &[id.into(), format!("{}%", id.replace(['%', '_'], "")).into()],
         )?;
@@ -320,6 +515,11 @@ impl Store {
             "log_path",
             "log_sha256",
             "imported_from",
+            "bench_id",
+            "host",
+            "software_revision",
+            "instruments",
+            "calibration_overdue",
             "parent_id",
             "recorded_utc",
         ];
@@ -348,8 +548,9 @@ impl Store {
             .sql()
             .query(
                 &format!(
-                    "SELECT {RUN_COLUMNS} FROM runs r JOIN units u ON u.id = r.unit_id \
-                     WHERE r.run_id = $1 ORDER BY r.part"
+                    "SELECT {} FROM runs r JOIN run_units ru ON ru.run = r.id JOIN units u ON u.id = ru.unit_id \
+                     WHERE r.run_id = $1 ORDER BY r.part",
+                    run_columns()
                 ),
                 &[run_id.into()],
             )?
@@ -372,8 +573,9 @@ impl Store {
             .sql()
             .query(
                 &format!(
-                    "SELECT {RUN_COLUMNS} FROM runs r JOIN units u ON u.id = r.unit_id \
-                     WHERE u.serial = $1 AND r.latest = 1 ORDER BY r.started_utc, r.id"
+                    "SELECT {} FROM runs r JOIN run_units ru ON ru.run = r.id JOIN units u ON u.id = ru.unit_id \
+                     WHERE u.serial = $1 AND r.latest = 1 ORDER BY r.started_utc, r.id",
+                    run_columns()
                 ),
                 &[serial.into()],
             )?
@@ -390,8 +592,8 @@ impl Store {
             .sql()
             .query(
                 &format!(
-                    "SELECT {MEASUREMENT_COLUMNS} FROM measurements m JOIN runs r ON r.id = m.run \
-                     JOIN units u ON u.id = r.unit_id WHERE u.serial = $1 AND r.latest = 1 \
+                    "SELECT {MEASUREMENT_COLUMNS} FROM measurements m JOIN run_units ru ON ru.run = m.run AND ru.slot = m.slot \
+                     JOIN runs r ON r.id = m.run JOIN units u ON u.id = ru.unit_id WHERE u.serial = $1 AND r.latest = 1 \
                      ORDER BY r.started_utc, r.id, m.seq"
                 ),
                 &[serial.into()],
@@ -402,7 +604,7 @@ impl Store {
         let coefficients = one(
             self.sql().query(
                 "SELECT c.version, c.created_utc, c.validation, c.held_out_drift_pp_dph, c.source_runs, \
-                 c.coeffs_toml FROM coefficient_sets c JOIN units u ON u.id = c.unit_id \
+                 c.coeffs_toml, c.sha256 FROM coefficient_sets c JOIN units u ON u.id = c.unit_id \
                  WHERE u.serial = $1 ORDER BY c.version DESC LIMIT 1",
                 &[serial.into()],
             )?,
@@ -413,6 +615,7 @@ impl Store {
                 held_out_drift_pp_dph: r.get(3).and_then(Value::real),
                 source_runs: r.get(4).map_or(String::new(), Value::text),
                 coeffs_toml: r.get(5).map_or(String::new(), Value::text),
+                sha256: r.get(6).map(Value::text).filter(|s| !s.is_empty()),
             },
         );
         Ok(UnitHistory {
@@ -423,15 +626,39 @@ impl Store {
         })
     }
 
+    /// The newest coefficient set of unit `serial` of type `dut_type`:
+    /// its version and its text.
+    pub fn latest_coefficients(
+        &mut self,
+        dut_type: &str,
+        serial: &str,
+    ) -> Result<Option<(i64, String)>, StoreError> {
+        Ok(one(
+            self.sql().query(
+                "SELECT c.version, c.coeffs_toml FROM coefficient_sets c JOIN units u ON u.id = c.unit_id \
+                 WHERE u.dut_type = $1 AND u.serial = $2 ORDER BY c.version DESC LIMIT 1",
+                &[dut_type.into(), serial.into()],
+            )?,
+            |r| {
+                (
+                    r.first().and_then(Value::int).unwrap_or(0),
+                    r.get(1).map_or(String::new(), Value::text),
+                )
+            },
+        ))
+    }
+
     /// The statistics of measurement `name` over the runs `f` selects
     /// (their latest parts).
     pub fn trend(&mut self, name: &str, f: &Filter) -> Result<Trend, StoreError> {
         let (clauses, params) = f.clauses(2);
+        let reference = f.reference_clause();
         let mut all = vec![Value::from(name)];
         all.extend(params);
         let from = format!(
-            "FROM measurements m JOIN runs r ON r.id = m.run JOIN units u ON u.id = r.unit_id \
-             WHERE m.name = $1 AND r.latest = 1{clauses}"
+            "FROM measurements m JOIN run_units ru ON ru.run = m.run AND ru.slot = m.slot \
+             JOIN runs r ON r.id = m.run JOIN units u ON u.id = ru.unit_id \
+             WHERE m.name = $1 AND r.latest = 1{reference}{clauses}"
         );
         let stats = self.sql().query(
             &format!(
@@ -480,12 +707,22 @@ impl Store {
             .first()
             .and_then(|r| r.get(2))
             .map_or(String::new(), Value::text);
-        let cpk = match (mean, sigma, low, high) {
-            (Some(m), Some(s), Some(lo), Some(hi)) if s > 0.0 => {
-                Some(((hi - m).min(m - lo)) / (3.0 * s))
-            }
-            _ => None,
-        };
+        // The spread from one run to the next (moving ranges in run order):
+        // what the process does over short times, without its drifts.
+        let mr = self.sql().query(
+            &format!(
+                "SELECT AVG(ABS(v - prev)), COUNT(prev) FROM (SELECT m.value AS v, \
+                 LAG(m.value) OVER (ORDER BY r.started_utc, r.id, m.seq) AS prev {from} \
+                 AND m.value IS NOT NULL) AS ordered WHERE prev IS NOT NULL"
+            ),
+            &all,
+        )?;
+        let sigma_within = mr
+            .first()
+            .and_then(|r| r.first())
+            .and_then(Value::real)
+            .map(|mr_bar| mr_bar / D2_MOVING_RANGE);
+        let index = |spread: Option<f64>| Capability::of(mean, spread, low, high);
         Ok(Trend {
             name: name.to_owned(),
             unit,
@@ -498,41 +735,47 @@ impl Store {
             yield_fraction: g(4).map(|p| p / judged as f64),
             low,
             high,
-            cpk,
+            sigma_within,
+            within: index(sigma_within),
+            overall: index(sigma),
         })
     }
 
-    /// The values of measurement `name` with their run's start and unit,
+    /// The values of measurement `name` with their run, unit and log,
     /// oldest first (at most `max`, the newest).
     pub fn trend_points(
         &mut self,
         name: &str,
         f: &Filter,
         max: usize,
-    ) -> Result<Vec<(String, String, f64, String)>, StoreError> {
+    ) -> Result<Vec<TrendPoint>, StoreError> {
         let (clauses, params) = f.clauses(2);
+        let reference = f.reference_clause();
         let mut all = vec![Value::from(name)];
         all.extend(params);
         all.push((max as i64).into());
         let rows = self.sql().query(
             &format!(
-                "SELECT r.started_utc, u.serial, m.value, m.outcome FROM measurements m \
-                 JOIN runs r ON r.id = m.run JOIN units u ON u.id = r.unit_id \
-                 WHERE m.name = $1 AND r.latest = 1 AND m.value IS NOT NULL{clauses} \
-                 ORDER BY r.started_utc DESC LIMIT ${}",
+                "SELECT r.started_utc, u.serial, m.value, m.outcome, r.id, r.log_path FROM measurements m \
+                 JOIN run_units ru ON ru.run = m.run AND ru.slot = m.slot \
+                 JOIN runs r ON r.id = m.run JOIN units u ON u.id = ru.unit_id \
+                 WHERE m.name = $1 AND r.latest = 1 AND m.value IS NOT NULL{reference}{clauses} \
+                 ORDER BY r.started_utc DESC, r.id DESC LIMIT ${}",
                 all.len()
             ),
             &all,
         )?;
-        let mut out: Vec<(String, String, f64, String)> = rows
+        let mut out: Vec<TrendPoint> = rows
             .iter()
             .filter_map(|r| {
-                Some((
-                    r.first()?.text(),
-                    r.get(1)?.text(),
-                    r.get(2)?.real()?,
-                    r.get(3)?.text(),
-                ))
+                Some(TrendPoint {
+                    started_utc: r.first()?.text(),
+                    serial: r.get(1)?.text(),
+                    value: r.get(2)?.real()?,
+                    outcome: r.get(3)?.text(),
+                    run: r.get(4)?.text(),
+                    log_path: r.get(5)?.text(),
+                })
             })
             .collect();
         out.reverse();
@@ -546,7 +789,10 @@ impl Store {
     ) -> Result<Vec<(RunRow, Vec<MeasurementRow>)>, StoreError> {
         let runs = self.list(f)?;
         let mut out = Vec::with_capacity(runs.len());
-        for r in runs {
+        for r in runs
+            .into_iter()
+            .filter(|r| f.include_reference || r.outcome != "reference")
+        {
             let ms = self
                 .sql()
                 .query(

@@ -4,39 +4,15 @@
 
 use std::path::Path;
 
-use sha2::Digest;
-
 use super::sql::{Sql, Value, transaction};
 use super::{Store, StoreError};
+use crate::coeffs::CoefficientSet;
 use crate::protocol::frame::LinkStats;
 use crate::runlog::meta::RunMeta;
 use crate::runlog::replay::replay;
 use crate::sequencer::RunResult;
 
-/// The SHA-256 of a file, in hex.
-pub fn sha256_file(path: &Path) -> std::io::Result<String> {
-    use std::io::Read;
-    let mut f = std::fs::File::open(path)?;
-    let mut h = sha2::Sha256::new();
-    let mut buf = vec![0u8; 1 << 16];
-    loop {
-        let n = f.read(&mut buf)?;
-        if n == 0 {
-            break;
-        }
-        h.update(&buf[..n]);
-    }
-    Ok(hex(&h.finalize()))
-}
-
-fn hex(bytes: &[u8]) -> String {
-    bytes.iter().map(|b| format!("{b:02x}")).collect()
-}
-
-/// The SHA-256 of a text, in hex.
-pub fn sha256_text(text: &str) -> String {
-    hex(&sha2::Sha256::digest(text.as_bytes()))
-}
+pub use crate::fsutil::{sha256_file, sha256_text};
 
 /// The store's key of a part of a run: `RUN_ID.PART`. A log of the first
 /// format has no run id: its first part's SHA-256 stands for it.
@@ -70,6 +46,15 @@ fn run_id(meta: &RunMeta, log: &Path) -> Result<String, StoreError> {
         message: format!("the first part of a run without a run id: {e}"),
     })?;
     Ok(format!("sha256-{}", &sha[..32]))
+}
+
+/// How the store names where a run's coefficients came from.
+fn coeffs_source(s: crate::coeffs::CoeffsSource) -> &'static str {
+    match s {
+        crate::coeffs::CoeffsSource::Fitted => "fitted",
+        crate::coeffs::CoeffsSource::File => "file",
+        crate::coeffs::CoeffsSource::Store => "store",
+    }
 }
 
 /// How a part ended, for the store.
@@ -145,11 +130,19 @@ impl Store {
                 "UPDATE runs SET latest = 0 WHERE run_id = $1 AND part < $2",
                 &[run.clone().into(), i64::from(meta.part).into()],
             )?;
+            let overdue: Vec<&str> = meta
+                .instruments
+                .iter()
+                .filter(|i| i.calibration_overdue)
+                .map(|i| i.role.as_str())
+                .collect();
             sql.execute(
                 "INSERT INTO runs (id, run_id, part, parent_id, latest, unit_id, procedure_name, \
                  procedure_sha256, procedure_path, bench, station, operator, seed, software_version, \
-                 run_started_utc, started_utc, outcome, log_path, imported_from, recorded_utc) \
-                 VALUES ($1, $2, $3, $4, 1, $5, $6, $7, $8, $9, $10, $11, $12, $13, $14, $15, 'running', $16, $17, $18)",
+                 run_started_utc, started_utc, outcome, log_path, imported_from, recorded_utc, \
+                 bench_id, host, software_revision, instruments, calibration_overdue) \
+                 VALUES ($1, $2, $3, $4, 1, $5, $6, $7, $8, $9, $10, $11, $12, $13, $14, $15, 'running', $16, $17, $18, \
+                 $19, $20, $21, $22, $23)",
                 &[
                     key.clone().into(),
                     run.clone().into(),
@@ -169,15 +162,57 @@ impl Store {
                     log_path.into(),
                     meta.imported_from.clone().into(),
                     now.into(),
+                    meta.bench_id.clone().into(),
+                    meta.host.clone().into(),
+                    meta.software_revision.clone().into(),
+                    serde_json::to_string(&meta.instruments)
+                        .unwrap_or_default()
+                        .into(),
+                    (!overdue.is_empty()).then(|| overdue.join(",")).into(),
                 ],
             )?;
+            let fallback = [crate::runlog::meta::RunUnit {
+                slot: String::new(),
+                serial: meta.dut_serial.clone(),
+                dut_type: meta.dut_type.clone(),
+                coefficients: crate::coeffs::CoeffsUsed::fitted(),
+            }];
+            let units = if meta.units.is_empty() {
+                &fallback[..]
+            } else {
+                &meta.units[..]
+            };
+            for u in units {
+                let id = if u.serial == meta.dut_serial && u.dut_type == meta.dut_type {
+                    unit
+                } else {
+                    unit_id(sql, &u.dut_type, &u.serial)?
+                };
+                let c = &u.coefficients;
+                sql.execute(
+                    "INSERT INTO run_units (run, slot, unit_id, outcome, coeffs_source, coeffs_serial, \
+                     coeffs_version, coeffs_sha256, coeffs_override_reason) \
+                     VALUES ($1, $2, $3, 'running', $4, $5, $6, $7, $8)",
+                    &[
+                        key.clone().into(),
+                        u.slot.clone().into(),
+                        id.into(),
+                        coeffs_source(c.source).into(),
+                        c.serial.clone().into(),
+                        c.version.into(),
+                        c.sha256.clone().into(),
+                        c.override_reason.clone().into(),
+                    ],
+                )?;
+            }
             Ok(())
         })?;
         Ok(key)
     }
 
-    /// Record how a part ended: its outcome, figures, link, bench state,
-    /// log checksum, and every measurement of the run so far.
+    /// Record how a part ended: its outcome (`reference` for an imported
+    /// run, which is never judged), figures, link, bench state, log
+    /// checksum, and every measurement of the run so far.
     pub fn finish_part(
         &mut self,
         key: &str,
@@ -224,6 +259,16 @@ impl Store {
                     ),
                 });
             }
+            // A run recorded elsewhere and imported is for reference: its
+            // figures were judged at our limits, never by its own bench.
+            sql.execute(
+                "UPDATE runs SET outcome = 'reference' WHERE id = $1 AND imported_from IS NOT NULL",
+                &[key.into()],
+            )?;
+            sql.execute(
+                "UPDATE run_units SET outcome = (SELECT outcome FROM runs WHERE id = $1) WHERE run = $1",
+                &[key.into()],
+            )?;
             // One statement for every measurement (a round trip each would
             // cost a lab's server more than the rest of the run's record).
             for (chunk_at, chunk) in r.measurements.chunks(100).enumerate() {
@@ -277,6 +322,13 @@ impl Store {
             path: log.display().to_string(),
             message,
         };
+        // A part the store has complete is known by its key alone, read
+        // from the log's first metadata: no replay.
+        if let Some(key) = part_key_of_log(log)
+            && outcome_of(self.sql(), &key)?.is_some_and(|o| o != "running")
+        {
+            return Ok(Indexed::AlreadyThere);
+        }
         let r = replay(log, None).map_err(|e| bad(e.to_string()))?;
         let key = part_key(&r.meta, log)?;
         let before = outcome_of(self.sql(), &key)?;
@@ -321,80 +373,249 @@ impl Store {
     }
 
     /// Every run directory below `dir` (those holding a `run.mcap`), each
-    /// part indexed in order. Returns (added or completed, already there,
-    /// failures with their reason).
-    pub fn sync_dir(&mut self, dir: &Path) -> (usize, usize, Vec<String>) {
-        let (mut added, mut there, mut failed) = (0, 0, Vec::new());
+    /// part indexed in order. A log whose path, size, modification time
+    /// and summary are those the store noted when it last indexed it is
+    /// not read again.
+    pub fn sync_dir(&mut self, dir: &Path) -> Synced {
+        let mut done = Synced::default();
+        let known = match self.indexed_logs() {
+            Ok(k) => k,
+            Err(e) => {
+                done.failed.push(e.to_string());
+                return done;
+            }
+        };
         for run_dir in run_dirs(dir) {
-            let mut part = 1;
-            loop {
-                let log = if part == 1 {
-                    run_dir.join("run.mcap")
-                } else {
-                    run_dir.join(format!("run.part{part}.mcap"))
+            for log in parts(&run_dir) {
+                let Ok(seen) = LogFile::of(&log) else {
+                    done.failed
+                        .push(format!("{}: cannot be read", log.display()));
+                    continue;
                 };
-                if !log.exists() {
-                    break;
+                if known.get(&seen.path) == Some(&seen) {
+                    done.unchanged += 1;
+                    continue;
                 }
                 match self.index_log(&log) {
-                    Ok(Indexed::AlreadyThere) => there += 1,
-                    Ok(_) => added += 1,
-                    Err(e) => failed.push(e.to_string()),
+                    Ok(indexed) => {
+                        if indexed == Indexed::AlreadyThere {
+                            done.there += 1;
+                        } else {
+                            done.added += 1;
+                        }
+                        if let Err(e) = self.note_indexed(&seen, &log) {
+                            done.failed.push(e.to_string());
+                        }
+                    }
+                    Err(e) => done.failed.push(e.to_string()),
                 }
-                part += 1;
             }
         }
-        (added, there, failed)
+        done
     }
 
-    /// Record a coefficient set `calibrate` made for a unit: the next
-    /// version of that unit's sets, with the runs it came from.
-    pub fn record_coefficients(&mut self, set: &CoefficientSet<'_>) -> Result<i64, StoreError> {
+    /// The logs a sync has indexed, by path.
+    fn indexed_logs(&mut self) -> Result<std::collections::HashMap<String, LogFile>, StoreError> {
+        Ok(self
+            .sql()
+            .query(
+                "SELECT path, size, mtime_ns, summary_sha256 FROM log_files",
+                &[],
+            )?
+            .iter()
+            .filter_map(|r| {
+                let f = LogFile {
+                    path: r.first()?.text(),
+                    size: r.get(1)?.int()?,
+                    mtime_ns: r.get(2)?.int()?,
+                    summary_sha256: r.get(3)?.text(),
+                };
+                Some((f.path.clone(), f))
+            })
+            .collect())
+    }
+
+    /// Note that `log`, as `seen`, is in the store.
+    fn note_indexed(&mut self, seen: &LogFile, log: &Path) -> Result<(), StoreError> {
+        let key = part_key_of_log(log).unwrap_or_default();
         let now = crate::clock::utc_now().to_rfc3339();
         transaction(self.sql(), |sql| {
-            let unit = unit_id(sql, set.dut_type, set.serial)?;
+            sql.execute(
+                "DELETE FROM log_files WHERE path = $1",
+                &[seen.path.clone().into()],
+            )?;
+            sql.execute(
+                "INSERT INTO log_files (path, size, mtime_ns, summary_sha256, part_key, indexed_utc) \
+                 VALUES ($1, $2, $3, $4, $5, $6)",
+                &[
+                    seen.path.clone().into(),
+                    seen.size.into(),
+                    seen.mtime_ns.into(),
+                    seen.summary_sha256.clone().into(),
+                    key.into(),
+                    now.into(),
+                ],
+            )?;
+            Ok(())
+        })
+    }
+
+    /// Record a coefficient set `calibrate` made for its unit: the next
+    /// version of that unit's sets. The set gets that version, and its text
+    /// (returned: what the file must hold) is stored with its SHA-256.
+    pub fn record_coefficients(
+        &mut self,
+        set: &mut CoefficientSet,
+        rec: &SetRecord<'_>,
+    ) -> Result<String, StoreError> {
+        let store = self.name.clone();
+        let Some(unit) = set.unit.clone() else {
+            return Err(StoreError::NotFound {
+                store,
+                what: "a coefficient set that names no unit cannot be recorded".into(),
+            });
+        };
+        let now = crate::clock::utc_now().to_rfc3339();
+        transaction(self.sql(), |sql| {
+            let unit_id = unit_id(sql, &unit.dut_type, &unit.serial)?;
             let next = sql
                 .query(
                     "SELECT COALESCE(MAX(version), 0) + 1 FROM coefficient_sets WHERE unit_id = $1",
-                    &[unit.into()],
+                    &[unit_id.into()],
                 )?
                 .first()
                 .and_then(|r| r.first())
                 .and_then(Value::int)
                 .unwrap_or(1);
+            let provenance = set.set.get_or_insert_with(|| crate::coeffs::SetSection {
+                version: None,
+                created_utc: now.clone(),
+                software: crate::version::software(),
+                models: Vec::new(),
+                fitted_on: Vec::new(),
+            });
+            provenance.version = Some(next);
+            let fitted_on = serde_json::to_string(&provenance.fitted_on).unwrap_or_default();
+            let software = provenance.software.clone();
+            let text = set.to_toml().map_err(|e| StoreError::Log {
+                path: "coefficient set".into(),
+                message: e.to_string(),
+            })?;
             sql.execute(
                 "INSERT INTO coefficient_sets (unit_id, version, created_utc, coeffs_toml, validation, \
-                 held_out_drift_pp_dph, source_runs) VALUES ($1, $2, $3, $4, $5, $6, $7)",
+                 held_out_drift_pp_dph, source_runs, sha256, software, fitted_on) \
+                 VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10)",
                 &[
-                    unit.into(),
+                    unit_id.into(),
                     next.into(),
-                    now.into(),
-                    set.coeffs_toml.into(),
-                    set.validation.into(),
-                    set.held_out_drift_pp_dph.into(),
-                    serde_json::to_string(&set.sources).unwrap_or_default().into(),
+                    now.clone().into(),
+                    text.clone().into(),
+                    rec.validation.into(),
+                    rec.held_out_drift_pp_dph.into(),
+                    serde_json::to_string(&rec.sources).unwrap_or_default().into(),
+                    sha256_text(&text).into(),
+                    software.into(),
+                    fitted_on.into(),
                 ],
             )?;
-            Ok(next)
+            Ok(text)
         })
     }
 }
 
-/// A coefficient set as `calibrate` made it.
+/// What the store keeps beside a coefficient set's text.
 #[derive(Debug)]
-pub struct CoefficientSet<'a> {
-    /// Unit type.
-    pub dut_type: &'a str,
-    /// Serial number.
-    pub serial: &'a str,
-    /// The coefficients file's text.
-    pub coeffs_toml: &'a str,
+pub struct SetRecord<'a> {
     /// How it was validated.
     pub validation: &'a str,
     /// Model 4's held-out drift, deg/h.
     pub held_out_drift_pp_dph: Option<f64>,
     /// The runs it came from: (part key, log path).
     pub sources: Vec<(String, String)>,
+}
+
+/// What a sync did.
+#[derive(Debug, Default)]
+pub struct Synced {
+    /// Parts added or completed.
+    pub added: usize,
+    /// Parts read and found in the store already.
+    pub there: usize,
+    /// Logs not read: as the store last saw them.
+    pub unchanged: usize,
+    /// Logs that could not be indexed, with the reason.
+    pub failed: Vec<String>,
+}
+
+/// A log as a sync last saw it: where, how large, when last written, and
+/// a hash of its summary (the MCAP summary section and footer; the last
+/// 64 KiB of a log without one).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct LogFile {
+    /// Absolute path.
+    pub path: String,
+    /// Size, bytes.
+    pub size: i64,
+    /// Modification time, ns since the Unix epoch.
+    pub mtime_ns: i64,
+    /// SHA-256 of its summary.
+    pub summary_sha256: String,
+}
+
+impl LogFile {
+    /// How `log` looks now.
+    pub fn of(log: &Path) -> std::io::Result<Self> {
+        use std::io::{Read, Seek, SeekFrom};
+        let path = std::path::absolute(log)?;
+        let mut f = std::fs::File::open(&path)?;
+        let md = f.metadata()?;
+        let size = md.len();
+        let mtime_ns = md
+            .modified()?
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| i64::try_from(d.as_nanos()).unwrap_or(i64::MAX));
+        // The footer: opcode, length, summary start (u64 LE), summary
+        // offset start, CRC, then the 8-byte magic.
+        const FOOTER_AND_MAGIC: u64 = 1 + 8 + 8 + 8 + 4 + 8;
+        let mut start = size.saturating_sub(64 * 1024);
+        if size >= FOOTER_AND_MAGIC {
+            let mut footer = [0u8; FOOTER_AND_MAGIC as usize];
+            f.seek(SeekFrom::Start(size - FOOTER_AND_MAGIC))?;
+            f.read_exact(&mut footer)?;
+            let summary_start = u64::from_le_bytes(footer[9..17].try_into().unwrap_or_default());
+            if footer[0] == 0x02 && summary_start > 0 && summary_start < size {
+                start = summary_start;
+            }
+        }
+        f.seek(SeekFrom::Start(start))?;
+        let mut tail = Vec::new();
+        f.take(size - start).read_to_end(&mut tail)?;
+        let mut hashed = format!("{size}:").into_bytes();
+        hashed.extend_from_slice(&tail);
+        Ok(Self {
+            path: path.display().to_string(),
+            size: i64::try_from(size).unwrap_or(i64::MAX),
+            mtime_ns,
+            summary_sha256: crate::fsutil::sha256_bytes(&hashed),
+        })
+    }
+}
+
+/// The logs of a run directory in part order: `run.mcap`, `run.part2.mcap`, ...
+pub fn parts(run_dir: &Path) -> Vec<std::path::PathBuf> {
+    let mut out = Vec::new();
+    for part in 1.. {
+        let log = if part == 1 {
+            run_dir.join("run.mcap")
+        } else {
+            run_dir.join(format!("run.part{part}.mcap"))
+        };
+        if !log.exists() {
+            break;
+        }
+        out.push(log);
+    }
+    out
 }
 
 /// Run directories at or below `dir`, sorted.

@@ -123,6 +123,11 @@ pub fn migrations(engine: Engine) -> &'static [(i64, &'static str, &'static str)
                 "indexes",
                 include_str!("migrations/sqlite/0002_indexes.sql"),
             ),
+            (
+                3,
+                "unit record",
+                include_str!("migrations/sqlite/0003_unit_record.sql"),
+            ),
         ],
         Engine::Postgres => &[
             (1, "init", include_str!("migrations/postgres/0001_init.sql")),
@@ -130,6 +135,11 @@ pub fn migrations(engine: Engine) -> &'static [(i64, &'static str, &'static str)
                 2,
                 "indexes",
                 include_str!("migrations/postgres/0002_indexes.sql"),
+            ),
+            (
+                3,
+                "unit record",
+                include_str!("migrations/postgres/0003_unit_record.sql"),
             ),
         ],
     }

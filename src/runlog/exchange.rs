@@ -244,6 +244,21 @@ pub fn import(
 ) -> Result<Imported, ImportError> {
     ensure_distinct(out, &[csv])?;
     let name = csv.display().to_string();
+    let serial = match dut {
+        Some(d) => d.to_owned(),
+        None => csv
+            .file_stem()
+            .map_or(String::new(), |s| s.to_string_lossy().into_owned()),
+    };
+    crate::unit::check_serial(&serial).map_err(|e| {
+        ImportError::Other(match dut {
+            Some(_) => format!("--dut {serial:?}: {e}"),
+            None => format!(
+                "{name}: its file name {serial:?} stands for the unit's serial and is not one ({e}); give --dut SERIAL"
+            ),
+        })
+    })?;
+    let imported_at = crate::clock::utc_now().to_rfc3339();
     let rows = to_one_hz(&interchange::read(csv)?, &name)?;
     let parts = stretches(&rows);
     let mut bench = BenchConfig::embedded();
@@ -264,17 +279,23 @@ pub fn import(
         bench_toml: toml::to_string_pretty(&bench).map_err(|e| other("bench", &e))?,
         bench: format!("imported from {name}"),
         site_json: serde_json::to_string(&site).map_err(|e| other("site", &e))?,
-        dut_serial: dut.map_or_else(
-            || {
-                csv.file_stem()
-                    .map_or(String::new(), |s| s.to_string_lossy().into_owned())
-            },
-            str::to_owned,
-        ),
+        dut_serial: serial.clone(),
         dut_type: "gyro".into(),
-        software_version: env!("CARGO_PKG_VERSION").to_owned(),
+        software_version: crate::version::VERSION.to_owned(),
+        software_revision: crate::version::REVISION.to_owned(),
+        // The CSV carries no date: the run is dated by its import.
+        start_time_utc: imported_at.clone(),
+        part_start_time_utc: imported_at,
         part: 1,
         imported_from: Some(name.clone()),
+        bench_id: "imported".into(),
+        host: crate::session::rundir::hostname(),
+        units: vec![crate::runlog::meta::RunUnit {
+            slot: String::new(),
+            serial,
+            dut_type: "gyro".into(),
+            coefficients: crate::coeffs::CoeffsUsed::fitted(),
+        }],
         ..RunMeta::default()
     };
     let mut pending =

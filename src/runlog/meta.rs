@@ -7,6 +7,8 @@ use std::collections::BTreeMap;
 
 use serde::Serialize;
 
+use crate::bench::Instrument;
+use crate::coeffs::{CoeffsSource, CoeffsUsed};
 use crate::sequencer::measure::Measurement;
 use crate::sequencer::{BenchLeft, Outcome, RunError, RunResult};
 
@@ -72,8 +74,36 @@ pub struct RunMeta {
     pub speed: String,
     /// The CSV an imported run came from.
     pub imported_from: Option<String>,
+    /// The bench's id (empty in logs written before the key).
+    pub bench_id: String,
+    /// The computer the run ran on, its host name.
+    pub host: String,
+    /// The source revision of the gyrobench that wrote the log.
+    pub software_revision: String,
+    /// The chamber and table as they reported themselves, with their
+    /// calibration due dates (empty in logs written before the key).
+    pub instruments: Vec<Instrument>,
+    /// The units of the run, one per slot, with the coefficients each was
+    /// compensated with. Logs written before the key have one, made of
+    /// `dut_serial`, `dut_type` and `coeffs_toml`.
+    pub units: Vec<RunUnit>,
     /// Keys this build does not know (kept, never dropped).
     pub other: BTreeMap<String, String>,
+}
+
+/// A unit of a run: its slot on the bench (empty on a bench with one unit
+/// position), its identity, and the coefficients it was compensated with.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, serde::Deserialize)]
+pub struct RunUnit {
+    /// Slot on the bench's fixture (empty: the bench's only one).
+    pub slot: String,
+    /// Serial number.
+    pub serial: String,
+    /// Unit type.
+    #[serde(rename = "type")]
+    pub dut_type: String,
+    /// The coefficients its compensated figures use.
+    pub coefficients: CoeffsUsed,
 }
 
 fn take(m: &mut BTreeMap<String, String>, k: &str) -> String {
@@ -96,6 +126,23 @@ fn parse<T: std::str::FromStr>(
             record,
             key: k.to_owned(),
             why: why.to_owned(),
+            value: v,
+        }),
+    }
+}
+
+/// A JSON value under `k`, or none when the key is absent or empty.
+fn json<T: serde::de::DeserializeOwned>(
+    record: &'static str,
+    m: &mut BTreeMap<String, String>,
+    k: &str,
+) -> Result<Option<T>, MetaError> {
+    match take_opt(m, k) {
+        None => Ok(None),
+        Some(v) => serde_json::from_str(&v).map(Some).map_err(|e| MetaError {
+            record,
+            key: k.to_owned(),
+            why: e.to_string(),
             value: v,
         }),
     }
@@ -141,8 +188,45 @@ impl RunMeta {
             )?,
             speed: take(m, "speed"),
             imported_from: take_opt(m, "imported_from"),
-            other: std::mem::take(m),
-        })
+            bench_id: take(m, "bench_id"),
+            host: take(m, "host"),
+            software_revision: take(m, "software_revision"),
+            instruments: json(r, m, "instruments")?.unwrap_or_default(),
+            units: json(r, m, "units")?.unwrap_or_default(),
+            other: BTreeMap::new(),
+        }
+        .with_units_of_format_2()
+        .with_other(std::mem::take(m)))
+    }
+
+    /// A log written before `units`: its one unit from `dut_serial`,
+    /// `dut_type` and whether it names coefficients.
+    fn with_units_of_format_2(mut self) -> Self {
+        if self.units.is_empty() {
+            self.units.push(RunUnit {
+                slot: String::new(),
+                serial: self.dut_serial.clone(),
+                dut_type: self.dut_type.clone(),
+                coefficients: match &self.coeffs_toml {
+                    Some(_) => CoeffsUsed {
+                        source: CoeffsSource::File,
+                        ..CoeffsUsed::fitted()
+                    },
+                    None => CoeffsUsed::fitted(),
+                },
+            });
+        }
+        self
+    }
+
+    fn with_other(mut self, other: BTreeMap<String, String>) -> Self {
+        self.other = other;
+        self
+    }
+
+    /// The run's first unit (its only one on a bench with one position).
+    pub fn unit(&self) -> Option<&RunUnit> {
+        self.units.first()
     }
 
     /// The entries as written to the log.
@@ -180,12 +264,43 @@ impl RunMeta {
         if let Some(f) = &self.imported_from {
             put("imported_from", f);
         }
+        put("bench_id", &self.bench_id);
+        put("host", &self.host);
+        put("software_revision", &self.software_revision);
+        put(
+            "instruments",
+            &serde_json::to_string(&self.instruments).unwrap_or_else(|_| "[]".into()),
+        );
+        put(
+            "units",
+            &serde_json::to_string(&self.units).unwrap_or_else(|_| "[]".into()),
+        );
         m
     }
 
     /// True when the run ran on the embedded simulated bench.
     pub fn is_embedded(&self) -> bool {
         self.bench == "embedded"
+    }
+}
+
+/// The `run` metadata of the log at `path` (its first part's when the
+/// file holds several), or why it cannot be read.
+pub fn read_run_meta(path: &std::path::Path) -> Result<RunMeta, String> {
+    let mut meta = None;
+    let read = crate::runlog::read(path, |item| {
+        if let crate::runlog::Item::Meta { name, entries } = item
+            && name == crate::runlog::schema::RUN_META
+        {
+            meta = Some(RunMeta::from_entries(entries).map_err(|e| e.to_string()));
+            return Err("enough".into());
+        }
+        Ok(())
+    });
+    match (meta, read) {
+        (Some(m), _) => m,
+        (None, Err(e)) => Err(e.to_string()),
+        (None, Ok(_)) => Err(format!("{}: no run metadata", path.display())),
     }
 }
 
@@ -354,11 +469,64 @@ mod tests {
             part: 2,
             previous_part: Some("run.mcap".into()),
             resume_completed_steps: Some(4),
+            bench_id: "bench-2".into(),
+            host: "pc-7".into(),
+            software_revision: "1a2b3c4d5e6f".into(),
+            instruments: vec![Instrument {
+                role: "chamber".into(),
+                spec: "tcp://10.0.0.5:10001".into(),
+                identity: Some(crate::protocol::Identity {
+                    manufacturer: Some("Espec".into()),
+                    model: Some("SCP-220".into()),
+                    serial: None,
+                    firmware: Some("1.05".into()),
+                    raw: "TYPE? SCP-220 | ROM? 1.05".into(),
+                }),
+                identity_error: None,
+                calibration_due: Some("2027-03-31".into()),
+                calibration_overdue: false,
+            }],
+            units: vec![RunUnit {
+                slot: "A".into(),
+                serial: "RL16-0042".into(),
+                dut_type: "RL-16".into(),
+                coefficients: CoeffsUsed {
+                    source: CoeffsSource::Store,
+                    serial: Some("RL16-0042".into()),
+                    dut_type: Some("RL-16".into()),
+                    version: Some(3),
+                    sha256: Some("ab".repeat(32)),
+                    from: Some("results.sqlite".into()),
+                    override_reason: None,
+                },
+            }],
             ..RunMeta::default()
         };
         m.other.insert("from_the_future".into(), "x".into());
         let back = RunMeta::from_entries(&m.to_entries()).expect("parses");
         assert_eq!(back, m);
+    }
+
+    #[test]
+    fn a_log_written_before_units_has_its_one_unit_from_the_dut_keys() {
+        let mut e = BTreeMap::new();
+        e.insert("dut_serial".to_owned(), "RL16-0007".to_owned());
+        e.insert("dut_type".to_owned(), "RL-16".to_owned());
+        e.insert("coeffs_toml".to_owned(), "[model4]".to_owned());
+        let m = RunMeta::from_entries(&e).expect("an older log");
+        let u = m.unit().expect("one unit");
+        assert_eq!(
+            (u.serial.as_str(), u.dut_type.as_str()),
+            ("RL16-0007", "RL-16")
+        );
+        assert_eq!(u.coefficients.source, CoeffsSource::File);
+        assert_eq!(
+            u.coefficients.describe(),
+            "the coefficients given by --coeffs"
+        );
+        e.insert("instruments".to_owned(), "not json".to_owned());
+        let err = RunMeta::from_entries(&e).expect_err("a bad value is said");
+        assert_eq!(err.key, "instruments");
     }
 
     #[test]

@@ -25,9 +25,9 @@ use super::schema::{
     ChamberState, LinkSample, LogLine, RESULT_META, RUN_META, Rate1Hz, StepEvent, StepPhase,
     TableState, topics,
 };
-use crate::analysis::model::Fit;
+
 use crate::bench::BenchConfig;
-use crate::coeffs::CoeffsFile;
+use crate::coeffs::{CoefficientSet, Compensation};
 use crate::config::Source;
 use crate::procedure::{Procedure, StepKind};
 use crate::protocol::frame::LinkStats;
@@ -143,11 +143,11 @@ struct LoggedTable {
 
 struct State<'a> {
     path: &'a Path,
-    coeffs_override: Option<&'a Fit>,
+    coeffs_override: Option<&'a Compensation>,
     meta: Option<RunMeta>,
     result_meta: Option<ResultMeta>,
     procedure: Option<Procedure>,
-    coeffs: Option<Fit>,
+    coeffs: Option<Compensation>,
     records: Records,
     measurements: Vec<measure::Measurement>,
     pending: Option<(TickSums, Scales)>,
@@ -174,7 +174,7 @@ pub struct Logged {
     /// Procedure (`procedure_toml`), checked against that bench.
     pub procedure: Procedure,
     /// Coefficients the run compensated with (`coeffs_toml`).
-    pub coeffs: Option<CoeffsFile>,
+    pub coeffs: Option<CoefficientSet>,
     /// Twin of a simulated run (`twin_toml`).
     pub twin: Option<TwinConfig>,
 }
@@ -215,7 +215,7 @@ pub fn logged(meta: &RunMeta) -> Result<Logged, String> {
     let coeffs = meta
         .coeffs_toml
         .as_deref()
-        .map(|t| CoeffsFile::from_source(&src("coeffs_toml", t)))
+        .map(|t| CoefficientSet::from_source(&src("coeffs_toml", t)))
         .transpose()
         .map_err(|e| format!("the logged coefficients: {e}"))?;
     let twin = meta
@@ -261,7 +261,18 @@ impl State<'_> {
                 let meta =
                     RunMeta::from_entries(entries).map_err(|e| self.log_err(e.to_string()))?;
                 let l = logged(&meta).map_err(|e| self.log_err(e))?;
-                self.coeffs = l.coeffs.as_ref().map(CoeffsFile::fit);
+                self.coeffs =
+                    l.coeffs
+                        .as_ref()
+                        .and_then(CoefficientSet::fit)
+                        .map(|fit| Compensation {
+                            fit,
+                            used: meta
+                                .unit()
+                                .map_or_else(crate::coeffs::CoeffsUsed::fitted, |u| {
+                                    u.coefficients.clone()
+                                }),
+                        });
                 self.record_edge_s = l.bench.record_edge_s();
                 self.procedure = Some(l.procedure);
                 if let Some(prev) = &meta.previous_part {
@@ -479,7 +490,7 @@ mod format1 {
 }
 
 /// Replay the log at `path`; `coeffs` replace the coefficients the run used.
-pub fn replay(path: &Path, coeffs: Option<&Fit>) -> Result<Replayed, ReplayError> {
+pub fn replay(path: &Path, coeffs: Option<&Compensation>) -> Result<Replayed, ReplayError> {
     let mut st = State {
         path,
         coeffs_override: coeffs,

@@ -252,4 +252,11 @@ impl BenchIo for DeviceBench {
         let table = self.table.read().await?;
         Ok((chamber, table))
     }
+
+    async fn identify(&mut self) -> super::Identities {
+        super::Identities {
+            chamber: self.chamber.identify().await.map_err(|e| e.to_string()),
+            table: self.table.identify().await.map_err(|e| e.to_string()),
+        }
+    }
 }

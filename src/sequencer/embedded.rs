@@ -324,4 +324,14 @@ impl BenchIo for EmbeddedBench {
             ..LinkStats::default()
         }
     }
+
+    async fn identify(&mut self) -> super::Identities {
+        // The embedded instruments answer as `sim serve`'s do.
+        super::Identities {
+            chamber: Ok(crate::sim::identity::chamber(
+                crate::bench::ChamberProtocol::EspecAscii,
+            )),
+            table: Ok(crate::sim::identity::table()),
+        }
+    }
 }

@@ -146,6 +146,10 @@ impl<B: BenchIo> BenchIo for Guarded<B> {
     ) -> Result<(crate::driver::ChamberReading, crate::driver::TableReading), DeviceError> {
         self.inner.idle(t_s).await
     }
+
+    async fn identify(&mut self) -> super::Identities {
+        self.inner.identify().await
+    }
 }
 
 #[cfg(test)]

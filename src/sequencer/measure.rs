@@ -7,7 +7,7 @@ use serde::Serialize;
 use super::health::{RecordHealth, Runs};
 use super::{BenchState, Tick};
 use crate::analysis::figures::{DriftTrace, bias_stability, drift_trace, mean};
-use crate::analysis::model::{self, Fit, ModelKind};
+use crate::analysis::model::{self, ModelKind};
 use crate::analysis::rate::{self, Figure, RatePoint};
 use crate::analysis::series::Interval;
 use crate::analysis::study::{self_heating_dph, temperature_sensitivity_parts};
@@ -323,7 +323,12 @@ impl Measurement {
 /// turn-on bias: the compensation and sensitivity fits have one offset per
 /// part, and drifts are smoothed within a part, never across the break.
 /// For a run never resumed this is the single-part figure.
-pub fn compute(m: &Measure, records: &Records, coeffs: Option<&Fit>, step: &str) -> Measurement {
+pub fn compute(
+    m: &Measure,
+    records: &Records,
+    coeffs: Option<&crate::coeffs::Compensation>,
+    step: &str,
+) -> Measurement {
     let parts = records.by_part(&m.records);
     let series: Vec<Interval> = parts.iter().flatten().copied().collect();
     let bias: Vec<f64> = series.iter().map(Interval::bias_dph).collect();
@@ -434,9 +439,9 @@ pub fn compute(m: &Measure, records: &Records, coeffs: Option<&Fit>, step: &str)
         }
         Metric::CompensatedDriftPp => {
             let fit = match coeffs {
-                Some(f) => {
-                    note = "model 4 with the coefficients given by --coeffs".into();
-                    Ok(f.clone())
+                Some(c) => {
+                    note = format!("model 4 with {}", c.used.describe());
+                    Ok(c.fit.clone())
                 }
                 None => {
                     note = "model 4 fitted on these records (no --coeffs given)".into();

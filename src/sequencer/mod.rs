@@ -116,6 +116,18 @@ pub trait BenchIo: Send {
     /// when the gyro may be what failed): commands the host carries out go
     /// on; the chamber and table as read at `t_s`.
     async fn idle(&mut self, t_s: f64) -> Result<(ChamberReading, TableReading), DeviceError>;
+    /// Ask the chamber and the table what they are, each as it reports
+    /// itself (or why it did not).
+    async fn identify(&mut self) -> Identities;
+}
+
+/// The identities a bench's instruments reported.
+#[derive(Debug, Clone)]
+pub struct Identities {
+    /// The chamber's.
+    pub chamber: Result<crate::driver::Identity, String>,
+    /// The table's.
+    pub table: Result<crate::driver::Identity, String>,
 }
 
 /// Where the run's data goes (the recorder implements it).
@@ -230,8 +242,11 @@ pub trait Progress {
     /// `notes` are what the operator should know first (a stale lock
     /// taken over, an earlier run moved aside).
     fn begin(&mut self, _dir: &std::path::Path, _notes: &[String]) {}
-    /// A step starts.
+    /// A step starts: `index` of `total` (setup, main and cleanup, from 0).
     fn step(&mut self, step: &Step, index: usize, total: usize);
+    /// A resumed run restores the bench before going on: restore step
+    /// `index` of `total` starts.
+    fn restore(&mut self, _step: &Step, _index: usize, _total: usize) {}
     /// A tick passed; `interval` is its 1 Hz mean (rate, temperatures).
     fn tick(&mut self, state: &BenchState, interval: Option<&crate::analysis::series::Interval>);
     /// Ask the operator to confirm `text`; returns when confirmed. The
@@ -261,7 +276,7 @@ impl Progress for Quiet {
 #[derive(Debug, Clone)]
 pub struct Options {
     /// Model-4 coefficients for compensation (else fitted on the run).
-    pub coeffs: Option<crate::analysis::model::Fit>,
+    pub coeffs: Option<crate::coeffs::Compensation>,
     /// Asked to stop the run (cleanup still runs).
     pub interrupt: Arc<Interrupt>,
     /// Bench limit on the gyro's temperatures, degC.
@@ -904,28 +919,19 @@ pub async fn run(
 /// Bring the bench back to the conditions a resumed run needs
 /// ([`resume_plan`]); the error names the restore step that failed.
 async fn restore(r: &mut Run<'_>, p: &Procedure, res: &Resume) -> Result<(), (Stop, String)> {
-    let (start_at, restore) = resume_plan(p, res.completed);
-    let what = if restore.is_empty() {
-        "nothing".to_owned()
-    } else {
-        restore
-            .iter()
-            .map(|(_, s)| s.describe())
-            .collect::<Vec<_>>()
-            .join(", ")
-    };
+    let (_, restore) = resume_plan(p, res.completed);
     let at = |e| (e, "resume".to_owned());
     r.log(
         Level::Info,
         &format!(
-            "resume: part {} continues at step {} of {}; restoring {what}",
+            "resume, part {}: {}",
             res.part,
-            start_at + 1,
-            p.setup.len() + p.main.len(),
+            resume::describe_resume(p, res.completed)
         ),
     )
     .map_err(at)?;
-    for (index, s) in &restore {
+    for (k, (index, s)) in restore.iter().enumerate() {
+        r.progress.restore(s, k, restore.len());
         r.log_step(StepPhase::Restore, *index, s).map_err(at)?;
         r.step(s).await.map_err(|e| (e, s.key.clone()))?;
     }

@@ -186,6 +186,43 @@ pub fn resume_plan(p: &Procedure, completed: usize) -> (usize, Vec<(usize, Step)
     (start_at, restore)
 }
 
+/// What a resume after `completed` steps retakes, in the words every
+/// place uses (`run --resume`, the station, the log): steps are counted
+/// as the progress counts them, `[n/N]` over the procedure's setup, main
+/// and cleanup steps, from 1.
+pub fn describe_resume(p: &Procedure, completed: usize) -> String {
+    let (start_at, restore) = resume_plan(p, completed);
+    let total = p.steps().count();
+    let retaken = if start_at < completed {
+        format!(
+            "; steps {} to {} are taken again: the break cut their thermal segment, which is retaken whole",
+            start_at + 1,
+            completed
+        )
+    } else {
+        String::new()
+    };
+    let next = p.steps().nth(start_at).map_or("cleanup".to_owned(), |s| {
+        format!("step {} of {total} ({})", start_at + 1, s.describe())
+    });
+    let first = if restore.is_empty() {
+        "nothing to restore first".to_owned()
+    } else {
+        format!(
+            "first the bench is restored in {} step(s): {}",
+            restore.len(),
+            restore
+                .iter()
+                .map(|(_, s)| s.describe())
+                .collect::<Vec<_>>()
+                .join(", ")
+        )
+    };
+    format!(
+        "{completed} of {total} steps were done before the break{retaken}; going on at {next}; {first}"
+    )
+}
+
 impl Resume {
     /// What the earlier parts leave for a resume at `start_at`: records and
     /// measurements of the steps before it; records that will be taken

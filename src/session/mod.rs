@@ -11,7 +11,7 @@ use std::sync::Arc;
 
 use crate::bench::{BenchConfig, open_bench};
 use crate::clock::{Pacing, VirtualClock, utc_now};
-use crate::coeffs::CoeffsFile;
+use crate::coeffs::Chosen;
 use crate::procedure::Procedure;
 use crate::procedure::estimate::min_total_s;
 use crate::protocol::frame::LinkStats;
@@ -51,6 +51,17 @@ pub enum SessionError {
         #[source]
         source: crate::driver::DeviceError,
     },
+    /// An instrument is past its calibration due date and the bench
+    /// refuses such runs.
+    #[error(
+        "{instruments} past the calibration due date in {bench}; the bench's overdue_calibration = \"refuse\" does not start a run (calibrate the instrument and update calibration_due)"
+    )]
+    CalibrationOverdue {
+        /// The instruments with their due dates.
+        instruments: String,
+        /// The bench file.
+        bench: String,
+    },
     /// A file could not be written.
     #[error("{what} {path}: {cause}")]
     Io {
@@ -82,8 +93,9 @@ pub struct Plan {
     pub bench_label: String,
     /// Twin of the embedded bench.
     pub twin: TwinConfig,
-    /// Coefficients to compensate with.
-    pub coeffs_file: Option<CoeffsFile>,
+    /// Coefficients to compensate with (none: model 4 fitted on the run's
+    /// own records).
+    pub coeffs: Option<Chosen>,
     /// The run's seed; a resumed part seeds its twin with
     /// `seed + part - 1` (a new power-on, fresh noise).
     pub seed: u64,
@@ -223,11 +235,8 @@ pub fn plan_resume(
     }
     let state = resume_from(&prev, completed);
     let summary = format!(
-        "resuming {}: {} of {} steps completed, going on from step {} (last part {}, ended: {})",
+        "resuming {} (its last part {} ended: {}): {}",
         dir.display(),
-        completed,
-        prev.procedure.setup.len() + prev.procedure.main.len(),
-        state.start_at + 1,
         last.display(),
         prev.result
             .error
@@ -235,7 +244,8 @@ pub fn plan_resume(
             .map_or("-".to_owned(), |e| format!(
                 "{} in step {}",
                 e.message, e.step
-            ))
+            )),
+        crate::sequencer::resume::describe_resume(&prev.procedure, completed)
     );
     let meta = &prev.meta;
     let embedded = config.bench.is_embedded();
@@ -265,7 +275,18 @@ pub fn plan_resume(
         store,
         bench_cfg: config.bench,
         twin: config.twin.unwrap_or_else(TwinConfig::default_rl16),
-        coeffs_file: config.coeffs,
+        coeffs: match (&meta.coeffs_toml, config.coeffs) {
+            (Some(text), Some(set)) => Some(Chosen {
+                set,
+                text: text.clone(),
+                used: meta
+                    .unit()
+                    .map_or_else(crate::coeffs::CoeffsUsed::fitted, |u| {
+                        u.coefficients.clone()
+                    }),
+            }),
+            _ => None,
+        },
         seed,
         dut: meta.dut_serial.clone(),
         operator: meta.operator.clone(),
@@ -330,7 +351,7 @@ pub const MOVE_TIMEOUT_S: f64 = 600.0;
 /// The sequencer's options for a run on `bench`.
 pub fn options(
     bench: &BenchConfig,
-    coeffs: Option<crate::analysis::model::Fit>,
+    coeffs: Option<crate::coeffs::Compensation>,
     interrupt: Arc<Interrupt>,
     resume: Option<Resume>,
 ) -> Options {
@@ -378,6 +399,26 @@ pub fn execute(
     interrupt: Arc<Interrupt>,
 ) -> Result<Finished, SessionError> {
     let embedded = plan.bench_cfg.is_embedded();
+    let today = utc_now().date_naive();
+    if plan.bench_cfg.overdue_calibration == crate::bench::OverduePolicy::Refuse {
+        let d = &plan.bench_cfg.devices;
+        let overdue: Vec<String> = [
+            ("the chamber", d.chamber.calibration_due),
+            ("the table", d.table.calibration_due),
+        ]
+        .iter()
+        .filter_map(|(who, due)| {
+            due.filter(|due| today > due.0)
+                .map(|due| format!("{who} (due {due})"))
+        })
+        .collect();
+        if !overdue.is_empty() {
+            return Err(SessionError::CalibrationOverdue {
+                instruments: overdue.join(" and "),
+                bench: plan.bench_label.clone(),
+            });
+        }
+    }
     let specs = [
         &plan.bench_cfg.devices.chamber.spec,
         &plan.bench_cfg.devices.table.spec,
@@ -463,13 +504,10 @@ pub fn execute(
     } else {
         None
     };
-    let coeffs_toml =
-        match &plan.coeffs_file {
-            Some(c) => Some(c.to_toml().map_err(|e| {
-                SessionError::Bench(format!("the coefficients cannot be logged: {e}"))
-            })?),
-            None => None,
-        };
+    let identities = rt.block_on(bench.identify());
+    let instruments = plan
+        .bench_cfg
+        .instruments(identities.chamber, identities.table, today);
     let meta = RunMeta {
         format: FORMAT,
         run_id: plan
@@ -483,13 +521,13 @@ pub fn execute(
         bench_toml,
         bench: plan.bench_label.clone(),
         twin_toml,
-        coeffs_toml,
+        coeffs_toml: plan.coeffs.as_ref().map(|c| c.text.clone()),
         site_json,
         dut_serial: plan.dut.clone(),
         dut_type: plan.procedure.meta.dut_type.clone(),
         operator: plan.operator.clone(),
         station: plan.station.clone(),
-        software_version: env!("CARGO_PKG_VERSION").to_owned(),
+        software_version: crate::version::VERSION.to_owned(),
         start_time_utc: run_start.clone(),
         part_start_time_utc: start.to_rfc3339(),
         seed: embedded.then_some(plan.seed),
@@ -498,6 +536,19 @@ pub fn execute(
         resume_completed_steps: plan.resume.as_ref().map(|r| r.state.completed),
         speed: plan.speed.clone(),
         imported_from: None,
+        bench_id: plan.bench_cfg.bench_id(&plan.bench_label),
+        host: rundir::hostname(),
+        software_revision: crate::version::REVISION.to_owned(),
+        instruments,
+        units: vec![crate::runlog::meta::RunUnit {
+            slot: String::new(),
+            serial: plan.dut.clone(),
+            dut_type: plan.procedure.meta.dut_type.clone(),
+            coefficients: plan
+                .coeffs
+                .as_ref()
+                .map_or_else(crate::coeffs::CoeffsUsed::fitted, |c| c.used.clone()),
+        }],
         other: Default::default(),
     };
     let log = if part == 1 {
@@ -522,7 +573,7 @@ pub fn execute(
     let notes_at_begin = notes.len();
     let opts = options(
         &plan.bench_cfg,
-        plan.coeffs_file.as_ref().map(CoeffsFile::fit),
+        plan.coeffs.as_ref().and_then(Chosen::compensation),
         interrupt,
         plan.resume.as_ref().map(|r| r.state.clone()),
     );
@@ -552,17 +603,7 @@ pub fn execute(
         Some(r) => add_link(&r.link, &part_link),
         None => part_link,
     };
-    let finish = |result: &RunResult| {
-        Report::new(
-            &plan.procedure,
-            result,
-            &plan.dut,
-            &run_start,
-            link,
-            embedded.then_some(plan.seed),
-            &plan.bench_label,
-        )
-    };
+    let finish = |result: &RunResult| Report::new(&plan.procedure, result, &meta, link);
     let mut result = result;
     let mut report = finish(&result);
     let end_s = bench.now_s();

@@ -133,7 +133,7 @@ impl SimBench {
                 }
                 return Some(s.to_string());
             }
-            Command::Identify => return Some("gyrobench,ACL two-axis simulator,0,0.1".into()),
+            Command::Identify => return Some(super::identity::ACL_IDN.into()),
             Command::ClearStatus => self.table.errors.clear(),
             Command::ErrorQuery => {
                 return Some(

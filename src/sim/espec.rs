@@ -44,8 +44,8 @@ impl SimBench {
                 }
                 s
             }
-            Request::Type => "SCP-220,TEMP".to_owned(),
-            Request::Rom => "GYROBENCH-SIM,0.1".to_owned(),
+            Request::Type => super::identity::ESPEC_TYPE.to_owned(),
+            Request::Rom => super::identity::ESPEC_ROM.to_owned(),
             Request::SetTemp(v) => {
                 let cfg = &self.twin.config().chamber;
                 if !(cfg.min_c..=cfg.max_c).contains(&v) {

@@ -31,6 +31,42 @@ use crate::twin::{Twin, TwinConfig};
 /// controlling (standby or off), degC/min (ours).
 pub const PASSIVE_DRIFT_C_PER_MIN: f64 = 0.5;
 
+/// How the simulated instruments answer their identity queries: as their
+/// instruments do, in their formats, naming themselves as simulators (the
+/// embedded bench reports the same).
+pub mod identity {
+    use crate::protocol::{Identity, acl, espec, watlow};
+
+    /// Espec `TYPE?`.
+    pub const ESPEC_TYPE: &str = "SCP-220,TEMP";
+    /// Espec `ROM?`.
+    pub const ESPEC_ROM: &str = concat!("GYROBENCH-SIM,", env!("CARGO_PKG_VERSION"));
+    /// ACL `*IDN?`: maker, model, serial, firmware.
+    pub const ACL_IDN: &str = concat!(
+        "gyrobench,ACL two-axis simulator,SIM-TABLE,",
+        env!("CARGO_PKG_VERSION")
+    );
+    /// Watlow F4T part number.
+    pub const WATLOW_PART_NUMBER: &str = "F4T1L1AA1A1SIMA";
+
+    /// The simulated chamber's identity over `protocol`.
+    pub fn chamber(protocol: crate::bench::ChamberProtocol) -> Identity {
+        match protocol {
+            crate::bench::ChamberProtocol::EspecAscii => {
+                espec::parse_identity(ESPEC_TYPE, ESPEC_ROM)
+            }
+            crate::bench::ChamberProtocol::WatlowF4tModbus => watlow::parse_identity(
+                &watlow::encode_string(WATLOW_PART_NUMBER, usize::from(watlow::PART_NUMBER_LEN)),
+            ),
+        }
+    }
+
+    /// The simulated table's identity.
+    pub fn table() -> Identity {
+        acl::parse_identity(ACL_IDN)
+    }
+}
+
 /// Chamber alarm codes raised by the simulator itself.
 pub mod alarm {
     /// Air above the upper alarm limit.

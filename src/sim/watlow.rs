@@ -33,6 +33,15 @@ impl SimBench {
                 })
             })
             .or_else(|| (addr == w::PROFILE_STATE).then_some(profile::OFF))
+            .or_else(|| {
+                let i = addr.checked_sub(w::PART_NUMBER)?;
+                (i < w::PART_NUMBER_LEN).then(|| {
+                    w::encode_string(
+                        super::identity::WATLOW_PART_NUMBER,
+                        usize::from(w::PART_NUMBER_LEN),
+                    )[usize::from(i)]
+                })
+            })
     }
 
     /// Read `count` holding registers from `addr`.

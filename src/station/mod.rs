@@ -209,17 +209,17 @@ impl Station {
     /// Start a run: refused when the serial is empty, the procedure does
     /// not pass `check`, or the bench is busy.
     pub fn start(self: &Arc<Self>, req: &Start) -> Result<u64, Refused> {
+        // A scanner's trailing newline or blank is not part of the serial.
         let serial = req.serial.trim();
-        if serial.is_empty() {
-            return Err(Refused::Bad(
-                "scan or type the unit's serial number first".into(),
-            ));
+        crate::unit::check_serial(serial).map_err(|e| Refused::Bad(e.to_string()))?;
+        if serial == crate::unit::SIMULATED_SERIAL && !self.cfg.bench.is_embedded() {
+            return Err(Refused::Bad(format!(
+                "{serial} names no unit; scan the serial of the unit on this bench"
+            )));
         }
-        if serial.chars().any(char::is_control) || serial.len() > 64 {
-            return Err(Refused::Bad(
-                "a serial number is at most 64 characters, without control characters".into(),
-            ));
-        }
+        let operator = req.operator.trim();
+        crate::unit::check_operator(operator)
+            .map_err(|e| Refused::Bad(format!("operator: {e}")))?;
         // Only a file the directory lists (never a path given by the page).
         let file = self
             .procedure_files()
@@ -242,10 +242,10 @@ impl Station {
             bench_label: self.cfg.bench_label.clone(),
             bench_cfg: self.cfg.bench.clone(),
             twin: TwinConfig::default_rl16(),
-            coeffs_file: None,
+            coeffs: None,
             seed: self.runs_started.load(std::sync::atomic::Ordering::Relaxed) + 1,
             dut: serial.to_owned(),
-            operator: req.operator.trim().to_owned(),
+            operator: operator.to_owned(),
             speed: self.cfg.speed.clone(),
             pacing: self.cfg.pacing,
             faults: Vec::new(),

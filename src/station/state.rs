@@ -202,6 +202,19 @@ impl Progress for Reporter {
         });
     }
 
+    fn restore(&mut self, step: &Step, index: usize, total: usize) {
+        let line = format!(
+            "restoring the bench before the resumed run goes on ({}/{total}): {}",
+            index + 1,
+            step.describe()
+        );
+        self.shared.update(|b| {
+            if let Some(run) = &mut b.run {
+                run.events.push(line);
+            }
+        });
+    }
+
     fn tick(&mut self, st: &BenchState, iv: Option<&Interval>) {
         let wall = self.started.elapsed().as_secs_f64();
         let sample = iv.map(|i| {

@@ -8,6 +8,7 @@ use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
+use crate::compensation::{Model4, Model4Terms};
 use crate::config::{Checker, ConfigError, Source};
 use crate::geometry::{Site, TableAngles, TableGeometry};
 
@@ -223,45 +224,68 @@ pub struct GyroConfig {
 }
 
 /// Model-4 thermal bias `K1 dT + K2 dT^2 + K3 d(dT)/dt + K4 T_K + K5 F(tau)`
-/// with `dT = T1 - T2`, `F(tau) = exp(-tau/tau_w)`, plus a fixed and a
-/// turn-on bias.
+/// with `dT = T1 - T2`, `F(tau) = exp(-tau/tau_w)`, plus a fixed bias (the
+/// model's constant) and a turn-on bias. In the file, the model's keys sit
+/// flat in `[bias]` beside the others.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
+#[serde(from = "RawBias", into = "RawBias")]
 pub struct BiasConfig {
-    /// Fixed bias, deg/h.
-    pub offset_dph: f64,
+    /// The model-4 coefficients; `offset_dph` is the fixed bias, deg/h.
+    pub model4: Model4,
     /// Run-to-run (turn-on) bias repeatability, deg/h, 1 sigma.
     pub turn_on_sigma_dph: f64,
-    /// K1, deg/h per degC of dT.
-    pub k1_dph_per_c: f64,
-    /// K2, deg/h per degC^2 of dT.
-    pub k2_dph_per_c2: f64,
-    /// K3, deg/h per degC/s of d(dT)/dt.
-    pub k3_dph_per_c_per_s: f64,
-    /// K4, deg/h per degC of case temperature.
-    pub k4_dph_per_c: f64,
-    /// K5, deg/h at power-on (times F(tau)).
-    pub k5_dph: f64,
-    /// Warm-up time constant tau_w of F(tau), s.
-    pub warmup_tau_s: f64,
     /// Which model-4 terms act (all true reproduces the study).
-    pub terms: BiasTerms,
+    pub terms: Model4Terms,
 }
 
-/// Switches for the model-4 terms (names as in the diagnosis library).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+/// `[bias]` as the file has it.
+#[derive(Debug, Clone, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct BiasTerms {
-    /// K1 dT.
-    pub gradient: bool,
-    /// K2 dT^2.
-    pub gradient_quadratic: bool,
-    /// K3 d(dT)/dt.
-    pub gradient_rate: bool,
-    /// K4 T_K.
-    pub case_temperature: bool,
-    /// K5 F(tau).
-    pub self_heating: bool,
+struct RawBias {
+    offset_dph: f64,
+    turn_on_sigma_dph: f64,
+    k1_dph_per_c: f64,
+    k2_dph_per_c2: f64,
+    k3_dph_per_c_per_s: f64,
+    k4_dph_per_c: f64,
+    k5_dph: f64,
+    warmup_tau_s: f64,
+    terms: Model4Terms,
+}
+
+impl From<RawBias> for BiasConfig {
+    fn from(r: RawBias) -> Self {
+        Self {
+            model4: Model4 {
+                k1_dph_per_c: r.k1_dph_per_c,
+                k2_dph_per_c2: r.k2_dph_per_c2,
+                k3_dph_per_c_per_s: r.k3_dph_per_c_per_s,
+                k4_dph_per_c: r.k4_dph_per_c,
+                k5_dph: r.k5_dph,
+                warmup_tau_s: r.warmup_tau_s,
+                offset_dph: r.offset_dph,
+            },
+            turn_on_sigma_dph: r.turn_on_sigma_dph,
+            terms: r.terms,
+        }
+    }
+}
+
+impl From<BiasConfig> for RawBias {
+    fn from(b: BiasConfig) -> Self {
+        let m = b.model4;
+        Self {
+            offset_dph: m.offset_dph,
+            turn_on_sigma_dph: b.turn_on_sigma_dph,
+            k1_dph_per_c: m.k1_dph_per_c,
+            k2_dph_per_c2: m.k2_dph_per_c2,
+            k3_dph_per_c_per_s: m.k3_dph_per_c_per_s,
+            k4_dph_per_c: m.k4_dph_per_c,
+            k5_dph: m.k5_dph,
+            warmup_tau_s: m.warmup_tau_s,
+            terms: b.terms,
+        }
+    }
 }
 
 /// Random noise terms of the rate output.
@@ -597,15 +621,8 @@ impl TwinConfig {
         c.within(g.lsb_arcsec, 1e-6, 100.0, "gyro.lsb_arcsec")?;
         c.within(g.temp_lsb_c, 1e-6, 1.0, "gyro.temp_lsb_c")?;
 
-        let b = &self.bias;
-        c.finite(b.offset_dph, "bias.offset_dph")?;
-        c.non_negative(b.turn_on_sigma_dph, "bias.turn_on_sigma_dph")?;
-        c.finite(b.k1_dph_per_c, "bias.k1_dph_per_c")?;
-        c.finite(b.k2_dph_per_c2, "bias.k2_dph_per_c2")?;
-        c.finite(b.k3_dph_per_c_per_s, "bias.k3_dph_per_c_per_s")?;
-        c.finite(b.k4_dph_per_c, "bias.k4_dph_per_c")?;
-        c.finite(b.k5_dph, "bias.k5_dph")?;
-        c.positive(b.warmup_tau_s, "bias.warmup_tau_s")?;
+        c.non_negative(self.bias.turn_on_sigma_dph, "bias.turn_on_sigma_dph")?;
+        self.bias.model4.check(c, "bias")?;
 
         let nz = &self.noise;
         c.non_negative(nz.arw_deg_per_rt_h, "noise.arw_deg_per_rt_h")?;

@@ -21,6 +21,7 @@ pub use config::TwinConfig;
 pub use table::{Axis, AxisDemand};
 pub use thermal::ChamberLimit;
 
+use crate::compensation::Model4Inputs;
 use crate::geometry::{DPS_TO_DPH, Orientation, TableAngles, gravity_ned_g};
 use effects::{EffectInputs, Effects};
 use noise::Noise;
@@ -412,12 +413,11 @@ impl Twin {
     }
 
     fn refresh_bias(&mut self) {
-        self.bias_dph = self.cfg.bias.offset_dph
+        let b = &self.cfg.bias;
+        self.bias_dph = b.model4.offset_dph
             + self.turn_on_dph
-            + model4_bias_dph(
-                &self.cfg.bias,
-                &Model4Inputs::of(&self.thermal, self.tau_s()),
-            )
+            + b.model4
+                .thermal_bias_dph(&model4_inputs(&self.thermal, self.tau_s()), b.terms)
             + self.effect_dph
             + self.noise_dph;
     }
@@ -445,40 +445,14 @@ fn with_dither(cfg: &TwinConfig) -> config::NoiseConfig {
     n
 }
 
-/// Inputs of the model-4 bias.
-#[derive(Debug, Clone, Copy)]
-pub struct Model4Inputs {
-    /// dT = T1 - T2, degC.
-    pub gradient_c: f64,
-    /// d(dT)/dt, degC/s.
-    pub gradient_rate_c_per_s: f64,
-    /// Case temperature T_K, degC.
-    pub case_c: f64,
-    /// Time since power-on, s.
-    pub tau_s: f64,
-}
-
-impl Model4Inputs {
-    fn of(th: &ThermalNetwork, tau_s: f64) -> Self {
-        Self {
-            gradient_c: th.gradient_c(),
-            gradient_rate_c_per_s: th.ddt_dt_c_per_s,
-            case_c: th.case_c,
-            tau_s,
-        }
+/// Model 4's inputs from the thermal network now.
+fn model4_inputs(th: &ThermalNetwork, tau_s: f64) -> Model4Inputs {
+    Model4Inputs {
+        gradient_c: th.gradient_c(),
+        gradient_rate_c_per_s: th.ddt_dt_c_per_s,
+        case_c: th.case_c,
+        tau_s,
     }
-}
-
-/// The study's model 4, `K1 dT + K2 dT^2 + K3 d(dT)/dt + K4 T_K + K5 exp(-tau/tau_w)`,
-/// with switched-off terms left out, deg/h.
-pub fn model4_bias_dph(b: &config::BiasConfig, x: &Model4Inputs) -> f64 {
-    let t = b.terms;
-    let on = |flag: bool| if flag { 1.0 } else { 0.0 };
-    on(t.gradient) * b.k1_dph_per_c * x.gradient_c
-        + on(t.gradient_quadratic) * b.k2_dph_per_c2 * x.gradient_c * x.gradient_c
-        + on(t.gradient_rate) * b.k3_dph_per_c_per_s * x.gradient_rate_c_per_s
-        + on(t.case_temperature) * b.k4_dph_per_c * x.case_c
-        + on(t.self_heating) * b.k5_dph * (-x.tau_s / b.warmup_tau_s).exp()
 }
 
 #[cfg(test)]

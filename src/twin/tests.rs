@@ -7,8 +7,9 @@ use crate::geometry::EARTH_RATE_DPH;
 /// A twin whose output is exactly the kinematic rate: no bias, no noise.
 fn quiet() -> TwinConfig {
     let mut c = TwinConfig::default_rl16();
-    let b = &mut c.bias;
-    (b.offset_dph, b.turn_on_sigma_dph) = (0.0, 0.0);
+    c.bias.turn_on_sigma_dph = 0.0;
+    let b = &mut c.bias.model4;
+    b.offset_dph = 0.0;
     (b.k1_dph_per_c, b.k2_dph_per_c2, b.k3_dph_per_c_per_s) = (0.0, 0.0, 0.0);
     (b.k4_dph_per_c, b.k5_dph) = (0.0, 0.0);
     c.noise.arw_deg_per_rt_h = 0.0;
@@ -136,8 +137,8 @@ fn turn_on_bias_differs_from_power_on_to_power_on() {
 #[test]
 fn self_heating_term_decays_with_the_warmup_time_constant() {
     let mut c = quiet();
-    c.bias.k5_dph = 0.5;
-    let tau_w = c.bias.warmup_tau_s;
+    c.bias.model4.k5_dph = 0.5;
+    let tau_w = c.bias.model4.warmup_tau_s;
     let mut twin = Twin::new(c.clone(), 1);
     let b0 = twin.truth().bias_dph;
     twin.run_until(tau_w, |_, _| {});

@@ -223,6 +223,7 @@ pub struct Axis {
 /// A chart.
 #[derive(Debug, Clone, Default)]
 pub struct Chart {
+    links: Vec<Link>,
     title: String,
     x: Axis,
     y: Axis,
@@ -328,6 +329,13 @@ impl Chart {
         self
     }
 
+    /// A point that names itself when hovered (and opens `href` when
+    /// clicked): an invisible target over a point drawn by a series.
+    pub fn link(mut self, l: Link) -> Self {
+        self.links.push(l);
+        self
+    }
+
     /// A sentence under the chart.
     pub fn caption(mut self, text: impl Into<String>) -> Self {
         self.caption = text.into();
@@ -408,16 +416,18 @@ impl Chart {
         let plot_h = self.height.unwrap_or(PLOT_H);
         let legend_h = rows.len() as u32 * LEGEND_ROW + if rows.is_empty() { 0 } else { 8 };
         let mut svg = String::new();
+        let mut targets: Vec<(i32, i32)> = Vec::new();
         let drawn = {
             let root =
                 SVGBackend::with_string(&mut svg, (W, plot_h + legend_h)).into_drawing_area();
             let (plot, legend) = root.split_vertically(plot_h);
             let ((x0, x1), (y0, y1)) = self.ranges();
+            let at = &mut targets;
             let r = match (self.x.log, self.y.log) {
-                (false, false) => self.plot(&plot, lin(x0, x1), lin(y0, y1)),
-                (true, false) => self.plot(&plot, log(x0, x1), lin(y0, y1)),
-                (false, true) => self.plot(&plot, lin(x0, x1), log(y0, y1)),
-                (true, true) => self.plot(&plot, log(x0, x1), log(y0, y1)),
+                (false, false) => self.plot(&plot, lin(x0, x1), lin(y0, y1), at),
+                (true, false) => self.plot(&plot, log(x0, x1), lin(y0, y1), at),
+                (false, true) => self.plot(&plot, lin(x0, x1), log(y0, y1), at),
+                (true, true) => self.plot(&plot, log(x0, x1), log(y0, y1), at),
             };
             r.and_then(|()| draw_legend(&legend, &rows))
                 .and_then(|()| root.present().map_err(Into::into))
@@ -428,6 +438,20 @@ impl Chart {
         } else {
             format!("<figcaption>{}</figcaption>", esc(&self.caption))
         };
+        if let Some(end) = svg.rfind("</svg>") {
+            let mut hover = String::new();
+            for (l, (px, py)) in self.links.iter().zip(&targets) {
+                let target = format!(
+                    "<circle cx=\"{px}\" cy=\"{py}\" r=\"7\" fill=\"transparent\"><title>{}</title></circle>",
+                    esc(&l.title)
+                );
+                match &l.href {
+                    Some(h) => hover.push_str(&format!("<a href=\"{}\">{target}</a>", esc(h))),
+                    None => hover.push_str(&target),
+                }
+            }
+            svg.insert_str(end, &hover);
+        }
         match drawn {
             Ok(()) => format!("<figure>{svg}{caption}</figure>\n"),
             Err(e) => format!(
@@ -438,7 +462,13 @@ impl Chart {
         }
     }
 
-    fn plot<X, Y>(&self, area: &DrawingArea<SVGBackend<'_>, Shift>, x: X, y: Y) -> Drawn
+    fn plot<X, Y>(
+        &self,
+        area: &DrawingArea<SVGBackend<'_>, Shift>,
+        x: X,
+        y: Y,
+        targets: &mut Vec<(i32, i32)>,
+    ) -> Drawn
     where
         X: Ranged<ValueType = f64> + ValueFormatter<f64>,
         Y: Ranged<ValueType = f64> + ValueFormatter<f64>,
@@ -564,8 +594,22 @@ impl Chart {
                 EmptyElement::at((*x, *y)) + Text::new(text.clone(), (6, -18), (FONT, TICK_PX)),
             ))?;
         }
+        targets.extend(self.links.iter().map(|l| c.backend_coord(&(l.x, l.y))));
         Ok(())
     }
+}
+
+/// A point of a chart that names itself (see [`Chart::link`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Link {
+    /// Where, in data units.
+    pub x: f64,
+    /// Where, in data units.
+    pub y: f64,
+    /// What a pointer over it shows.
+    pub title: String,
+    /// What a click opens.
+    pub href: Option<String>,
 }
 
 type Drawn = Result<(), Box<dyn std::error::Error>>;

@@ -1,0 +1,312 @@
+//! `results verify`: whether the store tells the truth about the logs. Every
+//! stored part of a run is checked against its log: the log is where the
+//! store says, its SHA-256 is the one stored when the part ended, and the
+//! figures the store holds are the log's (its `result` record, or with
+//! `replay` the figures recomputed from its frames). Logs below a runs
+//! directory that the store lacks are listed too.
+
+use std::path::Path;
+
+use serde::Serialize;
+
+use super::sql::Value;
+use super::{Store, StoreError};
+use crate::runlog::meta::{ResultMeasurement, ResultMeta};
+
+/// What is wrong with a stored part or a log.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Problem {
+    /// The log is not where the store says.
+    Missing,
+    /// The log's SHA-256 is not the one stored.
+    Changed,
+    /// The stored figures are not the log's.
+    FiguresDiffer,
+    /// The store never saw the part end (its run was killed); a sync
+    /// completes it from the log.
+    Incomplete,
+    /// The log's `result` record (or its replay) cannot be read.
+    Unreadable,
+    /// A log below the runs directory that the store lacks.
+    NotIndexed,
+}
+
+/// One finding.
+#[derive(Debug, Clone, Serialize)]
+pub struct Finding {
+    /// What is wrong.
+    pub problem: Problem,
+    /// The part's key (`RUN_ID.PART`), when the store has it.
+    pub run: Option<String>,
+    /// The log.
+    pub log: String,
+    /// In words.
+    pub detail: String,
+}
+
+/// The outcome of a verification.
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct Verification {
+    /// Stored parts checked.
+    pub checked: usize,
+    /// Of them, those that agree with their logs.
+    pub agree: usize,
+    /// Stored parts whose logs lie outside the runs directory given (not
+    /// checked: another bench's).
+    pub elsewhere: usize,
+    /// Logs below the runs directory.
+    pub logs_found: usize,
+    /// Everything wrong.
+    pub findings: Vec<Finding>,
+}
+
+/// How the figures are compared: a value, its outcome and its name, in
+/// order.
+fn key(m: &ResultMeasurement) -> (String, Option<u64>, String) {
+    (m.name.clone(), m.value.map(f64::to_bits), m.outcome.clone())
+}
+
+fn first_difference(stored: &[ResultMeasurement], log: &[ResultMeasurement]) -> Option<String> {
+    if stored.len() != log.len() {
+        return Some(format!(
+            "the store holds {} measurement(s), the log {}",
+            stored.len(),
+            log.len()
+        ));
+    }
+    stored.iter().zip(log).find_map(|(a, b)| {
+        (key(a) != key(b)).then(|| {
+            let v = |m: &ResultMeasurement| m.value.map_or("none".to_owned(), |v| format!("{v}"));
+            format!(
+                "{}: the store has {} ({}), the log {} ({})",
+                a.name,
+                v(a),
+                a.outcome,
+                v(b),
+                b.outcome
+            )
+        })
+    })
+}
+
+/// The figures a log holds: its `result` record's, or replayed.
+fn log_figures(log: &Path, replay: bool) -> Result<Vec<ResultMeasurement>, String> {
+    if replay {
+        let r = crate::runlog::replay::replay(log, None).map_err(|e| e.to_string())?;
+        return Ok(r
+            .result
+            .measurements
+            .iter()
+            .map(ResultMeasurement::new)
+            .collect());
+    }
+    let mut found = None;
+    crate::runlog::read(log, |item| {
+        if let crate::runlog::Item::Meta { name, entries } = item
+            && name == crate::runlog::schema::RESULT_META
+        {
+            found = Some(ResultMeta::from_entries(entries).map_err(|e| e.to_string()));
+        }
+        Ok(())
+    })
+    .map_err(|e| e.to_string())?;
+    match found {
+        Some(r) => Ok(r?.measurements),
+        None => Err("the log has no result record (the run did not end)".into()),
+    }
+}
+
+impl Store {
+    /// Check every stored part against its log (only those whose logs lie
+    /// below `dir` when given, and then also the logs there the store
+    /// lacks); `replay` recomputes the figures from the frames.
+    pub fn verify(&mut self, dir: Option<&Path>, replay: bool) -> Result<Verification, StoreError> {
+        let mut v = Verification::default();
+        let under = dir
+            .map(std::path::absolute)
+            .transpose()
+            .map_err(|e| StoreError::Log {
+                path: dir.map_or(String::new(), |d| d.display().to_string()),
+                message: e.to_string(),
+            })?;
+        let parts = self.sql().query(
+            "SELECT id, log_path, log_sha256, outcome FROM runs ORDER BY started_utc, id",
+            &[],
+        )?;
+        let mut stored_logs = std::collections::HashSet::new();
+        for row in &parts {
+            let t = |i: usize| row.get(i).map_or(String::new(), Value::text);
+            let (run, log, sha, outcome) = (t(0), t(1), t(2), t(3));
+            stored_logs.insert(log.clone());
+            if let Some(u) = &under
+                && !Path::new(&log).starts_with(u)
+            {
+                v.elsewhere += 1;
+                continue;
+            }
+            v.checked += 1;
+            let mut find = |problem, detail: String| {
+                v.findings.push(Finding {
+                    problem,
+                    run: Some(run.clone()),
+                    log: log.clone(),
+                    detail,
+                });
+            };
+            let path = Path::new(&log);
+            if !path.is_file() {
+                find(Problem::Missing, "the log is not there".into());
+                continue;
+            }
+            if outcome == "running" {
+                find(
+                    Problem::Incomplete,
+                    "the store never saw this part end; `gyrobench results sync` on its directory completes it".into(),
+                );
+                continue;
+            }
+            match crate::fsutil::sha256_file(path) {
+                Ok(now) if now == sha => {}
+                Ok(now) => {
+                    find(
+                        Problem::Changed,
+                        format!(
+                            "its SHA-256 is {} now, {} when the part ended",
+                            &now[..16],
+                            sha.get(..16).unwrap_or("(none stored)")
+                        ),
+                    );
+                    continue;
+                }
+                Err(e) => {
+                    find(Problem::Unreadable, e.to_string());
+                    continue;
+                }
+            }
+            let stored = self.stored_figures(&run)?;
+            match log_figures(path, replay) {
+                Ok(figures) => match first_difference(&stored, &figures) {
+                    Some(d) => {
+                        v.findings.push(Finding {
+                            problem: Problem::FiguresDiffer,
+                            run: Some(run.clone()),
+                            log: log.clone(),
+                            detail: d,
+                        });
+                    }
+                    None => v.agree += 1,
+                },
+                Err(e) => v.findings.push(Finding {
+                    problem: Problem::Unreadable,
+                    run: Some(run.clone()),
+                    log: log.clone(),
+                    detail: e,
+                }),
+            }
+        }
+        if let Some(dir) = dir {
+            for run_dir in super::record::run_dirs(dir) {
+                for log in super::record::parts(&run_dir) {
+                    v.logs_found += 1;
+                    let abs = std::path::absolute(&log).unwrap_or_else(|_| log.clone());
+                    if stored_logs.contains(&abs.display().to_string()) {
+                        continue;
+                    }
+                    // Stored under another path (a directory moved, a
+                    // copy): known by its key.
+                    let known = match super::record::part_key_of_log(&log) {
+                        Some(k) => !self
+                            .sql()
+                            .query("SELECT id FROM runs WHERE id = $1", &[k.into()])?
+                            .is_empty(),
+                        None => false,
+                    };
+                    if !known {
+                        v.findings.push(Finding {
+                            problem: Problem::NotIndexed,
+                            run: None,
+                            log: abs.display().to_string(),
+                            detail: "the store has no record of this log; `gyrobench results sync` indexes it".into(),
+                        });
+                    }
+                }
+            }
+        }
+        Ok(v)
+    }
+
+    fn stored_figures(&mut self, run: &str) -> Result<Vec<ResultMeasurement>, StoreError> {
+        Ok(self
+            .sql()
+            .query(
+                "SELECT name, value, unit, low, high, outcome, step, note FROM measurements \
+                 WHERE run = $1 ORDER BY seq",
+                &[run.into()],
+            )?
+            .iter()
+            .map(|r| {
+                let t = |i: usize| r.get(i).map_or(String::new(), Value::text);
+                let f = |i: usize| r.get(i).and_then(Value::real);
+                ResultMeasurement {
+                    name: t(0),
+                    value: f(1),
+                    unit: t(2),
+                    low: f(3),
+                    high: f(4),
+                    outcome: t(5),
+                    step: t(6),
+                    note: t(7),
+                }
+            })
+            .collect())
+    }
+}
+
+impl Verification {
+    /// True when the store and the logs agree everywhere checked.
+    pub fn clean(&self) -> bool {
+        self.findings.is_empty()
+    }
+
+    /// A report for the terminal.
+    pub fn render_text(&self) -> String {
+        let mut s = String::new();
+        for f in &self.findings {
+            let what = match f.problem {
+                Problem::Missing => "MISSING",
+                Problem::Changed => "CHANGED",
+                Problem::FiguresDiffer => "FIGURES DIFFER",
+                Problem::Incomplete => "INCOMPLETE",
+                Problem::Unreadable => "UNREADABLE",
+                Problem::NotIndexed => "NOT INDEXED",
+            };
+            s.push_str(&format!(
+                "{what:<15} {} {}\n                {}\n",
+                f.run.as_deref().unwrap_or("-"),
+                f.log,
+                f.detail
+            ));
+        }
+        s.push_str(&format!(
+            "{} stored part(s) checked, {} agree with their logs, {} finding(s){}{}\n",
+            self.checked,
+            self.agree,
+            self.findings.len(),
+            if self.elsewhere > 0 {
+                format!(
+                    "; {} part(s) with logs outside the directory not checked",
+                    self.elsewhere
+                )
+            } else {
+                String::new()
+            },
+            if self.logs_found > 0 {
+                format!("; {} log(s) in the directory", self.logs_found)
+            } else {
+                String::new()
+            }
+        ));
+        s
+    }
+}
