@@ -205,7 +205,8 @@ impl TableGeometry {
         Ok(())
     }
 
-    /// The geometry of `docs/physics.md`: outer axis horizontal along north,
+    /// The geometry of `docs/physics.md`: outer axis horizontal on the
+    /// north-south line (its positive sense south),
     /// inner axis perpendicular to it, sensitive axis along the inner axis.
     /// Outer 0 deg: axis horizontal (east); outer 90 deg: axis up;
     /// outer 35 deg: axis 55 deg from vertical.

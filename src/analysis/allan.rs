@@ -1,5 +1,5 @@
 //! Overlapping Allan deviation of a rate series, its confidence intervals
-//! and the noise terms it implies (physics.md, "Allan deviation").
+//! and the noise terms it implies (`docs/physics.md`, "Allan deviation").
 //!
 //! - Each tau costs O(N): the second difference of the cumulative angle
 //!   `theta_{k+2m} - 2 theta_{k+m} + theta_k`, summed in one pass; taus
@@ -466,7 +466,7 @@ impl Resolved {
     }
 }
 
-/// The three figures called "bias instability" (physics.md).
+/// The three figures called "bias instability" (`docs/physics.md`).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct BiasInstability {
     /// IEEE coefficient B = ADEV floor / 0.664 (from the fit), deg/h.

@@ -418,12 +418,13 @@ pub fn run(args: RunArgs) -> Result<Outcome> {
     let finished = match session::execute(plan, place, &rt, &mut progress, interrupt) {
         Ok(f) => f,
         Err(
-            e @ SessionError::RunDir(
+            e @ (SessionError::RunDir(
                 RunDirError::Exists { .. }
                 | RunDirError::NotARun { .. }
                 | RunDirError::Locked { .. }
                 | RunDirError::Suspicious { .. },
-            ),
+            )
+            | SessionError::CalibrationOverdue { .. }),
         ) => {
             return Err(Usage(e.to_string()).into());
         }

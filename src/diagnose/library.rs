@@ -329,7 +329,7 @@ pub fn separating_procedure(a: Effect, b: Effect) -> Option<&'static str> {
 }
 
 /// Which extra position or run would tell two effects apart (ours, from
-/// the geometry of physics.md: Earth rate, gravity and the magnetic field
+/// the geometry of `docs/physics.md`: Earth rate, gravity and the magnetic field
 /// lie nearly in the north-down plane).
 pub fn separate_with(a: Effect, b: Effect) -> String {
     use Effect::*;

@@ -721,7 +721,7 @@ const SWAP_WITHIN: f64 = 0.2;
 /// candidate in) explains as much, held out, and neither adds over the
 /// other. The step-by-step check above compares candidates alone; this one
 /// sees the sets: Earth rate lies in the plane of gravity and the magnetic
-/// field (physics.md), so with a magnetic sensitivity accepted, a
+/// field (`docs/physics.md`), so with a magnetic sensitivity accepted, a
 /// misalignment and a g-sensitivity explain the same rest at every
 /// position of one site.
 fn swaps(

@@ -421,4 +421,17 @@ mod tests {
             let _ = parse_numbers(&s, 2);
         }
     }
+
+    #[test]
+    fn an_idn_reply_gives_maker_model_serial_and_firmware() {
+        let id = parse_identity("ACUTRONIC,AC2247,SN 1234,FW 3.2.1\r");
+        assert_eq!(id.manufacturer.as_deref(), Some("ACUTRONIC"));
+        assert_eq!(id.model.as_deref(), Some("AC2247"));
+        assert_eq!(id.serial.as_deref(), Some("SN 1234"));
+        assert_eq!(id.firmware.as_deref(), Some("FW 3.2.1"));
+        // Fields a unit leaves at 0 or out are none; control characters go.
+        let id = parse_identity("Maker,Model\u{1b}[2J,0");
+        assert_eq!(id.model.as_deref(), Some("Model[2J"));
+        assert_eq!((id.serial, id.firmware), (None, None));
+    }
 }

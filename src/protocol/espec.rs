@@ -459,4 +459,17 @@ mod tests {
             let _ = parse_request(&s);
         }
     }
+
+    #[test]
+    fn type_and_rom_give_the_controller_and_its_firmware_and_a_refusal_is_an_error() {
+        let id = parse_identity("SCP-220,TEMP", "P-300 Ver 1.05");
+        assert_eq!(id.manufacturer.as_deref(), Some("Espec"));
+        assert_eq!(id.model.as_deref(), Some("SCP-220,TEMP"));
+        assert_eq!(id.firmware.as_deref(), Some("P-300 Ver 1.05"));
+        assert_eq!(id.serial, None);
+        assert_eq!(
+            parse_text("NA:CMD ERR"),
+            Err(ReplyError::Refused("CMD ERR".into()))
+        );
+    }
 }

@@ -121,4 +121,15 @@ mod tests {
             }
         }
     }
+
+    #[test]
+    fn the_part_number_reads_back_from_its_registers() {
+        let words = encode_string("F4T1L1AA1A1SIMA", usize::from(PART_NUMBER_LEN));
+        assert_eq!(words.len(), 15);
+        assert_eq!(words[0], u16::from(b'F'));
+        let id = parse_identity(&words);
+        assert_eq!(id.model.as_deref(), Some("F4T1L1AA1A1SIMA"));
+        let short = encode_string("F4T", 15);
+        assert_eq!(decode_string(&short), "F4T", "zeros ignored");
+    }
 }

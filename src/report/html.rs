@@ -891,3 +891,39 @@ fn print_margins(r: &Report) -> String {
         css_string(&format!("run id {}", r.run_id)),
     )
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn m(value: f64, low: Option<f64>, high: Option<f64>) -> Measurement {
+        Measurement {
+            name: "compensated_drift_pp_dph".into(),
+            value: Some(value),
+            unit: "deg/h".into(),
+            low,
+            high,
+            outcome: MeasureOutcome::Fail,
+            step: "main.3".into(),
+            metric: Metric::CompensatedDriftPp,
+            averaging_s: 600.0,
+            records: Vec::new(),
+            note: String::new(),
+            std_error: None,
+            trace: None,
+        }
+    }
+
+    #[test]
+    fn a_failure_names_the_limit_it_broke_and_by_how_much() {
+        assert_eq!(
+            outside_by(&m(0.0712, None, Some(0.05))),
+            "compensated_drift_pp_dph = 0.0712 deg/h against a limit of 0.05 deg/h, 0.0212 deg/h over it"
+        );
+        let under = outside_by(&m(-6.5, Some(-5.0), Some(5.0)));
+        assert!(
+            under.ends_with("against a limit of -5 deg/h, 1.5000 deg/h under it"),
+            "{under}"
+        );
+    }
+}

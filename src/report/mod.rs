@@ -160,7 +160,7 @@ fn describe(o: &Orientation) -> String {
 }
 
 /// Which "bias instability" the report judges, with the others beside it
-/// (physics.md), and the Allan deviation they come from (1 Hz means of
+/// (`docs/physics.md`), and the Allan deviation they come from (1 Hz means of
 /// the Earth-removed rate).
 #[derive(Debug, Clone, Serialize)]
 pub struct NoiseFigures {

@@ -638,3 +638,59 @@ pub fn run_dirs(dir: &Path) -> Vec<std::path::PathBuf> {
     out.sort();
     out
 }
+
+#[cfg(test)]
+mod tests {
+    use super::super::sql::{Engine, migrations};
+    use super::super::{Location, Store};
+    use super::*;
+
+    /// A store written by a gyrobench of schema 2 (one unit per run, no
+    /// run-unit relation, an imported run stored as a pass) opens in this
+    /// one with its runs whole, each with its unit, the import a reference.
+    #[test]
+    fn a_store_of_schema_2_is_migrated_with_its_runs_and_units() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let path = dir.path().join("old.sqlite");
+        {
+            let mut sql = super::super::sqlite::Sqlite::open(&path).expect("sqlite");
+            for (v, _, text) in &migrations(Engine::Sqlite)[..2] {
+                assert!(*v <= 2);
+                sql.batch(text).expect("old migration");
+            }
+            sql.batch(
+                "CREATE TABLE gyrobench_schema (version BIGINT NOT NULL);
+                 INSERT INTO gyrobench_schema (version) VALUES (2);
+                 INSERT INTO units (id, dut_type, serial) VALUES (1, 'RL-16', 'RL16-0042'), (2, 'gyro', 'LAB-7');
+                 INSERT INTO runs (id, run_id, part, latest, unit_id, procedure_name, procedure_sha256,
+                   procedure_path, bench, station, operator, software_version, run_started_utc, started_utc,
+                   outcome, log_path, recorded_utc, imported_from)
+                 VALUES ('r1.1', 'r1', 1, 1, 1, 'acceptance', 'x', 'p', 'embedded', 'pc', '', '0.1.0',
+                   '2026-11-01T00:00:00Z', '2026-11-01T00:00:00Z', 'pass', '/l/r1.mcap', 'now', NULL),
+                        ('r2.1', 'r2', 1, 1, 2, 'imported', 'x', 'p', 'imported', 'pc', '', '0.1.0',
+                   '2026-11-02T00:00:00Z', '2026-11-02T00:00:00Z', 'pass', '/l/r2.mcap', 'now', 'lab.csv');
+                 INSERT INTO measurements (run, seq, name, value, unit, low, high, outcome, step, note)
+                 VALUES ('r1.1', 0, 'compensated_drift_pp_dph', 0.03, 'deg/h', NULL, 0.05, 'pass', 'main.3', ''),
+                        ('r2.1', 0, 'compensated_drift_pp_dph', 0.04, 'deg/h', NULL, 0.05, 'pass', 'main.1', '');",
+            )
+            .expect("an old store's rows");
+        }
+        let mut store = Store::open(&Location::Sqlite(path))
+            .expect("migrates")
+            .expect("a store");
+        let rows = store.list(&Default::default()).expect("list");
+        let outcome = |id: &str| {
+            rows.iter()
+                .find(|r| r.id == id)
+                .map(|r| (r.serial.clone(), r.outcome.clone()))
+        };
+        assert_eq!(outcome("r1.1"), Some(("RL16-0042".into(), "pass".into())));
+        assert_eq!(outcome("r2.1"), Some(("LAB-7".into(), "reference".into())));
+        let h = store.unit("RL16-0042").expect("history");
+        assert_eq!(h.measurements.len(), 1, "measurements keep their unit");
+        let t = store
+            .trend("compensated_drift_pp_dph", &Default::default())
+            .expect("trend");
+        assert_eq!(t.judged, 1, "the reference is left out");
+    }
+}

@@ -389,6 +389,37 @@ fn io_err(what: &'static str, path: &Path) -> impl FnOnce(std::io::Error) -> Ses
     move |cause| SessionError::Io { what, path, cause }
 }
 
+/// Refuse to start when the bench says so (`overdue_calibration =
+/// "refuse"`) and an instrument is past its calibration due date on
+/// `today`.
+pub fn check_calibration(
+    bench: &BenchConfig,
+    bench_label: &str,
+    today: chrono::NaiveDate,
+) -> Result<(), SessionError> {
+    if bench.overdue_calibration != crate::bench::OverduePolicy::Refuse {
+        return Ok(());
+    }
+    let d = &bench.devices;
+    let overdue: Vec<String> = [
+        ("the chamber", d.chamber.calibration_due),
+        ("the table", d.table.calibration_due),
+    ]
+    .iter()
+    .filter_map(|(who, due)| {
+        due.filter(|due| today > due.0)
+            .map(|due| format!("{who} (due {due})"))
+    })
+    .collect();
+    if overdue.is_empty() {
+        return Ok(());
+    }
+    Err(SessionError::CalibrationOverdue {
+        instruments: overdue.join(" and "),
+        bench: bench_label.to_owned(),
+    })
+}
+
 /// Run `plan` in `place` on the async runtime `rt`; `interrupt` stops it
 /// (cleanup still runs).
 pub fn execute(
@@ -400,25 +431,7 @@ pub fn execute(
 ) -> Result<Finished, SessionError> {
     let embedded = plan.bench_cfg.is_embedded();
     let today = utc_now().date_naive();
-    if plan.bench_cfg.overdue_calibration == crate::bench::OverduePolicy::Refuse {
-        let d = &plan.bench_cfg.devices;
-        let overdue: Vec<String> = [
-            ("the chamber", d.chamber.calibration_due),
-            ("the table", d.table.calibration_due),
-        ]
-        .iter()
-        .filter_map(|(who, due)| {
-            due.filter(|due| today > due.0)
-                .map(|due| format!("{who} (due {due})"))
-        })
-        .collect();
-        if !overdue.is_empty() {
-            return Err(SessionError::CalibrationOverdue {
-                instruments: overdue.join(" and "),
-                bench: plan.bench_label.clone(),
-            });
-        }
-    }
+    check_calibration(&plan.bench_cfg, &plan.bench_label, today)?;
     let specs = [
         &plan.bench_cfg.devices.chamber.spec,
         &plan.bench_cfg.devices.table.spec,

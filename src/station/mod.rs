@@ -234,6 +234,12 @@ impl Station {
                 offer.problem.unwrap_or_default()
             )));
         };
+        session::check_calibration(
+            &self.cfg.bench,
+            &self.cfg.bench_label,
+            crate::clock::utc_now().date_naive(),
+        )
+        .map_err(|e| Refused::Bad(e.to_string()))?;
         let path = self.cfg.procedures.join(&offer.file);
         let plan = Plan {
             station: session::station(&self.cfg.bench),

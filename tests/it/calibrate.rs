@@ -7,7 +7,7 @@ use crate::common::s;
 
 /// A two-hour thermal excursion at power-on: enough to tell the model-4
 /// terms apart, quick to simulate.
-const CYCLE: &str = r#"
+pub const CYCLE: &str = r#"
 [procedure]
 name = "mini_cycle"
 description = "power-on at +20, up to +40, down to +5"
@@ -143,7 +143,10 @@ fn calibration_recovers_the_twin_and_its_file_compensates_a_new_run() {
             .expect("JSON");
     let m = &report["measurements"][0];
     assert!(
-        m["note"].as_str().expect("note").contains("--coeffs"),
+        m["note"]
+            .as_str()
+            .expect("note")
+            .contains("of RL-16 SIMULATED from"),
         "{m}"
     );
     assert!(m["value"].as_f64().expect("value") < 0.05, "{m} {r:?}");

@@ -186,7 +186,16 @@ fn a_withheld_effect_is_found_and_the_updated_twin_closes_the_gap() {
             gyrobench(&["export", s(log), "-o", s(&csv)]).status.code(),
             Some(0)
         );
-        let r = gyrobench(&["import", s(&csv), "--site", s(&site), "-o", s(&back)]);
+        let r = gyrobench(&[
+            "import",
+            s(&csv),
+            "--site",
+            s(&site),
+            "--dut",
+            "RL16-0042",
+            "-o",
+            s(&back),
+        ]);
         assert!(
             r.status.code() == Some(0),
             "{}",

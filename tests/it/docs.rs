@@ -87,3 +87,44 @@ fn the_served_bench_file_runs_at_the_speed_of_the_serve_configuration() {
         );
     }
 }
+
+/// Every `docs/NAME.md` the code or the documentation cites is a file of
+/// the project (not a note kept elsewhere).
+#[test]
+fn every_document_cited_exists() {
+    let mut stack = vec![Path::new(ROOT).join("src"), Path::new(ROOT).join("docs")];
+    let mut files = vec![
+        Path::new(ROOT).join("README.md"),
+        Path::new(ROOT).join("ARCHITECTURE.md"),
+    ];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).expect("dir") {
+            let p = e.expect("entry").path();
+            if p.is_dir() {
+                stack.push(p);
+            } else if p.extension().is_some_and(|x| x == "rs" || x == "md") {
+                files.push(p);
+            }
+        }
+    }
+    let mut cited = 0;
+    for f in files {
+        let text = std::fs::read_to_string(&f).expect("text");
+        for (i, _) in text.match_indices("docs/") {
+            let name: String = text[i + 5..]
+                .chars()
+                .take_while(|c| c.is_ascii_alphanumeric() || *c == '_' || *c == '-')
+                .collect();
+            if text[i + 5 + name.len()..].starts_with(".md") {
+                cited += 1;
+                let doc = Path::new(ROOT).join("docs").join(format!("{name}.md"));
+                assert!(
+                    doc.is_file(),
+                    "{} cites docs/{name}.md, which does not exist",
+                    f.display()
+                );
+            }
+        }
+    }
+    assert!(cited > 20, "{cited} citations found");
+}

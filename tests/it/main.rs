@@ -27,3 +27,4 @@ mod run;
 mod safety;
 mod station;
 mod sweep;
+mod unit_record;

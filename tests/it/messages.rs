@@ -106,6 +106,8 @@ fn a_device_that_refuses_names_the_bench_file_and_its_spec() {
         s(&proc),
         "--bench",
         s(&bench),
+        "--dut",
+        "RL16-0042",
         "--out",
         s(&dir.join("run")),
         "--db",

@@ -113,11 +113,50 @@ fn report_html_loads_in_chromium_with_every_chart_and_prints_on_a4() {
     );
     let boxes = media_boxes(&std::fs::read(&pdf).expect("pdf"));
     assert!(!boxes.is_empty(), "no pages in the PDF");
-    for (w, h) in boxes {
+    for (w, h) in &boxes {
         assert!(
             (w - 595.3).abs() < 2.0 && (h - 841.9).abs() < 2.0,
             "page of {w} x {h} pt, not A4 portrait"
         );
+    }
+    // Every printed page names the unit and the run, and which page of how
+    // many it is (poppler's pdftotext reads the text as printed).
+    let report = crate::common::json(&run.join("report.json"));
+    let run_id = report["run_id"].as_str().expect("run id");
+    match Command::new("pdftotext")
+        .args(["-layout", s(&pdf), "-"])
+        .output()
+    {
+        Ok(text) if text.status.success() => {
+            let text = String::from_utf8_lossy(&text.stdout);
+            let pages: Vec<&str> = text
+                .split('\u{c}')
+                .filter(|p| !p.trim().is_empty())
+                .collect();
+            assert_eq!(pages.len(), boxes.len(), "{text}");
+            assert!(
+                pages.len() >= 2,
+                "a report of one page cannot show the margins repeat"
+            );
+            for (i, page) in pages.iter().enumerate() {
+                for want in [
+                    "RL-16 SIMULATED".to_owned(),
+                    format!("run {}", &run_id[..12]),
+                    format!("page {} of {}", i + 1, pages.len()),
+                    format!("run id {run_id}"),
+                ] {
+                    assert!(
+                        page.contains(&want),
+                        "page {} lacks {want:?}:\n{page}",
+                        i + 1
+                    );
+                }
+            }
+        }
+        _ => assert!(
+            std::env::var_os("CI").is_none(),
+            "CI must read the printed pages: install poppler-utils (pdftotext)"
+        ),
     }
     std::fs::remove_dir_all(&dir).expect("cleanup");
 }

@@ -391,6 +391,8 @@ table = { outer_deg = 90.0, inner_deg = 0.0 }
             s(&p),
             "--bench",
             s(&bench),
+            "--dut",
+            "RL16-0042",
             "--out",
             s(&out),
             "--db",
@@ -497,7 +499,7 @@ fn a_rate_run_killed_mid_record_resumes_with_the_turn() {
     assert_eq!(o.status.code(), Some(0), "{err}");
     let first = err
         .lines()
-        .find(|l| l.starts_with('['))
+        .find(|l| l.starts_with('[') && !l.starts_with("[restore"))
         .unwrap_or_else(|| panic!("no step in {err}"));
     assert!(
         first.contains("turn the inner axis at +1 deg/s"),

@@ -216,8 +216,11 @@ fn the_readme_commands_run_top_to_bottom_from_a_fresh_clone() {
             Expect::NeedsHardware => continue,
             Expect::Serves => serve_and_stop(line, &work),
             Expect::Exit(want) => {
+                // The README's store is its own: `--coeffs latest` and
+                // `results verify` see the README's runs alone.
                 let out = command()
                     .current_dir(&work)
+                    .env("GYROBENCH_DB", work.join("results.sqlite"))
                     .args(&line.args)
                     .stdin(Stdio::null())
                     .output()

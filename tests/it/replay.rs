@@ -7,7 +7,11 @@ use std::path::Path;
 use crate::cli::{gyrobench, temp_dir};
 use crate::common::{MINI, json, s};
 
-const COEFFS: &str = "[model4]
+const COEFFS: &str = "[unit]
+serial = \"SIMULATED\"
+type = \"RL-16\"
+
+[model4]
 k1_dph_per_c = -0.12
 k2_dph_per_c2 = -0.01
 k3_dph_per_c_per_s = 20.0
@@ -42,7 +46,15 @@ fn live_then_replay(dir: &Path, extra: &[&str]) -> (std::process::Output, std::p
             "{name} differs between the live run and its replay"
         );
     }
-    assert_eq!(run.stdout, replay.stdout, "the same verdict text");
+    // The same verdict text; the run also says where its directory is.
+    let live_text = String::from_utf8_lossy(&run.stdout);
+    let dir_line = format!("  run directory: {}\n", live.display());
+    assert!(live_text.ends_with(&dir_line), "{live_text}");
+    assert_eq!(
+        live_text.trim_end_matches(&dir_line),
+        String::from_utf8_lossy(&replay.stdout),
+        "the same verdict text"
+    );
     (run, replay)
 }
 
@@ -121,12 +133,12 @@ fn the_run_coefficients_travel_in_the_log_and_replay_can_swap_them() {
     std::fs::write(&coeffs, COEFFS).expect("coeffs");
     live_then_replay(&dir, &["--coeffs", s(&coeffs)]);
     let live = json(&dir.join("live/report.json"));
+    let note = live["measurements"][5]["note"].as_str().expect("note");
     assert!(
-        live["measurements"][5]["note"]
-            .as_str()
-            .expect("note")
-            .contains("--coeffs")
+        note.contains("a set not in a store of RL-16 SIMULATED from"),
+        "{note}"
     );
+    assert_eq!(live["coefficients"]["source"], "file");
     // Without the run's coefficients, the same log gives another figure.
     let other = dir.join("other.toml");
     std::fs::write(&other, COEFFS.replace("k5_dph = 0.36", "k5_dph = 3.6")).expect("coeffs");

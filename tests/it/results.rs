@@ -168,7 +168,19 @@ fn lifecycle(db: &str, tag: &str) {
     let t: serde_json::Value = serde_json::from_slice(&trend.stdout).expect("JSON");
     assert!(t["count"].as_i64().expect("count") >= 3, "{t}");
     assert_eq!(t["low"], -5.0);
-    assert!(t["cpk"].as_f64().expect("both limits: a Cpk") > 1.0, "{t}");
+    assert!(
+        t["within"]["k"].as_f64().expect("both limits: a Cpk") > 1.0,
+        "{t}"
+    );
+    let k = &t["overall"];
+    assert_eq!(
+        k["k"].as_f64(),
+        k["upper"]
+            .as_f64()
+            .zip(k["lower"].as_f64())
+            .map(|(u, l)| u.min(l)),
+        "Ppk is the smaller side: {t}"
+    );
     // The same figures from the rows the store exports.
     let csv = dir.join("trend-rows.csv");
     let r = with_db(

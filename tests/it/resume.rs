@@ -50,7 +50,25 @@ fn an_interrupted_run_resumes_from_its_last_completed_step() {
         String::from_utf8_lossy(&out.stderr)
     );
     let err = String::from_utf8_lossy(&out.stderr);
-    assert!(err.contains("10 of 15 steps completed"), "{err}");
+    // What a resume retakes is said once, and counted the way the progress
+    // lines count: the step it goes on at is the next `[n/N]` line.
+    assert!(
+        err.contains("10 of 16 steps were done before the break"),
+        "{err}"
+    );
+    let (_, at) = err
+        .split_once("going on at step ")
+        .expect("the step it goes on at");
+    let (n, rest) = at.split_once(" of ").expect("n of N");
+    let total: String = rest.chars().take_while(char::is_ascii_digit).collect();
+    assert!(
+        err.contains(&format!("\n[{n}/{total}] ")),
+        "the first step after the resume is not [{n}/{total}]: {err}"
+    );
+    assert!(
+        err.contains("[restore 1/"),
+        "the restore shows no progress: {err}"
+    );
     // The report covers both parts: every measurement once, in order, and
     // the frames of both logs.
     let r = json(&run.join("report.json"));

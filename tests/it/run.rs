@@ -325,7 +325,13 @@ fn a_procedure_through_sim_serve_over_tcp_and_ptys_gives_the_embedded_verdict() 
         let run_dir = dir.join(scheme.trim_end_matches("://"));
         let out = run(
             &run_dir,
-            &[p, "--bench", bench_path.to_str().expect("utf-8")],
+            &[
+                p,
+                "--bench",
+                bench_path.to_str().expect("utf-8"),
+                "--dut",
+                "RL16-0042",
+            ],
         );
         assert_eq!(
             out.status.code(),
@@ -342,6 +348,15 @@ fn a_procedure_through_sim_serve_over_tcp_and_ptys_gives_the_embedded_verdict() 
             "{scheme}: {frames} frames"
         );
         assert_eq!(got["link"]["crc_errors"], 0, "{scheme}");
+        // The served instruments identified themselves through the real
+        // drivers, as the embedded bench reports them.
+        for i in 0..2 {
+            assert_eq!(
+                got["instruments"][i]["identity"], want["instruments"][i]["identity"],
+                "{scheme}"
+            );
+        }
+        assert_eq!(got["instruments"][1]["identity"]["serial"], "SIM-TABLE");
         let msgs = messages(&run_dir.join("run.mcap"));
         assert_eq!(
             frames_logged(&msgs),

@@ -69,7 +69,16 @@ fn a_cleanup_ramp_the_host_steps_reaches_its_set_point_and_is_read_back() {
     let bench = served.bench_file(&dir, "tcp://", 100.0);
     let p = write(&dir, "ramped.toml", RAMPED);
     let out = dir.join("run");
-    let r = gyrobench(&["run", s(&p), "--bench", s(&bench), "--out", s(&out)]);
+    let r = gyrobench(&[
+        "run",
+        s(&p),
+        "--bench",
+        s(&bench),
+        "--dut",
+        "RL16-0042",
+        "--out",
+        s(&out),
+    ]);
     // Both streams on failure: the summary (stdout) says how the run ended.
     assert_eq!(
         r.status.code(),
@@ -172,7 +181,16 @@ fn a_device_run_stopped_by_sigterm_or_killed_through_sim_serve_ends_safe_and_res
     // SIGTERM: cleanup, the safe state read back from the real drivers.
     let out = dir.join("term");
     let child = crate::cli::command()
-        .args(["run", s(&p), "--bench", s(&bench), "--out", s(&out)])
+        .args([
+            "run",
+            s(&p),
+            "--bench",
+            s(&bench),
+            "--dut",
+            "RL16-0042",
+            "--out",
+            s(&out),
+        ])
         .stdout(Stdio::null())
         .stderr(Stdio::piped())
         .spawn()
@@ -193,7 +211,16 @@ fn a_device_run_stopped_by_sigterm_or_killed_through_sim_serve_ends_safe_and_res
     // SIGKILL: nothing runs; the next part picks up from the log.
     let out = dir.join("kill");
     let mut child = crate::cli::command()
-        .args(["run", s(&p), "--bench", s(&bench), "--out", s(&out)])
+        .args([
+            "run",
+            s(&p),
+            "--bench",
+            s(&bench),
+            "--dut",
+            "RL16-0042",
+            "--out",
+            s(&out),
+        ])
         .stdout(Stdio::null())
         .stderr(Stdio::null())
         .spawn()

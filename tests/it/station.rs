@@ -207,6 +207,10 @@ fn the_station_runs_a_procedure_from_start_to_report_and_refuses_what_it_must() 
         std::fs::read(run_dir.join("report.json")).expect("run's"),
         "replay reproduces the station's run"
     );
+    // The operator typed in the page is the report's and the store's.
+    let report = json(&run_dir.join("report.json"));
+    assert_eq!(report["operator"], "ann", "{report}");
+    assert_eq!(report["dut"]["serial"], "RL16-0042");
     let (code, body) = st.request("GET", "/api/history?serial=RL16-0042", true, "");
     assert_eq!(code, 200, "{body}");
     assert!(body.contains("\"outcome\":\"pass\""), "{body}");
