@@ -735,13 +735,12 @@ pub fn render_html(r: &Report, records: &Records) -> String {
 <h1>{proc} &mdash; {dut_type} {serial}</h1>
 <p class=headline>{headline}</p>
 {overdue}{error}{bench_left}<p class=note>Spec: {spec}<br>Started {start} &middot; {hours:.2} h of device time &middot; {frames} frames &middot; bench {bench}{seed} &middot; gyrobench {version}</p>
-{record}
 {headline_chart}
 <h2>Measurements</h2>
 <table><tr><th>name</th><th>value</th><th>unit</th><th>low</th><th>high</th><th>outcome</th><th>step</th><th>note</th></tr>
 {rows}</table>
 <p class=note>Definitions: bias stability = 1-sigma of the averages over the averaging time of the Earth-removed rate; drift = peak-to-peak of the Earth-removed rate smoothed by a centred moving average of the averaging time; compensated = the same after the study's model 4; self-heating = mean of the first 120 s after power-on minus the mean of 1680..1800 s; scale factor, nonlinearity and asymmetry = the fit of output against input rate with one slope per direction; dead band and threshold = the inputs giving 10 % and 50 % of the expected output in a lock-in fit; axis misalignment = the slope of the Earth-removed rate against the rate of a table axis turning across the input axis, as an angle (&plusmn; one standard error). See docs/figures.md.</p>
-{positions}{rate_table}{noise}{allan}
+{record}{positions}{rate_table}{noise}{allan}
 <h2>Traces</h2>
 {traces}
 <h2>Gyro link</h2>

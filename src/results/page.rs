@@ -90,9 +90,9 @@ pub fn trend_page(
                 p.serial,
                 short(&p.run),
                 day(&p.started_utc),
-                p.value,
+                crate::view::num(Some(p.value), 4),
                 t.unit,
-                p.outcome.to_uppercase()
+                outcome_word(p)
             ),
             href: href.clone(),
         });
@@ -100,14 +100,14 @@ pub fn trend_page(
             format!("<a href=\"{}\">report</a>", esc(&h))
         });
         rows.push_str(&format!(
-            "<tr class={o}><td class=num>{n}</td><td>{serial}</td><td><code>{run}</code></td><td>{start}</td><td class=num>{v}</td><td class=\"outcome {o}\">{word}</td><td>{report}</td></tr>\n",
+            "<tr class={o}><td class=num>{n}</td><td class=nw>{serial}</td><td><code>{run}</code></td><td class=nw>{start}</td><td class=num>{v}</td><td class=\"outcome {o}\">{word}</td><td>{report}</td></tr>\n",
             n = i + 1,
             serial = esc(&p.serial),
             run = esc(&p.run),
             start = esc(&crate::view::utc_seconds(&p.started_utc)),
-            v = p.value,
+            v = crate::view::num(Some(p.value), 4),
             o = esc(&p.outcome),
-            word = esc(&p.outcome.to_uppercase()),
+            word = esc(&outcome_word(p)),
         ));
     }
     let chart = c.render();
@@ -148,7 +148,21 @@ pub fn trend_page(
         ppk = f(t.overall.k, 2),
         shown = points.len(),
     );
-    page(&format!("{}: trend", t.name), "", &body)
+    page(
+        &format!("{}: trend", t.name),
+        "td.nw{white-space:nowrap}",
+        &body,
+    )
+}
+
+/// `PASS`, `FAIL`, or `PASS (reference)` for an imported run's figure.
+fn outcome_word(p: &TrendPoint) -> String {
+    let w = p.outcome.to_uppercase();
+    if p.reference {
+        format!("{w} (reference: imported)")
+    } else {
+        w
+    }
 }
 
 /// The first 12 characters of a run key (its run id's start).

@@ -414,6 +414,8 @@ pub struct TrendPoint {
     pub run: String,
     /// Its log (the report sits beside it).
     pub log_path: String,
+    /// An imported run (judged for reference only).
+    pub reference: bool,
 }
 
 /// The run of a part's key `RUN_ID.PART`.
@@ -649,90 +651,63 @@ impl Store {
     }
 
     /// The statistics of measurement `name` over the runs `f` selects
-    /// (their latest parts).
+    /// (their latest parts): one pass over the values in run order, the
+    /// figures computed here (the mean first, then the squares about it,
+    /// which do not cancel as the mean of the squares would).
     pub fn trend(&mut self, name: &str, f: &Filter) -> Result<Trend, StoreError> {
         let (clauses, params) = f.clauses(2);
         let reference = f.reference_clause();
         let mut all = vec![Value::from(name)];
         all.extend(params);
-        let from = format!(
-            "FROM measurements m JOIN run_units ru ON ru.run = m.run AND ru.slot = m.slot \
-             JOIN runs r ON r.id = m.run JOIN units u ON u.id = ru.unit_id \
-             WHERE m.name = $1 AND r.latest = 1{reference}{clauses}"
-        );
-        let stats = self.sql().query(
+        let rows = self.sql().query(
             &format!(
-                "SELECT COUNT(m.value), AVG(m.value), MIN(m.value), MAX(m.value), \
-                 SUM(CASE WHEN m.outcome = 'pass' THEN 1 ELSE 0 END), COUNT(*) {from}"
+                "SELECT m.value, m.outcome, m.low, m.high, m.unit \
+                 FROM measurements m JOIN run_units ru ON ru.run = m.run AND ru.slot = m.slot \
+                 JOIN runs r ON r.id = m.run JOIN units u ON u.id = ru.unit_id \
+                 WHERE m.name = $1 AND r.latest = 1{reference}{clauses} \
+                 ORDER BY r.started_utc, r.id, m.seq"
             ),
             &all,
         )?;
-        let s = stats.first().cloned().unwrap_or_default();
-        let g = |i: usize| s.get(i).and_then(Value::real);
-        let count = s.first().and_then(Value::int).unwrap_or(0);
-        let judged = s.get(5).and_then(Value::int).unwrap_or(0);
-        if judged == 0 {
+        let judged = rows.len() as i64;
+        let Some(newest) = rows.last() else {
             return Err(StoreError::NotFound {
                 store: self.name.clone(),
                 what: format!("no measurement named {name} in the runs asked for"),
             });
-        }
-        let mean = g(1);
-        let n = count as f64;
-        // Two passes: the squares about the mean, not the mean of the
-        // squares (which cancels catastrophically for a large mean).
-        let sigma = match mean {
-            Some(m) if count > 1 => {
-                let k = all.len() + 1;
-                let mut with_mean = all.clone();
-                with_mean.push(Value::from(m));
-                let ss = self.sql().query(
-                    &format!("SELECT SUM((m.value - ${k}) * (m.value - ${k})) {from}"),
-                    &with_mean,
-                )?;
-                ss.first()
-                    .and_then(|r| r.first())
-                    .and_then(Value::real)
-                    .map(|ss| (ss.max(0.0) / (n - 1.0)).sqrt())
-            }
-            _ => None,
         };
-        let newest = self.sql().query(
-            &format!("SELECT m.low, m.high, m.unit {from} ORDER BY r.started_utc DESC LIMIT 1"),
-            &all,
-        )?;
-        let low = newest.first().and_then(|r| r.first()).and_then(Value::real);
-        let high = newest.first().and_then(|r| r.get(1)).and_then(Value::real);
-        let unit = newest
-            .first()
-            .and_then(|r| r.get(2))
-            .map_or(String::new(), Value::text);
+        let real = |r: &Row, i: usize| r.get(i).and_then(Value::real);
+        let low = real(newest, 2);
+        let high = real(newest, 3);
+        let unit = newest.get(4).map_or(String::new(), Value::text);
+        let values: Vec<f64> = rows.iter().filter_map(|r| real(r, 0)).collect();
+        let passed = rows
+            .iter()
+            .filter(|r| r.get(1).map(Value::text).as_deref() == Some("pass"))
+            .count();
+        let count = values.len();
+        let n = count as f64;
+        let mean = (count > 0).then(|| values.iter().sum::<f64>() / n);
+        let sigma = mean
+            .filter(|_| count > 1)
+            .map(|m| (values.iter().map(|v| (v - m) * (v - m)).sum::<f64>() / (n - 1.0)).sqrt());
         // The spread from one run to the next (moving ranges in run order):
         // what the process does over short times, without its drifts.
-        let mr = self.sql().query(
-            &format!(
-                "SELECT AVG(ABS(v - prev)), COUNT(prev) FROM (SELECT m.value AS v, \
-                 LAG(m.value) OVER (ORDER BY r.started_utc, r.id, m.seq) AS prev {from} \
-                 AND m.value IS NOT NULL) AS ordered WHERE prev IS NOT NULL"
-            ),
-            &all,
-        )?;
-        let sigma_within = mr
-            .first()
-            .and_then(|r| r.first())
-            .and_then(Value::real)
-            .map(|mr_bar| mr_bar / D2_MOVING_RANGE);
+        let sigma_within = (count > 1).then(|| {
+            let mr: f64 = values.windows(2).map(|w| (w[1] - w[0]).abs()).sum();
+            mr / (n - 1.0) / D2_MOVING_RANGE
+        });
         let index = |spread: Option<f64>| Capability::of(mean, spread, low, high);
         Ok(Trend {
             name: name.to_owned(),
             unit,
-            count,
+            count: count as i64,
             judged,
             mean,
             sigma,
-            min: g(2),
-            max: g(3),
-            yield_fraction: g(4).map(|p| p / judged as f64),
+            min: values.iter().copied().reduce(f64::min),
+            max: values.iter().copied().reduce(f64::max),
+            yield_fraction: Some(passed as f64 / judged as f64),
             low,
             high,
             sigma_within,
@@ -756,7 +731,7 @@ impl Store {
         all.push((max as i64).into());
         let rows = self.sql().query(
             &format!(
-                "SELECT r.started_utc, u.serial, m.value, m.outcome, r.id, r.log_path FROM measurements m \
+                "SELECT r.started_utc, u.serial, m.value, m.outcome, r.id, r.log_path, ru.outcome FROM measurements m \
                  JOIN run_units ru ON ru.run = m.run AND ru.slot = m.slot \
                  JOIN runs r ON r.id = m.run JOIN units u ON u.id = ru.unit_id \
                  WHERE m.name = $1 AND r.latest = 1 AND m.value IS NOT NULL{reference}{clauses} \
@@ -775,6 +750,7 @@ impl Store {
                     outcome: r.get(3)?.text(),
                     run: r.get(4)?.text(),
                     log_path: r.get(5)?.text(),
+                    reference: r.get(6)?.text() == "reference",
                 })
             })
             .collect();
