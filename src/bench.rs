@@ -305,6 +305,10 @@ impl Limits {
     }
 }
 
+/// The largest travel a table limit may name, deg: ten turns either way (a
+/// position-mode axis with slip rings); beyond is a slip of the keyboard.
+pub const MAX_TRAVEL_DEG: f64 = 3600.0;
+
 /// How much later than its neighbours a frame may reach the host, wall
 /// time, s (ours): what a record's frame count allows at its ends
 /// ([`BenchConfig::record_edge_s`]).
@@ -379,13 +383,23 @@ impl BenchConfig {
         self.site.validate(&c, "site")?;
         self.table.geometry.validate(&c, "table.geometry")?;
         let d = &self.devices;
-        for (key, spec) in [
-            ("devices.chamber.spec", &d.chamber.spec),
-            ("devices.table.spec", &d.table.spec),
-            ("devices.gyro.spec", &d.gyro.spec),
+        for (key, spec, role) in [
+            ("devices.chamber.spec", &d.chamber.spec, "chamber"),
+            ("devices.table.spec", &d.table.spec, "table"),
+            ("devices.gyro.spec", &d.gyro.spec, "gyro"),
         ] {
             spec.parse::<DeviceSpec>()
                 .map_err(|e| src.invalid(key, e.to_string()))?;
+            // The embedded simulator has one device of each kind, by name.
+            if let Some(name) = spec.strip_prefix("sim://") {
+                c.ensure(
+                    name == role,
+                    key,
+                    &format!(
+                        "{spec:?} is not the embedded simulator's {role}; the {role} there is \"sim://{role}\""
+                    ),
+                )?;
+            }
         }
         c.within(d.chamber.timeout_s, 0.01, 60.0, "devices.chamber.timeout_s")?;
         c.ensure(
@@ -457,9 +471,11 @@ impl BenchConfig {
             (l.inner_range_deg, "limits.inner_range_deg"),
         ] {
             c.ensure(
-                r.iter().all(|v| v.is_finite()) && r[0] < r[1],
+                r.iter().all(|v| v.is_finite() && v.abs() <= MAX_TRAVEL_DEG) && r[0] < r[1],
                 key,
-                "must be [min, max] with min below max, deg",
+                &format!(
+                    "must be [min, max] with min below max, each within +-{MAX_TRAVEL_DEG} deg (ten turns)"
+                ),
             )?;
         }
         c.positive(l.table_max_rate_dps, "limits.table_max_rate_dps")?;

@@ -133,9 +133,29 @@ fn walk_value(v: &DeValue<'_>, path: &str, keys: &mut HashMap<String, usize>) {
     }
 }
 
+/// The largest configuration file read (procedure, bench, twin, site,
+/// coefficient set), bytes: the shipped ones are a few kilobytes; a larger
+/// file is a mistake or an attack (a procedure of 51 MB once took 3.1 GB
+/// of memory to check).
+pub const MAX_FILE_BYTES: u64 = 1 << 20;
+
 impl Source {
-    /// Read a file from disk.
+    /// Read a file from disk (at most [`MAX_FILE_BYTES`]).
     pub fn read(path: &Path) -> Result<Self, ConfigError> {
+        if let Ok(m) = std::fs::metadata(path)
+            && m.is_file()
+            && m.len() > MAX_FILE_BYTES
+        {
+            return Err(ConfigError::Parse {
+                path: path.to_owned(),
+                line: 1,
+                column: 1,
+                message: format!(
+                    "the file is {} bytes; a configuration file is at most {MAX_FILE_BYTES} bytes (1 MiB)",
+                    m.len()
+                ),
+            });
+        }
         let text = std::fs::read_to_string(path).map_err(|source| {
             if source.kind() == std::io::ErrorKind::InvalidData {
                 ConfigError::Parse {
@@ -436,5 +456,19 @@ mod tests {
     fn line_col_counts_from_one() {
         assert_eq!(line_col("ab\ncd", 0), (1, 1));
         assert_eq!(line_col("ab\ncd", 4), (2, 2));
+    }
+
+    #[test]
+    fn a_file_larger_than_a_configuration_is_refused_unread() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let big = dir.path().join("big.toml");
+        let line = "# padding padding padding padding padding padding padding\n";
+        let text = line.repeat((MAX_FILE_BYTES as usize) / line.len() + 1);
+        std::fs::write(&big, text).expect("write");
+        let err = Source::read(&big).expect_err("too large");
+        assert!(err.to_string().contains("at most 1048576 bytes"), "{err}");
+        let small = dir.path().join("small.toml");
+        std::fs::write(&small, "a = 1\n").expect("write");
+        assert!(Source::read(&small).is_ok());
     }
 }

@@ -135,6 +135,51 @@ fn write_pending(mut p: Pending, bytes: &[u8]) -> std::io::Result<()> {
     p.commit()
 }
 
+/// An output that would write over a run's record.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error(
+    "{output} {what}: writing it would replace the record of a run; choose another output path, or give --force"
+)]
+pub struct OverRecord {
+    /// The output as given.
+    pub output: String,
+    /// What it is.
+    pub what: String,
+}
+
+/// Refuse (unless `force`) an output that exists and is a run's log (an
+/// MCAP file) or any file of a run directory (one holding `run.mcap` or
+/// `run.lock`).
+pub fn ensure_not_a_record(output: &Path, force: bool) -> Result<(), OverRecord> {
+    if force || std::fs::symlink_metadata(output).is_err() {
+        return Ok(());
+    }
+    let target = resolve(output);
+    let is_log = std::fs::File::open(&target)
+        .and_then(|mut f| {
+            use std::io::Read;
+            let mut magic = [0u8; 8];
+            f.read_exact(&mut magic).map(|()| magic)
+        })
+        .is_ok_and(|m| m == *mcap::MAGIC);
+    let dir = target
+        .parent()
+        .filter(|d| !d.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    let in_run_dir = dir.join("run.mcap").exists() || dir.join("run.lock").exists();
+    let what = if is_log {
+        "is a run's log".to_owned()
+    } else if in_run_dir {
+        format!("is a file of the run directory {}", dir.display())
+    } else {
+        return Ok(());
+    };
+    Err(OverRecord {
+        output: output.display().to_string(),
+        what,
+    })
+}
+
 /// An output that would destroy an input.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 #[error(

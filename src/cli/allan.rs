@@ -125,6 +125,13 @@ fn load(args: &AllanArgs) -> Result<(String, Vec<f64>, f64)> {
         .is_some_and(|e| e.eq_ignore_ascii_case("csv"));
     if !is_csv {
         let r = record_rates(&args.file, args.record.as_deref())?;
+        if let Some(d) = r.read.damage(r.start_ns) {
+            anyhow::bail!(
+                "{}: {d}; an Allan deviation across the missing frames would be wrong \
+                 (the run's figures in `replay` say what its records hold)",
+                args.file.display()
+            );
+        }
         super::warn_incomplete(
             &args.file,
             &r.read,

@@ -8,7 +8,7 @@ use anyhow::{Context, Result};
 use clap::Args;
 
 use super::{Outcome, Usage};
-use crate::fsutil::ensure_distinct;
+use crate::fsutil::{ensure_distinct, ensure_not_a_record};
 use crate::runlog::exchange::{export, import, load_site};
 
 #[derive(Debug, Args)]
@@ -16,7 +16,7 @@ use crate::runlog::exchange::{export, import, load_site};
     "gyrobench import fixtures/import/lab-run.csv --site fixtures/import/site.toml -o lab-run.mcap",
     "0 the log is written, whatever its figures (they are for reference: `replay` of the log \
      gives the verdict), 1 error (a bad row or site file, I/O), 2 usage (an output that is an \
-     input)"
+     input, or a run's log or run directory file without --force)"
 ))]
 pub struct ImportArgs {
     /// Interchange CSV (docs/analysis.md, "Interchange CSV").
@@ -28,9 +28,14 @@ pub struct ImportArgs {
     /// its extension).
     #[arg(long)]
     dut: Option<String>,
-    /// The log to write.
+    /// The log to write (a new file: an existing log, or a file of a run
+    /// directory, is refused without --force).
     #[arg(short, long)]
     out: PathBuf,
+    /// Write over an existing --out that is a run's log or a file of a run
+    /// directory.
+    #[arg(long)]
+    force: bool,
     /// The results store the imported run is recorded in: a SQLite file,
     /// a postgres:// URL or `none` (default: $GYROBENCH_DB, else
     /// ~/.local/share/gyrobench/results.sqlite).
@@ -43,9 +48,14 @@ pub struct ImportArgs {
 pub struct ExportArgs {
     /// Any run log (live, simulated or imported).
     log: PathBuf,
-    /// The CSV to write.
+    /// The CSV to write (an existing log, or a file of a run directory,
+    /// is refused without --force).
     #[arg(short, long)]
     out: PathBuf,
+    /// Write over an existing --out that is a run's log or a file of a run
+    /// directory.
+    #[arg(long)]
+    force: bool,
 }
 
 pub fn run_import(args: ImportArgs) -> Result<Outcome> {
@@ -53,6 +63,7 @@ pub fn run_import(args: ImportArgs) -> Result<Outcome> {
         crate::unit::check_serial(d).map_err(|e| Usage(format!("--dut {d:?}: {e}")))?;
     }
     ensure_distinct(&args.out, &[&args.csv, &args.site])?;
+    ensure_not_a_record(&args.out, args.force)?;
     let site = load_site(&args.site).context("reading the site file")?;
     let r = import(&args.csv, site, args.dut.as_deref(), &args.out)?;
     let loc = crate::results::Location::resolve(args.db.as_deref(), None);
@@ -74,6 +85,7 @@ pub fn run_import(args: ImportArgs) -> Result<Outcome> {
 
 pub fn run_export(args: ExportArgs) -> Result<Outcome> {
     ensure_distinct(&args.out, &[&args.log])?;
+    ensure_not_a_record(&args.out, args.force)?;
     let done = export(&args.log, &args.out)?;
     super::warn_incomplete(&args.log, &done.read, "exported what it holds");
     outln!(
@@ -81,6 +93,13 @@ pub fn run_export(args: ExportArgs) -> Result<Outcome> {
         done.rows,
         args.out.display()
     )?;
+    if let Some(d) = &done.damage {
+        errln!(
+            "error: {}: {d}; the CSV holds every other row, and lacks these",
+            args.log.display()
+        );
+        return Ok(Outcome::Error);
+    }
     Ok(Outcome::Success)
 }
 

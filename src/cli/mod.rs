@@ -223,9 +223,11 @@ pub fn main() -> ExitCode {
         Err(e) => {
             errln!("error: {e:#}");
             // An output that is one of the inputs is a bad pair of arguments.
-            let usage = e
-                .chain()
-                .any(|c| c.is::<Usage>() || c.is::<crate::fsutil::SamePath>());
+            let usage = e.chain().any(|c| {
+                c.is::<Usage>()
+                    || c.is::<crate::fsutil::SamePath>()
+                    || c.is::<crate::fsutil::OverRecord>()
+            });
             ExitCode::from(if usage { EXIT_USAGE } else { EXIT_ERROR })
         }
     }

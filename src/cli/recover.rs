@@ -13,7 +13,7 @@ use crate::runlog::recover::recover;
 #[derive(Debug, Args)]
 #[command(after_help = after_help!(
     "gyrobench recover runs/killed/run.mcap",
-    "0 recovered, 1 error (nothing of a run in the file, I/O), 2 usage (an output that is the input)"
+    "0 recovered, 1 error (nothing of a run in the file, I/O, or damaged parts skipped: the output lacks them), 2 usage (an output that is the input)"
 ))]
 pub struct RecoverArgs {
     /// The log of a run that did not finish (or any MCAP log).
@@ -45,11 +45,18 @@ pub fn run(args: RecoverArgs) -> Result<Outcome> {
         r.frames,
         out.display(),
         r.bytes_lost,
-        if r.was_complete {
+        if r.was_complete && r.damage.is_none() {
             " (the log was complete)"
         } else {
             ""
         }
     ))?;
+    if let Some(d) = &r.damage {
+        errln!(
+            "error: {}: {d}; the recovered log holds everything else, and lacks these",
+            args.log.display()
+        );
+        return Ok(Outcome::Error);
+    }
     Ok(Outcome::Success)
 }

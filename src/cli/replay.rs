@@ -60,6 +60,12 @@ pub fn run(args: ReplayArgs) -> Result<Outcome> {
         &r.read,
         &format!("read up to {:.0} s of device time", r.last_state_s),
     );
+    if let Some(d) = r.read.damage(r.meta.part_start_ns()) {
+        errln!(
+            "error: {}: {d}; the report says so, and its figures lack these",
+            args.log.display()
+        );
+    }
     if r.result.frames == 0 {
         errln!(
             "replayed {} intervals in {secs:.2} s (no frames: an imported run)",

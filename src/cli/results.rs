@@ -359,16 +359,19 @@ pub fn render_list(rows: &[RunRow]) -> String {
         "{:<25} {:<36} {:<8} {:<14} {:<14} {:<12} {:<8}\n",
         "started (UTC)", "run", "type", "serial", "procedure", "bench", "outcome"
     );
+    // Stored text is shown, never obeyed: a control character in it is
+    // written as an escape, not sent to the terminal.
+    let p = crate::view::printable;
     for r in rows {
         s.push_str(&format!(
             "{:<25} {:<36} {:<8} {:<14} {:<14} {:<12} {:<8}\n",
-            r.started_utc.get(..19).unwrap_or(&r.started_utc),
-            r.id,
-            r.dut_type,
-            r.serial,
-            r.procedure,
-            r.bench,
-            r.outcome.to_uppercase()
+            p(r.started_utc.get(..19).unwrap_or(&r.started_utc)),
+            p(&r.id),
+            p(&r.dut_type),
+            p(&r.serial),
+            p(&r.procedure),
+            p(&r.bench),
+            p(&r.outcome.to_uppercase())
         ));
     }
     s
@@ -397,12 +400,13 @@ pub fn render_run(
     ms: &[MeasurementRow],
     parts: &[RunRow],
 ) -> String {
+    let p = crate::view::printable;
     let mut s = format!(
         "{}: {} on {} {} (run {}, part {}{})\n",
         run.outcome.to_uppercase(),
-        run.procedure,
-        run.dut_type,
-        run.serial,
+        p(&run.procedure),
+        p(&run.dut_type),
+        p(&run.serial),
         run.id,
         run.part,
         if run.latest {
@@ -414,12 +418,12 @@ pub fn render_run(
     s.push_str(&format!(
         "  started {}  bench {}  station {}  operator {}\n",
         run.started_utc,
-        run.bench,
-        run.station,
+        p(&run.bench),
+        p(&run.station),
         if run.operator.is_empty() {
-            "-"
+            "-".into()
         } else {
-            &run.operator
+            p(&run.operator)
         }
     ));
     for (k, v) in fields.iter().filter(|(_, v)| !v.is_empty()) {
@@ -442,24 +446,25 @@ pub fn render_run(
 
 /// A unit's history as text: one block per run, and the coefficients.
 pub fn render_unit(h: &UnitHistory) -> String {
-    let mut s = format!("unit {}: {} run(s)\n", h.serial, h.runs.len());
+    let p = crate::view::printable;
+    let mut s = format!("unit {}: {} run(s)\n", p(&h.serial), h.runs.len());
     for r in &h.runs {
         s.push_str(&format!(
             "{} {} {} {} ({})\n  by {} on bench {}, gyrobench {}; coefficients: {}{}\n",
             r.started_utc.get(..19).unwrap_or(&r.started_utc),
-            r.procedure,
+            p(&r.procedure),
             r.outcome.to_uppercase(),
             r.id,
-            r.bench,
+            p(&r.bench),
             if r.operator.is_empty() {
-                "(operator not given)"
+                "(operator not given)".into()
             } else {
-                &r.operator
+                p(&r.operator)
             },
             if r.bench_id.is_empty() {
-                "-"
+                "-".into()
             } else {
-                &r.bench_id
+                p(&r.bench_id)
             },
             r.software,
             r.coefficients.describe(),
@@ -525,4 +530,49 @@ pub fn render_trend(t: &Trend) -> String {
         idx(t.overall.lower),
         idx(t.overall.k),
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_stored_serial_is_shown_never_obeyed_by_the_terminal() {
+        let row = RunRow {
+            id: "r.1".into(),
+            started_utc: "2026-12-03T10:00:00+00:00".into(),
+            dut_type: "RL-16".into(),
+            serial: "RL16\u{1b}[2J\u{202E}42".into(),
+            procedure: "acceptance".into(),
+            bench: "embedded".into(),
+            station: "pc".into(),
+            operator: "J.\u{7}Doe".into(),
+            outcome: "pass".into(),
+            part: 1,
+            latest: true,
+            device_time_s: None,
+            error: None,
+            slot: String::new(),
+            bench_id: String::new(),
+            software: String::new(),
+            calibration_overdue: None,
+            coefficients: Default::default(),
+        };
+        let text = render_list(std::slice::from_ref(&row));
+        assert!(
+            !text.contains('\u{1b}') && !text.contains('\u{202E}'),
+            "{text:?}"
+        );
+        assert!(text.contains("RL16\\u{1b}[2J\\u{202e}42"), "{text}");
+        let unit = render_unit(&UnitHistory {
+            serial: row.serial.clone(),
+            runs: vec![row],
+            measurements: Vec::new(),
+            coefficients: None,
+        });
+        assert!(
+            !unit.chars().any(|c| c.is_control() && c != '\n'),
+            "{unit:?}"
+        );
+    }
 }

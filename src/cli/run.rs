@@ -82,7 +82,8 @@ pub struct RunArgs {
     db: Option<String>,
     /// Simulated bench only: play a fault, FAULT@SECONDS of device time
     /// (chamber-alarm, chamber-silent, table-interlock, gyro-silent,
-    /// gyro-corrupt, gyro-stuck, gyro-saturated, process-kill, panic).
+    /// gyro-corrupt, gyro-stuck, gyro-saturated, process-kill, panic,
+    /// disk-full, sighup, sigquit).
     #[arg(long, value_name = "FAULT@SECONDS")]
     inject: Vec<String>,
     /// Publish the run's channels live on a Foxglove WebSocket server
@@ -440,10 +441,13 @@ pub fn run(args: RunArgs) -> Result<Outcome> {
     outf!("  run directory: {}\n", finished.dir.display())?;
     match &finished.report_error {
         None => errln!("log and report in {}", finished.dir.display()),
-        Some(e) => errln!(
-            "log in {}; the report could not be written ({e}); the figures are above",
-            finished.dir.display()
-        ),
+        Some(e) => {
+            errln!(
+                "log in {}; the report could not be written ({e}); the figures are above, and report.json follows:",
+                finished.dir.display()
+            );
+            errln!("{}", finished.report.to_json());
+        }
     }
     Ok(match finished.result.outcome {
         _ if finished.report_error.is_some() => Outcome::Error,

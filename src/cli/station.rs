@@ -15,7 +15,7 @@ use crate::station::{Config, Station, new_token, router};
 #[derive(Debug, Args)]
 #[command(after_help = after_help!(
     "gyrobench station --procedures procedures",
-    "0 stopped with Ctrl-C or SIGTERM (a run going on is aborted first: the bench goes to its safe state), \
+    "0 stopped with Ctrl-C, SIGTERM, SIGHUP or SIGQUIT (a run going on is aborted first: the bench goes to its safe state), \
      1 error (the address cannot be taken, a bench file that does not load), 2 usage (bad arguments)"
 ))]
 pub struct StationArgs {
@@ -116,7 +116,8 @@ pub fn run(args: StationArgs) -> Result<Outcome> {
         }
         // The handlers are in place before the URL is printed: whoever reads
         // it may send SIGTERM at once, and the station must stop cleanly.
-        let stop = stop_signal().context("installing the Ctrl-C and SIGTERM handlers")?;
+        let stop = stop_signal()
+            .context("installing the Ctrl-C, SIGTERM, SIGHUP and SIGQUIT handlers")?;
         outln!("station http://{addr}/?token={token}")?;
         errln!("open the URL above in a browser; Ctrl-C stops the station");
         if let Some(b) = &banner {
@@ -124,7 +125,7 @@ pub fn run(args: StationArgs) -> Result<Outcome> {
         }
         let app = router(station.clone());
         let stopping = station.clone();
-        axum::serve(listener, app)
+        axum::serve(crate::station::listener::Guarded::new(listener), app)
             .with_graceful_shutdown(async move {
                 stop.await;
                 errln!("stopping: a run going on is aborted and its cleanup runs first");
@@ -136,16 +137,23 @@ pub fn run(args: StationArgs) -> Result<Outcome> {
     Ok(Outcome::Success)
 }
 
-/// Ctrl-C or SIGTERM: both handlers installed when this returns, so a
-/// signal that comes before the future is first polled is not lost.
+/// Ctrl-C, SIGTERM, SIGHUP (the terminal or SSH session that started the
+/// station closed) or SIGQUIT (Ctrl-\): every handler installed when this
+/// returns, so a signal that comes before the future is first polled is
+/// not lost, and none of them kills the station outright: a run going on
+/// is aborted, its cleanup runs and its report is written first.
 fn stop_signal() -> std::io::Result<impl std::future::Future<Output = ()>> {
     use tokio::signal::unix::{SignalKind, signal};
     let mut term = signal(SignalKind::terminate())?;
     let mut int = signal(SignalKind::interrupt())?;
+    let mut hup = signal(SignalKind::hangup())?;
+    let mut quit = signal(SignalKind::quit())?;
     Ok(async move {
         tokio::select! {
             _ = int.recv() => {}
             _ = term.recv() => {}
+            _ = hup.recv() => {}
+            _ = quit.recv() => {}
         }
     })
 }

@@ -437,18 +437,30 @@ impl Validator<'_> {
         }
         // A rate step that keeps turning hands the table to another rate
         // step, never to a move, a record at rest or the end of the group.
+        // A rate step on the other axis would leave this one turning
+        // through its record, the rest of the procedure and cleanup.
         for (i, s) in out.iter().enumerate() {
-            let turning_on = matches!(s.kind, StepKind::Record { .. })
-                && i > 0
-                && matches!(out[i - 1].kind, StepKind::Turn { rate_dps, .. } if rate_dps != 0.0);
-            let next_turns = out
-                .get(i + 1)
-                .is_some_and(|n| matches!(n.kind, StepKind::Turn { .. }));
-            if turning_on && !next_turns {
+            let turning = match (i.checked_sub(1).map(|p| &out[p].kind), &s.kind) {
+                (
+                    Some(StepKind::Turn {
+                        inner, rate_dps, ..
+                    }),
+                    StepKind::Record { .. },
+                ) if *rate_dps != 0.0 => Some(*inner),
+                _ => None,
+            };
+            let Some(inner) = turning else { continue };
+            let next_turns_it = out.get(i + 1).is_some_and(
+                |n| matches!(n.kind, StepKind::Turn { inner: next, .. } if next == inner),
+            );
+            if !next_turns_it {
                 let key = s.key.trim_end_matches(".record");
+                let axis = if inner { "inner" } else { "outer" };
                 return Err(self.src.invalid(
                     &format!("{key}.keep_turning"),
-                    "a rate step that keeps turning must be followed by another rate step (the table would still turn)",
+                    format!(
+                        "a rate step that keeps turning must be followed by another rate step on the same axis (the {axis} axis would still turn through what comes next)"
+                    ),
                 ));
             }
         }
@@ -753,6 +765,7 @@ impl Validator<'_> {
                 };
                 let settle = settle_s.unwrap_or(2.0);
                 c.within(settle, 0.0, 3600.0, &k("settle_s"))?;
+                let mut ramp_s = 0.0;
                 if let (Some(a), Some((_, max_acc))) = (acc_dps2, self.bench.limits.rate_mode()) {
                     c.ensure(
                         a.is_finite() && *a > 0.0 && *a <= max_acc,
@@ -762,7 +775,28 @@ impl Validator<'_> {
                             crate::config::num(*a)
                         ),
                     )?;
+                    // Up to the rate (from rest or another rate, at most
+                    // twice it) and back: bounded as a wait is.
+                    ramp_s = 2.0 * rate_dps.abs() / a;
+                    c.ensure(
+                        ramp_s <= MAX_STEP_S,
+                        &k("acc_dps2"),
+                        &format!(
+                            "{} deg/s^2 ramps to {} deg/s in {} s, beyond {MAX_STEP_S} s (7 days); give a larger acceleration",
+                            crate::config::num(*a),
+                            crate::config::num(*rate_dps),
+                            crate::config::num(ramp_s / 2.0)
+                        ),
+                    )?;
                 }
+                c.ensure(
+                    2.0 * ramp_s + settle + duration <= MAX_STEP_S,
+                    key,
+                    &format!(
+                        "takes {} s with its ramps, settling and record, beyond {MAX_STEP_S} s (7 days)",
+                        crate::config::num(2.0 * ramp_s + settle + duration)
+                    ),
+                )?;
                 // Turn, record, come to rest: three plain steps (a record is
                 // a record wherever it is taken: replay, resume and health
                 // treat it as any other).

@@ -18,6 +18,9 @@ fn limits(m: &MeasurementRow) -> String {
 /// The runs and their measurements as JUnit XML (the common schema:
 /// `testsuites` > `testsuite` > `testcase` with `failure` / `error`).
 pub fn junit(runs: &[(RunRow, Vec<MeasurementRow>)]) -> std::io::Result<String> {
+    // XML 1.0 cannot hold control characters at all: a value stored by an
+    // earlier gyrobench (or an import) that has one is written escaped.
+    let runs = &safe_rows(runs);
     let mut w = Writer::new_with_indent(Vec::new(), b' ', 2);
     w.write_event(Event::Decl(BytesDecl::new("1.0", Some("UTF-8"), None)))?;
     let failures = |ms: &[MeasurementRow]| ms.iter().filter(|m| m.outcome == "fail").count();
@@ -145,6 +148,45 @@ pub fn junit(runs: &[(RunRow, Vec<MeasurementRow>)]) -> std::io::Result<String> 
 }
 
 /// What ended a run that neither passed nor failed.
+/// Every text of the rows as XML 1.0 can hold it ([`crate::view::printable`]).
+fn safe_rows(runs: &[(RunRow, Vec<MeasurementRow>)]) -> Vec<(RunRow, Vec<MeasurementRow>)> {
+    let p = |s: &str| crate::view::printable(s).into_owned();
+    runs.iter()
+        .map(|(r, ms)| {
+            let run = RunRow {
+                id: p(&r.id),
+                started_utc: p(&r.started_utc),
+                dut_type: p(&r.dut_type),
+                serial: p(&r.serial),
+                procedure: p(&r.procedure),
+                bench: p(&r.bench),
+                station: p(&r.station),
+                operator: p(&r.operator),
+                outcome: p(&r.outcome),
+                error: r.error.as_deref().map(p),
+                slot: p(&r.slot),
+                bench_id: p(&r.bench_id),
+                software: p(&r.software),
+                ..r.clone()
+            };
+            let ms = ms
+                .iter()
+                .map(|m| {
+                    let mut m = m.clone();
+                    m.run = p(&m.run);
+                    m.measurement.name = p(&m.measurement.name);
+                    m.measurement.unit = p(&m.measurement.unit);
+                    m.measurement.outcome = p(&m.measurement.outcome);
+                    m.measurement.step = p(&m.measurement.step);
+                    m.measurement.note = p(&m.measurement.note);
+                    m
+                })
+                .collect();
+            (run, ms)
+        })
+        .collect()
+}
+
 fn run_error(r: &RunRow) -> Option<String> {
     match r.outcome.as_str() {
         "pass" | "fail" => None,
@@ -210,4 +252,62 @@ pub fn csv(runs: &[(RunRow, Vec<MeasurementRow>)]) -> Result<String, csv::Error>
     }
     let bytes = w.into_inner().map_err(|e| e.into_error())?;
     Ok(String::from_utf8_lossy(&bytes).into_owned())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::runlog::meta::ResultMeasurement;
+
+    #[test]
+    fn text_xml_cannot_hold_is_written_escaped_and_the_file_parses() {
+        let run = RunRow {
+            id: "r.1".into(),
+            started_utc: "2026-12-03T10:00:00+00:00".into(),
+            dut_type: "RL-16".into(),
+            serial: "RL16\u{1b}[31m\u{202E}0042\u{7}".into(),
+            procedure: "acceptance".into(),
+            bench: "embedded".into(),
+            station: "pc".into(),
+            operator: "J.\u{0}Doe".into(),
+            outcome: "fail".into(),
+            part: 1,
+            latest: true,
+            device_time_s: Some(1.0),
+            error: None,
+            slot: String::new(),
+            bench_id: "embedded".into(),
+            software: "0.1.0".into(),
+            calibration_overdue: None,
+            coefficients: Default::default(),
+        };
+        let m = MeasurementRow {
+            run: "r.1".into(),
+            measurement: ResultMeasurement {
+                name: "bias\u{1b}".into(),
+                value: Some(1.0),
+                unit: "deg/h".into(),
+                low: None,
+                high: Some(0.5),
+                outcome: "fail".into(),
+                step: "main.1".into(),
+                note: "<&>".into(),
+            },
+        };
+        let xml = junit(&[(run, vec![m])]).expect("xml");
+        assert!(
+            !xml.chars()
+                .any(|c| c.is_control() && c != '\n' && c != '\t'),
+            "{xml}"
+        );
+        assert!(xml.contains("RL16\\u{1b}[31m\\u{202e}0042\\u{7}"), "{xml}");
+        let mut reader = quick_xml::Reader::from_str(&xml);
+        loop {
+            match reader.read_event() {
+                Ok(quick_xml::events::Event::Eof) => break,
+                Ok(_) => {}
+                Err(e) => panic!("not XML: {e}\n{xml}"),
+            }
+        }
+    }
 }

@@ -178,9 +178,10 @@ impl Store {
 }
 
 /// Runs waiting for a store that could not be reached: one file per run
-/// part in `data_dir()/pending`, holding the path of its log. Written
-/// when a run cannot record itself; indexed (and removed) the next time a
-/// command opens the store.
+/// part and store in `data_dir()/pending`, naming the store (as
+/// [`Location::describe`] words it, without a password) and the log.
+/// Written when a run cannot record itself; indexed (and removed) the next
+/// time a command opens that store, and no other.
 pub mod pending {
     use super::*;
 
@@ -189,8 +190,18 @@ pub mod pending {
         data_dir().join("pending")
     }
 
-    /// Queue the log at `log` (part `key` of a run).
-    pub fn push(key: &str, log: &Path) -> std::io::Result<PathBuf> {
+    /// A queue entry: which store, which log.
+    #[derive(Debug, Clone, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+    pub struct Entry {
+        /// The store it waits for.
+        pub store: String,
+        /// The log to index there.
+        pub log: PathBuf,
+    }
+
+    /// Queue the log at `log` (part `key` of a run) for the store named
+    /// `store`.
+    pub fn push(store: &str, key: &str, log: &Path) -> std::io::Result<PathBuf> {
         let d = dir();
         std::fs::create_dir_all(&d)?;
         let name: String = key
@@ -203,14 +214,24 @@ pub mod pending {
                 }
             })
             .collect();
-        let path = d.join(name);
-        let log = std::path::absolute(log)?;
-        crate::fsutil::write_atomic(&path, log.display().to_string().as_bytes())?;
+        // One entry per part and store: the same part queued for two
+        // stores waits for each.
+        let store_tag = &crate::fsutil::sha256_text(store)[..12];
+        let path = d.join(format!("{name}.{store_tag}.json"));
+        let entry = Entry {
+            store: store.to_owned(),
+            log: std::path::absolute(log)?,
+        };
+        let text = serde_json::to_string(&entry).map_err(std::io::Error::other)?;
+        crate::fsutil::write_atomic(&path, text.as_bytes())?;
         Ok(path)
     }
 
-    /// Every queued log, with its queue entry.
-    pub fn list() -> Vec<(PathBuf, PathBuf)> {
+    /// The queued logs waiting for the store named `store`, with their
+    /// queue entries. An entry of an earlier gyrobench (a bare log path,
+    /// naming no store) is left for `results sync`: which store it was
+    /// meant for is not known.
+    pub fn list(store: &str) -> Vec<(PathBuf, PathBuf)> {
         let Ok(entries) = std::fs::read_dir(dir()) else {
             return Vec::new();
         };
@@ -218,8 +239,9 @@ pub mod pending {
             .filter_map(Result::ok)
             .filter(|e| !e.file_name().to_string_lossy().starts_with('.'))
             .filter_map(|e| {
-                let log = std::fs::read_to_string(e.path()).ok()?;
-                Some((e.path(), PathBuf::from(log.trim())))
+                let text = std::fs::read_to_string(e.path()).ok()?;
+                let entry: Entry = serde_json::from_str(&text).ok()?;
+                (entry.store == store).then(|| (e.path(), entry.log))
             })
             .collect();
         out.sort();
@@ -232,7 +254,7 @@ impl Store {
     /// log is gone) leaves it. Returns how many were indexed.
     pub fn flush_pending(&mut self) -> usize {
         let mut done = 0;
-        for (entry, log) in pending::list() {
+        for (entry, log) in pending::list(&self.name) {
             match self.index_log(&log) {
                 Ok(_) => {
                     done += 1;

@@ -458,6 +458,8 @@ pub struct Exported {
     pub rows: usize,
     /// How the read of the log went (complete or truncated).
     pub read: ReadSummary,
+    /// Damaged parts of the log skipped (rows missing), in words.
+    pub damage: Option<String>,
 }
 
 /// Write every 1 Hz interval of the log at `log` as interchange CSV at
@@ -478,9 +480,13 @@ pub fn export(log: &Path, out: &Path) -> Result<Exported, ImportError> {
     let mut table: Option<TableState> = None;
     let mut rows = 0usize;
     let mut saw_run = false;
+    let mut start_ns = None;
     let read = reader::read(log, |item| {
         match item {
-            Item::Meta { name, .. } if name == RUN_META => saw_run = true,
+            Item::Meta { name, entries } if name == RUN_META => {
+                saw_run = true;
+                start_ns = start_ns.or_else(|| super::recover::part_start_ns(entries));
+            }
             Item::Message { topic, data, .. } if topic == topics::TABLE => {
                 table = Some(serde_json::from_slice(data).map_err(|e| format!("{topic}: {e}"))?);
             }
@@ -513,11 +519,9 @@ pub fn export(log: &Path, out: &Path) -> Result<Exported, ImportError> {
     let fail = |m: String| ImportError::Other(m);
     if !saw_run {
         return Err(fail(format!(
-            "{}: not a gyrobench log (no run metadata{})",
+            "{}: not a gyrobench log (no run metadata){}",
             log.display(),
-            read.stopped
-                .as_ref()
-                .map_or(String::new(), |s| format!("; the read stopped: {s}"))
+            read.trouble()
         )));
     }
     if let Some(why) = read.stopped.as_ref().filter(|_| read.complete) {
@@ -527,13 +531,12 @@ pub fn export(log: &Path, out: &Path) -> Result<Exported, ImportError> {
         return Err(fail(format!(
             "{}: no 1 Hz interval in the log{}; nothing to export",
             log.display(),
-            read.stopped
-                .as_ref()
-                .map_or(String::new(), |s| format!(" (the read stopped: {s})"))
+            read.trouble()
         )));
     }
     w.flush().map_err(|e| fail(err(&e)))?;
     drop(w);
     pending.commit().map_err(|e| fail(err(&e)))?;
-    Ok(Exported { rows, read })
+    let damage = read.damage(start_ns);
+    Ok(Exported { rows, read, damage })
 }

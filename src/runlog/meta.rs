@@ -148,7 +148,20 @@ fn json<T: serde::de::DeserializeOwned>(
     }
 }
 
+/// An RFC 3339 time as ns since the epoch (log times count from it), or
+/// none when it does not parse or falls outside 1970..2554.
+pub fn utc_ns(t: &str) -> Option<u64> {
+    let t = chrono::DateTime::parse_from_rfc3339(t).ok()?;
+    u64::try_from(t.timestamp_nanos_opt()?).ok()
+}
+
 impl RunMeta {
+    /// Where this part's device time starts, in log time (ns since the
+    /// epoch).
+    pub fn part_start_ns(&self) -> Option<u64> {
+        utc_ns(&self.part_start_time_utc)
+    }
+
     /// Read the `run` record's entries; unknown keys are kept in `other`.
     pub fn from_entries(entries: &BTreeMap<String, String>) -> Result<Self, MetaError> {
         let m = &mut entries.clone();

@@ -98,6 +98,81 @@ pub struct ReadSummary {
     pub messages: u64,
     /// Why the read stopped early, when it did.
     pub stopped: Option<String>,
+    /// Parts of the file skipped because they were damaged (a chunk whose
+    /// checksum, compression or records do not hold; a record whose
+    /// length is garbage), in file order: the read went on after each.
+    pub damaged: Vec<Gap>,
+}
+
+/// A damaged part of a log the read skipped.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Gap {
+    /// Log time of its first message, ns since the epoch (none when the
+    /// damage hid it).
+    pub from_ns: Option<u64>,
+    /// Log time of its last message.
+    pub to_ns: Option<u64>,
+    /// Messages lost (from the message indexes after the chunk; none when
+    /// they do not say).
+    pub messages: Option<u64>,
+    /// Bytes skipped.
+    pub bytes: u64,
+    /// What was wrong.
+    pub why: String,
+}
+
+impl ReadSummary {
+    /// The damaged parts in words, with `start_ns` the run's start (their
+    /// times as seconds into the run), or none when nothing was skipped.
+    pub fn damage(&self, start_ns: Option<u64>) -> Option<String> {
+        if self.damaged.is_empty() {
+            return None;
+        }
+        let s = |t: Option<u64>| match (t, start_ns) {
+            (Some(t), Some(s)) => format!("{:.0} s", t.saturating_sub(s) as f64 / 1e9),
+            (Some(t), None) => format!("log time {t} ns"),
+            _ => "an unknown time".into(),
+        };
+        let parts: Vec<String> = self
+            .damaged
+            .iter()
+            .map(|g| {
+                let what = g
+                    .messages
+                    .map_or("messages of an unknown count".into(), |n| {
+                        format!("{n} message(s)")
+                    });
+                let when = match (g.from_ns, g.to_ns) {
+                    (Some(a), Some(b)) => format!(" from {} to {}", s(Some(a)), s(Some(b))),
+                    (Some(a), None) => format!(" from {}", s(Some(a))),
+                    _ => " at an unknown time".into(),
+                };
+                format!("{what}{when} ({} bytes: {})", g.bytes, g.why)
+            })
+            .collect();
+        Some(format!(
+            "{} damaged part(s) skipped, the rest read: {}",
+            self.damaged.len(),
+            parts.join("; ")
+        ))
+    }
+
+    /// What went wrong with the read, for an error that follows from it
+    /// (" (the read stopped: ...; 1 damaged part(s) skipped ...)"), or
+    /// nothing when the read was clean.
+    pub fn trouble(&self) -> String {
+        let parts: Vec<String> = self
+            .stopped
+            .iter()
+            .map(|s| format!("the read stopped: {s}"))
+            .chain(self.damage(None))
+            .collect();
+        if parts.is_empty() {
+            String::new()
+        } else {
+            format!(" ({})", parts.join("; "))
+        }
+    }
 }
 
 /// Read errors that prevent any use of the file.
@@ -121,9 +196,237 @@ pub enum ReadError {
     },
 }
 
+/// What the reader keeps while it goes through a file.
+struct Reading {
+    schemas: HashMap<u16, SchemaInfo>,
+    channels: HashMap<u16, ChannelInfo>,
+    unknown: ChannelInfo,
+    summary: ReadSummary,
+    in_summary_section: bool,
+    /// The damaged chunk the message indexes that follow it count for.
+    counting: Option<usize>,
+}
+
+/// What a record (or a chunk) came to.
+enum Flow {
+    /// Go on.
+    On,
+    /// The caller asked to stop.
+    Stop(String),
+}
+
+/// A chunk's records, decompressed and checked (its CRC and every record
+/// whole), or why not.
+fn unpack_chunk(
+    body: &[u8],
+) -> Result<(mcap::records::ChunkHeader, Vec<u8>), (Option<mcap::records::ChunkHeader>, String)> {
+    let (header, compressed) = match mcap::parse_record(mcap::records::op::CHUNK, body) {
+        Ok(Record::Chunk { header, data }) => (header, data),
+        Ok(_) => return Err((None, "not a chunk".into())),
+        Err(e) => return Err((None, format!("its header: {e}"))),
+    };
+    let size = usize::try_from(header.uncompressed_size).unwrap_or(usize::MAX);
+    if size > RECORD_LENGTH_LIMIT {
+        let h = header.clone();
+        return Err((Some(h), format!("it claims {size} bytes uncompressed")));
+    }
+    let data = match header.compression.as_str() {
+        "" => compressed.into_owned(),
+        "zstd" => match zstd::bulk::decompress(&compressed, size) {
+            Ok(d) => d,
+            Err(e) => return Err((Some(header.clone()), format!("zstd: {e}"))),
+        },
+        other => {
+            return Err((
+                Some(header.clone()),
+                format!("compression {other:?} this reader does not take"),
+            ));
+        }
+    };
+    if data.len() != size {
+        return Err((
+            Some(header.clone()),
+            format!("{} bytes uncompressed, the header says {size}", data.len()),
+        ));
+    }
+    if header.uncompressed_crc != 0 {
+        let crc = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC).checksum(&data);
+        if crc != header.uncompressed_crc {
+            return Err((
+                Some(header.clone()),
+                format!(
+                    "bad checksum (saved {:08x}, computed {crc:08x})",
+                    header.uncompressed_crc
+                ),
+            ));
+        }
+    }
+    // Every record whole and parsed before any is used.
+    let mut at = 0;
+    while at < data.len() {
+        match record_at(&data, at) {
+            Some((opcode, body, next)) => {
+                if let Err(e) = mcap::parse_record(opcode, body) {
+                    return Err((Some(header.clone()), format!("a record inside: {e}")));
+                }
+                at = next;
+            }
+            None => return Err((Some(header.clone()), "a record inside is cut".into())),
+        }
+    }
+    Ok((header, data))
+}
+
+/// The record at `at` of `buf`: opcode, body and where the next begins.
+fn record_at(buf: &[u8], at: usize) -> Option<(u8, &[u8], usize)> {
+    let opcode = *buf.get(at)?;
+    let len = u64::from_le_bytes(buf.get(at + 1..at + 9)?.try_into().ok()?);
+    let end = (at + 9).checked_add(usize::try_from(len).ok()?)?;
+    Some((opcode, buf.get(at + 9..end)?, end))
+}
+
+impl Reading {
+    fn record(
+        &mut self,
+        rec: Record<'_>,
+        f: &mut impl FnMut(Item<'_>) -> Result<(), String>,
+    ) -> Flow {
+        let res = match rec {
+            Record::Schema { header, data } => {
+                self.schemas.insert(
+                    header.id,
+                    SchemaInfo {
+                        name: header.name,
+                        encoding: header.encoding,
+                        data: data.into_owned(),
+                    },
+                );
+                Ok(())
+            }
+            Record::Channel(c) => {
+                let schema = self.schemas.get(&c.schema_id).cloned();
+                self.channels.insert(
+                    c.id,
+                    ChannelInfo {
+                        id: c.id,
+                        topic: c.topic,
+                        message_encoding: c.message_encoding,
+                        metadata: c.metadata,
+                        schema,
+                    },
+                );
+                Ok(())
+            }
+            Record::Message { header, data } if !self.in_summary_section => {
+                self.summary.messages += 1;
+                let channel = self
+                    .channels
+                    .get(&header.channel_id)
+                    .unwrap_or(&self.unknown);
+                f(Item::Message {
+                    topic: &channel.topic,
+                    channel,
+                    sequence: header.sequence,
+                    log_time_ns: header.log_time,
+                    publish_time_ns: header.publish_time,
+                    data: &data,
+                })
+            }
+            Record::Attachment { header, data, .. } if !self.in_summary_section => {
+                f(Item::Attachment {
+                    name: &header.name,
+                    media_type: &header.media_type,
+                    log_time_ns: header.log_time,
+                    data: &data,
+                })
+            }
+            Record::Metadata(m) if !self.in_summary_section => f(Item::Meta {
+                name: &m.name,
+                entries: &m.metadata,
+            }),
+            Record::MessageIndex(ix) => {
+                if let Some(g) = self.counting.and_then(|i| self.summary.damaged.get_mut(i)) {
+                    *g.messages.get_or_insert(0) += ix.records.len() as u64;
+                }
+                Ok(())
+            }
+            Record::DataEnd(_) => {
+                self.in_summary_section = true;
+                Ok(())
+            }
+            Record::Footer(_) => {
+                self.summary.complete = true;
+                Ok(())
+            }
+            _ => Ok(()),
+        };
+        match res {
+            Ok(()) => Flow::On,
+            Err(e) => Flow::Stop(e),
+        }
+    }
+
+    /// A chunk: its records, or (damaged) a gap noted and the read on.
+    fn chunk(&mut self, body: &[u8], f: &mut impl FnMut(Item<'_>) -> Result<(), String>) -> Flow {
+        self.counting = None;
+        match unpack_chunk(body) {
+            Ok((_, data)) => {
+                let mut at = 0;
+                while let Some((opcode, rec_body, next)) = record_at(&data, at) {
+                    at = next;
+                    // Checked whole by unpack_chunk.
+                    let Ok(rec) = mcap::parse_record(opcode, rec_body) else {
+                        continue;
+                    };
+                    if let Flow::Stop(e) = self.record(rec, f) {
+                        return Flow::Stop(e);
+                    }
+                }
+                Flow::On
+            }
+            Err((header, why)) => {
+                self.summary.damaged.push(Gap {
+                    from_ns: header.as_ref().map(|h| h.message_start_time),
+                    to_ns: header.as_ref().map(|h| h.message_end_time),
+                    messages: None,
+                    bytes: 9 + body.len() as u64,
+                    why: format!("a damaged chunk: {why}"),
+                });
+                self.counting = Some(self.summary.damaged.len() - 1);
+                Flow::On
+            }
+        }
+    }
+}
+
+/// The first offset at or after `from` where a chunk whose records all
+/// check out begins (after damage that hid where the next record starts).
+fn next_whole_chunk(file: &mut File, from: u64, len: u64) -> std::io::Result<Option<u64>> {
+    if from >= len {
+        return Ok(None);
+    }
+    file.seek(SeekFrom::Start(from))?;
+    let mut rest = Vec::new();
+    file.take(len - from).read_to_end(&mut rest)?;
+    for i in 0..rest.len() {
+        if rest[i] != mcap::records::op::CHUNK {
+            continue;
+        }
+        let Some((_, body, _)) = record_at(&rest, i) else {
+            continue;
+        };
+        if body.len() <= RECORD_LENGTH_LIMIT && unpack_chunk(body).is_ok() {
+            return Ok(Some(from + i as u64));
+        }
+    }
+    Ok(None)
+}
+
 /// Read `path` from start to end, calling `f` for every item in file order.
-/// Stops early (and says so in the summary) when `f` returns an error or
-/// the file ends inside a record.
+/// A damaged chunk (or a record whose length is garbage) is skipped, the
+/// read goes on with the next whole chunk, and [`ReadSummary::damaged`]
+/// says what was lost. Stops early (and says so in the summary) when `f`
+/// returns an error or the file ends inside a record.
 pub fn read(
     path: &Path,
     mut f: impl FnMut(Item<'_>) -> Result<(), String>,
@@ -141,124 +444,100 @@ pub fn read(
             reason: "it does not start with the MCAP magic".into(),
         });
     }
-    file.seek(SeekFrom::Start(0)).map_err(io)?;
-
-    let mut reader = LinearReader::new_with_options(
-        LinearReaderOptions::default()
-            // A chunk is checked whole before any of its messages is used,
-            // so a chunk cut by a crash is dropped, not half-read.
-            .with_prevalidate_chunk_crcs(true)
-            .with_record_length_limit(RECORD_LENGTH_LIMIT),
-    );
-    let mut schemas: HashMap<u16, SchemaInfo> = HashMap::new();
-    let mut channels: HashMap<u16, ChannelInfo> = HashMap::new();
-    let unknown = ChannelInfo {
-        id: u16::MAX,
-        topic: String::new(),
-        message_encoding: String::new(),
-        metadata: BTreeMap::new(),
-        schema: None,
+    let mut st = Reading {
+        schemas: HashMap::new(),
+        channels: HashMap::new(),
+        unknown: ChannelInfo {
+            id: u16::MAX,
+            topic: String::new(),
+            message_encoding: String::new(),
+            metadata: BTreeMap::new(),
+            schema: None,
+        },
+        summary: ReadSummary {
+            file_bytes,
+            ..ReadSummary::default()
+        },
+        in_summary_section: false,
+        counting: None,
     };
-    let mut summary = ReadSummary {
-        file_bytes,
-        ..ReadSummary::default()
-    };
-    let mut in_summary_section = false;
-    while let Some(event) = reader.next_event() {
-        let event = match event {
-            Ok(e) => e,
-            Err(mcap::McapError::UnexpectedEof) => {
-                summary.stopped = Some(
-                    "the file ends inside a record (the run did not finish writing it)".into(),
-                );
-                break;
-            }
-            Err(e) => {
-                summary.stopped = Some(format!("unreadable record: {e}"));
-                break;
-            }
+    // Where the current pass starts: the file's start, or after damage the
+    // next whole chunk.
+    let mut pass_start: u64 = 0;
+    'passes: loop {
+        file.seek(SeekFrom::Start(pass_start)).map_err(io)?;
+        let mut reader = LinearReader::new_with_options(
+            LinearReaderOptions::default()
+                // Chunks come whole, checked here before any of their
+                // messages is used: a chunk cut by a crash is dropped, a
+                // damaged one skipped.
+                .with_emit_chunks(true)
+                .with_skip_start_magic(pass_start != 0)
+                .with_record_length_limit(RECORD_LENGTH_LIMIT),
+        );
+        let mut at = if pass_start == 0 {
+            mcap::MAGIC.len() as u64
+        } else {
+            pass_start
         };
-        match event {
-            LinearReadEvent::ReadRequest(n) => {
-                let buf = reader.insert(n.max(256 * 1024));
-                let got = file.read(buf).map_err(io)?;
-                reader.notify_read(got);
-            }
-            LinearReadEvent::Record { data, opcode } => {
-                let rec = match mcap::parse_record(opcode, data) {
-                    Ok(r) => r,
-                    Err(e) => {
-                        summary.stopped = Some(format!("unreadable record: {e}"));
-                        break;
+        while let Some(event) = reader.next_event() {
+            let event = match event {
+                Ok(e) => e,
+                Err(mcap::McapError::UnexpectedEof) => {
+                    st.summary.stopped = Some(
+                        "the file ends inside a record (the run did not finish writing it)".into(),
+                    );
+                    break 'passes;
+                }
+                Err(e) => {
+                    // The record at `at` is not whole: look for the next
+                    // chunk that is, and go on from there.
+                    match next_whole_chunk(&mut file, at + 1, file_bytes).map_err(io)? {
+                        Some(next) => {
+                            st.summary.damaged.push(Gap {
+                                from_ns: None,
+                                to_ns: None,
+                                messages: None,
+                                bytes: next - at,
+                                why: format!("unreadable records: {e}"),
+                            });
+                            st.counting = None;
+                            pass_start = next;
+                            continue 'passes;
+                        }
+                        None => {
+                            st.summary.stopped = Some(format!("unreadable record: {e}"));
+                            break 'passes;
+                        }
                     }
-                };
-                let res = match rec {
-                    Record::Schema { header, data } => {
-                        schemas.insert(
-                            header.id,
-                            SchemaInfo {
-                                name: header.name,
-                                encoding: header.encoding,
-                                data: data.into_owned(),
-                            },
-                        );
-                        Ok(())
+                }
+            };
+            match event {
+                LinearReadEvent::ReadRequest(n) => {
+                    let buf = reader.insert(n.max(256 * 1024));
+                    let got = file.read(buf).map_err(io)?;
+                    reader.notify_read(got);
+                }
+                LinearReadEvent::Record { data, opcode } => {
+                    at += 9 + data.len() as u64;
+                    let flow = if opcode == mcap::records::op::CHUNK {
+                        st.chunk(data, &mut f)
+                    } else {
+                        match mcap::parse_record(opcode, data) {
+                            Ok(rec) => st.record(rec, &mut f),
+                            Err(e) => Flow::Stop(format!("unreadable record: {e}")),
+                        }
+                    };
+                    if let Flow::Stop(e) = flow {
+                        st.summary.stopped = Some(e);
+                        break 'passes;
                     }
-                    Record::Channel(c) => {
-                        let schema = schemas.get(&c.schema_id).cloned();
-                        channels.insert(
-                            c.id,
-                            ChannelInfo {
-                                id: c.id,
-                                topic: c.topic,
-                                message_encoding: c.message_encoding,
-                                metadata: c.metadata,
-                                schema,
-                            },
-                        );
-                        Ok(())
-                    }
-                    Record::Message { header, data } if !in_summary_section => {
-                        summary.messages += 1;
-                        let channel = channels.get(&header.channel_id).unwrap_or(&unknown);
-                        f(Item::Message {
-                            topic: &channel.topic,
-                            channel,
-                            sequence: header.sequence,
-                            log_time_ns: header.log_time,
-                            publish_time_ns: header.publish_time,
-                            data: &data,
-                        })
-                    }
-                    Record::Attachment { header, data, .. } if !in_summary_section => {
-                        f(Item::Attachment {
-                            name: &header.name,
-                            media_type: &header.media_type,
-                            log_time_ns: header.log_time,
-                            data: &data,
-                        })
-                    }
-                    Record::Metadata(m) if !in_summary_section => f(Item::Meta {
-                        name: &m.name,
-                        entries: &m.metadata,
-                    }),
-                    Record::DataEnd(_) => {
-                        in_summary_section = true;
-                        Ok(())
-                    }
-                    Record::Footer(_) => {
-                        summary.complete = true;
-                        Ok(())
-                    }
-                    _ => Ok(()),
-                };
-                if let Err(e) = res {
-                    summary.stopped = Some(e);
-                    break;
                 }
             }
         }
+        break;
     }
+    let mut summary = st.summary;
     if !summary.complete {
         summary.bytes_lost = file_bytes.saturating_sub(complete_prefix(&mut file).map_err(io)?);
     }

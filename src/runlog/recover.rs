@@ -22,6 +22,9 @@ pub struct Recovered {
     pub was_complete: bool,
     /// Why the read of the input stopped early, when it did.
     pub stopped: Option<String>,
+    /// Damaged parts of the input that were skipped (their messages are
+    /// not in the output), in words; none when nothing was.
+    pub damage: Option<String>,
 }
 
 /// Why nothing could be recovered.
@@ -55,6 +58,13 @@ pub enum RecoverError {
     },
 }
 
+/// Where the part's device time starts, ns since the epoch (its `run`
+/// metadata's `part_start_time_utc`): message log times are counted from
+/// it.
+pub fn part_start_ns(entries: &std::collections::BTreeMap<String, String>) -> Option<u64> {
+    super::meta::utc_ns(entries.get("part_start_time_utc")?)
+}
+
 /// Rewrite the possibly truncated log at `input` as a complete, indexed
 /// file at `out`: every message of every complete chunk, the metadata and
 /// the attachments are copied; what follows the last complete record is
@@ -73,13 +83,17 @@ pub fn recover(input: &Path, out: &Path) -> Result<Recovered, RecoverError> {
         .map_err(mcap_err)?;
     let mut r = Recovered::default();
     let mut saw_run = false;
+    let mut start_ns = None;
     // Channel id in the input -> channel id in the output.
     let mut ids: HashMap<u16, u16> = HashMap::new();
     let mut failure: Option<mcap::McapError> = None;
     let read = reader::read(input, |item| {
         let res = match item {
             Item::Meta { name, entries } => {
-                saw_run |= name == RUN_META;
+                if name == RUN_META {
+                    saw_run = true;
+                    start_ns = start_ns.or_else(|| part_start_ns(entries));
+                }
                 w.write_metadata(&mcap::records::Metadata {
                     name: name.to_owned(),
                     metadata: entries.clone(),
@@ -151,6 +165,7 @@ pub fn recover(input: &Path, out: &Path) -> Result<Recovered, RecoverError> {
     r.was_complete = read.complete;
     r.bytes_lost = read.bytes_lost;
     r.stopped = read.stopped.clone();
+    r.damage = read.damage(start_ns);
     if r.messages == 0 {
         return Err(RecoverError::Empty {
             path: input.display().to_string(),

@@ -55,6 +55,9 @@ pub struct Replayed {
     pub completed_steps: usize,
     /// Which part of the run this file is (1 for a run never resumed).
     pub part: u32,
+    /// Whether the log holds its end record (the run's own outcome); a
+    /// log without one was cut short (a kill, a full disk).
+    pub ended: bool,
 }
 
 /// Why a log cannot be replayed.
@@ -284,6 +287,21 @@ impl State<'_> {
                     let prev_path = self.path.with_file_name(prev);
                     let earlier = replay(&prev_path, self.coeffs_override)
                         .map_err(|e| self.log_err(format!("its earlier part {prev}: {e}")))?;
+                    // A part of another run (a file copied in, a directory
+                    // reused) is not this run's: its steps and figures
+                    // would be mixed with another unit's.
+                    let (mine, theirs) = (&meta.run_id, &earlier.meta.run_id);
+                    if !mine.is_empty() && !theirs.is_empty() && mine != theirs {
+                        return Err(self.log_err(format!(
+                            "it is a part of run {mine}, but its earlier part {prev} is of run {theirs}: the parts are of two runs; move the foreign file out of the run directory"
+                        )));
+                    }
+                    if earlier.meta.part + 1 != meta.part {
+                        return Err(self.log_err(format!(
+                            "it says it is part {} but its earlier part {prev} is part {}",
+                            meta.part, earlier.meta.part
+                        )));
+                    }
                     let completed = meta
                         .resume_completed_steps
                         .unwrap_or(earlier.completed_steps);
@@ -533,14 +551,13 @@ pub fn replay(path: &Path, coeffs: Option<&Compensation>) -> Result<Replayed, Re
     let (Some(procedure), Some(meta)) = (st.procedure.take(), st.meta.take()) else {
         return Err(log_err(format!(
             "no run metadata (procedure, bench) in the log{}; is this a gyrobench log?",
-            read.stopped
-                .as_ref()
-                .map_or(String::new(), |s| format!(" (the read stopped: {s})"))
+            read.trouble()
         )));
     };
     let last_state_s = st.table.map_or(0.0, |t| t.t_s);
     let earlier_s = st.earlier.as_ref().map_or(0.0, |e| e.result.device_time_s);
     let (verdict, verdict_error) = crate::sequencer::verdict(&st.measurements);
+    let ended = st.result_meta.is_some();
     let (outcome, error, cleanup_completed, device_time_s, bench_left) = match st.result_meta {
         Some(r) => {
             let (outcome, error) = match r.outcome {
@@ -573,6 +590,25 @@ pub fn replay(path: &Path, coeffs: Option<&Compensation>) -> Result<Replayed, Re
             None,
         ),
     };
+    // Damaged parts skipped: what the log still holds is replayed, but the
+    // run cannot be judged on a log with holes.
+    let start_ns = meta.part_start_ns();
+    // The damage comes first: the frames a record misses are the log's
+    // holes, not the gyro's (whatever else the run said of itself).
+    let (outcome, error) = match read.damage(start_ns) {
+        Some(d) => (
+            Outcome::Error,
+            Some(RunError {
+                device: None,
+                step: "log".into(),
+                message: format!(
+                    "the log is damaged: {d}; its figures lack those messages{}",
+                    error.map_or(String::new(), |e| format!(" (the run said: {})", e.message))
+                ),
+            }),
+        ),
+        None => (outcome, error),
+    };
     let link = match &st.earlier {
         Some(e) => add_link(&e.link, &st.link),
         None => st.link,
@@ -596,6 +632,7 @@ pub fn replay(path: &Path, coeffs: Option<&Compensation>) -> Result<Replayed, Re
         last_state_s,
         completed_steps: st.completed,
         part,
+        ended,
     })
 }
 
@@ -625,6 +662,8 @@ pub struct RecordRates {
     pub rate_dph: Vec<f64>,
     /// How the read of the log went (complete or truncated).
     pub read: ReadSummary,
+    /// The run's start in log time, ns (to place damaged parts in it).
+    pub start_ns: Option<u64>,
 }
 
 #[derive(Deserialize)]
@@ -650,10 +689,14 @@ pub fn record_rates(path: &Path, label: Option<&str>) -> Result<RecordRates, Rep
         dt_s: f64::NAN,
         rate_dph: Vec::new(),
         read: ReadSummary::default(),
+        start_ns: None,
     };
     let read = reader::read(path, |item| {
         match item {
             Item::Meta { name, entries } if name == RUN_META => {
+                out.start_ns = out
+                    .start_ns
+                    .or_else(|| super::recover::part_start_ns(entries));
                 // The procedure as logged, checked against the logged bench.
                 let meta = RunMeta::from_entries(entries).map_err(|e| e.to_string())?;
                 if let Ok(Logged { procedure: p, .. }) = logged(&meta) {
@@ -709,10 +752,7 @@ pub fn record_rates(path: &Path, label: Option<&str>) -> Result<RecordRates, Rep
     if let Some(why) = read.stopped.as_ref().filter(|_| read.complete) {
         return Err(log_err(why.clone()));
     }
-    let stopped = read
-        .stopped
-        .as_ref()
-        .map_or(String::new(), |s| format!(" (the read stopped: {s})"));
+    let stopped = read.trouble();
     out.read = read;
     let Some(want) = want else {
         return Err(log_err(format!(

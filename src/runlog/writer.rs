@@ -51,6 +51,9 @@ pub struct Recorder {
     failed: Option<String>,
     /// Where every message is also published live, if anywhere.
     live: Option<Arc<Live>>,
+    /// Device time from which the disk is full (`--inject disk-full@T` on
+    /// the simulated bench).
+    full_from_s: Option<f64>,
 }
 
 impl std::fmt::Debug for Recorder {
@@ -151,6 +154,7 @@ impl Recorder {
             buf: Vec::with_capacity(64 * 1024),
             messages: BTreeMap::new(),
             failed: None,
+            full_from_s: None,
             live: None,
         })
     }
@@ -163,6 +167,13 @@ impl Recorder {
     /// The file being written.
     pub fn path(&self) -> &Path {
         &self.path
+    }
+
+    /// Play a full disk from device time `t_s` on: every write from then
+    /// fails as `No space left on device` would, and nothing more reaches
+    /// the file (the simulated bench's `disk-full` fault).
+    pub fn fill_disk_at(&mut self, t_s: f64) {
+        self.full_from_s = Some(t_s);
     }
 
     /// The first write failure, if any ("writing FILE: cause").
@@ -192,6 +203,13 @@ impl Recorder {
         t_s: f64,
         value: &impl Serialize,
     ) -> std::io::Result<()> {
+        if self.failed.is_none() && self.full_from_s.is_some_and(|t| t_s >= t) {
+            self.failed = Some(format!(
+                "writing {}: {} (simulated: --inject disk-full)",
+                self.path.display(),
+                std::io::Error::from_raw_os_error(28)
+            ));
+        }
         self.buf.clear();
         serde_json::to_writer(&mut self.buf, value)?;
         let time = self.ns(t_s);

@@ -41,11 +41,19 @@ pub enum Fault {
     /// A bug: the run panics mid-tick (the bench must still reach its safe
     /// state).
     Panic,
+    /// The disk the log is on fills: every write to the log fails from
+    /// then on, as with `No space left on device` (the recorder plays it;
+    /// the bench carries on).
+    DiskFull,
+    /// The process gets SIGHUP (its terminal or SSH session closed), once.
+    Hangup,
+    /// The process gets SIGQUIT (Ctrl-\), once.
+    Quit,
 }
 
 impl Fault {
     /// Every fault by the name `--inject` takes.
-    pub const NAMES: [&str; 9] = [
+    pub const NAMES: [&str; 12] = [
         "chamber-alarm",
         "chamber-silent",
         "table-interlock",
@@ -55,6 +63,9 @@ impl Fault {
         "gyro-saturated",
         "process-kill",
         "panic",
+        "disk-full",
+        "sighup",
+        "sigquit",
     ];
 }
 
@@ -71,6 +82,9 @@ impl std::str::FromStr for Fault {
             "gyro-saturated" => Self::GyroSaturated,
             "process-kill" => Self::ProcessKill,
             "panic" => Self::Panic,
+            "disk-full" => Self::DiskFull,
+            "sighup" => Self::Hangup,
+            "sigquit" => Self::Quit,
             _ => {
                 return Err(format!(
                     "unknown fault {s:?}; expected {}",
@@ -264,6 +278,16 @@ impl BenchIo for EmbeddedBench {
                 .demand_table(Some(AxisDemand::Stop), Some(AxisDemand::Stop));
         }
         self.check(&["chamber", "table", "gyro"])?;
+        for (f, signal) in [
+            (Fault::Hangup, rustix::process::Signal::HUP),
+            (Fault::Quit, rustix::process::Signal::QUIT),
+        ] {
+            if self.active(f) {
+                // Once: as a terminal closing sends it once.
+                self.faults.retain(|(_, g)| *g != f);
+                let _ = rustix::process::kill_process(rustix::process::getpid(), signal);
+            }
+        }
         if self.active(Fault::ProcessKill) {
             // SIGKILL itself: nothing after this line runs, no handler,
             // no unwinding, no core dump.

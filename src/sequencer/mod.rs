@@ -361,7 +361,9 @@ impl Run<'_> {
             );
         }
         let until = self.bench.now_s() + pending + SETTLE_MARGIN_S;
-        let mut table = self.last.as_ref().map(|st| st.table);
+        // Not the last tick's table: a tick that failed (a log write, say)
+        // after the bench moved on left it stale. At rest is seen afresh.
+        let mut table: Option<TableReading> = None;
         // Ticks log the bench as it settles; when a tick fails (the gyro,
         // or the device that stopped the run), time passes without them.
         let mut ticking = true;
@@ -393,11 +395,18 @@ impl Run<'_> {
         }
     }
 
-    /// Write a line for people; a log that cannot be written stops the run.
+    /// What a write to the log came to: a failure stops the run, except
+    /// once cleanup has begun: a full disk stops logging, never cleanup
+    /// (the failure is kept, and the run ends as an error naming it).
+    fn written(&mut self, r: std::io::Result<()>) -> Result<(), Stop> {
+        written(&mut self.log_failed, self.cleaning_up, r)
+    }
+
+    /// Write a line for people; a log that cannot be written stops the run
+    /// (not its cleanup, [`Run::written`]).
     fn log(&mut self, level: Level, message: &str) -> Result<(), Stop> {
-        self.sink
-            .event(self.bench.now_s(), level, message)
-            .map_err(|e| Stop::Data(format!("writing the log: {e}")))
+        let r = self.sink.event(self.bench.now_s(), level, message);
+        self.written(r)
     }
 
     /// Write a line where a failure must not stop what is being done
@@ -421,9 +430,8 @@ impl Run<'_> {
         if phase == StepPhase::End {
             e.link = self.record_link.take();
         }
-        self.sink
-            .step(&e)
-            .map_err(|e| Stop::Data(format!("writing the log: {e}")))?;
+        let r = self.sink.step(&e);
+        self.written(r)?;
         let words = match phase {
             StepPhase::Start => s.start_message(),
             StepPhase::End => format!("end of step {}", s.key),
@@ -443,9 +451,8 @@ impl Run<'_> {
             .await
             .map_err(Stop::Device)?;
         self.frames += self.tick.frames.len() as u64;
-        self.sink
-            .tick(&self.tick, record, step)
-            .map_err(|e| Stop::Data(format!("writing the log: {e}")))?;
+        let r = self.sink.tick(&self.tick, record, step);
+        self.written(r)?;
         let dt = self.bench.frame_dt_s();
         let lsb = self.bench.lsb_arcsec();
         let tl = self.bench.temp_lsb_c();
@@ -478,16 +485,14 @@ impl Run<'_> {
             self.progress.tick(state, iv.as_ref());
             if let Some(iv) = iv {
                 self.progress.link(&self.bench.link_stats());
-                self.sink
-                    .interval(&iv, record)
-                    .map_err(|e| Stop::Data(format!("writing the log: {e}")))?;
+                let r = self.sink.interval(&iv, record);
+                written(&mut self.log_failed, self.cleaning_up, r)?;
             }
             if state.t_s - self.last_link_s >= 60.0 {
                 self.last_link_s = state.t_s;
                 let stats = self.bench.link_stats();
-                self.sink
-                    .link(state.t_s, &stats)
-                    .map_err(|e| Stop::Data(format!("writing the log: {e}")))?;
+                let r = self.sink.link(state.t_s, &stats);
+                written(&mut self.log_failed, self.cleaning_up, r)?;
             }
             self.last = Some(state.clone());
         }
@@ -936,6 +941,22 @@ async fn restore(r: &mut Run<'_>, p: &Procedure, res: &Resume) -> Result<(), (St
         r.step(s).await.map_err(|e| (e, s.key.clone()))?;
     }
     Ok(())
+}
+
+/// [`Run::written`] on the fields it needs.
+fn written(
+    log_failed: &mut Option<String>,
+    cleaning_up: bool,
+    r: std::io::Result<()>,
+) -> Result<(), Stop> {
+    match r {
+        Ok(()) => Ok(()),
+        Err(e) if cleaning_up => {
+            log_failed.get_or_insert_with(|| format!("writing the log: {e}"));
+            Ok(())
+        }
+        Err(e) => Err(Stop::Data(format!("writing the log: {e}"))),
+    }
 }
 
 /// The verdict of a run that ran to its end: pass when every measurement

@@ -221,8 +221,13 @@ pub fn plan_resume(
     if completed >= steps {
         // Every step ran but a record could not be judged (a link that
         // lost frames, a stuck output): take it again, from its thermal
-        // segment as after any break.
-        completed = first_unsound_record(&prev).ok_or_else(|| {
+        // segment as after any break. A log cut short after its last step
+        // (the disk filled, or the process ended, before the end record)
+        // cannot stand as the run's record: its last record is taken
+        // again, so the run ends on a log that says how it ended.
+        completed = first_unsound_record(&prev)
+            .or_else(|| (!prev.ended).then(|| last_record(&prev.procedure)).flatten())
+            .ok_or_else(|| {
             SessionError::NotResumable(format!(
                 "every step of the run in {} completed; it ended in error ({}), which no step taken again would change",
                 dir.display(),
@@ -305,6 +310,18 @@ pub fn plan_resume(
         }),
         live: None,
     })
+}
+
+/// Run-order index of the procedure's last record step.
+fn last_record(procedure: &crate::procedure::Procedure) -> Option<usize> {
+    procedure
+        .setup
+        .iter()
+        .chain(&procedure.main)
+        .enumerate()
+        .filter(|(_, s)| matches!(s.kind, crate::procedure::StepKind::Record { .. }))
+        .map(|(i, _)| i)
+        .last()
 }
 
 /// Run-order index of the first record whose data could not be judged.
@@ -580,6 +597,11 @@ pub fn execute(
     if let Some(live) = &plan.live {
         recorder.publish_live(live.clone());
     }
+    for (at, f) in &plan.faults {
+        if *f == Fault::DiskFull {
+            recorder.fill_disk_at(*at);
+        }
+    }
 
     let mut store = StoreLink::open(&plan.store, &meta, &log, &mut notes);
     progress.begin(&dir.path, &notes);
@@ -728,8 +750,9 @@ impl StoreLink {
         match done {
             Ok(name) => notes.push(format!("recorded in the results store {name}")),
             Err(e) => {
-                let queued = crate::results::record::part_key_of_log(log)
-                    .and_then(|k| crate::results::pending::push(&k, log).ok());
+                let queued = crate::results::record::part_key_of_log(log).and_then(|k| {
+                    crate::results::pending::push(&self.location.describe(), &k, log).ok()
+                });
                 notes.push(format!(
                     "{e}; {}",
                     match queued {

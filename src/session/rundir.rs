@@ -197,12 +197,25 @@ fn holder_text(text: &str) -> String {
     }
 }
 
-/// The process the lock file names runs on this host still.
+/// The process the lock file names runs on this host still. A zombie (a
+/// process that ended, not yet reaped by its parent) runs no more: it
+/// holds no lock and does nothing.
 fn holder_alive(text: &str) -> bool {
     let on_this_host = field(text, "host").is_none_or(|h| h == hostname());
     let pid = field(text, "pid").and_then(|p| p.trim().parse::<u32>().ok());
-    on_this_host
-        && pid.is_some_and(|p| p != std::process::id() && Path::new(&format!("/proc/{p}")).exists())
+    on_this_host && pid.is_some_and(|p| p != std::process::id() && process_runs(p))
+}
+
+/// Whether process `pid` exists and is not a zombie (`/proc/PID/stat`:
+/// the state after the command name's closing parenthesis).
+fn process_runs(pid: u32) -> bool {
+    let Ok(stat) = std::fs::read_to_string(format!("/proc/{pid}/stat")) else {
+        return false;
+    };
+    let state = stat
+        .rsplit_once(')')
+        .and_then(|(_, rest)| rest.split_whitespace().next());
+    !matches!(state, Some("Z" | "X"))
 }
 
 /// This machine's host name (empty when it cannot be read).
@@ -463,6 +476,41 @@ mod tests {
         .expect("lock");
         let err = RunDir::open_existing(&base, "t").expect_err("refused");
         assert!(err.to_string().contains("still running"), "{err}");
+        std::fs::remove_dir_all(&base).expect("cleanup");
+    }
+
+    #[test]
+    fn a_lock_naming_a_zombie_is_taken_over() {
+        let base = temp("zombie");
+        // A child that ends at once and is not reaped: a zombie.
+        let mut child = std::process::Command::new("true").spawn().expect("a child");
+        let pid = child.id();
+        let state = || {
+            std::fs::read_to_string(format!("/proc/{pid}/stat"))
+                .ok()
+                .and_then(|s| {
+                    s.rsplit_once(')')
+                        .map(|(_, r)| r.trim_start().chars().next())
+                })
+                .flatten()
+        };
+        while state() != Some('Z') {
+            std::thread::yield_now();
+        }
+        std::fs::write(
+            base.join(LOCK_FILE),
+            format!("pid={pid}\nhost={}\n", hostname()),
+        )
+        .expect("lock");
+        let d = RunDir::open_existing(&base, "t").expect("a zombie holds nothing");
+        assert!(
+            d.lock
+                .stale
+                .as_deref()
+                .is_some_and(|s| s.contains(&format!("pid {pid}")))
+        );
+        drop(d);
+        child.wait().expect("reaped");
         std::fs::remove_dir_all(&base).expect("cleanup");
     }
 }

@@ -9,7 +9,8 @@
 //! header needs a CORS preflight the station never grants), and on a lab
 //! network nobody without the URL can.
 
-pub mod state;
+pub mod listener;
+mod state;
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -67,7 +68,20 @@ pub struct Station {
     /// Set when the station stops: event streams end, so that open
     /// browsers do not hold the shutdown.
     stopping: std::sync::atomic::AtomicBool,
+    /// Each procedure file as last checked: its (size, modification
+    /// time), the offer and the procedure.
+    offers: std::sync::Mutex<OfferCache>,
 }
+
+/// Procedure files as checked, by file name.
+type OfferCache = std::collections::HashMap<
+    String,
+    (
+        (u64, Option<std::time::SystemTime>),
+        Offer,
+        Option<Procedure>,
+    ),
+>;
 
 /// A procedure the page offers.
 #[derive(Debug, Clone, Serialize)]
@@ -111,11 +125,13 @@ impl IntoResponse for Refused {
             Self::Bad(_) => StatusCode::BAD_REQUEST,
             Self::NotFound(_) => StatusCode::NOT_FOUND,
         };
-        (
-            code,
-            axum::Json(serde_json::json!({ "error": self.to_string() })),
-        )
-            .into_response()
+        let body = axum::Json(serde_json::json!({ "error": self.to_string() }));
+        if matches!(self, Self::Token) {
+            // Whoever has no token gets no connection to keep either.
+            let close = [(axum::http::header::CONNECTION, "close")];
+            return (code, close, body).into_response();
+        }
+        (code, body).into_response()
     }
 }
 
@@ -142,6 +158,7 @@ impl Station {
             interrupt: std::sync::Mutex::new(None),
             runs_started: std::sync::atomic::AtomicU64::new(0),
             stopping: std::sync::atomic::AtomicBool::new(false),
+            offers: std::sync::Mutex::new(OfferCache::new()),
         })
     }
 
@@ -164,8 +181,31 @@ impl Station {
     }
 
     /// The procedure `file` of the directory as offered, and the
-    /// procedure itself when it passes `check`.
+    /// procedure itself when it passes `check`: checked once per version
+    /// of the file (its size and modification time), not on every request.
     fn offer(&self, file: String) -> (Offer, Option<Procedure>) {
+        let path = self.cfg.procedures.join(&file);
+        let version = std::fs::metadata(&path)
+            .ok()
+            .map(|m| (m.len(), m.modified().ok()));
+        let mut cache = self
+            .offers
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        if let Some(v) = &version
+            && let Some((seen, offer, procedure)) = cache.get(&file)
+            && seen == v
+        {
+            return (offer.clone(), procedure.clone());
+        }
+        let made = self.check_offer(file.clone());
+        if let Some(v) = version {
+            cache.insert(file, (v, made.0.clone(), made.1.clone()));
+        }
+        made
+    }
+
+    fn check_offer(&self, file: String) -> (Offer, Option<Procedure>) {
         match Procedure::load(&self.cfg.procedures.join(&file), &self.cfg.bench) {
             Ok(proc_) => (
                 Offer {
@@ -479,7 +519,10 @@ impl Station {
             .filter(|r| r.number == number && !r.dir.is_empty())
             .ok_or_else(|| Refused::NotFound(format!("no run {number} here")))?;
         let path = Path::new(&run.dir).join(name);
-        if path.is_file() {
+        // A regular file of the run directory itself: a link planted there
+        // (to a key, to another bench's data) is never followed.
+        let regular = std::fs::symlink_metadata(&path).is_ok_and(|m| m.file_type().is_file());
+        if regular {
             Ok(path)
         } else {
             Err(Refused::NotFound(format!(

@@ -635,8 +635,21 @@ impl TwinConfig {
         c.positive(t.rate_mode_max_dps, "table.rate_mode_max_dps")?;
         c.positive(t.rate_mode_max_acc_dps2, "table.rate_mode_max_acc_dps2")?;
         t.geometry.validate(c, "table.geometry")?;
-        c.finite(t.initial.outer_deg, "table.initial.outer_deg")?;
-        c.finite(t.initial.inner_deg, "table.initial.inner_deg")?;
+        // A table's axes read within a turn or so; an angle far beyond
+        // is a slip of the keyboard (1e300 deg was reported as the bench's
+        // safe state).
+        c.within(
+            t.initial.outer_deg,
+            -360.0,
+            360.0,
+            "table.initial.outer_deg",
+        )?;
+        c.within(
+            t.initial.inner_deg,
+            -360.0,
+            360.0,
+            "table.initial.inner_deg",
+        )?;
 
         self.rate_response.validate(c)?;
         self.effects.validate(c)

@@ -20,6 +20,32 @@ pub fn esc(s: &str) -> String {
         .replace('\'', "&#39;")
 }
 
+/// Text as a terminal or an XML file can hold it: control characters and
+/// invisible formatting characters (bidirectional overrides, zero-width
+/// marks) written as `\u{1b}`, so a stored value can neither move the
+/// cursor nor disguise itself.
+pub fn printable(s: &str) -> std::borrow::Cow<'_, str> {
+    let bad = |c: char| {
+        c.is_control()
+            || matches!(c, '\u{00AD}' | '\u{200B}'..='\u{200F}' | '\u{202A}'..='\u{202E}'
+                | '\u{2060}'..='\u{206F}' | '\u{FEFF}' | '\u{FFFE}' | '\u{FFFF}')
+    };
+    if !s.chars().any(bad) {
+        return std::borrow::Cow::Borrowed(s);
+    }
+    std::borrow::Cow::Owned(
+        s.chars()
+            .map(|c| {
+                if bad(c) {
+                    format!("\\u{{{:x}}}", u32::from(c))
+                } else {
+                    c.to_string()
+                }
+            })
+            .collect(),
+    )
+}
+
 /// A p-value as a reader takes it: three decimals, `< 0.001` below that
 /// (never `0.0e0`), `n/a` when it could not be computed.
 pub fn p_value(p: f64) -> String {

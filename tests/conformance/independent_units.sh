@@ -17,7 +17,7 @@ for ((i = 0; i < n; i++)); do
     d="$root/$(printf %03d "$i")_${case}_s$seed"
     "$py" "$here/independent_units.py" --seed "$seed" --case "$case" --out "$d" "$@"
     for run in cycle orient; do
-        "$bin" import "$d/$run.csv" --site "$d/site.toml" -o "$d/$run.mcap" --db none > /dev/null
+        "$bin" import "$d/$run.csv" --site "$d/site.toml" --dut "IND-$seed" -o "$d/$run.mcap" --db none > /dev/null
     done
     start=$(date +%s%N)
     "$bin" diagnose "$d/cycle.mcap" "$d/orient.mcap" --out "$d/d" > "$d/diagnose.out"

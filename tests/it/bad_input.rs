@@ -18,6 +18,11 @@ struct Case {
     kind: String,
     error: String,
     line: Option<usize>,
+    /// A damaged log whose whole parts are still read: a command may
+    /// leave what it made of them (a recovered log, a report that says
+    /// the log is damaged), but it still exits 1 with the error.
+    #[serde(default)]
+    partial: bool,
 }
 
 #[test]
@@ -106,10 +111,15 @@ fn every_bad_file_is_refused_with_its_error_and_line() {
                 c.file
             );
             assert!(
-                !out_dir.exists(),
+                c.partial || !out_dir.exists(),
                 "{}: a refused input must not start a run or leave an output",
                 c.file
             );
+            if out_dir.is_dir() {
+                std::fs::remove_dir_all(&out_dir).expect("clear the partial output");
+            } else if out_dir.exists() {
+                std::fs::remove_file(&out_dir).expect("clear the partial output");
+            }
         }
     }
     std::fs::remove_dir_all(&dir).expect("cleanup");

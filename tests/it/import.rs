@@ -218,3 +218,77 @@ fn import_gives_figures_for_reference_and_leaves_the_verdict_to_replay() {
     }
     std::fs::remove_dir_all(&dir).expect("cleanup");
 }
+
+/// `export -o` and `import -o` never write over a run's log or a file of a
+/// run directory unless told to: the report beside it would describe
+/// another run.
+#[test]
+fn export_and_import_refuse_to_write_over_a_runs_record() {
+    let dir = crate::cli::temp_dir("import-overwrite");
+    let p = crate::common::write(&dir, "tiny.toml", crate::common::TINY);
+    let run = |name: &str| {
+        let out = dir.join(name);
+        let o = crate::cli::gyrobench(&["run", s(&p), "--db", "none", "--out", s(&out)]);
+        assert_eq!(o.status.code(), Some(0), "{}", crate::common::stderr(&o));
+        out
+    };
+    let (a, b) = (run("a"), run("b"));
+    let before = std::fs::read(b.join("run.mcap")).expect("log");
+    let fixtures = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/import");
+    let import = |out: &std::path::Path, force: bool| {
+        let mut args = vec![
+            "import".to_owned(),
+            fixtures.join("lab-run.csv").display().to_string(),
+            "--site".to_owned(),
+            fixtures.join("site.toml").display().to_string(),
+            "--db".to_owned(),
+            "none".to_owned(),
+            "-o".to_owned(),
+            out.display().to_string(),
+        ];
+        if force {
+            args.push("--force".to_owned());
+        }
+        crate::cli::command().args(&args).output().expect("runs")
+    };
+    for o in [
+        crate::cli::gyrobench(&[
+            "export",
+            s(&a.join("run.mcap")),
+            "-o",
+            s(&b.join("run.mcap")),
+        ]),
+        crate::cli::gyrobench(&[
+            "export",
+            s(&a.join("run.mcap")),
+            "-o",
+            s(&b.join("report.json")),
+        ]),
+        import(&b.join("run.mcap"), false),
+    ] {
+        assert_eq!(o.status.code(), Some(2), "{}", crate::common::stderr(&o));
+        assert!(
+            crate::common::stderr(&o).contains("--force"),
+            "{}",
+            crate::common::stderr(&o)
+        );
+    }
+    assert_eq!(
+        std::fs::read(b.join("run.mcap")).expect("log"),
+        before,
+        "untouched"
+    );
+    // A new file, or --force: written.
+    let csv = dir.join("a.csv");
+    let o = crate::cli::gyrobench(&["export", s(&a.join("run.mcap")), "-o", s(&csv)]);
+    assert_eq!(o.status.code(), Some(0));
+    let o = crate::cli::gyrobench(&["export", s(&a.join("run.mcap")), "-o", s(&csv)]);
+    assert_eq!(
+        o.status.code(),
+        Some(0),
+        "a CSV outside a run directory is the user's to replace"
+    );
+    let o = import(&b.join("run.mcap"), true);
+    assert_eq!(o.status.code(), Some(0), "{}", crate::common::stderr(&o));
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}

@@ -5,7 +5,7 @@
 use std::path::Path;
 
 use crate::cli::{gyrobench, temp_dir};
-use crate::common::{MINI, json, s};
+use crate::common::{MINI, json, s, stderr};
 
 const COEFFS: &str = "[unit]
 serial = \"SIMULATED\"
@@ -239,5 +239,102 @@ fn logs_of_the_first_format_still_replay_to_their_figures() {
         }
         assert_eq!(now["measurements"].as_array().map(Vec::len), Some(2));
     }
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
+
+/// The offsets of the top-level chunk records of an MCAP file.
+fn chunk_offsets(bytes: &[u8]) -> Vec<usize> {
+    let mut at = 8;
+    let mut out = Vec::new();
+    while at + 9 <= bytes.len() {
+        let len = u64::from_le_bytes(bytes[at + 1..at + 9].try_into().expect("8 bytes")) as usize;
+        if bytes[at] == 0x06 {
+            out.push(at);
+        }
+        at += 9 + len;
+    }
+    out
+}
+
+/// One flipped bit in one chunk of nine loses that chunk, not the rest:
+/// recover, replay and export skip it, say what is missing by time and
+/// count, and exit non-zero.
+#[test]
+fn a_damaged_chunk_loses_only_itself_and_every_reader_says_so() {
+    let dir = temp_dir("replay-damaged");
+    let procedure = dir.join("mini.toml");
+    std::fs::write(&procedure, MINI).expect("procedure");
+    let live = dir.join("live");
+    let o = gyrobench(&["run", s(&procedure), "--out", s(&live), "--db", "none"]);
+    assert_eq!(o.status.code(), Some(0));
+    let log = live.join("run.mcap");
+    let whole = std::fs::read(&log).expect("log");
+    let chunks = chunk_offsets(&whole);
+    assert!(chunks.len() >= 9, "{} chunks", chunks.len());
+    // The intact log's counts.
+    let r = gyrobench(&["recover", s(&log), "-o", s(&dir.join("intact.mcap"))]);
+    assert_eq!(r.status.code(), Some(0));
+    let messages = |out: &std::process::Output| -> u64 {
+        let text = String::from_utf8_lossy(&out.stdout);
+        text.split_whitespace()
+            .nth(1)
+            .and_then(|n| n.parse().ok())
+            .expect("recovered N")
+    };
+    let all = messages(&r);
+    let e = gyrobench(&["export", s(&log), "-o", s(&dir.join("intact.csv"))]);
+    assert_eq!(e.status.code(), Some(0));
+    let all_rows = std::fs::read_to_string(dir.join("intact.csv"))
+        .expect("csv")
+        .lines()
+        .count();
+
+    let mut damaged = whole.clone();
+    let third = chunks[2];
+    let len = u64::from_le_bytes(damaged[third + 1..third + 9].try_into().expect("len")) as usize;
+    damaged[third + 9 + len * 3 / 4] ^= 0x10;
+    let bad = dir.join("damaged.mcap");
+    std::fs::write(&bad, &damaged).expect("damaged log");
+
+    let r = gyrobench(&["recover", s(&bad), "-o", s(&dir.join("rec.mcap"))]);
+    assert_eq!(r.status.code(), Some(1), "{}", stderr(&r));
+    let err = stderr(&r);
+    assert!(err.contains("1 damaged part(s) skipped"), "{err}");
+    let got = messages(&r);
+    assert!(got > all / 2 && got < all, "{got} of {all} messages");
+    // The count it reports lost is the count that is missing.
+    let lost: u64 = err
+        .split(" damaged part(s) skipped, the rest read: ")
+        .nth(1)
+        .and_then(|t| t.split_whitespace().next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("a count of lost messages in {err}"));
+    assert_eq!(got + lost, all, "{err}");
+
+    let e = gyrobench(&["export", s(&bad), "-o", s(&dir.join("damaged.csv"))]);
+    assert_eq!(e.status.code(), Some(1), "{}", stderr(&e));
+    let rows = std::fs::read_to_string(dir.join("damaged.csv"))
+        .expect("csv")
+        .lines()
+        .count();
+    assert!(
+        rows > all_rows / 2 && rows < all_rows,
+        "{rows} of {all_rows} rows"
+    );
+
+    let p = gyrobench(&["replay", s(&bad), "--out", s(&dir.join("rp"))]);
+    assert_eq!(p.status.code(), Some(1), "{}", stderr(&p));
+    let report = json(&dir.join("rp/report.json"));
+    let msg = report["error"]["message"].as_str().unwrap_or_default();
+    assert!(msg.contains("damaged"), "{report}");
+    // Its last state is the end of the run, not where the damage was.
+    assert!(
+        report["device_time_s"].as_f64().expect("device time")
+            > 0.9
+                * json(&live.join("report.json"))["device_time_s"]
+                    .as_f64()
+                    .expect("t"),
+        "{report}"
+    );
     std::fs::remove_dir_all(&dir).expect("cleanup");
 }

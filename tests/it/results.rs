@@ -533,3 +533,50 @@ fn eight_benches_write_one_postgres_store_at_once_and_lose_nothing() {
     assert_eq!(r.status.code(), Some(0), "{}", stderr(&r));
     std::fs::remove_dir_all(&dir).expect("cleanup");
 }
+
+/// A run queued because its store could not be reached waits for that
+/// store: another store opened meanwhile does not take it; the store it
+/// was meant for does, once it is back.
+#[test]
+fn a_queued_run_goes_only_to_the_store_it_was_meant_for() {
+    let dir = temp_dir("results-queue");
+    let home = dir.join("home");
+    let at = |db: &Path, args: &[&str]| {
+        command()
+            .env("XDG_DATA_HOME", &home)
+            .env("GYROBENCH_DB", db)
+            .args(args)
+            .output()
+            .expect("runs")
+    };
+    let p = write(&dir, "tiny.toml", TINY);
+    let broken = write(&dir, "broken.sqlite", &"not a database ".repeat(400));
+    let other = dir.join("other.sqlite");
+    let r = at(
+        &broken,
+        &["run", s(&p), "--dut", "Q-1", "--out", s(&dir.join("run"))],
+    );
+    assert_eq!(r.status.code(), Some(0), "{}", stderr(&r));
+    assert!(stderr(&r).contains("queued"), "{}", stderr(&r));
+    // Another store: the queued run is not its.
+    let list = at(&other, &["results", "list", "--json"]);
+    assert_eq!(list.status.code(), Some(0), "{}", stderr(&list));
+    assert_eq!(stdout(&list).trim(), "[]", "{}", stdout(&list));
+    // The store it was meant for, repaired: it takes it.
+    std::fs::remove_file(&broken).expect("repair");
+    let list = at(&broken, &["results", "list", "--json"]);
+    assert!(
+        stderr(&list).contains("1 queued run(s) written"),
+        "{}",
+        stderr(&list)
+    );
+    let rows: serde_json::Value = serde_json::from_slice(&list.stdout).expect("JSON");
+    assert_eq!(rows[0]["serial"], "Q-1", "{rows}");
+    assert_eq!(
+        std::fs::read_dir(home.join("gyrobench/pending"))
+            .map(|d| d.count())
+            .ok(),
+        Some(0)
+    );
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}

@@ -261,3 +261,76 @@ fn a_device_run_stopped_by_sigterm_or_killed_through_sim_serve_ends_safe_and_res
     drop(served);
     std::fs::remove_dir_all(&dir).expect("cleanup");
 }
+
+/// A cold ramp with the table away from home, and a cleanup that warms the
+/// chamber and brings the table home: the case a full disk left half done.
+const COLD_AWAY: &str = r#"
+[procedure]
+name = "cold_away"
+description = "a ramp down with the table away from home"
+dut_type = "RL-16"
+spec = "test"
+
+[[setup]]
+action = "move"
+table = { outer_deg = 14.6, inner_deg = 30.0 }
+
+[[setup]]
+action = "chamber"
+set_c = -10.0
+ramp_c_per_min = 2.0
+
+[[main]]
+action = "record"
+label = "cold"
+duration_s = 1800.0
+
+[[cleanup]]
+action = "chamber"
+set_c = 20.0
+ramp_c_per_min = 2.0
+
+[[cleanup]]
+action = "move"
+table = { outer_deg = 90.0, inner_deg = 0.0 }
+"#;
+
+/// A full disk stops logging, never cleanup: every cleanup step runs, the
+/// bench is read back where cleanup left it, and the report says why the
+/// run is an error.
+#[test]
+fn a_full_disk_mid_run_stops_the_log_but_cleanup_runs_to_its_end() {
+    let dir = temp_dir("disk-full");
+    let p = write(&dir, "cold.toml", COLD_AWAY);
+    let out = dir.join("run");
+    let o = gyrobench(&[
+        "run",
+        s(&p),
+        "--out",
+        s(&out),
+        "--db",
+        "none",
+        "--inject",
+        "disk-full@600",
+    ]);
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    let r = json(&out.join("report.json"));
+    assert_eq!(r["outcome"], "error");
+    let msg = r["error"]["message"].as_str().expect("message");
+    assert!(msg.contains("No space left on device"), "{msg}");
+    assert_eq!(r["cleanup_completed"], true, "{}", stderr(&o));
+    let left = &r["bench_left"];
+    assert_eq!(left["verified"], true, "{left}");
+    assert_eq!(left["intended"], "cleanup", "{left}");
+    assert_eq!(left["chamber_set_point_c"], 20.0, "{left}");
+    let deg = |i: usize| left["table_deg"][i].as_f64().expect("table angle");
+    assert!(
+        (deg(0) - 90.0).abs() < 0.01 && deg(1).abs() < 0.01,
+        "{left}"
+    );
+    assert_eq!(left["table_at_rest"], true, "{left}");
+    // What reached the disk before it filled is a log `recover` completes.
+    let rec = gyrobench(&["recover", s(&out.join("run.mcap"))]);
+    assert_eq!(rec.status.code(), Some(0), "{}", stderr(&rec));
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}

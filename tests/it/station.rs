@@ -336,3 +336,107 @@ fn the_live_foxglove_stream_carries_the_logs_channels_to_a_third_party_client() 
     assert!(st.stop().success());
     std::fs::remove_dir_all(&dir).expect("cleanup");
 }
+
+/// Closing the terminal or SSH session that started the station (SIGHUP),
+/// or Ctrl-\ (SIGQUIT), mid-run: the run is aborted, its cleanup runs, its
+/// report is written and the bench is read back at rest, as for SIGTERM.
+#[test]
+fn sighup_and_sigquit_stop_the_station_as_sigterm_does() {
+    for signal in ["HUP", "QUIT"] {
+        let dir = temp_dir(&format!("station-sig{signal}"));
+        let mut st = Served::start(&dir, &[]);
+        let (code, body) = st.request("POST", "/api/start", true, SMOKE);
+        assert_eq!(code, 200, "{body}");
+        // At the prompt: the run is under way (its log open, the bench set).
+        let waiting = st.until("the prompt", |s| !s["run"]["prompt"].is_null());
+        let run_dir = PathBuf::from(waiting["run"]["dir"].as_str().expect("dir"));
+        let _sent = std::process::Command::new("kill")
+            .args([&format!("-{signal}"), &st.child.id().to_string()])
+            .status();
+        let status = (0..300)
+            .find_map(|_| {
+                let s = st.child.try_wait().expect("station");
+                if s.is_none() {
+                    std::thread::sleep(std::time::Duration::from_millis(100));
+                }
+                s
+            })
+            .unwrap_or_else(|| panic!("SIG{signal}: the station did not stop within 30 s"));
+        assert_eq!(status.code(), Some(0), "SIG{signal}: {status}");
+        let report = json(&run_dir.join("report.json"));
+        assert_eq!(report["outcome"], "aborted", "SIG{signal}");
+        assert_eq!(
+            report["bench_left"]["verified"], true,
+            "SIG{signal}: {}",
+            report["bench_left"]
+        );
+        assert_eq!(report["cleanup_completed"], true, "SIG{signal}");
+        std::fs::remove_dir_all(&dir).expect("cleanup");
+    }
+}
+
+/// A flood of connections that send nothing (no token needed to open
+/// them) never keeps the page or Abort out: the oldest of them are closed
+/// to make room, and a request sent at once is answered.
+#[test]
+fn a_flood_of_half_open_connections_leaves_the_page_reachable() {
+    let dir = temp_dir("station-flood");
+    let st = Served::start(&dir, &[]);
+    let host = st.base.trim_start_matches("http://").to_owned();
+    let flood: Vec<TcpStream> = (0..600)
+        .map(|_| TcpStream::connect(&host).expect("a connection"))
+        .collect();
+    // Answered while the flood is held open.
+    let (code, body) = st.request("GET", "/api/state", true, "");
+    assert_eq!(code, 200, "{body}");
+    let (code, body) = st.request("POST", "/api/abort", true, "{}");
+    assert_ne!(code, 403, "{body}");
+    // The oldest of the flood were closed by the station.
+    let mut first = &flood[0];
+    // A guard against a station that would never close it (the station's
+    // own limit is 10 s); not a measure of speed.
+    first
+        .set_read_timeout(Some(std::time::Duration::from_secs(120)))
+        .expect("timeout");
+    let mut byte = [0u8; 1];
+    let read = first.read(&mut byte);
+    let closed = match &read {
+        Ok(0) => true,
+        Err(e) => !matches!(
+            e.kind(),
+            std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
+        ),
+        Ok(_) => false,
+    };
+    assert!(closed, "the oldest idle connection is still open: {read:?}");
+    drop(flood);
+    assert_eq!(st.stop().code(), Some(0));
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
+
+/// A link planted in a run directory is never followed by the download
+/// route: only the run directory's own regular files are served.
+#[test]
+fn a_link_in_a_run_directory_is_not_served() {
+    let dir = temp_dir("station-link");
+    let st = Served::start(&dir, &[]);
+    let (code, body) = st.request("POST", "/api/start", true, SMOKE);
+    assert_eq!(code, 200, "{body}");
+    let waiting = st.until("the prompt", |s| !s["run"]["prompt"].is_null());
+    let id = waiting["run"]["prompt"]["id"].as_u64().expect("prompt id");
+    let (code, body) = st.request("POST", "/api/answer", true, &format!(r#"{{"id":{id}}}"#));
+    assert_eq!(code, 200, "{body}");
+    let done = st.until("the verdict", |s| s["run"]["phase"] == "finished");
+    let run_dir = PathBuf::from(done["run"]["dir"].as_str().expect("dir"));
+    let (code, _) = st.request("GET", "/runs/1/report.html", true, "");
+    assert_eq!(code, 200);
+    let secret = dir.join("secret.txt");
+    std::fs::write(&secret, "not the bench's to give").expect("secret");
+    std::fs::remove_file(run_dir.join("report.html")).expect("remove");
+    std::os::unix::fs::symlink(&secret, run_dir.join("report.html")).expect("link");
+    let (code, body) = st.request("GET", "/runs/1/report.html", true, "");
+    assert_eq!(code, 404, "{body}");
+    assert!(!body.contains("not the bench's to give"));
+    assert_eq!(st.stop().code(), Some(0));
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
