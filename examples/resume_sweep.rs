@@ -48,6 +48,11 @@ fn main() -> std::process::ExitCode {
             ("chamber-alarm".into(), 3 * every),
             ("table-interlock".into(), 5 * every),
             ("gyro-silent".into(), 5 * every),
+            ("disk-full".into(), 5 * every),
+            ("sighup".into(), 5 * every),
+            ("sigquit".into(), 10 * every),
+            ("station-sighup".into(), 10 * every),
+            ("station-sigquit".into(), 10 * every),
         ],
         jobs,
     };

@@ -136,7 +136,8 @@ fn an_interrupted_run_resumes_from_its_last_completed_step() {
 /// The fault-and-resume sweep on a short procedure with a thermal segment
 /// (the full sweep of the acceptance runs in CI, `examples/resume_sweep`):
 /// interrupted at every step boundary and mid-step by a kill, a chamber
-/// alarm and a silent gyro, every resume passes with figures in the
+/// alarm, a silent gyro, a full disk, SIGHUP of the run and SIGQUIT of the
+/// station running it, every resume passes with figures in the
 /// reference spread, nothing is lost or overwritten, no step before the
 /// interrupted segment is taken again, and the bench is left safe.
 #[test]
@@ -154,6 +155,9 @@ fn the_quick_fault_and_resume_sweep_finds_nothing_wrong() {
             ("process-kill".into(), 1),
             ("chamber-alarm".into(), 2),
             ("gyro-silent".into(), 3),
+            ("disk-full".into(), 4),
+            ("sighup".into(), 5),
+            ("station-sigquit".into(), 6),
         ],
         jobs: 2,
     };
@@ -172,6 +176,53 @@ fn the_quick_fault_and_resume_sweep_finds_nothing_wrong() {
         (0, 0, 0, 0, 0, 0),
         "{table}\n{}",
         crate::sweep::render_rows(&rows)
+    );
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
+
+/// A part file of another run in a run's directory (copied in, left from
+/// a reused directory) is never taken as the run's own.
+#[test]
+fn a_part_of_another_run_is_refused_by_name() {
+    let dir = temp_dir("resume-foreign");
+    let procedure = dir.join("p.toml");
+    std::fs::write(&procedure, MINI).expect("procedure");
+    let interrupted = |name: &str| {
+        let run = dir.join(name);
+        let out = gyrobench(&[
+            "run",
+            s(&procedure),
+            "--out",
+            s(&run),
+            "--db",
+            "none",
+            "--inject",
+            "chamber-alarm@2500",
+        ]);
+        assert_eq!(out.status.code(), Some(1));
+        run
+    };
+    let (x, y) = (interrupted("x"), interrupted("y"));
+    let out = gyrobench(&["run", "--resume", s(&x), "--db", "none"]);
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    std::fs::copy(x.join("run.part2.mcap"), y.join("run.part2.mcap")).expect("copy");
+    let before = std::fs::read(y.join("report.json")).expect("report");
+    let out = gyrobench(&["run", "--resume", s(&y), "--db", "none"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_ne!(out.status.code(), Some(0), "{err}");
+    assert!(
+        err.contains("run.part2.mcap") && err.contains("the parts are of two runs"),
+        "{err}"
+    );
+    assert!(!y.join("run.part3.mcap").exists(), "nothing resumed");
+    assert_eq!(
+        std::fs::read(y.join("report.json")).expect("report"),
+        before
     );
     std::fs::remove_dir_all(&dir).expect("cleanup");
 }

@@ -327,22 +327,50 @@ impl Sweep {
         at_s: f64,
         step: &str,
     ) -> Row {
-        let dir = self.dir.join(format!("{n:04}-{fault}"));
         let mut problems = Vec::new();
-        let first = gyrobench(
-            &self.bin,
-            &self.dir,
-            &[
-                "run",
-                s(&self.procedure),
-                "--seed",
-                &self.seeds[0].to_string(),
-                "--out",
-                s(&dir),
-                "--inject",
-                &format!("{fault}@{at_s}"),
-            ],
-        );
+        // `station-sighup@T`: the station runs the procedure and is sent
+        // the signal near device time T (the terminal it was started from
+        // closed); every other fault is `run --inject FAULT@T`.
+        let (dir, first_exit, at_s) = match fault.strip_prefix("station-") {
+            Some(signal) => {
+                let runs = self.dir.join(format!("{n:04}-{fault}"));
+                match self.station_first_part(&runs, signal, at_s) {
+                    Ok(first) => first,
+                    Err(why) => {
+                        problems.push(format!("lost: the station's part: {why}"));
+                        return Row {
+                            fault: fault.to_owned(),
+                            at_s,
+                            step: step.to_owned(),
+                            first_exit: None,
+                            resume_exit: None,
+                            outcome: "none".into(),
+                            problems,
+                            worst: (String::new(), 0.0),
+                            retaken: 0,
+                        };
+                    }
+                }
+            }
+            None => {
+                let dir = self.dir.join(format!("{n:04}-{fault}"));
+                let first = gyrobench(
+                    &self.bin,
+                    &self.dir,
+                    &[
+                        "run",
+                        s(&self.procedure),
+                        "--seed",
+                        &self.seeds[0].to_string(),
+                        "--out",
+                        s(&dir),
+                        "--inject",
+                        &format!("{fault}@{at_s}"),
+                    ],
+                );
+                (dir, first.status.code(), at_s)
+            }
+        };
         let log1 = dir.join("run.mcap");
         let before = std::fs::read(&log1).unwrap_or_default();
         if let Some(r) = json(&dir.join("report.json"))
@@ -361,7 +389,7 @@ impl Sweep {
                 fault: fault.to_owned(),
                 at_s,
                 step: step.to_owned(),
-                first_exit: first.status.code(),
+                first_exit,
                 resume_exit: None,
                 outcome: "pass (finished before the fault)".into(),
                 problems,
@@ -439,7 +467,17 @@ impl Sweep {
             problems.push("lost: no report after the resume".into());
         }
         // Steps taken again: only the interrupted segment's.
-        let completed = completed1.iter().max().map_or(0, |m| m + 1);
+        let mut completed = completed1.iter().max().map_or(0, |m| m + 1);
+        let steps: Vec<_> = procedure.setup.iter().chain(&procedure.main).collect();
+        if completed >= steps.len() {
+            // Every step done but the log cut short before its end record
+            // (a full disk at the very end): the interrupted segment is the
+            // last record's.
+            completed = steps
+                .iter()
+                .rposition(|s| matches!(s.kind, gyrobench::procedure::StepKind::Record { .. }))
+                .unwrap_or(completed);
+        }
         let (start_at, _) = resume_plan(procedure, completed);
         let mut retaken = 0;
         for k in 2..=parts {
@@ -459,13 +497,133 @@ impl Sweep {
             fault: fault.to_owned(),
             at_s,
             step: step.to_owned(),
-            first_exit: first.status.code(),
+            first_exit,
             resume_exit: resume.status.code(),
             outcome,
             problems,
             worst,
             retaken,
         }
+    }
+
+    /// The first part through the station: it is started on the embedded
+    /// bench at full speed, runs the procedure for a unit, and is sent
+    /// SIG`signal` once the run's device time reaches `at_s`. The run
+    /// directory, the station's exit code and the device time the signal
+    /// found.
+    fn station_first_part(
+        &self,
+        runs: &Path,
+        signal: &str,
+        at_s: f64,
+    ) -> Result<(PathBuf, Option<i32>, f64), String> {
+        use std::io::{BufRead, Read, Write};
+        let offered = self.procedure.parent().ok_or("the procedure's directory")?;
+        let file = self
+            .procedure
+            .file_name()
+            .and_then(|f| f.to_str())
+            .ok_or("the procedure's file name")?;
+        let mut child = Command::new(&self.bin)
+            .env("XDG_DATA_HOME", self.dir.join("data"))
+            .env("GYROBENCH_DB", self.dir.join("results.sqlite"))
+            .args([
+                "station",
+                "--listen",
+                "127.0.0.1:0",
+                "--no-live",
+                "--procedures",
+                s(offered),
+                "--runs",
+                s(runs),
+            ])
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::null())
+            .spawn()
+            .map_err(|e| format!("the station does not start: {e}"))?;
+        let mut line = String::new();
+        if let Some(out) = child.stdout.take() {
+            std::io::BufReader::new(out)
+                .read_line(&mut line)
+                .map_err(|e| format!("the station's URL: {e}"))?;
+        }
+        let url = line.trim().strip_prefix("station ").unwrap_or_default();
+        let Some((base, token)) = url.split_once("/?token=") else {
+            let _ = child.kill();
+            let _ = child.wait();
+            return Err(format!("no station URL in {line:?}"));
+        };
+        let host = base.trim_start_matches("http://").to_owned();
+        let request = |method: &str, path: &str, body: &str| -> Result<String, String> {
+            let mut c = std::net::TcpStream::connect(&host).map_err(|e| e.to_string())?;
+            write!(
+                c,
+                "{method} {path} HTTP/1.1\r\nHost: {host}\r\nConnection: close\r\nX-Gyrobench-Token: {token}\r\nContent-Type: application/json\r\nContent-Length: {}\r\n\r\n{body}",
+                body.len()
+            )
+            .map_err(|e| e.to_string())?;
+            let mut raw = String::new();
+            c.read_to_string(&mut raw).map_err(|e| e.to_string())?;
+            let (head, body) = raw.split_once("\r\n\r\n").unwrap_or((&raw, ""));
+            if head.split_whitespace().nth(1) != Some("200") {
+                return Err(format!("{method} {path}: {head} {body}"));
+            }
+            Ok(body.to_owned())
+        };
+        let started = request(
+            "POST",
+            "/api/start",
+            &format!(r#"{{"procedure":"{file}","serial":"RL16-SWEEP","operator":"sweep"}}"#),
+        );
+        let mut dir = None;
+        let mut seen_s = 0.0;
+        if let Err(why) = started {
+            let _ = child.kill();
+            let _ = child.wait();
+            return Err(why);
+        }
+        // Poll until the run reaches `at_s` (or ends first).
+        for _ in 0..60_000 {
+            let Ok(state) = request("GET", "/api/state", "") else {
+                break;
+            };
+            let state: serde_json::Value = serde_json::from_str(&state).unwrap_or_default();
+            let run = &state["run"];
+            if let Some(d) = run["dir"].as_str() {
+                dir = Some(PathBuf::from(d));
+            }
+            seen_s = run["device_s"].as_f64().unwrap_or(0.0);
+            if seen_s >= at_s || run["phase"] == "finished" {
+                break;
+            }
+            std::thread::sleep(std::time::Duration::from_millis(5));
+        }
+        let _ = Command::new("kill")
+            .args([
+                format!("-{}", signal.to_uppercase().trim_start_matches("SIG")),
+                child.id().to_string(),
+            ])
+            .status();
+        let mut code = None;
+        for _ in 0..1200 {
+            match child.try_wait() {
+                Ok(Some(st)) => {
+                    code = Some(st.code());
+                    break;
+                }
+                Ok(None) => std::thread::sleep(std::time::Duration::from_millis(100)),
+                Err(_) => break,
+            }
+        }
+        let Some(code) = code else {
+            let _ = child.kill();
+            let _ = child.wait();
+            return Err(format!(
+                "SIG{signal}: the station did not stop within 120 s"
+            ));
+        };
+        let dir = dir.ok_or("the station named no run directory")?;
+        Ok((dir, code, seen_s))
     }
 }
 
