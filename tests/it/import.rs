@@ -224,6 +224,8 @@ fn import_gives_figures_for_reference_and_leaves_the_verdict_to_replay() {
 /// another run.
 #[test]
 fn export_and_import_refuse_to_write_over_a_runs_record() {
+    // Runs beside no wall-clock test (see `busy_turn`).
+    let _busy = crate::common::busy_turn();
     let dir = crate::cli::temp_dir("import-overwrite");
     let p = crate::common::write(&dir, "tiny.toml", crate::common::TINY);
     let run = |name: &str| {

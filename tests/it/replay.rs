@@ -261,6 +261,8 @@ fn chunk_offsets(bytes: &[u8]) -> Vec<usize> {
 /// count, and exit non-zero.
 #[test]
 fn a_damaged_chunk_loses_only_itself_and_every_reader_says_so() {
+    // Runs beside no wall-clock test (see `busy_turn`).
+    let _busy = crate::common::busy_turn();
     let dir = temp_dir("replay-damaged");
     let procedure = dir.join("mini.toml");
     std::fs::write(&procedure, MINI).expect("procedure");

@@ -539,6 +539,8 @@ fn eight_benches_write_one_postgres_store_at_once_and_lose_nothing() {
 /// was meant for does, once it is back.
 #[test]
 fn a_queued_run_goes_only_to_the_store_it_was_meant_for() {
+    // Runs beside no wall-clock test (see `busy_turn`).
+    let _busy = crate::common::busy_turn();
     let dir = temp_dir("results-queue");
     let home = dir.join("home");
     let at = |db: &Path, args: &[&str]| {

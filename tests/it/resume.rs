@@ -184,6 +184,8 @@ fn the_quick_fault_and_resume_sweep_finds_nothing_wrong() {
 /// a reused directory) is never taken as the run's own.
 #[test]
 fn a_part_of_another_run_is_refused_by_name() {
+    // Runs beside no wall-clock test (see `busy_turn`).
+    let _busy = crate::common::busy_turn();
     let dir = temp_dir("resume-foreign");
     let procedure = dir.join("p.toml");
     std::fs::write(&procedure, MINI).expect("procedure");

@@ -300,6 +300,8 @@ table = { outer_deg = 90.0, inner_deg = 0.0 }
 /// run is an error.
 #[test]
 fn a_full_disk_mid_run_stops_the_log_but_cleanup_runs_to_its_end() {
+    // Runs beside no wall-clock test (see `busy_turn`).
+    let _busy = crate::common::busy_turn();
     let dir = temp_dir("disk-full");
     let p = write(&dir, "cold.toml", COLD_AWAY);
     let out = dir.join("run");

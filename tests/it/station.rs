@@ -342,6 +342,8 @@ fn the_live_foxglove_stream_carries_the_logs_channels_to_a_third_party_client() 
 /// report is written and the bench is read back at rest, as for SIGTERM.
 #[test]
 fn sighup_and_sigquit_stop_the_station_as_sigterm_does() {
+    // Runs beside no wall-clock test (see `busy_turn`).
+    let _busy = crate::common::busy_turn();
     for signal in ["HUP", "QUIT"] {
         let dir = temp_dir(&format!("station-sig{signal}"));
         let mut st = Served::start(&dir, &[]);
@@ -380,6 +382,8 @@ fn sighup_and_sigquit_stop_the_station_as_sigterm_does() {
 /// to make room, and a request sent at once is answered.
 #[test]
 fn a_flood_of_half_open_connections_leaves_the_page_reachable() {
+    // Runs beside no wall-clock test (see `busy_turn`).
+    let _busy = crate::common::busy_turn();
     let dir = temp_dir("station-flood");
     let st = Served::start(&dir, &[]);
     let host = st.base.trim_start_matches("http://").to_owned();
@@ -418,6 +422,8 @@ fn a_flood_of_half_open_connections_leaves_the_page_reachable() {
 /// route: only the run directory's own regular files are served.
 #[test]
 fn a_link_in_a_run_directory_is_not_served() {
+    // Runs beside no wall-clock test (see `busy_turn`).
+    let _busy = crate::common::busy_turn();
     let dir = temp_dir("station-link");
     let st = Served::start(&dir, &[]);
     let (code, body) = st.request("POST", "/api/start", true, SMOKE);
