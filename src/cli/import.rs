@@ -65,7 +65,7 @@ pub fn run_import(args: ImportArgs) -> Result<Outcome> {
     ensure_distinct(&args.out, &[&args.csv, &args.site])?;
     ensure_not_a_record(&args.out, args.force)?;
     let site = load_site(&args.site).context("reading the site file")?;
-    let r = import(&args.csv, site, args.dut.as_deref(), &args.out)?;
+    let r = import(&args.csv, &site, args.dut.as_deref(), &args.out)?;
     let loc = crate::results::Location::resolve(args.db.as_deref(), None);
     match crate::results::Store::open(&loc).and_then(|s| match s {
         Some(mut s) => s.index_log(&args.out).map(|_| Some(s.name().to_owned())),

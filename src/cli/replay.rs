@@ -79,6 +79,11 @@ pub fn run(args: ReplayArgs) -> Result<Outcome> {
         );
     }
     let mut report = Report::new(&r.procedure, &r.result, &r.meta, r.link);
+    if r.meta.imported_from.is_some() {
+        // No moves in an imported run's procedure: its records' poses are
+        // the orientations the file gave.
+        report.positions = crate::report::Position::logged(&r.procedure, &r.poses);
+    }
     if let Some(c) = &coeffs {
         report.coefficients = c.used.clone();
     }

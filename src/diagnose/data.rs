@@ -119,7 +119,7 @@ pub fn load(path: &Path) -> Result<RunData, ReplayError> {
     let mut table: Option<TableState> = None;
     // Each recorded sample with the table's angles and rates it was taken
     // at (turned into a body rate once the logged bench is known).
-    let mut samples: Vec<(Sample, TableAngles, TableAngles)> = Vec::new();
+    let mut samples: Vec<(Sample, Option<TableAngles>, TableAngles)> = Vec::new();
     runlog::read(path, |item| {
         match item {
             Item::Meta { name, entries } if name == RUN_META => {
@@ -153,10 +153,12 @@ pub fn load(path: &Path) -> Result<RunData, ReplayError> {
                         step: t.step.clone(),
                         table_rate_body_dph: Vector3::zeros(),
                     },
-                    TableAngles {
-                        outer_deg: t.outer_deg,
-                        inner_deg: t.inner_deg,
-                    },
+                    t.outer_deg
+                        .zip(t.inner_deg)
+                        .map(|(outer_deg, inner_deg)| TableAngles {
+                            outer_deg,
+                            inner_deg,
+                        }),
                     TableAngles {
                         outer_deg: t.outer_rate_dps,
                         inner_deg: t.inner_rate_dps,
@@ -186,6 +188,12 @@ pub fn load(path: &Path) -> Result<RunData, ReplayError> {
                             s.record
                         )));
                     }
+                };
+                let Some(angles) = angles else {
+                    return Err(log_err(format!(
+                        "record {:?} turns the table, and the log has no table angles to say how",
+                        s.record
+                    )));
                 };
                 s.table_rate_body_dph = g.table_rate_body_dph(angles, rates);
             }

@@ -444,11 +444,13 @@ fn positions(r: &Report) -> String {
     for x in &rows {
         let p = x.position;
         table.push_str(&format!(
-            "<tr><td>{}</td><td>{}</td><td class=num>{:.2}</td><td class=num>{:.2}</td>{}{}</tr>\n",
+            "<tr><td>{}</td><td>{}</td><td class=num>{}</td><td class=num>{}</td>{}{}</tr>\n",
             esc(&p.record),
             esc(&p.description),
-            p.table.outer_deg,
-            p.table.inner_deg,
+            p.table
+                .map_or("-".into(), |t| format!("{:.2}", t.outer_deg)),
+            p.table
+                .map_or("-".into(), |t| format!("{:.2}", t.inner_deg)),
             cell(x.bias),
             cell(x.stability),
         ));

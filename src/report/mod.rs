@@ -101,11 +101,32 @@ pub struct Position {
     pub description: String,
     /// Orientation of the unit, deg.
     pub orientation: Orientation,
-    /// Table axis angles, deg.
-    pub table: TableAngles,
+    /// Table axis angles, deg (null where not known: a run imported from
+    /// another bench without them).
+    pub table: Option<TableAngles>,
 }
 
 impl Position {
+    /// The pose of every record of `p` a measurement uses, from the poses
+    /// logged with the records (an imported run: its orientation as the
+    /// file gave it, table angles where known), in run order.
+    pub fn logged(
+        p: &Procedure,
+        poses: &[(String, Orientation, Option<TableAngles>)],
+    ) -> Vec<Self> {
+        let used = |label: &str| p.measures().any(|m| m.records.iter().any(|r| r == label));
+        poses
+            .iter()
+            .filter(|(label, _, _)| used(label))
+            .map(|(label, orientation, table)| Self {
+                record: label.clone(),
+                description: describe(orientation),
+                orientation: *orientation,
+                table: *table,
+            })
+            .collect()
+    }
+
     /// The pose of every record of `p` a measurement uses: the last move
     /// before the record step (records before any move have none).
     pub fn of(p: &Procedure) -> Vec<Self> {
@@ -125,7 +146,7 @@ impl Position {
                             record: label.clone(),
                             description: describe(&orientation),
                             orientation,
-                            table,
+                            table: Some(table),
                         });
                     }
                 }

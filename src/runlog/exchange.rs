@@ -25,28 +25,103 @@ use crate::bench::BenchConfig;
 use crate::config::{Checker, ConfigError, Source};
 use crate::driver::{ChamberMode, ChamberReading, TableReading};
 use crate::fsutil::{Pending, ensure_distinct};
-use crate::geometry::{Orientation, Site, TableAngles};
+use crate::geometry::{Site, TableAngles, TableGeometry};
 use crate::procedure::{Procedure, StepKind};
 use crate::sequencer::measure::{self, MeasureOutcome, Records};
 use crate::sequencer::{BenchState, Outcome, RunResult, Sink, Tick};
 
-/// `SITE.toml`: the `[site]` of a bench file alone.
-#[derive(Debug, Deserialize)]
+/// `SITE.toml`: the `[site]` of a bench file alone, and, when the run was
+/// made on a two-axis table whose geometry is known, its `[table.geometry]`
+/// (the table angles of the rows then follow from their orientation).
+#[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
-struct SiteFile {
-    site: Site,
+pub struct SiteFile {
+    /// Where the run stood.
+    pub site: Site,
+    /// The table the run was made on, if given.
+    #[serde(default)]
+    pub table: Option<SiteTable>,
+}
+
+/// `[table]` of a site file.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SiteTable {
+    /// Axes and mount of the table the run was made on.
+    pub geometry: TableGeometry,
+}
+
+impl SiteFile {
+    /// A site alone: no table geometry.
+    pub fn of(site: Site) -> Self {
+        Self { site, table: None }
+    }
 }
 
 /// Read and check a site file.
-pub fn load_site(path: &Path) -> Result<Site, ConfigError> {
+pub fn load_site(path: &Path) -> Result<SiteFile, ConfigError> {
     site_from_source(&Source::read(path)?)
 }
 
 /// Parse and check a site file's text.
-pub fn site_from_source(src: &Source) -> Result<Site, ConfigError> {
+pub fn site_from_source(src: &Source) -> Result<SiteFile, ConfigError> {
     let f: SiteFile = src.parse()?;
-    f.site.validate(&Checker::new(src), "site")?;
-    Ok(f.site)
+    let c = Checker::new(src);
+    f.site.validate(&c, "site")?;
+    if let Some(t) = &f.table {
+        t.geometry.validate(&c, "table.geometry")?;
+    }
+    Ok(f)
+}
+
+/// The table angles of every row: from its own columns, else from the
+/// site file's table geometry, else not known. Rows whose angles
+/// contradict their orientation under that geometry, or whose pose the
+/// geometry cannot reach, are refused, a few of them named.
+fn table_angles(
+    rows: &[Row],
+    geometry: Option<&TableGeometry>,
+    name: &str,
+) -> Result<Vec<Option<TableAngles>>, ImportError> {
+    let Some(g) = geometry else {
+        return Ok(rows.iter().map(Row::table_angles).collect());
+    };
+    let mut out = Vec::with_capacity(rows.len());
+    let mut bad: Vec<String> = Vec::new();
+    let mut count = 0usize;
+    for r in rows {
+        let o = r.orientation();
+        let got = match r.table_angles() {
+            Some(a) => {
+                let off = crate::geometry::rotation_distance_deg(&g.rotation(a), &o.rotation());
+                (off <= 0.1).then_some(a).ok_or_else(|| {
+                    format!(
+                        "its table angles (outer {} deg, inner {} deg) put the unit {off:.2} deg from its orientation",
+                        a.outer_deg, a.inner_deg
+                    )
+                })
+            }
+            None => g.angles_for(o).map_err(|e| e.to_string()),
+        };
+        match got {
+            Ok(a) => out.push(Some(a)),
+            Err(why) => {
+                count += 1;
+                if bad.len() < 3 {
+                    bad.push(format!("time_s = {} (step {:?}): {why}", r.time_s, r.step));
+                }
+            }
+        }
+    }
+    if count > 0 {
+        return Err(ImportError::Other(format!(
+            "{name}: {count} row(s) do not fit the site file's [table.geometry]; {}{}; \
+             correct the geometry, or leave it out (the orientation alone is enough)",
+            bad.join("; "),
+            if count > bad.len() { "; ..." } else { "" }
+        )));
+    }
+    Ok(out)
 }
 
 /// Why an import or export failed.
@@ -111,6 +186,8 @@ fn to_one_hz(rows: &[Row], name: &str) -> Result<Vec<Row>, ImportError> {
                 elevation_deg: first.elevation_deg,
                 roll_deg: first.roll_deg,
                 step: first.step.clone(),
+                outer_deg: first.outer_deg,
+                inner_deg: first.inner_deg,
             });
         }
         acc.clear();
@@ -238,7 +315,7 @@ fn procedure_text(name: &str, parts: &[(String, usize, usize)], rows: &[Row]) ->
 /// `out`; `dut` is the unit's serial (default: the CSV's file stem).
 pub fn import(
     csv: &Path,
-    site: Site,
+    site: &SiteFile,
     dut: Option<&str>,
     out: &Path,
 ) -> Result<Imported, ImportError> {
@@ -260,9 +337,15 @@ pub fn import(
     })?;
     let imported_at = crate::clock::utc_now().to_rfc3339();
     let rows = to_one_hz(&interchange::read(csv)?, &name)?;
+    let geometry = site.table.as_ref().map(|t| t.geometry);
+    let angles = table_angles(&rows, geometry.as_ref(), &name)?;
     let parts = stretches(&rows);
     let mut bench = BenchConfig::embedded();
+    let site = site.site;
     bench.site = site;
+    if let Some(g) = geometry {
+        bench.table.geometry = g;
+    }
     let text = procedure_text(&name, &parts, &rows);
     let procedure = Procedure::from_source(&Source::from_text("imported procedure", &text), &bench)
         .map_err(|e| {
@@ -300,8 +383,15 @@ pub fn import(
     };
     let mut pending =
         Pending::output(out).map_err(|e| ImportError::Other(format!("{}: {e}", out.display())))?;
-    let (outcome, measurements) =
-        write_log(&mut pending, &meta, &bench, site, &procedure, &parts, &rows)?;
+    let (outcome, measurements) = write_log(
+        &mut pending,
+        &meta,
+        site,
+        &procedure,
+        &parts,
+        &rows,
+        &angles,
+    )?;
     pending
         .commit()
         .map_err(|e| ImportError::Other(format!("writing {}: {e}", out.display())))?;
@@ -317,11 +407,11 @@ pub fn import(
 fn write_log(
     tmp: &mut Pending,
     meta: &RunMeta,
-    bench: &BenchConfig,
     site: Site,
     procedure: &Procedure,
     parts: &[(String, usize, usize)],
     rows: &[Row],
+    angles: &[Option<TableAngles>],
 ) -> Result<(Outcome, Vec<measure::Measurement>), ImportError> {
     let scales = FrameScales {
         dt_s: 1.0,
@@ -334,7 +424,6 @@ fn write_log(
     let tmp_path = tmp.path().to_owned();
     let io = |e: std::io::Error| ImportError::Other(format!("writing {}: {e}", tmp_path.display()));
     let mut rec = Recorder::from_file(file, &tmp_path, meta, 0, scales).map_err(io)?;
-    let geometry = &bench.table.geometry;
     let mut records = Records::default();
     let steps: Vec<_> = procedure.main.iter().collect();
     let mut step_at = 0;
@@ -351,14 +440,12 @@ fn write_log(
         rec.event(t0, Level::Debug, &step.start_message())
             .map_err(io)?;
         records.start(label);
-        for r in &rows[*a..*b] {
-            let o = Orientation::new(r.azimuth_deg, r.elevation_deg, r.roll_deg);
-            let angles = geometry.angles_for(o).map_err(|e| {
-                ImportError::Other(format!(
-                    "the row at time_s = {} (step {:?}): {e}; the embedded bench's two-axis table cannot take this pose",
-                    r.time_s, r.step
-                ))
-            })?;
+        for (r, known) in rows[*a..*b].iter().zip(&angles[*a..*b]) {
+            // The orientation is the measured fact; the table angles are
+            // written only where they are known.
+            let o = r.orientation();
+            rec.set_table_angles_known(known.is_some());
+            let angles = known.unwrap_or_default();
             let state = BenchState {
                 t_s: r.time_s + 0.5,
                 chamber: ChamberReading {

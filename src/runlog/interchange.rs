@@ -28,6 +28,15 @@ pub const HEADER: [&str; 10] = [
     "step",
 ];
 
+/// Optional columns after the ten: the table's axis angles at the row, deg,
+/// when the run was made on a two-axis table and they are known (both or
+/// neither; an empty cell is a row whose angles are not known).
+pub const TABLE_COLUMNS: [&str; 2] = ["outer_deg", "inner_deg"];
+
+/// Table angles a row may have, deg (ten turns either way, as a bench's
+/// table range).
+pub const TABLE_RANGE_DEG: (f64, f64) = (-3600.0, 3600.0);
+
 /// Time since power-on a row may have, s (from power-on to 115 days).
 pub const TIME_RANGE_S: (f64, f64) = (0.0, 1e7);
 /// Rate a row may have, deg/h (1000 deg/s either way: beyond any laser
@@ -61,6 +70,84 @@ pub struct Row {
     pub roll_deg: f64,
     /// Step label.
     pub step: String,
+    /// Outer table axis angle, deg, where known.
+    #[serde(default)]
+    pub outer_deg: Option<f64>,
+    /// Inner table axis angle, deg, where known.
+    #[serde(default)]
+    pub inner_deg: Option<f64>,
+}
+
+impl Row {
+    /// The orientation of the body.
+    pub fn orientation(&self) -> crate::geometry::Orientation {
+        crate::geometry::Orientation::new(self.azimuth_deg, self.elevation_deg, self.roll_deg)
+    }
+
+    /// The table angles, when the row has both.
+    pub fn table_angles(&self) -> Option<crate::geometry::TableAngles> {
+        Some(crate::geometry::TableAngles {
+            outer_deg: self.outer_deg?,
+            inner_deg: self.inner_deg?,
+        })
+    }
+
+    /// What is wrong with this row after `prev`, in words naming the
+    /// field: a value that is not finite or outside what a gyro run can
+    /// record, a time that does not increase, one table angle without the
+    /// other.
+    pub fn check(&self, prev: Option<&Row>) -> Result<(), String> {
+        let mut fields = vec![
+            (self.time_s, "time_s", TIME_RANGE_S),
+            (self.rate_dph, "rate_dph", RATE_RANGE_DPH),
+            (self.t1_c, "t1_c", TEMP_RANGE_C),
+            (self.t2_c, "t2_c", TEMP_RANGE_C),
+            (self.tcase_c, "tcase_c", TEMP_RANGE_C),
+            (self.chamber_c, "chamber_c", TEMP_RANGE_C),
+            (self.azimuth_deg, "azimuth_deg", ANGLE_RANGE_DEG),
+            (self.elevation_deg, "elevation_deg", (-90.0, 90.0)),
+            (self.roll_deg, "roll_deg", ANGLE_RANGE_DEG),
+        ];
+        fields.extend(self.outer_deg.map(|v| (v, "outer_deg", TABLE_RANGE_DEG)));
+        fields.extend(self.inner_deg.map(|v| (v, "inner_deg", TABLE_RANGE_DEG)));
+        for (v, name, (lo, hi)) in fields {
+            if !v.is_finite() {
+                return Err(format!("field {name}: {v} is not a finite number"));
+            }
+            if !(lo..=hi).contains(&v) {
+                return Err(format!(
+                    "field {name}: {} is outside {}..{}, beyond what a gyro run can record",
+                    num(v),
+                    num(lo),
+                    num(hi)
+                ));
+            }
+        }
+        if self.outer_deg.is_some() != self.inner_deg.is_some() {
+            return Err(format!(
+                "field {}: empty while {} has a value (give both table angles or neither)",
+                if self.outer_deg.is_none() {
+                    "outer_deg"
+                } else {
+                    "inner_deg"
+                },
+                if self.outer_deg.is_none() {
+                    "inner_deg"
+                } else {
+                    "outer_deg"
+                },
+            ));
+        }
+        if let Some(prev) = prev
+            && self.time_s <= prev.time_s
+        {
+            return Err(format!(
+                "field time_s: {} does not follow {} (time must increase)",
+                self.time_s, prev.time_s
+            ));
+        }
+        Ok(())
+    }
 }
 
 /// What is wrong with a CSV, and where.
@@ -111,12 +198,14 @@ pub fn parse(input: impl std::io::Read, name: &str) -> Result<Vec<Row>, CsvError
         .map_err(|e| err(1, format!("unreadable header: {e}")))?
         .clone();
     let got: Vec<&str> = header.iter().collect();
-    if got != HEADER {
+    let with_table: Vec<&str> = HEADER.iter().chain(&TABLE_COLUMNS).copied().collect();
+    if got != HEADER && got != with_table {
         return Err(err(
             1,
             format!(
-                "the header must be `{}`; found `{}`",
+                "the header must be `{}` (then `,{}` where the table angles are known); found `{}`",
                 HEADER.join(","),
+                TABLE_COLUMNS.join(","),
                 got.join(",")
             ),
         ));
@@ -133,7 +222,7 @@ pub fn parse(input: impl std::io::Read, name: &str) -> Result<Vec<Row>, CsvError
                 csv::ErrorKind::Deserialize { err: d, .. } => {
                     let field = d
                         .field()
-                        .and_then(|i| HEADER.get(i as usize))
+                        .and_then(|i| got.get(i as usize))
                         .map_or(String::new(), |h| format!("field {h}: "));
                     format!("{field}{}", d.kind())
                 }
@@ -141,46 +230,7 @@ pub fn parse(input: impl std::io::Read, name: &str) -> Result<Vec<Row>, CsvError
             };
             err(line, message)
         })?;
-        for (v, name, (lo, hi)) in [
-            (row.time_s, "time_s", TIME_RANGE_S),
-            (row.rate_dph, "rate_dph", RATE_RANGE_DPH),
-            (row.t1_c, "t1_c", TEMP_RANGE_C),
-            (row.t2_c, "t2_c", TEMP_RANGE_C),
-            (row.tcase_c, "tcase_c", TEMP_RANGE_C),
-            (row.chamber_c, "chamber_c", TEMP_RANGE_C),
-            (row.azimuth_deg, "azimuth_deg", ANGLE_RANGE_DEG),
-            (row.elevation_deg, "elevation_deg", (-90.0, 90.0)),
-            (row.roll_deg, "roll_deg", ANGLE_RANGE_DEG),
-        ] {
-            if !v.is_finite() {
-                return Err(err(
-                    line,
-                    format!("field {name}: {v} is not a finite number"),
-                ));
-            }
-            if !(lo..=hi).contains(&v) {
-                return Err(err(
-                    line,
-                    format!(
-                        "field {name}: {} is outside {}..{}, beyond what a gyro run can record",
-                        num(v),
-                        num(lo),
-                        num(hi)
-                    ),
-                ));
-            }
-        }
-        if let Some(prev) = rows.last()
-            && row.time_s <= prev.time_s
-        {
-            return Err(err(
-                line,
-                format!(
-                    "field time_s: {} does not follow {} (time must increase)",
-                    row.time_s, prev.time_s
-                ),
-            ));
-        }
+        row.check(rows.last()).map_err(|m| err(line, m))?;
         rows.push(row);
     }
     if rows.is_empty() {

@@ -29,6 +29,7 @@ use super::schema::{
 use crate::bench::BenchConfig;
 use crate::coeffs::{CoefficientSet, Compensation};
 use crate::config::Source;
+use crate::geometry::{Orientation, TableAngles};
 use crate::procedure::{Procedure, StepKind};
 use crate::protocol::frame::LinkStats;
 use crate::sequencer::measure::{self, IntervalState, Records, TickSums};
@@ -58,6 +59,10 @@ pub struct Replayed {
     /// Whether the log holds its end record (the run's own outcome); a
     /// log without one was cut short (a kill, a full disk).
     pub ended: bool,
+    /// The pose each record of an imported run was taken in, as logged
+    /// (label, orientation, table angles where known), in run order; a
+    /// live run's poses are its procedure's moves.
+    pub poses: Vec<(String, Orientation, Option<TableAngles>)>,
 }
 
 /// Why a log cannot be replayed.
@@ -142,6 +147,8 @@ struct LoggedTable {
     t_s: f64,
     earth_rate_dph: f64,
     rates_dps: (f64, f64),
+    orientation: Orientation,
+    angles: Option<TableAngles>,
 }
 
 struct State<'a> {
@@ -156,6 +163,8 @@ struct State<'a> {
     pending: Option<(TickSums, Scales)>,
     chamber_c: f64,
     table: Option<LoggedTable>,
+    /// The pose of each record of an imported run, as logged.
+    poses: Vec<(String, Orientation, Option<TableAngles>)>,
     /// How far a record's ends may fall off its frames on the logged bench.
     record_edge_s: f64,
     link: LinkStats,
@@ -362,13 +371,26 @@ impl State<'_> {
                     t_s: m.t_s,
                     earth_rate_dph: m.earth_rate_dph,
                     rates_dps: (m.outer_rate_dps, m.inner_rate_dps),
+                    orientation: Orientation::new(m.azimuth_deg, m.elevation_deg, m.roll_deg),
+                    angles: m.outer_deg.zip(m.inner_deg).map(|(outer_deg, inner_deg)| {
+                        TableAngles {
+                            outer_deg,
+                            inner_deg,
+                        }
+                    }),
                 });
             }
             topics::RATE_1HZ => {
                 // The live run wrote this interval from the tick just logged.
                 let m: Rate1Hz = serde_json::from_slice(data).map_err(|e| bad(topic, e))?;
                 let Some((sums, sc)) = self.pending.take() else {
-                    // No frames before it: an imported run; take the interval as logged.
+                    // No frames before it: an imported run; take the interval as logged,
+                    // and the pose its record was taken in.
+                    if let (Some(label), Some(t)) = (&m.record, &self.table)
+                        && !self.poses.iter().any(|p| &p.0 == label)
+                    {
+                        self.poses.push((label.clone(), t.orientation, t.angles));
+                    }
                     self.records.push(m.interval(), m.record.as_deref());
                     return Ok(());
                 };
@@ -521,6 +543,7 @@ pub fn replay(path: &Path, coeffs: Option<&Compensation>) -> Result<Replayed, Re
         pending: None,
         chamber_c: f64::NAN,
         table: None,
+        poses: Vec::new(),
         record_edge_s: 0.0,
         link: LinkStats::default(),
         frames: 0,
@@ -633,6 +656,7 @@ pub fn replay(path: &Path, coeffs: Option<&Compensation>) -> Result<Replayed, Re
         completed_steps: st.completed,
         part,
         ended,
+        poses: st.poses,
     })
 }
 

@@ -56,7 +56,7 @@ pub const CHANNELS: [(&str, &str, &str); 7] = [
 const FRAMES_SCHEMA: &str = r#"{"type":"object","title":"gyrobench.GyroFrames","description":"Consecutive gyro frames; element i of every array is frame i","properties":{"t0_s":{"type":"number","description":"device time of the first frame, s since the run started"},"dt_s":{"type":"number","description":"frame period, s"},"lsb_arcsec":{"type":"number"},"temp_lsb_c":{"type":"number"},"seq":{"type":"array","items":{"type":"integer"}},"counts":{"type":"array","items":{"type":"integer"},"description":"delta-angle counts"},"t1_raw":{"type":"array","items":{"type":"integer"}},"t2_raw":{"type":"array","items":{"type":"integer"}},"tcase_raw":{"type":"array","items":{"type":"integer"}},"status":{"type":"array","items":{"type":"integer"}}},"required":["t0_s","dt_s","lsb_arcsec","temp_lsb_c","seq","counts","t1_raw","t2_raw","tcase_raw","status"]}"#;
 const RATE_SCHEMA: &str = r#"{"type":"object","title":"gyrobench.Rate1Hz","properties":{"t_s":{"type":"number"},"rate_dph":{"type":"number","description":"measured rate, Earth rate included"},"reference_dph":{"type":"number","description":"Earth + table rate on the nominal axis"},"bias_dph":{"type":"number","description":"rate minus reference"},"t1_c":{"type":"number"},"t2_c":{"type":"number"},"tcase_c":{"type":"number"},"chamber_c":{"type":"number"},"frames":{"type":"integer"},"record":{"type":["string","null"]}},"required":["t_s","rate_dph","reference_dph","bias_dph","t1_c","t2_c","tcase_c","chamber_c","frames"]}"#;
 const CHAMBER_SCHEMA: &str = r#"{"type":"object","title":"gyrobench.ChamberState","properties":{"t_s":{"type":"number"},"air_c":{"type":"number"},"set_point_c":{"type":"number"},"mode":{"type":"string"},"alarms":{"type":"array","items":{"type":"integer"}}},"required":["t_s","air_c","set_point_c","mode","alarms"]}"#;
-const TABLE_SCHEMA: &str = r#"{"type":"object","title":"gyrobench.TableState","properties":{"t_s":{"type":"number"},"outer_deg":{"type":"number"},"inner_deg":{"type":"number"},"outer_rate_dps":{"type":"number"},"inner_rate_dps":{"type":"number"},"commanded_outer_deg":{"type":"number"},"commanded_inner_deg":{"type":"number"},"azimuth_deg":{"type":"number"},"elevation_deg":{"type":"number"},"roll_deg":{"type":"number"},"earth_rate_dph":{"type":"number"},"in_position":{"type":"boolean"},"step":{"type":"string"}},"required":["t_s","outer_deg","inner_deg","outer_rate_dps","inner_rate_dps","commanded_outer_deg","commanded_inner_deg","azimuth_deg","elevation_deg","roll_deg","earth_rate_dph","step"]}"#;
+const TABLE_SCHEMA: &str = r#"{"type":"object","title":"gyrobench.TableState","description":"The pose of the unit; the table axis angles are absent where they are not known (a run imported from another bench)","properties":{"t_s":{"type":"number"},"outer_deg":{"type":"number"},"inner_deg":{"type":"number"},"outer_rate_dps":{"type":"number"},"inner_rate_dps":{"type":"number"},"commanded_outer_deg":{"type":"number"},"commanded_inner_deg":{"type":"number"},"azimuth_deg":{"type":"number"},"elevation_deg":{"type":"number"},"roll_deg":{"type":"number"},"earth_rate_dph":{"type":"number"},"in_position":{"type":"boolean"},"step":{"type":"string"}},"required":["t_s","outer_rate_dps","inner_rate_dps","azimuth_deg","elevation_deg","roll_deg","earth_rate_dph","step"]}"#;
 const LOG_SCHEMA: &str = r#"{"type":"object","title":"foxglove.Log","properties":{"timestamp":{"type":"object","properties":{"sec":{"type":"integer","minimum":0},"nsec":{"type":"integer","minimum":0}}},"level":{"type":"integer","description":"1 debug, 2 info, 3 warning, 4 error, 5 fatal"},"message":{"type":"string"},"name":{"type":"string"},"file":{"type":"string"},"line":{"type":"integer"}},"required":["timestamp","level","message","name","file","line"]}"#;
 const LINK_SCHEMA: &str = r#"{"type":"object","title":"gyrobench.LinkStats","properties":{"t_s":{"type":"number"},"bytes":{"type":"integer"},"frames":{"type":"integer"},"resyncs":{"type":"integer"},"skipped_bytes":{"type":"integer"},"crc_errors":{"type":"integer"},"lost_frames":{"type":"integer"},"duplicates":{"type":"integer"},"reconnects":{"type":"integer"},"longest_gap_ms":{"type":"integer","description":"longest stretch without a valid frame, ms (host clock)"}},"required":["t_s","frames","lost_frames","crc_errors"]}"#;
 const STEP_SCHEMA: &str = r#"{"type":"object","title":"gyrobench.StepEvent","description":"A procedure step started, ended, or was run to restore a resumed run's conditions","properties":{"t_s":{"type":"number","description":"device time, s since this part of the run started"},"phase":{"type":"string","enum":["start","end","restore"]},"index":{"type":"integer","description":"position of the step in run order (setup, main, cleanup)"},"key":{"type":"string","description":"dotted key of the step in the procedure file"},"line":{"type":"integer"},"group":{"type":"string","enum":["setup","main","cleanup"]},"action":{"type":"string"},"description":{"type":"string"},"link":{"type":"object","description":"at the end of a record: the gyro link's figures over it"}},"required":["t_s","phase","index","key","line","group","action","description"]}"#;
@@ -172,18 +172,23 @@ pub struct ChamberState {
 pub struct TableState {
     /// Device time, s.
     pub t_s: f64,
-    /// Outer axis angle, deg.
-    pub outer_deg: f64,
-    /// Inner axis angle, deg.
-    pub inner_deg: f64,
+    /// Outer axis angle, deg (absent when not known: a run imported from
+    /// another bench without its table angles).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub outer_deg: Option<f64>,
+    /// Inner axis angle, deg (absent when not known).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub inner_deg: Option<f64>,
     /// Outer axis rate, deg/s.
     pub outer_rate_dps: f64,
     /// Inner axis rate, deg/s.
     pub inner_rate_dps: f64,
-    /// Outer angle last commanded, deg.
-    pub commanded_outer_deg: f64,
-    /// Inner angle last commanded, deg.
-    pub commanded_inner_deg: f64,
+    /// Outer angle last commanded, deg (absent when not known).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub commanded_outer_deg: Option<f64>,
+    /// Inner angle last commanded, deg (absent when not known).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub commanded_inner_deg: Option<f64>,
     /// Body azimuth, deg.
     pub azimuth_deg: f64,
     /// Body elevation, deg.

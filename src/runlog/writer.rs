@@ -54,6 +54,9 @@ pub struct Recorder {
     /// Device time from which the disk is full (`--inject disk-full@T` on
     /// the simulated bench).
     full_from_s: Option<f64>,
+    /// Whether the table angles of the states written are known (not for
+    /// a run imported from another bench without them).
+    table_angles_known: bool,
 }
 
 impl std::fmt::Debug for Recorder {
@@ -155,6 +158,7 @@ impl Recorder {
             messages: BTreeMap::new(),
             failed: None,
             full_from_s: None,
+            table_angles_known: true,
             live: None,
         })
     }
@@ -162,6 +166,12 @@ impl Recorder {
     /// Publish every message written from now on on `live` too.
     pub fn publish_live(&mut self, live: Arc<Live>) {
         self.live = Some(live);
+    }
+
+    /// Whether the table states written from now on carry table angles
+    /// (an imported run knows its orientation, not always its table's).
+    pub fn set_table_angles_known(&mut self, known: bool) {
+        self.table_angles_known = known;
     }
 
     /// The file being written.
@@ -330,14 +340,15 @@ impl Sink for Recorder {
                 alarms: s.chamber.alarms.clone(),
             };
             self.write_json(topics::CHAMBER, s.t_s, &chamber)?;
+            let known = self.table_angles_known;
             let table = TableState {
                 t_s: s.t_s,
-                outer_deg: s.table.angles.outer_deg,
-                inner_deg: s.table.angles.inner_deg,
+                outer_deg: known.then_some(s.table.angles.outer_deg),
+                inner_deg: known.then_some(s.table.angles.inner_deg),
                 outer_rate_dps: s.table.rates.outer_deg,
                 inner_rate_dps: s.table.rates.inner_deg,
-                commanded_outer_deg: s.commanded.outer_deg,
-                commanded_inner_deg: s.commanded.inner_deg,
+                commanded_outer_deg: known.then_some(s.commanded.outer_deg),
+                commanded_inner_deg: known.then_some(s.commanded.inner_deg),
                 azimuth_deg: s.orientation.azimuth_deg,
                 elevation_deg: s.orientation.elevation_deg,
                 roll_deg: s.orientation.roll_deg,

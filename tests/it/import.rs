@@ -294,3 +294,293 @@ fn export_and_import_refuse_to_write_over_a_runs_record() {
     assert_eq!(o.status.code(), Some(0), "{}", crate::common::stderr(&o));
     std::fs::remove_dir_all(&dir).expect("cleanup");
 }
+
+/// Earth rate on a sensitive axis at azimuth `az` and elevation `el`
+/// (deg) at latitude `lat`, deg/h: `W (sin e sin phi + cos e cos psi cos phi)`
+/// (docs/physics.md), written out here rather than taken from the crate.
+fn earth_rate_dph(lat: f64, az: f64, el: f64) -> f64 {
+    let w = 7.292_115e-5_f64.to_degrees() * 3600.0;
+    let (phi, psi, e) = (lat.to_radians(), az.to_radians(), el.to_radians());
+    w * (e.sin() * phi.sin() + e.cos() * psi.cos() * phi.cos())
+}
+
+/// Orientations spread over the whole sphere of axis directions (a
+/// Fibonacci lattice, with the poles, the horizontal axis pointing north
+/// a low-latitude lab reverses about, and the 55 deg tilt made toward
+/// north), each at every roll in 45 deg steps.
+fn poses_on_the_sphere() -> Vec<(f64, f64, f64)> {
+    let mut axes = vec![
+        (0.0, 90.0),
+        (0.0, -90.0),
+        (0.0, 0.0),
+        (180.0, 0.0),
+        (0.0, 35.0),
+    ];
+    let n = 24;
+    for i in 0..n {
+        let z = 1.0 - (2.0 * i as f64 + 1.0) / n as f64;
+        let az = (i as f64 * 137.507_764_05).rem_euclid(360.0);
+        axes.push((az, z.asin().to_degrees()));
+    }
+    let mut out = Vec::new();
+    for (az, el) in axes {
+        for k in 0..8 {
+            out.push((az, el, -180.0 + 45.0 * k as f64));
+        }
+    }
+    out
+}
+
+#[test]
+fn any_orientation_on_the_sphere_imports_judges_and_exports_back() {
+    let dir = temp_dir("import-sphere");
+    let site = dir.join("site.toml");
+    std::fs::write(&site, SITE).expect("site");
+    // Six 1 Hz rows per pose: the rate is the Earth rate the pose sees plus
+    // a constant bias, so every figure of the drift is zero exactly when
+    // the importer takes the pose as given.
+    let bias = 3.25;
+    let mut csv = String::from(
+        "time_s,rate_dph,t1_c,t2_c,tcase_c,chamber_c,azimuth_deg,elevation_deg,roll_deg,step\n",
+    );
+    let poses = poses_on_the_sphere();
+    let mut t = 0.5;
+    for (i, (az, el, roll)) in poses.iter().enumerate() {
+        for _ in 0..6 {
+            let rate = earth_rate_dph(50.45, *az, *el) + bias;
+            csv.push_str(&format!(
+                "{t:.3},{rate},20.5,20.4,20.1,20,{az},{el},{roll},pose_{i}\n"
+            ));
+            t += 1.0;
+        }
+    }
+    let file = dir.join("sphere.csv");
+    std::fs::write(&file, &csv).expect("csv");
+    let log = dir.join("sphere.mcap");
+    let out = gyrobench(&[
+        "import",
+        s(&file),
+        "--site",
+        s(&site),
+        "-o",
+        s(&log),
+        "--db",
+        "none",
+    ]);
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+
+    // Export gives the very rows back.
+    let back = dir.join("back.csv");
+    let out = gyrobench(&["export", s(&log), "-o", s(&back)]);
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let (a, b) = (rows(&file), rows(&back));
+    assert_eq!(a.len(), poses.len() * 6);
+    assert_eq!(a.len(), b.len());
+    for (x, y) in a.iter().zip(&b) {
+        assert_eq!(x[9], y[9], "step label");
+        for c in 0..9 {
+            let (u, v): (f64, f64) = (x[c].parse().expect("number"), y[c].parse().expect("number"));
+            assert!((u - v).abs() < 1e-9, "{}: column {c}: {u} vs {v}", x[9]);
+        }
+    }
+
+    // Replay judges it from the orientations: the Earth rate of every pose
+    // is taken out (no drift left), and each record's position is its pose,
+    // with no table angles (none were given).
+    let rep = dir.join("replay");
+    let out = gyrobench(&["replay", s(&log), "--out", s(&rep)]);
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let r: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(rep.join("report.json")).expect("report"))
+            .expect("JSON");
+    let raw = r["measurements"]
+        .as_array()
+        .expect("list")
+        .iter()
+        .find(|m| m["name"] == "raw_drift_pp_dph")
+        .and_then(|m| m["value"].as_f64())
+        .expect("raw drift judged");
+    assert!(
+        raw.abs() < 1e-6,
+        "the drift left by the reference: {raw} deg/h"
+    );
+    let positions = r["positions"].as_array().expect("positions");
+    assert_eq!(positions.len(), poses.len());
+    for (p, (az, el, roll)) in positions.iter().zip(&poses) {
+        let o = &p["orientation"];
+        assert_eq!(o["azimuth_deg"].as_f64(), Some(*az), "{p}");
+        assert_eq!(o["elevation_deg"].as_f64(), Some(*el), "{p}");
+        assert_eq!(o["roll_deg"].as_f64(), Some(*roll), "{p}");
+        assert!(p["table"].is_null(), "{p}");
+    }
+    // The pose a low-latitude lab reverses about is named for what it is.
+    assert_eq!(
+        positions[2 * 8]["description"].as_str(),
+        Some("axis horizontal toward azimuth 0 deg, roll 180 deg"),
+        "{}",
+        positions[2 * 8]
+    );
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
+
+#[test]
+fn a_table_geometry_with_the_site_gives_table_angles_or_names_the_rows_it_cannot_reach() {
+    let dir = temp_dir("import-geometry");
+    // The study's table: its outer axis on the north-south line, the unit
+    // along the inner axis; it reaches axis up and the tilts toward east,
+    // never the axis horizontal pointing north.
+    let site = dir.join("site.toml");
+    std::fs::write(
+        &site,
+        format!(
+            "{SITE}\n[table.geometry]\nouter_axis_ned = [-1.0, 0.0, 0.0]\ninner_axis_ned = [0.0, 1.0, 0.0]\nmount = {{ azimuth_deg = 90.0, elevation_deg = 0.0, roll_deg = 0.0 }}\n"
+        ),
+    )
+    .expect("site");
+    let head =
+        "time_s,rate_dph,t1_c,t2_c,tcase_c,chamber_c,azimuth_deg,elevation_deg,roll_deg,step\n";
+    let mut reachable = String::from(head);
+    for i in 0..10 {
+        reachable.push_str(&format!("{}.5,12,20,20,20,20,0,90,-90,up\n", i));
+    }
+    let good = dir.join("up.csv");
+    std::fs::write(&good, &reachable).expect("csv");
+    let log = dir.join("up.mcap");
+    let out = gyrobench(&[
+        "import",
+        s(&good),
+        "--site",
+        s(&site),
+        "-o",
+        s(&log),
+        "--db",
+        "none",
+    ]);
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let rep = dir.join("replay-up");
+    // The log's table states carry the angles the geometry gives.
+    let out = gyrobench(&["replay", s(&log), "--out", s(&rep)]);
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+
+    let mut north = String::from(head);
+    for i in 0..10 {
+        north.push_str(&format!("{}.5,9,20,20,20,20,0,0,0,north\n", i));
+    }
+    let bad = dir.join("north.csv");
+    std::fs::write(&bad, &north).expect("csv");
+    let log = dir.join("north.mcap");
+    let out = gyrobench(&[
+        "import",
+        s(&bad),
+        "--site",
+        s(&site),
+        "-o",
+        s(&log),
+        "--db",
+        "none",
+    ]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("10 row(s) do not fit the site file's [table.geometry]"),
+        "{err}"
+    );
+    assert!(err.contains("time_s = 0.5 (step \"north\")"), "{err}");
+    assert!(!log.exists());
+    // Without the geometry the same rows are taken as they are.
+    let plain = dir.join("plain-site.toml");
+    std::fs::write(&plain, SITE).expect("site");
+    let out = gyrobench(&[
+        "import",
+        s(&bad),
+        "--site",
+        s(&plain),
+        "-o",
+        s(&log),
+        "--db",
+        "none",
+    ]);
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+
+    // Table-angle columns: taken as given, and checked against the geometry.
+    let mut with_angles = String::from(head.trim_end());
+    with_angles.push_str(",outer_deg,inner_deg\n");
+    for i in 0..10 {
+        with_angles.push_str(&format!(
+            "{}.5,12,20,20,20,20,0,90,-90,up,90,{}\n",
+            i,
+            if i < 5 { 0 } else { 30 }
+        ));
+    }
+    let cols = dir.join("cols.csv");
+    std::fs::write(&cols, &with_angles).expect("csv");
+    let log = dir.join("cols.mcap");
+    let out = gyrobench(&[
+        "import",
+        s(&cols),
+        "--site",
+        s(&plain),
+        "-o",
+        s(&log),
+        "--db",
+        "none",
+    ]);
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    std::fs::remove_file(&log).expect("rm");
+    // The unit lies along the inner axis: the inner angle turns it about
+    // its own axis, and 30 deg of it contradicts the roll the rows give, so
+    // the geometry refuses the last five rows.
+    let out = gyrobench(&[
+        "import",
+        s(&cols),
+        "--site",
+        s(&site),
+        "-o",
+        s(&log),
+        "--db",
+        "none",
+    ]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains("5 row(s) do not fit"), "{err}");
+    assert!(
+        err.contains("its table angles (outer 90 deg, inner 30 deg)"),
+        "{err}"
+    );
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
