@@ -9,18 +9,26 @@ use clap::Args;
 
 use super::{Outcome, Usage};
 use crate::fsutil::{ensure_distinct, ensure_not_a_record};
-use crate::runlog::exchange::{export, import, load_site};
+use crate::runlog::exchange::{export, import, import_mapped, load_site};
 
 #[derive(Debug, Args)]
 #[command(after_help = after_help!(
-    "gyrobench import fixtures/import/lab-run.csv --site fixtures/import/site.toml -o lab-run.mcap",
+    "gyrobench import fixtures/import/lab-run.csv --site fixtures/import/site.toml -o lab-run.mcap\n  \
+     gyrobench import fixtures/import/iso-dps-kelvin.csv --map fixtures/import/iso-dps-kelvin.map.toml \
+     --site fixtures/import/site.toml -o iso.mcap",
     "0 the log is written, whatever its figures (they are for reference: `replay` of the log \
      gives the verdict), 1 error (a bad row or site file, I/O), 2 usage (an output that is an \
      input, or a run's log or run directory file without --force)"
 ))]
 pub struct ImportArgs {
-    /// Interchange CSV (docs/analysis.md, "Interchange CSV").
+    /// Interchange CSV (docs/analysis.md, "Interchange CSV"), or a lab's
+    /// own file with --map.
     csv: PathBuf,
+    /// An import map (TOML) saying how to read a lab's own file: which
+    /// column is time, rate, temperatures, orientation and step, in which
+    /// units (docs/analysis.md, "Import maps"; examples in fixtures/import/).
+    #[arg(long)]
+    map: Option<PathBuf>,
     /// Where the run stood: a TOML file with a `[site]` table.
     #[arg(long)]
     site: PathBuf,
@@ -62,10 +70,18 @@ pub fn run_import(args: ImportArgs) -> Result<Outcome> {
     if let Some(d) = &args.dut {
         crate::unit::check_serial(d).map_err(|e| Usage(format!("--dut {d:?}: {e}")))?;
     }
-    ensure_distinct(&args.out, &[&args.csv, &args.site])?;
+    let mut inputs = vec![args.csv.as_path(), args.site.as_path()];
+    inputs.extend(args.map.as_deref());
+    ensure_distinct(&args.out, &inputs)?;
     ensure_not_a_record(&args.out, args.force)?;
     let site = load_site(&args.site).context("reading the site file")?;
-    let r = import(&args.csv, &site, args.dut.as_deref(), &args.out)?;
+    let r = match &args.map {
+        Some(m) => {
+            let map = crate::runlog::import_map::load(m).context("reading the import map")?;
+            import_mapped(&args.csv, &map, &site, args.dut.as_deref(), &args.out)?
+        }
+        None => import(&args.csv, &site, args.dut.as_deref(), &args.out)?,
+    };
     let loc = crate::results::Location::resolve(args.db.as_deref(), None);
     match crate::results::Store::open(&loc).and_then(|s| match s {
         Some(mut s) => s.index_log(&args.out).map(|_| Some(s.name().to_owned())),

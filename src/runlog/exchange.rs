@@ -320,10 +320,35 @@ pub fn import(
     out: &Path,
 ) -> Result<Imported, ImportError> {
     ensure_distinct(out, &[csv])?;
-    let name = csv.display().to_string();
+    let serial = serial_of(csv, dut)?;
+    let rows = interchange::read(csv)?;
+    import_rows(csv, rows, None, site, &serial, out)
+}
+
+/// Import a lab's own file at `file` read through `map` (see
+/// [`import_map`](super::import_map)), as [`import`] does the interchange CSV.
+pub fn import_mapped(
+    file: &Path,
+    map: &super::import_map::ImportMap,
+    site: &SiteFile,
+    dut: Option<&str>,
+    out: &Path,
+) -> Result<Imported, ImportError> {
+    ensure_distinct(out, &[file])?;
+    let serial = serial_of(file, dut)?;
+    let mapped = map.read(file).map_err(|e| match e {
+        super::import_map::MapError::Map(e) => ImportError::Config(e),
+        super::import_map::MapError::Csv(e) => ImportError::Csv(e),
+    })?;
+    import_rows(file, mapped.rows, mapped.power_on_utc, site, &serial, out)
+}
+
+/// The unit's serial: `dut`, else the file's stem (checked either way).
+fn serial_of(file: &Path, dut: Option<&str>) -> Result<String, ImportError> {
+    let name = file.display().to_string();
     let serial = match dut {
         Some(d) => d.to_owned(),
-        None => csv
+        None => file
             .file_stem()
             .map_or(String::new(), |s| s.to_string_lossy().into_owned()),
     };
@@ -335,8 +360,23 @@ pub fn import(
             ),
         })
     })?;
-    let imported_at = crate::clock::utc_now().to_rfc3339();
-    let rows = to_one_hz(&interchange::read(csv)?, &name)?;
+    Ok(serial)
+}
+
+/// Write `rows` read from `file` as a log at `out`; `power_on_utc` dates
+/// the run when the file gave dates (else the import dates it).
+fn import_rows(
+    file: &Path,
+    rows: Vec<Row>,
+    power_on_utc: Option<String>,
+    site: &SiteFile,
+    serial: &str,
+    out: &Path,
+) -> Result<Imported, ImportError> {
+    let name = file.display().to_string();
+    let serial = serial.to_owned();
+    let imported_at = power_on_utc.unwrap_or_else(|| crate::clock::utc_now().to_rfc3339());
+    let rows = to_one_hz(&rows, &name)?;
     let geometry = site.table.as_ref().map(|t| t.geometry);
     let angles = table_angles(&rows, geometry.as_ref(), &name)?;
     let parts = stretches(&rows);
@@ -366,7 +406,8 @@ pub fn import(
         dut_type: "gyro".into(),
         software_version: crate::version::VERSION.to_owned(),
         software_revision: crate::version::REVISION.to_owned(),
-        // The CSV carries no date: the run is dated by its import.
+        // Dated by the file's power-on where it gives dates, else by the
+        // import.
         start_time_utc: imported_at.clone(),
         part_start_time_utc: imported_at,
         part: 1,

@@ -97,6 +97,11 @@ impl Row {
     /// record, a time that does not increase, one table angle without the
     /// other.
     pub fn check(&self, prev: Option<&Row>) -> Result<(), String> {
+        self.check_after(prev.map(|p| p.time_s))
+    }
+
+    /// [`Row::check`] after a row at `prev_time_s`.
+    pub fn check_after(&self, prev_time_s: Option<f64>) -> Result<(), String> {
         let mut fields = vec![
             (self.time_s, "time_s", TIME_RANGE_S),
             (self.rate_dph, "rate_dph", RATE_RANGE_DPH),
@@ -138,12 +143,12 @@ impl Row {
                 },
             ));
         }
-        if let Some(prev) = prev
-            && self.time_s <= prev.time_s
+        if let Some(prev) = prev_time_s
+            && self.time_s <= prev
         {
             return Err(format!(
-                "field time_s: {} does not follow {} (time must increase)",
-                self.time_s, prev.time_s
+                "field time_s: {} does not follow {prev} (time must increase)",
+                self.time_s
             ));
         }
         Ok(())

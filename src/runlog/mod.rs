@@ -9,9 +9,11 @@
 //! - [`recover`]: a complete log from a killed run's file.
 //! - [`replay`]: a run's measurements and verdict from its log alone.
 //! - [`exchange`] and [`interchange`]: runs recorded elsewhere (the
-//!   interchange CSV) in and out.
+//!   interchange CSV) in and out; [`import_map`]: a lab's own CSV read
+//!   through a map.
 
 pub mod exchange;
+pub mod import_map;
 pub mod interchange;
 pub mod live;
 pub mod meta;

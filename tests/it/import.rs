@@ -584,3 +584,91 @@ fn a_table_geometry_with_the_site_gives_table_angles_or_names_the_rows_it_cannot
     );
     std::fs::remove_dir_all(&dir).expect("cleanup");
 }
+
+/// The two example lab files were written from lab-run.csv's rows in
+/// other units and layouts (fixtures/import/make_examples.py): read
+/// through their maps, they give those rows back.
+#[test]
+fn the_example_maps_read_their_lab_files_back_to_the_interchange_rows() {
+    let dir = temp_dir("import-maps");
+    let reference = rows(Path::new("fixtures/import/lab-run.csv"));
+    for (name, n, rate_tol, temp_tol) in [
+        ("iso-dps-kelvin", 2400, 1e-9, 1e-9),
+        // Counts of 0.01 arcsec: each 1 s mean is within one count a
+        // second (0.01 deg/h); temperatures quantised to 1/16 degC.
+        ("counts-10ms", 120, 0.0101, 1.0 / 32.0 + 1e-9),
+    ] {
+        let log = dir.join(format!("{name}.mcap"));
+        let out = gyrobench(&[
+            "import",
+            &format!("fixtures/import/{name}.csv"),
+            "--map",
+            &format!("fixtures/import/{name}.map.toml"),
+            "--site",
+            "fixtures/import/site.toml",
+            "--dut",
+            "RL16-0417",
+            "-o",
+            s(&log),
+            "--db",
+            "none",
+        ]);
+        assert_eq!(
+            out.status.code(),
+            Some(0),
+            "{name}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let back = dir.join(format!("{name}.csv"));
+        let out = gyrobench(&["export", s(&log), "-o", s(&back)]);
+        assert_eq!(
+            out.status.code(),
+            Some(0),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let got = rows(&back);
+        assert_eq!(got.len(), n, "{name}");
+        for (x, y) in reference.iter().zip(&got) {
+            let f = |r: &Vec<String>, c: usize| -> f64 { r[c].parse().expect("number") };
+            assert!(
+                (f(x, 0) - f(y, 0)).abs() < 1e-9,
+                "{name}: time {} vs {}",
+                x[0],
+                y[0]
+            );
+            assert!(
+                (f(x, 1) - f(y, 1)).abs() <= rate_tol,
+                "{name} at {}: rate {} vs {}",
+                x[0],
+                x[1],
+                y[1]
+            );
+            for c in 2..6 {
+                assert!(
+                    (f(x, c) - f(y, c)).abs() <= temp_tol,
+                    "{name} at {}: column {c}: {} vs {}",
+                    x[0],
+                    x[c],
+                    y[c]
+                );
+            }
+            for c in 6..9 {
+                assert_eq!(f(x, c), f(y, c), "{name}: orientation");
+            }
+        }
+        if name == "iso-dps-kelvin" {
+            assert!(
+                reference.iter().zip(&got).all(|(x, y)| x[9] == y[9]),
+                "step labels"
+            );
+        } else {
+            assert_eq!(got[59][9], "warm_up");
+            assert_eq!(
+                got[60][9], "hold",
+                "the boundary at 63 s: the row of 63..64 s"
+            );
+        }
+    }
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
