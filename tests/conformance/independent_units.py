@@ -280,13 +280,33 @@ def main():
     ap.add_argument("--ool-scaled", action="store_true",
                     help="size the step / sine like a withheld effect (factor x sigma60 after projection) "
                          "instead of the fixed 0.03 / 0.02 deg/h")
+    ap.add_argument("--low-latitude", action="store_true",
+                    help="a lab near the equator: latitude within 12 deg of it, the thermal cycle with the "
+                         "axis horizontal pointing north, the orientation run's four azimuths with the axis "
+                         "horizontal, its four rolls about the axis pointing north, the 55 deg tilt toward north")
     a = ap.parse_args()
+    if a.low_latitude:
+        global CYCLE_ORIENT, ORIENT_POS
+        CYCLE_ORIENT = (0.0, 0.0, 0.0)
+        ORIENT_POS = [
+            ("az000", (0.0, 0.0, 0.0)),
+            ("az090", (90.0, 0.0, 0.0)),
+            ("az180", (180.0, 0.0, 0.0)),
+            ("az270", (270.0, 0.0, 0.0)),
+            ("roll000", (0.0, 0.0, 0.0)),
+            ("roll090", (0.0, 0.0, 90.0)),
+            ("roll180", (0.0, 0.0, 180.0)),
+            ("roll270", (0.0, 0.0, -90.0)),
+            ("tilt55", (0.0, 35.0, 0.0)),
+        ]
     rng = np.random.default_rng(a.seed)
     os.makedirs(a.out, exist_ok=True)
     truth = {"seed": a.seed, "case": a.case}
 
     # ---------------- site
     lat = float(rng.uniform(-60, 65))
+    if a.low_latitude:
+        lat = lat / 65.0 * 12.0
     lon = float(rng.uniform(-180, 180))
     height = float(rng.uniform(0, 1500))
     B0 = rng.uniform(28, 33)  # equatorial dipole field, uT
