@@ -213,10 +213,11 @@ pub fn run(args: DiagnoseArgs) -> Result<Outcome> {
         _ => String::new(),
     };
     outln!(
-        "rate layer: held-out gap {:.5} deg/h -> {:.5} deg/h; thermal layer: {:.4} degC held out{network}",
+        "rate layer: held-out gap {:.5} deg/h -> {:.5} deg/h; thermal layer: {:.4} degC held out (the sensors' noise floor {:.4} degC){network}",
         d.layers.rate.gap_dph,
         d.layers.rate.gap_after_dph,
         th.gap_c,
+        th.noise_floor_c,
     )?;
     if d.effects.is_empty() {
         outln!("no library effect is significant")?;

@@ -14,6 +14,13 @@ use crate::view::{Chart, Marker, Series, Stroke, esc, p_value, page};
 /// a degree on the twin's and other units' runs).
 const THERMAL_GAP_C: f64 = 0.05;
 
+/// The held-out gap the thermal layer may have and still match: 0.05 degC,
+/// or twice the floor the sensors' own noise and resolution leave, where
+/// that is more (a model cannot predict a sensor's noise).
+fn thermal_limit_c(t: &super::ThermalLayer) -> f64 {
+    THERMAL_GAP_C.max(2.0 * t.noise_floor_c)
+}
+
 /// Residual 60 s means of one run: (t h, reference, final).
 fn run_series(d: &Diagnosis, run: usize) -> Vec<(f64, f64, f64)> {
     let Some((base, fin)) = &d.fits else {
@@ -289,10 +296,10 @@ pub fn headline(d: &Diagnosis) -> String {
 fn headline_of_one_unit(d: &Diagnosis) -> String {
     let t = &d.layers.thermal;
     let r = &d.layers.rate;
-    let thermal = if t.gap_c > THERMAL_GAP_C {
+    let thermal = if t.gap_c > thermal_limit_c(t) {
         format!(
-            "The thermal layer carries a gap: the simulated sensors miss the measured ones by {:.3} degC held out (a network that fits leaves a few hundredths), so look at the thermal model first.",
-            t.gap_c
+            "The thermal layer carries a gap: the simulated sensors miss the measured ones by {:.3} degC held out against a noise floor of {:.3} degC (a network that fits leaves a few hundredths), so look at the thermal model first.",
+            t.gap_c, t.noise_floor_c
         )
     } else {
         // When the network form misses, the layer matches by the modal
@@ -304,8 +311,8 @@ fn headline_of_one_unit(d: &Diagnosis) -> String {
             )
         });
         format!(
-            "The thermal layer matches ({:.3} degC held out{by}); the gap is in the rate layer.",
-            t.gap_c
+            "The thermal layer matches ({:.3} degC held out, noise floor {:.3} degC{by}); the gap is in the rate layer.",
+            t.gap_c, t.noise_floor_c
         )
     };
     let noise = noise_of_means(d);
@@ -323,11 +330,12 @@ fn headline_of_one_unit(d: &Diagnosis) -> String {
     if d.effects.is_empty()
         && d.inconclusive.is_none()
         && at_noise(r.gap_dph)
-        && t.gap_c <= THERMAL_GAP_C
+        && t.gap_c <= thermal_limit_c(t)
     {
         return format!(
-            "Simulator and runs agree: the thermal layer matches ({:.3} degC held out) and the rate gap of {:.5} deg/h held out is {}, so nothing is left for an effect to explain.",
+            "Simulator and runs agree: the thermal layer matches ({:.3} degC held out, noise floor {:.3} degC) and the rate gap of {:.5} deg/h held out is {}, so nothing is left for an effect to explain.",
             t.gap_c,
+            t.noise_floor_c,
             r.gap_dph,
             noise_text(r.gap_dph)
         );
@@ -558,11 +566,12 @@ pub fn render(d: &Diagnosis) -> String {
         + &allan_chart(d);
     let u = &d.unexplained;
     let body = format!(
-        "<h1>Sim-to-real diagnosis</h1>\n<p class=headline>{headline}</p>\n<p class=note>Runs: {runs}. {protocol}.</p>\n<h2>Layers</h2>\n<table><tr><th>layer</th><th>held-out gap</th><th>reference</th></tr><tr><td>thermal</td><td class=num>{tg:.4} degC</td><td>{tref}</td></tr><tr><td>rate</td><td class=num>{rg:.5} deg/h &rarr; {ra:.5} deg/h</td><td>{rref}</td></tr></table>\n<h2>Accepted effects</h2>\n<table><tr><th>effect</th><th>gap before</th><th>gap after</th><th>shrink</th><th>p</th><th>parameters</th></tr>\n{effects}</table>\n{confounded}<h2>Unexplained</h2><p>Held-out gap {ug:.5} deg/h{period}.</p>\n<h2>Where the gap lies (reference simulator)</h2>\n<table><tr><th>run</th><th>record</th><th>step</th><th>s</th><th>regime</th><th>TK degC</th><th>az/el/roll</th><th>RMS deg/h</th><th>share</th></tr>\n{where_}</table>\n<h2>Residual per position</h2>\n<table><tr><th>az/el/roll, deg</th><th>seconds</th><th>mean, reference (deg/h)</th><th>mean, with the accepted effects</th></tr>{position_rows}</table>\n<h2>Candidates against the reference</h2><table><tr><th>effect</th><th>held-out gap</th><th>p</th></tr>{candidates}</table>\n<h2>Charts</h2>{charts}\n",
+        "<h1>Sim-to-real diagnosis</h1>\n<p class=headline>{headline}</p>\n<p class=note>Runs: {runs}. {protocol}.</p>\n<h2>Layers</h2>\n<table><tr><th>layer</th><th>held-out gap</th><th>reference</th></tr><tr><td>thermal</td><td class=num>{tg:.4} degC (noise floor {tf:.4})</td><td>{tref}</td></tr><tr><td>rate</td><td class=num>{rg:.5} deg/h &rarr; {ra:.5} deg/h</td><td>{rref}</td></tr></table>\n<h2>Accepted effects</h2>\n<table><tr><th>effect</th><th>gap before</th><th>gap after</th><th>shrink</th><th>p</th><th>parameters</th></tr>\n{effects}</table>\n{confounded}<h2>Unexplained</h2><p>Held-out gap {ug:.5} deg/h{period}.</p>\n<h2>Where the gap lies (reference simulator)</h2>\n<table><tr><th>run</th><th>record</th><th>step</th><th>s</th><th>regime</th><th>TK degC</th><th>az/el/roll</th><th>RMS deg/h</th><th>share</th></tr>\n{where_}</table>\n<h2>Residual per position</h2>\n<table><tr><th>az/el/roll, deg</th><th>seconds</th><th>mean, reference (deg/h)</th><th>mean, with the accepted effects</th></tr>{position_rows}</table>\n<h2>Candidates against the reference</h2><table><tr><th>effect</th><th>held-out gap</th><th>p</th></tr>{candidates}</table>\n<h2>Charts</h2>{charts}\n",
         headline = esc(&headline(d)),
         runs = esc(&d.runs.join(", ")),
         protocol = esc(&d.protocol),
         tg = d.layers.thermal.gap_c,
+        tf = d.layers.thermal.noise_floor_c,
         tref = esc(&d.layers.thermal.reference),
         rg = d.layers.rate.gap_dph,
         ra = d.layers.rate.gap_after_dph,

@@ -62,6 +62,12 @@ pub struct ThermalLayer {
     pub gap_c: f64,
     /// Per sensor, degC.
     pub per_sensor_c: BTreeMap<String, f64>,
+    /// What the sensors' own noise and resolution alone leave in the gap
+    /// of 60 s means (RMS over the sensors), degC: the floor no model gets
+    /// under (`thermal::noise_floor`).
+    pub noise_floor_c: f64,
+    /// The same per sensor, degC.
+    pub noise_floor_per_sensor_c: BTreeMap<String, f64>,
     /// How the layer's simulator was made.
     pub reference: String,
     /// Without a twin, the reference's (modal model's) time constants, s.

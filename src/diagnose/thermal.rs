@@ -1503,6 +1503,82 @@ fn quadratic_mean(per_sensor: &BTreeMap<String, f64>) -> f64 {
     (per_sensor.values().map(|v| v * v).sum::<f64>() / n).sqrt()
 }
 
+/// What the sensors' own noise and resolution leave in the held-out gap
+/// of 60 s means, however good the model: per sensor, from the runs alone.
+///
+/// The 1 Hz white noise is read from second differences of consecutive
+/// samples (1.4826 MAD / sqrt 6: robust to the few where the temperature
+/// bends), and the resolution from the smallest step between samples when
+/// most steps are whole multiples of it (a quantised sensor). A 60 s mean
+/// keeps the white noise over sqrt 60; a quantisation the noise does not
+/// dither (noise under half a step) stays whole, as uniform error of
+/// step / sqrt 12. Returns (per sensor, RMS over them), degC.
+pub fn noise_floor(runs: &[RunData]) -> (BTreeMap<String, f64>, f64) {
+    let mut per_sensor = BTreeMap::new();
+    for (name, j) in [("t1_c", 0), ("t2_c", 1), ("tcase_c", 2)] {
+        let value = |s: &super::data::Sample| [s.iv.t1_c, s.iv.t2_c, s.iv.tcase_c][j];
+        let mut second = Vec::new();
+        let mut steps = Vec::new();
+        for run in runs {
+            for w in run.samples.windows(3) {
+                let even = (w[1].iv.time_s - w[0].iv.time_s - 1.0).abs() < 0.5
+                    && (w[2].iv.time_s - w[1].iv.time_s - 1.0).abs() < 0.5;
+                if even {
+                    second.push(value(&w[0]) - 2.0 * value(&w[1]) + value(&w[2]));
+                }
+            }
+            for w in run.samples.windows(2) {
+                let d = (value(&w[1]) - value(&w[0])).abs();
+                if d > 1e-9 {
+                    steps.push(d);
+                }
+            }
+        }
+        let sigma_1hz = median_abs(&mut second).map_or(0.0, |m| 1.4826 * m / 6f64.sqrt());
+        let q = resolution(&steps);
+        let undithered = q > 0.0 && sigma_1hz < 0.5 * q;
+        let var = sigma_1hz * sigma_1hz / AVERAGING_S as f64
+            + if undithered { q * q / 12.0 } else { 0.0 };
+        per_sensor.insert(name.to_owned(), var.sqrt());
+    }
+    let rms = quadratic_mean(&per_sensor);
+    (per_sensor, rms)
+}
+
+/// Median of |v|, none when empty.
+fn median_abs(v: &mut [f64]) -> Option<f64> {
+    if v.is_empty() {
+        return None;
+    }
+    for x in v.iter_mut() {
+        *x = x.abs();
+    }
+    v.sort_by(f64::total_cmp);
+    Some(v[v.len() / 2])
+}
+
+/// A sensor's resolution from the steps between its samples: the smallest
+/// step, when at least 90 % of the steps are whole multiples of it (to a
+/// tenth of it); 0 for a sensor that is not quantised (or whose values are
+/// means over many readings).
+fn resolution(steps: &[f64]) -> f64 {
+    let Some(q) = steps.iter().copied().min_by(f64::total_cmp) else {
+        return 0.0;
+    };
+    let whole = steps
+        .iter()
+        .filter(|d| {
+            let k = *d / q;
+            (k - k.round()).abs() < 0.1
+        })
+        .count();
+    if q > 1e-6 && whole as f64 >= 0.9 * steps.len() as f64 {
+        q
+    } else {
+        0.0
+    }
+}
+
 /// The thermal layer's gap.
 pub fn layer(runs: &[RunData], twin: Option<&TwinConfig>, fit_with_twin: bool) -> ThermalLayer {
     let mut network = None;
@@ -1562,9 +1638,12 @@ pub fn layer(runs: &[RunData], twin: Option<&TwinConfig>, fit_with_twin: bool) -
             out
         }
     };
+    let (noise_floor_per_sensor_c, noise_floor_c) = noise_floor(runs);
     ThermalLayer {
         gap_c: quadratic_mean(&per_sensor_c),
         per_sensor_c,
+        noise_floor_c,
+        noise_floor_per_sensor_c,
         reference,
         modes_s,
         fitted: network,
@@ -2134,5 +2213,70 @@ mod tests {
         let gap = layer.fitted_gap_c.expect("fitted");
         assert!(gap < FORM_MISFIT_C, "network held out {gap}");
         assert!(layer.gap_c < FORM_MISFIT_C, "layer {}", layer.gap_c);
+    }
+
+    /// The floor the sensors leave: white noise of sigma at 1 Hz leaves
+    /// sigma / sqrt 60 in 60 s means; a 1/16 degC quantisation that the
+    /// noise does not dither leaves (1/16) / sqrt 12; a slow ramp under
+    /// either is not taken for noise.
+    #[test]
+    fn the_noise_floor_is_read_from_the_sensors_alone() {
+        let run = |sigma: f64, q: f64, seed: u64| {
+            let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
+            let samples = (0..20_000)
+                .map(|t| {
+                    // A ramp, a soak and a slow exponential: the signal a
+                    // model would follow.
+                    let tf = t as f64;
+                    let truth = 20.0 + 10.0 * (1.0 - (-tf / 3000.0).exp()) + 0.001 * tf.min(5000.0);
+                    let read = |rng: &mut Xoshiro256PlusPlus| {
+                        let v = truth + sigma * rng.sample::<f64, _>(StandardNormal);
+                        if q > 0.0 { (v / q).round() * q } else { v }
+                    };
+                    Sample {
+                        iv: Interval {
+                            time_s: tf + 0.5,
+                            rate_dph: 0.0,
+                            reference_dph: 0.0,
+                            t1_c: read(&mut rng),
+                            t2_c: read(&mut rng),
+                            tcase_c: read(&mut rng),
+                            chamber_c: 20.0,
+                            frames: 400,
+                        },
+                        orientation: Orientation::new(0.0, 90.0, 0.0),
+                        record: "r".into(),
+                        step: "s".into(),
+                        table_rate_body_dph: nalgebra::Vector3::zeros(),
+                    }
+                })
+                .collect();
+            [RunData {
+                name: "r".into(),
+                site: TwinConfig::default_rl16().site,
+                samples,
+            }]
+        };
+        let (_, white) = noise_floor(&run(0.05, 0.0, 1));
+        let want = 0.05 / 60f64.sqrt();
+        assert!(
+            (white / want - 1.0).abs() < 0.1,
+            "white: {white} against {want}"
+        );
+        let (per, quantised) = noise_floor(&run(0.003, 0.0625, 2));
+        let want = 0.0625 / 12f64.sqrt();
+        assert!(
+            (quantised / want - 1.0).abs() < 0.1,
+            "quantised: {quantised} against {want} ({per:?})"
+        );
+        // Noise of twice the step dithers it: the floor is the noise's.
+        let (_, dithered) = noise_floor(&run(0.125, 0.0625, 3));
+        let want = (0.125f64.powi(2) + 0.0625f64.powi(2) / 12.0).sqrt() / 60f64.sqrt();
+        assert!(
+            (dithered / want - 1.0).abs() < 0.15,
+            "dithered: {dithered} against {want}"
+        );
+        let (_, clean) = noise_floor(&run(0.0, 0.0, 4));
+        assert!(clean < 1e-4, "a noiseless ramp: {clean}");
     }
 }
