@@ -17,6 +17,8 @@
     reason = "a sweep that cannot run should fail loudly"
 )]
 
+#[path = "../tests/it/http.rs"]
+mod http;
 #[path = "../tests/it/sweep.rs"]
 mod sweep;
 

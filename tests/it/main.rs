@@ -14,6 +14,7 @@ mod common;
 mod diagnose;
 mod docs;
 mod fuzz;
+mod http;
 mod import;
 mod integrity;
 mod messages;

@@ -65,28 +65,14 @@ impl Served {
     /// One HTTP/1.1 request: (status, body).
     fn request(&self, method: &str, path: &str, token: bool, body: &str) -> (u16, String) {
         let host = self.base.trim_start_matches("http://");
-        let mut c = TcpStream::connect(host).expect("connect");
-        let auth = if token {
-            format!("X-Gyrobench-Token: {}\r\n", self.token)
-        } else {
-            String::new()
-        };
-        write!(
-            c,
-            "{method} {path} HTTP/1.1\r\nHost: {host}\r\nConnection: close\r\n{auth}Content-Type: application/json\r\nContent-Length: {}\r\n\r\n{body}",
-            body.len()
+        crate::http::request(
+            host,
+            token.then_some(self.token.as_str()),
+            method,
+            path,
+            body,
         )
-        .expect("send");
-        let mut raw = Vec::new();
-        c.read_to_end(&mut raw).expect("response");
-        let text = String::from_utf8_lossy(&raw).into_owned();
-        let (head, body) = text.split_once("\r\n\r\n").expect("HTTP response");
-        let status = head
-            .split_whitespace()
-            .nth(1)
-            .and_then(|c| c.parse().ok())
-            .expect("status");
-        (status, body.to_owned())
+        .expect("an HTTP response")
     }
 
     fn state(&self) -> serde_json::Value {

@@ -517,7 +517,7 @@ impl Sweep {
         signal: &str,
         at_s: f64,
     ) -> Result<(PathBuf, Option<i32>, f64), String> {
-        use std::io::{BufRead, Read, Write};
+        use std::io::BufRead;
         let offered = self.procedure.parent().ok_or("the procedure's directory")?;
         let file = self
             .procedure
@@ -555,20 +555,10 @@ impl Sweep {
         };
         let host = base.trim_start_matches("http://").to_owned();
         let request = |method: &str, path: &str, body: &str| -> Result<String, String> {
-            let mut c = std::net::TcpStream::connect(&host).map_err(|e| e.to_string())?;
-            write!(
-                c,
-                "{method} {path} HTTP/1.1\r\nHost: {host}\r\nConnection: close\r\nX-Gyrobench-Token: {token}\r\nContent-Type: application/json\r\nContent-Length: {}\r\n\r\n{body}",
-                body.len()
-            )
-            .map_err(|e| e.to_string())?;
-            let mut raw = String::new();
-            c.read_to_string(&mut raw).map_err(|e| e.to_string())?;
-            let (head, body) = raw.split_once("\r\n\r\n").unwrap_or((&raw, ""));
-            if head.split_whitespace().nth(1) != Some("200") {
-                return Err(format!("{method} {path}: {head} {body}"));
+            match crate::http::request(&host, Some(token), method, path, body)? {
+                (200, body) => Ok(body),
+                (code, body) => Err(format!("{method} {path}: {code} {body}")),
             }
-            Ok(body.to_owned())
         };
         let started = request(
             "POST",
