@@ -435,11 +435,11 @@ fn positions(r: &Report) -> String {
             )
         })
     };
-    let lim = |m: Option<&Measurement>| {
-        m.map_or(String::new(), |m| {
-            format!("{}..{} {}", limit(m.low), limit(m.high), m.unit)
-        })
-    };
+    let lim = |m: &Measurement| format!("{}..{} {}", limit(m.low), limit(m.high), m.unit);
+    let bias = rows.iter().find_map(|x| x.bias);
+    let stability = rows.iter().find_map(|x| x.stability);
+    // A figure no position has (an imported run judges no mean bias) gets
+    // no column and no limit (and `position_chart` draws no chart).
     let mut table = String::new();
     for x in &rows {
         let p = x.position;
@@ -451,18 +451,24 @@ fn positions(r: &Report) -> String {
                 .map_or("-".into(), |t| format!("{:.2}", t.outer_deg)),
             p.table
                 .map_or("-".into(), |t| format!("{:.2}", t.inner_deg)),
-            cell(x.bias),
-            cell(x.stability),
+            bias.map_or(String::new(), |_| cell(x.bias)),
+            stability.map_or(String::new(), |_| cell(x.stability)),
         ));
     }
-    let bias = rows.iter().find_map(|x| x.bias);
-    let stability = rows.iter().find_map(|x| x.stability);
+    let head = |m: Option<&Measurement>, name: &str| {
+        m.map_or(String::new(), |m| {
+            format!("<th>{name}, {}</th><th></th>", esc(&m.unit))
+        })
+    };
+    let limits: Vec<String> = [(bias, "bias"), (stability, "bias stability")]
+        .into_iter()
+        .filter_map(|(m, name)| m.map(|m| format!("{name} {}", esc(&lim(m)))))
+        .collect();
     format!(
-        "<h2>Positions</h2>\n<table><tr><th>record</th><th>position</th><th>outer, deg</th><th>inner, deg</th><th>bias, {bu}</th><th></th><th>bias stability, {su}</th><th></th></tr>\n{table}</table>\n<p class=note>Limits: bias {bl}; bias stability {sl}.</p>\n{c1}{c2}",
-        bu = esc(bias.map_or("", |m| &m.unit)),
-        su = esc(stability.map_or("", |m| &m.unit)),
-        bl = esc(&lim(bias)),
-        sl = esc(&lim(stability)),
+        "<h2>Positions</h2>\n<table><tr><th>record</th><th>position</th><th>outer, deg</th><th>inner, deg</th>{bh}{sh}</tr>\n{table}</table>\n<p class=note>Limits: {limits}.</p>\n{c1}{c2}",
+        bh = head(bias, "bias"),
+        sh = head(stability, "bias stability"),
+        limits = limits.join("; "),
         c1 = position_chart(
             "Bias stability per position, against its limit",
             &rows,

@@ -158,7 +158,8 @@ pub struct Imported {
 }
 
 /// Rows reduced to 1 s means (rows finer than 1 s are averaged per whole
-/// second of `time_s`; 1 s rows pass through).
+/// second of `time_s` and step, as [`interchange::OneHz`] does; 1 s rows
+/// pass through).
 fn to_one_hz(rows: &[Row], name: &str) -> Result<Vec<Row>, ImportError> {
     let (_, _, dt) = interchange::longest_even_run(rows);
     if dt > 1.01 {
@@ -169,39 +170,11 @@ fn to_one_hz(rows: &[Row], name: &str) -> Result<Vec<Row>, ImportError> {
     if dt > 0.99 {
         return Ok(rows.to_vec());
     }
-    let mut out: Vec<Row> = Vec::new();
-    let mut acc: Vec<&Row> = Vec::new();
-    let flush = |acc: &mut Vec<&Row>, out: &mut Vec<Row>| {
-        if let Some(first) = acc.first() {
-            let n = acc.len() as f64;
-            let m = |f: fn(&Row) -> f64| acc.iter().map(|r| f(r)).sum::<f64>() / n;
-            out.push(Row {
-                time_s: first.time_s.floor() + 0.5,
-                rate_dph: m(|r| r.rate_dph),
-                t1_c: m(|r| r.t1_c),
-                t2_c: m(|r| r.t2_c),
-                tcase_c: m(|r| r.tcase_c),
-                chamber_c: m(|r| r.chamber_c),
-                azimuth_deg: first.azimuth_deg,
-                elevation_deg: first.elevation_deg,
-                roll_deg: first.roll_deg,
-                step: first.step.clone(),
-                outer_deg: first.outer_deg,
-                inner_deg: first.inner_deg,
-            });
-        }
-        acc.clear();
-    };
+    let mut out = interchange::OneHz::default();
     for r in rows {
-        if let Some(first) = acc.first()
-            && (r.time_s.floor() != first.time_s.floor() || r.step != first.step)
-        {
-            flush(&mut acc, &mut out);
-        }
-        acc.push(r);
+        out.push(r.clone());
     }
-    flush(&mut acc, &mut out);
-    Ok(out)
+    Ok(out.finish())
 }
 
 /// Stretches of rows with one step label: (label made unique, first, end).

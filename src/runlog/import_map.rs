@@ -427,47 +427,6 @@ struct Resolved {
     table: Option<[usize; 2]>,
 }
 
-/// 1 s means built while reading: rows of one whole second and one step
-/// are averaged (a second with a single row keeps it as it is).
-#[derive(Debug, Default)]
-struct OneHz {
-    out: Vec<Row>,
-    acc: Option<(Row, usize)>,
-}
-
-impl OneHz {
-    fn push(&mut self, r: Row) {
-        if let Some((a, n)) = &mut self.acc {
-            if r.time_s.floor() == a.time_s.floor() && r.step == a.step {
-                a.rate_dph += r.rate_dph;
-                a.t1_c += r.t1_c;
-                a.t2_c += r.t2_c;
-                a.tcase_c += r.tcase_c;
-                a.chamber_c += r.chamber_c;
-                *n += 1;
-                return;
-            }
-            self.flush();
-        }
-        self.acc = Some((r, 1));
-    }
-
-    fn flush(&mut self) {
-        if let Some((mut a, n)) = self.acc.take() {
-            if n > 1 {
-                let k = n as f64;
-                a.time_s = a.time_s.floor() + 0.5;
-                a.rate_dph /= k;
-                a.t1_c /= k;
-                a.t2_c /= k;
-                a.tcase_c /= k;
-                a.chamber_c /= k;
-            }
-            self.out.push(a);
-        }
-    }
-}
-
 /// What a mapped file gave.
 #[derive(Debug, Clone)]
 pub struct Mapped {
@@ -596,7 +555,7 @@ impl ImportMap {
             .collect();
         let cols = self.resolve(&header, name).map_err(MapError::Map)?;
         let cell_name = |i: usize| header.get(i).cloned().unwrap_or_default();
-        let mut out = OneHz::default();
+        let mut out = super::interchange::OneHz::default();
         let mut prev_time: Option<f64> = None;
         let mut power_on = match &self.time.power_on {
             Some(p) => Some(
@@ -749,12 +708,12 @@ impl ImportMap {
             samples += 1;
             out.push(row);
         }
-        out.flush();
-        if out.out.is_empty() {
+        let rows = out.finish();
+        if rows.is_empty() {
             return Err(err(skipped + 2, "no samples after the header".into()));
         }
         Ok(Mapped {
-            rows: out.out,
+            rows,
             samples,
             power_on_utc: power_on.map(|p| p.with_timezone(&chrono::Utc).to_rfc3339()),
         })

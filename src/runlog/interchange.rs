@@ -244,6 +244,57 @@ pub fn parse(input: impl std::io::Read, name: &str) -> Result<Vec<Row>, CsvError
     Ok(rows)
 }
 
+/// 1 s means built row by row: rows of one whole second of `time_s` and
+/// one step are averaged (rate and temperatures; the time becomes the
+/// second's centre; orientation, angles and step are the first row's); a
+/// second with a single row keeps it as it is. Nothing but the current
+/// second is held, so a file of 100 Hz samples is reduced as it is read.
+#[derive(Debug, Default)]
+pub struct OneHz {
+    out: Vec<Row>,
+    acc: Option<(Row, usize)>,
+}
+
+impl OneHz {
+    /// Take the next row (in time order).
+    pub fn push(&mut self, r: Row) {
+        if let Some((a, n)) = &mut self.acc {
+            if r.time_s.floor() == a.time_s.floor() && r.step == a.step {
+                a.rate_dph += r.rate_dph;
+                a.t1_c += r.t1_c;
+                a.t2_c += r.t2_c;
+                a.tcase_c += r.tcase_c;
+                a.chamber_c += r.chamber_c;
+                *n += 1;
+                return;
+            }
+            self.flush();
+        }
+        self.acc = Some((r, 1));
+    }
+
+    fn flush(&mut self) {
+        if let Some((mut a, n)) = self.acc.take() {
+            if n > 1 {
+                let k = n as f64;
+                a.time_s = a.time_s.floor() + 0.5;
+                a.rate_dph /= k;
+                a.t1_c /= k;
+                a.t2_c /= k;
+                a.tcase_c /= k;
+                a.chamber_c /= k;
+            }
+            self.out.push(a);
+        }
+    }
+
+    /// The 1 s rows.
+    pub fn finish(mut self) -> Vec<Row> {
+        self.flush();
+        self.out
+    }
+}
+
 /// The longest stretch of evenly spaced samples (no gap over 1.5 sample
 /// times), as (first index, length, sample time s).
 pub fn longest_even_run(rows: &[Row]) -> (usize, usize, f64) {

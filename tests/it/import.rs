@@ -672,3 +672,84 @@ fn the_example_maps_read_their_lab_files_back_to_the_interchange_rows() {
     }
     std::fs::remove_dir_all(&dir).expect("cleanup");
 }
+
+/// An imported run's report lists the pose of each record it judges, in
+/// the operator's words, with no table angles it was not given, and no
+/// column for a figure it does not judge (an import judges no mean bias).
+#[test]
+fn an_imported_runs_report_shows_each_records_pose_without_table_angles() {
+    let dir = temp_dir("import-positions");
+    let site = dir.join("site.toml");
+    std::fs::write(&site, SITE).expect("site");
+    let mut csv = String::from(
+        "time_s,rate_dph,t1_c,t2_c,tcase_c,chamber_c,azimuth_deg,elevation_deg,roll_deg,step\n",
+    );
+    let mut t = 0.5;
+    for (label, az, el, n) in [
+        ("warm", 0.0, 90.0, 1800),
+        ("north", 0.0, 0.0, 1200),
+        ("down", 0.0, -90.0, 1200),
+    ] {
+        for i in 0..n {
+            let wobble = if i % 2 == 0 { 0.01 } else { -0.01 };
+            let rate = earth_rate_dph(50.45, az, el) + 2.0 + wobble;
+            csv.push_str(&format!(
+                "{t},{rate},20.5,20.4,20.1,20,{az},{el},0,{label}\n"
+            ));
+            t += 1.0;
+        }
+    }
+    let file = dir.join("two.csv");
+    std::fs::write(&file, &csv).expect("csv");
+    let log = dir.join("two.mcap");
+    let out = gyrobench(&[
+        "import",
+        s(&file),
+        "--site",
+        s(&site),
+        "-o",
+        s(&log),
+        "--db",
+        "none",
+    ]);
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let rep = dir.join("replay");
+    let out = gyrobench(&["replay", s(&log), "--out", s(&rep)]);
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let html = std::fs::read_to_string(rep.join("report.html")).expect("html");
+    let at = html
+        .find("<h2>Positions</h2>")
+        .expect("a Positions section");
+    let section = &html[at..at + html[at..].find("</table>").expect("its table")];
+    assert!(
+        section.contains("<td>north</td><td>axis horizontal toward azimuth 0 deg, roll 0 deg</td><td class=num>-</td><td class=num>-</td>"),
+        "{section}"
+    );
+    assert!(
+        section.contains("<td>down</td><td>axis down, azimuth 0 deg</td>"),
+        "{section}"
+    );
+    assert!(
+        section.contains("<th>bias stability, deg/h</th>"),
+        "{section}"
+    );
+    assert!(
+        !section.contains("<th>bias, "),
+        "no empty bias column: {section}"
+    );
+    assert!(
+        html[at..].contains("Limits: bias stability ..0.05 deg/h."),
+        "{section}"
+    );
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
