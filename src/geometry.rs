@@ -221,6 +221,25 @@ impl TableGeometry {
         }
     }
 
+    /// The study's table turned a quarter turn in azimuth, as a lab near
+    /// the equator sets it up: outer axis horizontal on the east-west line
+    /// (its positive sense east), inner axis north, sensitive axis along
+    /// the inner axis. Outer 0 deg: axis horizontal north; outer 90 deg:
+    /// axis up; outer 180 deg: axis horizontal south; outer 35 deg: the
+    /// axis 55 deg from vertical, tilted toward north.
+    ///
+    /// Near the equator an up/down reversal sees almost no Earth rate
+    /// (`W sin(latitude)`); north/south sees nearly all of it
+    /// (`W cos(latitude)`), so the thermal cycle runs with the axis north
+    /// (`procedures/thermal_cycle_north.toml`).
+    pub fn north() -> Self {
+        Self {
+            outer_axis_ned: [0.0, 1.0, 0.0],
+            inner_axis_ned: [1.0, 0.0, 0.0],
+            mount: Orientation::new(0.0, 0.0, 0.0),
+        }
+    }
+
     fn outer_axis(&self) -> Unit<Vector3<f64>> {
         Unit::new_normalize(Vector3::from(self.outer_axis_ned))
     }
@@ -386,6 +405,42 @@ mod tests {
         assert!((tilt.elevation_deg - 35.0).abs() < 1e-9);
         let w = tilt.earth_rate_dph(&site);
         assert!((w - closed_form(&site, &tilt)).abs() < 1e-9);
+    }
+
+    #[test]
+    fn the_north_table_puts_the_axis_north_up_and_south_and_tilts_it_toward_north() {
+        let g = TableGeometry::north();
+        let site = Site {
+            latitude_deg: 3.0,
+            ..kyiv()
+        };
+        let at = |outer_deg, inner_deg| {
+            g.orientation(TableAngles {
+                outer_deg,
+                inner_deg,
+            })
+        };
+        let phi = site.latitude_deg.to_radians();
+        for inner in [0.0, 90.0, 180.0, 270.0] {
+            let north = at(0.0, inner);
+            assert!(north.elevation_deg.abs() < 1e-9, "{north:?}");
+            assert!(north.azimuth_deg.abs() < 1e-9, "{north:?}");
+            assert!((north.earth_rate_dph(&site) - EARTH_RATE_DPH * phi.cos()).abs() < 1e-9);
+            let up = at(90.0, inner);
+            assert!((up.elevation_deg - 90.0).abs() < 1e-6, "{up:?}");
+            let south = at(180.0, inner);
+            assert!((south.earth_rate_dph(&site) + EARTH_RATE_DPH * phi.cos()).abs() < 1e-9);
+        }
+        let tilt = at(35.0, 0.0);
+        assert!((tilt.elevation_deg - 35.0).abs() < 1e-9 && tilt.azimuth_deg.abs() < 1e-9);
+        // The study's poses with the axis east are out of its reach, and
+        // the low-latitude ones are inside it.
+        assert!(g.angles_for(Orientation::new(90.0, 0.0, 0.0)).is_err());
+        for roll in [0.0, 90.0, 180.0, -90.0] {
+            let o = Orientation::new(0.0, 0.0, roll);
+            let a = g.angles_for(o).expect("a roll about the north axis");
+            assert!(rotation_distance_deg(&g.rotation(a), &o.rotation()) < 1e-6);
+        }
     }
 
     #[test]

@@ -25,6 +25,11 @@ use nalgebra::Vector3;
 pub const THERMAL_CYCLE_TOML: &str = include_str!("../procedures/thermal_cycle.toml");
 /// The study's orientation run, as shipped.
 pub const ORIENTATION_TOML: &str = include_str!("../procedures/orientation.toml");
+/// The study's thermal cycle with the axis horizontal north, for a lab
+/// near the equator ([`crate::geometry::TableGeometry::north`]), as shipped.
+pub const THERMAL_CYCLE_NORTH_TOML: &str = include_str!("../procedures/thermal_cycle_north.toml");
+/// The orientation run with its rolls and tilt about north, as shipped.
+pub const ORIENTATION_NORTH_TOML: &str = include_str!("../procedures/orientation_north.toml");
 /// The run that separates what those two cannot (thermal lag,
 /// scale-factor drift), as shipped.
 pub const SEPARATING_TOML: &str = include_str!("../procedures/separating.toml");
@@ -42,6 +47,8 @@ pub fn shipped_procedure(path: &str) -> Option<&'static str> {
     Some(match path {
         "procedures/thermal_cycle.toml" => THERMAL_CYCLE_TOML,
         "procedures/orientation.toml" => ORIENTATION_TOML,
+        "procedures/thermal_cycle_north.toml" => THERMAL_CYCLE_NORTH_TOML,
+        "procedures/orientation_north.toml" => ORIENTATION_NORTH_TOML,
         "procedures/separating.toml" => SEPARATING_TOML,
         "procedures/misalignment.toml" => MISALIGNMENT_TOML,
         "procedures/rate_transfer_temperatures.toml" => RATE_TEMPERATURES_TOML,
@@ -179,6 +186,14 @@ pub enum StudyError {
     Fit(#[from] FitError),
 }
 
+/// The embedded bench where the twin `cfg` stands: its site, its table.
+fn bench_of(cfg: &TwinConfig) -> BenchConfig {
+    let mut b = BenchConfig::embedded();
+    b.site = cfg.site;
+    b.table.geometry = cfg.table.geometry;
+    b
+}
+
 /// Run a procedure (`text`, labelled `name`) on a twin built from `cfg`,
 /// keeping the recorded 1 Hz samples with their orientation (no log).
 pub fn simulate(
@@ -187,7 +202,7 @@ pub fn simulate(
     cfg: &TwinConfig,
     seed: u64,
 ) -> Result<(crate::sequencer::RunResult, Vec<Sample>), StudyError> {
-    let bench_cfg = BenchConfig::embedded();
+    let bench_cfg = bench_of(cfg);
     let procedure = Procedure::from_source(&Source::from_text(name, text), &bench_cfg)?;
     run_on_twin(&procedure, &bench_cfg, name, cfg, seed)
 }
@@ -201,7 +216,7 @@ pub fn simulate_samples(
     cfg: &TwinConfig,
     seed: u64,
 ) -> Result<Vec<Sample>, StudyError> {
-    let bench_cfg = BenchConfig::embedded();
+    let bench_cfg = bench_of(cfg);
     let mut procedure = Procedure::from_source(&Source::from_text(name, text), &bench_cfg)?;
     for steps in [
         &mut procedure.setup,

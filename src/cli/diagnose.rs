@@ -385,9 +385,14 @@ fn run_randomized(a: &SelfcheckArgs) -> Result<Outcome> {
     );
     let r = randomized::run(a.units, a.seed, a.separating, &|done, _, t| {
         let line = format!(
-            "[{done}/{}] seed {} {}: named {} / inconclusive {} (thermal {:.3} degC)",
+            "[{done}/{}] seed {}{} {}: named {} / inconclusive {} (thermal {:.3} degC)",
             a.units,
             t.seed,
+            if t.low_latitude {
+                " (low latitude)"
+            } else {
+                ""
+            },
             serde_json::to_string(&t.case).unwrap_or_default(),
             if t.accepted.is_empty() {
                 "nothing".to_owned()
@@ -429,6 +434,16 @@ fn run_randomized(a: &SelfcheckArgs) -> Result<Outcome> {
         100.0 * r.thermal_within_0_05,
         100.0 * r.network_followed,
         100.0 * r.median_excess_closed
+    )?;
+    let l = &r.low_latitude;
+    outln!(
+        "  of them {} low-latitude units (table turned north): named first {:.0} % at >= 2x, {:.0} % at 1.5x; pairs both named {:.0} %; false attribution {:.0} %; thermal layer within 0.05 degC {:.0} %",
+        l.units,
+        100.0 * l.named_at_2x,
+        100.0 * l.named_at_1_5x,
+        100.0 * l.pairs_both_named,
+        100.0 * l.false_attribution,
+        100.0 * l.thermal_within_0_05
     )?;
     for why in &r.skipped {
         outln!("  not diagnosed: {why}")?;

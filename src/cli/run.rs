@@ -205,8 +205,41 @@ pub(super) fn pacing(speed: &str) -> Result<Pacing> {
     Ok(Pacing::Factor(f))
 }
 
+/// A twin file on the embedded bench says where the simulated unit
+/// stands: with no bench file, the bench takes the twin's site and table
+/// (the run is that twin's world); with one, the two must agree, since the
+/// bench file is what the log and the analysis take as the truth.
+fn place_twin(
+    bench_cfg: &mut crate::bench::BenchConfig,
+    bench_given: bool,
+    twin: &TwinConfig,
+    twin_path: &std::path::Path,
+) -> Result<()> {
+    if !bench_given {
+        bench_cfg.site = twin.site;
+        bench_cfg.table.geometry = twin.table.geometry;
+        return Ok(());
+    }
+    let differs = [
+        (bench_cfg.site != twin.site, "[site]"),
+        (
+            bench_cfg.table.geometry != twin.table.geometry,
+            "[table.geometry]",
+        ),
+    ];
+    if let Some((_, what)) = differs.iter().find(|(d, _)| *d) {
+        return Err(Usage(format!(
+            "{}: its {what} differs from the bench file's; the embedded bench simulates the bench file's \
+             site and table, so give the twin the same {what} (or leave out --bench to run at the twin's)",
+            twin_path.display()
+        ))
+        .into());
+    }
+    Ok(())
+}
+
 fn fresh(args: &RunArgs, procedure_path: &std::path::Path, pacing: Pacing) -> Result<Plan> {
-    let bench_cfg = load_bench(args.bench.as_ref())?;
+    let mut bench_cfg = load_bench(args.bench.as_ref())?;
     // Options that do not go together are said before any file is read.
     if !bench_cfg.is_embedded() && args.twin.is_some() {
         return Err(Usage("--twin applies to the embedded simulated bench only".into()).into());
@@ -216,12 +249,15 @@ fn fresh(args: &RunArgs, procedure_path: &std::path::Path, pacing: Pacing) -> Re
     }
     let dut = serial(args.dut.as_deref(), bench_cfg.is_embedded())?;
     check_operator(&args.operator).map_err(|e| Usage(format!("--operator: {e}")))?;
-    let procedure =
-        Procedure::load(procedure_path, &bench_cfg).context("checking the procedure")?;
     let twin = match &args.twin {
         Some(p) => TwinConfig::load(p).context("loading the twin file")?,
         None => TwinConfig::default_rl16(),
     };
+    if let Some(path) = &args.twin {
+        place_twin(&mut bench_cfg, args.bench.is_some(), &twin, path)?;
+    }
+    let procedure =
+        Procedure::load(procedure_path, &bench_cfg).context("checking the procedure")?;
     let faults = args
         .inject
         .iter()

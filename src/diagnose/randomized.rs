@@ -18,6 +18,7 @@ use super::data::RunData;
 use super::library::{Effect, LIBRARY, MODEL4, pack, separating_procedure};
 use super::selfcheck::{contribution, inject, runs_of, to_run};
 use super::{Options, diagnose, diagnose_rate, visible_gap};
+use crate::geometry::TableGeometry;
 use crate::study::StudyError;
 use crate::twin::TwinConfig;
 use crate::twin::config::{EffectTemperature, HysteresisShape};
@@ -25,6 +26,10 @@ use crate::twin::config::{EffectTemperature, HysteresisShape};
 /// Amplitudes of a withheld effect, in units of the unit's own noise of
 /// 60 s means (its null runs' held-out gap).
 pub const AMPLITUDES: [f64; 4] = [1.0, 1.5, 2.0, 3.0];
+/// Share of the units a lab near the equator makes (ours: one in four).
+pub const LOW_LATITUDE_SHARE: f64 = 0.25;
+/// Their latitudes lie within this of the equator, deg.
+pub const LOW_LATITUDE_DEG: f64 = 12.0;
 /// Amplitude of each effect of a pair.
 pub const PAIR_AMPLITUDE: f64 = 2.0;
 /// Amplitude of a disturbance outside the library (ours: 3x, as the
@@ -115,6 +120,10 @@ pub fn cases() -> Vec<Case> {
 
 /// A unit drawn from the priors (docs/diagnosis.md, "Randomised units").
 pub fn draw_unit(seed: u64) -> TwinConfig {
+    // A low-latitude lab's unit, drawn on a stream of its own so every
+    // other unit of a seed stays what it was.
+    let low_latitude =
+        Xoshiro256PlusPlus::seed_from_u64(seed ^ 0x0e9a_7012).random::<f64>() < LOW_LATITUDE_SHARE;
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed ^ 0x5eed_0f00_1a7e);
     let mut u = |lo: f64, hi: f64| lo + (hi - lo) * rng.random::<f64>();
     let mut t = TwinConfig::default_rl16();
@@ -163,6 +172,14 @@ pub fn draw_unit(seed: u64) -> TwinConfig {
     // A site and a field that goes with it (a dipole: horizontal
     // 10-35 uT north, vertical down in the north, up in the south).
     let lat = u(-65.0, 70.0);
+    // Near the equator the lab turns its table north (the thermal cycle
+    // with the axis north, the rolls and the tilt about north).
+    let lat = if low_latitude {
+        t.table.geometry = TableGeometry::north();
+        lat / 70.0 * LOW_LATITUDE_DEG
+    } else {
+        lat
+    };
     let l = lat.to_radians();
     t.site.latitude_deg = lat;
     let b0 = u(25.0, 35.0);
@@ -260,6 +277,10 @@ fn disturb(runs: &mut [RunData], d: Outside, a: f64, seed: u64) {
 pub struct UnitTrial {
     /// Seed of the unit and its runs.
     pub seed: u64,
+    /// A low-latitude lab's unit: near the equator, on a table turned
+    /// north, its runs `procedures/thermal_cycle_north.toml` and
+    /// `procedures/orientation_north.toml`.
+    pub low_latitude: bool,
     /// What was withheld.
     pub case: Case,
     /// The unit's noise of 60 s means (its null runs' held-out gap), deg/h.
@@ -357,10 +378,29 @@ pub struct Randomized {
     pub network_followed: f64,
     /// Median excess closed for named effects.
     pub median_excess_closed: f64,
+    /// The same figures over the low-latitude units alone.
+    pub low_latitude: Subset,
     /// Units whose runs stopped (a bench limit), with why.
     pub skipped: Vec<String>,
     /// Every trial.
     pub trials: Vec<UnitTrial>,
+}
+
+/// The headline figures over a subset of the units.
+#[derive(Debug, Clone, Serialize)]
+pub struct Subset {
+    /// Units diagnosed.
+    pub units: usize,
+    /// Named first at amplitude >= 2 (effects).
+    pub named_at_2x: f64,
+    /// Named first at amplitude 1.5.
+    pub named_at_1_5x: f64,
+    /// Both effects named (pairs).
+    pub pairs_both_named: f64,
+    /// Anything accepted on null and outside units.
+    pub false_attribution: f64,
+    /// Thermal layer within 0.05 degC held out.
+    pub thermal_within_0_05: f64,
 }
 
 fn trial(seed: u64, case: &Case, go_on_to_separate: bool) -> Result<UnitTrial, StudyError> {
@@ -435,6 +475,7 @@ fn trial(seed: u64, case: &Case, go_on_to_separate: bool) -> Result<UnitTrial, S
         });
     Ok(UnitTrial {
         seed,
+        low_latitude: unit.table.geometry == TableGeometry::north(),
         case: case.clone(),
         noise_dph: noise,
         accepted,
@@ -595,6 +636,29 @@ fn median(mut v: Vec<f64>) -> Option<f64> {
     Some(v[v.len() / 2])
 }
 
+/// The trials whose case `keep` takes.
+fn of_case<'a>(all: &[&'a UnitTrial], keep: impl Fn(&Case) -> bool) -> Vec<&'a UnitTrial> {
+    all.iter().copied().filter(|t| keep(&t.case)).collect()
+}
+
+/// The trials with a single effect whose amplitude `f` takes.
+fn effects_at<'a>(all: &[&'a UnitTrial], f: impl Fn(f64) -> bool) -> Vec<&'a UnitTrial> {
+    of_case(
+        all,
+        |c| matches!(c, Case::Effect { amplitude, .. } if f(*amplitude)),
+    )
+}
+
+/// The trials with a pair withheld.
+fn pairs_in<'a>(all: &[&'a UnitTrial]) -> Vec<&'a UnitTrial> {
+    of_case(all, |c| matches!(c, Case::Pair { .. }))
+}
+
+/// The trials with nothing of the library's withheld.
+fn quiet_in<'a>(all: &[&'a UnitTrial]) -> Vec<&'a UnitTrial> {
+    of_case(all, |c| matches!(c, Case::Null | Case::Outside { .. }))
+}
+
 fn summarise(units: usize, seed: u64, trials: Vec<UnitTrial>) -> Randomized {
     let mut groups: BTreeMap<String, Vec<&UnitTrial>> = BTreeMap::new();
     for t in &trials {
@@ -658,28 +722,23 @@ fn summarise(units: usize, seed: u64, trials: Vec<UnitTrial>) -> Randomized {
         })
         .collect();
     let all: Vec<&UnitTrial> = trials.iter().collect();
-    let effects_at = |f: &dyn Fn(f64) -> bool| -> Vec<&UnitTrial> {
-        all.iter()
-            .copied()
-            .filter(|t| matches!(&t.case, Case::Effect { amplitude, .. } if f(*amplitude)))
-            .collect()
+    let subset = |v: &[&UnitTrial]| Subset {
+        units: v.len(),
+        named_at_2x: frac(&effects_at(v, |a| a >= 2.0), &named),
+        named_at_1_5x: frac(&effects_at(v, |a| (a - 1.5).abs() < 1e-9), &named),
+        pairs_both_named: frac(&pairs_in(v), &named),
+        false_attribution: frac(&quiet_in(v), &named),
+        thermal_within_0_05: frac(v, &|t| t.thermal_gap_c <= 0.05),
     };
-    let pairs: Vec<&UnitTrial> = all
-        .iter()
-        .copied()
-        .filter(|t| matches!(t.case, Case::Pair { .. }))
-        .collect();
-    let quiet: Vec<&UnitTrial> = all
-        .iter()
-        .copied()
-        .filter(|t| matches!(t.case, Case::Null | Case::Outside { .. }))
-        .collect();
+    let low: Vec<&UnitTrial> = all.iter().copied().filter(|t| t.low_latitude).collect();
+    let (pairs, quiet) = (pairs_in(&all), quiet_in(&all));
     Randomized {
+        low_latitude: subset(&low),
         units,
         seed,
         rows,
-        named_at_2x: frac(&effects_at(&|a| a >= 2.0), &named),
-        named_at_1_5x: frac(&effects_at(&|a| (a - 1.5).abs() < 1e-9), &named),
+        named_at_2x: frac(&effects_at(&all, |a| a >= 2.0), &named),
+        named_at_1_5x: frac(&effects_at(&all, |a| (a - 1.5).abs() < 1e-9), &named),
         pairs_both_named: frac(&pairs, &named),
         pairs_named_or_confounded: frac(&pairs, &accounted),
         pairs_both_named_with_separating_run: frac(&pairs, &named_after),
@@ -703,6 +762,40 @@ fn summarise(units: usize, seed: u64, trials: Vec<UnitTrial>) -> Randomized {
 mod tests {
     use super::*;
     use crate::twin::config::EffectTemperature;
+
+    #[test]
+    fn one_unit_in_four_is_a_low_latitude_labs_on_a_table_turned_north() {
+        let units: Vec<TwinConfig> = (1..=400).map(draw_unit).collect();
+        let low: Vec<&TwinConfig> = units
+            .iter()
+            .filter(|u| u.table.geometry == TableGeometry::north())
+            .collect();
+        let share = low.len() as f64 / units.len() as f64;
+        assert!((0.18..0.32).contains(&share), "{share}");
+        for u in &low {
+            assert!(
+                u.site.latitude_deg.abs() <= LOW_LATITUDE_DEG,
+                "{:?}",
+                u.site
+            );
+        }
+        // Their runs are the north procedures: the cycle with the axis
+        // north sees nearly all of the Earth rate.
+        let seed = (1..=400)
+            .find(|&s| units[s as usize - 1].table.geometry == TableGeometry::north())
+            .expect("a low-latitude unit");
+        let runs = runs_of(&draw_unit(seed), seed, false).expect("runs");
+        assert!(
+            runs[0].name.starts_with("thermal_cycle_north"),
+            "{}",
+            runs[0].name
+        );
+        let o = runs[0].samples[0].orientation;
+        assert!(
+            o.elevation_deg.abs() < 1e-6 && o.azimuth_deg.abs() < 1e-6,
+            "{o:?}"
+        );
+    }
 
     /// Units of the randomised self-check (seed 1) where, before the
     /// selection weighed candidates against disturbances outside the

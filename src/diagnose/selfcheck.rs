@@ -12,9 +12,10 @@ use serde::Serialize;
 use super::data::{RunData, Sample};
 use super::library::{Effect, LIBRARY};
 use super::{Options, diagnose};
+use crate::geometry::TableGeometry;
 use crate::study::{
-    ORIENTATION_TOML, RATE_TEMPERATURES_TOML, SEPARATING_TOML, StudyError, THERMAL_CYCLE_TOML,
-    simulate_samples,
+    ORIENTATION_NORTH_TOML, ORIENTATION_TOML, RATE_TEMPERATURES_TOML, SEPARATING_TOML, StudyError,
+    THERMAL_CYCLE_NORTH_TOML, THERMAL_CYCLE_TOML, simulate_samples,
 };
 use crate::twin::TwinConfig;
 use crate::twin::config as tc;
@@ -172,10 +173,20 @@ pub(crate) fn runs_of(
     seed: u64,
     separating: bool,
 ) -> Result<Vec<RunData>, StudyError> {
-    let mut procedures = vec![
-        (THERMAL_CYCLE_TOML, "thermal_cycle"),
-        (ORIENTATION_TOML, "orientation"),
-    ];
+    // A table turned north (a lab near the equator) runs the cycle with
+    // the axis north and rolls about north: the study's east-pointing
+    // poses are out of its reach.
+    let mut procedures = if twin.table.geometry == TableGeometry::north() {
+        vec![
+            (THERMAL_CYCLE_NORTH_TOML, "thermal_cycle_north"),
+            (ORIENTATION_NORTH_TOML, "orientation_north"),
+        ]
+    } else {
+        vec![
+            (THERMAL_CYCLE_TOML, "thermal_cycle"),
+            (ORIENTATION_TOML, "orientation"),
+        ]
+    };
     if separating {
         procedures.push((SEPARATING_TOML, "separating"));
         procedures.push((RATE_TEMPERATURES_TOML, "rate_transfer_temperatures"));

@@ -29,6 +29,44 @@ fn shipped_procedures_validate_against_the_embedded_bench() {
 }
 
 #[test]
+fn the_north_procedures_run_on_a_table_turned_north_and_say_where_the_study_table_falls_short() {
+    let north = BenchConfig::from_source(&Source::from_text(
+        "embedded-north.toml",
+        include_str!("../../fixtures/bench/embedded-north.toml"),
+    ))
+    .expect("the north bench");
+    assert_eq!(
+        north.table.geometry,
+        crate::geometry::TableGeometry::north()
+    );
+    for (name, text) in [
+        (
+            "thermal_cycle_north.toml",
+            crate::study::THERMAL_CYCLE_NORTH_TOML,
+        ),
+        (
+            "orientation_north.toml",
+            crate::study::ORIENTATION_NORTH_TOML,
+        ),
+    ] {
+        let p = Procedure::from_source(&Source::from_text(name, text), &north)
+            .unwrap_or_else(|e| panic!("{name}: {e}"));
+        assert!(!p.main.is_empty(), "{name}");
+    }
+    // The study's table cannot roll about north: the error says where.
+    let e = load(
+        "orientation_north.toml",
+        crate::study::ORIENTATION_NORTH_TOML,
+    )
+    .expect_err("the study's table cannot roll about north")
+    .to_string();
+    assert!(
+        e.contains("orientation_north.toml") && e.contains("cannot reach"),
+        "{e}"
+    );
+}
+
+#[test]
 fn orientation_run_reaches_the_nine_positions_of_the_study() {
     let p = load(
         "orientation.toml",

@@ -494,11 +494,17 @@ pub fn execute(
         ));
     }
 
+    // The embedded bench simulates the bench its file describes: the twin
+    // stands at the bench's site on the bench's table (a lab's simulated
+    // bench near the equator has its own latitude and its table turned).
+    let mut twin = plan.twin.clone();
+    twin.site = plan.bench_cfg.site;
+    twin.table.geometry = plan.bench_cfg.table.geometry;
     let limits = plan.bench_cfg.limits.clone();
     let mut bench: Box<dyn BenchIo> = if embedded {
         let seed = plan.seed.wrapping_add(u64::from(part) - 1);
         Box::new(embedded_bench(
-            &plan.twin,
+            &twin,
             seed,
             plan.pacing,
             &plan.faults,
@@ -528,7 +534,7 @@ pub fn execute(
     let site_json = serde_json::to_string(&plan.bench_cfg.site)
         .map_err(|e| SessionError::Bench(format!("the site cannot be logged: {e}")))?;
     let twin_toml = if embedded {
-        Some(plan.twin.to_toml().map_err(|e| {
+        Some(twin.to_toml().map_err(|e| {
             SessionError::Bench(format!("the twin configuration cannot be logged: {e}"))
         })?)
     } else {

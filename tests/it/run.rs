@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use crate::cli::{gyrobench, temp_dir};
-use crate::common::SimServe;
+use crate::common::{SimServe, stderr};
 
 fn report(dir: &Path) -> serde_json::Value {
     let text = std::fs::read_to_string(dir.join("report.json")).expect("report.json written");
@@ -540,4 +540,56 @@ fn a_table_interlock_or_a_silent_gyro_ends_the_run_in_error_naming_the_device() 
         );
         std::fs::remove_dir_all(&dir).expect("cleanup");
     }
+}
+
+/// A lab near the equator: its simulated bench stands at its own site on
+/// a table turned north, and the twin with it. The Earth rate the bench
+/// expects in each pose is the one the simulated unit sees, so the rolls
+/// about north (15 deg/h of Earth rate on the axis) read the unit's own
+/// bias, as the axis-up poses do.
+#[test]
+fn the_north_procedures_run_on_the_north_bench_where_the_twin_stands_with_it() {
+    let root = env!("CARGO_MANIFEST_DIR");
+    let bench = format!("{root}/fixtures/bench/embedded-north.toml");
+    let dir = temp_dir("north");
+    let out = run(
+        &dir,
+        &[
+            &format!("{root}/procedures/orientation_north.toml"),
+            "--bench",
+            &bench,
+        ],
+    );
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    let r = report(&dir);
+    let bias = |label: &str| {
+        r["measurements"]
+            .as_array()
+            .expect("measurements")
+            .iter()
+            .find(|m| m["name"] == format!("bias_dph:{label}"))
+            .and_then(|m| m["value"].as_f64())
+            .unwrap_or_else(|| panic!("no bias at {label}"))
+    };
+    for label in ["roll000", "roll090", "roll180", "roll270", "tilt55"] {
+        assert!(
+            (bias(label) - bias("az000")).abs() < 0.2,
+            "{label}: {} against {} axis up",
+            bias(label),
+            bias("az000")
+        );
+    }
+    // A twin file standing elsewhere is refused on this bench, naming why.
+    let out = run(
+        &temp_dir("north-twin"),
+        &[
+            &format!("{root}/procedures/smoke.toml"),
+            "--bench",
+            &bench,
+            "--twin",
+            &format!("{root}/fixtures/twin/rl16.toml"),
+        ],
+    );
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+    assert!(stderr(&out).contains("[site] differs"), "{}", stderr(&out));
 }
