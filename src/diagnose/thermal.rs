@@ -425,7 +425,13 @@ impl<const N: usize> BlockStep<N> {
             m += self.rise_mean.column(r);
         }
         *x = end;
-        [0, 1, 2].map(|s| [0, 1, 2, 3].map(|j| mean[(s, j)]))
+        let mut out = [[0.0; 4]; 3];
+        for (s, o) in out.iter_mut().enumerate() {
+            for (j, v) in o.iter_mut().enumerate() {
+                *v = mean[(s, j)];
+            }
+        }
+        out
     }
 }
 
@@ -446,6 +452,10 @@ fn row(r: &[[f64; 4]; 3], sensor: usize) -> [f64; 7] {
 /// and the gain within AIR_GAIN (a quantity past its bound is held there
 /// and the rest solved again).
 fn solve_linear(runs: &[Vec<Block>], resp: &[Responses], held_out: Option<usize>) -> Linear {
+    // The normal equations of the rows ([`row`]: a sensor's four
+    // responses, then a one for its offset), summed by their structure:
+    // the responses' products, each response's sum against its sensor's
+    // offset, and each sensor's count (the upper triangle, mirrored).
     let mut ata = SMatrix::<f64, 7, 7>::zeros();
     let mut atb = SVector::<f64, 7>::zeros();
     for (run, r) in runs.iter().zip(resp) {
@@ -453,13 +463,21 @@ fn solve_linear(runs: &[Vec<Block>], resp: &[Responses], held_out: Option<usize>
             if Some(b.fold) == held_out {
                 continue;
             }
-            for s in 0..3 {
-                let x = SVector::<f64, 7>::from(row(rb, s));
-                ata += x * x.transpose();
-                atb += x * b.measured[s];
+            for (s, x) in rb.iter().enumerate() {
+                let m = b.measured[s];
+                for i in 0..4 {
+                    for j in i..4 {
+                        ata[(i, j)] += x[i] * x[j];
+                    }
+                    ata[(i, 4 + s)] += x[i];
+                    atb[i] += x[i] * m;
+                }
+                ata[(4 + s, 4 + s)] += 1.0;
+                atb[4 + s] += m;
             }
         }
     }
+    ata.fill_lower_triangle_with_upper_triangle();
     ata[(0, 0)] += PRIOR_GAIN;
     atb[0] += PRIOR_GAIN;
     for k in 4..7 {
@@ -615,12 +633,15 @@ impl CostFunction for Cost<'_> {
 
     fn cost(&self, p: &Vec<f64>) -> Result<f64, Error> {
         let (q, outside) = self.shape(p);
-        let (_, res) = self.fit_at(&q);
+        // fit_at's residuals summed as they come (the search's hot path).
+        let resp: Vec<Responses> = self.runs.iter().map(|r| simulate(&q, r)).collect();
+        let lin = solve_linear(self.runs, &resp, self.held_out);
         let mut sse = 0.0;
-        for (run, r) in self.runs.iter().zip(&res) {
-            for (b, v) in run.iter().zip(r) {
+        for (run, r) in self.runs.iter().zip(&resp) {
+            for (b, rb) in run.iter().zip(r) {
                 if Some(b.fold) != self.held_out {
-                    sse += v.iter().map(|x| x * x).sum::<f64>();
+                    let p = predict(rb, &lin);
+                    sse += (0..3).map(|k| (b.measured[k] - p[k]).powi(2)).sum::<f64>();
                 }
             }
         }
@@ -785,22 +806,62 @@ const FULL_STARTS: [(f64, f64, f64); 8] = [
 /// each of [`FULL_STARTS`], then started again from the others' optima
 /// as in the simpler form ([`cross_started`]).
 fn in_full_form(data: &[Vec<Block>], shapes: &[Shape]) -> Vec<Shape> {
-    let fold = |i: usize| (i > 0).then(|| i - 1);
-    let jobs: Vec<usize> = (0..shapes.len()).collect();
-    let searched = on_two_threads(&jobs, |&i| {
-        let starts: Vec<Shape> = FULL_STARTS
-            .iter()
-            .map(|&(tau, ratio, blocks)| {
-                let mut q = shapes[i];
-                q[8] = tau.ln();
-                q[9] = ratio;
-                q[10] = blocks.ln();
-                q
-            })
-            .collect();
-        search_shape(data, fold(i), true, &starts, 2, 150)
-    });
+    let Some(first) = shapes.first() else {
+        return Vec::new();
+    };
+    let starts: Vec<Shape> = FULL_STARTS
+        .iter()
+        .map(|&(tau, ratio, blocks)| {
+            let mut q = *first;
+            q[8] = tau.ln();
+            q[9] = ratio;
+            q[10] = blocks.ln();
+            q
+        })
+        .collect();
+    let all = search_shape(data, None, true, &starts, 2, 150);
+    let folds: Vec<usize> = (0..shapes.len() - 1).collect();
+    let searched = std::iter::once(all)
+        .chain(on_two_threads(&folds, |&k| {
+            warm_shape(data, Some(k), true, &all)
+        }))
+        .collect();
     cross_started(data, searched, true)
+}
+
+/// Simplex iterations of a fold's search from the fit on all the runs
+/// before it is settled by Levenberg-Marquardt (ours: the fold's optimum
+/// lies near, three quarters of its blocks being the same).
+const WARM_ITERS: u64 = 30;
+
+/// A fold's network, searched from `start` (the fit on all the runs).
+///
+/// A fold sees three quarters of the blocks the fit on all the runs saw,
+/// so its optimum lies near that fit's: searched from there, it takes a
+/// tenth of the evaluations of a search from the grid, which is most of
+/// the diagnosis's time on a unit unlike the twin. It still minimises its
+/// own training cost alone (a start is not a fit to the held-out
+/// quarter), and [`cross_started`] still searches again any fit another
+/// one's optimum beats.
+fn warm_shape(runs: &[Vec<Block>], held_out: Option<usize>, full: bool, start: &Shape) -> Shape {
+    search_shape(runs, held_out, full, &[*start], 1, WARM_ITERS)
+}
+
+/// A fold's modes, searched from `start` (the modes on all the runs), as
+/// [`warm_shape`].
+fn warm_modes(
+    runs: &[Vec<Block>],
+    held_out: Option<usize>,
+    axis: usize,
+    start: &[f64; MODES],
+) -> [f64; MODES] {
+    let cost = ModalCost {
+        runs,
+        held_out,
+        axis,
+    };
+    let p = multistart(cost, &[start.map(f64::ln).to_vec()], 1, WARM_ITERS);
+    clamp_modes(&p).0
 }
 
 /// `f` over `jobs` on two threads (the jobs dealt alternately), the
@@ -1281,7 +1342,6 @@ pub fn fitted_network(runs: &[RunData], base: &ThermalConfig, prior: bool) -> Fi
         Network(Shape),
         Modal([f64; MODES]),
     }
-    let folds = std::iter::once(None).chain((0..FOLDS).map(Some));
     // The modal model's convection input first along the twin's sensor
     // axis: its fits run alongside the network's.
     let base_axis = (0..CONV_INPUTS)
@@ -1291,18 +1351,30 @@ pub fn fitted_network(runs: &[RunData], base: &ThermalConfig, prior: bool) -> Fi
                 .total_cmp(&base.sensor_axis_body[b].abs())
         })
         .unwrap_or(1);
-    let jobs: Vec<Job> = folds
-        .clone()
-        .map(Job::Network)
-        .chain(folds.clone().map(|k| Job::Modal(k, base_axis)))
-        .collect();
-    // Independent fits on two threads.
+    // The fits on all the runs first, searched from the grids; each fold's
+    // fit then starts from them ([`warm`]). Two threads each time.
     let prior = prior.as_ref();
     let run = |j: &Job| match *j {
         Job::Network(k) => Out::Network(identify(&data, k, prior)),
         Job::Modal(k, axis) => Out::Modal(identify_modes(&data, k, axis)),
     };
-    let outs = on_two_threads(&jobs, run);
+    let firsts = on_two_threads(&[Job::Network(None), Job::Modal(None, base_axis)], run);
+    let (all_shape, all_modes) = match firsts.as_slice() {
+        [Out::Network(q), Out::Modal(t)] => (*q, *t),
+        _ => (shape_of(base), [600.0; MODES]),
+    };
+    let full_prior = prior.is_some_and(is_full);
+    let fold_jobs: Vec<Job> = (0..FOLDS)
+        .flat_map(|k| [Job::Network(Some(k)), Job::Modal(Some(k), base_axis)])
+        .collect();
+    let fold_fit = |j: &Job| match *j {
+        Job::Network(k) => Out::Network(warm_shape(&data, k, full_prior, &all_shape)),
+        Job::Modal(k, axis) => Out::Modal(warm_modes(&data, k, axis, &all_modes)),
+    };
+    let outs: Vec<Out> = firsts
+        .into_iter()
+        .chain(on_two_threads(&fold_jobs, fold_fit))
+        .collect();
     let mut modes: Vec<[f64; MODES]> = outs
         .iter()
         .filter_map(|o| match o {
@@ -1318,7 +1390,6 @@ pub fn fitted_network(runs: &[RunData], base: &ThermalConfig, prior: bool) -> Fi
     // axis that changes once in the orientation run (the sensitive axis,
     // vertical then horizontal) took the warm-up's tail and lost 0.05 degC
     // held out on units with no convection at all.
-    let all_modes = modes.first().copied().unwrap_or([600.0; MODES]);
     let axis = (0..CONV_INPUTS)
         .map(|a| {
             let held: f64 = (0..FOLDS)
@@ -1337,13 +1408,12 @@ pub fn fitted_network(runs: &[RunData], base: &ThermalConfig, prior: bool) -> Fi
         .min_by(|x, y| x.1.total_cmp(&y.1))
         .map_or(base_axis, |x| x.0);
     if axis != base_axis {
-        let again: Vec<Job> = folds.map(|k| Job::Modal(k, axis)).collect();
-        modes = on_two_threads(&again, run)
-            .iter()
-            .filter_map(|o| match o {
-                Out::Modal(t) => Some(*t),
-                Out::Network(_) => None,
-            })
+        let all = identify_modes(&data, None, axis);
+        let folds: Vec<usize> = (0..FOLDS).collect();
+        modes = std::iter::once(all)
+            .chain(on_two_threads(&folds, |&k| {
+                warm_modes(&data, Some(k), axis, &all)
+            }))
             .collect();
     }
     let shapes: Vec<Shape> = outs
