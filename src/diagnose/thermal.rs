@@ -802,9 +802,10 @@ const FULL_STARTS: [(f64, f64, f64); 8] = [
     (SINK_START_S, 0.0, 1.0 / 3.0),
 ];
 
-/// Every fit searched again in the full form, from its own optimum with
-/// each of [`FULL_STARTS`], then started again from the others' optima
-/// as in the simpler form ([`cross_started`]).
+/// The fits searched again in the full form: the one on all the runs
+/// from its own optimum with each of [`FULL_STARTS`], each fold from that
+/// ([`warm_shape`]), then started again from the others' optima as in the
+/// simpler form ([`cross_started`]).
 fn in_full_form(data: &[Vec<Block>], shapes: &[Shape]) -> Vec<Shape> {
     let Some(first) = shapes.first() else {
         return Vec::new();
@@ -837,9 +838,9 @@ const WARM_ITERS: u64 = 30;
 /// A fold's network, searched from `start` (the fit on all the runs).
 ///
 /// A fold sees three quarters of the blocks the fit on all the runs saw,
-/// so its optimum lies near that fit's: searched from there, it takes a
-/// tenth of the evaluations of a search from the grid, which is most of
-/// the diagnosis's time on a unit unlike the twin. It still minimises its
+/// so its optimum lies near that fit's: searched from there, it is spared
+/// the grid's six simplex searches, which on a unit unlike the twin were
+/// most of the diagnosis's time. It still minimises its
 /// own training cost alone (a start is not a fit to the held-out
 /// quarter), and [`cross_started`] still searches again any fit another
 /// one's optimum beats.
