@@ -165,7 +165,8 @@ pub(crate) fn to_run(samples: Vec<crate::study::Sample>, name: &str, twin: &Twin
 }
 
 /// The runs of one trial on `twin`: the study's thermal cycle and
-/// orientation run, and with `separating` also `procedures/separating.toml`
+/// orientation run (their `_north` versions on a table turned north),
+/// and with `separating` also `procedures/separating.toml`
 /// and the rate transfer at three temperatures
 /// (`procedures/rate_transfer_temperatures.toml`).
 pub(crate) fn runs_of(

@@ -13,6 +13,20 @@ height_m = 180.0
 magnetic_field_ned_ut = [19.5, 2.7, 46.5]
 ";
 
+/// `gyrobench import CSV --site SITE -o LOG --db none`.
+fn import(csv: &Path, site: &Path, log: &Path) -> std::process::Output {
+    gyrobench(&[
+        "import",
+        s(csv),
+        "--site",
+        s(site),
+        "-o",
+        s(log),
+        "--db",
+        "none",
+    ])
+}
+
 fn rows(p: &Path) -> Vec<Vec<String>> {
     std::fs::read_to_string(p)
         .expect("csv")
@@ -357,16 +371,7 @@ fn any_orientation_on_the_sphere_imports_judges_and_exports_back() {
     let file = dir.join("sphere.csv");
     std::fs::write(&file, &csv).expect("csv");
     let log = dir.join("sphere.mcap");
-    let out = gyrobench(&[
-        "import",
-        s(&file),
-        "--site",
-        s(&site),
-        "-o",
-        s(&log),
-        "--db",
-        "none",
-    ]);
+    let out = import(&file, &site, &log);
     assert_eq!(
         out.status.code(),
         Some(0),
@@ -461,16 +466,7 @@ fn a_table_geometry_with_the_site_gives_table_angles_or_names_the_rows_it_cannot
     let good = dir.join("up.csv");
     std::fs::write(&good, &reachable).expect("csv");
     let log = dir.join("up.mcap");
-    let out = gyrobench(&[
-        "import",
-        s(&good),
-        "--site",
-        s(&site),
-        "-o",
-        s(&log),
-        "--db",
-        "none",
-    ]);
+    let out = import(&good, &site, &log);
     assert_eq!(
         out.status.code(),
         Some(0),
@@ -494,16 +490,7 @@ fn a_table_geometry_with_the_site_gives_table_angles_or_names_the_rows_it_cannot
     let bad = dir.join("north.csv");
     std::fs::write(&bad, &north).expect("csv");
     let log = dir.join("north.mcap");
-    let out = gyrobench(&[
-        "import",
-        s(&bad),
-        "--site",
-        s(&site),
-        "-o",
-        s(&log),
-        "--db",
-        "none",
-    ]);
+    let out = import(&bad, &site, &log);
     let err = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(1), "{err}");
     assert!(
@@ -515,16 +502,7 @@ fn a_table_geometry_with_the_site_gives_table_angles_or_names_the_rows_it_cannot
     // Without the geometry the same rows are taken as they are.
     let plain = dir.join("plain-site.toml");
     std::fs::write(&plain, SITE).expect("site");
-    let out = gyrobench(&[
-        "import",
-        s(&bad),
-        "--site",
-        s(&plain),
-        "-o",
-        s(&log),
-        "--db",
-        "none",
-    ]);
+    let out = import(&bad, &plain, &log);
     assert_eq!(
         out.status.code(),
         Some(0),
@@ -545,16 +523,7 @@ fn a_table_geometry_with_the_site_gives_table_angles_or_names_the_rows_it_cannot
     let cols = dir.join("cols.csv");
     std::fs::write(&cols, &with_angles).expect("csv");
     let log = dir.join("cols.mcap");
-    let out = gyrobench(&[
-        "import",
-        s(&cols),
-        "--site",
-        s(&plain),
-        "-o",
-        s(&log),
-        "--db",
-        "none",
-    ]);
+    let out = import(&cols, &plain, &log);
     assert_eq!(
         out.status.code(),
         Some(0),
@@ -565,16 +534,7 @@ fn a_table_geometry_with_the_site_gives_table_angles_or_names_the_rows_it_cannot
     // The unit lies along the inner axis: the inner angle turns it about
     // its own axis, and 30 deg of it contradicts the roll the rows give, so
     // the geometry refuses the last five rows.
-    let out = gyrobench(&[
-        "import",
-        s(&cols),
-        "--site",
-        s(&site),
-        "-o",
-        s(&log),
-        "--db",
-        "none",
-    ]);
+    let out = import(&cols, &site, &log);
     let err = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(1), "{err}");
     assert!(err.contains("5 row(s) do not fit"), "{err}");
@@ -702,16 +662,7 @@ fn an_imported_runs_report_shows_each_records_pose_without_table_angles() {
     let file = dir.join("two.csv");
     std::fs::write(&file, &csv).expect("csv");
     let log = dir.join("two.mcap");
-    let out = gyrobench(&[
-        "import",
-        s(&file),
-        "--site",
-        s(&site),
-        "-o",
-        s(&log),
-        "--db",
-        "none",
-    ]);
+    let out = import(&file, &site, &log);
     assert_eq!(
         out.status.code(),
         Some(0),
