@@ -26,12 +26,19 @@ fn main() {
         let commit = git(&["rev-parse", "--short=12", "HEAD"])?;
         // A new commit (HEAD moves, or the branch it names) or a changed
         // source file asks again.
+        // Only files that exist: cargo takes a missing one as changed on
+        // every build, and rebuilds the crate each time (a repository
+        // whose refs are all loose has no `packed-refs`).
         if let Some(dir) = git(&["rev-parse", "--git-dir"]) {
-            println!("cargo:rerun-if-changed={dir}/HEAD");
+            let mut watched = vec![format!("{dir}/HEAD"), format!("{dir}/packed-refs")];
             if let Some(r) = git(&["symbolic-ref", "-q", "HEAD"]) {
-                println!("cargo:rerun-if-changed={dir}/{r}");
+                watched.push(format!("{dir}/{r}"));
             }
-            println!("cargo:rerun-if-changed={dir}/packed-refs");
+            for path in watched {
+                if std::path::Path::new(&path).exists() {
+                    println!("cargo:rerun-if-changed={path}");
+                }
+            }
         }
         println!("cargo:rerun-if-changed=src");
         let dirty =

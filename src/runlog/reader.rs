@@ -250,7 +250,7 @@ fn unpack_chunk(
         ));
     }
     if header.uncompressed_crc != 0 {
-        let crc = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC).checksum(&data);
+        let crc = crc32fast::hash(&data);
         if crc != header.uncompressed_crc {
             return Err((
                 Some(header.clone()),

@@ -202,16 +202,17 @@ static TURN: std::sync::RwLock<()> = std::sync::RwLock::new(());
 /// Held by tests that run a simulated bench paced against the wall clock
 /// (`sim serve` at 60-200x: a starved reader loses frames, which the run
 /// rightly refuses to judge, or falls behind the gyro) and by the README
-/// test, whose selfchecks and 2 kHz link benchmark would starve them. They
-/// take turns, and never run beside a test holding [`busy_turn`]; the
-/// light rest of the suite runs beside them.
+/// test's paced lines (`--speed`, the 2 kHz link benchmark). They take
+/// turns, and never run beside a test holding [`busy_turn`]; the light
+/// rest of the suite runs beside them.
 pub fn wall_clock_turn() -> std::sync::RwLockWriteGuard<'static, ()> {
     TURN.write()
         .unwrap_or_else(std::sync::PoisonError::into_inner)
 }
 
 /// Held by tests that keep the cores busy for long (self-checks, the
-/// fault-and-resume sweep, eight runs at once, Chromium): they run beside
+/// fault-and-resume sweep, eight runs at once, Chromium, the README's
+/// lines at full speed, one line at a time): they run beside
 /// each other but not beside a [`wall_clock_turn`]. Seen in a release
 /// build: the sweep beside a run through `sim serve` at 60x made the host
 /// fall behind the gyro, and the run (rightly) refused to judge its record.
