@@ -4,7 +4,9 @@
 //! `fixtures/` (so nothing lands in the repository), each exit code
 //! checked: 0, or the `(exit N` the line's comment gives. A line whose
 //! comment says `needs hardware` is skipped; one that `serves until
-//! Ctrl-C` is started, seen serving, and stopped with SIGTERM.
+//! Ctrl-C` is started, seen serving, and stopped with SIGTERM. The
+//! diagnosis self-checks, which depend on no other line, run in a test and
+//! a working directory of their own, beside the rest.
 
 use std::io::BufRead;
 use std::path::Path;
@@ -197,19 +199,23 @@ fn exited(status: std::process::ExitStatus, want: i32) -> bool {
     status.code() == Some(want) || status.signal().is_some_and(|s| 128 + s == want)
 }
 
-#[test]
-fn the_readme_commands_run_top_to_bottom_from_a_fresh_clone() {
-    let lines = readme_lines();
-    assert!(lines.len() >= 20, "{lines:#?}");
-    assert_eq!(lines[0].args, ["run", "procedures/acceptance.toml"]);
-    assert!(lines.iter().any(|l| l.expect == Expect::Serves));
+/// Whether a line is one of the diagnosis self-checks: each reads nothing
+/// another line writes and writes only its own `--out`, so they run in a
+/// test of their own beside the rest (a third of the README's time).
+fn is_selfcheck(line: &Line) -> bool {
+    line.args
+        .starts_with(&["diagnose".to_owned(), "selfcheck".to_owned()])
+}
 
-    let work = temp_dir("readme");
+/// Run `lines` in order in a fresh working directory named `tag` holding
+/// copies of `procedures/` and `fixtures/`; the directory.
+fn run_in_order(tag: &str, lines: &[&Line]) -> std::path::PathBuf {
+    let work = temp_dir(tag);
     let _fresh = std::fs::remove_dir_all(&work);
     for dir in ["procedures", "fixtures"] {
         copy_dir(&Path::new(ROOT).join(dir), &work.join(dir));
     }
-    for line in &lines {
+    for line in lines {
         // A line paced against the wall clock (`--speed`, the 2 kHz link
         // benchmark, a server) takes its turn alone; the rest (selfchecks,
         // runs at full speed) keep the cores busy beside other busy tests,
@@ -258,6 +264,17 @@ fn the_readme_commands_run_top_to_bottom_from_a_fresh_clone() {
             line.args.join(" ")
         );
     }
+    work
+}
+
+#[test]
+fn the_readme_commands_run_top_to_bottom_from_a_fresh_clone() {
+    let lines = readme_lines();
+    assert!(lines.len() >= 20, "{lines:#?}");
+    assert_eq!(lines[0].args, ["run", "procedures/acceptance.toml"]);
+    assert!(lines.iter().any(|l| l.expect == Expect::Serves));
+    let rest: Vec<&Line> = lines.iter().filter(|l| !is_selfcheck(l)).collect();
+    let work = run_in_order("readme", &rest);
     // What the commands wrote stayed in the working directory.
     for made in [
         "runs/smoke/run.mcap",
@@ -266,6 +283,24 @@ fn the_readme_commands_run_top_to_bottom_from_a_fresh_clone() {
         "lab-run.mcap",
     ] {
         assert!(work.join(made).exists(), "{made}");
+    }
+    std::fs::remove_dir_all(&work).expect("cleanup");
+}
+
+#[test]
+fn the_readme_selfchecks_run_in_order_from_a_fresh_clone() {
+    let lines = readme_lines();
+    let checks: Vec<&Line> = lines.iter().filter(|l| is_selfcheck(l)).collect();
+    assert!(checks.len() >= 3, "{lines:#?}");
+    let work = run_in_order("readme-selfchecks", &checks);
+    for line in &checks {
+        let out = line
+            .args
+            .windows(2)
+            .find(|w| w[0] == "--out")
+            .map(|w| w[1].clone())
+            .unwrap_or_else(|| panic!("README.md:{}: a selfcheck names its --out", line.number));
+        assert!(work.join(&out).is_dir(), "README.md:{}: {out}", line.number);
     }
     std::fs::remove_dir_all(&work).expect("cleanup");
 }
