@@ -866,7 +866,8 @@ fn warm_modes(
 }
 
 /// `f` over `jobs` on two threads (the jobs dealt alternately), the
-/// results in the jobs' order.
+/// results in the jobs' order. A worker's panic is raised again here: a
+/// lost worker would otherwise drop half the results and shift the rest.
 fn on_two_threads<J: Sync, R: Send>(jobs: &[J], f: impl Fn(&J) -> R + Sync) -> Vec<R> {
     let f = &f;
     let mut out: Vec<(usize, R)> = std::thread::scope(|s| {
@@ -883,7 +884,7 @@ fn on_two_threads<J: Sync, R: Send>(jobs: &[J], f: impl Fn(&J) -> R + Sync) -> V
             .collect();
         handles
             .into_iter()
-            .flat_map(|h| h.join().unwrap_or_default())
+            .flat_map(|h| h.join().unwrap_or_else(|p| std::panic::resume_unwind(p)))
             .collect()
     });
     out.sort_by_key(|o| o.0);
