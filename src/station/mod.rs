@@ -27,10 +27,11 @@ use serde::{Deserialize, Serialize};
 use crate::bench::BenchConfig;
 use crate::procedure::Procedure;
 use crate::procedure::estimate::min_total_s;
+use crate::sequencer::Outcome;
 use crate::sequencer::interrupt::Interrupt;
 use crate::session::{self, Place, Plan};
 use crate::twin::config::TwinConfig;
-use state::{Reporter, RunView, Shared, StepView};
+use state::{Reporter, RunPhase, RunView, Shared, StepView};
 
 /// How the station runs its benches.
 #[derive(Debug, Clone)]
@@ -316,8 +317,8 @@ impl Station {
                 .as_ref()
                 .filter(|r| r.number == number)
                 .ok_or_else(|| Refused::NotFound(format!("no run {number} here")))?;
-            if run.phase != "finished"
-                || !matches!(run.outcome.as_deref(), Some("aborted" | "error"))
+            if run.phase != RunPhase::Finished
+                || !matches!(run.outcome, Some(Outcome::Aborted | Outcome::Error))
                 || run.dir.is_empty()
             {
                 return Err(Refused::Bad(format!(
@@ -382,7 +383,7 @@ impl Station {
             + 1;
         let view = RunView {
             number,
-            phase: "running".into(),
+            phase: RunPhase::Running,
             procedure: plan.procedure.meta.name.clone(),
             serial: plan.dut.clone(),
             operator: plan.operator.clone(),
@@ -438,11 +439,11 @@ impl Station {
             let Some(run) = &mut b.run else {
                 return;
             };
-            run.phase = "finished".into();
+            run.phase = RunPhase::Finished;
             run.prompt = None;
             match &finished {
                 Ok(f) => {
-                    run.outcome = Some(f.report.outcome_word().to_lowercase());
+                    run.outcome = Some(f.report.outcome);
                     run.summary = Some(f.report.render_text());
                     run.bench_left = f.report.bench_left.as_ref().map(|l| l.summary.clone());
                     run.dir = f.dir.display().to_string();
@@ -452,7 +453,7 @@ impl Station {
                     }
                 }
                 Err(e) => {
-                    run.outcome = Some("error".into());
+                    run.outcome = Some(Outcome::Error);
                     run.error = Some(e.clone());
                 }
             }

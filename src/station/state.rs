@@ -46,13 +46,25 @@ pub struct PromptView {
     pub text: String,
 }
 
+/// Where the station's run is: the page shows the controls of a running
+/// run or of a finished one (serialised `running`, `finished`).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum RunPhase {
+    /// Started, not yet ended.
+    #[default]
+    Running,
+    /// Ended, however it ended ([`RunView::outcome`]).
+    Finished,
+}
+
 /// The run, without its samples.
 #[derive(Debug, Clone, Default, Serialize)]
 pub struct RunView {
     /// Station-local number of the run (1, 2, ...).
     pub number: u64,
-    /// `running` or `finished`.
-    pub phase: String,
+    /// Running or finished.
+    pub phase: RunPhase,
     /// Procedure name.
     pub procedure: String,
     /// Unit serial.
@@ -79,8 +91,9 @@ pub struct RunView {
     pub prompt: Option<PromptView>,
     /// Abort was asked (cleanup runs).
     pub abort_requested: bool,
-    /// `pass`, `fail`, `error` or `aborted` once finished.
-    pub outcome: Option<String>,
+    /// How it ended, once finished (serialised `pass`, `fail`, `error`,
+    /// `aborted`, as in the report).
+    pub outcome: Option<crate::sequencer::Outcome>,
     /// The report's summary lines once finished.
     pub summary: Option<String>,
     /// How the bench was left, once finished.
@@ -294,5 +307,37 @@ impl Progress for Reporter {
                 run.measurements.push(view);
             }
         });
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::sequencer::Outcome;
+
+    /// The page reads `phase` and `outcome` by these words (and a resume
+    /// is offered on `aborted` or `error`): the enums keep them.
+    #[test]
+    fn phase_and_outcome_serialise_with_the_words_the_page_reads() {
+        let mut run = RunView::default();
+        let v = serde_json::to_value(&run).expect("json");
+        assert_eq!(
+            (&v["phase"], &v["outcome"]),
+            (&"running".into(), &serde_json::Value::Null)
+        );
+        for (outcome, word) in [
+            (Outcome::Pass, "pass"),
+            (Outcome::Fail, "fail"),
+            (Outcome::Error, "error"),
+            (Outcome::Aborted, "aborted"),
+        ] {
+            run.phase = RunPhase::Finished;
+            run.outcome = Some(outcome);
+            let v = serde_json::to_value(&run).expect("json");
+            assert_eq!(
+                (&v["phase"], &v["outcome"]),
+                (&"finished".into(), &word.into())
+            );
+        }
     }
 }
