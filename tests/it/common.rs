@@ -294,6 +294,68 @@ impl Drop for SimServe {
     }
 }
 
+/// A `gyrobench` child whose stderr (where a run says each step it
+/// starts) is read on a thread, so that a test signals a run once it has
+/// reached a step instead of after a fixed sleep.
+pub struct Watched {
+    /// The process.
+    pub child: std::process::Child,
+    lines: std::sync::mpsc::Receiver<String>,
+    seen: Vec<String>,
+}
+
+impl Watched {
+    /// Start `command` with its stderr read line by line.
+    pub fn spawn(mut command: std::process::Command) -> Self {
+        use std::io::BufRead;
+        let mut child = command
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .expect("gyrobench starts");
+        let err = child.stderr.take().expect("stderr");
+        let (tx, lines) = std::sync::mpsc::channel();
+        std::thread::spawn(move || {
+            // Read to the end even if no one listens: a full pipe would
+            // stall the run.
+            for line in std::io::BufReader::new(err).lines().map_while(Result::ok) {
+                let _unheard = tx.send(line);
+            }
+        });
+        Self {
+            child,
+            lines,
+            seen: Vec::new(),
+        }
+    }
+
+    /// Wait until the process prints a line holding `needle` (at most
+    /// 120 s); fails with every line seen if it ends or times out first.
+    pub fn wait_for_line(&mut self, needle: &str) {
+        let deadline = std::time::Instant::now() + std::time::Duration::from_secs(120);
+        loop {
+            let left = deadline.saturating_duration_since(std::time::Instant::now());
+            match self.lines.recv_timeout(left) {
+                Ok(line) => {
+                    let hit = line.contains(needle);
+                    self.seen.push(line);
+                    if hit {
+                        return;
+                    }
+                }
+                Err(why) => panic!("`{needle}` never printed ({why}): {:#?}", self.seen),
+            }
+        }
+    }
+
+    /// Wait for the process to end: its exit status and all it printed on
+    /// stderr.
+    pub fn finish(mut self) -> (std::process::ExitStatus, String) {
+        let status = self.child.wait().expect("it ends");
+        self.seen.extend(self.lines.iter());
+        (status, self.seen.join("\n"))
+    }
+}
+
 /// Wait until `path` exists (a run started writing), at most 60 s.
 pub fn wait_for(path: &Path) {
     for _ in 0..3000 {

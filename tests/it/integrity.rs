@@ -160,17 +160,16 @@ fn a_resume_after_a_kill_reports_the_stale_lock_it_takes_over() {
     let dir = temp_dir("integrity-stale");
     let p = write(&dir, "mini.toml", MINI);
     let out = dir.join("run");
-    let mut child = bin()
+    let mut command = bin();
+    command
         .args(["run", s(&p), "--out", s(&out), "--speed", "400"])
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .spawn()
-        .expect("run starts");
-    let pid = child.id();
-    wait_for(&out.join("run.mcap"));
-    std::thread::sleep(std::time::Duration::from_millis(500));
-    child.kill().expect("SIGKILL");
-    child.wait().expect("reaped");
+        .stdout(Stdio::null());
+    let mut run = crate::common::Watched::spawn(command);
+    let pid = run.child.id();
+    // SIGKILL once the first record has started.
+    run.wait_for_line("] record warm for");
+    run.child.kill().expect("SIGKILL");
+    let _killed = run.finish();
     let lock = std::fs::read_to_string(out.join("run.lock")).expect("the killed run's lock");
     assert!(lock.contains(&format!("pid={pid}")), "{lock}");
     let r = gyrobench(&["run", "--resume", s(&out)]);

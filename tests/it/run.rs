@@ -225,7 +225,8 @@ fn a_device_failure_mid_run_is_an_error_after_cleanup_with_a_readable_log() {
 #[test]
 fn ctrl_c_runs_cleanup_and_exits_130() {
     let dir: PathBuf = temp_dir("run-sigint");
-    let child = crate::cli::command()
+    let mut command = crate::cli::command();
+    command
         .args([
             "run",
             &smoke(),
@@ -234,30 +235,17 @@ fn ctrl_c_runs_cleanup_and_exits_130() {
             "--out",
             dir.to_str().expect("utf-8"),
         ])
-        .stdout(std::process::Stdio::null())
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .expect("run starts");
-    // Wait until the run is under way (its run directory has a log).
-    for _ in 0..200 {
-        if dir.join("run.mcap").exists() {
-            break;
-        }
-        std::thread::sleep(std::time::Duration::from_millis(20));
-    }
-    std::thread::sleep(std::time::Duration::from_millis(1500));
+        .stdout(std::process::Stdio::null());
+    let mut run = crate::common::Watched::spawn(command);
+    // Mid-run: a record has started.
+    run.wait_for_line("] record ");
     let kill = Command::new("kill")
-        .args(["-INT", &child.id().to_string()])
+        .args(["-INT", &run.child.id().to_string()])
         .status()
         .expect("kill runs");
     assert!(kill.success());
-    let out = child.wait_with_output().expect("run ends");
-    assert_eq!(
-        out.status.code(),
-        Some(130),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let (status, err) = run.finish();
+    assert_eq!(status.code(), Some(130), "{err}");
     let r = report(&dir);
     assert_eq!(r["outcome"], "aborted");
     assert_eq!(r["cleanup_completed"], true);

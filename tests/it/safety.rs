@@ -7,7 +7,7 @@ use std::path::Path;
 use std::process::{Command, Stdio};
 
 use crate::cli::{gyrobench, temp_dir};
-use crate::common::{MINI, SimServe, json, s, stderr, wait_for, write};
+use crate::common::{MINI, SimServe, Watched, json, s, stderr, write};
 
 fn signal(pid: u32, sig: &str) {
     let ok = Command::new("kill")
@@ -108,22 +108,16 @@ fn sigterm_sighup_and_sigquit_stop_a_run_as_ctrl_c_does() {
     let p = write(&dir, "mini.toml", MINI);
     for (sig, code) in [("TERM", 143), ("HUP", 129), ("QUIT", 131)] {
         let out = dir.join(sig);
-        let child = crate::cli::command()
+        let mut command = crate::cli::command();
+        command
             .args(["run", s(&p), "--out", s(&out), "--speed", "300"])
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped())
-            .spawn()
-            .expect("run starts");
-        wait_for(&out.join("run.mcap"));
-        std::thread::sleep(std::time::Duration::from_millis(400));
-        signal(child.id(), sig);
-        let done = child.wait_with_output().expect("ends");
-        assert_eq!(
-            done.status.code(),
-            Some(code),
-            "SIG{sig}: {}",
-            stderr(&done)
-        );
+            .stdout(Stdio::null());
+        let mut run = Watched::spawn(command);
+        // Mid-run: the first record has started.
+        run.wait_for_line("] record warm for");
+        signal(run.child.id(), sig);
+        let (status, err) = run.finish();
+        assert_eq!(status.code(), Some(code), "SIG{sig}: {err}");
         let report = json(&out.join("report.json"));
         assert_eq!(report["outcome"], "aborted", "SIG{sig}");
         let message = report["error"]["message"].as_str().expect("message");
@@ -180,26 +174,28 @@ fn a_device_run_stopped_by_sigterm_or_killed_through_sim_serve_ends_safe_and_res
     let p = write(&dir, "mini.toml", MINI);
     // SIGTERM: cleanup, the safe state read back from the real drivers.
     let out = dir.join("term");
-    let child = crate::cli::command()
-        .args([
-            "run",
-            s(&p),
-            "--bench",
-            s(&bench),
-            "--dut",
-            "RL16-0042",
-            "--out",
-            s(&out),
-        ])
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("run starts");
-    wait_for(&out.join("run.mcap"));
-    std::thread::sleep(std::time::Duration::from_millis(1500));
-    signal(child.id(), "TERM");
-    let done = child.wait_with_output().expect("ends");
-    assert_eq!(done.status.code(), Some(143), "{}", stderr(&done));
+    let run_args = |out: &std::path::Path| {
+        let mut command = crate::cli::command();
+        command
+            .args([
+                "run",
+                s(&p),
+                "--bench",
+                s(&bench),
+                "--dut",
+                "RL16-0042",
+                "--out",
+                s(out),
+            ])
+            .stdout(Stdio::null());
+        command
+    };
+    let mut run = Watched::spawn(run_args(&out));
+    // Mid-run: the first record has started.
+    run.wait_for_line("] record warm for");
+    signal(run.child.id(), "TERM");
+    let (status, err) = run.finish();
+    assert_eq!(status.code(), Some(143), "{err}");
     let report = json(&out.join("report.json"));
     assert_eq!(report["outcome"], "aborted");
     assert_eq!(
@@ -210,25 +206,11 @@ fn a_device_run_stopped_by_sigterm_or_killed_through_sim_serve_ends_safe_and_res
 
     // SIGKILL: nothing runs; the next part picks up from the log.
     let out = dir.join("kill");
-    let mut child = crate::cli::command()
-        .args([
-            "run",
-            s(&p),
-            "--bench",
-            s(&bench),
-            "--dut",
-            "RL16-0042",
-            "--out",
-            s(&out),
-        ])
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .spawn()
-        .expect("run starts");
-    wait_for(&out.join("run.mcap"));
-    std::thread::sleep(std::time::Duration::from_millis(2500));
-    child.kill().expect("SIGKILL");
-    child.wait().expect("reaped");
+    let mut run = Watched::spawn(run_args(&out));
+    // SIGKILL once the first record has started.
+    run.wait_for_line("] record warm for");
+    run.child.kill().expect("SIGKILL");
+    let _killed = run.finish();
     assert!(!out.join("report.json").exists());
     let r = gyrobench(&["run", "--resume", s(&out)]);
     let report = json(&out.join("report.json"));
