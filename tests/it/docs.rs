@@ -128,3 +128,179 @@ fn every_document_cited_exists() {
     }
     assert!(cited > 20, "{cited} citations found");
 }
+
+/// The rows of ARCHITECTURE.md's module table, bottom layer first: the
+/// module paths each row names (`runlog::reader`, `protocol::espec`, ...).
+fn layer_rows() -> Vec<Vec<String>> {
+    read("ARCHITECTURE.md")
+        .lines()
+        .filter_map(|l| l.strip_prefix("| `"))
+        .map(|l| {
+            let cell = l.split('|').next().unwrap_or_default();
+            format!("`{cell}")
+                .split('`')
+                .skip(1)
+                .step_by(2)
+                .filter(|name| {
+                    name.chars()
+                        .all(|c| c.is_alphanumeric() || c == '_' || c == ':')
+                })
+                .map(str::to_owned)
+                .collect()
+        })
+        .collect()
+}
+
+/// The row of the deepest module path that `path` (`a::b::c`) lies in.
+fn row_of(rows: &[Vec<String>], path: &str) -> Option<usize> {
+    let mut parts: Vec<&str> = path.split("::").collect();
+    while !parts.is_empty() {
+        let key = parts.join("::");
+        if let Some(i) = rows.iter().position(|r| r.contains(&key)) {
+            return Some(i);
+        }
+        parts.pop();
+    }
+    None
+}
+
+/// Every path named after `crate::` in `code`, `crate::a::{b, c::d}`
+/// read as `a::b` and `a::c::d`.
+fn crate_paths(code: &str) -> Vec<String> {
+    fn group(prefix: &str, text: &str, out: &mut Vec<String>) -> usize {
+        // `text` starts after `{`: items up to the matching `}`.
+        let (mut depth, mut start) = (0, 0);
+        for (i, c) in text.char_indices() {
+            match c {
+                '{' => depth += 1,
+                '}' if depth > 0 => depth -= 1,
+                ',' | '}' if depth == 0 => {
+                    item(prefix, &text[start..i], out);
+                    start = i + 1;
+                    if c == '}' {
+                        return i + 1;
+                    }
+                }
+                _ => {}
+            }
+        }
+        text.len()
+    }
+    fn item(prefix: &str, text: &str, out: &mut Vec<String>) {
+        let text = text.trim();
+        let path: String = text
+            .chars()
+            .take_while(|c| c.is_alphanumeric() || *c == '_' || *c == ':')
+            .collect();
+        let rest = &text[path.len()..];
+        let full = format!("{prefix}{path}");
+        if let Some(inner) = rest.strip_prefix('{') {
+            group(&full, inner, out);
+        } else if !path.is_empty() && path != "self" {
+            out.push(full.trim_end_matches("::").to_owned());
+        } else if path == "self" {
+            out.push(prefix.trim_end_matches("::").to_owned());
+        }
+    }
+    let mut out = Vec::new();
+    let mut rest = code;
+    while let Some(at) = rest.find("crate::") {
+        let after = &rest[at + "crate::".len()..];
+        let path: String = after
+            .chars()
+            .take_while(|c| c.is_alphanumeric() || *c == '_' || *c == ':')
+            .collect();
+        let tail = &after[path.len()..];
+        if let Some(inner) = tail.strip_prefix('{') {
+            let used = group(&path, inner, &mut out);
+            rest = &inner[used..];
+        } else {
+            out.push(path.trim_end_matches("::").to_owned());
+            rest = tail;
+        }
+    }
+    out
+}
+
+fn rust_files(dir: &Path, out: &mut Vec<std::path::PathBuf>) {
+    for e in std::fs::read_dir(dir).expect("src") {
+        let p = e.expect("entry").path();
+        if p.is_dir() {
+            rust_files(&p, out);
+        } else if p.extension().is_some_and(|x| x == "rs") {
+            out.push(p);
+        }
+    }
+}
+
+#[test]
+fn every_import_follows_the_layers_architecture_md_states() {
+    let rows = layer_rows();
+    assert!(rows.len() > 40, "{rows:?}");
+    let src = Path::new(ROOT).join("src");
+    let mut files = Vec::new();
+    rust_files(&src, &mut files);
+    let mut against = Vec::new();
+    let mut unplaced = Vec::new();
+    for file in &files {
+        let rel = file.strip_prefix(&src).expect("under src");
+        let name = rel
+            .to_string_lossy()
+            .trim_end_matches(".rs")
+            .replace('/', "::");
+        let module = name.trim_end_matches("::mod");
+        // The crate root and the binary see every layer; tests may too.
+        if matches!(module, "lib" | "main") || module.ends_with("tests") {
+            continue;
+        }
+        let text = std::fs::read_to_string(file).expect("source");
+        let Some(me) = row_of(&rows, module) else {
+            // A parent that only declares its children needs no row.
+            if text.contains("fn ") {
+                unplaced.push(rel.display().to_string());
+            }
+            continue;
+        };
+        let code = text
+            .split("#[cfg(test)]\nmod tests")
+            .next()
+            .unwrap_or_default();
+        let code: String = code
+            .lines()
+            .map(|l| l.split("//").next().unwrap_or_default())
+            .collect::<Vec<_>>()
+            .join("\n");
+        for path in crate_paths(&code) {
+            if let Some(theirs) = row_of(&rows, &path)
+                && theirs > me
+            {
+                against.push(format!(
+                    "src/{}: `crate::{path}` (row `{}`) is above `{}`",
+                    rel.display(),
+                    rows[theirs][0],
+                    rows[me][0]
+                ));
+            }
+        }
+    }
+    assert!(
+        unplaced.is_empty(),
+        "modules with no row in ARCHITECTURE.md: {unplaced:?}"
+    );
+    against.sort();
+    against.dedup();
+    assert!(
+        against.is_empty(),
+        "imports against the layering ARCHITECTURE.md states:\n{}",
+        against.join("\n")
+    );
+}
+
+#[test]
+fn crate_paths_reads_plain_and_grouped_imports() {
+    let code = "use crate::a::b;\nuse crate::{c::d, e::{f, g::h}, i};\nlet x = crate::j::k(1);";
+    assert_eq!(
+        crate_paths(code),
+        ["a::b", "c::d", "e::f", "e::g::h", "i", "j::k"]
+    );
+}
