@@ -342,7 +342,11 @@ impl Watched {
                         return;
                     }
                 }
-                Err(why) => panic!("`{needle}` never printed ({why}): {:#?}", self.seen),
+                Err(why) => {
+                    // Not left running behind a failed test.
+                    let _killed = self.child.kill();
+                    panic!("`{needle}` never printed ({why}): {:#?}", self.seen)
+                }
             }
         }
     }

@@ -196,10 +196,10 @@ fn crate_paths(code: &str) -> Vec<String> {
         let full = format!("{prefix}{path}");
         if let Some(inner) = rest.strip_prefix('{') {
             group(&full, inner, out);
-        } else if !path.is_empty() && path != "self" {
-            out.push(full.trim_end_matches("::").to_owned());
         } else if path == "self" {
             out.push(prefix.trim_end_matches("::").to_owned());
+        } else if !path.is_empty() {
+            out.push(full.trim_end_matches("::").to_owned());
         }
     }
     let mut out = Vec::new();
@@ -298,9 +298,10 @@ fn every_import_follows_the_layers_architecture_md_states() {
 
 #[test]
 fn crate_paths_reads_plain_and_grouped_imports() {
-    let code = "use crate::a::b;\nuse crate::{c::d, e::{f, g::h}, i};\nlet x = crate::j::k(1);";
+    let code =
+        "use crate::a::b;\nuse crate::{c::d, e::{self, f, g::h}, i};\nlet x = crate::j::k(1);";
     assert_eq!(
         crate_paths(code),
-        ["a::b", "c::d", "e::f", "e::g::h", "i", "j::k"]
+        ["a::b", "c::d", "e", "e::f", "e::g::h", "i", "j::k"]
     );
 }
