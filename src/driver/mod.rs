@@ -10,6 +10,7 @@ pub mod acl;
 pub mod espec;
 pub mod gyro;
 pub mod link;
+pub mod supply;
 pub mod watlow;
 
 use std::time::Duration;
@@ -223,6 +224,47 @@ pub trait Chamber: Send {
     /// Ask the controller what it is (model, firmware; its serial where
     /// the protocol reports one).
     async fn identify(&mut self) -> Result<Identity, DeviceError>;
+}
+
+/// What a supply channel reports.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SupplyReading {
+    /// Voltage setting, V.
+    pub set_v: f64,
+    /// Current limit, A.
+    pub limit_a: f64,
+    /// Voltage measured at the output, V.
+    pub v: f64,
+    /// Current measured through it, A.
+    pub a: f64,
+    /// Output switched on.
+    pub on: bool,
+    /// Over-current protection tripped (the output is then off).
+    pub tripped: bool,
+}
+
+/// A programmable DC power supply; channels are numbered from 1.
+#[async_trait]
+pub trait PowerSupply: Send {
+    /// Name of the device (from the bench file).
+    fn name(&self) -> &str;
+    /// Ask the supply what it is.
+    async fn identify(&mut self) -> Result<Identity, DeviceError>;
+    /// Set a channel's voltage and current limit, its over-current
+    /// protection on or off (leaves the output as it is).
+    async fn configure(
+        &mut self,
+        channel: u8,
+        volts: f64,
+        limit_a: f64,
+        protection: bool,
+    ) -> Result<(), DeviceError>;
+    /// Switch a channel's output on or off.
+    async fn output(&mut self, channel: u8, on: bool) -> Result<(), DeviceError>;
+    /// Read a channel's settings, measurements and state.
+    async fn read(&mut self, channel: u8) -> Result<SupplyReading, DeviceError>;
+    /// Clear a tripped protection (the output stays off).
+    async fn clear_trip(&mut self, channel: u8) -> Result<(), DeviceError>;
 }
 
 /// Ramps a chamber whose controller has no ramp of its own by stepping its

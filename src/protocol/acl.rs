@@ -126,50 +126,7 @@ pub fn encode(commands: &[Command]) -> Vec<u8> {
     s.into_bytes()
 }
 
-/// SCPI-style error, as queued by the instrument.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct ScpiError {
-    /// Negative SCPI error number.
-    pub code: i16,
-    /// Standard text.
-    pub text: &'static str,
-}
-
-impl ScpiError {
-    /// -113: the header is not a command of this instrument.
-    pub const UNDEFINED_HEADER: Self = Self {
-        code: -113,
-        text: "Undefined header",
-    };
-    /// -109: a required argument is missing.
-    pub const MISSING_PARAMETER: Self = Self {
-        code: -109,
-        text: "Missing parameter",
-    };
-    /// -104: an argument is not a number.
-    pub const DATA_TYPE: Self = Self {
-        code: -104,
-        text: "Data type error",
-    };
-    /// -222: an argument is outside its range (bad axis, beyond a limit).
-    pub const OUT_OF_RANGE: Self = Self {
-        code: -222,
-        text: "Data out of range",
-    };
-    /// -221: the command conflicts with the state (interlock open, wrong mode).
-    pub const SETTINGS_CONFLICT: Self = Self {
-        code: -221,
-        text: "Settings conflict",
-    };
-
-    /// The `:SYST:ERR?` answer for this error.
-    pub fn reply(&self) -> String {
-        format!("{},\"{}\"", self.code, self.text)
-    }
-}
-
-/// `:SYST:ERR?` answer when the queue is empty.
-pub const NO_ERROR: &str = "0,\"No error\"";
+use super::scpi::ScpiError;
 
 /// Status byte bits.
 pub mod stb {

@@ -4,6 +4,8 @@
 pub mod acl;
 pub mod espec;
 pub mod frame;
+pub mod scpi;
+pub mod supply;
 pub mod watlow;
 
 use serde::{Deserialize, Serialize};

@@ -7,7 +7,8 @@ use tokio::io::{AsyncRead, AsyncWrite};
 use super::faults::Action;
 use super::lines::serve_lines;
 use super::{SharedBench, SimBench};
-use crate::protocol::acl::{Axis, Command, NO_ERROR, ScpiError, ServoMode, parse_message, stb};
+use crate::protocol::acl::{Axis, Command, ServoMode, parse_message, stb};
+use crate::protocol::scpi::{NO_ERROR, ScpiError};
 use crate::twin::AxisDemand;
 
 /// Longest message accepted, bytes.

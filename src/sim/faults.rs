@@ -106,6 +106,8 @@ pub struct Faults {
     pub chamber: DeviceFaults,
     /// Motion simulator.
     pub table: DeviceFaults,
+    /// Power supply.
+    pub supply: DeviceFaults,
     /// Gyro output.
     pub gyro: GyroFaults,
 }

@@ -13,6 +13,7 @@ pub mod faults;
 pub mod gyro;
 mod lines;
 pub mod serve;
+pub mod supply;
 pub mod watlow;
 
 use std::sync::{Arc, Mutex, MutexGuard};
@@ -22,9 +23,10 @@ use tokio::sync::broadcast;
 pub use faults::{Action, DeviceFaults, Faults, GyroFaults};
 
 use crate::clock::Clock;
-use crate::protocol::acl::{ScpiError, ServoMode};
+use crate::protocol::acl::ServoMode;
 use crate::protocol::espec::Mode;
 use crate::protocol::frame::{FrameLayout, WireFrame};
+use crate::protocol::scpi::ScpiError;
 use crate::twin::{Twin, TwinConfig};
 
 /// Passive drift of the chamber air towards the room when it is not
@@ -114,6 +116,8 @@ pub struct SimBench {
     pub chamber: ChamberState,
     /// Motion simulator.
     pub table: TableState,
+    /// The unit's power supply.
+    pub supply: supply::Supply,
     gyro_tx: broadcast::Sender<GyroChunk>,
     out: Vec<u8>,
 }
@@ -149,6 +153,7 @@ impl SimBench {
                 tripped: false,
                 errors: Default::default(),
             },
+            supply: supply::Supply::new(crate::protocol::supply::Dialect::default()),
             gyro_tx,
             out: Vec::new(),
         }
@@ -156,6 +161,7 @@ impl SimBench {
 
     /// Advance the physics to `t_s`, encoding every gyro frame.
     pub fn advance_to(&mut self, t_s: f64) {
+        self.supply.advance_to(t_s);
         let layout = &self.layout;
         let out = &mut self.out;
         self.twin.run_until(t_s, |_, g| {

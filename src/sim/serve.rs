@@ -9,12 +9,17 @@ use serde::Deserialize;
 use tokio::net::TcpListener;
 
 use super::{
-    SharedBench, SimBench, acl::serve_acl, espec::serve_espec, gyro::serve_gyro,
+    SharedBench, SimBench,
+    acl::serve_acl,
+    espec::serve_espec,
+    gyro::serve_gyro,
+    supply::{Supply, serve_supply},
     watlow::WatlowService,
 };
 use crate::clock::WallClock;
 use crate::config::{Checker, ConfigError, Source};
 use crate::protocol::frame::FrameLayout;
+use crate::protocol::supply::Dialect;
 use crate::transport::pty_pair;
 use crate::twin::TwinConfig;
 
@@ -39,6 +44,10 @@ pub struct ServeConfig {
     /// Gyro frame layout (default: the documented one).
     #[serde(default)]
     pub frame: Option<FrameLayout>,
+    /// Whose SCPI commands the power supply takes (default
+    /// `keysight-e36300`; or `rigol-dp800`).
+    #[serde(default)]
+    pub supply: Dialect,
 }
 
 fn one() -> u64 {
@@ -67,6 +76,9 @@ pub struct Ports {
     /// Gyro frame stream.
     #[serde(default)]
     pub gyro: u16,
+    /// Power supply (SCPI; real ones listen on 5025).
+    #[serde(default)]
+    pub supply: u16,
 }
 
 /// A loaded serve configuration with its twin resolved.
@@ -135,9 +147,10 @@ impl Serve {
 /// One served endpoint: `<device> <protocol> <address>`.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Endpoint {
-    /// `chamber`, `table` or `gyro`.
+    /// `chamber`, `table`, `gyro` or `supply`.
     pub device: &'static str,
-    /// `espec-ascii`, `watlow-f4t-modbus`, `acl`, `rlg-frame`.
+    /// `espec-ascii`, `watlow-f4t-modbus`, `acl`, `rlg-frame`,
+    /// `keysight-e36300`, `rigol-dp800`.
     pub protocol: &'static str,
     /// `tcp://127.0.0.1:PORT` or `pty:///dev/pts/N`.
     pub address: String,
@@ -257,10 +270,9 @@ pub struct Served {
 /// Start every simulated device; returns once all endpoints listen.
 pub async fn start(s: &Serve) -> Result<Served, ServeError> {
     let clock = Arc::new(WallClock::scaled(s.config.speed));
-    let bench = SharedBench::new(
-        SimBench::new(s.twin.clone(), s.config.seed, s.layout.clone()),
-        clock,
-    );
+    let mut sim = SimBench::new(s.twin.clone(), s.config.seed, s.layout.clone());
+    sim.supply = Supply::new(s.config.supply);
+    let bench = SharedBench::new(sim, clock);
     bench.spawn_ticker(Duration::from_millis(5));
     let p = s.config.ports;
     let mut endpoints = Vec::new();
@@ -293,12 +305,18 @@ pub async fn start(s: &Serve) -> Result<Served, ServeError> {
     endpoints.push(e);
     spawn_accept(gyro, bench.clone(), serve_gyro);
 
+    let dialect = s.config.supply.as_str();
+    let (supply, e) = listen("supply", dialect, p.supply, "ports.supply").await?;
+    endpoints.push(e);
+    spawn_accept(supply, bench.clone(), serve_supply);
+
     let mut ptys = Vec::new();
     if s.config.ptys {
         for (device, protocol) in [
             ("chamber", "espec-ascii"),
             ("table", "acl"),
             ("gyro", "rlg-frame"),
+            ("supply", dialect),
         ] {
             let crate::transport::PtyPair {
                 master,
@@ -314,7 +332,8 @@ pub async fn start(s: &Serve) -> Result<Served, ServeError> {
             match protocol {
                 "espec-ascii" => drop(tokio::spawn(serve_espec(master, b))),
                 "acl" => drop(tokio::spawn(serve_acl(master, b))),
-                _ => drop(tokio::spawn(serve_gyro(master, b))),
+                "rlg-frame" => drop(tokio::spawn(serve_gyro(master, b))),
+                _ => drop(tokio::spawn(serve_supply(master, b))),
             }
             ptys.push(slave);
         }

@@ -9,10 +9,15 @@ use gyrobench::driver::acl::AclTable;
 use gyrobench::driver::espec::EspecChamber;
 use gyrobench::driver::gyro::GyroReader;
 use gyrobench::driver::link::{Connector, LineLink};
+use gyrobench::driver::supply::ScpiSupply;
 use gyrobench::driver::watlow::WatlowChamber;
-use gyrobench::driver::{Chamber, ChamberMode, DeviceError, InPosition, MotionTable, RetryPolicy};
+use gyrobench::driver::{
+    Chamber, ChamberMode, DeviceError, InPosition, MotionTable, PowerSupply, RetryPolicy,
+    SupplyReading,
+};
 use gyrobench::geometry::TableAngles;
 use gyrobench::protocol::frame::FrameLayout;
+use gyrobench::protocol::supply::Dialect;
 use gyrobench::sim::serve::{Serve, Served, start};
 use gyrobench::transport::{BoxTransport, DeviceSpec, open};
 
@@ -65,6 +70,93 @@ async fn acl(served: &Served, scheme: &str) -> AclTable {
     let s = spec(served, "table", "acl", scheme);
     let t = connect(&s).await;
     AclTable::new(LineLink::new("table", t, Some(connector(s)), POLICY))
+}
+
+async fn supply(served: &Served, dialect: Dialect, scheme: &str) -> ScpiSupply {
+    let s = spec(served, "supply", dialect.as_str(), scheme);
+    let t = connect(&s).await;
+    ScpiSupply::new(
+        LineLink::new("supply", t, Some(connector(s)), POLICY),
+        dialect,
+    )
+}
+
+/// Read channel 2 until `done` holds (2 s at most); the last reading.
+async fn supply_until(p: &mut ScpiSupply, done: impl Fn(&SupplyReading) -> bool) -> SupplyReading {
+    let mut last = None;
+    for _ in 0..100 {
+        let r = p.read(2).await.expect("a reading");
+        if done(&r) {
+            return r;
+        }
+        last = Some(r);
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    panic!("the supply never got there: {last:?}");
+}
+
+/// Power the unit on channel 2, trip the protection by lowering the limit
+/// under its steady draw, see the refusal to switch a tripped output on,
+/// clear it and power the unit again: through the real driver. A Rigol
+/// trips at once, so its limit must clear the turn-on inrush (1.15 A); a
+/// Keysight rides it out in current limit for less than its delay.
+async fn supply_cycle(p: &mut ScpiSupply) {
+    let limit = match p.dialect() {
+        Dialect::KeysightE36300 => 1.0,
+        Dialect::RigolDp800 => 1.5,
+    };
+    p.configure(2, 15.0, limit, true)
+        .await
+        .expect("settings taken");
+    p.output(2, true).await.expect("output on");
+    // The inrush, then the steady 0.55 A.
+    let on = supply_until(p, |r| r.on && (r.v - 15.0).abs() < 0.01 && r.a < 0.551).await;
+    assert!((on.a - 0.55).abs() < 0.001 && !on.tripped, "{on:?}");
+    p.configure(2, 15.0, 0.5, true)
+        .await
+        .expect("settings taken");
+    let tripped = supply_until(p, |r| r.tripped).await;
+    assert!(!tripped.on && tripped.a == 0.0, "{tripped:?}");
+    let e = p
+        .output(2, true)
+        .await
+        .expect_err("a tripped output stays off");
+    assert!(e.to_string().contains("-221 Settings conflict"), "{e}");
+    p.clear_trip(2).await.expect("cleared");
+    p.configure(2, 15.0, limit, true)
+        .await
+        .expect("settings taken");
+    p.output(2, true).await.expect("output on");
+    supply_until(p, |r| r.on && r.a > 0.5).await;
+    let e = p
+        .configure(2, 99.0, limit, true)
+        .await
+        .expect_err("beyond the rating");
+    assert!(e.to_string().contains("-222 Data out of range"), "{e}");
+    p.output(2, false).await.expect("output off");
+    supply_until(p, |r| !r.on && r.v == 0.0 && r.a == 0.0).await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn supply_driver_powers_the_unit_through_both_dialects_over_tcp_and_pty() {
+    for dialect in Dialect::ALL {
+        let mut s = Serve::load(None).expect("defaults");
+        s.config.supply = dialect;
+        let served = start(&s).await.expect("simulated bench starts");
+        for scheme in ["tcp://", "pty://"] {
+            let mut p = supply(&served, dialect, scheme).await;
+            let id = p.identify().await.expect("identity");
+            let model = match dialect {
+                Dialect::KeysightE36300 => "E36312A",
+                Dialect::RigolDp800 => "DP832",
+            };
+            assert!(
+                id.model.as_deref().is_some_and(|m| m.contains(model)),
+                "{id:?}"
+            );
+            supply_cycle(&mut p).await;
+        }
+    }
 }
 
 async fn chamber_round_trip(c: &mut dyn Chamber) {

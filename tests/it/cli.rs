@@ -208,7 +208,7 @@ fn sim_serve_prints_its_endpoints_serves_and_exits_0_on_sigterm() {
         .expect("sim serve starts");
     let mut lines = BufReader::new(child.stdout.take().expect("stdout"));
     let mut endpoints = Vec::new();
-    for _ in 0..7 {
+    for _ in 0..9 {
         let mut l = String::new();
         lines.read_line(&mut l).expect("endpoint line");
         endpoints.push(l.trim_end().to_owned());
@@ -226,6 +226,8 @@ fn sim_serve_prints_its_endpoints_serves_and_exits_0_on_sigterm() {
         "chamber watlow-f4t-modbus tcp://",
         "table acl tcp://",
         "gyro rlg-frame pty://",
+        "supply keysight-e36300 tcp://",
+        "supply keysight-e36300 pty://",
     ] {
         assert!(
             endpoints.iter().any(|e| e.starts_with(want)),

@@ -1,0 +1,461 @@
+//! Programmable DC power supplies over SCPI: LF-terminated lines, `;`
+//! chains commands, headers in short or long form, any case.
+//!
+//! The reference is Keysight's E36300 series (E36312A); Rigol's DP800
+//! series (DP832) is the second [`Dialect`]. Both select the channel with
+//! `INSTrument:NSELect` and then set, switch and measure the selected one
+//! with the same headers. They differ in:
+//!
+//! | | Keysight E36300 | Rigol DP800 |
+//! |---|---|---|
+//! | over-current protection | trips when the output stays in current limit for its delay (`CURR:PROT:STAT ON`) | trips at once when the current reaches its own level (`CURR:PROT <A>`, `CURR:PROT:STAT ON`): the level must clear the turn-on inrush |
+//! | tripped? | `CURR:PROT:TRIP?` gives `1`/`0` | `CURR:PROT:TRIP?` gives `YES`/`NO` |
+//! | clear a trip | `OUTP:PROT:CLE` | `CURR:PROT:CLE` |
+//! | numbers in replies | `+5.00000000E+00` | `5.000` |
+//! | `OUTP?` | `1`/`0` | `ON`/`OFF` |
+//!
+//! R&S HMP supplies share the selection and setting headers but protect
+//! with an electronic fuse (`FUSE:STAT`, `FUSE:TRIP?`); they are not
+//! supported here.
+
+use super::scpi::{
+    Node, Numeric, ScpiError, header_matches, node, opt, parse_bool_arg, parse_numeric,
+    split_command,
+};
+
+/// Which maker's command set.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Dialect {
+    /// Keysight E36300 series (the reference).
+    #[default]
+    KeysightE36300,
+    /// Rigol DP800 series.
+    RigolDp800,
+}
+
+impl Dialect {
+    /// The bench file's word for it.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::KeysightE36300 => "keysight-e36300",
+            Self::RigolDp800 => "rigol-dp800",
+        }
+    }
+
+    /// Every dialect, for error messages.
+    pub const ALL: [Self; 2] = [Self::KeysightE36300, Self::RigolDp800];
+}
+
+/// One command, host side or as the instrument parsed it. Channel-bound
+/// commands act on the channel `Select` chose.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Command {
+    /// `*IDN?`.
+    Identify,
+    /// `*RST`: outputs off, settings to their reset values.
+    Reset,
+    /// `*CLS`: empty the error queue.
+    ClearStatus,
+    /// `*OPC?`: answers 1 once earlier commands are done.
+    OperationComplete,
+    /// `INST:NSEL <n>` (also `INST CH<n>`).
+    Select(u8),
+    /// `INST:NSEL?`.
+    SelectQuery,
+    /// `VOLT <V>`: the voltage setting.
+    Voltage(Numeric),
+    /// `VOLT?`.
+    VoltageQuery,
+    /// `CURR <A>`: the current limit.
+    Current(Numeric),
+    /// `CURR?`.
+    CurrentQuery,
+    /// `OUTP ON|OFF`.
+    Output(bool),
+    /// `OUTP?`.
+    OutputQuery,
+    /// `MEAS:VOLT?`: the voltage at the output, V.
+    MeasureVoltage,
+    /// `MEAS:CURR?`: the current through it, A.
+    MeasureCurrent,
+    /// `CURR:PROT:STAT ON|OFF`: over-current protection on or off.
+    Protection(bool),
+    /// `CURR:PROT:STAT?`.
+    ProtectionQuery,
+    /// `CURR:PROT <A>`: the trip level (Rigol only).
+    ProtectionLevel(Numeric),
+    /// `CURR:PROT?` (Rigol only).
+    ProtectionLevelQuery,
+    /// `CURR:PROT:TRIP?`: has the protection tripped?
+    Tripped,
+    /// `OUTP:PROT:CLE` (Keysight) or `CURR:PROT:CLE` (Rigol).
+    ClearProtection,
+    /// `SYST:ERR?`: the oldest error.
+    ErrorQuery,
+    /// `SYST:REM`: remote mode, needed before commands over serial.
+    Remote,
+}
+
+fn num_text(n: Numeric) -> String {
+    match n {
+        Numeric::Value(v) => format!("{v:.4}"),
+        Numeric::Min => "MIN".into(),
+        Numeric::Max => "MAX".into(),
+    }
+}
+
+impl Command {
+    /// The command in short form, as the driver sends it to `dialect`.
+    pub fn text(&self, dialect: Dialect) -> String {
+        let on = |b: &bool| if *b { "ON" } else { "OFF" };
+        match self {
+            Self::Identify => "*IDN?".into(),
+            Self::Reset => "*RST".into(),
+            Self::ClearStatus => "*CLS".into(),
+            Self::OperationComplete => "*OPC?".into(),
+            Self::Select(n) => format!("INST:NSEL {n}"),
+            Self::SelectQuery => "INST:NSEL?".into(),
+            Self::Voltage(v) => format!("VOLT {}", num_text(*v)),
+            Self::VoltageQuery => "VOLT?".into(),
+            Self::Current(v) => format!("CURR {}", num_text(*v)),
+            Self::CurrentQuery => "CURR?".into(),
+            Self::Output(b) => format!("OUTP {}", on(b)),
+            Self::OutputQuery => "OUTP?".into(),
+            Self::MeasureVoltage => "MEAS:VOLT?".into(),
+            Self::MeasureCurrent => "MEAS:CURR?".into(),
+            Self::Protection(b) => format!("CURR:PROT:STAT {}", on(b)),
+            Self::ProtectionQuery => "CURR:PROT:STAT?".into(),
+            Self::ProtectionLevel(v) => format!("CURR:PROT {}", num_text(*v)),
+            Self::ProtectionLevelQuery => "CURR:PROT?".into(),
+            Self::Tripped => "CURR:PROT:TRIP?".into(),
+            Self::ClearProtection => match dialect {
+                Dialect::KeysightE36300 => "OUTP:PROT:CLE".into(),
+                Dialect::RigolDp800 => "CURR:PROT:CLE".into(),
+            },
+            Self::ErrorQuery => "SYST:ERR?".into(),
+            Self::Remote => "SYST:REM".into(),
+        }
+    }
+
+    /// True if the instrument answers it.
+    pub fn is_query(&self) -> bool {
+        matches!(
+            self,
+            Self::Identify
+                | Self::OperationComplete
+                | Self::SelectQuery
+                | Self::VoltageQuery
+                | Self::CurrentQuery
+                | Self::OutputQuery
+                | Self::MeasureVoltage
+                | Self::MeasureCurrent
+                | Self::ProtectionQuery
+                | Self::ProtectionLevelQuery
+                | Self::Tripped
+                | Self::ErrorQuery
+        )
+    }
+
+    /// The line on the wire.
+    pub fn encode(&self, dialect: Dialect) -> Vec<u8> {
+        let mut s = self.text(dialect);
+        s.push('\n');
+        s.into_bytes()
+    }
+}
+
+const SOURCE_VOLTAGE: &[Node] = &[
+    opt("SOURce"),
+    node("VOLTage"),
+    opt("LEVel"),
+    opt("IMMediate"),
+    opt("AMPLitude"),
+];
+const SOURCE_CURRENT: &[Node] = &[
+    opt("SOURce"),
+    node("CURRent"),
+    opt("LEVel"),
+    opt("IMMediate"),
+    opt("AMPLitude"),
+];
+const PROT_STATE: &[Node] = &[
+    opt("SOURce"),
+    node("CURRent"),
+    node("PROTection"),
+    node("STATe"),
+];
+const PROT_LEVEL: &[Node] = &[
+    opt("SOURce"),
+    node("CURRent"),
+    node("PROTection"),
+    opt("LEVel"),
+];
+const PROT_TRIPPED: &[Node] = &[
+    opt("SOURce"),
+    node("CURRent"),
+    node("PROTection"),
+    node("TRIPped"),
+];
+const PROT_CLEAR_RIGOL: &[Node] = &[
+    opt("SOURce"),
+    node("CURRent"),
+    node("PROTection"),
+    node("CLEar"),
+];
+const PROT_CLEAR_KEYSIGHT: &[Node] = &[node("OUTPut"), node("PROTection"), node("CLEar")];
+const OUTPUT: &[Node] = &[node("OUTPut"), opt("STATe")];
+const MEAS_VOLTAGE: &[Node] = &[node("MEASure"), opt("SCALar"), node("VOLTage"), opt("DC")];
+const MEAS_CURRENT: &[Node] = &[node("MEASure"), opt("SCALar"), node("CURRent"), opt("DC")];
+const INST_NSELECT: &[Node] = &[node("INSTrument"), node("NSELect")];
+const INST_SELECT: &[Node] = &[node("INSTrument"), opt("SELect")];
+const SYST_ERROR: &[Node] = &[node("SYSTem"), node("ERRor"), opt("NEXT")];
+const SYST_REMOTE: &[Node] = &[node("SYSTem"), node("REMote")];
+
+const VOLTS: &[(&str, f64)] = &[("V", 1.0), ("MV", 1e-3)];
+const AMPS: &[(&str, f64)] = &[("A", 1.0), ("MA", 1e-3)];
+
+/// Parse one received message into its commands; each failing command
+/// gives the error the instrument queues. Every command of a message
+/// starts at the root of the tree (the supplies' headers all do).
+pub fn parse_message(line: &str, dialect: Dialect) -> Vec<Result<Command, ScpiError>> {
+    line.trim_end_matches(['\r', '\n'])
+        .split(';')
+        .filter(|c| !c.trim().is_empty())
+        .map(|c| parse_one(c, dialect))
+        .collect()
+}
+
+fn parse_one(cmd: &str, dialect: Dialect) -> Result<Command, ScpiError> {
+    let s = split_command(cmd)?;
+    let parts: Vec<&str> = s.parts.iter().map(String::as_str).collect();
+    let args = s.args.as_slice();
+    // A set command takes exactly one argument, a query none.
+    let one = || match args {
+        [] => Err(ScpiError::MISSING_PARAMETER),
+        [a] => Ok(*a),
+        _ => Err(ScpiError::PARAMETER_NOT_ALLOWED),
+    };
+    let none = |c: Command| {
+        if args.is_empty() {
+            Ok(c)
+        } else {
+            Err(ScpiError::PARAMETER_NOT_ALLOWED)
+        }
+    };
+    if s.common {
+        return match (parts.as_slice(), s.query) {
+            (["IDN"], true) => none(Command::Identify),
+            (["RST"], false) => none(Command::Reset),
+            (["CLS"], false) => none(Command::ClearStatus),
+            (["OPC"], true) => none(Command::OperationComplete),
+            _ => Err(ScpiError::UNDEFINED_HEADER),
+        };
+    }
+    let is = |pattern: &[Node]| header_matches(&parts, pattern);
+    let rigol = dialect == Dialect::RigolDp800;
+    // Longer headers first: `CURR:PROT` must not be read as `CURR`.
+    if is(PROT_STATE) {
+        return if s.query {
+            none(Command::ProtectionQuery)
+        } else {
+            parse_bool_arg(one()?).map(Command::Protection)
+        };
+    }
+    if is(PROT_TRIPPED) && s.query {
+        return none(Command::Tripped);
+    }
+    if (is(PROT_CLEAR_RIGOL) && rigol || is(PROT_CLEAR_KEYSIGHT) && !rigol) && !s.query {
+        return none(Command::ClearProtection);
+    }
+    if is(PROT_LEVEL) && rigol {
+        return if s.query {
+            none(Command::ProtectionLevelQuery)
+        } else {
+            parse_numeric(one()?, AMPS).map(Command::ProtectionLevel)
+        };
+    }
+    if is(SOURCE_VOLTAGE) {
+        return if s.query {
+            none(Command::VoltageQuery)
+        } else {
+            parse_numeric(one()?, VOLTS).map(Command::Voltage)
+        };
+    }
+    if is(SOURCE_CURRENT) {
+        return if s.query {
+            none(Command::CurrentQuery)
+        } else {
+            parse_numeric(one()?, AMPS).map(Command::Current)
+        };
+    }
+    if is(OUTPUT) {
+        return if s.query {
+            none(Command::OutputQuery)
+        } else {
+            parse_bool_arg(one()?).map(Command::Output)
+        };
+    }
+    if is(MEAS_VOLTAGE) && s.query {
+        return none(Command::MeasureVoltage);
+    }
+    if is(MEAS_CURRENT) && s.query {
+        return none(Command::MeasureCurrent);
+    }
+    if is(INST_NSELECT) {
+        return if s.query {
+            none(Command::SelectQuery)
+        } else {
+            channel_number(one()?).map(Command::Select)
+        };
+    }
+    if is(INST_SELECT) {
+        return if s.query {
+            none(Command::SelectQuery)
+        } else {
+            channel_name(one()?).map(Command::Select)
+        };
+    }
+    if is(SYST_ERROR) && s.query {
+        return none(Command::ErrorQuery);
+    }
+    if is(SYST_REMOTE) && !s.query {
+        return none(Command::Remote);
+    }
+    Err(ScpiError::UNDEFINED_HEADER)
+}
+
+fn channel_number(arg: &str) -> Result<u8, ScpiError> {
+    let v: f64 = arg.trim().parse().map_err(|_| ScpiError::DATA_TYPE)?;
+    if v.fract() != 0.0 || !(1.0..=255.0).contains(&v) {
+        return Err(ScpiError::OUT_OF_RANGE);
+    }
+    Ok(v as u8)
+}
+
+/// `CH2` (both makers) or `OUTP2`/`OUT2`.
+fn channel_name(arg: &str) -> Result<u8, ScpiError> {
+    let a = arg.trim().to_ascii_uppercase();
+    let digits = ["CH", "OUTPUT", "OUTP", "OUT"]
+        .iter()
+        .find_map(|p| a.strip_prefix(p))
+        .ok_or(ScpiError::ILLEGAL_PARAMETER)?;
+    channel_number(digits).map_err(|_| ScpiError::ILLEGAL_PARAMETER)
+}
+
+/// The identity in an `*IDN?` reply (`maker,model,serial,firmware`).
+pub fn parse_identity(reply: &str) -> super::Identity {
+    super::acl::parse_identity(reply)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn ok(line: &str, d: Dialect) -> Vec<Command> {
+        parse_message(line, d)
+            .into_iter()
+            .collect::<Result<_, _>>()
+            .expect("valid message")
+    }
+
+    fn err(line: &str, d: Dialect) -> ScpiError {
+        parse_message(line, d).remove(0).expect_err("must fail")
+    }
+
+    const K: Dialect = Dialect::KeysightE36300;
+    const R: Dialect = Dialect::RigolDp800;
+
+    #[test]
+    fn long_and_short_forms_are_the_same_command() {
+        for form in [
+            "VOLT 15",
+            ":SOURce:VOLTage:LEVel:IMMediate:AMPLitude 15.0",
+            "sour:volt 15V",
+            "VOLT 15000 mV",
+        ] {
+            assert_eq!(
+                ok(form, K),
+                [Command::Voltage(Numeric::Value(15.0))],
+                "{form}"
+            );
+        }
+        assert_eq!(
+            ok("INST:NSEL 2;INST CH3;INSTrument:SELect OUT1", K),
+            [Command::Select(2), Command::Select(3), Command::Select(1)]
+        );
+        assert_eq!(
+            ok("MEAS:VOLT?;MEASure:SCALar:CURRent:DC?", R),
+            [Command::MeasureVoltage, Command::MeasureCurrent]
+        );
+    }
+
+    #[test]
+    fn what_the_driver_sends_parses_back_in_its_dialect() {
+        for d in Dialect::ALL {
+            let mut cmds = vec![
+                Command::Identify,
+                Command::Reset,
+                Command::ClearStatus,
+                Command::OperationComplete,
+                Command::Select(2),
+                Command::SelectQuery,
+                Command::Voltage(Numeric::Value(15.25)),
+                Command::VoltageQuery,
+                Command::Current(Numeric::Max),
+                Command::CurrentQuery,
+                Command::Output(true),
+                Command::OutputQuery,
+                Command::MeasureVoltage,
+                Command::MeasureCurrent,
+                Command::Protection(false),
+                Command::ProtectionQuery,
+                Command::Tripped,
+                Command::ClearProtection,
+                Command::ErrorQuery,
+                Command::Remote,
+            ];
+            if d == R {
+                cmds.push(Command::ProtectionLevel(Numeric::Value(1.2)));
+                cmds.push(Command::ProtectionLevelQuery);
+            }
+            for c in cmds {
+                let text = String::from_utf8(c.encode(d)).expect("ascii");
+                assert_eq!(ok(&text, d), [c], "{text:?} in {d:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn each_maker_keeps_its_own_headers() {
+        assert_eq!(ok("OUTP:PROT:CLE", K), [Command::ClearProtection]);
+        assert_eq!(err("OUTP:PROT:CLE", R), ScpiError::UNDEFINED_HEADER);
+        assert_eq!(ok("CURR:PROT:CLE", R), [Command::ClearProtection]);
+        assert_eq!(err("CURR:PROT:CLE", K), ScpiError::UNDEFINED_HEADER);
+        assert_eq!(err("CURR:PROT 1.5", K), ScpiError::UNDEFINED_HEADER);
+    }
+
+    #[test]
+    fn errors_are_scpi_codes() {
+        assert_eq!(err("VOLTS 5", K), ScpiError::UNDEFINED_HEADER);
+        assert_eq!(err("VOLT", K), ScpiError::MISSING_PARAMETER);
+        assert_eq!(err("VOLT five", K), ScpiError::DATA_TYPE);
+        assert_eq!(err("VOLT 5 A", K), ScpiError::INVALID_SUFFIX);
+        assert_eq!(err("VOLT 5,6", K), ScpiError::PARAMETER_NOT_ALLOWED);
+        assert_eq!(err("OUTP MAYBE", K), ScpiError::ILLEGAL_PARAMETER);
+        assert_eq!(err("INST:NSEL 0", K), ScpiError::OUT_OF_RANGE);
+        assert_eq!(err("INST CHX", K), ScpiError::ILLEGAL_PARAMETER);
+        assert_eq!(err("MEAS:VOLT", K), ScpiError::UNDEFINED_HEADER);
+        assert_eq!(err("*IDN", K), ScpiError::UNDEFINED_HEADER);
+        assert_eq!(err("VO$T 1", K), ScpiError::SYNTAX);
+    }
+
+    proptest::proptest! {
+        #[test]
+        fn the_parser_never_panics(s in "\\PC*") {
+            for d in Dialect::ALL {
+                let _ = parse_message(&s, d);
+            }
+        }
+    }
+}
