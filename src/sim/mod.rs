@@ -153,7 +153,7 @@ impl SimBench {
                 tripped: false,
                 errors: Default::default(),
             },
-            supply: supply::Supply::new(crate::protocol::supply::Dialect::default()),
+            supply: supply::Supply::powering_unit(crate::protocol::supply::Dialect::default()),
             gyro_tx,
             out: Vec::new(),
         }
@@ -161,7 +161,20 @@ impl SimBench {
 
     /// Advance the physics to `t_s`, encoding every gyro frame.
     pub fn advance_to(&mut self, t_s: f64) {
-        self.supply.advance_to(t_s);
+        // The unit runs on the supply's power: the twin is run up to each
+        // moment the power came or went, and switched there.
+        while let Some(t_change) = self.supply.advance_until_change(t_s) {
+            self.run_twin(t_change);
+            if self.supply.unit_powered() {
+                self.twin.power_on();
+            } else {
+                self.twin.power_off();
+            }
+        }
+        self.run_twin(t_s);
+    }
+
+    fn run_twin(&mut self, t_s: f64) {
         let layout = &self.layout;
         let out = &mut self.out;
         self.twin.run_until(t_s, |_, g| {

@@ -271,7 +271,7 @@ pub struct Served {
 pub async fn start(s: &Serve) -> Result<Served, ServeError> {
     let clock = Arc::new(WallClock::scaled(s.config.speed));
     let mut sim = SimBench::new(s.twin.clone(), s.config.seed, s.layout.clone());
-    sim.supply = Supply::new(s.config.supply);
+    sim.supply = Supply::powering_unit(s.config.supply);
     let bench = SharedBench::new(sim, clock);
     bench.spawn_ticker(Duration::from_millis(5));
     let p = s.config.ports;

@@ -193,20 +193,47 @@ impl Supply {
         &self.channels[self.load.1.min(self.channels.len() - 1)]
     }
 
+    /// A supply of `dialect`'s model already powering the unit, settled:
+    /// the state a bench is in when a run starts on a unit switched on
+    /// beforehand (the simulated benches start so).
+    pub fn powering_unit(dialect: Dialect) -> Self {
+        let mut s = Self::new(dialect);
+        let (load, at) = s.load;
+        let c = &mut s.channels[at];
+        c.set_v = load.nominal_v;
+        c.on = true;
+        c.source_v = load.nominal_v;
+        c.out_v = load.nominal_v;
+        c.out_a = load.steady_a;
+        s.powered_s = 20.0 * load.inrush_tau_s;
+        s.peak_a = load.steady_a;
+        s
+    }
+
     /// Move the outputs to time `t_s`: fine steps while anything changes,
     /// one step once everything is steady.
     pub fn advance_to(&mut self, t_s: f64) {
-        let mut left = t_s - self.t_s;
-        self.t_s = self.t_s.max(t_s);
-        while left > 0.0 {
+        while self.advance_until_change(t_s).is_some() {}
+    }
+
+    /// Move towards `t_s`, stopping early at the end of the step in which
+    /// the unit's power came or went; that time, or none once at `t_s`.
+    pub fn advance_until_change(&mut self, t_s: f64) -> Option<f64> {
+        let was = self.unit_powered();
+        while self.t_s < t_s {
+            let left = t_s - self.t_s;
             let dt = if self.steady() {
                 left
             } else {
                 left.min(STEP_S)
             };
             self.step(dt);
-            left -= dt;
+            self.t_s = if dt == left { t_s } else { self.t_s + dt };
+            if self.unit_powered() != was {
+                return Some(self.t_s);
+            }
         }
+        None
     }
 
     fn steady(&self) -> bool {
@@ -224,8 +251,13 @@ impl Supply {
         let dialect = self.dialect;
         for (i, c) in self.channels.iter_mut().enumerate() {
             let target = if c.on && !c.tripped { c.set_v } else { 0.0 };
-            let dv = (target - c.source_v).clamp(-SLEW_V_PER_S * dt, SLEW_V_PER_S * dt);
-            c.source_v += dv;
+            let max_dv = SLEW_V_PER_S * dt;
+            if (target - c.source_v).abs() <= max_dv {
+                // Exactly there, so that the state counts as steady.
+                c.source_v = target;
+            } else {
+                c.source_v += max_dv.copysign(target - c.source_v);
+            }
             let demand = if i == at {
                 load.current_a(c.source_v, self.powered_s)
             } else {
@@ -479,6 +511,50 @@ mod tests {
         s.advance_to(2.0);
         assert_eq!(s.message("CURR:PROT:TRIP?;OUTP?").as_deref(), Some("NO;ON"));
         assert_eq!(s.message("MEAS:VOLT?").as_deref(), Some("15.0000"));
+    }
+
+    #[test]
+    fn a_bench_starts_with_the_unit_powered_and_settled() {
+        let mut s = Supply::powering_unit(Dialect::KeysightE36300);
+        assert!(s.unit_powered());
+        assert_eq!(s.advance_until_change(100.0), None);
+        assert_eq!(
+            s.message("INST:NSEL 2;MEAS:CURR?;OUTP?").as_deref(),
+            Some("+5.50000000E-01;1")
+        );
+        s.message("OUTP OFF");
+        let off = s.advance_until_change(200.0).expect("the unit goes off");
+        assert!(off > 100.0 && off < 100.02, "within the slew down: {off}");
+        s.advance_to(200.0);
+        s.message("OUTP ON");
+        let on = s.advance_until_change(300.0).expect("and on again");
+        assert!(on > 200.0 && on < 200.02, "{on}");
+        assert_eq!(s.advance_until_change(300.0), None);
+    }
+
+    #[test]
+    fn the_twin_runs_on_the_supply_s_power() {
+        let mut b = crate::sim::test_bench();
+        let mut rx = b.subscribe_gyro();
+        b.advance_to(1.0);
+        assert!(
+            b.twin.is_powered() && rx.try_recv().is_ok(),
+            "frames while powered"
+        );
+        b.supply.message("INST:NSEL 2;OUTP OFF");
+        b.advance_to(2.0);
+        while rx.try_recv().is_ok() {}
+        b.advance_to(3.0);
+        assert!(!b.twin.is_powered());
+        assert!(rx.try_recv().is_err(), "no frames from an unpowered unit");
+        b.supply.message("OUTP ON");
+        b.advance_to(4.0);
+        assert!(b.twin.is_powered() && rx.try_recv().is_ok());
+        let tau = b.twin.truth().tau_s;
+        assert!(
+            tau > 0.9 && tau < 1.0,
+            "time since power-on restarted: {tau}"
+        );
     }
 
     #[test]
