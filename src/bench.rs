@@ -13,6 +13,7 @@ use crate::driver::acl::AclTable;
 use crate::driver::espec::EspecChamber;
 use crate::driver::gyro::GyroReader;
 use crate::driver::link::{Connector, LineLink};
+use crate::driver::supply::ScpiSupply;
 use crate::driver::watlow::WatlowChamber;
 use crate::driver::{Chamber, DeviceError, MotionTable, RetryPolicy};
 use crate::geometry::{Site, TableGeometry};
@@ -181,6 +182,79 @@ pub struct Devices {
     pub table: TableDevice,
     /// Gyro digital output.
     pub gyro: GyroDevice,
+    /// The unit's programmable supply (none: the unit is powered by hand).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub supply: Option<SupplyDevice>,
+}
+
+/// What the supply's output is left as when a run ends in the bench's safe
+/// state.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SupplySafe {
+    /// Output off: the unit unpowered (the usual safe state).
+    #[default]
+    Off,
+    /// Output left on: a unit that must stay powered (a heated unit, a
+    /// unit whose turn-on is itself a stress).
+    On,
+}
+
+/// `[devices.supply]`: the programmable DC supply powering the unit.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SupplyDevice {
+    /// Where it is: `tcp://host:5025`, `serial://...`, `pty://...`,
+    /// `sim://supply`.
+    pub spec: String,
+    /// Whose SCPI commands it takes: `keysight-e36300` or `rigol-dp800`.
+    pub protocol: crate::protocol::supply::Dialect,
+    /// The output the unit hangs on (1-based).
+    pub channel: u8,
+    /// The unit's supply voltage, V.
+    pub volts: f64,
+    /// Current limit, A (a Rigol trips at once when it is reached: it must
+    /// clear the unit's turn-on inrush).
+    pub limit_a: f64,
+    /// Over-current protection: the output goes off when held at the limit.
+    #[serde(default = "yes")]
+    pub protection: bool,
+    /// Highest voltage a `power` step may ask, V (default `volts`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_volts: Option<f64>,
+    /// Highest current limit a `power` step may ask, A (default `limit_a`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_limit_a: Option<f64>,
+    /// The output in the bench's safe state: `off` (default) or `on`.
+    #[serde(default)]
+    pub safe_state: SupplySafe,
+    /// Reply timeout per attempt, s.
+    pub timeout_s: f64,
+    /// Attempts per request.
+    pub attempts: u32,
+    /// How long a dropped link is reopened before the supply is declared
+    /// unreachable, s (default 180).
+    #[serde(default = "reconnect_window_s")]
+    pub reconnect_window_s: f64,
+    /// When the supply's calibration is due (`docs/bench.md`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub calibration_due: Option<CalibrationDue>,
+}
+
+fn yes() -> bool {
+    true
+}
+
+impl SupplyDevice {
+    /// Highest voltage a step may ask, V.
+    pub fn max_volts(&self) -> f64 {
+        self.max_volts.unwrap_or(self.volts)
+    }
+
+    /// Highest current limit a step may ask, A.
+    pub fn max_limit_a(&self) -> f64 {
+        self.max_limit_a.unwrap_or(self.limit_a)
+    }
 }
 
 /// Chamber protocols.
@@ -354,7 +428,8 @@ impl BenchConfig {
             &self.devices.table.spec,
             &self.devices.gyro.spec,
         ]
-        .iter()
+        .into_iter()
+        .chain(self.devices.supply.as_ref().map(|s| &s.spec))
         .all(|s| s.starts_with("sim://"))
     }
 
@@ -441,6 +516,9 @@ impl BenchConfig {
         ] {
             c.within(v, 0.0, 3600.0, key)?;
         }
+        if let Some(p) = &d.supply {
+            Self::validate_supply(&c, src, p)?;
+        }
         if let Some(layout) = &d.gyro.frame {
             layout
                 .validate()
@@ -502,6 +580,73 @@ impl BenchConfig {
         Ok(())
     }
 
+    fn validate_supply(c: &Checker, src: &Source, p: &SupplyDevice) -> Result<(), ConfigError> {
+        let key = "devices.supply.spec";
+        p.spec
+            .parse::<DeviceSpec>()
+            .map_err(|e| src.invalid(key, e.to_string()))?;
+        if let Some(name) = p.spec.strip_prefix("sim://") {
+            c.ensure(
+                name == "supply",
+                key,
+                &format!(
+                    "{:?} is not the embedded simulator's supply; the supply there is \"sim://supply\"",
+                    p.spec
+                ),
+            )?;
+        }
+        c.ensure(
+            (1..=16).contains(&p.channel),
+            "devices.supply.channel",
+            "must be an output number, 1 to 16",
+        )?;
+        if p.spec.starts_with("sim://") {
+            // The embedded supply is the model its dialect names: its
+            // outputs and their ratings are known.
+            let r = crate::protocol::supply::ratings(p.protocol);
+            let Some(rating) = r.get(usize::from(p.channel) - 1) else {
+                return Err(src.invalid(
+                    "devices.supply.channel",
+                    format!(
+                        "the simulated {} supply has outputs 1 to {}",
+                        p.protocol.as_str(),
+                        r.len()
+                    ),
+                ));
+            };
+            c.within(p.max_volts(), 0.1, rating.max_v, "devices.supply.volts")?;
+            c.within(
+                p.max_limit_a(),
+                0.001,
+                rating.max_a,
+                "devices.supply.limit_a",
+            )?;
+        }
+        // Bench supplies for a gyro stay under 100 V and 20 A; beyond is a
+        // slip of the keyboard.
+        c.within(p.volts, 0.1, 100.0, "devices.supply.volts")?;
+        c.within(p.limit_a, 0.001, 20.0, "devices.supply.limit_a")?;
+        if let Some(v) = p.max_volts {
+            c.within(v, p.volts, 100.0, "devices.supply.max_volts")?;
+        }
+        if let Some(a) = p.max_limit_a {
+            c.within(a, p.limit_a, 20.0, "devices.supply.max_limit_a")?;
+        }
+        c.within(p.timeout_s, 0.01, 60.0, "devices.supply.timeout_s")?;
+        c.ensure(
+            (1..=20).contains(&p.attempts),
+            "devices.supply.attempts",
+            "must be 1 to 20",
+        )?;
+        c.within(
+            p.reconnect_window_s,
+            0.0,
+            3600.0,
+            "devices.supply.reconnect_window_s",
+        )?;
+        Ok(())
+    }
+
     /// The bench's id for the record: `id`, else the bench file's name
     /// without its extension (`label` is the file as named), else
     /// `embedded`.
@@ -517,12 +662,13 @@ impl BenchConfig {
             .map_or_else(|| label.to_owned(), |s| s.to_string_lossy().into_owned())
     }
 
-    /// The chamber and the table as a run records them: their reported
+    /// The chamber, the table and the supply as a run records them: their reported
     /// identities, due dates, and whether each is past it on `today`.
     pub fn instruments(
         &self,
         chamber: Result<crate::protocol::Identity, String>,
         table: Result<crate::protocol::Identity, String>,
+        supply: Option<Result<crate::protocol::Identity, String>>,
         today: chrono::NaiveDate,
     ) -> Vec<Instrument> {
         let d = &self.devices;
@@ -536,6 +682,12 @@ impl BenchConfig {
             ("table", &d.table.spec, d.table.calibration_due, table),
         ]
         .into_iter()
+        .chain(
+            d.supply
+                .as_ref()
+                .zip(supply)
+                .map(|(p, id)| ("supply", &p.spec, p.calibration_due, id)),
+        )
         .map(|(role, spec, due, id)| {
             let (identity, identity_error) = match id {
                 Ok(i) => (Some(i), None),
@@ -591,6 +743,8 @@ pub struct OpenBench {
     pub table: AclTable,
     /// Gyro link.
     pub gyro: GyroReader<BoxTransport>,
+    /// The unit's supply, if the bench has one.
+    pub supply: Option<ScpiSupply>,
 }
 
 impl std::fmt::Debug for OpenBench {
@@ -636,6 +790,26 @@ pub async fn open_bench(cfg: &BenchConfig) -> Result<OpenBench, DeviceError> {
             reconnect_window: Duration::from_secs_f64(d.table.reconnect_window_s),
         },
     ));
+    let supply = match &d.supply {
+        Some(p) => {
+            let pt = Duration::from_secs_f64(p.timeout_s);
+            let (ps, t) = open_device("supply", &p.spec, pt).await?;
+            Some(ScpiSupply::new(
+                LineLink::new(
+                    "supply",
+                    t,
+                    Some(connector(ps, pt)),
+                    RetryPolicy {
+                        timeout: pt,
+                        attempts: p.attempts,
+                        reconnect_window: Duration::from_secs_f64(p.reconnect_window_s),
+                    },
+                ),
+                p.protocol,
+            ))
+        }
+        None => None,
+    };
     let gt = Duration::from_secs_f64(d.gyro.silence_s);
     let (gs, t) = open_device("gyro", &d.gyro.spec, gt).await?;
     let gyro = GyroReader::new("gyro", t, cfg.frame_layout(), gt).with_reconnect(
@@ -646,6 +820,7 @@ pub async fn open_bench(cfg: &BenchConfig) -> Result<OpenBench, DeviceError> {
         chamber,
         table,
         gyro,
+        supply,
     })
 }
 

@@ -235,8 +235,14 @@ fn run_on_twin(
     cfg: &TwinConfig,
     seed: u64,
 ) -> Result<(crate::sequencer::RunResult, Vec<Sample>), StudyError> {
-    let mut bench =
-        crate::session::embedded_bench(cfg, seed, Pacing::Max, &[], bench_cfg.limits.clone());
+    let mut bench = crate::session::embedded_bench(
+        cfg,
+        seed,
+        Pacing::Max,
+        &[],
+        bench_cfg.limits.clone(),
+        bench_cfg.devices.supply.as_ref(),
+    );
     let opts = crate::session::options(bench_cfg, None, Arc::default(), None);
     let mut sink = Collect::new(bench_cfg.table.geometry);
     // No timers or I/O are awaited on the embedded bench: a plain executor will do.

@@ -186,9 +186,66 @@ pub fn derivative_by_time(t_s: &[f64], x: &[f64], half_s: f64) -> Vec<f64> {
     out
 }
 
+/// Turn-on to turn-on bias repeatability (IEEE Std 647): the sample
+/// standard deviation of the mean biases of `n` turn-ons, with its one
+/// standard error for `n` samples, `s / sqrt(2 (n - 1))` (the chi
+/// distribution's, normal turn-on biases); none below two turn-ons.
+pub fn repeatability(turn_on_means: &[f64]) -> Option<(f64, f64)> {
+    let n = turn_on_means.len();
+    if n < 2 || turn_on_means.iter().any(|v| !v.is_finite()) {
+        return None;
+    }
+    let s = std_dev(turn_on_means);
+    Some((s, s / (2.0 * (n as f64 - 1.0)).sqrt()))
+}
+
+/// Warm-up time (IEEE Std 647: the time from turn-on to the specified
+/// performance), on a series of 1-per-`dt_s` samples starting at turn-on:
+/// the end of the first `window`-sample mean after which every such mean
+/// stays within `band` of the settled value; s from the series' start.
+/// The settled value is the mean of the series' last quarter (ours: a
+/// single last window would carry its own noise into every comparison).
+/// None when the series holds fewer than four windows.
+pub fn warm_up_time(x: &[f64], dt_s: f64, window: usize, band: f64) -> Option<f64> {
+    if window == 0 || x.len() < 4 * window {
+        return None;
+    }
+    let settled = mean(&x[x.len() - x.len() / 4..]);
+    let means = moving_average(x, window);
+    // The last mean outside the band; warm once past it.
+    let last_out = means.iter().rposition(|m| (m - settled).abs() > band);
+    let first_in = last_out.map_or(0, |i| i + 1);
+    // Mean i covers samples i..i + window: it ends window samples in.
+    Some((first_in + window) as f64 * dt_s)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn repeatability_is_the_spread_of_the_turn_on_biases_with_its_error() {
+        let (s, e) = repeatability(&[1.0, 2.0, 3.0, 4.0, 5.0]).expect("five turn-ons");
+        assert!((s - 2.5_f64.sqrt()).abs() < 1e-12);
+        assert!((e - s / 8.0_f64.sqrt()).abs() < 1e-12);
+        assert_eq!(repeatability(&[1.0]), None);
+        assert_eq!(repeatability(&[1.0, f64::NAN]), None);
+    }
+
+    #[test]
+    fn warm_up_ends_when_the_mean_stays_in_its_band() {
+        // A transient of 0.5 decaying in 600 s, on a flat 0.1: within
+        // 0.01 of the end once 0.5 exp(-t/600) < 0.01, t = 2347 s; a
+        // 100 s mean lags by about half a window.
+        let x: Vec<f64> = (0..10_000)
+            .map(|i| 0.1 + 0.5 * (-(f64::from(i) + 0.5) / 600.0).exp())
+            .collect();
+        let t = warm_up_time(&x, 1.0, 100, 0.01).expect("settles");
+        assert!((t - 2397.0).abs() < 5.0, "{t}");
+        // Already warm: one window.
+        assert_eq!(warm_up_time(&[0.2; 500], 1.0, 100, 0.01), Some(100.0));
+        assert_eq!(warm_up_time(&[0.2; 399], 1.0, 100, 0.01), None);
+    }
 
     #[test]
     fn a_drift_trace_is_the_drift_and_shows_where_it_is_taken() {

@@ -83,7 +83,7 @@ pub struct RunArgs {
     /// Simulated bench only: play a fault, FAULT@SECONDS of device time
     /// (chamber-alarm, chamber-silent, table-interlock, gyro-silent,
     /// gyro-corrupt, gyro-stuck, gyro-saturated, process-kill, panic,
-    /// disk-full, sighup, sigquit).
+    /// supply-overcurrent, disk-full, sighup, sigquit).
     #[arg(long, value_name = "FAULT@SECONDS")]
     inject: Vec<String>,
     /// Publish the run's channels live on a Foxglove WebSocket server

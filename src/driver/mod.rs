@@ -136,6 +136,17 @@ pub enum DeviceError {
         /// The last attempt's failure.
         cause: std::io::Error,
     },
+    /// The supply's over-current protection switched the unit's power off.
+    #[error(
+        "{device}: the over-current protection tripped (current limit {limit_a} A): the unit's power is off; \
+         find what drew the current (a shorted cable, a faulty unit) before powering it again"
+    )]
+    Overcurrent {
+        /// Device name.
+        device: String,
+        /// The current limit in force, A.
+        limit_a: f64,
+    },
     /// The gyro sent nothing usable for longer than the link timeout.
     #[error(
         "{device}: no valid frame for {timeout_s} s; check the gyro's power and the data cable"

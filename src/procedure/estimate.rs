@@ -56,6 +56,8 @@ pub fn estimate<'p>(p: &'p Procedure, bench: &BenchConfig) -> Vec<(&'p Step, Est
             StepKind::Soak {
                 hold_s, timeout_s, ..
             } => (ramp_left_s + hold_s, *timeout_s),
+            // A second or two to read the output at its new state.
+            StepKind::Power { .. } => (1.0, super::POWER_TIMEOUT_S),
             StepKind::Move { angles, .. } => {
                 let t = travel_s(
                     angles.outer_deg - table.outer_deg,

@@ -82,6 +82,14 @@ pub enum Metric {
     /// Smallest input giving at least 50 % of the expected output, deg/h
     /// (IEEE threshold), from the same fit.
     Threshold,
+    /// Turn-on to turn-on bias repeatability, deg/h: 1-sigma of the mean
+    /// Earth-removed rates of records made after separate turn-ons (one
+    /// record per turn-on), with its standard error for their number.
+    BiasRepeatability,
+    /// Warm-up time, s: from the start of a record made at turn-on until
+    /// the `averaging_s` mean of the Earth-removed rate stays within
+    /// `band` of its settled value (the mean of the record's last quarter).
+    WarmUpTime,
     /// Tilt of the input axis towards the turning table axis, arcsec: the
     /// slope of the Earth-removed rate against the rate of an axis turning
     /// across the sensitive axis (records at that rate both ways).
@@ -105,6 +113,8 @@ impl Metric {
             "dead_band" => Self::DeadBand,
             "threshold" => Self::Threshold,
             "axis_misalignment" => Self::AxisMisalignment,
+            "bias_repeatability" => Self::BiasRepeatability,
+            "warm_up_time" => Self::WarmUpTime,
             _ => return None,
         })
     }
@@ -112,7 +122,7 @@ impl Metric {
     fn needs_averaging(self) -> bool {
         matches!(
             self,
-            Self::BiasStability | Self::DriftPp | Self::CompensatedDriftPp
+            Self::BiasStability | Self::DriftPp | Self::CompensatedDriftPp | Self::WarmUpTime
         )
     }
 }
@@ -128,6 +138,9 @@ pub struct Measure {
     pub records: Vec<String>,
     /// Averaging time, s (0 where the metric has none).
     pub averaging_s: f64,
+    /// The band of a warm-up time, deg/h (none for other metrics).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub band: Option<f64>,
     /// Lower limit.
     pub low: Option<f64>,
     /// Upper limit.
@@ -167,6 +180,15 @@ pub enum StepKind {
         angles: TableAngles,
         /// The unit's orientation there.
         orientation: Orientation,
+    },
+    /// Switch the unit's supply output, and wait until it reads so.
+    Power {
+        /// On or off.
+        on: bool,
+        /// Voltage when on, V.
+        volts: f64,
+        /// Current limit when on, A.
+        limit_a: f64,
     },
     /// Let time pass.
     Wait {
@@ -213,6 +235,7 @@ impl StepKind {
             Self::Chamber { .. } => "chamber",
             Self::Soak { .. } => "soak",
             Self::Move { .. } => "move",
+            Self::Power { .. } => "power",
             Self::Wait { .. } => "wait",
             Self::Record { .. } => "record",
             Self::Turn { .. } => "turn",
@@ -222,6 +245,11 @@ impl StepKind {
         }
     }
 }
+
+/// How long a supply output may take to read what a `power` step asked,
+/// device time, s (ours: a bench supply settles in well under a second;
+/// the rest is the link).
+pub const POWER_TIMEOUT_S: f64 = 10.0;
 
 /// One step with where it came from.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -277,6 +305,14 @@ impl Step {
                 angles.outer_deg,
                 angles.inner_deg
             ),
+            StepKind::Power {
+                on: true,
+                volts,
+                limit_a,
+            } => {
+                format!("power the unit on at {volts} V (limit {limit_a} A)")
+            }
+            StepKind::Power { on: false, .. } => "power the unit off".to_owned(),
             StepKind::Wait { duration_s } => format!("wait {duration_s:.0} s"),
             StepKind::Record { label, duration_s } => {
                 format!("record {label} for {duration_s:.0} s")
@@ -576,6 +612,39 @@ impl Validator<'_> {
                     orientation,
                 }
             }
+            RawStep::Power { on, volts, limit_a } => {
+                let Some(p) = &self.bench.devices.supply else {
+                    return Err(self.src.invalid(
+                        &k("action"),
+                        "a power step needs a supply, and the bench file names none ([devices.supply] in docs/bench.md)".to_owned(),
+                    ));
+                };
+                let volts = volts.unwrap_or(p.volts);
+                let limit_a = limit_a.unwrap_or(p.limit_a);
+                c.ensure(
+                    volts.is_finite() && volts > 0.0 && volts <= p.max_volts(),
+                    &k("volts"),
+                    &format!(
+                        "{} V is beyond the bench's supply limit 0..{} V (devices.supply.max_volts)",
+                        crate::config::num(volts),
+                        p.max_volts()
+                    ),
+                )?;
+                c.ensure(
+                    limit_a.is_finite() && limit_a > 0.0 && limit_a <= p.max_limit_a(),
+                    &k("limit_a"),
+                    &format!(
+                        "{} A is beyond the bench's supply limit 0..{} A (devices.supply.max_limit_a)",
+                        crate::config::num(limit_a),
+                        p.max_limit_a()
+                    ),
+                )?;
+                StepKind::Power {
+                    on: *on,
+                    volts,
+                    limit_a,
+                }
+            }
             RawStep::Wait { duration_s } => StepKind::Wait {
                 duration_s: self.duration(*duration_s, &k("duration_s"))?,
             },
@@ -595,6 +664,7 @@ impl Validator<'_> {
                 metric,
                 records,
                 averaging_s,
+                band,
                 low,
                 high,
                 unit,
@@ -609,7 +679,8 @@ impl Validator<'_> {
                              compensated_drift_pp, self_heating, mean_bias, \
                              temperature_sensitivity, temperature_rate_sensitivity, \
                              scale_factor, scale_factor_nonlinearity, scale_factor_asymmetry, \
-                             scale_factor_temperature, dead_band, threshold or axis_misalignment"
+                             scale_factor_temperature, dead_band, threshold, axis_misalignment, \
+                             bias_repeatability or warm_up_time"
                         ),
                     )
                 })?;
@@ -663,6 +734,26 @@ impl Validator<'_> {
                     }
                     (false, _) => 0.0,
                 };
+                let band = match (metric == Metric::WarmUpTime, band) {
+                    (true, Some(b)) => Some(c.within(*b, 1e-6, 1e6, &k("band"))?),
+                    (true, None) => {
+                        return Err(self.src.invalid(
+                            key,
+                            "needs band (deg/h) for a warm-up time: how close to its settled value the averaged rate must stay",
+                        ));
+                    }
+                    (false, Some(_)) => {
+                        return Err(self.src.invalid(&k("band"), "is only for warm_up_time"));
+                    }
+                    (false, None) => None,
+                };
+                if metric == Metric::BiasRepeatability {
+                    c.ensure(
+                        records.len() >= 2,
+                        &k("records"),
+                        "must name two or more records, one after each turn-on",
+                    )?;
+                }
                 for (v, f) in [(low, "low"), (high, "high")] {
                     if let Some(v) = v {
                         c.finite(*v, &k(f))?;
@@ -686,6 +777,7 @@ impl Validator<'_> {
                     metric,
                     records,
                     averaging_s,
+                    band,
                     low: *low,
                     high: *high,
                     unit: unit.clone(),

@@ -78,6 +78,15 @@ pub enum RawStep {
         /// Or by table angles.
         table: Option<TableAngles>,
     },
+    /// Switch the unit's supply output on or off.
+    Power {
+        /// On (true) or off.
+        on: bool,
+        /// Voltage, V (default: the bench's `devices.supply.volts`).
+        volts: Option<f64>,
+        /// Current limit, A (default: the bench's `devices.supply.limit_a`).
+        limit_a: Option<f64>,
+    },
     /// Let time pass.
     Wait {
         /// s.
@@ -126,6 +135,8 @@ pub enum RawStep {
         records: Vec<String>,
         /// Averaging time, s.
         averaging_s: Option<f64>,
+        /// Band the averaged rate must stay within (warm-up time), deg/h.
+        band: Option<f64>,
         /// Lower limit.
         low: Option<f64>,
         /// Upper limit.

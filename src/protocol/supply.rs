@@ -47,6 +47,26 @@ impl Dialect {
     pub const ALL: [Self; 2] = [Self::KeysightE36300, Self::RigolDp800];
 }
 
+/// What one output of a supply can deliver.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Rating {
+    /// Highest voltage setting, V.
+    pub max_v: f64,
+    /// Highest current limit, A.
+    pub max_a: f64,
+}
+
+/// The outputs of the model each dialect's simulator imitates: an
+/// E36312A (6 V 5 A, 25 V 1 A, 25 V 1 A) or a DP832 (30 V 3 A, 30 V 3 A,
+/// 5 V 3 A).
+pub fn ratings(dialect: Dialect) -> [Rating; 3] {
+    let r = |max_v, max_a| Rating { max_v, max_a };
+    match dialect {
+        Dialect::KeysightE36300 => [r(6.0, 5.0), r(25.0, 1.0), r(25.0, 1.0)],
+        Dialect::RigolDp800 => [r(30.0, 3.0), r(30.0, 3.0), r(5.0, 3.0)],
+    }
+}
+
 /// One command, host side or as the instrument parsed it. Channel-bound
 /// commands act on the channel `Select` chose.
 #[derive(Debug, Clone, Copy, PartialEq)]

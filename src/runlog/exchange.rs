@@ -476,6 +476,7 @@ fn write_log(
                 orientation: o,
                 reference_dph: o.earth_rate_dph(&site),
                 in_position: true,
+                power: None,
             };
             let tick = Tick {
                 t0_s: r.time_s - 0.5,

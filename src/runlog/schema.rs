@@ -27,6 +27,8 @@ pub mod topics {
     pub const LINK: &str = "/gyro/link";
     /// Step starts and ends, as data (format 2 on).
     pub const STEPS: &str = "/steps";
+    /// The unit's supply channel, 1 Hz (benches with a supply).
+    pub const SUPPLY: &str = "/supply/state";
 }
 
 /// Version of the log layout this build writes. Format 1 logs (no
@@ -43,7 +45,7 @@ pub const PROCEDURE_ATTACHMENT: &str = "procedure.toml";
 pub const REPORT_ATTACHMENT: &str = "report.json";
 
 /// (topic, schema name, JSON Schema) of every channel, in channel order.
-pub const CHANNELS: [(&str, &str, &str); 7] = [
+pub const CHANNELS: [(&str, &str, &str); 8] = [
     (topics::FRAMES, "gyrobench.GyroFrames", FRAMES_SCHEMA),
     (topics::RATE_1HZ, "gyrobench.Rate1Hz", RATE_SCHEMA),
     (topics::CHAMBER, "gyrobench.ChamberState", CHAMBER_SCHEMA),
@@ -51,12 +53,14 @@ pub const CHANNELS: [(&str, &str, &str); 7] = [
     (topics::EVENTS, "foxglove.Log", LOG_SCHEMA),
     (topics::LINK, "gyrobench.LinkStats", LINK_SCHEMA),
     (topics::STEPS, "gyrobench.StepEvent", STEP_SCHEMA),
+    (topics::SUPPLY, "gyrobench.SupplyState", SUPPLY_SCHEMA),
 ];
 
 const FRAMES_SCHEMA: &str = r#"{"type":"object","title":"gyrobench.GyroFrames","description":"Consecutive gyro frames; element i of every array is frame i","properties":{"t0_s":{"type":"number","description":"device time of the first frame, s since the run started"},"dt_s":{"type":"number","description":"frame period, s"},"lsb_arcsec":{"type":"number"},"temp_lsb_c":{"type":"number"},"seq":{"type":"array","items":{"type":"integer"}},"counts":{"type":"array","items":{"type":"integer"},"description":"delta-angle counts"},"t1_raw":{"type":"array","items":{"type":"integer"}},"t2_raw":{"type":"array","items":{"type":"integer"}},"tcase_raw":{"type":"array","items":{"type":"integer"}},"status":{"type":"array","items":{"type":"integer"}}},"required":["t0_s","dt_s","lsb_arcsec","temp_lsb_c","seq","counts","t1_raw","t2_raw","tcase_raw","status"]}"#;
 const RATE_SCHEMA: &str = r#"{"type":"object","title":"gyrobench.Rate1Hz","properties":{"t_s":{"type":"number"},"rate_dph":{"type":"number","description":"measured rate, Earth rate included"},"reference_dph":{"type":"number","description":"Earth + table rate on the nominal axis"},"bias_dph":{"type":"number","description":"rate minus reference"},"t1_c":{"type":"number"},"t2_c":{"type":"number"},"tcase_c":{"type":"number"},"chamber_c":{"type":"number"},"frames":{"type":"integer"},"record":{"type":["string","null"]}},"required":["t_s","rate_dph","reference_dph","bias_dph","t1_c","t2_c","tcase_c","chamber_c","frames"]}"#;
 const CHAMBER_SCHEMA: &str = r#"{"type":"object","title":"gyrobench.ChamberState","properties":{"t_s":{"type":"number"},"air_c":{"type":"number"},"set_point_c":{"type":"number"},"mode":{"type":"string"},"alarms":{"type":"array","items":{"type":"integer"}}},"required":["t_s","air_c","set_point_c","mode","alarms"]}"#;
 const TABLE_SCHEMA: &str = r#"{"type":"object","title":"gyrobench.TableState","description":"The pose of the unit; the table axis angles are absent where they are not known (a run imported from another bench)","properties":{"t_s":{"type":"number"},"outer_deg":{"type":"number"},"inner_deg":{"type":"number"},"outer_rate_dps":{"type":"number"},"inner_rate_dps":{"type":"number"},"commanded_outer_deg":{"type":"number"},"commanded_inner_deg":{"type":"number"},"azimuth_deg":{"type":"number"},"elevation_deg":{"type":"number"},"roll_deg":{"type":"number"},"earth_rate_dph":{"type":"number"},"in_position":{"type":"boolean"},"step":{"type":"string"}},"required":["t_s","outer_rate_dps","inner_rate_dps","azimuth_deg","elevation_deg","roll_deg","earth_rate_dph","step"]}"#;
+const SUPPLY_SCHEMA: &str = r#"{"type":"object","title":"gyrobench.SupplyState","description":"The supply output the unit hangs on","properties":{"t_s":{"type":"number"},"v":{"type":"number","description":"voltage measured at the output, V"},"a":{"type":"number","description":"current measured, A"},"w":{"type":"number","description":"power delivered, W"},"set_v":{"type":"number","description":"voltage setting, V"},"limit_a":{"type":"number","description":"current limit, A"},"on":{"type":"boolean"},"tripped":{"type":"boolean","description":"over-current protection tripped"}},"required":["t_s","v","a","w","set_v","limit_a","on","tripped"]}"#;
 const LOG_SCHEMA: &str = r#"{"type":"object","title":"foxglove.Log","properties":{"timestamp":{"type":"object","properties":{"sec":{"type":"integer","minimum":0},"nsec":{"type":"integer","minimum":0}}},"level":{"type":"integer","description":"1 debug, 2 info, 3 warning, 4 error, 5 fatal"},"message":{"type":"string"},"name":{"type":"string"},"file":{"type":"string"},"line":{"type":"integer"}},"required":["timestamp","level","message","name","file","line"]}"#;
 const LINK_SCHEMA: &str = r#"{"type":"object","title":"gyrobench.LinkStats","properties":{"t_s":{"type":"number"},"bytes":{"type":"integer"},"frames":{"type":"integer"},"resyncs":{"type":"integer"},"skipped_bytes":{"type":"integer"},"crc_errors":{"type":"integer"},"lost_frames":{"type":"integer"},"duplicates":{"type":"integer"},"reconnects":{"type":"integer"},"longest_gap_ms":{"type":"integer","description":"longest stretch without a valid frame, ms (host clock)"}},"required":["t_s","frames","lost_frames","crc_errors"]}"#;
 const STEP_SCHEMA: &str = r#"{"type":"object","title":"gyrobench.StepEvent","description":"A procedure step started, ended, or was run to restore a resumed run's conditions","properties":{"t_s":{"type":"number","description":"device time, s since this part of the run started"},"phase":{"type":"string","enum":["start","end","restore"]},"index":{"type":"integer","description":"position of the step in run order (setup, main, cleanup)"},"key":{"type":"string","description":"dotted key of the step in the procedure file"},"line":{"type":"integer"},"group":{"type":"string","enum":["setup","main","cleanup"]},"action":{"type":"string"},"description":{"type":"string"},"link":{"type":"object","description":"at the end of a record: the gyro link's figures over it"}},"required":["t_s","phase","index","key","line","group","action","description"]}"#;
@@ -165,6 +169,43 @@ pub struct ChamberState {
     /// Active alarm codes.
     #[serde(default)]
     pub alarms: Vec<u16>,
+}
+
+/// One `/supply/state` message.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct SupplyState {
+    /// Device time, s.
+    pub t_s: f64,
+    /// Voltage measured, V.
+    pub v: f64,
+    /// Current measured, A.
+    pub a: f64,
+    /// Power delivered, W.
+    pub w: f64,
+    /// Voltage setting, V.
+    pub set_v: f64,
+    /// Current limit, A.
+    pub limit_a: f64,
+    /// Output on.
+    pub on: bool,
+    /// Over-current protection tripped.
+    pub tripped: bool,
+}
+
+impl SupplyState {
+    /// The message for a reading at `t_s`.
+    pub fn new(t_s: f64, r: &crate::driver::SupplyReading) -> Self {
+        Self {
+            t_s,
+            v: r.v,
+            a: r.a,
+            w: r.v * r.a,
+            set_v: r.set_v,
+            limit_a: r.limit_a,
+            on: r.on,
+            tripped: r.tripped,
+        }
+    }
 }
 
 /// One `/table/state` message.

@@ -26,7 +26,8 @@ use super::live::Live;
 use super::meta::{ResultMeta, RunMeta};
 use super::schema::{
     CHANNELS, ChamberState, GyroFrames, Level, LinkSample, LogLine, PROCEDURE_ATTACHMENT,
-    REPORT_ATTACHMENT, RESULT_META, RUN_META, Rate1Hz, StepEvent, TableState, Timestamp, topics,
+    REPORT_ATTACHMENT, RESULT_META, RUN_META, Rate1Hz, StepEvent, SupplyState, TableState,
+    Timestamp, topics,
 };
 use crate::analysis::series::Interval;
 use crate::clock::Stopwatch;
@@ -361,6 +362,9 @@ impl Sink for Recorder {
                 step: step.to_owned(),
             };
             self.write_json(topics::TABLE, s.t_s, &table)?;
+            if let Some(p) = &s.power {
+                self.write_json(topics::SUPPLY, s.t_s, &SupplyState::new(s.t_s, p))?;
+            }
         }
         Ok(())
     }

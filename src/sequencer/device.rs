@@ -6,6 +6,7 @@
 //! the chamber and the table. Chambers ramp by the set point being stepped
 //! here (the drivers' constant set point has no ramp of its own).
 
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
@@ -13,10 +14,11 @@ use async_trait::async_trait;
 use tokio::sync::mpsc;
 
 use super::{BenchIo, BenchState, FrameRecord, Tick};
-use crate::bench::{BenchConfig, OpenBench};
+use crate::bench::{BenchConfig, OpenBench, SupplyDevice, SupplySafe};
 use crate::clock::{Clock, WallClock};
 use crate::driver::acl::AclTable;
-use crate::driver::{Chamber, ChamberMode, DeviceError, MotionTable, SetPointRamp};
+use crate::driver::supply::ScpiSupply;
+use crate::driver::{Chamber, ChamberMode, DeviceError, MotionTable, PowerSupply, SetPointRamp};
 use crate::geometry::{Site, TableAngles, TableGeometry};
 use crate::protocol::frame::LinkStats;
 
@@ -37,6 +39,10 @@ pub struct DeviceBench {
     record_edge_s: f64,
     lsb_arcsec: f64,
     temp_lsb_c: f64,
+    supply: Option<(ScpiSupply, SupplyDevice)>,
+    /// Cleared while the run has switched the unit's power off: the gyro's
+    /// silence is then expected, not a fault.
+    powered: Arc<AtomicBool>,
 }
 
 impl std::fmt::Debug for DeviceBench {
@@ -54,15 +60,33 @@ impl DeviceBench {
             mut chamber,
             mut table,
             mut gyro,
+            supply,
         } = open;
         table.servo_on().await?;
+        // The unit is powered as the bench file says before anything else:
+        // an output already on at that voltage stays as it is.
+        let supply = match (supply, &cfg.devices.supply) {
+            (Some(mut p), Some(c)) => {
+                p.configure(c.channel, c.volts, c.limit_a, c.protection)
+                    .await?;
+                p.output(c.channel, true).await?;
+                Some((p, c.clone()))
+            }
+            _ => None,
+        };
         let reading = chamber.read().await?;
         let stats = Arc::new(Mutex::new(LinkStats::default()));
         let (tx, rx) = mpsc::channel(1 << 16);
         let shared = stats.clone();
+        let powered = Arc::new(AtomicBool::new(true));
+        let on = powered.clone();
         tokio::spawn(async move {
             loop {
                 let next = gyro.next_frame().await;
+                if matches!(next, Err(DeviceError::Silent { .. })) && !on.load(Ordering::Relaxed) {
+                    // An unpowered unit sends nothing.
+                    continue;
+                }
                 if let Ok(mut s) = shared.lock() {
                     *s = gyro.stats();
                 }
@@ -99,6 +123,8 @@ impl DeviceBench {
             record_edge_s: cfg.record_edge_s(),
             lsb_arcsec: cfg.devices.gyro.lsb_arcsec,
             temp_lsb_c: layout.temp_lsb_c,
+            supply,
+            powered,
         })
     }
 
@@ -182,7 +208,38 @@ impl BenchIo for DeviceBench {
         self.ramp = None;
         let table = self.table.stop().await;
         let chamber = self.chamber.set_mode(ChamberMode::Standby).await;
-        table.and(chamber)
+        let supply = match self.supply.as_mut() {
+            Some((p, c)) if c.safe_state == SupplySafe::Off => p.output(c.channel, false).await,
+            _ => Ok(()),
+        };
+        table.and(chamber).and(supply)
+    }
+
+    async fn set_power(&mut self, on: bool, volts: f64, limit_a: f64) -> Result<(), DeviceError> {
+        let Some((p, c)) = self.supply.as_mut() else {
+            return Err(DeviceError::Refused {
+                device: "supply".into(),
+                request: "power".into(),
+                reason: "the bench file names no supply".into(),
+            });
+        };
+        if on {
+            p.configure(c.channel, volts, limit_a, c.protection).await?;
+        } else {
+            self.powered.store(false, Ordering::Relaxed);
+        }
+        p.output(c.channel, on).await?;
+        if on {
+            self.powered.store(true, Ordering::Relaxed);
+        }
+        Ok(())
+    }
+
+    async fn read_power(&mut self) -> Result<Option<crate::driver::SupplyReading>, DeviceError> {
+        match self.supply.as_mut() {
+            Some((p, c)) => p.read(c.channel).await.map(Some),
+            None => Ok(None),
+        }
     }
 
     async fn advance(&mut self, t_s: f64, tick: &mut Tick) -> Result<(), DeviceError> {
@@ -206,6 +263,7 @@ impl BenchIo for DeviceBench {
         let chamber = self.chamber.read().await?;
         self.last_air_c = chamber.air_c;
         let table = self.table.read().await?;
+        let power = self.read_power().await?;
         tick.state = Some(BenchState {
             t_s: now,
             orientation: self.geometry.orientation(table.angles),
@@ -216,6 +274,7 @@ impl BenchIo for DeviceBench {
             chamber,
             table,
             commanded: self.commanded,
+            power,
         });
         Ok(())
     }
@@ -254,9 +313,14 @@ impl BenchIo for DeviceBench {
     }
 
     async fn identify(&mut self) -> super::Identities {
+        let supply = match self.supply.as_mut() {
+            Some((p, _)) => Some(p.identify().await.map_err(|e| e.to_string())),
+            None => None,
+        };
         super::Identities {
             chamber: self.chamber.identify().await.map_err(|e| e.to_string()),
             table: self.table.identify().await.map_err(|e| e.to_string()),
+            supply,
         }
     }
 }

@@ -7,12 +7,29 @@ use std::sync::Arc;
 use async_trait::async_trait;
 
 use super::{BenchIo, BenchState, FrameRecord, Tick};
+use crate::bench::{SupplyDevice, SupplySafe};
 use crate::clock::{Clock, VirtualClock};
 use crate::driver::{ChamberMode, ChamberReading, DeviceError, TableReading};
 use crate::geometry::{Site, TableAngles, TableGeometry};
 use crate::protocol::frame::LinkStats;
+use crate::protocol::scpi::Numeric;
+use crate::protocol::supply::{Command, Dialect};
 use crate::sim::PASSIVE_DRIFT_C_PER_MIN;
-use crate::twin::{AxisDemand, Twin, TwinConfig};
+use crate::sim::supply::Supply;
+use crate::twin::{AxisDemand, GyroSample, Twin, TwinConfig};
+
+/// The errors a supply queued as the refusal of `request`; none: done.
+fn refused_by_supply(request: &str, errors: Vec<String>) -> Result<(), DeviceError> {
+    if errors.is_empty() {
+        Ok(())
+    } else {
+        Err(DeviceError::Refused {
+            device: "supply".into(),
+            request: request.to_owned(),
+            reason: errors.join("; "),
+        })
+    }
+}
 
 /// Temperature resolution of the frames, degC (the documented layout).
 pub const TEMP_LSB_C: f64 = 0.01;
@@ -41,6 +58,9 @@ pub enum Fault {
     /// A bug: the run panics mid-tick (the bench must still reach its safe
     /// state).
     Panic,
+    /// The unit shorts: it draws three times its current, and the supply's
+    /// over-current protection trips (a bench with a supply).
+    SupplyOvercurrent,
     /// The disk the log is on fills: every write to the log fails from
     /// then on, as with `No space left on device` (the recorder plays it;
     /// the bench carries on).
@@ -53,7 +73,7 @@ pub enum Fault {
 
 impl Fault {
     /// Every fault by the name `--inject` takes.
-    pub const NAMES: [&str; 12] = [
+    pub const NAMES: [&str; 13] = [
         "chamber-alarm",
         "chamber-silent",
         "table-interlock",
@@ -63,6 +83,7 @@ impl Fault {
         "gyro-saturated",
         "process-kill",
         "panic",
+        "supply-overcurrent",
         "disk-full",
         "sighup",
         "sigquit",
@@ -82,6 +103,7 @@ impl std::str::FromStr for Fault {
             "gyro-saturated" => Self::GyroSaturated,
             "process-kill" => Self::ProcessKill,
             "panic" => Self::Panic,
+            "supply-overcurrent" => Self::SupplyOvercurrent,
             "disk-full" => Self::DiskFull,
             "sighup" => Self::Hangup,
             "sigquit" => Self::Quit,
@@ -107,6 +129,15 @@ pub struct EmbeddedBench {
     faults: Vec<(f64, Fault)>,
     frames: u64,
     crc_errors: u64,
+    supply: Option<EmbeddedSupply>,
+}
+
+/// The simulated supply powering the unit, with the bench file's settings.
+#[derive(Debug)]
+struct EmbeddedSupply {
+    sim: Supply,
+    cfg: SupplyDevice,
+    shorted: bool,
 }
 
 impl EmbeddedBench {
@@ -123,7 +154,54 @@ impl EmbeddedBench {
             faults: Vec::new(),
             frames: 0,
             crc_errors: 0,
+            supply: None,
         }
+    }
+
+    /// Power the unit from a simulated supply as the bench file describes
+    /// it: on at its voltage and limit from the start, settled.
+    pub fn with_supply(mut self, cfg: &SupplyDevice) -> Self {
+        let sim = Supply::powering(
+            cfg.protocol,
+            cfg.channel,
+            cfg.volts,
+            cfg.limit_a,
+            cfg.protection,
+        );
+        if !sim.unit_powered() {
+            self.twin.power_off();
+        }
+        self.supply = Some(EmbeddedSupply {
+            sim,
+            cfg: cfg.clone(),
+            shorted: false,
+        });
+        self
+    }
+
+    /// Run the twin to `t_s`, switching it on and off where the supply's
+    /// output brings the unit's power or takes it away.
+    fn run_to(&mut self, t_s: f64, mut on_frame: impl FnMut(&GyroSample)) {
+        if let Some(p) = self.supply.as_mut() {
+            if !p.shorted
+                && self
+                    .faults
+                    .iter()
+                    .any(|(t, f)| *f == Fault::SupplyOvercurrent && self.twin.time_s() >= *t)
+            {
+                p.shorted = true;
+                p.sim.load.0.steady_a *= 3.0;
+            }
+            while let Some(t_change) = p.sim.advance_until_change(t_s) {
+                self.twin.run_until(t_change, |_, g| on_frame(g));
+                if p.sim.unit_powered() {
+                    self.twin.power_on();
+                } else {
+                    self.twin.power_off();
+                }
+            }
+        }
+        self.twin.run_until(t_s, |_, g| on_frame(g));
     }
 
     /// Play `fault` from device time `at_s` on.
@@ -182,7 +260,14 @@ impl EmbeddedBench {
             orientation: self.geometry.orientation(angles),
             reference_dph: self.geometry.kinematic_rate_dph(&self.site, angles, rates),
             in_position: !self.twin.table_moving(),
+            power: self.power(),
         }
+    }
+
+    fn power(&self) -> Option<crate::driver::SupplyReading> {
+        self.supply
+            .as_ref()
+            .and_then(|p| p.sim.reading(p.cfg.channel))
     }
 }
 
@@ -249,6 +334,12 @@ impl BenchIo for EmbeddedBench {
         // be told anything.
         self.twin
             .demand_table(Some(AxisDemand::Stop), Some(AxisDemand::Stop));
+        if let Some(p) = self.supply.as_mut()
+            && p.cfg.safe_state == SupplySafe::Off
+        {
+            let errors = p.sim.program(p.cfg.channel, &[Command::Output(false)]);
+            refused_by_supply("output off", errors)?;
+        }
         self.check(&["chamber"])?;
         let room = self.twin.config().chamber.initial_c;
         self.twin
@@ -262,11 +353,46 @@ impl BenchIo for EmbeddedBench {
         Ok(())
     }
 
+    async fn set_power(&mut self, on: bool, volts: f64, limit_a: f64) -> Result<(), DeviceError> {
+        let Some(p) = self.supply.as_mut() else {
+            return Err(DeviceError::Refused {
+                device: "supply".into(),
+                request: "power".into(),
+                reason: "the embedded bench has no supply".into(),
+            });
+        };
+        let cmds = if on {
+            let mut c = vec![
+                Command::Voltage(Numeric::Value(volts)),
+                Command::Current(Numeric::Value(limit_a)),
+            ];
+            if p.cfg.protocol == Dialect::RigolDp800 {
+                c.push(Command::ProtectionLevel(Numeric::Value(limit_a)));
+            }
+            c.push(Command::Protection(p.cfg.protection));
+            c.push(Command::Output(true));
+            c
+        } else {
+            vec![Command::Output(false)]
+        };
+        let request = if on {
+            format!("output on at {volts} V, limit {limit_a} A")
+        } else {
+            "output off".to_owned()
+        };
+        let errors = p.sim.program(p.cfg.channel, &cmds);
+        refused_by_supply(&request, errors)
+    }
+
+    async fn read_power(&mut self) -> Result<Option<crate::driver::SupplyReading>, DeviceError> {
+        Ok(self.power())
+    }
+
     async fn idle(&mut self, t_s: f64) -> Result<(ChamberReading, TableReading), DeviceError> {
         // A tripped interlock stops the table, it does not blind it.
         self.check(&["chamber"])?;
         self.clock.sleep_until(t_s);
-        self.twin.run_until(t_s, |_, _| {});
+        self.run_to(t_s, |_| {});
         let st = self.state();
         Ok((st.chamber, st.table))
     }
@@ -311,7 +437,7 @@ impl BenchIo for EmbeddedBench {
         let stuck = self.active(Fault::GyroStuck);
         let saturated = self.active(Fault::GyroSaturated);
         let mut crc_errors = 0;
-        self.twin.run_until(t_s, |_, g| {
+        self.run_to(t_s, |g| {
             if corrupt && g.index % 50 == 0 {
                 crc_errors += 1;
                 return;
@@ -356,6 +482,11 @@ impl BenchIo for EmbeddedBench {
                 crate::bench::ChamberProtocol::EspecAscii,
             )),
             table: Ok(crate::sim::identity::table()),
+            supply: self.supply.as_ref().map(|p| {
+                Ok(crate::protocol::supply::parse_identity(
+                    &crate::sim::supply::idn(p.cfg.protocol),
+                ))
+            }),
         }
     }
 }

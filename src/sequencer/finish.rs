@@ -33,6 +33,11 @@ pub struct Expected {
     pub chamber: Option<ChamberEnd>,
     /// Where the table was last sent (none: at rest anywhere).
     pub table: Option<TableAngles>,
+    /// What the supply's output was last asked to be (none: never
+    /// switched by the run; as the bench started it).
+    pub power_on: Option<bool>,
+    /// The bench's safe state leaves the supply's output on.
+    pub supply_safe_on: bool,
     /// The safe state was applied after the last command.
     pub safe_state: bool,
     /// Devices whose cleanup steps were skipped (they failed during the
@@ -53,11 +58,21 @@ impl Expected {
         self.safe_state = false;
     }
 
+    /// A power step was carried out.
+    pub fn power_set(&mut self, on: bool) {
+        self.power_on = Some(on);
+        self.safe_state = false;
+    }
+
     /// The safe state was applied: chamber standing by, table stopped
-    /// wherever it was.
+    /// wherever it was, the supply's output off (unless the bench's safe
+    /// state leaves it on).
     pub fn safe(&mut self) {
         self.chamber = Some(ChamberEnd::Standby);
         self.table = None;
+        if !self.supply_safe_on {
+            self.power_on = Some(false);
+        }
         self.safe_state = true;
     }
 }
@@ -139,6 +154,9 @@ pub async fn bench_left(
                 chamber_air_c: None,
                 table_deg: None,
                 table_at_rest: None,
+                supply_on: None,
+                supply_v: None,
+                supply_a: None,
                 verified: false,
                 summary: format!(
                     "UNKNOWN: the bench could not be read back ({e}); check the chamber and the table before anyone opens the chamber or touches the fixture"
@@ -146,7 +164,38 @@ pub async fn bench_left(
             };
         }
     };
-    let bad = mismatches(&c, &t, expected, in_position_deg);
+    let mut bad = mismatches(&c, &t, expected, in_position_deg);
+    // The supply, when the bench has one: its output as asked.
+    let power = bench.read_power().await;
+    let supply = match &power {
+        Ok(Some(p)) => {
+            if let Some(want) = expected.power_on
+                && p.on != want
+            {
+                bad.push(format!(
+                    "the supply was asked to switch the unit's power {} but its output is {} ({:.2} V, {:.3} A)",
+                    if want { "on" } else { "off" },
+                    if p.on { "on" } else { "off" },
+                    p.v,
+                    p.a
+                ));
+            }
+            Some(if p.on {
+                format!("unit powered at {:.2} V, {:.3} A", p.v, p.a)
+            } else if p.tripped {
+                format!("supply output off, its protection tripped ({:.2} V)", p.v)
+            } else {
+                format!("supply output off ({:.2} V)", p.v)
+            })
+        }
+        Ok(None) => None,
+        Err(e) => {
+            bad.push(format!(
+                "the supply could not be read back ({e}); check the unit's power at the supply"
+            ));
+            None
+        }
+    };
     let at_rest = t.rates.outer_deg.abs() <= AT_REST_DPS && t.rates.inner_deg.abs() <= AT_REST_DPS;
     let chamber = match c.mode {
         ChamberMode::Constant if (c.air_c - c.set_point_c).abs() > 1.0 => format!(
@@ -175,8 +224,12 @@ pub async fn bench_left(
             expected.skipped.join(" and the ")
         )
     };
+    let devices = match supply {
+        Some(s) => format!("{chamber}, {table}, {s}"),
+        None => format!("{chamber}, {table}"),
+    };
     let mut summary = if bad.is_empty() {
-        format!("{chamber}, {table}: {what}, read back")
+        format!("{devices}: {what}, read back")
     } else {
         format!(
             "NOT as asked: {}; check the bench before anyone opens the chamber or touches the fixture",
@@ -202,6 +255,9 @@ pub async fn bench_left(
         chamber_air_c: Some(c.air_c),
         table_deg: Some([t.angles.outer_deg, t.angles.inner_deg]),
         table_at_rest: Some(at_rest),
+        supply_on: power.as_ref().ok().and_then(|p| p.map(|p| p.on)),
+        supply_v: power.as_ref().ok().and_then(|p| p.map(|p| p.v)),
+        supply_a: power.as_ref().ok().and_then(|p| p.map(|p| p.a)),
         verified: bad.is_empty(),
         summary,
     }

@@ -16,12 +16,25 @@ use crate::protocol::frame::LinkStats;
 pub struct Guarded<B> {
     inner: B,
     limits: Limits,
+    /// Highest voltage and current limit a power command may ask.
+    supply_max: Option<(f64, f64)>,
 }
 
 impl<B: BenchIo> Guarded<B> {
     /// Guard `inner` with `limits`.
     pub fn new(inner: B, limits: Limits) -> Self {
-        Self { inner, limits }
+        Self {
+            inner,
+            limits,
+            supply_max: None,
+        }
+    }
+
+    /// Refuse power commands beyond the supply's `max_volts` and
+    /// `max_limit_a` from the bench file.
+    pub fn with_supply(mut self, supply: Option<&crate::bench::SupplyDevice>) -> Self {
+        self.supply_max = supply.map(|p| (p.max_volts(), p.max_limit_a()));
+        self
     }
 
     fn refuse(device: &str, request: String, reason: String) -> DeviceError {
@@ -120,6 +133,37 @@ impl<B: BenchIo> BenchIo for Guarded<B> {
 
     async fn safe_state(&mut self) -> Result<(), DeviceError> {
         self.inner.safe_state().await
+    }
+
+    async fn set_power(&mut self, on: bool, volts: f64, limit_a: f64) -> Result<(), DeviceError> {
+        let request = if on {
+            format!("output on at {volts} V, limit {limit_a} A")
+        } else {
+            "output off".to_owned()
+        };
+        let Some((max_v, max_a)) = self.supply_max else {
+            return Err(Self::refuse(
+                "supply",
+                request,
+                "the bench file names no supply ([devices.supply])".into(),
+            ));
+        };
+        if on {
+            if !(volts.is_finite() && volts > 0.0 && volts <= max_v) {
+                let why = format!("voltage not within 0..{max_v} V (devices.supply.max_volts)");
+                return Err(Self::refuse("supply", request, why));
+            }
+            if !(limit_a.is_finite() && limit_a > 0.0 && limit_a <= max_a) {
+                let why =
+                    format!("current limit not within 0..{max_a} A (devices.supply.max_limit_a)");
+                return Err(Self::refuse("supply", request, why));
+            }
+        }
+        self.inner.set_power(on, volts, limit_a).await
+    }
+
+    async fn read_power(&mut self) -> Result<Option<crate::driver::SupplyReading>, DeviceError> {
+        self.inner.read_power().await
     }
 
     async fn advance(&mut self, t_s: f64, tick: &mut Tick) -> Result<(), DeviceError> {

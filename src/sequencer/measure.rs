@@ -432,6 +432,43 @@ pub fn compute(
             trace.as_ref().map(DriftTrace::pp)
         }
         Metric::MeanBias => Some(mean(&bias)),
+        Metric::BiasRepeatability => {
+            let means: Vec<f64> = m
+                .records
+                .iter()
+                .filter_map(|l| records.get(l))
+                .map(|r| mean(&r.iter().map(Interval::bias_dph).collect::<Vec<_>>()))
+                .collect();
+            let n = means.len();
+            figure(
+                crate::analysis::figures::repeatability(&means).map(|(value, e)| Figure {
+                    value,
+                    std_error: Some(e),
+                }),
+                "needs two or more records with data, one after each turn-on",
+                &mut note,
+            )
+            .inspect(|_| note = format!("{n} turn-ons"))
+        }
+        Metric::WarmUpTime => {
+            let dt = match series.as_slice() {
+                [a, b, ..] => b.time_s - a.time_s,
+                _ => 1.0,
+            };
+            let t = crate::analysis::figures::warm_up_time(
+                &bias,
+                dt,
+                (m.averaging_s / dt).round().max(1.0) as usize,
+                m.band.unwrap_or(0.0),
+            );
+            if t.is_none() {
+                note = format!(
+                    "not computable: needs four averaging times ({} s) of data after turn-on",
+                    4.0 * m.averaging_s
+                );
+            }
+            t
+        }
         Metric::SelfHeating => self_heating_dph(&series).map(f64::abs),
         Metric::TemperatureSensitivity => temperature_sensitivity_parts(&part_refs).map(|(a, _)| a),
         Metric::TemperatureRateSensitivity => {
@@ -549,6 +586,7 @@ mod tests {
             orientation: Orientation::new(0.0, 90.0, 0.0),
             reference_dph: 10.0,
             in_position: true,
+            power: None,
         };
         let mut r = Records::default();
         r.start("up");

@@ -23,7 +23,7 @@ use serde::Serialize;
 
 use crate::driver::{ChamberReading, DeviceError, InPosition, TableReading};
 use crate::geometry::{Orientation, TableAngles};
-use crate::procedure::{Procedure, Step, StepKind};
+use crate::procedure::{POWER_TIMEOUT_S, Procedure, Step, StepKind};
 pub use events::{Level, StepEvent, StepPhase};
 pub use interrupt::Interrupt;
 use measure::{Measurement, Records};
@@ -59,6 +59,8 @@ pub struct BenchState {
     pub reference_dph: f64,
     /// Both axes at their commanded angles and at rest (as last judged).
     pub in_position: bool,
+    /// The unit's supply channel (none: the bench has no supply).
+    pub power: Option<crate::driver::SupplyReading>,
 }
 
 /// What one tick brought.
@@ -97,8 +99,16 @@ pub trait BenchIo: Send {
     /// mode; 0 brings it to rest, still in rate mode (a move returns it to
     /// position mode).
     async fn rotate_table(&mut self, inner: bool, rate_dps: f64) -> Result<(), DeviceError>;
-    /// Safe state: table to a controlled stop, chamber to standby.
+    /// Safe state: table to a controlled stop, chamber to standby, the
+    /// supply's output as the bench file's `safe_state` says (off unless
+    /// it says otherwise).
     async fn safe_state(&mut self) -> Result<(), DeviceError>;
+    /// Switch the unit's supply output on at `volts` with the current
+    /// limit `limit_a` (and the bench's protection), or off.
+    async fn set_power(&mut self, on: bool, volts: f64, limit_a: f64) -> Result<(), DeviceError>;
+    /// The unit's supply output as read now (none: the bench has no
+    /// supply).
+    async fn read_power(&mut self) -> Result<Option<crate::driver::SupplyReading>, DeviceError>;
     /// Advance to device time `t_s`, filling `tick`.
     async fn advance(&mut self, t_s: f64, tick: &mut Tick) -> Result<(), DeviceError>;
     /// Link figures of the gyro so far.
@@ -128,6 +138,8 @@ pub struct Identities {
     pub chamber: Result<crate::driver::Identity, String>,
     /// The table's.
     pub table: Result<crate::driver::Identity, String>,
+    /// The supply's (none: the bench has no supply).
+    pub supply: Option<Result<crate::driver::Identity, String>>,
 }
 
 /// Where the run's data goes (the recorder implements it).
@@ -230,6 +242,16 @@ pub struct BenchLeft {
     pub table_deg: Option<[f64; 2]>,
     /// Both table axes at rest.
     pub table_at_rest: Option<bool>,
+    /// The supply's output read back: on (none: the bench has no supply,
+    /// or it could not be read).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub supply_on: Option<bool>,
+    /// The voltage it reads, V.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub supply_v: Option<f64>,
+    /// The current it reads, A.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub supply_a: Option<f64>,
     /// The state read back is the one asked for.
     pub verified: bool,
     /// In words, for the report and the operator.
@@ -287,6 +309,9 @@ pub struct Options {
     pub move_timeout_s: f64,
     /// Continue an interrupted run instead of starting from the top.
     pub resume: Option<Resume>,
+    /// The bench's safe state leaves the supply's output on
+    /// (`devices.supply.safe_state = "on"`).
+    pub supply_safe_on: bool,
 }
 
 /// How long past its expected end the bench may take to settle at the end
@@ -464,6 +489,15 @@ impl Run<'_> {
                 return Err(Stop::Device(DeviceError::Alarm {
                     device: "chamber".into(),
                     codes: state.chamber.alarms.clone(),
+                }));
+            }
+            if let Some(p) = &state.power
+                && p.tripped
+                && !self.cleaning_up
+            {
+                return Err(Stop::Device(DeviceError::Overcurrent {
+                    device: "supply".into(),
+                    limit_a: p.limit_a,
                 }));
             }
             let hot = self
@@ -653,6 +687,46 @@ impl Run<'_> {
                 }
                 self.run_for(*settle_s, None, key).await
             }
+            StepKind::Power { on, volts, limit_a } => {
+                self.bench
+                    .set_power(*on, *volts, *limit_a)
+                    .await
+                    .map_err(Stop::Device)?;
+                self.expected.power_set(*on);
+                // Until the output reads what was asked: on at the voltage
+                // (within 2 %, out of current limit), or off.
+                let deadline = self.bench.now_s() + POWER_TIMEOUT_S;
+                loop {
+                    self.tick(f64::INFINITY, None, key).await?;
+                    let reached = self.last.as_ref().and_then(|st| st.power).is_some_and(|p| {
+                        if *on {
+                            p.on && (p.v - volts).abs() <= 0.02 * volts
+                        } else {
+                            !p.on && p.v.abs() < 0.02 * p.set_v.max(1.0)
+                        }
+                    });
+                    if reached {
+                        return Ok(());
+                    }
+                    if self.bench.now_s() > deadline {
+                        let now = self.last.as_ref().and_then(|st| st.power);
+                        return Err(Stop::Data(format!(
+                            "the supply did not reach {} within {POWER_TIMEOUT_S} s (it reads {}); check the supply and the unit's cable",
+                            if *on {
+                                format!("{volts} V")
+                            } else {
+                                "output off".into()
+                            },
+                            now.map_or("nothing".into(), |p| format!(
+                                "{:.3} V, {:.4} A, output {}",
+                                p.v,
+                                p.a,
+                                if p.on { "on" } else { "off" }
+                            ))
+                        )));
+                    }
+                }
+            }
             StepKind::Wait { duration_s } => self.run_for(*duration_s, None, key).await,
             StepKind::Record { label, duration_s } => {
                 self.records
@@ -739,7 +813,10 @@ pub async fn run(
         last_link_s: 0.0,
         log_failed: None,
         record_link: None,
-        expected: finish::Expected::default(),
+        expected: finish::Expected {
+            supply_safe_on: opts.supply_safe_on,
+            ..finish::Expected::default()
+        },
     };
     let total = p.steps().count();
     let mut stop: Option<(Stop, String)> = None;
@@ -793,6 +870,7 @@ pub async fn run(
         let needs = match s.kind {
             StepKind::Chamber { .. } | StepKind::Soak { .. } => Some("chamber"),
             StepKind::Move { .. } => Some("table"),
+            StepKind::Power { .. } => Some("supply"),
             _ => None,
         };
         if let (Some(d), Some(f)) = (needs, faulted.as_deref())
@@ -993,6 +1071,7 @@ fn device_of(e: &DeviceError) -> Option<String> {
         | DeviceError::Open { device, .. }
         | DeviceError::Alarm { device, .. }
         | DeviceError::Interlock { device }
+        | DeviceError::Overcurrent { device, .. }
         | DeviceError::Unreachable { device, .. }
         | DeviceError::Silent { device, .. } => Some(device.clone()),
     }

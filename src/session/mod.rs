@@ -382,6 +382,11 @@ pub fn options(
         ),
         move_timeout_s: MOVE_TIMEOUT_S,
         resume,
+        supply_safe_on: bench
+            .devices
+            .supply
+            .as_ref()
+            .is_some_and(|p| p.safe_state == crate::bench::SupplySafe::On),
     }
 }
 
@@ -392,13 +397,17 @@ pub fn embedded_bench(
     pacing: Pacing,
     faults: &[(f64, Fault)],
     limits: crate::bench::Limits,
+    supply: Option<&crate::bench::SupplyDevice>,
 ) -> Guarded<EmbeddedBench> {
     let clock = Arc::new(VirtualClock::new(pacing));
     let mut b = EmbeddedBench::new(twin.clone(), seed, clock);
+    if let Some(p) = supply {
+        b = b.with_supply(p);
+    }
     for (at, f) in faults {
         b.schedule(*at, *f);
     }
-    Guarded::new(b, limits)
+    Guarded::new(b, limits).with_supply(supply)
 }
 
 fn io_err(what: &'static str, path: &Path) -> impl FnOnce(std::io::Error) -> SessionError {
@@ -509,6 +518,7 @@ pub fn execute(
             plan.pacing,
             &plan.faults,
             limits,
+            plan.bench_cfg.devices.supply.as_ref(),
         ))
     } else {
         let bench_err = |source| SessionError::Device {
@@ -521,7 +531,7 @@ pub fn execute(
         let device = rt
             .block_on(DeviceBench::start(&plan.bench_cfg, open))
             .map_err(bench_err)?;
-        Box::new(Guarded::new(device, limits))
+        Box::new(Guarded::new(device, limits).with_supply(plan.bench_cfg.devices.supply.as_ref()))
     };
     // A store URL's password never goes into a log.
     let mut logged_bench = plan.bench_cfg.clone();
@@ -541,9 +551,12 @@ pub fn execute(
         None
     };
     let identities = rt.block_on(bench.identify());
-    let instruments = plan
-        .bench_cfg
-        .instruments(identities.chamber, identities.table, today);
+    let instruments = plan.bench_cfg.instruments(
+        identities.chamber,
+        identities.table,
+        identities.supply,
+        today,
+    );
     let meta = RunMeta {
         format: FORMAT,
         run_id: plan
@@ -637,6 +650,7 @@ pub fn execute(
             &mut recorder,
             &panic_text(panic.as_ref()),
             plan.bench_cfg.devices.table.in_position_deg,
+            opts.supply_safe_on,
         )),
     };
     let part_link = bench.link_stats();
@@ -789,10 +803,14 @@ async fn after_panic(
     log: &mut dyn sequencer::Sink,
     what: &str,
     in_position_deg: f64,
+    supply_safe_on: bool,
 ) -> RunResult {
     use sequencer::{Level, finish};
     let now = bench.now_s();
-    let mut expected = finish::Expected::default();
+    let mut expected = finish::Expected {
+        supply_safe_on,
+        ..finish::Expected::default()
+    };
     let safe = bench.safe_state().await;
     if safe.is_ok() {
         expected.safe();

@@ -17,7 +17,7 @@ use super::SharedBench;
 use super::faults::Action;
 use super::lines::serve_lines;
 use crate::protocol::scpi::{ErrorQueue, NO_ERROR, Numeric, ScpiError, format_nr3};
-use crate::protocol::supply::{Command, Dialect, parse_message};
+use crate::protocol::supply::{Command, Dialect, Rating, parse_message, ratings};
 
 /// Longest message accepted, bytes.
 pub const MAX_LINE: usize = 1024;
@@ -29,25 +29,6 @@ pub const SLEW_V_PER_S: f64 = 500.0;
 pub const OCP_DELAY_S: f64 = 0.05;
 /// Longest integration step while something changes, s.
 const STEP_S: f64 = 0.002;
-
-/// What one channel can deliver.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Rating {
-    /// Highest voltage setting, V.
-    pub max_v: f64,
-    /// Highest current limit, A.
-    pub max_a: f64,
-}
-
-/// The channels of the simulated model of `dialect`: an E36312A (6 V 5 A,
-/// 25 V 1 A, 25 V 1 A) or a DP832 (30 V 3 A, 30 V 3 A, 5 V 3 A).
-pub fn ratings(dialect: Dialect) -> [Rating; 3] {
-    let r = |max_v, max_a| Rating { max_v, max_a };
-    match dialect {
-        Dialect::KeysightE36300 => [r(6.0, 5.0), r(25.0, 1.0), r(25.0, 1.0)],
-        Dialect::RigolDp800 => [r(30.0, 3.0), r(30.0, 3.0), r(5.0, 3.0)],
-    }
-}
 
 /// The simulated supply's `*IDN?` answer: the model it imitates, naming
 /// itself as a simulator.
@@ -193,20 +174,53 @@ impl Supply {
         &self.channels[self.load.1.min(self.channels.len() - 1)]
     }
 
-    /// A supply of `dialect`'s model already powering the unit, settled:
-    /// the state a bench is in when a run starts on a unit switched on
-    /// beforehand (the simulated benches start so).
+    /// A supply of `dialect`'s model already powering the unit from
+    /// channel 2 at its nominal voltage, settled: the state a bench is in
+    /// when a run starts on a unit switched on beforehand (`sim serve`
+    /// starts so).
     pub fn powering_unit(dialect: Dialect) -> Self {
+        let limit = ratings(dialect)[1].max_a;
+        Self::powering(dialect, 2, UnitLoad::RL16.nominal_v, limit, false)
+    }
+
+    /// The same with the unit on `channel` (1-based; channel 2 when the
+    /// model has no such channel) at `volts`, `limit_a`, its protection
+    /// on or off; an output that cannot give that is left off.
+    pub fn powering(
+        dialect: Dialect,
+        channel: u8,
+        volts: f64,
+        limit_a: f64,
+        protection: bool,
+    ) -> Self {
         let mut s = Self::new(dialect);
-        let (load, at) = s.load;
+        let at = usize::from(channel)
+            .checked_sub(1)
+            .filter(|i| *i < s.channels.len())
+            .unwrap_or(1);
+        s.load.1 = at;
+        let rating = s.channels[at].rating;
+        if !(0.0..=rating.max_v).contains(&volts) || !(0.0..=rating.max_a).contains(&limit_a) {
+            return s;
+        }
+        let load = s.load.0;
         let c = &mut s.channels[at];
-        c.set_v = load.nominal_v;
+        c.set_v = volts;
+        c.limit_a = limit_a;
+        c.ocp = protection;
+        c.ocp_level_a = limit_a;
         c.on = true;
-        c.source_v = load.nominal_v;
-        c.out_v = load.nominal_v;
-        c.out_a = load.steady_a;
-        s.powered_s = 20.0 * load.inrush_tau_s;
-        s.peak_a = load.steady_a;
+        c.source_v = volts;
+        let demand = load.current_a(volts, f64::INFINITY);
+        (c.out_v, c.out_a) = if demand > limit_a {
+            (volts * limit_a / demand, limit_a)
+        } else {
+            (volts, demand)
+        };
+        if load.current_a(c.out_v, 0.0) > 0.0 {
+            s.powered_s = 20.0 * load.inrush_tau_s;
+            s.peak_a = c.out_a;
+        }
         s
     }
 
@@ -403,6 +417,37 @@ impl Supply {
             }
         }
         (!answers.is_empty()).then(|| answers.join(";"))
+    }
+}
+
+impl Supply {
+    /// Carry out `cmds` on `channel` (1-based) as the instrument does when
+    /// a driver sends them; the errors they queued, in words
+    /// (`-222 Data out of range`), the queue emptied.
+    pub fn program(&mut self, channel: u8, cmds: &[Command]) -> Vec<String> {
+        self.errors.clear();
+        for c in std::iter::once(Command::Select(channel)).chain(cmds.iter().copied()) {
+            if let Err(e) = self.execute(c) {
+                self.errors.push(e);
+            }
+        }
+        std::iter::from_fn(|| self.errors.pop())
+            .map(|e| format!("{} {}", e.code, e.text))
+            .collect()
+    }
+
+    /// `channel` (1-based) as a driver reads it (measurements at the
+    /// instrument's resolution); none when there is no such channel.
+    pub fn reading(&self, channel: u8) -> Option<crate::driver::SupplyReading> {
+        let c = self.channels.get(usize::from(channel).checked_sub(1)?)?;
+        Some(crate::driver::SupplyReading {
+            set_v: c.set_v,
+            limit_a: c.limit_a,
+            v: round_to(c.out_v, 1e-3),
+            a: round_to(c.out_a, 1e-4),
+            on: c.on,
+            tripped: c.tripped,
+        })
     }
 }
 

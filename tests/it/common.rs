@@ -240,7 +240,7 @@ impl SimServe {
             .expect("sim serve starts");
         let mut lines = std::io::BufReader::new(child.stdout.take().expect("stdout"));
         let mut endpoints = Vec::new();
-        for _ in 0..7 {
+        for _ in 0..9 {
             let mut l = String::new();
             lines.read_line(&mut l).expect("endpoint");
             endpoints.push(l.trim().to_owned());

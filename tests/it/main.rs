@@ -19,6 +19,7 @@ mod import;
 mod integrity;
 mod messages;
 mod pages;
+mod power;
 mod rate;
 mod readme;
 mod replay;

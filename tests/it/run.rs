@@ -93,6 +93,7 @@ fn smoke_passes_with_the_report_contract_and_a_complete_log() {
         "/chamber/state",
         "/table/state",
         "/gyro/link",
+        "/supply/state",
     ] {
         assert!(msgs.iter().any(|(t, _, _)| t == topic), "{topic} missing");
     }
@@ -454,8 +455,8 @@ fn a_run_killed_with_sigkill_is_recovered_to_what_was_flushed() {
         .expect("has a summary");
     assert_eq!(
         summary.channels.len(),
-        7,
-        "every channel of the log, /steps included"
+        8,
+        "every channel of the log, /steps and /supply/state included"
     );
     let recovered = counts_and_seqs(&recovered_path);
     assert_eq!(
