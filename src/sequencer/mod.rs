@@ -605,9 +605,12 @@ impl Run<'_> {
                         case.pop_front();
                     }
                     let slope = slope_per_min(&case);
-                    let ok = (st.chamber.air_c - st.chamber.set_point_c).abs() <= *band_c
-                        && case.len() >= 60
-                        && slope.abs() <= *case_slope_c_per_min;
+                    // An air-only soak (no case criterion) needs no frames:
+                    // it holds while the unit is off.
+                    let case_ok = case_slope_c_per_min.is_infinite()
+                        || (case.len() >= 60 && slope.abs() <= *case_slope_c_per_min);
+                    let ok =
+                        (st.chamber.air_c - st.chamber.set_point_c).abs() <= *band_c && case_ok;
                     held_since = if ok {
                         held_since.or(Some(st.t_s))
                     } else {

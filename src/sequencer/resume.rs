@@ -86,6 +86,51 @@ pub fn resume_plan(p: &Procedure, completed: usize) -> (usize, Vec<(usize, Step)
         start_at -= 1;
     }
 
+    // A turn-on whose records the break reached is taken again from the
+    // turn-on (a record after it, a warm-up, counts from turn-on), and with
+    // the time off before it when that is where the procedure put it (a
+    // cool-down: the turn-on is a cold one). The safe state switched the
+    // unit off anyway.
+    let is_power = |s: &&Step| matches!(s.kind, StepKind::Power { .. });
+    if let Some(pw) = steps[..completed].iter().rposition(is_power)
+        && matches!(steps[pw].kind, StepKind::Power { on: true, .. })
+        && pw < start_at
+        && completed < steps.len()
+        && steps[pw + 1..=completed]
+            .iter()
+            .any(|s| matches!(s.kind, StepKind::Record { .. }))
+    {
+        start_at = pw;
+        if let Some(off) = steps[..pw].iter().rposition(is_power)
+            && matches!(steps[off].kind, StepKind::Power { on: false, .. })
+            && steps[off + 1..pw].iter().all(|s| {
+                matches!(
+                    s.kind,
+                    StepKind::Wait { .. } | StepKind::Move { .. } | StepKind::Note { .. }
+                )
+            })
+        {
+            start_at = off;
+        }
+    }
+    // The unit's power as the last power step before the resume point left
+    // it, restored last: a soak reads the unit's case sensor, which an
+    // unpowered unit does not send.
+    let power = steps[..start_at]
+        .iter()
+        .rposition(is_power)
+        .map(|pw| (pw, steps[pw].clone()));
+    let (start_at, mut restore) = restore_conditions(&steps, start_at);
+    restore.extend(power);
+    (start_at, restore)
+}
+
+/// The steps that bring the bench back to the table pose and chamber
+/// condition a resume at `start_at` needs.
+fn restore_conditions(steps: &[&Step], start_at: usize) -> (usize, Vec<(usize, Step)>) {
+    let is_chamber = |s: &&Step| matches!(s.kind, StepKind::Chamber { .. });
+    let is_soak = |s: &&Step| matches!(s.kind, StepKind::Soak { .. });
+    let last_chamber_before = |end: usize| steps[..end].iter().rposition(is_chamber);
     let mut restore: Vec<(usize, Step)> = Vec::new();
     if let Some(m) = steps[..start_at]
         .iter()
@@ -334,6 +379,45 @@ mod tests {
             panic!("soak")
         };
         assert_eq!(case_slope_c_per_min, 0.02, "the procedure's own criteria");
+    }
+
+    fn turn_ons() -> Procedure {
+        Procedure::from_source(
+            &Source::from_text(
+                "bias_repeatability.toml",
+                include_str!("../../procedures/bias_repeatability.toml"),
+            ),
+            &BenchConfig::embedded(),
+        )
+        .expect("loads")
+    }
+
+    #[test]
+    fn a_break_in_a_turn_on_retakes_it_from_the_cool_down_before_it() {
+        let p = turn_ons();
+        // Each cycle: the move to its position, then power on, warm-up
+        // record, its measure, bias record, power off, the cool-down.
+        let cycle = |c: usize, i: usize| index(&p, &format!("main.0.positions.{c}")) + 1 + i;
+        for cut in [1, 3] {
+            let (start, restore) = resume_plan(&p, cycle(1, cut));
+            assert_eq!(
+                start,
+                cycle(0, 4),
+                "cut at step {cut} of c2: c1's power-off and cool-down first"
+            );
+            assert_eq!(
+                restore.last().map(|(i, _)| *i),
+                Some(cycle(0, 0)),
+                "c1 switched the unit on last: restored last, after the soak"
+            );
+        }
+        // In the cool-down: go on there, the unit off.
+        let (start, restore) = resume_plan(&p, cycle(1, 5));
+        assert_eq!(start, cycle(1, 5));
+        assert!(matches!(
+            restore.last().map(|(_, s)| &s.kind),
+            Some(StepKind::Power { on: false, .. })
+        ));
     }
 
     #[test]

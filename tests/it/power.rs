@@ -272,3 +272,56 @@ unit = "deg/h"
     drop(served);
     std::fs::remove_dir_all(&dir).expect("cleanup");
 }
+
+/// Killed in the second turn-on's warm-up and resumed: the resume switches
+/// the unit off again and retakes that turn-on from the cool-down before
+/// it (a warm-up counts from a cold turn-on), every figure is there, and
+/// the last part replays to the report byte for byte.
+#[test]
+fn a_turn_on_cut_short_is_retaken_cold_on_resume() {
+    let dir = temp_dir("power-resume");
+    let out_dir = dir.join("run");
+    let killed = gyrobench(&[
+        "run",
+        PROCEDURE,
+        "--inject",
+        "process-kill@21000",
+        "--out",
+        s(&out_dir),
+        "--db",
+        "none",
+    ]);
+    assert_eq!(
+        std::os::unix::process::ExitStatusExt::signal(&killed.status),
+        Some(9),
+        "killed: {}",
+        stderr(&killed)
+    );
+    let resumed = gyrobench(&["run", "--resume", s(&out_dir), "--db", "none"]);
+    assert_eq!(resumed.status.code(), Some(0), "{}", stderr(&resumed));
+    let err = stderr(&resumed);
+    assert!(
+        err.contains("going on at step") && err.contains("(power the unit off)"),
+        "the resume goes on at c1's power-off: {err}"
+    );
+    let report = json(&out_dir.join("report.json"));
+    assert_eq!(measurements(&report, "warm_up_time_s:").len(), 6);
+    let (spread, _) = crate::common::figure(&report, "bias_repeatability_dph");
+    assert!(spread > 0.0 && spread < 0.05, "{spread}");
+    let replay = dir.join("replay");
+    let out = gyrobench(&[
+        "replay",
+        s(&out_dir.join("run.part2.mcap")),
+        "--out",
+        s(&replay),
+    ]);
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    for f in ["report.json", "report.html"] {
+        assert_eq!(
+            std::fs::read(out_dir.join(f)).expect("live"),
+            std::fs::read(replay.join(f)).expect("replayed"),
+            "{f}"
+        );
+    }
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
