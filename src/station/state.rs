@@ -102,6 +102,23 @@ pub struct RunView {
     pub error: Option<String>,
     /// The gyro link's figures so far (each second of device time).
     pub link: Option<crate::protocol::frame::LinkStats>,
+    /// The unit's supply output as last read (benches with a supply).
+    pub supply: Option<SupplyView>,
+}
+
+/// The unit's supply output, as the page shows it.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
+pub struct SupplyView {
+    /// Volts measured.
+    pub v: f64,
+    /// Amperes measured.
+    pub a: f64,
+    /// Watts delivered.
+    pub w: f64,
+    /// Output on.
+    pub on: bool,
+    /// Over-current protection tripped.
+    pub tripped: bool,
 }
 
 /// One 1 Hz sample for the charts: device time (h), Earth-removed rate
@@ -246,6 +263,15 @@ impl Progress for Reporter {
             if let Some(run) = &mut b.run {
                 run.device_s = st.t_s;
                 run.elapsed_wall_s = wall;
+                if let Some(p) = st.power {
+                    run.supply = Some(SupplyView {
+                        v: p.v,
+                        a: p.a,
+                        w: p.v * p.a,
+                        on: p.on,
+                        tripped: p.tripped,
+                    });
+                }
             }
             if let Some(s) = sample {
                 b.samples.push(s);

@@ -96,6 +96,8 @@ def main():
         assert len(rows) == 2, f"{len(rows)} measurements"
         assert all(r.find_elements(By.CSS_SELECTOR, "td.pass") for r in rows)
         assert a.find_elements(By.CSS_SELECTOR, "#steps li.done")
+        supply = text_of(a, "#supply")
+        assert supply.startswith("Unit's supply: 15.00 V, 0.550 A (8.25 W), output on"), supply
         report = a.find_element(By.ID, "report-link").get_attribute("href")
         a.get(report)
         wait(a, "the report page", lambda d: "PASS" in d.find_element(By.CSS_SELECTOR, ".verdict").text)
@@ -110,7 +112,7 @@ def main():
         wait(a, "ABORTED", lambda d: d.find_elements(By.CSS_SELECTOR, ".verdict.aborted"))
         assert "Bench left" in text_of(a, "#verdict-box"), text_of(a, "#verdict-box")
         assert "cleanup" in text_of(a, "#events"), text_of(a, "#events")
-        print("station page: start refused without a serial, prompt, reload, second browser, PASS, report, abort: ok")
+        print("station page: start refused without a serial, prompt, reload, second browser, PASS, the unit's supply, report, abort: ok")
     finally:
         a.quit()
         b.quit()
