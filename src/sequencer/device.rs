@@ -6,7 +6,6 @@
 //! the chamber and the table. Chambers ramp by the set point being stepped
 //! here (the drivers' constant set point has no ramp of its own).
 
-use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
@@ -21,6 +20,32 @@ use crate::driver::supply::ScpiSupply;
 use crate::driver::{Chamber, ChamberMode, DeviceError, MotionTable, PowerSupply, SetPointRamp};
 use crate::geometry::{Site, TableAngles, TableGeometry};
 use crate::protocol::frame::LinkStats;
+
+/// How long after switching the unit on its silence is expected, wall
+/// time, s (ours: an RLG's discharge ignites and its frame stream starts
+/// within seconds; beyond this a silent unit is a fault).
+pub const BOOT_S: f64 = 10.0;
+
+/// When the gyro's silence is expected.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Quiet {
+    /// Never: the unit is powered and running.
+    No,
+    /// The run switched the unit off.
+    Off,
+    /// Switched on; booting until then.
+    Booting(std::time::Instant),
+}
+
+impl Quiet {
+    fn now(self) -> bool {
+        match self {
+            Self::No => false,
+            Self::Off => true,
+            Self::Booting(until) => std::time::Instant::now() < until,
+        }
+    }
+}
 
 /// Real drivers behind [`BenchIo`].
 pub struct DeviceBench {
@@ -40,9 +65,9 @@ pub struct DeviceBench {
     lsb_arcsec: f64,
     temp_lsb_c: f64,
     supply: Option<(ScpiSupply, SupplyDevice)>,
-    /// Cleared while the run has switched the unit's power off: the gyro's
-    /// silence is then expected, not a fault.
-    powered: Arc<AtomicBool>,
+    /// Whether the gyro's silence is expected now: while the run has the
+    /// unit's power off, and for a while after switching it on.
+    quiet: Arc<Mutex<Quiet>>,
 }
 
 impl std::fmt::Debug for DeviceBench {
@@ -78,13 +103,15 @@ impl DeviceBench {
         let stats = Arc::new(Mutex::new(LinkStats::default()));
         let (tx, rx) = mpsc::channel(1 << 16);
         let shared = stats.clone();
-        let powered = Arc::new(AtomicBool::new(true));
-        let on = powered.clone();
+        let quiet = Arc::new(Mutex::new(Quiet::No));
+        let expected = quiet.clone();
         tokio::spawn(async move {
             loop {
                 let next = gyro.next_frame().await;
-                if matches!(next, Err(DeviceError::Silent { .. })) && !on.load(Ordering::Relaxed) {
-                    // An unpowered unit sends nothing.
+                if matches!(next, Err(DeviceError::Silent { .. }))
+                    && expected.lock().is_ok_and(|q| q.now())
+                {
+                    // An unpowered unit sends nothing; a booting one not yet.
                     continue;
                 }
                 if let Ok(mut s) = shared.lock() {
@@ -124,7 +151,7 @@ impl DeviceBench {
             lsb_arcsec: cfg.devices.gyro.lsb_arcsec,
             temp_lsb_c: layout.temp_lsb_c,
             supply,
-            powered,
+            quiet,
         })
     }
 
@@ -223,14 +250,21 @@ impl BenchIo for DeviceBench {
                 reason: "the bench file names no supply".into(),
             });
         };
+        let set = |q: Quiet| {
+            if let Ok(mut g) = self.quiet.lock() {
+                *g = q;
+            }
+        };
         if on {
             p.configure(c.channel, volts, limit_a, c.protection).await?;
         } else {
-            self.powered.store(false, Ordering::Relaxed);
+            set(Quiet::Off);
         }
         p.output(c.channel, on).await?;
         if on {
-            self.powered.store(true, Ordering::Relaxed);
+            set(Quiet::Booting(
+                std::time::Instant::now() + Duration::from_secs_f64(BOOT_S),
+            ));
         }
         Ok(())
     }
