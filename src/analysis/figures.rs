@@ -205,7 +205,8 @@ pub fn repeatability(turn_on_means: &[f64]) -> Option<(f64, f64)> {
 /// stays within `band` of the settled value; s from the series' start.
 /// The settled value is the mean of the series' last quarter (ours: a
 /// single last window would carry its own noise into every comparison).
-/// None when the series holds fewer than four windows.
+/// None when the series holds fewer than four windows, or its last mean
+/// is still outside the band (not warm within the series).
 pub fn warm_up_time(x: &[f64], dt_s: f64, window: usize, band: f64) -> Option<f64> {
     if window == 0 || x.len() < 4 * window {
         return None;
@@ -215,8 +216,9 @@ pub fn warm_up_time(x: &[f64], dt_s: f64, window: usize, band: f64) -> Option<f6
     // The last mean outside the band; warm once past it.
     let last_out = means.iter().rposition(|m| (m - settled).abs() > band);
     let first_in = last_out.map_or(0, |i| i + 1);
-    // Mean i covers samples i..i + window: it ends window samples in.
-    Some((first_in + window) as f64 * dt_s)
+    // Mean i covers samples i..i + window: it ends window samples in. The
+    // last mean itself outside the band: not settled within the series.
+    (first_in < means.len()).then(|| (first_in + window) as f64 * dt_s)
 }
 
 #[cfg(test)]
@@ -245,6 +247,9 @@ mod tests {
         // Already warm: one window.
         assert_eq!(warm_up_time(&[0.2; 500], 1.0, 100, 0.01), Some(100.0));
         assert_eq!(warm_up_time(&[0.2; 399], 1.0, 100, 0.01), None);
+        // Still drifting at the end: not warm within the record.
+        let ramp: Vec<f64> = (0..1000).map(|i| f64::from(i) * 0.001).collect();
+        assert_eq!(warm_up_time(&ramp, 1.0, 100, 0.01), None);
     }
 
     #[test]

@@ -22,12 +22,15 @@ pub struct ScpiSupply {
     dialect: Dialect,
 }
 
+/// Commands in one message, each from the root (`;:`): SCPI reads a
+/// header after a bare `;` from the branch of the one before, and
+/// `INST:NSEL 2;VOLT 15` would be `INST:VOLT`.
 fn message(cmds: &[Command], dialect: Dialect) -> Vec<u8> {
     let mut s = cmds
         .iter()
         .map(|c| c.text(dialect))
         .collect::<Vec<_>>()
-        .join(";");
+        .join(";:");
     s.push('\n');
     s.into_bytes()
 }
@@ -230,9 +233,9 @@ mod tests {
     #[tokio::test]
     async fn every_setting_reads_the_error_queue_in_the_same_message() {
         let mock = Builder::new()
-            .write(b"INST:NSEL 2;VOLT 15.0000;CURR 1.0000;CURR:PROT:STAT ON;SYST:ERR?\n")
+            .write(b"INST:NSEL 2;:VOLT 15.0000;:CURR 1.0000;:CURR:PROT:STAT ON;:SYST:ERR?\n")
             .read(b"+0,\"No error\"\n")
-            .write(b"INST:NSEL 2;OUTP ON;SYST:ERR?\n")
+            .write(b"INST:NSEL 2;:OUTP ON;:SYST:ERR?\n")
             .read(b"0,\"No error\"\n")
             .build();
         let mut s = driver(mock, Dialect::KeysightE36300);
@@ -243,7 +246,7 @@ mod tests {
     #[tokio::test]
     async fn a_refused_setting_names_the_supply_s_errors() {
         let mock = Builder::new()
-            .write(b"INST:NSEL 1;VOLT 30.0000;CURR 1.0000;CURR:PROT 1.0000;CURR:PROT:STAT OFF;SYST:ERR?\n")
+            .write(b"INST:NSEL 1;:VOLT 30.0000;:CURR 1.0000;:CURR:PROT 1.0000;:CURR:PROT:STAT OFF;:SYST:ERR?\n")
             .read(b"-222,\"Data out of range\"\n")
             .write(b"SYST:ERR?\n")
             .read(b"0,\"No error\"\n")
@@ -258,7 +261,7 @@ mod tests {
     #[tokio::test]
     async fn a_reading_understands_both_makers_words() {
         let mock = Builder::new()
-            .write(b"INST:NSEL 2;VOLT?;CURR?;MEAS:VOLT?;MEAS:CURR?;OUTP?;CURR:PROT:TRIP?\n")
+            .write(b"INST:NSEL 2;:VOLT?;:CURR?;:MEAS:VOLT?;:MEAS:CURR?;:OUTP?;:CURR:PROT:TRIP?\n")
             .read(b"15.0000;1.0000;14.9990;0.5500;ON;NO\n")
             .build();
         let mut s = driver(mock, Dialect::RigolDp800);

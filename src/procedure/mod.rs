@@ -747,6 +747,13 @@ impl Validator<'_> {
                     }
                     (false, None) => None,
                 };
+                if metric == Metric::WarmUpTime {
+                    c.ensure(
+                        records.len() == 1,
+                        &k("records"),
+                        "must name one record, made from a turn-on",
+                    )?;
+                }
                 if metric == Metric::BiasRepeatability {
                     c.ensure(
                         records.len() >= 2,

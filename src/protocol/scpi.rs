@@ -81,16 +81,17 @@ pub struct ErrorQueue {
 }
 
 impl ErrorQueue {
-    /// Entries kept, the last of them -350 once overflowed (ours; the
-    /// E36300 keeps 20).
+    /// Entries kept (the E36300's 20), the last of them -350 once an
+    /// error found the queue full.
     pub const DEPTH: usize = 20;
 
-    /// Queue an error.
+    /// Queue an error; when the queue is full its newest entry becomes
+    /// -350 instead.
     pub fn push(&mut self, e: ScpiError) {
-        match self.queue.len() {
-            n if n + 1 < Self::DEPTH => self.queue.push_back(e),
-            n if n + 1 == Self::DEPTH => self.queue.push_back(ScpiError::QUEUE_OVERFLOW),
-            _ => {}
+        if self.queue.len() < Self::DEPTH {
+            self.queue.push_back(e);
+        } else if let Some(last) = self.queue.back_mut() {
+            *last = ScpiError::QUEUE_OVERFLOW;
         }
     }
 
@@ -174,6 +175,8 @@ pub struct Split<'a> {
     pub query: bool,
     /// Common command (`*IDN?`): the header starts with `*`.
     pub common: bool,
+    /// The header starts with `:`: from the root, whatever came before.
+    pub absolute: bool,
     /// Arguments, trimmed, split at commas outside parentheses.
     pub args: Vec<&'a str>,
 }
@@ -188,6 +191,7 @@ pub fn split_command(cmd: &str) -> Result<Split<'_>, ScpiError> {
     let query = header.ends_with('?');
     let h = header.trim_end_matches('?');
     let common = h.starts_with('*');
+    let absolute = h.starts_with(':');
     let h = h.strip_prefix(':').unwrap_or(h);
     let h = h.strip_prefix('*').unwrap_or(h);
     if h.is_empty()
@@ -205,6 +209,7 @@ pub fn split_command(cmd: &str) -> Result<Split<'_>, ScpiError> {
         parts,
         query,
         common,
+        absolute,
         args: split_args(args),
     })
 }
@@ -373,8 +378,9 @@ mod tests {
         assert_eq!(s.parts, ["VOLT", "PROT"]);
         assert!(!s.query && !s.common);
         assert_eq!(s.args, ["5.5", "(@1,2)"]);
+        assert!(split_command(":VOLT 1").expect("valid").absolute);
         let s = split_command("*IDN?").expect("valid");
-        assert!(s.query && s.common);
+        assert!(s.query && s.common && !s.absolute);
         assert_eq!(s.parts, ["IDN"]);
         assert_eq!(split_command("VOLT::X"), Err(ScpiError::SYNTAX));
         assert_eq!(split_command("VO#LT 1"), Err(ScpiError::SYNTAX));
@@ -429,6 +435,15 @@ mod tests {
         assert_eq!(seen.len(), ErrorQueue::DEPTH);
         assert_eq!(seen.last(), Some(&ScpiError::QUEUE_OVERFLOW));
         assert!(q.is_empty());
+        // Exactly full: every error kept; room again after a read.
+        for _ in 0..ErrorQueue::DEPTH {
+            q.push(ScpiError::SYNTAX);
+        }
+        assert_eq!(q.pop(), Some(ScpiError::SYNTAX));
+        q.push(ScpiError::OUT_OF_RANGE);
+        let rest: Vec<_> = std::iter::from_fn(|| q.pop()).collect();
+        assert_eq!(rest.len(), ErrorQueue::DEPTH);
+        assert_eq!(rest.last(), Some(&ScpiError::OUT_OF_RANGE), "no overflow");
     }
 
     proptest::proptest! {

@@ -177,7 +177,7 @@ impl Command {
         )
     }
 
-    /// The line on the wire.
+    /// The line on the wire (one command: from the root).
     pub fn encode(&self, dialect: Dialect) -> Vec<u8> {
         let mut s = self.text(dialect);
         s.push('\n');
@@ -236,18 +236,29 @@ const VOLTS: &[(&str, f64)] = &[("V", 1.0), ("MV", 1e-3)];
 const AMPS: &[(&str, f64)] = &[("A", 1.0), ("MA", 1e-3)];
 
 /// Parse one received message into its commands; each failing command
-/// gives the error the instrument queues. Every command of a message
-/// starts at the root of the tree (the supplies' headers all do).
+/// gives the error the instrument queues. SCPI's path rule holds: a
+/// message starts at the root; after a `;` a header continues from the
+/// branch of the one before (`SOUR:VOLT 5;CURR 1` sets `SOUR:CURR`) unless
+/// it starts with `:`; common commands (`*CLS`) leave the branch as it is.
 pub fn parse_message(line: &str, dialect: Dialect) -> Vec<Result<Command, ScpiError>> {
+    let mut branch: Vec<String> = Vec::new();
     line.trim_end_matches(['\r', '\n'])
         .split(';')
         .filter(|c| !c.trim().is_empty())
-        .map(|c| parse_one(c, dialect))
+        .map(|c| {
+            let mut s = split_command(c)?;
+            if !s.common {
+                if !s.absolute {
+                    s.parts = branch.iter().cloned().chain(s.parts).collect();
+                }
+                branch = s.parts[..s.parts.len() - 1].to_vec();
+            }
+            parse_one(&s, dialect)
+        })
         .collect()
 }
 
-fn parse_one(cmd: &str, dialect: Dialect) -> Result<Command, ScpiError> {
-    let s = split_command(cmd)?;
+fn parse_one(s: &super::scpi::Split<'_>, dialect: Dialect) -> Result<Command, ScpiError> {
     let parts: Vec<&str> = s.parts.iter().map(String::as_str).collect();
     let args = s.args.as_slice();
     // A set command takes exactly one argument, a query none.
@@ -401,12 +412,41 @@ mod tests {
             );
         }
         assert_eq!(
-            ok("INST:NSEL 2;INST CH3;INSTrument:SELect OUT1", K),
+            ok("INST:NSEL 2;:INST CH3;:INSTrument:SELect OUT1", K),
             [Command::Select(2), Command::Select(3), Command::Select(1)]
         );
         assert_eq!(
-            ok("MEAS:VOLT?;MEASure:SCALar:CURRent:DC?", R),
+            ok("MEAS:VOLT?;:MEASure:SCALar:CURRent:DC?", R),
             [Command::MeasureVoltage, Command::MeasureCurrent]
+        );
+    }
+
+    #[test]
+    fn after_a_semicolon_a_header_continues_from_the_branch_before() {
+        // SCPI's path rule: relative to the previous header's branch.
+        assert_eq!(
+            ok("SOUR:VOLT 5;CURR 1;*CLS;VOLT?", K),
+            [
+                Command::Voltage(Numeric::Value(5.0)),
+                Command::Current(Numeric::Value(1.0)),
+                Command::ClearStatus,
+                Command::VoltageQuery
+            ]
+        );
+        assert_eq!(
+            ok("CURR:PROT:STAT ON;TRIP?", K),
+            [Command::Protection(true), Command::Tripped]
+        );
+        assert_eq!(
+            ok("MEAS:VOLT?;CURR?", K),
+            [Command::MeasureVoltage, Command::MeasureCurrent]
+        );
+        // `INST:VOLT` is no command: a leading colon is needed.
+        let r = parse_message("INST:NSEL 2;VOLT 5", K);
+        assert_eq!(r[1], Err(ScpiError::UNDEFINED_HEADER));
+        assert_eq!(
+            ok("INST:NSEL 2;:VOLT 5", K),
+            [Command::Select(2), Command::Voltage(Numeric::Value(5.0))]
         );
     }
 

@@ -90,11 +90,14 @@ impl DeviceBench {
         table.servo_on().await?;
         // The unit is powered as the bench file says before anything else:
         // an output already on at that voltage stays as it is.
+        let mut booting = false;
         let supply = match (supply, &cfg.devices.supply) {
             (Some(mut p), Some(c)) => {
                 p.configure(c.channel, c.volts, c.limit_a, c.protection)
                     .await?;
                 p.output(c.channel, true).await?;
+                // A unit that was off (a safe state's) boots first.
+                booting = true;
                 Some((p, c.clone()))
             }
             _ => None,
@@ -103,7 +106,11 @@ impl DeviceBench {
         let stats = Arc::new(Mutex::new(LinkStats::default()));
         let (tx, rx) = mpsc::channel(1 << 16);
         let shared = stats.clone();
-        let quiet = Arc::new(Mutex::new(Quiet::No));
+        let quiet = Arc::new(Mutex::new(if booting {
+            Quiet::Booting(std::time::Instant::now() + Duration::from_secs_f64(BOOT_S))
+        } else {
+            Quiet::No
+        }));
         let expected = quiet.clone();
         tokio::spawn(async move {
             loop {
@@ -153,6 +160,22 @@ impl DeviceBench {
             supply,
             quiet,
         })
+    }
+
+    /// The cause of the gyro's failure `e`: the supply's protection when it
+    /// tripped (the unit went silent because its power went off).
+    async fn cause_of(&mut self, e: DeviceError) -> DeviceError {
+        if matches!(e, DeviceError::Silent { .. })
+            && let Some((p, c)) = self.supply.as_mut()
+            && let Ok(r) = p.read(c.channel).await
+            && r.tripped
+        {
+            return DeviceError::Overcurrent {
+                device: "supply".into(),
+                limit_a: r.limit_a,
+            };
+        }
+        e
     }
 
     async fn step_ramp(&mut self, t_s: f64) -> Result<(), DeviceError> {
@@ -236,7 +259,12 @@ impl BenchIo for DeviceBench {
         let table = self.table.stop().await;
         let chamber = self.chamber.set_mode(ChamberMode::Standby).await;
         let supply = match self.supply.as_mut() {
-            Some((p, c)) if c.safe_state == SupplySafe::Off => p.output(c.channel, false).await,
+            Some((p, c)) if c.safe_state == SupplySafe::Off => {
+                if let Ok(mut q) = self.quiet.lock() {
+                    *q = Quiet::Off;
+                }
+                p.output(c.channel, false).await
+            }
             _ => Ok(()),
         };
         table.and(chamber).and(supply)
@@ -286,7 +314,7 @@ impl BenchIo for DeviceBench {
             tokio::select! {
                 f = self.frames.recv() => match f {
                     Some(Ok(f)) => tick.frames.push(f),
-                    Some(Err(e)) => return Err(e),
+                    Some(Err(e)) => return Err(self.cause_of(e).await),
                     None => return Err(gyro_stream_ended()),
                 },
                 () = &mut deadline => break,

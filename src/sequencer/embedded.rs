@@ -192,13 +192,15 @@ impl EmbeddedBench {
                 p.shorted = true;
                 p.sim.load.0.steady_a *= 3.0;
             }
+            let follow = |twin: &mut Twin, powered: bool| match (powered, twin.is_powered()) {
+                (true, false) => twin.power_on(),
+                (false, true) => twin.power_off(),
+                _ => {}
+            };
+            follow(&mut self.twin, p.sim.unit_powered());
             while let Some(t_change) = p.sim.advance_until_change(t_s) {
                 self.twin.run_until(t_change, |_, g| on_frame(g));
-                if p.sim.unit_powered() {
-                    self.twin.power_on();
-                } else {
-                    self.twin.power_off();
-                }
+                follow(&mut self.twin, p.sim.unit_powered());
             }
         }
         self.twin.run_until(t_s, |_, g| on_frame(g));
@@ -334,12 +336,13 @@ impl BenchIo for EmbeddedBench {
         // be told anything.
         self.twin
             .demand_table(Some(AxisDemand::Stop), Some(AxisDemand::Stop));
-        if let Some(p) = self.supply.as_mut()
-            && p.cfg.safe_state == SupplySafe::Off
-        {
-            let errors = p.sim.program(p.cfg.channel, &[Command::Output(false)]);
-            refused_by_supply("output off", errors)?;
-        }
+        let supply = match self.supply.as_mut() {
+            Some(p) if p.cfg.safe_state == SupplySafe::Off => {
+                let errors = p.sim.program(p.cfg.channel, &[Command::Output(false)]);
+                refused_by_supply("output off", errors)
+            }
+            _ => Ok(()),
+        };
         self.check(&["chamber"])?;
         let room = self.twin.config().chamber.initial_c;
         self.twin
@@ -350,7 +353,7 @@ impl BenchIo for EmbeddedBench {
                 reason: e.to_string(),
             })?;
         self.mode = ChamberMode::Standby;
-        Ok(())
+        supply
     }
 
     async fn set_power(&mut self, on: bool, volts: f64, limit_a: f64) -> Result<(), DeviceError> {

@@ -33,8 +33,8 @@ pub struct Expected {
     pub chamber: Option<ChamberEnd>,
     /// Where the table was last sent (none: at rest anywhere).
     pub table: Option<TableAngles>,
-    /// What the supply's output was last asked to be (none: never
-    /// switched by the run; as the bench started it).
+    /// What the supply's output was last asked to be (a run starts it on;
+    /// none: nothing known, nothing checked).
     pub power_on: Option<bool>,
     /// The bench's safe state leaves the supply's output on.
     pub supply_safe_on: bool,
@@ -241,6 +241,13 @@ pub async fn bench_left(
             "; the chamber shows alarms {:?}: clear their cause at its panel",
             c.alarms
         ));
+    }
+    if let Ok(Some(p)) = &power
+        && p.tripped
+    {
+        summary.push_str(
+            "; the supply's over-current protection tripped: find what drew the current before clearing it and powering the unit again",
+        );
     }
     if c.air_c < COLD_BELOW_C && c.mode != ChamberMode::Constant {
         summary.push_str(&format!(

@@ -463,8 +463,10 @@ pub fn compute(
             );
             if t.is_none() {
                 note = format!(
-                    "not computable: needs four averaging times ({} s) of data after turn-on",
-                    4.0 * m.averaging_s
+                    "not computable: needs four averaging times ({} s) of data after turn-on, \
+                     the last of them within {} of the settled value",
+                    4.0 * m.averaging_s,
+                    m.band.unwrap_or(0.0)
                 );
             }
             t

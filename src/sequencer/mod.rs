@@ -368,6 +368,11 @@ impl Run<'_> {
             }
             Err(e) => {
                 self.note(Level::Error, &format!("safe state failed: {e}"));
+                // The supply was asked off (unless the bench keeps it on):
+                // read back against that, so an output still on shows.
+                if !self.expected.supply_safe_on {
+                    self.expected.power_on = Some(false);
+                }
                 false
             }
         }
@@ -818,6 +823,8 @@ pub async fn run(
         record_link: None,
         expected: finish::Expected {
             supply_safe_on: opts.supply_safe_on,
+            // A bench's supply starts the unit powered.
+            power_on: Some(true),
             ..finish::Expected::default()
         },
     };

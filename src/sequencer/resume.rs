@@ -113,6 +113,27 @@ pub fn resume_plan(p: &Procedure, completed: usize) -> (usize, Vec<(usize, Step)
             start_at = off;
         }
     }
+    // On the way to a turn-on (in its cool-down, the move before it, the
+    // turn-on itself): from the power-off, so the cool-down is whole and
+    // the turn-on cold, whatever the bench did with the power meanwhile.
+    let idle = |s: &&Step| {
+        matches!(
+            s.kind,
+            StepKind::Wait { .. } | StepKind::Move { .. } | StepKind::Note { .. }
+        )
+    };
+    let next_on = steps[completed.min(steps.len())..]
+        .iter()
+        .position(|s| !idle(s))
+        .map(|i| completed + i)
+        .filter(|&i| matches!(steps[i].kind, StepKind::Power { on: true, .. }));
+    if next_on.is_some()
+        && let Some(off) = steps[..completed].iter().rposition(is_power)
+        && matches!(steps[off].kind, StepKind::Power { on: false, .. })
+        && steps[off + 1..completed].iter().all(idle)
+    {
+        start_at = start_at.min(off);
+    }
     // The unit's power as the last power step before the resume point left
     // it, restored last: a soak reads the unit's case sensor, which an
     // unpowered unit does not send.
@@ -411,13 +432,19 @@ mod tests {
                 "c1 switched the unit on last: restored last, after the soak"
             );
         }
-        // In the cool-down: go on there, the unit off.
-        let (start, restore) = resume_plan(&p, cycle(1, 5));
-        assert_eq!(start, cycle(1, 5));
-        assert!(matches!(
-            restore.last().map(|(_, s)| &s.kind),
-            Some(StepKind::Power { on: false, .. })
-        ));
+        // In the cool-down, the move after it or the turn-on: from the
+        // power-off, the cool-down whole.
+        for at in [cycle(1, 5), cycle(2, 0) - 1, cycle(2, 0)] {
+            let (start, restore) = resume_plan(&p, at);
+            assert_eq!(start, cycle(1, 4), "break at {at}");
+            assert!(matches!(
+                restore.last().map(|(_, s)| &s.kind),
+                Some(StepKind::Power { on: true, .. })
+            ));
+        }
+        // In the setup's cool-down: from its power-off.
+        let setup_off = index(&p, "setup.3");
+        assert_eq!(resume_plan(&p, setup_off + 1).0, setup_off);
     }
 
     #[test]

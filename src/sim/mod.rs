@@ -162,16 +162,22 @@ impl SimBench {
     /// Advance the physics to `t_s`, encoding every gyro frame.
     pub fn advance_to(&mut self, t_s: f64) {
         // The unit runs on the supply's power: the twin is run up to each
-        // moment the power came or went, and switched there.
+        // moment the power came or went, and switched there (and at once
+        // when a command took it away between two advances: `*RST`).
+        self.follow_supply();
         while let Some(t_change) = self.supply.advance_until_change(t_s) {
             self.run_twin(t_change);
-            if self.supply.unit_powered() {
-                self.twin.power_on();
-            } else {
-                self.twin.power_off();
-            }
+            self.follow_supply();
         }
         self.run_twin(t_s);
+    }
+
+    fn follow_supply(&mut self) {
+        match (self.supply.unit_powered(), self.twin.is_powered()) {
+            (true, false) => self.twin.power_on(),
+            (false, true) => self.twin.power_off(),
+            _ => {}
+        }
     }
 
     fn run_twin(&mut self, t_s: f64) {

@@ -254,8 +254,17 @@ impl Supply {
         let (load, at) = self.load;
         self.channels.iter().enumerate().all(|(i, c)| {
             let target = if c.on && !c.tripped { c.set_v } else { 0.0 };
+            let demand = if i == at {
+                load.current_a(c.source_v, self.powered_s)
+            } else {
+                0.0
+            };
+            // Held at the limit (or about to be: a lower limit, a short)
+            // is a change the protection acts on within milliseconds.
             c.source_v == target
                 && c.in_limit_s == 0.0
+                && demand <= c.limit_a
+                && !(c.ocp && demand > c.ocp_level_a)
                 && (i != at || !self.unit_powered() || load.settled(self.powered_s))
         })
     }
@@ -491,7 +500,7 @@ mod tests {
         let mut s = Supply::new(dialect);
         assert_eq!(
             s.message(&format!(
-                "INST:NSEL 2;VOLT 15;CURR {limit_a};CURR:PROT:STAT {}",
+                "INST:NSEL 2;:VOLT 15;:CURR {limit_a};:CURR:PROT:STAT {}",
                 if ocp { "ON" } else { "OFF" }
             )),
             None
@@ -530,31 +539,34 @@ mod tests {
         // At 0.8 A the unit stays in limit longer than the delay.
         let mut s = powered(Dialect::KeysightE36300, 0.8, true);
         s.advance_to(2.0);
-        assert_eq!(s.message("CURR:PROT:TRIP?;OUTP?").as_deref(), Some("1;0"));
+        assert_eq!(s.message("CURR:PROT:TRIP?;:OUTP?").as_deref(), Some("1;0"));
         assert!(!s.unit_powered());
         s.message("OUTP ON");
         assert_eq!(
-            s.message("SYST:ERR?;SYST:ERR?").as_deref(),
+            s.message("SYST:ERR?;:SYST:ERR?").as_deref(),
             Some("-221,\"Settings conflict\";0,\"No error\"")
         );
-        s.message("CURR 1.0;OUTP:PROT:CLE;OUTP ON");
+        s.message("CURR 1.0;:OUTP:PROT:CLE;:OUTP ON");
         s.advance_to(4.0);
-        assert_eq!(s.message("CURR:PROT:TRIP?;OUTP?").as_deref(), Some("0;1"));
+        assert_eq!(s.message("CURR:PROT:TRIP?;:OUTP?").as_deref(), Some("0;1"));
         assert!(s.unit_powered());
     }
 
     #[test]
     fn a_rigol_trips_above_its_level_and_answers_in_words() {
         let mut s = Supply::new(Dialect::RigolDp800);
-        s.message("INST:NSEL 2;VOLT 15;CURR 2;CURR:PROT 0.9;CURR:PROT:STAT ON;OUTP ON");
+        s.message("INST:NSEL 2;:VOLT 15;:CURR 2;:CURR:PROT 0.9;:CURR:PROT:STAT ON;:OUTP ON");
         s.advance_to(1.0);
         assert_eq!(
-            s.message("CURR:PROT:TRIP?;OUTP?").as_deref(),
+            s.message("CURR:PROT:TRIP?;:OUTP?").as_deref(),
             Some("YES;OFF")
         );
-        s.message("CURR:PROT 1.5;CURR:PROT:CLE;OUTP ON");
+        s.message("CURR:PROT 1.5;:CURR:PROT:CLE;:OUTP ON");
         s.advance_to(2.0);
-        assert_eq!(s.message("CURR:PROT:TRIP?;OUTP?").as_deref(), Some("NO;ON"));
+        assert_eq!(
+            s.message("CURR:PROT:TRIP?;:OUTP?").as_deref(),
+            Some("NO;ON")
+        );
         assert_eq!(s.message("MEAS:VOLT?").as_deref(), Some("15.0000"));
     }
 
@@ -564,7 +576,7 @@ mod tests {
         assert!(s.unit_powered());
         assert_eq!(s.advance_until_change(100.0), None);
         assert_eq!(
-            s.message("INST:NSEL 2;MEAS:CURR?;OUTP?").as_deref(),
+            s.message("INST:NSEL 2;:MEAS:CURR?;:OUTP?").as_deref(),
             Some("+5.50000000E-01;1")
         );
         s.message("OUTP OFF");
@@ -586,7 +598,7 @@ mod tests {
             b.twin.is_powered() && rx.try_recv().is_ok(),
             "frames while powered"
         );
-        b.supply.message("INST:NSEL 2;OUTP OFF");
+        b.supply.message("INST:NSEL 2;:OUTP OFF");
         b.advance_to(2.0);
         while rx.try_recv().is_ok() {}
         b.advance_to(3.0);
@@ -605,7 +617,7 @@ mod tests {
     #[test]
     fn settings_beyond_the_rating_are_refused_with_their_number() {
         let mut s = Supply::new(Dialect::KeysightE36300);
-        s.message("INST:NSEL 1;VOLT 7;INST:NSEL 4;FOO;VOLT MAX");
+        s.message("INST:NSEL 1;:VOLT 7;:INST:NSEL 4;:FOO;:VOLT MAX");
         assert_eq!(s.message("VOLT?").as_deref(), Some("+6.00000000E+00"));
         let mut errors = Vec::new();
         loop {
@@ -626,7 +638,7 @@ mod tests {
         assert!(s.message("*IDN?").is_some_and(|i| i.contains("E36312A")));
         s.message("*RST");
         assert_eq!(
-            s.message("VOLT?;OUTP?").as_deref(),
+            s.message("VOLT?;:OUTP?").as_deref(),
             Some("+0.00000000E+00;0")
         );
     }

@@ -94,6 +94,14 @@ def socket_session(dialect, host, port):
     )
     check("the setting refused kept the old one", float(inst.query("VOLT?")) == 15.0)
 
+    # SCPI's path rule: after `;` a header continues from the branch before.
+    inst.write(f"SOUR:VOLT 15;CURR {limit}")
+    check("SOUR:VOLT 15;CURR ... sets SOUR:CURR", errors(inst) == [])
+    inst.write("INST:NSEL 2;VOLT 16")
+    got = [e.split(",", 1)[0] for e in errors(inst)]
+    check("INST:NSEL 2;VOLT 16 is INST:VOLT, -113", got == ["-113"], str(got))
+    check("... and left the voltage alone", float(inst.query("VOLT?")) == 15.0)
+
     inst.write("CURR 0.5")
     if not keysight:
         inst.write("CURR:PROT 0.5")
@@ -128,7 +136,7 @@ def serial_session(dialect, path):
     model = "E36312A" if dialect == "keysight-e36300" else "DP832"
     check("over serial: *IDN? names the model", model in idn, idn)
     inst.write("SYST:REM")
-    v = inst.query("INST:NSEL 2;MEAS:VOLT?").strip()
+    v = inst.query("INST:NSEL 2;:MEAS:VOLT?").strip()
     check("over serial: MEAS:VOLT? answers a number", float(v) >= 0.0, v)
     inst.close()
 
