@@ -9,7 +9,7 @@ use async_trait::async_trait;
 
 use super::link::{LineLink, Verdict};
 use super::{DeviceError, Identity, PowerSupply, SupplyReading};
-use crate::protocol::scpi::{Numeric, parse_bool_reply, parse_error_reply, parse_number_reply};
+use crate::protocol::scpi::{parse_bool_reply, parse_error_reply, parse_number_reply};
 use crate::protocol::supply::{self, Command, Dialect};
 
 /// Plausible readings, V and A; anything else is a fault of the link.
@@ -162,17 +162,8 @@ impl PowerSupply for ScpiSupply {
         limit_a: f64,
         protection: bool,
     ) -> Result<(), DeviceError> {
-        let mut cmds = vec![
-            Command::Select(channel),
-            Command::Voltage(Numeric::Value(volts)),
-            Command::Current(Numeric::Value(limit_a)),
-        ];
-        if self.dialect == Dialect::RigolDp800 {
-            // A Rigol trips at its own level: the limit itself, so that it
-            // trips when the output is held at the limit, as a Keysight does.
-            cmds.push(Command::ProtectionLevel(Numeric::Value(limit_a)));
-        }
-        cmds.push(Command::Protection(protection));
+        let mut cmds = vec![Command::Select(channel)];
+        cmds.extend(supply::configure(self.dialect, volts, limit_a, protection));
         self.set(&cmds).await
     }
 

@@ -185,6 +185,22 @@ impl Command {
     }
 }
 
+/// The settings that configure the selected channel: voltage, current
+/// limit, over-current protection. A Rigol trips at its own level: the
+/// limit itself, so that it trips when the output is held at the limit, as
+/// a Keysight does.
+pub fn configure(dialect: Dialect, volts: f64, limit_a: f64, protection: bool) -> Vec<Command> {
+    let mut cmds = vec![
+        Command::Voltage(Numeric::Value(volts)),
+        Command::Current(Numeric::Value(limit_a)),
+    ];
+    if dialect == Dialect::RigolDp800 {
+        cmds.push(Command::ProtectionLevel(Numeric::Value(limit_a)));
+    }
+    cmds.push(Command::Protection(protection));
+    cmds
+}
+
 const SOURCE_VOLTAGE: &[Node] = &[
     opt("SOURce"),
     node("VOLTage"),

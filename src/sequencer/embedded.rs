@@ -12,8 +12,7 @@ use crate::clock::{Clock, VirtualClock};
 use crate::driver::{ChamberMode, ChamberReading, DeviceError, TableReading};
 use crate::geometry::{Site, TableAngles, TableGeometry};
 use crate::protocol::frame::LinkStats;
-use crate::protocol::scpi::Numeric;
-use crate::protocol::supply::{Command, Dialect};
+use crate::protocol::supply::{Command, configure};
 use crate::sim::PASSIVE_DRIFT_C_PER_MIN;
 use crate::sim::supply::Supply;
 use crate::twin::{AxisDemand, GyroSample, Twin, TwinConfig};
@@ -192,15 +191,10 @@ impl EmbeddedBench {
                 p.shorted = true;
                 p.sim.load.0.steady_a *= 3.0;
             }
-            let follow = |twin: &mut Twin, powered: bool| match (powered, twin.is_powered()) {
-                (true, false) => twin.power_on(),
-                (false, true) => twin.power_off(),
-                _ => {}
-            };
-            follow(&mut self.twin, p.sim.unit_powered());
+            self.twin.set_powered(p.sim.unit_powered());
             while let Some(t_change) = p.sim.advance_until_change(t_s) {
                 self.twin.run_until(t_change, |_, g| on_frame(g));
-                follow(&mut self.twin, p.sim.unit_powered());
+                self.twin.set_powered(p.sim.unit_powered());
             }
         }
         self.twin.run_until(t_s, |_, g| on_frame(g));
@@ -365,14 +359,7 @@ impl BenchIo for EmbeddedBench {
             });
         };
         let cmds = if on {
-            let mut c = vec![
-                Command::Voltage(Numeric::Value(volts)),
-                Command::Current(Numeric::Value(limit_a)),
-            ];
-            if p.cfg.protocol == Dialect::RigolDp800 {
-                c.push(Command::ProtectionLevel(Numeric::Value(limit_a)));
-            }
-            c.push(Command::Protection(p.cfg.protection));
+            let mut c = configure(p.cfg.protocol, volts, limit_a, p.cfg.protection);
             c.push(Command::Output(true));
             c
         } else {

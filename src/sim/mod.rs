@@ -164,20 +164,12 @@ impl SimBench {
         // The unit runs on the supply's power: the twin is run up to each
         // moment the power came or went, and switched there (and at once
         // when a command took it away between two advances: `*RST`).
-        self.follow_supply();
+        self.twin.set_powered(self.supply.unit_powered());
         while let Some(t_change) = self.supply.advance_until_change(t_s) {
             self.run_twin(t_change);
-            self.follow_supply();
+            self.twin.set_powered(self.supply.unit_powered());
         }
         self.run_twin(t_s);
-    }
-
-    fn follow_supply(&mut self) {
-        match (self.supply.unit_powered(), self.twin.is_powered()) {
-            (true, false) => self.twin.power_on(),
-            (false, true) => self.twin.power_off(),
-            _ => {}
-        }
     }
 
     fn run_twin(&mut self, t_s: f64) {

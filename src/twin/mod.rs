@@ -205,6 +205,16 @@ impl Twin {
         self.power_on_tick = None;
     }
 
+    /// Follow the power the unit gets: switched on (a new turn-on) or off
+    /// when that changes, nothing when it does not.
+    pub fn set_powered(&mut self, powered: bool) {
+        match (powered, self.is_powered()) {
+            (true, false) => self.power_on(),
+            (false, true) => self.power_off(),
+            _ => {}
+        }
+    }
+
     /// True while the gyro is powered.
     pub fn is_powered(&self) -> bool {
         self.power_on_tick.is_some()
