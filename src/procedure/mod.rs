@@ -94,6 +94,13 @@ pub enum Metric {
     /// slope of the Earth-removed rate against the rate of an axis turning
     /// across the sensitive axis (records at that rate both ways).
     AxisMisalignment,
+    /// Power the unit draws at steady state, W: the mean of the supply's
+    /// readings (voltage times current) during the records.
+    PowerSteady,
+    /// Peak power the unit draws, W: the highest supply reading from the
+    /// turn-on each record was made after to the record's end (the
+    /// readings are taken fast for the first second after a turn-on).
+    PowerPeak,
 }
 
 impl Metric {
@@ -115,6 +122,8 @@ impl Metric {
             "axis_misalignment" => Self::AxisMisalignment,
             "bias_repeatability" => Self::BiasRepeatability,
             "warm_up_time" => Self::WarmUpTime,
+            "power_steady" => Self::PowerSteady,
+            "power_peak" => Self::PowerPeak,
             _ => return None,
         })
     }
@@ -680,7 +689,7 @@ impl Validator<'_> {
                              temperature_sensitivity, temperature_rate_sensitivity, \
                              scale_factor, scale_factor_nonlinearity, scale_factor_asymmetry, \
                              scale_factor_temperature, dead_band, threshold, axis_misalignment, \
-                             bias_repeatability or warm_up_time"
+                             bias_repeatability, warm_up_time, power_steady or power_peak"
                         ),
                     )
                 })?;

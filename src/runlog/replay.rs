@@ -23,7 +23,7 @@ use super::meta::{ResultMeta, RunMeta};
 use super::reader::{self, Item, ReadSummary};
 use super::schema::{
     ChamberState, LinkSample, LogLine, RESULT_META, RUN_META, Rate1Hz, StepEvent, StepPhase,
-    TableState, topics,
+    SupplyState, TableState, topics,
 };
 
 use crate::bench::BenchConfig;
@@ -161,6 +161,9 @@ struct State<'a> {
     records: Records,
     measurements: Vec<measure::Measurement>,
     pending: Option<(TickSums, Scales)>,
+    /// The tick's supply reading, filed with the record of the interval
+    /// that follows it, or with none when the next message is not one.
+    pending_power: Option<measure::PowerSample>,
     chamber_c: f64,
     table: Option<LoggedTable>,
     /// The pose of each record of an imported run, as logged.
@@ -338,7 +341,21 @@ impl State<'_> {
     fn message(&mut self, topic: &str, data: &[u8]) -> Result<(), String> {
         let bad =
             |what: &str, e: serde_json::Error| format!("a {what} message does not parse: {e}");
+        if topic != topics::RATE_1HZ
+            && let Some(p) = self.pending_power.take()
+        {
+            self.records.push_power(p, None);
+        }
         match topic {
+            topics::SUPPLY => {
+                let m: SupplyState = serde_json::from_slice(data).map_err(|e| bad(topic, e))?;
+                self.pending_power = Some(measure::PowerSample {
+                    t_s: m.t_s,
+                    v: m.v,
+                    a: m.a,
+                    on: m.on,
+                });
+            }
             topics::FRAMES => {
                 let m: FramesMsg = serde_json::from_slice(data).map_err(|e| bad(topic, e))?;
                 if [m.t1_raw.n, m.t2_raw.n, m.tcase_raw.n] != [m.counts.n; 3] {
@@ -411,6 +428,9 @@ impl State<'_> {
                     sc.lsb_arcsec,
                     sc.temp_lsb_c,
                 );
+                if let Some(p) = self.pending_power.take() {
+                    self.records.push_power(p, m.record.as_deref());
+                }
             }
             topics::LINK => {
                 let m: LinkSample = serde_json::from_slice(data).map_err(|e| bad(topic, e))?;
@@ -541,6 +561,7 @@ pub fn replay(path: &Path, coeffs: Option<&Compensation>) -> Result<Replayed, Re
         records: Records::default(),
         measurements: Vec::new(),
         pending: None,
+        pending_power: None,
         chamber_c: f64::NAN,
         table: None,
         poses: Vec::new(),
@@ -564,6 +585,9 @@ pub fn replay(path: &Path, coeffs: Option<&Compensation>) -> Result<Replayed, Re
         }
         Item::Attachment { .. } => Ok(()),
     })?;
+    if let Some(p) = st.pending_power.take() {
+        st.records.push_power(p, None);
+    }
     let log_err = |message: String| ReplayError::Log {
         path: path.display().to_string(),
         message,

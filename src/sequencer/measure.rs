@@ -31,6 +31,41 @@ pub struct Records {
     /// Sums of the table's axis rates (outer, inner, deg/s) over each
     /// record's intervals, and their number.
     turning: BTreeMap<String, (f64, f64, u64)>,
+    /// Every reading of the unit's supply, in the order the bench took
+    /// them (benches with a supply).
+    power: Vec<PowerSample>,
+    /// The first and last index in `power` of each record's readings.
+    power_of: BTreeMap<String, (usize, usize)>,
+}
+
+/// One reading of the unit's supply output.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PowerSample {
+    /// Device time of the reading, s.
+    pub t_s: f64,
+    /// Voltage measured at the output, V.
+    pub v: f64,
+    /// Current measured, A.
+    pub a: f64,
+    /// Output switched on.
+    pub on: bool,
+}
+
+impl PowerSample {
+    /// The sample of a reading taken at `t_s`.
+    pub fn of(t_s: f64, r: &crate::driver::SupplyReading) -> Self {
+        Self {
+            t_s,
+            v: r.v,
+            a: r.a,
+            on: r.on,
+        }
+    }
+
+    /// Power delivered, W.
+    pub fn w(&self) -> f64 {
+        self.v * self.a
+    }
 }
 
 impl Records {
@@ -75,6 +110,47 @@ impl Records {
         }
         self.health.remove(label);
         self.turning.remove(label);
+        self.power_of.remove(label);
+    }
+
+    /// File a reading of the supply; `record` is the record whose
+    /// interval the same tick made (none for a tick without frames).
+    pub fn push_power(&mut self, p: PowerSample, record: Option<&str>) {
+        let i = self.power.len();
+        self.power.push(p);
+        if let Some(label) = record {
+            self.power_of
+                .entry(label.to_owned())
+                .and_modify(|r| r.1 = i)
+                .or_insert((i, i));
+        }
+    }
+
+    /// Every supply reading of the run so far.
+    pub fn power(&self) -> &[PowerSample] {
+        &self.power
+    }
+
+    /// The supply readings taken during a record.
+    pub fn power_during(&self, label: &str) -> &[PowerSample] {
+        self.power_of
+            .get(label)
+            .and_then(|&(a, b)| self.power.get(a..=b))
+            .unwrap_or_default()
+    }
+
+    /// The supply readings from the turn-on a record was made after to
+    /// the record's end: back from its first reading to the last reading
+    /// with the output off (or the run's first reading).
+    pub fn power_from_turn_on(&self, label: &str) -> &[PowerSample] {
+        let Some(&(a, b)) = self.power_of.get(label) else {
+            return &[];
+        };
+        let from = self.power[..a]
+            .iter()
+            .rposition(|p| !p.on)
+            .map_or(0, |i| i + 1);
+        self.power.get(from..=b).unwrap_or_default()
     }
 
     /// The health of a record of frames.
@@ -471,6 +547,31 @@ pub fn compute(
             }
             t
         }
+        Metric::PowerSteady | Metric::PowerPeak => {
+            let readings: Vec<f64> = m
+                .records
+                .iter()
+                .flat_map(|l| {
+                    if m.metric == Metric::PowerPeak {
+                        records.power_from_turn_on(l)
+                    } else {
+                        records.power_during(l)
+                    }
+                })
+                .filter(|p| p.on)
+                .map(PowerSample::w)
+                .collect();
+            if readings.is_empty() {
+                note = "not computable: no supply readings with the output on during the records (a bench with [devices.supply])".into();
+                None
+            } else if m.metric == Metric::PowerPeak {
+                note = format!("highest of {} supply readings from turn-on", readings.len());
+                Some(readings.iter().copied().fold(f64::NEG_INFINITY, f64::max))
+            } else {
+                note = format!("mean of {} supply readings", readings.len());
+                Some(mean(&readings))
+            }
+        }
         Metric::SelfHeating => self_heating_dph(&series).map(f64::abs),
         Metric::TemperatureSensitivity => temperature_sensitivity_parts(&part_refs).map(|(a, _)| a),
         Metric::TemperatureRateSensitivity => {
@@ -556,6 +657,46 @@ mod tests {
     use crate::driver::{ChamberMode, ChamberReading, TableReading};
     use crate::geometry::{Orientation, TableAngles};
     use crate::sequencer::FrameRecord;
+
+    #[test]
+    fn a_records_power_runs_from_the_turn_on_before_it_to_its_end() {
+        let mut r = Records::default();
+        let p = |t_s: f64, a: f64, on: bool| PowerSample {
+            t_s,
+            v: if on { 15.0 } else { 0.0 },
+            a,
+            on,
+        };
+        // A first turn-on, its record, off; a second turn-on and record.
+        r.push_power(p(0.0, 1.0, true), None);
+        r.push_power(p(1.0, 0.5, true), Some("a"));
+        r.push_power(p(2.0, 0.0, false), None);
+        r.push_power(p(3.0, 0.9, true), None);
+        r.push_power(p(4.0, 0.6, true), None);
+        r.push_power(p(5.0, 0.5, true), Some("b"));
+        r.push_power(p(6.0, 0.5, true), Some("b"));
+        let times = |s: &[PowerSample]| s.iter().map(|p| p.t_s).collect::<Vec<_>>();
+        assert_eq!(times(r.power_during("b")), [5.0, 6.0]);
+        assert_eq!(times(r.power_from_turn_on("b")), [3.0, 4.0, 5.0, 6.0]);
+        assert_eq!(times(r.power_from_turn_on("a")), [0.0, 1.0]);
+        assert!(r.power_during("c").is_empty());
+        let m = |metric, records: &[&str]| Measure {
+            name: "p".into(),
+            metric,
+            records: records.iter().map(|l| (*l).to_owned()).collect(),
+            averaging_s: 0.0,
+            band: None,
+            low: None,
+            high: Some(100.0),
+            unit: "W".into(),
+        };
+        let steady = compute(&m(Metric::PowerSteady, &["b"]), &r, None, "s");
+        assert_eq!(steady.value, Some(7.5));
+        let peak = compute(&m(Metric::PowerPeak, &["a", "b"]), &r, None, "s");
+        assert_eq!(peak.value, Some(15.0));
+        let none = compute(&m(Metric::PowerPeak, &["c"]), &r, None, "s");
+        assert_eq!((none.value, none.outcome), (None, MeasureOutcome::Fail));
+    }
 
     #[test]
     fn a_tick_becomes_one_interval_of_means_and_is_filed_under_its_record() {

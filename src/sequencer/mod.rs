@@ -318,6 +318,15 @@ pub struct Options {
 /// of a run, s.
 pub const SETTLE_MARGIN_S: f64 = 120.0;
 
+/// How long after switching the unit on the `power` step reads the bench
+/// fast, s (ours: an RLG's turn-on inrush, the discharge igniting, is over
+/// within a few tenths of a second; a 1 s tick would never see it).
+pub const TURN_ON_WATCH_S: f64 = 1.0;
+
+/// The tick while a turn-on is watched, s (50 readings a second; a real
+/// bench reads as fast as its instruments answer, at most this fast).
+pub const TURN_ON_TICK_S: f64 = 0.02;
+
 enum Stop {
     Device(DeviceError),
     Data(String),
@@ -521,6 +530,13 @@ impl Run<'_> {
             let iv = self
                 .records
                 .push_tick(&self.tick, state, record, dt, lsb, tl);
+            if let Some(p) = &state.power {
+                // Replay files the logged reading the same way.
+                self.records.push_power(
+                    measure::PowerSample::of(state.t_s, p),
+                    record.filter(|_| iv.is_some()),
+                );
+            }
             self.progress.tick(state, iv.as_ref());
             if let Some(iv) = iv {
                 self.progress.link(&self.bench.link_stats());
@@ -702,10 +718,22 @@ impl Run<'_> {
                     .map_err(Stop::Device)?;
                 self.expected.power_set(*on);
                 // Until the output reads what was asked: on at the voltage
-                // (within 2 %, out of current limit), or off.
-                let deadline = self.bench.now_s() + POWER_TIMEOUT_S;
+                // (within 2 %, out of current limit), or off. A turn-on is
+                // read fast for its first second, so the inrush is seen.
+                let now = self.bench.now_s();
+                let deadline = now + POWER_TIMEOUT_S;
+                let watch_end = if *on { now + TURN_ON_WATCH_S } else { now };
                 loop {
-                    self.tick(f64::INFINITY, None, key).await?;
+                    let now = self.bench.now_s();
+                    let until = if now < watch_end - 1e-9 {
+                        (now + TURN_ON_TICK_S).min(watch_end)
+                    } else {
+                        f64::INFINITY
+                    };
+                    self.tick(until, None, key).await?;
+                    if self.bench.now_s() < watch_end - 1e-9 {
+                        continue;
+                    }
                     let reached = self.last.as_ref().and_then(|st| st.power).is_some_and(|p| {
                         if *on {
                             p.on && (p.v - volts).abs() <= 0.02 * volts

@@ -109,6 +109,25 @@ fn the_turn_on_figures_recover_the_twin_at_two_settings() {
             (0.9..1.3).contains(&(median / expected)),
             "median warm-up {median} s, expected {expected} s for tau {tau} s: {warm:?}"
         );
+        // The unit's draw as the supply reads it: steady at the load's
+        // current, and a peak that is the turn-on inrush held to the
+        // 1 A limit (the procedure's 15 V, 1 A).
+        let load = gyrobench::sim::supply::UnitLoad::RL16;
+        let (steady, peak) = match (
+            measurements(&report, "power_steady_w").as_slice(),
+            measurements(&report, "power_peak_w").as_slice(),
+        ) {
+            (&[steady], &[peak]) => (steady, peak),
+            other => panic!("one steady and one peak power: {other:?}"),
+        };
+        assert!(
+            (steady - 15.0 * load.steady_a).abs() < 0.01,
+            "steady power {steady} W"
+        );
+        assert!(
+            peak > 1.5 * steady && peak <= 15.0 * 1.0 + 1e-9,
+            "peak power {peak} W: the inrush seen, within the limit"
+        );
         spreads.push(spread);
     }
     assert!(spreads[1] > 2.0 * spreads[0], "{spreads:?}");
@@ -234,6 +253,22 @@ metric = "bias_repeatability"
 records = ["bias_*"]
 high = 1.0
 unit = "deg/h"
+
+[[main]]
+action = "measure"
+name = "power_steady_w"
+metric = "power_steady"
+records = ["bias_*"]
+high = 10.0
+unit = "W"
+
+[[main]]
+action = "measure"
+name = "power_peak_w"
+metric = "power_peak"
+records = ["bias_*"]
+high = 20.0
+unit = "W"
 "#,
     );
     let out_dir = dir.join("run");
@@ -253,6 +288,20 @@ unit = "deg/h"
     let report = json(&out_dir.join("report.json"));
     let (spread, _) = crate::common::figure(&report, "bias_repeatability_dph");
     assert!(spread.is_finite());
+    // The draw read over SCPI: the load's steady current at 15 V; the
+    // peak from the turn-ons, read as fast as the bench's instruments
+    // answer, at least that.
+    let steady = measurements(&report, "power_steady_w");
+    let peak = measurements(&report, "power_peak_w");
+    let load = gyrobench::sim::supply::UnitLoad::RL16;
+    assert!(
+        matches!(steady.as_slice(), &[w] if (w - 15.0 * load.steady_a).abs() < 0.05),
+        "steady power {steady:?} W"
+    );
+    assert!(
+        matches!((steady.as_slice(), peak.as_slice()), (&[s], &[p]) if p >= s && p <= 15.0 + 1e-9),
+        "peak power {peak:?} W"
+    );
     let left = &report["bench_left"];
     assert_eq!(left["supply_on"], true, "{left}");
     let v = left["supply_v"].as_f64().expect("volts read back");
