@@ -165,6 +165,221 @@ fn rate_chart(r: &Report, records: &Records) -> Option<String> {
     Some(c.render())
 }
 
+/// The turn-ons: the bias after each (the repeatability's points), the
+/// warm-up curves overlaid from turn-on, and the current the unit drew.
+/// Empty for a run without power steps or supply readings.
+fn turn_on_section(r: &Report, records: &Records) -> String {
+    let charts: String = [
+        repeatability_chart(r, records),
+        warm_up_chart(r, records),
+        current_chart(records),
+    ]
+    .into_iter()
+    .flatten()
+    .collect();
+    if charts.is_empty() {
+        String::new()
+    } else {
+        format!("<h2>Turn-ons</h2>\n{charts}")
+    }
+}
+
+/// The mean Earth-removed rate of each record a bias repeatability is
+/// taken on, in turn-on order, with their mean and the 1-sigma band.
+fn repeatability_chart(r: &Report, records: &Records) -> Option<String> {
+    let m = r
+        .measurements
+        .iter()
+        .find(|m| m.metric == Metric::BiasRepeatability)?;
+    let (labels, means): (Vec<String>, Vec<f64>) = m
+        .records
+        .iter()
+        .filter_map(|l| {
+            let ivs = records.get(l).filter(|v| !v.is_empty())?;
+            let b: Vec<f64> = ivs.iter().map(Interval::bias_dph).collect();
+            Some((l.clone(), crate::analysis::figures::mean(&b)))
+        })
+        .unzip();
+    if means.len() < 2 {
+        return None;
+    }
+    let all = crate::analysis::figures::mean(&means);
+    let n = means.len() as f64;
+    let points = means
+        .iter()
+        .enumerate()
+        .map(|(i, &b)| (i as f64, b))
+        .collect();
+    let mut c = Chart::new(
+        format!(
+            "{}: {} {} over {} turn-ons ({})",
+            m.name,
+            num(m.value, 4),
+            m.unit,
+            means.len(),
+            m.outcome.as_str().to_uppercase()
+        ),
+        "turn-on (record)",
+        "deg/h",
+    )
+    .categories(labels)
+    .height(300)
+    .series(
+        Series::points("mean bias after the warm-up", points, Marker::Circle)
+            .marker(Marker::Circle, 6)
+            .colour(0),
+    )
+    .rule(Rule {
+        label: format!("mean {all:+.4}"),
+        at: all,
+        vertical: false,
+    });
+    if let Some(s) = m.value {
+        c = c.band(Band {
+            label: format!("mean ± 1 sigma ({s:.4} deg/h)"),
+            y: (all - s, all + s),
+            x: Some((-0.5, n - 0.5)),
+        });
+    }
+    Some(
+        c.caption(format!(
+            "Each point is one record's mean Earth-removed rate, made after its own turn-on and the same warm-up. The repeatability is their sample standard deviation{}.",
+            m.std_error
+                .map_or(String::new(), |e| format!(", known to ±{e:.4} deg/h for {} turn-ons", means.len()))
+        ))
+        .render(),
+    )
+}
+
+/// Each warm-up record's moving mean from turn-on, overlaid, with the
+/// time each warm-up figure found marked on its curve.
+fn warm_up_chart(r: &Report, records: &Records) -> Option<String> {
+    let warm: Vec<&Measurement> = r
+        .measurements
+        .iter()
+        .filter(|m| m.metric == Metric::WarmUpTime)
+        .collect();
+    let first = warm.first()?;
+    let mut c = Chart::new(
+        format!(
+            "Warm-up from each turn-on ({:.0} s moving means)",
+            first.averaging_s
+        ),
+        "time from the record's start, min",
+        "deg/h",
+    );
+    let mut marks = Vec::new();
+    let mut drawn = 0;
+    for (k, m) in warm.iter().enumerate() {
+        let Some(ivs) = m.records.first().and_then(|l| records.get(l)) else {
+            continue;
+        };
+        let (Some(a), Some(b)) = (ivs.first(), ivs.get(1)) else {
+            continue;
+        };
+        let dt = b.time_s - a.time_s;
+        let window = (m.averaging_s / dt).round().max(1.0) as usize;
+        let bias: Vec<f64> = ivs.iter().map(Interval::bias_dph).collect();
+        let means = crate::analysis::figures::moving_average(&bias, window);
+        // A point every tenth of the window is plenty for the eye.
+        let every = (window / 10).max(1);
+        let pts: Vec<(f64, f64)> = means
+            .iter()
+            .enumerate()
+            .step_by(every)
+            .map(|(i, &v)| ((i + window) as f64 * dt / 60.0, v))
+            .collect();
+        if pts.is_empty() {
+            continue;
+        }
+        if let Some(t) = m.value {
+            let i = ((t / dt).round() as usize).saturating_sub(window);
+            if let Some(&v) = means.get(i) {
+                marks.push((t / 60.0, v));
+            }
+        }
+        c = c.series(
+            Series::line(m.records.first().cloned().unwrap_or_default(), pts)
+                .colour(k)
+                .width(1),
+        );
+        drawn += 1;
+    }
+    if drawn == 0 {
+        return None;
+    }
+    if !marks.is_empty() {
+        c = c.series(
+            Series::points(
+                "warm: the moving mean stays in its band from here",
+                marks,
+                Marker::Diamond,
+            )
+            .marker(Marker::Diamond, 5)
+            .colour(7),
+        );
+    }
+    Some(
+        c.caption(format!(
+            "{drawn} warm-ups, each from its own turn-on. A warm-up time is where its curve enters, for good, a band of ±{} deg/h around its settled value (the mean of the record's last quarter).",
+            first.band.unwrap_or(0.0)
+        ))
+        .render(),
+    )
+}
+
+/// The supply current against device time (60-reading means), with each
+/// turn-on's highest reading.
+fn current_chart(records: &Records) -> Option<String> {
+    let p = records.power();
+    if p.len() < 2 {
+        return None;
+    }
+    let t: Vec<f64> = p.iter().map(|s| s.t_s / 3600.0).collect();
+    let a: Vec<f64> = p.iter().map(|s| s.a).collect();
+    let block = if p.len() > 2000 { 60 } else { 1 };
+    let means: Vec<(f64, f64)> = block_means(&t, block)
+        .into_iter()
+        .zip(block_means(&a, block))
+        .collect();
+    // Each stretch with the output on that began with a turn-on (not
+    // the run's start), and its highest reading.
+    let mut peaks = Vec::new();
+    let mut best: Option<(f64, f64)> = None;
+    let mut was_off = false;
+    for s in p {
+        if s.on && was_off {
+            if best.is_none_or(|(_, a)| s.a > a) {
+                best = Some((s.t_s / 3600.0, s.a));
+            }
+        } else if !s.on {
+            was_off = true;
+            peaks.extend(best.take());
+        }
+    }
+    peaks.extend(best);
+    let top = peaks.iter().chain(&means).map(|p| p.1).fold(0.0, f64::max);
+    let mut c = Chart::new("Supply current", "device time, h", "A")
+        .y_range(0.0, 1.1 * top.max(0.01))
+        .series(
+            Series::line(if block > 1 { "60 s means" } else { "readings" }, means)
+                .colour(0)
+                .width(1)
+                .gap(None),
+        );
+    if !peaks.is_empty() {
+        c = c.series(
+            Series::points("highest reading of each turn-on", peaks, Marker::Triangle)
+                .marker(Marker::Triangle, 5)
+                .colour(1),
+        );
+    }
+    Some(
+        c.caption("The unit draws its current only while the supply's output is on; the highest reading of each turn-on is its inrush as read at 50 Hz in the turn-on's first second (the 60 s means smooth it away).")
+            .render(),
+    )
+}
+
 /// Chamber air and the gyro's sensors against time, each with its own
 /// line style.
 fn temperature_chart(records: &Records) -> Option<String> {
@@ -748,7 +963,7 @@ pub fn render_html(r: &Report, records: &Records) -> String {
 <table><tr><th>name</th><th>value</th><th>unit</th><th>low</th><th>high</th><th>outcome</th><th>step</th><th>note</th></tr>
 {rows}</table>
 <p class=note>Definitions: bias stability = 1-sigma of the averages over the averaging time of the Earth-removed rate; drift = peak-to-peak of the Earth-removed rate smoothed by a centred moving average of the averaging time; compensated = the same after the study's model 4; self-heating = mean of the first 120 s after power-on minus the mean of 1680..1800 s; scale factor, nonlinearity and asymmetry = the fit of output against input rate with one slope per direction; dead band and threshold = the inputs giving 10 % and 50 % of the expected output in a lock-in fit; axis misalignment = the slope of the Earth-removed rate against the rate of a table axis turning across the input axis, as an angle (&plusmn; one standard error). See docs/figures.md.</p>
-{record}{positions}{rate_table}{noise}{allan}
+{record}{positions}{rate_table}{turn_ons}{noise}{allan}
 <h2>Traces</h2>
 {traces}
 <h2>Gyro link</h2>
@@ -757,6 +972,7 @@ pub fn render_html(r: &Report, records: &Records) -> String {
         headline = headline(r),
         positions = positions(r),
         rate_table = rate_table_charts(r, records),
+        turn_ons = turn_on_section(r, records),
         noise = noise_table(r),
         allan = allan_chart(r).unwrap_or_default(),
         proc = esc(&r.procedure),
@@ -918,6 +1134,7 @@ mod tests {
             note: String::new(),
             std_error: None,
             trace: None,
+            band: None,
         }
     }
 

@@ -382,6 +382,10 @@ pub struct Measurement {
     /// the report's charts; not part of `report.json`).
     #[serde(skip)]
     pub trace: Option<DriftTrace>,
+    /// For a warm-up time: its band (for the report's chart; the
+    /// procedure in the log holds it).
+    #[serde(skip)]
+    pub band: Option<f64>,
 }
 
 impl Measurement {
@@ -644,6 +648,7 @@ pub fn compute(
         note,
         std_error,
         trace,
+        band: m.band,
     }
 }
 

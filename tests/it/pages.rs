@@ -160,3 +160,47 @@ fn report_html_loads_in_chromium_with_every_chart_and_prints_on_a4() {
     }
     std::fs::remove_dir_all(&dir).expect("cleanup");
 }
+
+/// A turn-on run's report, as Chromium builds it: a "Turn-ons" section
+/// with the bias of each turn-on against the repeatability's band, every
+/// warm-up curve overlaid, and the supply current with each turn-on's
+/// peak, each an SVG figure.
+#[test]
+fn a_turn_on_report_draws_the_bias_per_turn_on_the_warm_ups_and_the_current() {
+    let _busy = crate::common::busy_turn();
+    let Some(browser) = chromium() else {
+        return;
+    };
+    let dir = temp_dir("pages-turn-on");
+    let procedure = crate::power::with_cycles(&dir, 3);
+    let run = dir.join("run");
+    let out = gyrobench(&["run", s(&procedure), "--out", s(&run), "--db", "none"]);
+    assert!(
+        matches!(out.status.code(), Some(0 | 3)),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let dom = headless(&browser, &["--dump-dom"], &run.join("report.html"));
+    let dom = String::from_utf8_lossy(&dom.stdout);
+    let section = dom
+        .split("<h2>Turn-ons</h2>")
+        .nth(1)
+        .and_then(|s| s.split("<h2>").next())
+        .expect("a Turn-ons section");
+    assert_eq!(section.matches("<figure><svg").count(), 3, "{section}");
+    for want in [
+        "bias_repeatability_dph: ",
+        "over 3 turn-ons",
+        "bias_c1",
+        "bias_c3",
+        "Warm-up from each turn-on (100 s moving means)",
+        "warmup_c1",
+        "warmup_c2",
+        "warmup_c3",
+        "Supply current",
+        "highest reading of each turn-on",
+    ] {
+        assert!(section.contains(want), "the section lacks {want:?}");
+    }
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}

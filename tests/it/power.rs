@@ -15,7 +15,7 @@ const PROCEDURE: &str = concat!(
 );
 
 /// The shipped procedure with `cycles` turn-ons instead of six.
-fn with_cycles(dir: &Path, cycles: usize) -> PathBuf {
+pub(crate) fn with_cycles(dir: &Path, cycles: usize) -> PathBuf {
     let text = std::fs::read_to_string(PROCEDURE).expect("shipped procedure");
     let pose = r#"orientation = { azimuth_deg = 90.0, elevation_deg = 0.0, roll_deg = 0.0 }"#;
     let six: String = (1..=6)
