@@ -79,13 +79,38 @@ fn the_served_bench_file_runs_at_the_speed_of_the_serve_configuration() {
         .get("ports")
         .and_then(toml::Value::as_table)
         .expect("[ports]");
-    for (key, device) in [("espec", "chamber"), ("acl", "table"), ("gyro", "gyro")] {
+    for (key, device) in [
+        ("espec", "chamber"),
+        ("acl", "table"),
+        ("gyro", "gyro"),
+        ("supply", "supply (commented out)"),
+    ] {
         let port = ports.get(key).and_then(toml::Value::as_integer).expect(key);
         assert!(
             text.contains(&format!("spec = \"tcp://127.0.0.1:{port}\"")),
             "{device} at port {port}"
         );
     }
+    // The supply block, uncommented, makes a bench with a supply.
+    let uncommented: String = text
+        .lines()
+        .map(|l| match l.strip_prefix("# ") {
+            Some(rest)
+                if rest.starts_with('[')
+                    || rest.split_once(" = ").is_some_and(|(k, _)| {
+                        k.chars().all(|c| c.is_ascii_lowercase() || c == '_')
+                    }) =>
+            {
+                rest
+            }
+            _ => l,
+        })
+        .collect::<Vec<_>>()
+        .join("\n");
+    let src = gyrobench::config::Source::from_text("sim-serve.toml", &uncommented);
+    let cfg = gyrobench::bench::BenchConfig::from_source(&src)
+        .unwrap_or_else(|e| panic!("the bench with its supply: {e}"));
+    assert!(cfg.devices.supply.is_some(), "{uncommented}");
 }
 
 /// Every `docs/NAME.md` the code or the documentation cites is a file of
