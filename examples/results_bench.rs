@@ -93,6 +93,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                         note: String::new(),
                         std_error: None,
                         trace: None,
+                        band: None,
                     }
                 })
                 .collect();

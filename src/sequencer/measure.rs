@@ -413,209 +413,36 @@ pub fn compute(
     let series: Vec<Interval> = parts.iter().flatten().copied().collect();
     let bias: Vec<f64> = series.iter().map(Interval::bias_dph).collect();
     let window = m.averaging_s.round().max(1.0) as usize;
-    let mut note = String::new();
-    let mut trace = None;
     let part_refs: Vec<&[Interval]> = parts.iter().map(Vec::as_slice).collect();
-    let mut std_error = None;
-    let points = || -> Vec<RatePoint> {
-        m.records
-            .iter()
-            .filter_map(|l| records.get(l))
-            .filter_map(RatePoint::of)
-            .collect()
-    };
-    let mut figure = |f: Option<Figure>, what: &str, note: &mut String| {
-        if f.is_none() {
-            *note = format!("not computable: {what}");
+    let c = match m.metric {
+        Metric::ScaleFactor
+        | Metric::ScaleFactorNonlinearity
+        | Metric::ScaleFactorAsymmetry
+        | Metric::ScaleFactorTemperature
+        | Metric::DeadBand
+        | Metric::Threshold
+        | Metric::AxisMisalignment => rate_figure(m, records),
+        Metric::BiasStability => Computed::value(Some(bias_stability(&bias, window))),
+        Metric::DriftPp => drift(&parts, window),
+        Metric::MeanBias => Computed::value(Some(mean(&bias))),
+        Metric::BiasRepeatability => repeatability(m, records),
+        Metric::WarmUpTime => warm_up(m, &series, &bias),
+        Metric::PowerSteady | Metric::PowerPeak => power(m, records),
+        Metric::SelfHeating => Computed::value(self_heating_dph(&series).map(f64::abs)),
+        Metric::TemperatureSensitivity => {
+            Computed::value(temperature_sensitivity_parts(&part_refs).map(|(a, _)| a))
         }
-        std_error = f.and_then(|f| f.std_error);
-        f.map(|f| f.value)
-    };
-    let value = match m.metric {
-        Metric::ScaleFactor => figure(
-            rate::scale_factor_ppm(&points()),
-            "needs rate records at three or more input rates (four when they turn both ways)",
-            &mut note,
-        ),
-        Metric::ScaleFactorNonlinearity => figure(
-            rate::nonlinearity_ppm(&points()),
-            "needs rate records at three or more input rates (four when they turn both ways)",
-            &mut note,
-        ),
-        Metric::ScaleFactorAsymmetry => figure(
-            rate::asymmetry_ppm(&points()),
-            "needs rate records in both directions, four or more",
-            &mut note,
-        ),
-        Metric::ScaleFactorTemperature => figure(
-            rate::temperature_coefficient_ppm_per_c(&points()),
-            "needs rate records at block temperatures at least 1 degC apart",
-            &mut note,
-        ),
-        Metric::DeadBand => figure(
-            rate::band_dph(&points(), rate::DEAD_BAND_SHARE),
-            "needs four or more records at small input rates",
-            &mut note,
-        ),
-        Metric::Threshold => figure(
-            rate::band_dph(&points(), rate::THRESHOLD_SHARE),
-            "needs four or more records at small input rates",
-            &mut note,
-        ),
-        Metric::AxisMisalignment => figure(
-            rate::misalignment_arcsec(
-                &m.records
-                    .iter()
-                    .filter_map(|l| {
-                        let p = RatePoint::of(records.get(l)?)?;
-                        Some((records.turn_rate_dps(l)? * 3600.0, p))
-                    })
-                    .collect::<Vec<_>>(),
-            ),
-            "needs three or more records of frames with a table axis turning both ways",
-            &mut note,
-        ),
-        Metric::BiasStability => Some(bias_stability(&bias, window)),
-        Metric::DriftPp if parts.len() > 1 => {
-            // The turn-on bias differs between power-ons: each part is
-            // shifted by its offset from the first, as the model-4 fit
-            // with one offset per part estimates it.
-            match model::fit_runs(ModelKind::Model4, &part_refs) {
-                Ok(f) => {
-                    note = format!(
-                        "{} parts (power-ons) of a resumed run; turn-on offsets from the model-4 fit removed",
-                        parts.len()
-                    );
-                    let shifted: Vec<(Vec<f64>, Vec<f64>)> = parts
-                        .iter()
-                        .zip(&f.offsets)
-                        .map(|(p, o)| {
-                            (
-                                times(p),
-                                p.iter()
-                                    .map(|iv| iv.bias_dph() - (o - f.offsets[0]))
-                                    .collect(),
-                            )
-                        })
-                        .collect();
-                    trace = drift_trace(&shifted, window);
-                    trace.as_ref().map(DriftTrace::pp)
-                }
-                Err(e) => {
-                    note = format!("cannot separate the parts' turn-on offsets: {e}");
-                    None
-                }
-            }
-        }
-        Metric::DriftPp => {
-            trace = drift_trace(&[(times(&series), bias.clone())], window);
-            trace.as_ref().map(DriftTrace::pp)
-        }
-        Metric::MeanBias => Some(mean(&bias)),
-        Metric::BiasRepeatability => {
-            let means: Vec<f64> = m
-                .records
-                .iter()
-                .filter_map(|l| records.get(l))
-                .map(|r| mean(&r.iter().map(Interval::bias_dph).collect::<Vec<_>>()))
-                .collect();
-            let n = means.len();
-            figure(
-                crate::analysis::figures::repeatability(&means).map(|(value, e)| Figure {
-                    value,
-                    std_error: Some(e),
-                }),
-                "needs two or more records with data, one after each turn-on",
-                &mut note,
-            )
-            .inspect(|_| note = format!("{n} turn-ons"))
-        }
-        Metric::WarmUpTime => {
-            let dt = match series.as_slice() {
-                [a, b, ..] => b.time_s - a.time_s,
-                _ => 1.0,
-            };
-            let t = crate::analysis::figures::warm_up_time(
-                &bias,
-                dt,
-                (m.averaging_s / dt).round().max(1.0) as usize,
-                m.band.unwrap_or(0.0),
-            );
-            if t.is_none() {
-                note = format!(
-                    "not computable: needs four averaging times ({} s) of data after turn-on, \
-                     the last of them within {} of the settled value",
-                    4.0 * m.averaging_s,
-                    m.band.unwrap_or(0.0)
-                );
-            }
-            t
-        }
-        Metric::PowerSteady | Metric::PowerPeak => {
-            let readings: Vec<f64> = m
-                .records
-                .iter()
-                .flat_map(|l| {
-                    if m.metric == Metric::PowerPeak {
-                        records.power_from_turn_on(l)
-                    } else {
-                        records.power_during(l)
-                    }
-                })
-                .filter(|p| p.on)
-                .map(PowerSample::w)
-                .collect();
-            if readings.is_empty() {
-                note = "not computable: no supply readings with the output on during the records (a bench with [devices.supply])".into();
-                None
-            } else if m.metric == Metric::PowerPeak {
-                note = format!("highest of {} supply readings from turn-on", readings.len());
-                Some(readings.iter().copied().fold(f64::NEG_INFINITY, f64::max))
-            } else {
-                note = format!("mean of {} supply readings", readings.len());
-                Some(mean(&readings))
-            }
-        }
-        Metric::SelfHeating => self_heating_dph(&series).map(f64::abs),
-        Metric::TemperatureSensitivity => temperature_sensitivity_parts(&part_refs).map(|(a, _)| a),
         Metric::TemperatureRateSensitivity => {
-            temperature_sensitivity_parts(&part_refs).map(|(_, b)| b)
+            Computed::value(temperature_sensitivity_parts(&part_refs).map(|(_, b)| b))
         }
-        Metric::CompensatedDriftPp => {
-            let fit = match coeffs {
-                Some(c) => {
-                    note = format!("model 4 with {}", c.used.describe());
-                    Ok(c.fit.clone())
-                }
-                None => {
-                    note = "model 4 fitted on these records (no --coeffs given)".into();
-                    model::fit_runs(ModelKind::Model4, &part_refs).map(|m| m.fit)
-                }
-            };
-            match fit {
-                Ok(f) if bias.len() >= window => {
-                    // Each part's own constant removed when there are
-                    // several (a p-p does not see it within one part).
-                    let several = part_refs.len() > 1;
-                    let residuals: Vec<(Vec<f64>, Vec<f64>)> = part_refs
-                        .iter()
-                        .map(|p| {
-                            let r = f.residual(p);
-                            let c = if several { mean(&r) } else { 0.0 };
-                            (times(p), r.iter().map(|v| v - c).collect())
-                        })
-                        .collect();
-                    trace = drift_trace(&residuals, window);
-                    trace.as_ref().map(DriftTrace::pp)
-                }
-                Ok(_) => None,
-                Err(e) => {
-                    note = format!("cannot compensate: {e}");
-                    None
-                }
-            }
-        }
+        Metric::CompensatedDriftPp => compensated_drift(coeffs, &part_refs, bias.len(), window),
     };
+    let Computed {
+        value,
+        mut note,
+        std_error,
+        trace,
+    } = c;
     let value = value.filter(|v| v.is_finite());
     if value.is_none() && note.is_empty() {
         note = format!(
@@ -649,6 +476,273 @@ pub fn compute(
         std_error,
         trace,
         band: m.band,
+    }
+}
+
+/// A figure as computed, before it is judged.
+#[derive(Debug, Default)]
+struct Computed {
+    value: Option<f64>,
+    /// How it was obtained, or why it is missing.
+    note: String,
+    std_error: Option<f64>,
+    trace: Option<DriftTrace>,
+}
+
+impl Computed {
+    fn value(value: Option<f64>) -> Self {
+        Self {
+            value,
+            ..Self::default()
+        }
+    }
+
+    /// A figure with its standard error, or why there is none.
+    fn figure(f: Option<Figure>, what: &str) -> Self {
+        match f {
+            Some(f) => Self {
+                value: Some(f.value),
+                std_error: f.std_error,
+                ..Self::default()
+            },
+            None => Self {
+                note: format!("not computable: {what}"),
+                ..Self::default()
+            },
+        }
+    }
+}
+
+/// The rate-table figures, on the named records' rate points.
+fn rate_figure(m: &Measure, records: &Records) -> Computed {
+    let points = || -> Vec<RatePoint> {
+        m.records
+            .iter()
+            .filter_map(|l| records.get(l))
+            .filter_map(RatePoint::of)
+            .collect()
+    };
+    const RATES: &str =
+        "needs rate records at three or more input rates (four when they turn both ways)";
+    const SMALL: &str = "needs four or more records at small input rates";
+    match m.metric {
+        Metric::ScaleFactor => Computed::figure(rate::scale_factor_ppm(&points()), RATES),
+        Metric::ScaleFactorNonlinearity => {
+            Computed::figure(rate::nonlinearity_ppm(&points()), RATES)
+        }
+        Metric::ScaleFactorAsymmetry => Computed::figure(
+            rate::asymmetry_ppm(&points()),
+            "needs rate records in both directions, four or more",
+        ),
+        Metric::ScaleFactorTemperature => Computed::figure(
+            rate::temperature_coefficient_ppm_per_c(&points()),
+            "needs rate records at block temperatures at least 1 degC apart",
+        ),
+        Metric::DeadBand => {
+            Computed::figure(rate::band_dph(&points(), rate::DEAD_BAND_SHARE), SMALL)
+        }
+        Metric::Threshold => {
+            Computed::figure(rate::band_dph(&points(), rate::THRESHOLD_SHARE), SMALL)
+        }
+        _ => Computed::figure(
+            rate::misalignment_arcsec(
+                &m.records
+                    .iter()
+                    .filter_map(|l| {
+                        let p = RatePoint::of(records.get(l)?)?;
+                        Some((records.turn_rate_dps(l)? * 3600.0, p))
+                    })
+                    .collect::<Vec<_>>(),
+            ),
+            "needs three or more records of frames with a table axis turning both ways",
+        ),
+    }
+}
+
+/// Peak-to-peak of the smoothed Earth-removed rate. The turn-on bias
+/// differs between power-ons: over several parts each is shifted by its
+/// offset from the first, as the model-4 fit with one offset per part
+/// estimates it.
+fn drift(parts: &[Vec<Interval>], window: usize) -> Computed {
+    if parts.len() <= 1 {
+        let series: Vec<Interval> = parts.iter().flatten().copied().collect();
+        let bias = series.iter().map(Interval::bias_dph).collect();
+        let trace = drift_trace(&[(times(&series), bias)], window);
+        return Computed {
+            value: trace.as_ref().map(DriftTrace::pp),
+            trace,
+            ..Computed::default()
+        };
+    }
+    let part_refs: Vec<&[Interval]> = parts.iter().map(Vec::as_slice).collect();
+    match model::fit_runs(ModelKind::Model4, &part_refs) {
+        Ok(f) => {
+            let shifted: Vec<(Vec<f64>, Vec<f64>)> = parts
+                .iter()
+                .zip(&f.offsets)
+                .map(|(p, o)| {
+                    (
+                        times(p),
+                        p.iter()
+                            .map(|iv| iv.bias_dph() - (o - f.offsets[0]))
+                            .collect(),
+                    )
+                })
+                .collect();
+            let trace = drift_trace(&shifted, window);
+            Computed {
+                value: trace.as_ref().map(DriftTrace::pp),
+                note: format!(
+                    "{} parts (power-ons) of a resumed run; turn-on offsets from the model-4 fit removed",
+                    parts.len()
+                ),
+                std_error: None,
+                trace,
+            }
+        }
+        Err(e) => Computed {
+            note: format!("cannot separate the parts' turn-on offsets: {e}"),
+            ..Computed::default()
+        },
+    }
+}
+
+/// Bias repeatability: the spread of the records' mean biases, one
+/// record per turn-on.
+fn repeatability(m: &Measure, records: &Records) -> Computed {
+    let means: Vec<f64> = m
+        .records
+        .iter()
+        .filter_map(|l| records.get(l))
+        .map(|r| mean(&r.iter().map(Interval::bias_dph).collect::<Vec<_>>()))
+        .collect();
+    let mut c = Computed::figure(
+        crate::analysis::figures::repeatability(&means).map(|(value, e)| Figure {
+            value,
+            std_error: Some(e),
+        }),
+        "needs two or more records with data, one after each turn-on",
+    );
+    if c.value.is_some() {
+        c.note = format!("{} turn-ons", means.len());
+    }
+    c
+}
+
+/// Warm-up time over a record made from turn-on.
+fn warm_up(m: &Measure, series: &[Interval], bias: &[f64]) -> Computed {
+    let dt = match series {
+        [a, b, ..] => b.time_s - a.time_s,
+        _ => 1.0,
+    };
+    let t = crate::analysis::figures::warm_up_time(
+        bias,
+        dt,
+        (m.averaging_s / dt).round().max(1.0) as usize,
+        m.band.unwrap_or(0.0),
+    );
+    Computed {
+        value: t,
+        note: if t.is_none() {
+            format!(
+                "not computable: needs four averaging times ({} s) of data after turn-on, \
+                 the last of them within {} of the settled value",
+                4.0 * m.averaging_s,
+                m.band.unwrap_or(0.0)
+            )
+        } else {
+            String::new()
+        },
+        ..Computed::default()
+    }
+}
+
+/// Steady power (the mean of the readings during the records) or peak
+/// power (the highest from each record's turn-on to its end).
+fn power(m: &Measure, records: &Records) -> Computed {
+    let readings: Vec<f64> = m
+        .records
+        .iter()
+        .flat_map(|l| {
+            if m.metric == Metric::PowerPeak {
+                records.power_from_turn_on(l)
+            } else {
+                records.power_during(l)
+            }
+        })
+        .filter(|p| p.on)
+        .map(PowerSample::w)
+        .collect();
+    let (value, note) = if readings.is_empty() {
+        (
+            None,
+            "not computable: no supply readings with the output on during the records (a bench with [devices.supply])".to_owned(),
+        )
+    } else if m.metric == Metric::PowerPeak {
+        (
+            Some(readings.iter().copied().fold(f64::NEG_INFINITY, f64::max)),
+            format!("highest of {} supply readings from turn-on", readings.len()),
+        )
+    } else {
+        (
+            Some(mean(&readings)),
+            format!("mean of {} supply readings", readings.len()),
+        )
+    };
+    Computed {
+        value,
+        note,
+        ..Computed::default()
+    }
+}
+
+/// Peak-to-peak of the model-4 residual, smoothed: with the given
+/// coefficients, else model 4 fitted on the same records; over several
+/// parts each part's own constant removed.
+fn compensated_drift(
+    coeffs: Option<&crate::coeffs::Compensation>,
+    part_refs: &[&[Interval]],
+    samples: usize,
+    window: usize,
+) -> Computed {
+    let (fit, note) = match coeffs {
+        Some(c) => (
+            Ok(c.fit.clone()),
+            format!("model 4 with {}", c.used.describe()),
+        ),
+        None => (
+            model::fit_runs(ModelKind::Model4, part_refs).map(|m| m.fit),
+            "model 4 fitted on these records (no --coeffs given)".to_owned(),
+        ),
+    };
+    match fit {
+        Ok(f) if samples >= window => {
+            // A p-p does not see a constant within one part.
+            let several = part_refs.len() > 1;
+            let residuals: Vec<(Vec<f64>, Vec<f64>)> = part_refs
+                .iter()
+                .map(|p| {
+                    let r = f.residual(p);
+                    let c = if several { mean(&r) } else { 0.0 };
+                    (times(p), r.iter().map(|v| v - c).collect())
+                })
+                .collect();
+            let trace = drift_trace(&residuals, window);
+            Computed {
+                value: trace.as_ref().map(DriftTrace::pp),
+                note,
+                std_error: None,
+                trace,
+            }
+        }
+        Ok(_) => Computed {
+            note,
+            ..Computed::default()
+        },
+        Err(e) => Computed {
+            note: format!("cannot compensate: {e}"),
+            ..Computed::default()
+        },
     }
 }
 
