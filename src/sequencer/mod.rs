@@ -581,72 +581,15 @@ impl Run<'_> {
                 self.expected.chamber_set(*set_c);
                 Ok(())
             }
-            StepKind::Move { angles, .. } => {
-                self.bench.move_table(*angles).await.map_err(Stop::Device)?;
-                self.expected.table_moved(*angles);
-                let (tol, settle) = self.opts.in_position;
-                let mut ip = InPosition::new(tol, 0.01, settle);
-                let deadline = self.bench.now_s() + self.opts.move_timeout_s;
-                loop {
-                    self.tick(f64::INFINITY, None, key).await?;
-                    if let Some(st) = &self.last
-                        && ip.update(&st.table, *angles, st.t_s)
-                    {
-                        return Ok(());
-                    }
-                    if self.bench.now_s() > deadline {
-                        return Err(Stop::Data(format!(
-                            "the table did not settle on outer {:.3} / inner {:.3} deg within {} s; check the table",
-                            angles.outer_deg, angles.inner_deg, self.opts.move_timeout_s
-                        )));
-                    }
-                }
-            }
+            StepKind::Move { angles, .. } => self.move_step(key, *angles).await,
             StepKind::Soak {
                 band_c,
                 case_slope_c_per_min,
                 hold_s,
                 timeout_s,
             } => {
-                let start = self.bench.now_s();
-                let mut held_since: Option<f64> = None;
-                let mut case = std::collections::VecDeque::new();
-                loop {
-                    self.tick(f64::INFINITY, None, key).await?;
-                    let Some(st) = &self.last else { continue };
-                    let tk = self
-                        .tick
-                        .frames
-                        .last()
-                        .map(|f| f64::from(f.temps_raw[2]) * self.bench.temp_lsb_c());
-                    if let Some(tk) = tk {
-                        case.push_back((st.t_s, tk));
-                    }
-                    while case.len() > 120 {
-                        case.pop_front();
-                    }
-                    let slope = slope_per_min(&case);
-                    // An air-only soak (no case criterion) needs no frames:
-                    // it holds while the unit is off.
-                    let case_ok = case_slope_c_per_min.is_infinite()
-                        || (case.len() >= 60 && slope.abs() <= *case_slope_c_per_min);
-                    let ok =
-                        (st.chamber.air_c - st.chamber.set_point_c).abs() <= *band_c && case_ok;
-                    held_since = if ok {
-                        held_since.or(Some(st.t_s))
-                    } else {
-                        None
-                    };
-                    if held_since.is_some_and(|h| st.t_s - h >= *hold_s) {
-                        return Ok(());
-                    }
-                    if st.t_s - start > *timeout_s {
-                        return Err(Stop::Data(format!(
-                            "soak not reached within {timeout_s} s (air {:.2} degC for set point {:.2}, case slope {slope:.3} degC/min)",
-                            st.chamber.air_c, st.chamber.set_point_c
-                        )));
-                    }
-                }
+                self.soak_step(key, *band_c, *case_slope_c_per_min, *hold_s, *timeout_s)
+                    .await
             }
             StepKind::Turn {
                 inner,
@@ -654,114 +597,11 @@ impl Run<'_> {
                 settle_s,
                 acc_dps2,
             } => {
-                let axis_rate = |st: &BenchState| {
-                    if *inner {
-                        st.table.rates.inner_deg
-                    } else {
-                        st.table.rates.outer_deg
-                    }
-                };
-                // A ramp at `acc_dps2` is the host's: the demand steps
-                // towards the rate each tick (the table's own acceleration
-                // is higher); without it the table ramps as fast as it can.
-                let mut demand = match (acc_dps2, &self.last) {
-                    (Some(_), Some(st)) => axis_rate(st),
-                    _ => *rate_dps,
-                };
-                self.bench
-                    .rotate_table(*inner, demand)
+                self.turn_step(key, *inner, *rate_dps, *settle_s, *acc_dps2)
                     .await
-                    .map_err(Stop::Device)?;
-                // At the rate when the axis reads it to a part in a thousand.
-                let tol = 1e-3 * rate_dps.abs() + 1e-4;
-                let deadline = self.bench.now_s()
-                    + self.opts.move_timeout_s
-                    + acc_dps2.map_or(0.0, |a| (rate_dps - demand).abs() / a);
-                loop {
-                    let before = self.bench.now_s();
-                    self.tick(f64::INFINITY, None, key).await?;
-                    if let Some(a) = acc_dps2
-                        && demand != *rate_dps
-                    {
-                        let dt = self.bench.now_s() - before;
-                        let step = a * dt;
-                        demand = if (rate_dps - demand).abs() <= step {
-                            *rate_dps
-                        } else {
-                            demand + step * (rate_dps - demand).signum()
-                        };
-                        self.bench
-                            .rotate_table(*inner, demand)
-                            .await
-                            .map_err(Stop::Device)?;
-                    }
-                    if let Some(st) = &self.last
-                        && demand == *rate_dps
-                        && (axis_rate(st) - rate_dps).abs() <= tol
-                    {
-                        break;
-                    }
-                    if self.bench.now_s() > deadline {
-                        return Err(Stop::Data(format!(
-                            "the table's {} axis did not reach {rate_dps} deg/s within {} s; check the table",
-                            if *inner { "inner" } else { "outer" },
-                            self.opts.move_timeout_s
-                        )));
-                    }
-                }
-                self.run_for(*settle_s, None, key).await
             }
             StepKind::Power { on, volts, limit_a } => {
-                self.bench
-                    .set_power(*on, *volts, *limit_a)
-                    .await
-                    .map_err(Stop::Device)?;
-                self.expected.power_set(*on);
-                // Until the output reads what was asked: on at the voltage
-                // (within 2 %, out of current limit), or off. A turn-on is
-                // read fast for its first second, so the inrush is seen.
-                let now = self.bench.now_s();
-                let deadline = now + POWER_TIMEOUT_S;
-                let watch_end = if *on { now + TURN_ON_WATCH_S } else { now };
-                loop {
-                    let now = self.bench.now_s();
-                    let until = if now < watch_end - 1e-9 {
-                        (now + TURN_ON_TICK_S).min(watch_end)
-                    } else {
-                        f64::INFINITY
-                    };
-                    self.tick(until, None, key).await?;
-                    if self.bench.now_s() < watch_end - 1e-9 {
-                        continue;
-                    }
-                    let reached = self.last.as_ref().and_then(|st| st.power).is_some_and(|p| {
-                        if *on {
-                            p.on && (p.v - volts).abs() <= 0.02 * volts
-                        } else {
-                            !p.on && p.v.abs() < 0.02 * p.set_v.max(1.0)
-                        }
-                    });
-                    if reached {
-                        return Ok(());
-                    }
-                    if self.bench.now_s() > deadline {
-                        let now = self.last.as_ref().and_then(|st| st.power);
-                        return Err(Stop::Data(format!(
-                            "the supply did not reach {} within {POWER_TIMEOUT_S} s (it reads {}); check the supply and the unit's cable",
-                            if *on {
-                                format!("{volts} V")
-                            } else {
-                                "output off".into()
-                            },
-                            now.map_or("nothing".into(), |p| format!(
-                                "{:.3} V, {:.4} A, output {}",
-                                p.v,
-                                p.a,
-                                if p.on { "on" } else { "off" }
-                            ))
-                        )));
-                    }
-                }
+                self.power_step(key, *on, *volts, *limit_a).await
             }
             StepKind::Wait { duration_s } => self.run_for(*duration_s, None, key).await,
             StepKind::Record { label, duration_s } => {
@@ -774,26 +614,7 @@ impl Run<'_> {
                 self.record_link = Some(link);
                 Ok(())
             }
-            StepKind::Measure(m) => {
-                let meas = measure::compute(m, &self.records, self.opts.coeffs.as_ref(), key);
-                let msg = format!(
-                    "{} = {} {} [{}] ({})",
-                    meas.name,
-                    meas.value.map_or("n/a".to_owned(), |v| format!("{v:.4}")),
-                    meas.unit,
-                    meas.limits_text(),
-                    meas.outcome.as_str()
-                );
-                let level = if meas.outcome == measure::MeasureOutcome::Pass {
-                    Level::Info
-                } else {
-                    Level::Warning
-                };
-                self.log(level, &msg)?;
-                self.progress.measured(&meas);
-                self.measurements.push(meas);
-                Ok(())
-            }
+            StepKind::Measure(m) => self.measure_step(key, m),
             StepKind::Note { text } => self.log(Level::Info, text),
             StepKind::Prompt { text } => {
                 self.log(Level::Info, &format!("prompt: {text}"))?;
@@ -805,6 +626,227 @@ impl Run<'_> {
                 Ok(())
             }
         }
+    }
+
+    /// Move the table and wait until it is at rest in position.
+    async fn move_step(&mut self, key: &str, angles: TableAngles) -> Result<(), Stop> {
+        self.bench.move_table(angles).await.map_err(Stop::Device)?;
+        self.expected.table_moved(angles);
+        let (tol, settle) = self.opts.in_position;
+        let mut ip = InPosition::new(tol, 0.01, settle);
+        let deadline = self.bench.now_s() + self.opts.move_timeout_s;
+        loop {
+            self.tick(f64::INFINITY, None, key).await?;
+            if let Some(st) = &self.last
+                && ip.update(&st.table, angles, st.t_s)
+            {
+                return Ok(());
+            }
+            if self.bench.now_s() > deadline {
+                return Err(Stop::Data(format!(
+                    "the table did not settle on outer {:.3} / inner {:.3} deg within {} s; check the table",
+                    angles.outer_deg, angles.inner_deg, self.opts.move_timeout_s
+                )));
+            }
+        }
+    }
+
+    /// Wait until the chamber air is in its band and the case has settled, held for `hold_s`.
+    async fn soak_step(
+        &mut self,
+        key: &str,
+        band_c: f64,
+        case_slope_c_per_min: f64,
+        hold_s: f64,
+        timeout_s: f64,
+    ) -> Result<(), Stop> {
+        let start = self.bench.now_s();
+        let mut held_since: Option<f64> = None;
+        let mut case = std::collections::VecDeque::new();
+        loop {
+            self.tick(f64::INFINITY, None, key).await?;
+            let Some(st) = &self.last else { continue };
+            let tk = self
+                .tick
+                .frames
+                .last()
+                .map(|f| f64::from(f.temps_raw[2]) * self.bench.temp_lsb_c());
+            if let Some(tk) = tk {
+                case.push_back((st.t_s, tk));
+            }
+            while case.len() > 120 {
+                case.pop_front();
+            }
+            let slope = slope_per_min(&case);
+            // An air-only soak (no case criterion) needs no frames:
+            // it holds while the unit is off.
+            let case_ok = case_slope_c_per_min.is_infinite()
+                || (case.len() >= 60 && slope.abs() <= case_slope_c_per_min);
+            let ok = (st.chamber.air_c - st.chamber.set_point_c).abs() <= band_c && case_ok;
+            held_since = if ok {
+                held_since.or(Some(st.t_s))
+            } else {
+                None
+            };
+            if held_since.is_some_and(|h| st.t_s - h >= hold_s) {
+                return Ok(());
+            }
+            if st.t_s - start > timeout_s {
+                return Err(Stop::Data(format!(
+                    "soak not reached within {timeout_s} s (air {:.2} degC for set point {:.2}, case slope {slope:.3} degC/min)",
+                    st.chamber.air_c, st.chamber.set_point_c
+                )));
+            }
+        }
+    }
+
+    /// Turn a table axis at a rate (ramped at `acc_dps2` when given) and let it settle.
+    async fn turn_step(
+        &mut self,
+        key: &str,
+        inner: bool,
+        rate_dps: f64,
+        settle_s: f64,
+        acc_dps2: Option<f64>,
+    ) -> Result<(), Stop> {
+        let axis_rate = |st: &BenchState| {
+            if inner {
+                st.table.rates.inner_deg
+            } else {
+                st.table.rates.outer_deg
+            }
+        };
+        // A ramp at `acc_dps2` is the host's: the demand steps
+        // towards the rate each tick (the table's own acceleration
+        // is higher); without it the table ramps as fast as it can.
+        let mut demand = match (acc_dps2, &self.last) {
+            (Some(_), Some(st)) => axis_rate(st),
+            _ => rate_dps,
+        };
+        self.bench
+            .rotate_table(inner, demand)
+            .await
+            .map_err(Stop::Device)?;
+        // At the rate when the axis reads it to a part in a thousand.
+        let tol = 1e-3 * rate_dps.abs() + 1e-4;
+        let deadline = self.bench.now_s()
+            + self.opts.move_timeout_s
+            + acc_dps2.map_or(0.0, |a| (rate_dps - demand).abs() / a);
+        loop {
+            let before = self.bench.now_s();
+            self.tick(f64::INFINITY, None, key).await?;
+            if let Some(a) = acc_dps2
+                && demand != rate_dps
+            {
+                let dt = self.bench.now_s() - before;
+                let step = a * dt;
+                demand = if (rate_dps - demand).abs() <= step {
+                    rate_dps
+                } else {
+                    demand + step * (rate_dps - demand).signum()
+                };
+                self.bench
+                    .rotate_table(inner, demand)
+                    .await
+                    .map_err(Stop::Device)?;
+            }
+            if let Some(st) = &self.last
+                && demand == rate_dps
+                && (axis_rate(st) - rate_dps).abs() <= tol
+            {
+                break;
+            }
+            if self.bench.now_s() > deadline {
+                return Err(Stop::Data(format!(
+                    "the table's {} axis did not reach {rate_dps} deg/s within {} s; check the table",
+                    if inner { "inner" } else { "outer" },
+                    self.opts.move_timeout_s
+                )));
+            }
+        }
+        self.run_for(settle_s, None, key).await
+    }
+
+    /// Switch the unit's supply and wait until it reads so.
+    async fn power_step(
+        &mut self,
+        key: &str,
+        on: bool,
+        volts: f64,
+        limit_a: f64,
+    ) -> Result<(), Stop> {
+        self.bench
+            .set_power(on, volts, limit_a)
+            .await
+            .map_err(Stop::Device)?;
+        self.expected.power_set(on);
+        // Until the output reads what was asked: on at the voltage
+        // (within 2 %, out of current limit), or off. A turn-on is
+        // read fast for its first second, so the inrush is seen.
+        let now = self.bench.now_s();
+        let deadline = now + POWER_TIMEOUT_S;
+        let watch_end = if on { now + TURN_ON_WATCH_S } else { now };
+        loop {
+            let now = self.bench.now_s();
+            let until = if now < watch_end - 1e-9 {
+                (now + TURN_ON_TICK_S).min(watch_end)
+            } else {
+                f64::INFINITY
+            };
+            self.tick(until, None, key).await?;
+            if self.bench.now_s() < watch_end - 1e-9 {
+                continue;
+            }
+            let reached = self.last.as_ref().and_then(|st| st.power).is_some_and(|p| {
+                if on {
+                    p.on && (p.v - volts).abs() <= 0.02 * volts
+                } else {
+                    !p.on && p.v.abs() < 0.02 * p.set_v.max(1.0)
+                }
+            });
+            if reached {
+                return Ok(());
+            }
+            if self.bench.now_s() > deadline {
+                let now = self.last.as_ref().and_then(|st| st.power);
+                return Err(Stop::Data(format!(
+                    "the supply did not reach {} within {POWER_TIMEOUT_S} s (it reads {}); check the supply and the unit's cable",
+                    if on {
+                        format!("{volts} V")
+                    } else {
+                        "output off".into()
+                    },
+                    now.map_or("nothing".into(), |p| format!(
+                        "{:.3} V, {:.4} A, output {}",
+                        p.v,
+                        p.a,
+                        if p.on { "on" } else { "off" }
+                    ))
+                )));
+            }
+        }
+    }
+
+    /// Compute a figure on the records so far and judge it.
+    fn measure_step(&mut self, key: &str, m: &crate::procedure::Measure) -> Result<(), Stop> {
+        let meas = measure::compute(m, &self.records, self.opts.coeffs.as_ref(), key);
+        let msg = format!(
+            "{} = {} {} [{}] ({})",
+            meas.name,
+            meas.value.map_or("n/a".to_owned(), |v| format!("{v:.4}")),
+            meas.unit,
+            meas.limits_text(),
+            meas.outcome.as_str()
+        );
+        let level = if meas.outcome == measure::MeasureOutcome::Pass {
+            Level::Info
+        } else {
+            Level::Warning
+        };
+        self.log(level, &msg)?;
+        self.progress.measured(&meas);
+        self.measurements.push(meas);
+        Ok(())
     }
 }
 
@@ -901,130 +943,15 @@ pub async fn run(
         Some((Stop::Device(e), _)) => device_of(e),
         _ => None,
     };
-    let first_cleanup = p.setup.len() + p.main.len();
-    for (i, s) in p.cleanup.iter().enumerate() {
-        let index = first_cleanup + i;
-        r.progress.step(s, index, total);
-        let needs = match s.kind {
-            StepKind::Chamber { .. } | StepKind::Soak { .. } => Some("chamber"),
-            StepKind::Move { .. } => Some("table"),
-            StepKind::Power { .. } => Some("supply"),
-            _ => None,
-        };
-        if let (Some(d), Some(f)) = (needs, faulted.as_deref())
-            && d == f
-        {
-            cleanup_completed = false;
-            if !r.expected.skipped.iter().any(|x| x == d) {
-                r.expected.skipped.push(d.to_owned());
-            }
-            r.note(
-                Level::Warning,
-                &format!(
-                    "cleanup step {} skipped: the {d} failed during the run and stays in its safe state",
-                    s.key
-                ),
-            );
-            continue;
-        }
-        r.note_step(StepPhase::Start, index, s);
-        if let Err(e) = r.step(s).await {
-            cleanup_completed = false;
-            let msg = e.message();
-            r.note(
-                Level::Error,
-                &format!("cleanup step {} failed: {msg}", s.key),
-            );
-            r.safe_state().await;
-            if stop.is_none() {
-                stop = Some((e, s.key.clone()));
-            }
-            break;
-        }
-        r.note_step(StepPhase::End, index, s);
-    }
-    // The bench finishes what it was asked (a ramp the host steps goes on
-    // to its set point) and comes to rest; then its state is read back.
-    if let Err(e) = r.settle().await {
-        cleanup_completed = false;
-        r.note(
-            Level::Error,
-            &format!("the bench did not settle: {}", e.message()),
-        );
-        r.safe_state().await;
-    }
-    let in_position = r.opts.in_position.0;
-    let mut left = finish::bench_left(r.bench, &r.expected, in_position).await;
-    if !left.verified && !r.expected.safe_state {
-        r.note(
-            Level::Warning,
-            &format!(
-                "the bench is not as cleanup asked ({}): bringing it to its safe state",
-                left.summary
-            ),
-        );
-        r.safe_state().await;
-        let _settled = r.settle().await;
-        left = finish::bench_left(r.bench, &r.expected, in_position).await;
-    }
-    r.note(
-        if left.verified {
-            Level::Info
-        } else {
-            Level::Error
-        },
-        &format!("bench left: {}", left.summary),
-    );
-    if !left.verified {
-        cleanup_completed = false;
-        if stop.is_none() {
-            stop = Some((
-                Stop::Data(format!(
-                    "the bench is not in a known state: {}",
-                    left.summary
-                )),
-                "end of run".into(),
-            ));
-        }
-    }
+    cleanup_completed &= r.cleanup(p, total, faulted.as_deref(), &mut stop).await;
+    let (left, left_ok) = r.leave_bench(&mut stop).await;
+    cleanup_completed &= left_ok;
     if stop.is_none()
         && let Some(e) = r.log_failed.take()
     {
         stop = Some((Stop::Data(e), "cleanup".into()));
     }
-    let (outcome, error) = match stop {
-        None => verdict(&r.measurements),
-        Some((Stop::Interrupted, step)) if interrupted => (
-            Outcome::Aborted,
-            Some(RunError {
-                device: None,
-                step,
-                message: format!(
-                    "interrupted by {}",
-                    r.opts
-                        .interrupt
-                        .cause()
-                        .unwrap_or_else(|| "the operator".into())
-                ),
-            }),
-        ),
-        Some((e, step)) => {
-            let device = match &e {
-                Stop::Device(d) => device_of(d),
-                _ => None,
-            };
-            let message = e.message();
-            r.note(Level::Error, &format!("error in step {step}: {message}"));
-            (
-                Outcome::Error,
-                Some(RunError {
-                    device,
-                    step,
-                    message,
-                }),
-            )
-        }
-    };
+    let (outcome, error) = r.outcome(stop, interrupted);
     RunResult {
         outcome,
         measurements: r.measurements,
@@ -1034,6 +961,159 @@ pub async fn run(
         frames: r.frames + opts.resume.as_ref().map_or(0, |res| res.frames),
         records: r.records,
         bench_left: Some(left),
+    }
+}
+
+impl Run<'_> {
+    /// The cleanup steps, each skipped when it would drive the device that
+    /// failed (`faulted`); false when one was skipped or failed. A failed
+    /// cleanup step becomes the run's stop when nothing else stopped it.
+    async fn cleanup(
+        &mut self,
+        p: &Procedure,
+        total: usize,
+        faulted: Option<&str>,
+        stop: &mut Option<(Stop, String)>,
+    ) -> bool {
+        let mut cleanup_completed = true;
+        let first_cleanup = p.setup.len() + p.main.len();
+        for (i, s) in p.cleanup.iter().enumerate() {
+            let index = first_cleanup + i;
+            self.progress.step(s, index, total);
+            let needs = match s.kind {
+                StepKind::Chamber { .. } | StepKind::Soak { .. } => Some("chamber"),
+                StepKind::Move { .. } => Some("table"),
+                StepKind::Power { .. } => Some("supply"),
+                _ => None,
+            };
+            if let (Some(d), Some(f)) = (needs, faulted)
+                && d == f
+            {
+                cleanup_completed = false;
+                if !self.expected.skipped.iter().any(|x| x == d) {
+                    self.expected.skipped.push(d.to_owned());
+                }
+                self.note(
+                    Level::Warning,
+                    &format!(
+                        "cleanup step {} skipped: the {d} failed during the run and stays in its safe state",
+                        s.key
+                    ),
+                );
+                continue;
+            }
+            self.note_step(StepPhase::Start, index, s);
+            if let Err(e) = self.step(s).await {
+                cleanup_completed = false;
+                let msg = e.message();
+                self.note(
+                    Level::Error,
+                    &format!("cleanup step {} failed: {msg}", s.key),
+                );
+                self.safe_state().await;
+                if stop.is_none() {
+                    *stop = Some((e, s.key.clone()));
+                }
+                break;
+            }
+            self.note_step(StepPhase::End, index, s);
+        }
+        cleanup_completed
+    }
+
+    /// Let the bench settle and read it back; a bench not as cleanup left
+    /// it is brought to its safe state and read again. The bench as left,
+    /// and false when it did not settle or is not in a known state (which
+    /// becomes the run's stop when nothing else stopped it).
+    async fn leave_bench(&mut self, stop: &mut Option<(Stop, String)>) -> (BenchLeft, bool) {
+        let mut cleanup_completed = true;
+        // The bench finishes what it was asked (a ramp the host steps goes on
+        // to its set point) and comes to rest; then its state is read back.
+        if let Err(e) = self.settle().await {
+            cleanup_completed = false;
+            self.note(
+                Level::Error,
+                &format!("the bench did not settle: {}", e.message()),
+            );
+            self.safe_state().await;
+        }
+        let in_position = self.opts.in_position.0;
+        let mut left = finish::bench_left(self.bench, &self.expected, in_position).await;
+        if !left.verified && !self.expected.safe_state {
+            self.note(
+                Level::Warning,
+                &format!(
+                    "the bench is not as cleanup asked ({}): bringing it to its safe state",
+                    left.summary
+                ),
+            );
+            self.safe_state().await;
+            let _settled = self.settle().await;
+            left = finish::bench_left(self.bench, &self.expected, in_position).await;
+        }
+        self.note(
+            if left.verified {
+                Level::Info
+            } else {
+                Level::Error
+            },
+            &format!("bench left: {}", left.summary),
+        );
+        if !left.verified {
+            cleanup_completed = false;
+            if stop.is_none() {
+                *stop = Some((
+                    Stop::Data(format!(
+                        "the bench is not in a known state: {}",
+                        left.summary
+                    )),
+                    "end of run".into(),
+                ));
+            }
+        }
+        (left, cleanup_completed)
+    }
+
+    /// The run's outcome and error from what stopped it (none: the
+    /// verdict of the measurements).
+    fn outcome(
+        &mut self,
+        stop: Option<(Stop, String)>,
+        interrupted: bool,
+    ) -> (Outcome, Option<RunError>) {
+        match stop {
+            None => verdict(&self.measurements),
+            Some((Stop::Interrupted, step)) if interrupted => (
+                Outcome::Aborted,
+                Some(RunError {
+                    device: None,
+                    step,
+                    message: format!(
+                        "interrupted by {}",
+                        self.opts
+                            .interrupt
+                            .cause()
+                            .unwrap_or_else(|| "the operator".into())
+                    ),
+                }),
+            ),
+            Some((e, step)) => {
+                let device = match &e {
+                    Stop::Device(d) => device_of(d),
+                    _ => None,
+                };
+                let message = e.message();
+                self.note(Level::Error, &format!("error in step {step}: {message}"));
+                (
+                    Outcome::Error,
+                    Some(RunError {
+                        device,
+                        step,
+                        message,
+                    }),
+                )
+            }
+        }
     }
 }
 
