@@ -277,27 +277,24 @@ fn fresh(args: &RunArgs, procedure_path: &std::path::Path, pacing: Pacing) -> Re
             &dut,
         )?),
     };
-    Ok(Plan {
-        station: session::station(&bench_cfg),
-        store,
+    let bench_label = args
+        .bench
+        .as_ref()
+        .map_or("embedded".into(), |p| p.display().to_string());
+    Ok(Plan::new(
         procedure,
-        procedure_path: procedure_path.display().to_string(),
-        bench_label: args
-            .bench
-            .as_ref()
-            .map_or("embedded".into(), |p| p.display().to_string()),
+        procedure_path.display().to_string(),
         bench_cfg,
-        twin,
-        coeffs,
-        seed: args.seed,
+        bench_label,
+        store,
         dut,
-        operator: args.operator.clone(),
-        speed: args.speed.clone(),
-        pacing,
-        faults,
-        resume: None,
-        live: None,
-    })
+        args.operator.clone(),
+    )
+    .with_twin(twin)
+    .with_coeffs(coeffs)
+    .with_seed(args.seed)
+    .with_speed(args.speed.clone(), pacing)
+    .with_faults(faults))
 }
 
 /// The serial a run is recorded under: `--dut` (checked), or on the
@@ -446,10 +443,7 @@ pub fn run(args: RunArgs) -> Result<Outcome> {
         }
         None => None,
     };
-    let plan = Plan {
-        live: live.clone(),
-        ..plan
-    };
+    let plan = plan.with_live(live.clone());
     let mut progress = Live::new(session::estimated_s(&plan));
     errln!("running {}", plan.procedure.meta.name);
     let finished = match session::execute(plan, place, &rt, &mut progress, interrupt) {

@@ -120,6 +120,83 @@ pub struct Plan {
     pub live: Option<Arc<crate::runlog::live::Live>>,
 }
 
+impl Plan {
+    /// A new run of `procedure` (read from `procedure_path`) on the bench
+    /// `bench_cfg` (named `bench_label` to the operator) for unit `dut`,
+    /// run by `operator`, its results recorded in `store`: on the embedded
+    /// twin, seed 1, no coefficients (model 4 fitted on the run's own
+    /// records), at full speed, no faults, not published live. The CLI and
+    /// the station both start here; the `with_` methods set the rest.
+    pub fn new(
+        procedure: Procedure,
+        procedure_path: impl Into<String>,
+        bench_cfg: BenchConfig,
+        bench_label: impl Into<String>,
+        store: crate::results::Location,
+        dut: impl Into<String>,
+        operator: impl Into<String>,
+    ) -> Self {
+        Self {
+            station: station(&bench_cfg),
+            procedure,
+            procedure_path: procedure_path.into(),
+            bench_cfg,
+            bench_label: bench_label.into(),
+            twin: TwinConfig::default_rl16(),
+            coeffs: None,
+            seed: 1,
+            dut: dut.into(),
+            operator: operator.into(),
+            store,
+            speed: "max".into(),
+            pacing: Pacing::Max,
+            faults: Vec::new(),
+            resume: None,
+            live: None,
+        }
+    }
+
+    /// The embedded bench's twin.
+    #[must_use]
+    pub fn with_twin(self, twin: TwinConfig) -> Self {
+        Self { twin, ..self }
+    }
+
+    /// The coefficients to compensate with (none: fitted on the run).
+    #[must_use]
+    pub fn with_coeffs(self, coeffs: Option<Chosen>) -> Self {
+        Self { coeffs, ..self }
+    }
+
+    /// The run's seed.
+    #[must_use]
+    pub fn with_seed(self, seed: u64) -> Self {
+        Self { seed, ..self }
+    }
+
+    /// The pace of the embedded bench, and the `speed` as given (logged).
+    #[must_use]
+    pub fn with_speed(self, speed: impl Into<String>, pacing: Pacing) -> Self {
+        Self {
+            speed: speed.into(),
+            pacing,
+            ..self
+        }
+    }
+
+    /// Faults the embedded bench plays, at device times.
+    #[must_use]
+    pub fn with_faults(self, faults: Vec<(f64, Fault)>) -> Self {
+        Self { faults, ..self }
+    }
+
+    /// Publish the run's channels live too.
+    #[must_use]
+    pub fn with_live(self, live: Option<Arc<crate::runlog::live::Live>>) -> Self {
+        Self { live, ..self }
+    }
+}
+
 /// What the earlier parts of a resumed run leave.
 #[derive(Debug)]
 pub struct Resumed {
@@ -268,48 +345,46 @@ pub fn plan_resume(
         store,
         config.bench.results.as_ref().and_then(|r| r.db.as_deref()),
     );
-    Ok(Plan {
-        procedure: prev.procedure.clone(),
-        procedure_path: meta.procedure_path.clone(),
-        bench_label: meta.bench.clone(),
-        station: if meta.station.is_empty() {
-            station(&config.bench)
-        } else {
-            meta.station.clone()
-        },
-        store,
-        bench_cfg: config.bench,
-        twin: config.twin.unwrap_or_else(TwinConfig::default_rl16),
-        coeffs: match (&meta.coeffs_toml, config.coeffs) {
-            (Some(text), Some(set)) => Some(Chosen {
-                set,
-                text: text.clone(),
-                used: meta
-                    .unit()
-                    .map_or_else(crate::coeffs::CoeffsUsed::fitted, |u| {
-                        u.coefficients.clone()
-                    }),
-            }),
-            _ => None,
-        },
-        seed,
-        dut: meta.dut_serial.clone(),
-        operator: meta.operator.clone(),
-        speed: speed.to_owned(),
-        pacing,
-        faults: Vec::new(),
-        resume: Some(Resumed {
-            run_id: meta.run_id.clone(),
-            start_time_utc: meta.start_time_utc.clone(),
-            state,
-            previous_file: last
-                .file_name()
-                .map_or(String::new(), |f| f.to_string_lossy().into_owned()),
-            link: prev.link,
-            summary,
+    let coeffs = match (&meta.coeffs_toml, config.coeffs) {
+        (Some(text), Some(set)) => Some(Chosen {
+            set,
+            text: text.clone(),
+            used: meta
+                .unit()
+                .map_or_else(crate::coeffs::CoeffsUsed::fitted, |u| {
+                    u.coefficients.clone()
+                }),
         }),
-        live: None,
-    })
+        _ => None,
+    };
+    let mut plan = Plan::new(
+        prev.procedure.clone(),
+        meta.procedure_path.clone(),
+        config.bench,
+        meta.bench.clone(),
+        store,
+        meta.dut_serial.clone(),
+        meta.operator.clone(),
+    )
+    .with_twin(config.twin.unwrap_or_else(TwinConfig::default_rl16))
+    .with_coeffs(coeffs)
+    .with_seed(seed)
+    .with_speed(speed, pacing);
+    // The run stays on the bench PC its log names.
+    if !meta.station.is_empty() {
+        plan.station = meta.station.clone();
+    }
+    plan.resume = Some(Resumed {
+        run_id: meta.run_id.clone(),
+        start_time_utc: meta.start_time_utc.clone(),
+        state,
+        previous_file: last
+            .file_name()
+            .map_or(String::new(), |f| f.to_string_lossy().into_owned()),
+        link: prev.link,
+        summary,
+    });
+    Ok(plan)
 }
 
 /// Run-order index of the procedure's last record step.
@@ -455,53 +530,15 @@ pub fn execute(
     progress: &mut dyn Progress,
     interrupt: Arc<Interrupt>,
 ) -> Result<Finished, SessionError> {
-    let embedded = plan.bench_cfg.is_embedded();
     let today = utc_now().date_naive();
-    check_calibration(&plan.bench_cfg, &plan.bench_label, today)?;
-    let specs = [
-        &plan.bench_cfg.devices.chamber.spec,
-        &plan.bench_cfg.devices.table.spec,
-        &plan.bench_cfg.devices.gyro.spec,
-    ];
-    if !embedded && specs.iter().any(|s| s.starts_with("sim://")) {
-        return Err(SessionError::Bench(
-            "the bench file mixes sim:// and real devices; use all sim:// (the embedded bench) or none".into(),
-        ));
-    }
-    if !embedded && !plan.faults.is_empty() {
-        return Err(SessionError::Bench(
-            "--inject applies to the embedded simulated bench only".into(),
-        ));
-    }
+    check_plan(&plan, today)?;
     let part = plan.resume.as_ref().map_or(1, |r| r.state.part);
     let start = utc_now();
     let run_start = plan
         .resume
         .as_ref()
         .map_or_else(|| start.to_rfc3339(), |r| r.start_time_utc.clone());
-    let dir = match place {
-        Place::Auto { base } => RunDir::create_unique(
-            &base,
-            &plan.procedure.meta.name,
-            &start.format("%Y%m%dT%H%M%SZ").to_string(),
-            &start.to_rfc3339(),
-        )?,
-        Place::At { path, force } => RunDir::create_at(&path, &start.to_rfc3339(), force)?,
-        Place::Resume(dir) => dir,
-    };
-    let mut notes = Vec::new();
-    if let Some(holder) = &dir.lock.stale {
-        notes.push(format!(
-            "took over the lock of {holder}, which no longer runs (killed or crashed)"
-        ));
-    }
-    if let Some(aside) = &dir.moved_aside {
-        notes.push(format!(
-            "the run that was in {} is now in {}",
-            dir.path.display(),
-            aside.display()
-        ));
-    }
+    let (dir, mut notes) = open_run_dir(place, &plan.procedure.meta.name, &start)?;
 
     // The embedded bench simulates the bench its file describes: the twin
     // stands at the bench's site on the bench's table (a lab's simulated
@@ -509,47 +546,7 @@ pub fn execute(
     let mut twin = plan.twin.clone();
     twin.site = plan.bench_cfg.site;
     twin.table.geometry = plan.bench_cfg.table.geometry;
-    let limits = plan.bench_cfg.limits.clone();
-    let mut bench: Box<dyn BenchIo> = if embedded {
-        let seed = plan.seed.wrapping_add(u64::from(part) - 1);
-        Box::new(embedded_bench(
-            &twin,
-            seed,
-            plan.pacing,
-            &plan.faults,
-            limits,
-            plan.bench_cfg.devices.supply.as_ref(),
-        ))
-    } else {
-        let bench_err = |source| SessionError::Device {
-            bench: plan.bench_label.clone(),
-            source,
-        };
-        let open = rt
-            .block_on(open_bench(&plan.bench_cfg))
-            .map_err(bench_err)?;
-        let device = rt
-            .block_on(DeviceBench::start(&plan.bench_cfg, open))
-            .map_err(bench_err)?;
-        Box::new(Guarded::new(device, limits).with_supply(plan.bench_cfg.devices.supply.as_ref()))
-    };
-    // A store URL's password never goes into a log.
-    let mut logged_bench = plan.bench_cfg.clone();
-    if let Some(r) = logged_bench.results.as_mut() {
-        r.db = r.db.as_deref().map(crate::results::pg::redact);
-    }
-    let bench_toml = toml::to_string_pretty(&logged_bench).map_err(|e| {
-        SessionError::Bench(format!("the bench configuration cannot be logged: {e}"))
-    })?;
-    let site_json = serde_json::to_string(&plan.bench_cfg.site)
-        .map_err(|e| SessionError::Bench(format!("the site cannot be logged: {e}")))?;
-    let twin_toml = if embedded {
-        Some(twin.to_toml().map_err(|e| {
-            SessionError::Bench(format!("the twin configuration cannot be logged: {e}"))
-        })?)
-    } else {
-        None
-    };
+    let mut bench = bench_for(&plan, &twin, part, rt)?;
     let identities = rt.block_on(bench.identify());
     let instruments = plan.bench_cfg.instruments(
         identities.chamber,
@@ -557,49 +554,7 @@ pub fn execute(
         identities.supply,
         today,
     );
-    let meta = RunMeta {
-        format: FORMAT,
-        run_id: plan
-            .resume
-            .as_ref()
-            .map(|r| r.run_id.clone())
-            .filter(|id| !id.is_empty())
-            .unwrap_or_else(new_run_id),
-        procedure_toml: plan.procedure.text.clone(),
-        procedure_path: plan.procedure_path.clone(),
-        bench_toml,
-        bench: plan.bench_label.clone(),
-        twin_toml,
-        coeffs_toml: plan.coeffs.as_ref().map(|c| c.text.clone()),
-        site_json,
-        dut_serial: plan.dut.clone(),
-        dut_type: plan.procedure.meta.dut_type.clone(),
-        operator: plan.operator.clone(),
-        station: plan.station.clone(),
-        software_version: crate::version::VERSION.to_owned(),
-        start_time_utc: run_start.clone(),
-        part_start_time_utc: start.to_rfc3339(),
-        seed: embedded.then_some(plan.seed),
-        part,
-        previous_part: plan.resume.as_ref().map(|r| r.previous_file.clone()),
-        resume_completed_steps: plan.resume.as_ref().map(|r| r.state.completed),
-        speed: plan.speed.clone(),
-        imported_from: None,
-        bench_id: plan.bench_cfg.bench_id(&plan.bench_label),
-        host: rundir::hostname(),
-        software_revision: crate::version::REVISION.to_owned(),
-        instruments,
-        units: vec![crate::runlog::meta::RunUnit {
-            slot: String::new(),
-            serial: plan.dut.clone(),
-            dut_type: plan.procedure.meta.dut_type.clone(),
-            coefficients: plan
-                .coeffs
-                .as_ref()
-                .map_or_else(crate::coeffs::CoeffsUsed::fitted, |c| c.used.clone()),
-        }],
-        other: Default::default(),
-    };
+    let meta = run_meta(&plan, &twin, part, &run_start, &start, instruments)?;
     let log = if part == 1 {
         dir.path.join("run.mcap")
     } else {
@@ -659,34 +614,10 @@ pub fn execute(
         None => part_link,
     };
     let finish = |result: &RunResult| Report::new(&plan.procedure, result, &meta, link);
-    let mut result = result;
-    let mut report = finish(&result);
     let end_s = bench.now_s();
-    let link_written = {
-        use crate::sequencer::Sink;
-        recorder.link(end_s, &part_link)
-    };
-    let log_end = link_written.and_then(|()| {
-        recorder.finish_run(&ResultMeta::new(&result), Some(&report.to_json()), end_s)
-    });
-    if let Err(e) = log_end {
-        // The log could not be completed: what reached the disk stays
-        // (`gyrobench recover` rewrites it whole); the run is an error.
-        if result.error.is_none() {
-            result.outcome = sequencer::Outcome::Error;
-            result.error = Some(sequencer::RunError {
-                device: None,
-                step: "end of run".into(),
-                message: format!("the log could not be completed: {e}"),
-            });
-        }
-        notes.push(format!(
-            "the log {} is incomplete ({e}); `gyrobench recover {}` rewrites what it holds as a complete log",
-            log.display(),
-            log.display()
-        ));
-        report = finish(&result);
-    }
+    let (result, report) = close_log(
+        recorder, &log, result, finish, end_s, &part_link, &mut notes,
+    );
     let report_error = write_report(&dir.path, &report, &result).err();
     store.finish(&log, &result, link, &mut notes);
     Ok(Finished {
@@ -697,6 +628,207 @@ pub fn execute(
         report_error,
         notes,
         notes_at_begin,
+    })
+}
+
+/// Write the link's last figures and the result into the log and close
+/// it; the run's report. A log that cannot be completed keeps what reached
+/// the disk, makes the run an error and tells how to recover it.
+fn close_log(
+    mut recorder: Recorder,
+    log: &std::path::Path,
+    mut result: RunResult,
+    report_of: impl Fn(&RunResult) -> Report,
+    end_s: f64,
+    part_link: &LinkStats,
+    notes: &mut Vec<String>,
+) -> (RunResult, Report) {
+    use crate::sequencer::Sink;
+    let report = report_of(&result);
+    let log_end = recorder.link(end_s, part_link).and_then(|()| {
+        recorder.finish_run(&ResultMeta::new(&result), Some(&report.to_json()), end_s)
+    });
+    let Err(e) = log_end else {
+        return (result, report);
+    };
+    if result.error.is_none() {
+        result.outcome = sequencer::Outcome::Error;
+        result.error = Some(sequencer::RunError {
+            device: None,
+            step: "end of run".into(),
+            message: format!("the log could not be completed: {e}"),
+        });
+    }
+    notes.push(format!(
+        "the log {} is incomplete ({e}); `gyrobench recover {}` rewrites what it holds as a complete log",
+        log.display(),
+        log.display()
+    ));
+    let report = report_of(&result);
+    (result, report)
+}
+
+/// What stops a plan before anything is opened: an instrument past its
+/// calibration, a bench file mixing simulated and real devices, faults
+/// asked of a real bench.
+fn check_plan(plan: &Plan, today: chrono::NaiveDate) -> Result<(), SessionError> {
+    let embedded = plan.bench_cfg.is_embedded();
+    check_calibration(&plan.bench_cfg, &plan.bench_label, today)?;
+    let specs = [
+        &plan.bench_cfg.devices.chamber.spec,
+        &plan.bench_cfg.devices.table.spec,
+        &plan.bench_cfg.devices.gyro.spec,
+    ];
+    if !embedded && specs.iter().any(|s| s.starts_with("sim://")) {
+        return Err(SessionError::Bench(
+            "the bench file mixes sim:// and real devices; use all sim:// (the embedded bench) or none".into(),
+        ));
+    }
+    if !embedded && !plan.faults.is_empty() {
+        return Err(SessionError::Bench(
+            "--inject applies to the embedded simulated bench only".into(),
+        ));
+    }
+    Ok(())
+}
+
+/// The run's directory as `place` says, and what the operator is told
+/// about it (a stale lock taken over, an earlier run moved aside).
+fn open_run_dir(
+    place: Place,
+    name: &str,
+    start: &chrono::DateTime<chrono::Utc>,
+) -> Result<(RunDir, Vec<String>), SessionError> {
+    let dir = match place {
+        Place::Auto { base } => RunDir::create_unique(
+            &base,
+            name,
+            &start.format("%Y%m%dT%H%M%SZ").to_string(),
+            &start.to_rfc3339(),
+        )?,
+        Place::At { path, force } => RunDir::create_at(&path, &start.to_rfc3339(), force)?,
+        Place::Resume(dir) => dir,
+    };
+    let mut notes = Vec::new();
+    if let Some(holder) = &dir.lock.stale {
+        notes.push(format!(
+            "took over the lock of {holder}, which no longer runs (killed or crashed)"
+        ));
+    }
+    if let Some(aside) = &dir.moved_aside {
+        notes.push(format!(
+            "the run that was in {} is now in {}",
+            dir.path.display(),
+            aside.display()
+        ));
+    }
+    Ok((dir, notes))
+}
+
+/// The bench the plan runs on: the embedded twin (seeded for the part),
+/// or the bench file's devices opened behind the bench's limits.
+fn bench_for(
+    plan: &Plan,
+    twin: &TwinConfig,
+    part: u32,
+    rt: &tokio::runtime::Runtime,
+) -> Result<Box<dyn BenchIo>, SessionError> {
+    let limits = plan.bench_cfg.limits.clone();
+    let bench: Box<dyn BenchIo> = if plan.bench_cfg.is_embedded() {
+        let seed = plan.seed.wrapping_add(u64::from(part) - 1);
+        Box::new(embedded_bench(
+            twin,
+            seed,
+            plan.pacing,
+            &plan.faults,
+            limits,
+            plan.bench_cfg.devices.supply.as_ref(),
+        ))
+    } else {
+        let bench_err = |source| SessionError::Device {
+            bench: plan.bench_label.clone(),
+            source,
+        };
+        let open = rt
+            .block_on(open_bench(&plan.bench_cfg))
+            .map_err(bench_err)?;
+        let device = rt
+            .block_on(DeviceBench::start(&plan.bench_cfg, open))
+            .map_err(bench_err)?;
+        Box::new(Guarded::new(device, limits).with_supply(plan.bench_cfg.devices.supply.as_ref()))
+    };
+    Ok(bench)
+}
+
+/// The run's metadata, as the log's `run` record holds it.
+fn run_meta(
+    plan: &Plan,
+    twin: &TwinConfig,
+    part: u32,
+    run_start: &str,
+    start: &chrono::DateTime<chrono::Utc>,
+    instruments: Vec<crate::bench::Instrument>,
+) -> Result<RunMeta, SessionError> {
+    let embedded = plan.bench_cfg.is_embedded();
+    // A store URL's password never goes into a log.
+    let mut logged_bench = plan.bench_cfg.clone();
+    if let Some(r) = logged_bench.results.as_mut() {
+        r.db = r.db.as_deref().map(crate::results::pg::redact);
+    }
+    let bench_toml = toml::to_string_pretty(&logged_bench).map_err(|e| {
+        SessionError::Bench(format!("the bench configuration cannot be logged: {e}"))
+    })?;
+    let site_json = serde_json::to_string(&plan.bench_cfg.site)
+        .map_err(|e| SessionError::Bench(format!("the site cannot be logged: {e}")))?;
+    let twin_toml = if embedded {
+        Some(twin.to_toml().map_err(|e| {
+            SessionError::Bench(format!("the twin configuration cannot be logged: {e}"))
+        })?)
+    } else {
+        None
+    };
+    Ok(RunMeta {
+        format: FORMAT,
+        run_id: plan
+            .resume
+            .as_ref()
+            .map(|r| r.run_id.clone())
+            .filter(|id| !id.is_empty())
+            .unwrap_or_else(new_run_id),
+        procedure_toml: plan.procedure.text.clone(),
+        procedure_path: plan.procedure_path.clone(),
+        bench_toml,
+        bench: plan.bench_label.clone(),
+        twin_toml,
+        coeffs_toml: plan.coeffs.as_ref().map(|c| c.text.clone()),
+        site_json,
+        dut_serial: plan.dut.clone(),
+        dut_type: plan.procedure.meta.dut_type.clone(),
+        operator: plan.operator.clone(),
+        station: plan.station.clone(),
+        software_version: crate::version::VERSION.to_owned(),
+        start_time_utc: run_start.to_owned(),
+        part_start_time_utc: start.to_rfc3339(),
+        seed: embedded.then_some(plan.seed),
+        part,
+        previous_part: plan.resume.as_ref().map(|r| r.previous_file.clone()),
+        resume_completed_steps: plan.resume.as_ref().map(|r| r.state.completed),
+        speed: plan.speed.clone(),
+        imported_from: None,
+        bench_id: plan.bench_cfg.bench_id(&plan.bench_label),
+        host: rundir::hostname(),
+        software_revision: crate::version::REVISION.to_owned(),
+        instruments,
+        units: vec![crate::runlog::meta::RunUnit {
+            slot: String::new(),
+            serial: plan.dut.clone(),
+            dut_type: plan.procedure.meta.dut_type.clone(),
+            coefficients: plan
+                .coeffs
+                .as_ref()
+                .map_or_else(crate::coeffs::CoeffsUsed::fitted, |c| c.used.clone()),
+        }],
+        other: Default::default(),
     })
 }
 

@@ -30,7 +30,6 @@ use crate::procedure::estimate::min_total_s;
 use crate::sequencer::Outcome;
 use crate::sequencer::interrupt::Interrupt;
 use crate::session::{self, Place, Plan};
-use crate::twin::config::TwinConfig;
 use state::{Reporter, RunPhase, RunView, Shared, StepView};
 
 /// How the station runs its benches.
@@ -282,24 +281,18 @@ impl Station {
         )
         .map_err(|e| Refused::Bad(e.to_string()))?;
         let path = self.cfg.procedures.join(&offer.file);
-        let plan = Plan {
-            station: session::station(&self.cfg.bench),
-            store: self.cfg.store.clone(),
-            procedure_path: path.display().to_string(),
-            bench_label: self.cfg.bench_label.clone(),
-            bench_cfg: self.cfg.bench.clone(),
-            twin: TwinConfig::default_rl16(),
-            coeffs: None,
-            seed: self.runs_started.load(std::sync::atomic::Ordering::Relaxed) + 1,
-            dut: serial.to_owned(),
-            operator: operator.to_owned(),
-            speed: self.cfg.speed.clone(),
-            pacing: self.cfg.pacing,
-            faults: Vec::new(),
-            resume: None,
-            live: self.cfg.live.clone(),
+        let plan = Plan::new(
             procedure,
-        };
+            path.display().to_string(),
+            self.cfg.bench.clone(),
+            self.cfg.bench_label.clone(),
+            self.cfg.store.clone(),
+            serial,
+            operator,
+        )
+        .with_seed(self.runs_started.load(std::sync::atomic::Ordering::Relaxed) + 1)
+        .with_speed(self.cfg.speed.clone(), self.cfg.pacing)
+        .with_live(self.cfg.live.clone());
         let place = Place::Auto {
             base: self.cfg.runs.clone(),
         };
@@ -340,10 +333,7 @@ impl Station {
             self.cfg.db.as_deref(),
         )
         .map_err(|e| Refused::Bad(e.to_string()))?;
-        let plan = Plan {
-            live: self.cfg.live.clone(),
-            ..plan
-        };
+        let plan = plan.with_live(self.cfg.live.clone());
         let summary = plan.resume.as_ref().map(|r| r.summary.clone());
         let estimate_s = session::estimated_s(&plan);
         self.launch(plan, Place::Resume(locked), estimate_s, summary)
