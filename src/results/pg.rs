@@ -134,11 +134,16 @@ impl Sql for Postgres {
     fn query(&mut self, sql: &str, params: &[Value]) -> Result<Vec<Row>, StoreError> {
         let refs: Vec<&(dyn ToSql + Sync)> = params.iter().map(|p| p as _).collect();
         let rows = self.client.query(sql, &refs).map_err(err(&self.name))?;
+        let names: std::sync::Arc<[String]> = rows.first().map_or_else(
+            || std::sync::Arc::from(Vec::new()),
+            |r| r.columns().iter().map(|c| c.name().to_owned()).collect(),
+        );
         rows.iter()
             .map(|r| {
                 (0..r.len())
                     .map(|i| get(r, i))
-                    .collect::<Result<Row, _>>()
+                    .collect::<Result<Vec<Value>, _>>()
+                    .map(|values| Row::new(names.clone(), values))
                     .map_err(err(&self.name))
             })
             .collect()

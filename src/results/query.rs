@@ -185,36 +185,7 @@ fn run_columns() -> String {
         .join(", ")
 }
 
-/// A row read by column name (the names of the select list it came from).
-struct Named<'a> {
-    names: &'a [(&'a str, &'a str)],
-    row: &'a Row,
-}
-
-impl Named<'_> {
-    fn value(&self, name: &str) -> Option<&Value> {
-        let i = self.names.iter().position(|(_, n)| *n == name)?;
-        self.row.get(i).filter(|v| **v != Value::Null)
-    }
-    fn text(&self, name: &str) -> String {
-        self.value(name).map_or(String::new(), Value::text)
-    }
-    fn opt_text(&self, name: &str) -> Option<String> {
-        self.value(name).map(Value::text).filter(|s| !s.is_empty())
-    }
-    fn int(&self, name: &str) -> Option<i64> {
-        self.value(name).and_then(Value::int)
-    }
-    fn real(&self, name: &str) -> Option<f64> {
-        self.value(name).and_then(Value::real)
-    }
-}
-
-fn run_row(row: &Row) -> RunRow {
-    let r = Named {
-        names: RUN_COLUMNS,
-        row,
-    };
+fn run_row(r: &Row) -> RunRow {
     let version = r.text("software_version");
     let revision = r.text("software_revision");
     RunRow {
@@ -271,20 +242,23 @@ impl std::ops::Deref for MeasurementRow {
 }
 
 fn measurement_row(r: &Row) -> MeasurementRow {
-    let t = |i: usize| r.get(i).map_or(String::new(), Value::text);
-    let f = |i: usize| r.get(i).and_then(Value::real);
     MeasurementRow {
-        run: t(0),
-        measurement: ResultMeasurement {
-            name: t(1),
-            value: f(2),
-            unit: t(3),
-            low: f(4),
-            high: f(5),
-            outcome: t(6),
-            step: t(7),
-            note: t(8),
-        },
+        run: r.text("run"),
+        measurement: measurement_of(r),
+    }
+}
+
+/// A measurement read from a row of `measurements` columns.
+pub(super) fn measurement_of(r: &Row) -> ResultMeasurement {
+    ResultMeasurement {
+        name: r.text("name"),
+        value: r.real("value"),
+        unit: r.text("unit"),
+        low: r.real("low"),
+        high: r.real("high"),
+        outcome: r.text("outcome"),
+        step: r.text("step"),
+        note: r.text("note"),
     }
 }
 
@@ -467,17 +441,11 @@ impl Store {
                 });
             }
             [r] => run_row(r),
+            many if many.iter().any(|r| r.text("id") == id) => run_row(&many[0]),
+            // The parts of one run: its latest part.
             many if many
                 .iter()
-                .any(|r| r.first().map(Value::text).as_deref() == Some(id)) =>
-            {
-                run_row(&many[0])
-            }
-            // The parts of one run: its latest part.
-            many if many.iter().all(|r| {
-                run_id_of(&r.first().map(Value::text).unwrap_or_default())
-                    == run_id_of(&many[0].first().map(Value::text).unwrap_or_default())
-            }) =>
+                .all(|r| run_id_of(&r.text("id")) == run_id_of(&many[0].text("id"))) =>
             {
                 many.iter()
                     .map(run_row)
@@ -490,7 +458,7 @@ impl Store {
                     what: format!(
                         "{id} names several runs ({}, ...): give more of the id",
                         many.iter()
-                            .filter_map(|r| r.first().map(Value::text))
+                            .map(|r| r.text("id"))
                             .collect::<Vec<_>>()
                             .join(", ")
                     ),
@@ -526,15 +494,15 @@ impl Store {
             "recorded_utc",
         ];
         let sql = format!("SELECT {} FROM runs WHERE id = $1", names.join(", "));
-        let values = one(
-            self.sql().query(&sql, &[run.id.clone().into()])?,
-            Clone::clone,
-        )
-        .unwrap_or_default();
+        let row = self.sql().query(&sql, &[run.id.clone().into()])?;
         let fields = names
             .iter()
-            .zip(values)
-            .map(|(n, v)| ((*n).to_owned(), v.text()))
+            .map(|n| {
+                (
+                    (*n).to_owned(),
+                    row.first().map_or(String::new(), |r| r.text(n)),
+                )
+            })
             .collect();
         let measurements = self
             .sql()
@@ -611,13 +579,13 @@ impl Store {
                 &[serial.into()],
             )?,
             |r| CoefficientRow {
-                version: r.first().and_then(Value::int).unwrap_or(0),
-                created_utc: r.get(1).map_or(String::new(), Value::text),
-                validation: r.get(2).map_or(String::new(), Value::text),
-                held_out_drift_pp_dph: r.get(3).and_then(Value::real),
-                source_runs: r.get(4).map_or(String::new(), Value::text),
-                coeffs_toml: r.get(5).map_or(String::new(), Value::text),
-                sha256: r.get(6).map(Value::text).filter(|s| !s.is_empty()),
+                version: r.int("version").unwrap_or(0),
+                created_utc: r.text("created_utc"),
+                validation: r.text("validation"),
+                held_out_drift_pp_dph: r.real("held_out_drift_pp_dph"),
+                source_runs: r.text("source_runs"),
+                coeffs_toml: r.text("coeffs_toml"),
+                sha256: r.opt_text("sha256"),
             },
         );
         Ok(UnitHistory {
@@ -641,12 +609,7 @@ impl Store {
                  WHERE u.dut_type = $1 AND u.serial = $2 ORDER BY c.version DESC LIMIT 1",
                 &[dut_type.into(), serial.into()],
             )?,
-            |r| {
-                (
-                    r.first().and_then(Value::int).unwrap_or(0),
-                    r.get(1).map_or(String::new(), Value::text),
-                )
-            },
+            |r| (r.int("version").unwrap_or(0), r.text("coeffs_toml")),
         ))
     }
 
@@ -676,15 +639,11 @@ impl Store {
                 what: format!("no measurement named {name} in the runs asked for"),
             });
         };
-        let real = |r: &Row, i: usize| r.get(i).and_then(Value::real);
-        let low = real(newest, 2);
-        let high = real(newest, 3);
-        let unit = newest.get(4).map_or(String::new(), Value::text);
-        let values: Vec<f64> = rows.iter().filter_map(|r| real(r, 0)).collect();
-        let passed = rows
-            .iter()
-            .filter(|r| r.get(1).map(Value::text).as_deref() == Some("pass"))
-            .count();
+        let low = newest.real("low");
+        let high = newest.real("high");
+        let unit = newest.text("unit");
+        let values: Vec<f64> = rows.iter().filter_map(|r| r.real("value")).collect();
+        let passed = rows.iter().filter(|r| r.text("outcome") == "pass").count();
         let count = values.len();
         let n = count as f64;
         let mean = (count > 0).then(|| values.iter().sum::<f64>() / n);
@@ -731,7 +690,7 @@ impl Store {
         all.push((max as i64).into());
         let rows = self.sql().query(
             &format!(
-                "SELECT r.started_utc, u.serial, m.value, m.outcome, r.id, r.log_path, ru.outcome FROM measurements m \
+                "SELECT r.started_utc, u.serial, m.value, m.outcome, r.id, r.log_path, ru.outcome AS run_outcome FROM measurements m \
                  JOIN run_units ru ON ru.run = m.run AND ru.slot = m.slot \
                  JOIN runs r ON r.id = m.run JOIN units u ON u.id = ru.unit_id \
                  WHERE m.name = $1 AND r.latest = 1 AND m.value IS NOT NULL{reference}{clauses} \
@@ -744,13 +703,13 @@ impl Store {
             .iter()
             .filter_map(|r| {
                 Some(TrendPoint {
-                    started_utc: r.first()?.text(),
-                    serial: r.get(1)?.text(),
-                    value: r.get(2)?.real()?,
-                    outcome: r.get(3)?.text(),
-                    run: r.get(4)?.text(),
-                    log_path: r.get(5)?.text(),
-                    reference: r.get(6)?.text() == "reference",
+                    started_utc: r.text("started_utc"),
+                    serial: r.text("serial"),
+                    value: r.real("value")?,
+                    outcome: r.text("outcome"),
+                    run: r.text("id"),
+                    log_path: r.text("log_path"),
+                    reference: r.text("run_outcome") == "reference",
                 })
             })
             .collect();

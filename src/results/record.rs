@@ -89,8 +89,7 @@ fn unit_id(sql: &mut dyn Sql, dut_type: &str, serial: &str) -> Result<i64, Store
         &[dut_type.into(), serial.into()],
     )?;
     rows.first()
-        .and_then(|r| r.first())
-        .and_then(Value::int)
+        .and_then(|r| r.int("id"))
         .ok_or_else(|| StoreError::NotFound {
             store: String::new(),
             what: format!("unit {dut_type} {serial} just written"),
@@ -101,8 +100,7 @@ fn outcome_of(sql: &mut dyn Sql, id: &str) -> Result<Option<String>, StoreError>
     Ok(sql
         .query("SELECT outcome FROM runs WHERE id = $1", &[id.into()])?
         .first()
-        .and_then(|r| r.first())
-        .map(Value::text))
+        .map(|r| r.text("outcome")))
 }
 
 impl Store {
@@ -425,10 +423,10 @@ impl Store {
             .iter()
             .filter_map(|r| {
                 let f = LogFile {
-                    path: r.first()?.text(),
-                    size: r.get(1)?.int()?,
-                    mtime_ns: r.get(2)?.int()?,
-                    summary_sha256: r.get(3)?.text(),
+                    path: r.text("path"),
+                    size: r.int("size")?,
+                    mtime_ns: r.int("mtime_ns")?,
+                    summary_sha256: r.text("summary_sha256"),
                 };
                 Some((f.path.clone(), f))
             })
@@ -480,12 +478,11 @@ impl Store {
             let unit_id = unit_id(sql, &unit.dut_type, &unit.serial)?;
             let next = sql
                 .query(
-                    "SELECT COALESCE(MAX(version), 0) + 1 FROM coefficient_sets WHERE unit_id = $1",
+                    "SELECT COALESCE(MAX(version), 0) + 1 AS next FROM coefficient_sets WHERE unit_id = $1",
                     &[unit_id.into()],
                 )?
                 .first()
-                .and_then(|r| r.first())
-                .and_then(Value::int)
+                .and_then(|r| r.int("next"))
                 .unwrap_or(1);
             let provenance = set.set.get_or_insert_with(|| crate::coeffs::SetSection {
                 version: None,

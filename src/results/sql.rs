@@ -89,8 +89,51 @@ impl Value {
     }
 }
 
-/// A row: its values in the order of the select list.
-pub type Row = Vec<Value>;
+/// A row of a query, read by the names of its select list's columns (a
+/// column's `AS` alias, else its own name without the table's): a query
+/// and the code that reads it agree on names, never on positions.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Row {
+    names: std::sync::Arc<[String]>,
+    values: Vec<Value>,
+}
+
+impl Row {
+    /// A row of `values` under the column `names` (shared by a query's rows).
+    pub fn new(names: std::sync::Arc<[String]>, values: Vec<Value>) -> Self {
+        Self { names, values }
+    }
+
+    /// The value of column `name`; NULL when the row has no such column
+    /// (case-insensitive, as SQL names are).
+    pub fn get(&self, name: &str) -> &Value {
+        self.names
+            .iter()
+            .position(|n| n.eq_ignore_ascii_case(name))
+            .and_then(|i| self.values.get(i))
+            .unwrap_or(&Value::Null)
+    }
+
+    /// Column `name` as text (empty for NULL).
+    pub fn text(&self, name: &str) -> String {
+        self.get(name).text()
+    }
+
+    /// Column `name` as text, none for NULL or empty.
+    pub fn opt_text(&self, name: &str) -> Option<String> {
+        Some(self.text(name)).filter(|s| !s.is_empty())
+    }
+
+    /// Column `name` as an integer (none for NULL).
+    pub fn int(&self, name: &str) -> Option<i64> {
+        self.get(name).int()
+    }
+
+    /// Column `name` as a float (none for NULL).
+    pub fn real(&self, name: &str) -> Option<f64> {
+        self.get(name).real()
+    }
+}
 
 /// Which engine.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -163,11 +206,7 @@ pub fn migrate(sql: &mut dyn Sql, store: &str) -> Result<i64, StoreError> {
     let result = (|| {
         sql.batch("CREATE TABLE IF NOT EXISTS gyrobench_schema (version BIGINT NOT NULL)")?;
         let rows = sql.query("SELECT version FROM gyrobench_schema", &[])?;
-        let have = rows
-            .first()
-            .and_then(|r| r.first())
-            .and_then(Value::int)
-            .unwrap_or(0);
+        let have = rows.first().and_then(|r| r.int("version")).unwrap_or(0);
         let latest = latest_version(engine);
         if have > latest {
             return Err(StoreError::Newer {

@@ -96,7 +96,8 @@ impl Sql for Sqlite {
 
     fn query(&mut self, sql: &str, params: &[Value]) -> Result<Vec<Row>, StoreError> {
         let mut st = self.conn.prepare_cached(sql).map_err(err(&self.name))?;
-        let cols = st.column_count();
+        let names: std::sync::Arc<[String]> = st.column_names().map(str::to_owned).collect();
+        let cols = names.len();
         bind(&mut st, params).map_err(err(&self.name))?;
         let mut rows = st.raw_query();
         let mut out = Vec::new();
@@ -105,7 +106,7 @@ impl Sql for Sqlite {
             for i in 0..cols {
                 row.push(from_sqlite(r.get_ref(i).map_err(err(&self.name))?));
             }
-            out.push(row);
+            out.push(Row::new(names.clone(), row));
         }
         Ok(out)
     }

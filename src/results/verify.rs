@@ -9,7 +9,6 @@ use std::path::Path;
 
 use serde::Serialize;
 
-use super::sql::Value;
 use super::{Store, StoreError};
 use crate::runlog::meta::{ResultMeasurement, ResultMeta};
 
@@ -139,8 +138,12 @@ impl Store {
         )?;
         let mut stored_logs = std::collections::HashSet::new();
         for row in &parts {
-            let t = |i: usize| row.get(i).map_or(String::new(), Value::text);
-            let (run, log, sha, outcome) = (t(0), t(1), t(2), t(3));
+            let (run, log, sha, outcome) = (
+                row.text("id"),
+                row.text("log_path"),
+                row.text("log_sha256"),
+                row.text("outcome"),
+            );
             stored_logs.insert(log.clone());
             if let Some(u) = &under
                 && !Path::new(&log).starts_with(u)
@@ -248,20 +251,7 @@ impl Store {
                 &[run.into()],
             )?
             .iter()
-            .map(|r| {
-                let t = |i: usize| r.get(i).map_or(String::new(), Value::text);
-                let f = |i: usize| r.get(i).and_then(Value::real);
-                ResultMeasurement {
-                    name: t(0),
-                    value: f(1),
-                    unit: t(2),
-                    low: f(3),
-                    high: f(4),
-                    outcome: t(5),
-                    step: t(6),
-                    note: t(7),
-                }
-            })
+            .map(super::query::measurement_of)
             .collect())
     }
 }
