@@ -260,3 +260,25 @@ pub fn transaction<T>(
     let result = f(sql);
     end(sql, result)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_row_is_read_by_its_columns_names_whatever_their_order() {
+        let names: std::sync::Arc<[String]> = ["id", "Value", "note"]
+            .into_iter()
+            .map(str::to_owned)
+            .collect();
+        let row = Row::new(
+            names,
+            vec![Value::from("r1"), Value::from(2.5), Value::Null],
+        );
+        assert_eq!(row.text("id"), "r1");
+        assert_eq!(row.real("value"), Some(2.5), "names are case-insensitive");
+        assert_eq!(row.opt_text("note"), None, "NULL");
+        assert_eq!(row.get("missing"), &Value::Null);
+        assert_eq!(row.int("id"), None);
+    }
+}
