@@ -214,25 +214,19 @@ fn a_device_run_stopped_by_sigterm_or_killed_through_sim_serve_ends_safe_and_res
     assert!(!out.join("report.json").exists());
     let r = gyrobench(&["run", "--resume", s(&out)]);
     let report = json(&out.join("report.json"));
-    // A judged unit (0 or 3). A served link at 200x on a loaded host may
-    // lose frames; the run then says so and ends in error (1), which is
-    // the honest outcome, not a failed resume.
-    let host_lost_frames = {
-        let text = report.to_string();
-        [
-            "% missing)",
-            "the gyro link lost or corrupted",
-            "the host fell behind",
-        ]
-        .iter()
-        .any(|why| text.contains(why))
-    };
+    // A judged unit: the resumed run gives the verdict (0 or 3), not an
+    // error. (Wall-clock tests take their turn apart from the busy ones,
+    // so the host keeps up with the served gyro.)
     assert!(
-        r.status
-            .code()
-            .is_some_and(|c| c == 0 || c == 3 || (c == 1 && host_lost_frames)),
+        matches!(r.status.code(), Some(0 | 3)),
+        "{}\n{}",
+        stderr(&r),
+        report["error"]
+    );
+    assert!(
+        matches!(report["outcome"].as_str(), Some("pass" | "fail")),
         "{}",
-        stderr(&r)
+        report["outcome"]
     );
     assert_eq!(
         report["bench_left"]["verified"], true,
