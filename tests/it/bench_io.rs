@@ -467,8 +467,15 @@ async fn drivers_work_over_an_in_memory_duplex_too() {
     .await
     .expect("move");
     // Same bench behind both: the table's move shows in the twin.
-    tokio::time::sleep(Duration::from_millis(100)).await;
-    assert!(bench.lock().twin.table_moving());
+    let mut moving = false;
+    for _ in 0..200 {
+        moving = bench.lock().twin.table_moving();
+        if moving {
+            break;
+        }
+        tokio::time::sleep(Duration::from_millis(10)).await;
+    }
+    assert!(moving, "the move never showed in the twin");
 }
 
 /// A network drop shorter than the reconnect window costs a pause, not the
