@@ -103,6 +103,14 @@ pub enum Metric {
     PowerPeak,
 }
 
+/// `s` with `{label}` replaced by a repeat's position label.
+fn with_label(s: &str, label: Option<&str>) -> String {
+    match label {
+        Some(l) => s.replace("{label}", l),
+        None => s.to_owned(),
+    }
+}
+
 impl Metric {
     fn parse(s: &str) -> Option<Self> {
         Some(match s {
@@ -538,6 +546,8 @@ impl Validator<'_> {
         });
     }
 
+    // Over 100 lines: one arm per step kind, each a short run of checks
+    // that name their key; the two long kinds have methods of their own.
     fn step(
         &mut self,
         group: Group,
@@ -547,10 +557,7 @@ impl Validator<'_> {
         out: &mut Vec<Step>,
     ) -> Result<(), ConfigError> {
         let c = &self.c;
-        let subst = |s: &str| match label {
-            Some(l) => s.replace("{label}", l),
-            None => s.to_owned(),
-        };
+        let subst = |s: &str| with_label(s, label);
         let k = |field: &str| format!("{key}.{field}");
         let kind = match step {
             RawStep::Chamber {
@@ -668,287 +675,8 @@ impl Validator<'_> {
                     duration_s: self.duration(*duration_s, &k("duration_s"))?,
                 }
             }
-            RawStep::Measure {
-                name,
-                metric,
-                records,
-                averaging_s,
-                band,
-                low,
-                high,
-                unit,
-            } => {
-                let name = subst(name);
-                c.ensure(is_plain_text(&name), &k("name"), PLAIN_TEXT)?;
-                let metric = Metric::parse(metric).ok_or_else(|| {
-                    self.src.invalid(
-                        &k("metric"),
-                        format!(
-                            "{metric:?} is not a metric; expected bias_stability, drift_pp, \
-                             compensated_drift_pp, self_heating, mean_bias, \
-                             temperature_sensitivity, temperature_rate_sensitivity, \
-                             scale_factor, scale_factor_nonlinearity, scale_factor_asymmetry, \
-                             scale_factor_temperature, dead_band, threshold, axis_misalignment, \
-                             bias_repeatability, warm_up_time, power_steady or power_peak"
-                        ),
-                    )
-                })?;
-                c.ensure(
-                    !self.measures.contains(&name),
-                    &k("name"),
-                    &format!("measurement {name:?} is already used"),
-                )?;
-                self.measures.insert(name.clone());
-                // `PREFIX*` names every earlier record whose label starts so.
-                let mut named: Vec<String> = Vec::new();
-                for r in records.iter().map(|r| subst(r)) {
-                    match r.strip_suffix('*') {
-                        Some(prefix) => {
-                            let found: Vec<String> = self
-                                .records
-                                .order
-                                .iter()
-                                .filter(|l| l.starts_with(prefix))
-                                .cloned()
-                                .collect();
-                            c.ensure(
-                                !found.is_empty(),
-                                &k("records"),
-                                &format!("{r:?} matches no earlier record"),
-                            )?;
-                            named.extend(found);
-                        }
-                        None => named.push(r),
-                    }
-                }
-                let records = named;
-                c.ensure(
-                    !records.is_empty(),
-                    &k("records"),
-                    "must name at least one record",
-                )?;
-                for r in &records {
-                    c.ensure(
-                        self.records.set.contains(r),
-                        &k("records"),
-                        &format!("names record {r:?}, which no earlier record step makes"),
-                    )?;
-                }
-                let averaging_s = match (metric.needs_averaging(), averaging_s) {
-                    (true, Some(a)) => c.within(*a, 0.01, MAX_STEP_S, &k("averaging_s"))?,
-                    (true, None) => {
-                        return Err(self
-                            .src
-                            .invalid(key, "needs averaging_s (s) for this metric"));
-                    }
-                    (false, _) => 0.0,
-                };
-                let band = match (metric == Metric::WarmUpTime, band) {
-                    (true, Some(b)) => Some(c.within(*b, 1e-6, 1e6, &k("band"))?),
-                    (true, None) => {
-                        return Err(self.src.invalid(
-                            key,
-                            "needs band (deg/h) for a warm-up time: how close to its settled value the averaged rate must stay",
-                        ));
-                    }
-                    (false, Some(_)) => {
-                        return Err(self.src.invalid(&k("band"), "is only for warm_up_time"));
-                    }
-                    (false, None) => None,
-                };
-                if metric == Metric::WarmUpTime {
-                    c.ensure(
-                        records.len() == 1,
-                        &k("records"),
-                        "must name one record, made from a turn-on",
-                    )?;
-                }
-                if metric == Metric::BiasRepeatability {
-                    c.ensure(
-                        records.len() >= 2,
-                        &k("records"),
-                        "must name two or more records, one after each turn-on",
-                    )?;
-                }
-                for (v, f) in [(low, "low"), (high, "high")] {
-                    if let Some(v) = v {
-                        c.finite(*v, &k(f))?;
-                    }
-                }
-                if let (Some(lo), Some(hi)) = (low, high) {
-                    c.ensure(lo <= hi, &k("low"), "must not be above high")?;
-                }
-                c.ensure(
-                    low.is_some() || high.is_some(),
-                    key,
-                    "needs a limit: low, high or both",
-                )?;
-                c.ensure(
-                    !unit.trim().is_empty(),
-                    &k("unit"),
-                    "must name the unit, e.g. \"deg/h\"",
-                )?;
-                StepKind::Measure(Measure {
-                    name,
-                    metric,
-                    records,
-                    averaging_s,
-                    band,
-                    low: *low,
-                    high: *high,
-                    unit: unit.clone(),
-                })
-            }
-            RawStep::Rate {
-                label: l,
-                rate_dps,
-                rate_dph,
-                axis,
-                duration_s,
-                revolutions,
-                settle_s,
-                acc_dps2,
-                keep_turning,
-            } => {
-                let l = subst(l);
-                self.records.claim(c, &l, &k("label"))?;
-                let rate_dps = &match (rate_dps, rate_dph) {
-                    (Some(r), None) => *r,
-                    (None, Some(r)) => *r / 3600.0,
-                    _ => {
-                        return Err(self
-                            .src
-                            .invalid(key, "needs exactly one of `rate_dps` or `rate_dph`"));
-                    }
-                };
-                let rate_key = if rate_dph.is_some() {
-                    k("rate_dph")
-                } else {
-                    k("rate_dps")
-                };
-                let inner = match axis.as_deref() {
-                    None | Some("inner") => true,
-                    Some("outer") => false,
-                    Some(other) => {
-                        return Err(self.src.invalid(
-                            &k("axis"),
-                            format!("{other:?} is not an axis; expected \"inner\" or \"outer\""),
-                        ));
-                    }
-                };
-                let Some((max_rate, _)) = self.bench.limits.rate_mode() else {
-                    return Err(self.src.invalid(
-                        &rate_key,
-                        "this bench's table has no rate mode: its bench file gives no limits.table_rate_mode_max_dps",
-                    ));
-                };
-                c.ensure(
-                    rate_dps.is_finite() && rate_dps.abs() <= max_rate,
-                    &rate_key,
-                    &format!(
-                        "{} deg/s is beyond the table's rate-mode limit of {max_rate} deg/s (limits.table_rate_mode_max_dps)",
-                        crate::config::num(*rate_dps)
-                    ),
-                )?;
-                let duration = match (duration_s, revolutions) {
-                    (Some(d), None) => self.duration(*d, &k("duration_s"))?,
-                    (None, Some(n)) => {
-                        c.ensure(
-                            *n >= 1.0 && n.fract() == 0.0 && *n <= 1e6,
-                            &k("revolutions"),
-                            "must be a whole number of revolutions, at least 1",
-                        )?;
-                        c.ensure(
-                            *rate_dps != 0.0,
-                            &k("revolutions"),
-                            "a rate of 0 deg/s makes no revolutions; give duration_s",
-                        )?;
-                        self.duration(n * 360.0 / rate_dps.abs(), &k("revolutions"))?
-                    }
-                    _ => {
-                        return Err(self
-                            .src
-                            .invalid(key, "needs exactly one of `duration_s` or `revolutions`"));
-                    }
-                };
-                let settle = settle_s.unwrap_or(2.0);
-                c.within(settle, 0.0, 3600.0, &k("settle_s"))?;
-                let mut ramp_s = 0.0;
-                if let (Some(a), Some((_, max_acc))) = (acc_dps2, self.bench.limits.rate_mode()) {
-                    c.ensure(
-                        a.is_finite() && *a > 0.0 && *a <= max_acc,
-                        &k("acc_dps2"),
-                        &format!(
-                            "{} deg/s^2 is beyond the table's rate-mode acceleration (0 < acc <= {max_acc} deg/s^2, limits.table_rate_mode_max_acc_dps2)",
-                            crate::config::num(*a)
-                        ),
-                    )?;
-                    // Up to the rate (from rest or another rate, at most
-                    // twice it) and back: bounded as a wait is.
-                    ramp_s = 2.0 * rate_dps.abs() / a;
-                    c.ensure(
-                        ramp_s <= MAX_STEP_S,
-                        &k("acc_dps2"),
-                        &format!(
-                            "{} deg/s^2 ramps to {} deg/s in {} s, beyond {MAX_STEP_S} s (7 days); give a larger acceleration",
-                            crate::config::num(*a),
-                            crate::config::num(*rate_dps),
-                            crate::config::num(ramp_s / 2.0)
-                        ),
-                    )?;
-                }
-                c.ensure(
-                    2.0 * ramp_s + settle + duration <= MAX_STEP_S,
-                    key,
-                    &format!(
-                        "takes {} s with its ramps, settling and record, beyond {MAX_STEP_S} s (7 days)",
-                        crate::config::num(2.0 * ramp_s + settle + duration)
-                    ),
-                )?;
-                // Turn, record, come to rest: three plain steps (a record is
-                // a record wherever it is taken: replay, resume and health
-                // treat it as any other).
-                let line = self.line(key);
-                let mut steps = vec![
-                    (
-                        format!("{key}.turn"),
-                        StepKind::Turn {
-                            inner,
-                            rate_dps: *rate_dps,
-                            settle_s: settle,
-                            acc_dps2: *acc_dps2,
-                        },
-                    ),
-                    (
-                        // `is_rate_record_key` knows this suffix.
-                        format!("{key}.record"),
-                        StepKind::Record {
-                            label: l.clone(),
-                            duration_s: duration,
-                        },
-                    ),
-                ];
-                if !keep_turning.unwrap_or(false) {
-                    steps.push((
-                        format!("{key}.rest"),
-                        StepKind::Turn {
-                            inner,
-                            rate_dps: 0.0,
-                            settle_s: 0.0,
-                            acc_dps2: *acc_dps2,
-                        },
-                    ));
-                }
-                for (sub, kind) in steps {
-                    out.push(Step {
-                        group,
-                        key: sub,
-                        line,
-                        kind,
-                    });
-                }
-                return Ok(());
-            }
+            RawStep::Measure { .. } => self.measure_step(key, step, label)?,
+            RawStep::Rate { .. } => return self.rate_step(group, out, key, step, label),
             RawStep::Note { text } => StepKind::Note { text: subst(text) },
             RawStep::Prompt { text } => StepKind::Prompt { text: subst(text) },
             RawStep::Repeat { positions, steps } => {
@@ -978,6 +706,319 @@ impl Validator<'_> {
             }
         };
         self.push(out, group, key, kind);
+        Ok(())
+    }
+
+    /// A `measure` step: the metric, its records (`PREFIX*` expanded), averaging, band and limits.
+    /// (Over 100 lines: one check after another, each naming its key.)
+    fn measure_step(
+        &mut self,
+        key: &str,
+        step: &RawStep,
+        label: Option<&str>,
+    ) -> Result<StepKind, ConfigError> {
+        let c = &self.c;
+        let subst = |s: &str| with_label(s, label);
+        let k = |field: &str| format!("{key}.{field}");
+        let RawStep::Measure {
+            name,
+            metric,
+            records,
+            averaging_s,
+            band,
+            low,
+            high,
+            unit,
+        } = step
+        else {
+            return Err(self.src.invalid(key, "is not a measure step"));
+        };
+        let name = subst(name);
+        c.ensure(is_plain_text(&name), &k("name"), PLAIN_TEXT)?;
+        let metric = Metric::parse(metric).ok_or_else(|| {
+            self.src.invalid(
+                &k("metric"),
+                format!(
+                    "{metric:?} is not a metric; expected bias_stability, drift_pp, \
+                     compensated_drift_pp, self_heating, mean_bias, \
+                     temperature_sensitivity, temperature_rate_sensitivity, \
+                     scale_factor, scale_factor_nonlinearity, scale_factor_asymmetry, \
+                     scale_factor_temperature, dead_band, threshold, axis_misalignment, \
+                     bias_repeatability, warm_up_time, power_steady or power_peak"
+                ),
+            )
+        })?;
+        c.ensure(
+            !self.measures.contains(&name),
+            &k("name"),
+            &format!("measurement {name:?} is already used"),
+        )?;
+        self.measures.insert(name.clone());
+        // `PREFIX*` names every earlier record whose label starts so.
+        let mut named: Vec<String> = Vec::new();
+        for r in records.iter().map(|r| subst(r)) {
+            match r.strip_suffix('*') {
+                Some(prefix) => {
+                    let found: Vec<String> = self
+                        .records
+                        .order
+                        .iter()
+                        .filter(|l| l.starts_with(prefix))
+                        .cloned()
+                        .collect();
+                    c.ensure(
+                        !found.is_empty(),
+                        &k("records"),
+                        &format!("{r:?} matches no earlier record"),
+                    )?;
+                    named.extend(found);
+                }
+                None => named.push(r),
+            }
+        }
+        let records = named;
+        c.ensure(
+            !records.is_empty(),
+            &k("records"),
+            "must name at least one record",
+        )?;
+        for r in &records {
+            c.ensure(
+                self.records.set.contains(r),
+                &k("records"),
+                &format!("names record {r:?}, which no earlier record step makes"),
+            )?;
+        }
+        let averaging_s = match (metric.needs_averaging(), averaging_s) {
+            (true, Some(a)) => c.within(*a, 0.01, MAX_STEP_S, &k("averaging_s"))?,
+            (true, None) => {
+                return Err(self
+                    .src
+                    .invalid(key, "needs averaging_s (s) for this metric"));
+            }
+            (false, _) => 0.0,
+        };
+        let band = match (metric == Metric::WarmUpTime, band) {
+            (true, Some(b)) => Some(c.within(*b, 1e-6, 1e6, &k("band"))?),
+            (true, None) => {
+                return Err(self.src.invalid(
+                    key,
+                    "needs band (deg/h) for a warm-up time: how close to its settled value the averaged rate must stay",
+                ));
+            }
+            (false, Some(_)) => {
+                return Err(self.src.invalid(&k("band"), "is only for warm_up_time"));
+            }
+            (false, None) => None,
+        };
+        if metric == Metric::WarmUpTime {
+            c.ensure(
+                records.len() == 1,
+                &k("records"),
+                "must name one record, made from a turn-on",
+            )?;
+        }
+        if metric == Metric::BiasRepeatability {
+            c.ensure(
+                records.len() >= 2,
+                &k("records"),
+                "must name two or more records, one after each turn-on",
+            )?;
+        }
+        for (v, f) in [(low, "low"), (high, "high")] {
+            if let Some(v) = v {
+                c.finite(*v, &k(f))?;
+            }
+        }
+        if let (Some(lo), Some(hi)) = (low, high) {
+            c.ensure(lo <= hi, &k("low"), "must not be above high")?;
+        }
+        c.ensure(
+            low.is_some() || high.is_some(),
+            key,
+            "needs a limit: low, high or both",
+        )?;
+        c.ensure(
+            !unit.trim().is_empty(),
+            &k("unit"),
+            "must name the unit, e.g. \"deg/h\"",
+        )?;
+        Ok(StepKind::Measure(Measure {
+            name,
+            metric,
+            records,
+            averaging_s,
+            band,
+            low: *low,
+            high: *high,
+            unit: unit.clone(),
+        }))
+    }
+
+    /// A `rate` step: the turn it starts, its settle and record, and the stop unless it keeps turning.
+    /// (Over 100 lines: its keys' checks, then the three to four steps it makes.)
+    fn rate_step(
+        &mut self,
+        group: Group,
+        out: &mut Vec<Step>,
+        key: &str,
+        step: &RawStep,
+        label: Option<&str>,
+    ) -> Result<(), ConfigError> {
+        let c = &self.c;
+        let subst = |s: &str| with_label(s, label);
+        let k = |field: &str| format!("{key}.{field}");
+        let RawStep::Rate {
+            label: l,
+            rate_dps,
+            rate_dph,
+            axis,
+            duration_s,
+            revolutions,
+            settle_s,
+            acc_dps2,
+            keep_turning,
+        } = step
+        else {
+            return Err(self.src.invalid(key, "is not a rate step"));
+        };
+        let l = subst(l);
+        self.records.claim(c, &l, &k("label"))?;
+        let rate_dps = &match (rate_dps, rate_dph) {
+            (Some(r), None) => *r,
+            (None, Some(r)) => *r / 3600.0,
+            _ => {
+                return Err(self
+                    .src
+                    .invalid(key, "needs exactly one of `rate_dps` or `rate_dph`"));
+            }
+        };
+        let rate_key = if rate_dph.is_some() {
+            k("rate_dph")
+        } else {
+            k("rate_dps")
+        };
+        let inner = match axis.as_deref() {
+            None | Some("inner") => true,
+            Some("outer") => false,
+            Some(other) => {
+                return Err(self.src.invalid(
+                    &k("axis"),
+                    format!("{other:?} is not an axis; expected \"inner\" or \"outer\""),
+                ));
+            }
+        };
+        let Some((max_rate, _)) = self.bench.limits.rate_mode() else {
+            return Err(self.src.invalid(
+                &rate_key,
+                "this bench's table has no rate mode: its bench file gives no limits.table_rate_mode_max_dps",
+            ));
+        };
+        c.ensure(
+            rate_dps.is_finite() && rate_dps.abs() <= max_rate,
+            &rate_key,
+            &format!(
+                "{} deg/s is beyond the table's rate-mode limit of {max_rate} deg/s (limits.table_rate_mode_max_dps)",
+                crate::config::num(*rate_dps)
+            ),
+        )?;
+        let duration = match (duration_s, revolutions) {
+            (Some(d), None) => self.duration(*d, &k("duration_s"))?,
+            (None, Some(n)) => {
+                c.ensure(
+                    *n >= 1.0 && n.fract() == 0.0 && *n <= 1e6,
+                    &k("revolutions"),
+                    "must be a whole number of revolutions, at least 1",
+                )?;
+                c.ensure(
+                    *rate_dps != 0.0,
+                    &k("revolutions"),
+                    "a rate of 0 deg/s makes no revolutions; give duration_s",
+                )?;
+                self.duration(n * 360.0 / rate_dps.abs(), &k("revolutions"))?
+            }
+            _ => {
+                return Err(self
+                    .src
+                    .invalid(key, "needs exactly one of `duration_s` or `revolutions`"));
+            }
+        };
+        let settle = settle_s.unwrap_or(2.0);
+        c.within(settle, 0.0, 3600.0, &k("settle_s"))?;
+        let mut ramp_s = 0.0;
+        if let (Some(a), Some((_, max_acc))) = (acc_dps2, self.bench.limits.rate_mode()) {
+            c.ensure(
+                a.is_finite() && *a > 0.0 && *a <= max_acc,
+                &k("acc_dps2"),
+                &format!(
+                    "{} deg/s^2 is beyond the table's rate-mode acceleration (0 < acc <= {max_acc} deg/s^2, limits.table_rate_mode_max_acc_dps2)",
+                    crate::config::num(*a)
+                ),
+            )?;
+            // Up to the rate (from rest or another rate, at most
+            // twice it) and back: bounded as a wait is.
+            ramp_s = 2.0 * rate_dps.abs() / a;
+            c.ensure(
+                ramp_s <= MAX_STEP_S,
+                &k("acc_dps2"),
+                &format!(
+                    "{} deg/s^2 ramps to {} deg/s in {} s, beyond {MAX_STEP_S} s (7 days); give a larger acceleration",
+                    crate::config::num(*a),
+                    crate::config::num(*rate_dps),
+                    crate::config::num(ramp_s / 2.0)
+                ),
+            )?;
+        }
+        c.ensure(
+            2.0 * ramp_s + settle + duration <= MAX_STEP_S,
+            key,
+            &format!(
+                "takes {} s with its ramps, settling and record, beyond {MAX_STEP_S} s (7 days)",
+                crate::config::num(2.0 * ramp_s + settle + duration)
+            ),
+        )?;
+        // Turn, record, come to rest: three plain steps (a record is
+        // a record wherever it is taken: replay, resume and health
+        // treat it as any other).
+        let line = self.line(key);
+        let mut steps = vec![
+            (
+                format!("{key}.turn"),
+                StepKind::Turn {
+                    inner,
+                    rate_dps: *rate_dps,
+                    settle_s: settle,
+                    acc_dps2: *acc_dps2,
+                },
+            ),
+            (
+                // `is_rate_record_key` knows this suffix.
+                format!("{key}.record"),
+                StepKind::Record {
+                    label: l.clone(),
+                    duration_s: duration,
+                },
+            ),
+        ];
+        if !keep_turning.unwrap_or(false) {
+            steps.push((
+                format!("{key}.rest"),
+                StepKind::Turn {
+                    inner,
+                    rate_dps: 0.0,
+                    settle_s: 0.0,
+                    acc_dps2: *acc_dps2,
+                },
+            ));
+        }
+        for (sub, kind) in steps {
+            out.push(Step {
+                group,
+                key: sub,
+                line,
+                kind,
+            });
+        }
         Ok(())
     }
 
