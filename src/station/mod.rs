@@ -390,7 +390,11 @@ impl Station {
             ..RunView::default()
         };
         self.shared.update(|b| {
-            b.run = Some(view);
+            if let Some(done) = b.run.replace(view)
+                && !done.dir.is_empty()
+            {
+                b.earlier.insert(done.number, done.dir);
+            }
             b.samples.clear();
             b.answered = 0;
         });
@@ -504,12 +508,14 @@ impl Station {
     /// A file of run `number`'s directory: its report page or its log.
     fn run_file(&self, number: u64, name: &str) -> Result<PathBuf, Refused> {
         let b = self.shared.lock();
-        let run = b
+        let dir = b
             .run
             .as_ref()
             .filter(|r| r.number == number && !r.dir.is_empty())
+            .map(|r| r.dir.as_str())
+            .or_else(|| b.earlier.get(&number).map(String::as_str))
             .ok_or_else(|| Refused::NotFound(format!("no run {number} here")))?;
-        let path = Path::new(&run.dir).join(name);
+        let path = Path::new(dir).join(name);
         // A regular file of the run directory itself: a link planted there
         // (to a key, to another bench's data) is never followed.
         let regular = std::fs::symlink_metadata(&path).is_ok_and(|m| m.file_type().is_file());
@@ -574,6 +580,7 @@ pub fn router(station: Arc<Station>) -> Router {
         .route("/api/state", get(snapshot))
         .route("/api/events", get(events))
         .route("/api/history", get(history))
+        .route("/api/report", get(stored_report))
         .route("/api/start", post(start))
         .route("/api/abort", post(abort))
         .route("/api/answer", post(answer))
@@ -606,10 +613,15 @@ struct Snapshot {
     sample_unix_ms: i64,
     /// The live Foxglove stream's URL, if there is one.
     live_url: Option<String>,
+    /// The bench as named to the operator (`embedded` or its file).
+    bench: String,
+    /// True when the bench is simulated (the embedded twin, or every
+    /// device `sim://`): no hardware moves.
+    simulated: bool,
 }
 
-fn snapshot_of(shared: &Shared, from: usize) -> Snapshot {
-    let b = shared.lock();
+fn snapshot_of(station: &Station, from: usize) -> Snapshot {
+    let b = station.shared.lock();
     let from = from.min(b.samples.len());
     Snapshot {
         version: b.version,
@@ -618,6 +630,8 @@ fn snapshot_of(shared: &Shared, from: usize) -> Snapshot {
         samples: b.samples[from..].to_vec(),
         sample_unix_ms: b.sample_unix_ms,
         live_url: b.live_url.clone(),
+        bench: station.cfg.bench_label.clone(),
+        simulated: station.cfg.bench.is_embedded(),
     }
 }
 
@@ -625,7 +639,7 @@ async fn snapshot(State(s): St, headers: HeaderMap, Query(q): Query<TokenQuery>)
     if let Err(e) = s.check_token(&headers, q.token.as_deref()) {
         return e.into_response();
     }
-    axum::Json(snapshot_of(&s.shared, 0)).into_response()
+    axum::Json(snapshot_of(&s, 0)).into_response()
 }
 
 /// Server-sent events: the whole run first, then what changed, at most
@@ -665,7 +679,7 @@ async fn events(State(s): St, headers: HeaderMap, Query(q): Query<TokenQuery>) -
             c.run = number;
             c.sent_samples = 0;
         }
-        let snap = snapshot_of(&c.station.shared, c.sent_samples);
+        let snap = snapshot_of(&c.station, c.sent_samples);
         c.sent_samples = snap.from + snap.samples.len();
         let event = Event::default()
             .event("state")
@@ -695,6 +709,62 @@ async fn history(State(s): St, headers: HeaderMap, Query(q): Query<HistoryQuery>
     match found {
         Ok(Ok(v)) => axum::Json(v).into_response(),
         Ok(Err(e)) => Refused::NotFound(e).into_response(),
+        Err(e) => Refused::Bad(e.to_string()).into_response(),
+    }
+}
+
+/// A stored run's report request.
+#[derive(Debug, Deserialize)]
+struct ReportQuery {
+    run: String,
+    token: Option<String>,
+}
+
+/// The report page of a run the results store knows (a unit history's
+/// row), from its log's directory, when that directory is one of this
+/// station's run directories: the store names the file, the station's
+/// runs directory bounds what it serves.
+async fn stored_report(State(s): St, headers: HeaderMap, Query(q): Query<ReportQuery>) -> Response {
+    if let Err(e) = s.check_token(&headers, q.token.as_deref()) {
+        return e.into_response();
+    }
+    let store = s.cfg.store.clone();
+    let runs = s.cfg.runs.clone();
+    let found = tokio::task::spawn_blocking(move || -> Result<Vec<u8>, Refused> {
+        let not_found = |why: String| Refused::NotFound(why);
+        let mut st = crate::results::Store::open(&store)
+            .map_err(|e| not_found(e.to_string()))?
+            .ok_or_else(|| not_found("no results store (--db none)".into()))?;
+        let detail = st.show(&q.run).map_err(|e| not_found(e.to_string()))?;
+        let log = detail
+            .fields
+            .iter()
+            .find(|(k, _)| k == "log_path")
+            .map(|(_, v)| PathBuf::from(v))
+            .unwrap_or_default();
+        let page = log.with_file_name("report.html");
+        let inside = match (
+            log.parent().map(std::fs::canonicalize),
+            std::fs::canonicalize(&runs),
+        ) {
+            (Some(Ok(dir)), Ok(runs)) => dir.starts_with(runs),
+            _ => false,
+        };
+        let regular = std::fs::symlink_metadata(&page).is_ok_and(|m| m.file_type().is_file());
+        if !(inside && regular) {
+            return Err(not_found(format!(
+                "run {} has no report in this station's runs directory",
+                q.run
+            )));
+        }
+        std::fs::read(&page).map_err(|e| not_found(e.to_string()))
+    })
+    .await;
+    match found {
+        Ok(Ok(bytes)) => {
+            ([(header::CONTENT_TYPE, "text/html; charset=utf-8")], bytes).into_response()
+        }
+        Ok(Err(e)) => e.into_response(),
         Err(e) => Refused::Bad(e.to_string()).into_response(),
     }
 }

@@ -142,6 +142,9 @@ pub struct Board {
     pub sample_unix_ms: i64,
     /// Where runs are published live for Foxglove (`ws://...`), if they are.
     pub live_url: Option<String>,
+    /// The directories of the runs this station ran before the current
+    /// one, by number: their files stay reachable.
+    pub earlier: std::collections::BTreeMap<u64, String>,
 }
 
 /// The board behind a lock, with a wake-up for the run waiting on a

@@ -5,10 +5,14 @@ driven over WebDriver (selenium, Debian's chromium-driver).
 
 URL is the one `gyrobench station` prints (with its token). Runs the smoke
 procedure: types the serial and the operator (Enter, as a barcode scanner
-sends), ticks the checklist, starts, sees the steps advance and the prompt,
-reloads mid-run (the same state comes back), opens a second browser (it sees
-the same run), answers the prompt, sees PASS and the report; then starts
-again and aborts at the prompt: cleanup runs and the verdict is ABORTED.
+sends), ticks the checklist, starts (the form empties for the next unit),
+sees the bench named as simulated, the current step beside the status, the
+steps advance and the prompt, reloads mid-run (the same state comes back),
+opens a second browser (it sees the same run), answers the prompt, sees
+PASS, the Abort button greyed, the unit's history refreshed with a link to
+the report, and the report; then starts again and aborts at the prompt:
+cleanup runs, the verdict is ABORTED, and the first run's report is still
+served.
 Exits non-zero with the step that failed.
 """
 
@@ -73,9 +77,18 @@ def main():
 
         start_smoke(a, "RL16-0042")
         wait(a, "the run's steps", lambda d: len(d.find_elements(By.CSS_SELECTOR, "#steps li")) >= 5)
+        # The form is empty for the next unit: no serial, nothing ticked.
+        wait(a, "the serial field emptied by the start", lambda d: d.find_element(By.ID, "serial").get_attribute("value") == "")
+        assert not any(c.is_selected() for c in a.find_elements(By.CSS_SELECTOR, "#checklist input")), "the checklist stayed ticked"
+        bench = text_of(a, "#bench")
+        assert "embedded" in bench and "simulated" in bench, bench
         wait(a, "the prompt", ec.visibility_of_element_located((By.ID, "prompt")))
         assert "connector" in text_of(a, "#prompt-text"), text_of(a, "#prompt-text")
         steps_before = text_of(a, "#steps li.current")
+        now = text_of(a, "#now")
+        assert now.startswith("Now: step ") and steps_before in now, f"{now!r} against {steps_before!r}"
+        assert a.find_element(By.ID, "now").location["y"] < a.find_element(By.ID, "c-rate").location["y"], "the current step sits below the charts"
+        enabled_bg = a.find_element(By.ID, "abort").value_of_css_property("background-color")
 
         # Reload mid-run: the same state comes back.
         a.refresh()
@@ -96,12 +109,22 @@ def main():
         assert len(rows) == 2, f"{len(rows)} measurements"
         assert all(r.find_elements(By.CSS_SELECTOR, "td.pass") for r in rows)
         assert a.find_elements(By.CSS_SELECTOR, "#steps li.done")
+        abort = a.find_element(By.ID, "abort")
+        assert not abort.is_enabled(), "Abort enabled after the run"
+        disabled_bg = abort.value_of_css_property("background-color")
+        assert disabled_bg != enabled_bg, f"Abort looks the same disabled ({disabled_bg}) as enabled"
+        assert not a.find_element(By.ID, "now").is_displayed(), "a current step after the run"
+        # The unit's history refreshed by the run's end, linking its report.
+        wait(a, "the unit's history with this run", lambda d: d.find_elements(By.CSS_SELECTOR, "#history tr td.pass"))
+        stored = a.find_element(By.CSS_SELECTOR, "#history tr td a").get_attribute("href")
         supply = text_of(a, "#supply")
         assert supply.startswith("Unit's supply: 15.00 V, 0.550 A (8.25 W), output on"), supply
         report = a.find_element(By.ID, "report-link").get_attribute("href")
         a.get(report)
         wait(a, "the report page", lambda d: "PASS" in d.find_element(By.CSS_SELECTOR, ".verdict").text)
-        a.back()
+        a.get(stored)
+        wait(a, "the report from the unit's history", lambda d: "PASS" in d.find_element(By.CSS_SELECTOR, ".verdict").text)
+        a.get(url)
 
         # Abort at the prompt: confirmed, cleanup, ABORTED.
         start_smoke(a, "RL16-0043")
@@ -112,7 +135,10 @@ def main():
         wait(a, "ABORTED", lambda d: d.find_elements(By.CSS_SELECTOR, ".verdict.aborted"))
         assert "Bench left" in text_of(a, "#verdict-box"), text_of(a, "#verdict-box")
         assert "cleanup" in text_of(a, "#events"), text_of(a, "#events")
-        print("station page: start refused without a serial, prompt, reload, second browser, PASS, the unit's supply, report, abort: ok")
+        # The first run's report is still served.
+        a.get(report)
+        wait(a, "the first run's report after a second run", lambda d: "PASS" in d.find_element(By.CSS_SELECTOR, ".verdict").text)
+        print("station page: start refused without a serial, an empty form after a start, the bench named, the current step by the status, prompt, reload, second browser, PASS, Abort greyed, the history's report link, the unit's supply, report, abort, an earlier report kept: ok")
     finally:
         a.quit()
         b.quit()
