@@ -387,7 +387,7 @@ fn render_measurements(ms: &[MeasurementRow]) -> String {
             m.unit,
             lim(m.low),
             lim(m.high),
-            m.outcome.to_uppercase()
+            m.outcome.as_str().to_uppercase()
         ));
     }
     s

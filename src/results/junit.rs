@@ -6,6 +6,7 @@ use quick_xml::Writer;
 use quick_xml::events::{BytesDecl, BytesText, Event};
 
 use super::query::{MeasurementRow, RunRow};
+use crate::sequencer::measure::MeasureOutcome;
 
 fn num(v: Option<f64>) -> String {
     v.map_or(String::new(), |v| format!("{v}"))
@@ -23,9 +24,16 @@ pub fn junit(runs: &[(RunRow, Vec<MeasurementRow>)]) -> std::io::Result<String> 
     let runs = &safe_rows(runs);
     let mut w = Writer::new_with_indent(Vec::new(), b' ', 2);
     w.write_event(Event::Decl(BytesDecl::new("1.0", Some("UTF-8"), None)))?;
-    let failures = |ms: &[MeasurementRow]| ms.iter().filter(|m| m.outcome == "fail").count();
+    let failures = |ms: &[MeasurementRow]| {
+        ms.iter()
+            .filter(|m| m.outcome == MeasureOutcome::Fail)
+            .count()
+    };
     let errors = |r: &RunRow, ms: &[MeasurementRow]| {
-        ms.iter().filter(|m| m.outcome == "error").count() + usize::from(run_error(r).is_some())
+        ms.iter()
+            .filter(|m| m.outcome == MeasureOutcome::Error)
+            .count()
+            + usize::from(run_error(r).is_some())
     };
     let tests = |r: &RunRow, ms: &[MeasurementRow]| ms.len() + usize::from(run_error(r).is_some());
     let total_tests: usize = runs.iter().map(|(r, ms)| tests(r, ms)).sum();
@@ -93,17 +101,17 @@ pub fn junit(runs: &[(RunRow, Vec<MeasurementRow>)]) -> std::io::Result<String> 
                                     format!("; {}", m.note)
                                 }
                             );
-                            match m.outcome.as_str() {
-                                "pass" => {
+                            match m.outcome {
+                                MeasureOutcome::Pass => {
                                     el.write_empty()?;
                                 }
                                 outcome => {
-                                    let (tag, kind) = if outcome == "error" {
+                                    let (tag, kind) = if outcome == MeasureOutcome::Error {
                                         ("error", "not judged")
                                     } else {
                                         ("failure", "outside limits")
                                     };
-                                    let message = if outcome == "error" {
+                                    let message = if outcome == MeasureOutcome::Error {
                                         format!("{} not judged: {}", m.name, m.note)
                                     } else {
                                         format!(
@@ -176,7 +184,6 @@ fn safe_rows(runs: &[(RunRow, Vec<MeasurementRow>)]) -> Vec<(RunRow, Vec<Measure
                     m.run = p(&m.run);
                     m.measurement.name = p(&m.measurement.name);
                     m.measurement.unit = p(&m.measurement.unit);
-                    m.measurement.outcome = p(&m.measurement.outcome);
                     m.measurement.step = p(&m.measurement.step);
                     m.measurement.note = p(&m.measurement.note);
                     m
@@ -244,7 +251,7 @@ pub fn csv(runs: &[(RunRow, Vec<MeasurementRow>)]) -> Result<String, csv::Error>
                 &m.unit,
                 &num(m.low),
                 &num(m.high),
-                &m.outcome,
+                m.outcome.as_str(),
                 &m.step,
                 &m.note,
             ])?;
@@ -289,7 +296,7 @@ mod tests {
                 unit: "deg/h".into(),
                 low: None,
                 high: Some(0.5),
-                outcome: "fail".into(),
+                outcome: MeasureOutcome::Fail,
                 step: "main.1".into(),
                 note: "<&>".into(),
             },

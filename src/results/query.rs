@@ -7,6 +7,7 @@ use serde::Serialize;
 use super::sql::{Row, Value};
 use super::{Store, StoreError};
 use crate::runlog::meta::ResultMeasurement;
+use crate::sequencer::measure::MeasureOutcome;
 
 /// Which runs.
 #[derive(Debug, Clone, Default)]
@@ -256,7 +257,8 @@ pub(super) fn measurement_of(r: &Row) -> ResultMeasurement {
         unit: r.text("unit"),
         low: r.real("low"),
         high: r.real("high"),
-        outcome: r.text("outcome"),
+        // A word no build writes reads as not judged, never as a pass.
+        outcome: MeasureOutcome::parse(&r.text("outcome")).unwrap_or(MeasureOutcome::Error),
         step: r.text("step"),
         note: r.text("note"),
     }

@@ -11,6 +11,7 @@ use serde::Serialize;
 
 use super::{Store, StoreError};
 use crate::runlog::meta::{ResultMeasurement, ResultMeta};
+use crate::sequencer::measure::MeasureOutcome;
 
 /// What is wrong with a stored part or a log.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
@@ -62,8 +63,8 @@ pub struct Verification {
 
 /// How the figures are compared: a value, its outcome and its name, in
 /// order.
-fn key(m: &ResultMeasurement) -> (String, Option<u64>, String) {
-    (m.name.clone(), m.value.map(f64::to_bits), m.outcome.clone())
+fn key(m: &ResultMeasurement) -> (String, Option<u64>, MeasureOutcome) {
+    (m.name.clone(), m.value.map(f64::to_bits), m.outcome)
 }
 
 fn first_difference(stored: &[ResultMeasurement], log: &[ResultMeasurement]) -> Option<String> {
@@ -81,9 +82,9 @@ fn first_difference(stored: &[ResultMeasurement], log: &[ResultMeasurement]) -> 
                 "{}: the store has {} ({}), the log {} ({})",
                 a.name,
                 v(a),
-                a.outcome,
+                a.outcome.as_str(),
                 v(b),
-                b.outcome
+                b.outcome.as_str()
             )
         })
     })
@@ -315,7 +316,7 @@ mod tests {
             unit: "deg/h".into(),
             low: None,
             high: Some(0.05),
-            outcome: outcome.into(),
+            outcome: MeasureOutcome::parse(outcome).expect("a word of the three"),
             step: "main.1".into(),
             note: String::new(),
         }

@@ -331,8 +331,8 @@ pub struct ResultMeasurement {
     pub low: Option<f64>,
     /// Upper limit.
     pub high: Option<f64>,
-    /// `pass`, `fail` or `error`.
-    pub outcome: String,
+    /// The verdict (`pass`, `fail` or `error`).
+    pub outcome: crate::sequencer::measure::MeasureOutcome,
     /// Step key.
     pub step: String,
     /// How it was obtained, or why it could not be.
@@ -348,7 +348,7 @@ impl ResultMeasurement {
             unit: m.unit.clone(),
             low: m.low,
             high: m.high,
-            outcome: m.outcome.as_str().to_owned(),
+            outcome: m.outcome,
             step: m.step.clone(),
             note: m.note.clone(),
         }

@@ -324,8 +324,9 @@ impl TickSums {
     }
 }
 
-/// Verdict of one measurement.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+/// Verdict of one measurement (`pass`, `fail`, `error` in the report,
+/// the log's `result` record, the store and the station).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum MeasureOutcome {
     /// Within limits.
@@ -345,6 +346,13 @@ impl MeasureOutcome {
             Self::Fail => "fail",
             Self::Error => "error",
         }
+    }
+
+    /// The outcome a word names (`pass`, `fail`, `error`).
+    pub fn parse(word: &str) -> Option<Self> {
+        [Self::Pass, Self::Fail, Self::Error]
+            .into_iter()
+            .find(|o| o.as_str() == word)
     }
 }
 
@@ -756,6 +764,21 @@ mod tests {
     use crate::driver::{ChamberMode, ChamberReading, TableReading};
     use crate::geometry::{Orientation, TableAngles};
     use crate::sequencer::FrameRecord;
+
+    #[test]
+    fn a_measurement_outcome_has_one_word_in_json_text_and_the_store() {
+        for o in [
+            MeasureOutcome::Pass,
+            MeasureOutcome::Fail,
+            MeasureOutcome::Error,
+        ] {
+            let json = serde_json::to_string(&o).expect("JSON");
+            assert_eq!(json, format!("\"{}\"", o.as_str()));
+            assert_eq!(serde_json::from_str::<MeasureOutcome>(&json).ok(), Some(o));
+            assert_eq!(MeasureOutcome::parse(o.as_str()), Some(o));
+        }
+        assert_eq!(MeasureOutcome::parse("PASS"), None);
+    }
 
     #[test]
     fn a_records_power_runs_from_the_turn_on_before_it_to_its_end() {

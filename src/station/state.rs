@@ -33,8 +33,8 @@ pub struct MeasurementView {
     pub unit: String,
     /// `low..high`.
     pub limits: String,
-    /// `pass`, `fail` or `error`.
-    pub outcome: String,
+    /// The verdict (serialised `pass`, `fail` or `error`).
+    pub outcome: crate::sequencer::measure::MeasureOutcome,
 }
 
 /// A question the run waits on.
@@ -329,7 +329,7 @@ impl Progress for Reporter {
             std_error: m.std_error,
             unit: m.unit.clone(),
             limits: m.limits_text(),
-            outcome: m.outcome.as_str().to_owned(),
+            outcome: m.outcome,
         };
         self.shared.update(|b| {
             if let Some(run) = &mut b.run {
