@@ -153,7 +153,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     time("list: 50 newest failed acceptances", &mut |s| {
         s.list(&Filter {
             procedure: Some("acceptance".into()),
-            outcome: Some("fail".into()),
+            outcome: Some(gyrobench::results::RunState::Fail),
             limit: Some(50),
             latest_only: true,
             ..Filter::default()

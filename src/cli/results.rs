@@ -8,7 +8,7 @@ use clap::{Args, Subcommand};
 
 use super::{Outcome, Usage};
 use crate::results::query::{Filter, MeasurementRow, RunRow, Trend, UnitHistory};
-use crate::results::{Location, Store};
+use crate::results::{Location, RunState, Store};
 
 #[derive(Debug, Args)]
 pub struct StoreArgs {
@@ -50,14 +50,16 @@ pub struct FilterArgs {
 
 impl FilterArgs {
     fn filter(&self, latest_only: bool, limit: Option<usize>) -> Result<Filter> {
-        if let Some(o) = &self.outcome
-            && !["running", "pass", "fail", "error", "aborted", "reference"].contains(&o.as_str())
-        {
-            return Err(Usage(format!(
-                "--outcome {o:?}: expected running, pass, fail, error, aborted or reference"
-            ))
-            .into());
-        }
+        let outcome = match self.outcome.as_deref() {
+            None => None,
+            Some(o) => Some(RunState::parse(o).ok_or_else(|| {
+                let words: Vec<&str> = RunState::ALL.iter().map(|s| s.as_str()).collect();
+                Usage(format!(
+                    "--outcome {o:?}: expected one of {}",
+                    words.join(", ")
+                ))
+            })?),
+        };
         for (flag, v) in [("--since", &self.since), ("--until", &self.until)] {
             if let Some(v) = v
                 && !looks_like_a_time(v)
@@ -72,13 +74,12 @@ impl FilterArgs {
             serial: self.serial.clone(),
             dut_type: self.dut_type.clone(),
             procedure: self.procedure.clone(),
-            outcome: self.outcome.clone(),
+            outcome,
             bench: self.bench.clone(),
             since: self.since.clone(),
             until: self.until.clone(),
             latest_only,
-            include_reference: self.include_reference
-                || self.outcome.as_deref() == Some("reference"),
+            include_reference: self.include_reference || outcome == Some(RunState::Reference),
             limit,
         })
     }
@@ -371,7 +372,7 @@ pub fn render_list(rows: &[RunRow]) -> String {
             p(&r.serial),
             p(&r.procedure),
             p(&r.bench),
-            p(&r.outcome.to_uppercase())
+            p(&r.outcome.as_str().to_uppercase())
         ));
     }
     s
@@ -403,7 +404,7 @@ pub fn render_run(
     let p = crate::view::printable;
     let mut s = format!(
         "{}: {} on {} {} (run {}, part {}{})\n",
-        run.outcome.to_uppercase(),
+        run.outcome.as_str().to_uppercase(),
         p(&run.procedure),
         p(&run.dut_type),
         p(&run.serial),
@@ -437,7 +438,7 @@ pub fn render_run(
                 "    {} {} {}\n",
                 p.id,
                 p.started_utc,
-                p.outcome.to_uppercase()
+                p.outcome.as_str().to_uppercase()
             ));
         }
     }
@@ -453,7 +454,7 @@ pub fn render_unit(h: &UnitHistory) -> String {
             "{} {} {} {} ({})\n  by {} on bench {}, gyrobench {}; coefficients: {}{}\n",
             r.started_utc.get(..19).unwrap_or(&r.started_utc),
             p(&r.procedure),
-            r.outcome.to_uppercase(),
+            r.outcome.as_str().to_uppercase(),
             r.id,
             p(&r.bench),
             if r.operator.is_empty() {
@@ -547,7 +548,7 @@ mod tests {
             bench: "embedded".into(),
             station: "pc".into(),
             operator: "J.\u{7}Doe".into(),
-            outcome: "pass".into(),
+            outcome: crate::results::RunState::Pass,
             part: 1,
             latest: true,
             device_time_s: None,

@@ -170,7 +170,6 @@ fn safe_rows(runs: &[(RunRow, Vec<MeasurementRow>)]) -> Vec<(RunRow, Vec<Measure
                 bench: p(&r.bench),
                 station: p(&r.station),
                 operator: p(&r.operator),
-                outcome: p(&r.outcome),
                 error: r.error.as_deref().map(p),
                 slot: p(&r.slot),
                 bench_id: p(&r.bench_id),
@@ -195,14 +194,11 @@ fn safe_rows(runs: &[(RunRow, Vec<MeasurementRow>)]) -> Vec<(RunRow, Vec<Measure
 }
 
 fn run_error(r: &RunRow) -> Option<String> {
-    match r.outcome.as_str() {
-        "pass" | "fail" => None,
-        other => Some(
-            r.error
-                .clone()
-                .unwrap_or_else(|| format!("the run is {other}")),
-        ),
-    }
+    (!r.outcome.judged()).then(|| {
+        r.error
+            .clone()
+            .unwrap_or_else(|| format!("the run is {}", r.outcome.as_str()))
+    })
 }
 
 /// JUnit's timestamp: ISO 8601 without a zone (the common schema's form).
@@ -245,7 +241,7 @@ pub fn csv(runs: &[(RunRow, Vec<MeasurementRow>)]) -> Result<String, csv::Error>
                 &r.bench,
                 &r.station,
                 &r.operator,
-                &r.outcome,
+                r.outcome.as_str(),
                 &m.name,
                 &num(m.value),
                 &m.unit,
@@ -277,7 +273,7 @@ mod tests {
             bench: "embedded".into(),
             station: "pc".into(),
             operator: "J.\u{0}Doe".into(),
-            outcome: "fail".into(),
+            outcome: crate::results::RunState::Fail,
             part: 1,
             latest: true,
             device_time_s: Some(1.0),

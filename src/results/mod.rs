@@ -24,6 +24,71 @@ use std::path::{Path, PathBuf};
 
 use sql::Sql;
 
+/// Where a stored run part stands: running, ended with the run's outcome,
+/// or an imported run kept as a reference (never judged). Serialised, and
+/// stored, with the words the store has always held.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum RunState {
+    /// Begun, not (yet) ended: a run going on, or one killed before its end.
+    Running,
+    /// Every measurement within its limits.
+    Pass,
+    /// A measurement outside its limits.
+    Fail,
+    /// A device or data failure ended it.
+    Error,
+    /// The operator interrupted it.
+    Aborted,
+    /// An imported run: another bench's data, kept for comparison.
+    Reference,
+}
+
+impl RunState {
+    /// Every state, in the order the help lists them.
+    pub const ALL: [Self; 6] = [
+        Self::Running,
+        Self::Pass,
+        Self::Fail,
+        Self::Error,
+        Self::Aborted,
+        Self::Reference,
+    ];
+
+    /// The store's word.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Running => "running",
+            Self::Pass => "pass",
+            Self::Fail => "fail",
+            Self::Error => "error",
+            Self::Aborted => "aborted",
+            Self::Reference => "reference",
+        }
+    }
+
+    /// The state a word names.
+    pub fn parse(word: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|s| s.as_str() == word)
+    }
+
+    /// A run that ended so.
+    pub fn ended(o: crate::sequencer::Outcome) -> Self {
+        use crate::sequencer::Outcome;
+        match o {
+            Outcome::Pass => Self::Pass,
+            Outcome::Fail => Self::Fail,
+            Outcome::Error => Self::Error,
+            Outcome::Aborted => Self::Aborted,
+        }
+    }
+
+    /// True for a run judged PASS or FAIL.
+    pub fn judged(self) -> bool {
+        matches!(self, Self::Pass | Self::Fail)
+    }
+}
+
 /// What went wrong with the store.
 #[derive(Debug, thiserror::Error)]
 pub enum StoreError {
@@ -267,5 +332,21 @@ impl Store {
             }
         }
         done
+    }
+}
+
+#[cfg(test)]
+mod run_state_tests {
+    use super::RunState;
+
+    #[test]
+    fn a_run_state_is_the_stores_word_in_json_and_back() {
+        for s in RunState::ALL {
+            let json = serde_json::to_string(&s).expect("JSON");
+            assert_eq!(json, format!("\"{}\"", s.as_str()));
+            assert_eq!(RunState::parse(s.as_str()), Some(s));
+        }
+        assert_eq!(RunState::parse("passed"), None);
+        assert!(RunState::Pass.judged() && !RunState::Reference.judged());
     }
 }

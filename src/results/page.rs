@@ -6,6 +6,7 @@
 use std::path::Path;
 
 use super::query::{Trend, TrendPoint};
+use crate::sequencer::measure::MeasureOutcome;
 use crate::view::chart::{Link, Rule};
 use crate::view::{Chart, Marker, Series, esc, page};
 
@@ -39,7 +40,7 @@ pub fn trend_page(
         points
             .iter()
             .enumerate()
-            .filter(|(_, p)| (p.outcome == "pass") == pass)
+            .filter(|(_, p)| (p.outcome == MeasureOutcome::Pass) == pass)
             .map(|(i, p)| ((i + 1) as f64, p.value))
             .collect()
     };
@@ -106,7 +107,7 @@ pub fn trend_page(
             run = esc(&p.run),
             start = esc(&crate::view::utc_seconds(&p.started_utc)),
             v = crate::view::num(Some(p.value), 4),
-            o = esc(&p.outcome),
+            o = p.outcome.as_str(),
             word = esc(&outcome_word(p)),
         ));
     }
@@ -157,7 +158,7 @@ pub fn trend_page(
 
 /// `PASS`, `FAIL`, or `PASS (reference)` for an imported run's figure.
 fn outcome_word(p: &TrendPoint) -> String {
-    let w = p.outcome.to_uppercase();
+    let w = p.outcome.as_str().to_uppercase();
     if p.reference {
         format!("{w} (reference: imported)")
     } else {

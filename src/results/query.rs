@@ -5,7 +5,7 @@
 use serde::Serialize;
 
 use super::sql::{Row, Value};
-use super::{Store, StoreError};
+use super::{RunState, Store, StoreError};
 use crate::runlog::meta::ResultMeasurement;
 use crate::sequencer::measure::MeasureOutcome;
 
@@ -18,8 +18,8 @@ pub struct Filter {
     pub dut_type: Option<String>,
     /// Procedure name.
     pub procedure: Option<String>,
-    /// Outcome (`running`, `pass`, `fail`, `error`, `aborted`).
-    pub outcome: Option<String>,
+    /// Where the run stands.
+    pub outcome: Option<super::RunState>,
     /// Bench (as the run named it) or station (host).
     pub bench: Option<String>,
     /// Started at or after (UTC, RFC 3339 or a date).
@@ -60,7 +60,11 @@ impl Filter {
         add("u.serial = $?", &self.serial, &mut params);
         add("u.dut_type = $?", &self.dut_type, &mut params);
         add("r.procedure_name = $?", &self.procedure, &mut params);
-        add("ru.outcome = $?", &self.outcome, &mut params);
+        add(
+            "ru.outcome = $?",
+            &self.outcome.map(|o| o.as_str().to_owned()),
+            &mut params,
+        );
         add("(r.bench = $? OR r.station = $?)", &self.bench, &mut params);
         add("r.started_utc >= $?", &self.since, &mut params);
         add("r.started_utc < $?", &self.until, &mut params);
@@ -91,7 +95,7 @@ pub struct RunRow {
     /// Operator.
     pub operator: String,
     /// Outcome.
-    pub outcome: String,
+    pub outcome: RunState,
     /// Which part.
     pub part: i64,
     /// The run's latest part.
@@ -198,7 +202,8 @@ fn run_row(r: &Row) -> RunRow {
         bench: r.text("bench"),
         station: r.text("station"),
         operator: r.text("operator"),
-        outcome: r.text("outcome"),
+        // A word no build writes reads as an error, never as judged.
+        outcome: RunState::parse(&r.text("outcome")).unwrap_or(RunState::Error),
         part: r.int("part").unwrap_or(1),
         latest: r.int("latest") == Some(1),
         device_time_s: r.real("device_time_s"),
@@ -385,7 +390,7 @@ pub struct TrendPoint {
     /// The value.
     pub value: f64,
     /// `pass`, `fail` or `error`.
-    pub outcome: String,
+    pub outcome: MeasureOutcome,
     /// The run part's key.
     pub run: String,
     /// Its log (the report sits beside it).
@@ -708,7 +713,8 @@ impl Store {
                     started_utc: r.text("started_utc"),
                     serial: r.text("serial"),
                     value: r.real("value")?,
-                    outcome: r.text("outcome"),
+                    outcome: MeasureOutcome::parse(&r.text("outcome"))
+                        .unwrap_or(MeasureOutcome::Error),
                     run: r.text("id"),
                     log_path: r.text("log_path"),
                     reference: r.text("run_outcome") == "reference",
@@ -728,7 +734,7 @@ impl Store {
         let mut out = Vec::with_capacity(runs.len());
         for r in runs
             .into_iter()
-            .filter(|r| f.include_reference || r.outcome != "reference")
+            .filter(|r| f.include_reference || r.outcome != RunState::Reference)
         {
             let ms = self
                 .sql()

@@ -679,10 +679,16 @@ mod tests {
         let outcome = |id: &str| {
             rows.iter()
                 .find(|r| r.id == id)
-                .map(|r| (r.serial.clone(), r.outcome.clone()))
+                .map(|r| (r.serial.clone(), r.outcome))
         };
-        assert_eq!(outcome("r1.1"), Some(("RL16-0042".into(), "pass".into())));
-        assert_eq!(outcome("r2.1"), Some(("LAB-7".into(), "reference".into())));
+        assert_eq!(
+            outcome("r1.1"),
+            Some(("RL16-0042".into(), crate::results::RunState::Pass))
+        );
+        assert_eq!(
+            outcome("r2.1"),
+            Some(("LAB-7".into(), crate::results::RunState::Reference))
+        );
         let h = store.unit("RL16-0042").expect("history");
         assert_eq!(h.measurements.len(), 1, "measurements keep their unit");
         let t = store
