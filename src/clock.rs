@@ -57,12 +57,31 @@ impl VirtualClock {
         self.sleep_until(self.now_s() + dt_s);
     }
 
-    fn pace(&self, target_ns: u64) {
+    /// How long the wall must wait until this clock, paced, may read
+    /// `t_s` (none at full speed or when that time is already due). An
+    /// async caller awaits it (`tokio::time::sleep`) before
+    /// [`Clock::sleep_until`], which then moves the time without blocking.
+    pub fn wall_wait(&self, t_s: f64) -> Option<Duration> {
+        if !t_s.is_finite() {
+            return None;
+        }
+        let target = (t_s.max(0.0) * 1e9).round() as u64;
+        if target <= self.nanos.load(Ordering::Relaxed) {
+            return None;
+        }
+        let due = self.due(target)?;
+        due.checked_duration_since(Instant::now())
+            .filter(|d| !d.is_zero())
+    }
+
+    /// The wall instant virtual time `target_ns` is due at (none at full
+    /// speed).
+    fn due(&self, target_ns: u64) -> Option<Instant> {
         let Pacing::Factor(factor) = self.pacing else {
-            return;
+            return None;
         };
         if !(factor.is_finite() && factor > 0.0) {
-            return;
+            return None;
         }
         let (start, start_ns) = {
             let mut anchor = self.anchor.lock().unwrap_or_else(|p| p.into_inner());
@@ -73,9 +92,17 @@ impl VirtualClock {
         // Instant waits as long as one can (a year at a time), never panics.
         let wait = Duration::try_from_secs_f64(virtual_elapsed / factor)
             .unwrap_or(Duration::from_secs(365 * 86_400));
-        let due = start
-            .checked_add(wait)
-            .unwrap_or_else(|| Instant::now() + Duration::from_secs(365 * 86_400));
+        Some(
+            start
+                .checked_add(wait)
+                .unwrap_or_else(|| Instant::now() + Duration::from_secs(365 * 86_400)),
+        )
+    }
+
+    fn pace(&self, target_ns: u64) {
+        let Some(due) = self.due(target_ns) else {
+            return;
+        };
         let now = Instant::now();
         if due > now {
             std::thread::sleep(due - now);
@@ -191,6 +218,18 @@ pub fn time_it<T>(f: impl FnOnce() -> T) -> (T, f64) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_paced_clock_says_how_long_to_wait_and_a_free_one_never_waits() {
+        let paced = VirtualClock::new(Pacing::Factor(100.0));
+        let w = paced.wall_wait(10.0).expect("10 s at 100x: a wait");
+        assert!(
+            w > Duration::from_millis(80) && w <= Duration::from_millis(100),
+            "{w:?}"
+        );
+        assert_eq!(paced.wall_wait(0.0), None, "now is due");
+        assert_eq!(VirtualClock::new(Pacing::Max).wall_wait(10.0), None);
+    }
 
     #[test]
     fn virtual_clock_jumps_without_waiting_and_never_goes_back() {

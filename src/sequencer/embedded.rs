@@ -381,6 +381,10 @@ impl BenchIo for EmbeddedBench {
     async fn idle(&mut self, t_s: f64) -> Result<(ChamberReading, TableReading), DeviceError> {
         // A tripped interlock stops the table, it does not blind it.
         self.check(&["chamber"])?;
+        // Paced: wait on the runtime's timer, never block its thread.
+        if let Some(wait) = self.clock.wall_wait(t_s) {
+            tokio::time::sleep(wait).await;
+        }
         self.clock.sleep_until(t_s);
         self.run_to(t_s, |_| {});
         let st = self.state();
@@ -418,6 +422,10 @@ impl BenchIo for EmbeddedBench {
             "injected fault: a bug panics the run at {} s",
             self.twin.time_s()
         );
+        // Paced: wait on the runtime's timer, never block its thread.
+        if let Some(wait) = self.clock.wall_wait(t_s) {
+            tokio::time::sleep(wait).await;
+        }
         self.clock.sleep_until(t_s);
         tick.frames.clear();
         tick.t0_s = self.twin.time_s() + self.twin.frame_dt_s();
