@@ -1,10 +1,24 @@
 //! gyrobench: a hardware-in-the-loop test bench controller for ring laser
 //! gyroscopes.
 //!
-//! Layers, each depending only on those above it in this list:
-//! `clock` and `config` (time, TOML loading) <- `geometry` (frames, Earth
-//! rate, table kinematics) <- `twin` (the simulated gyro and bench) <-
-//! `analysis` (pure math) <- `cli`. See `ARCHITECTURE.md`.
+//! The modules are layered, each importing only those below it;
+//! `ARCHITECTURE.md` has the table, bottom layer first, and a test fails
+//! when an import runs against it. The entry types, by what a program
+//! does with gyrobench:
+//!
+//! - **Run a procedure**: read a [`Procedure`] against a [`BenchConfig`],
+//!   make a [`Plan`] ([`Plan::new`] and its `with_` methods), and
+//!   [`execute`] it into a run directory ([`Place`]): the sequencer drives
+//!   a [`BenchIo`] (the embedded twin of [`TwinConfig`], or the bench file's
+//!   devices), logs to MCAP and ends with a [`Finished`] run, its
+//!   [`Report`] and [`Outcome`].
+//! - **Read a log**: [`replay`] a `run.mcap` into the same report, or read
+//!   its messages with [`runlog::reader`].
+//! - **Query results**: open a [`Store`] at a [`Location`]; its rows carry
+//!   each run's [`RunState`] and each measurement's [`MeasureOutcome`].
+//! - **Simulate devices**: `sim` serves the chamber, table, gyro and supply
+//!   on their wire protocols; `protocol` holds the codecs drivers and
+//!   simulators share.
 
 pub mod analysis;
 pub mod bench;
@@ -32,6 +46,16 @@ pub mod transport;
 pub mod twin;
 pub mod unit;
 pub mod view;
+
+pub use bench::BenchConfig;
+pub use procedure::Procedure;
+pub use report::Report;
+pub use results::{Location, RunState, Store};
+pub use runlog::replay::replay;
+pub use sequencer::measure::MeasureOutcome;
+pub use sequencer::{BenchIo, Outcome};
+pub use session::{Finished, Place, Plan, execute};
+pub use twin::TwinConfig;
 
 /// What built this gyrobench: its version and the source revision (a git
 /// commit, `-dirty` when the sources differed from it; `build.rs`).
