@@ -323,6 +323,11 @@ pub const SETTLE_MARGIN_S: f64 = 120.0;
 /// within a few tenths of a second; a 1 s tick would never see it).
 pub const TURN_ON_WATCH_S: f64 = 1.0;
 
+/// Below this share of its current limit, a unit just switched on draws
+/// nothing: it has not started (ours: an RLG's converters draw from the
+/// moment they are powered; the RL-16 draws 55 % of its 1 A limit).
+pub const NO_DRAW_SHARE: f64 = 0.01;
+
 /// The tick while a turn-on is watched, s (50 readings a second; a real
 /// bench reads as fast as its instruments answer, at most this fast).
 pub const TURN_ON_TICK_S: f64 = 0.02;
@@ -805,7 +810,7 @@ impl Run<'_> {
                 }
             });
             if reached {
-                return Ok(());
+                return self.drawing(on, volts, limit_a);
             }
             if self.bench.now_s() > deadline {
                 let now = self.last.as_ref().and_then(|st| st.power);
@@ -825,6 +830,22 @@ impl Run<'_> {
                 )));
             }
         }
+    }
+
+    /// After a turn-on: a unit that draws no current has not started (a
+    /// voltage below its turn-on threshold, an open cable): the run stops
+    /// here, not hours later on records without frames.
+    fn drawing(&self, on: bool, volts: f64, limit_a: f64) -> Result<(), Stop> {
+        let Some(p) = self.last.as_ref().and_then(|st| st.power).filter(|_| on) else {
+            return Ok(());
+        };
+        if p.a >= NO_DRAW_SHARE * limit_a {
+            return Ok(());
+        }
+        Err(Stop::Data(format!(
+            "the unit draws no current at {volts} V ({:.4} A {TURN_ON_WATCH_S} s after switching on): it did not start; check the voltage against the unit's rating and its power cable",
+            p.a
+        )))
     }
 
     /// Compute a figure on the records so far and judge it.

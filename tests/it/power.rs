@@ -378,3 +378,67 @@ fn a_turn_on_cut_short_is_retaken_cold_on_resume() {
     }
     std::fs::remove_dir_all(&dir).expect("cleanup");
 }
+
+/// A unit that does not start (its supply set below its turn-on voltage,
+/// as a wrong setting or an open cable leaves it) draws no current: the
+/// run stops at that `power` step with the reason and the supply's reading,
+/// not hours later on records without frames, and the bench is left in
+/// its safe state with the output off.
+#[test]
+fn a_unit_that_draws_nothing_at_turn_on_stops_the_run_at_that_step() {
+    let dir = temp_dir("power-no-draw");
+    let procedure = write(
+        &dir,
+        "low.toml",
+        r#"[procedure]
+name = "low_voltage"
+dut_type = "RL-16"
+
+[[main]]
+action = "power"
+on = false
+
+[[main]]
+action = "wait"
+duration_s = 60.0
+
+[[main]]
+action = "power"
+on = true
+volts = 5.0
+
+[[main]]
+action = "record"
+label = "r"
+duration_s = 3600.0
+
+[[main]]
+action = "measure"
+name = "bias"
+metric = "mean_bias"
+records = ["r"]
+high = 10.0
+unit = "deg/h"
+"#,
+    );
+    let out_dir = dir.join("run");
+    let out = gyrobench(&["run", s(&procedure), "--out", s(&out_dir), "--db", "none"]);
+    assert_eq!(out.status.code(), Some(1), "{}", stderr(&out));
+    let report = json(&out_dir.join("report.json"));
+    let error = &report["error"];
+    assert_eq!(error["step"], "main.2", "{error}");
+    let message = error["message"].as_str().expect("a message");
+    assert!(
+        message.contains("the unit draws no current at 5 V") && message.contains("0.0000 A"),
+        "{message}"
+    );
+    assert!(
+        report["device_time_s"].as_f64().expect("device time") < 600.0,
+        "stopped at the turn-on, not after the record: {}",
+        report["device_time_s"]
+    );
+    let left = &report["bench_left"];
+    assert_eq!(left["verified"], true, "{left}");
+    assert_eq!(left["supply_on"], false, "{left}");
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
