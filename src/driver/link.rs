@@ -156,81 +156,64 @@ impl LineLink {
         judge: impl Fn(&str) -> Verdict<T>,
     ) -> Result<T, DeviceError> {
         let name = request_name(request);
-        let attempts = self.policy.attempts.max(1);
-        let mut last_problem: Option<String> = None;
+        let device = self.device.clone();
+        let policy = self.policy;
+        let mut a = Attempts::new(&device, &policy);
         let mut buf = Vec::new();
-        let mut drops = Drops::default();
-        let mut attempt = 0;
-        while attempt < attempts {
-            if attempt > 0 || drops.since.is_some() {
+        while a.left() {
+            if a.retrying() {
                 self.counters.retries += 1;
             }
-            let timeout = self.policy.timeout;
-            let io = self.ensure_open(&mut drops).await?;
-            Self::drain(io).await;
-            let sent = async {
-                io.get_mut().write_all(request).await?;
-                io.get_mut().flush().await
-            }
-            .await;
-            if let Err(e) = sent {
-                self.io = None;
-                drops
-                    .dropped(&self.device, self.policy.reconnect_window, e)
-                    .await?;
-                continue;
-            }
-            match tokio::time::timeout(timeout, read_line(io, &mut buf, MAX_REPLY)).await {
-                Err(_) => {
-                    attempt += 1;
-                    continue;
-                }
-                Ok(r) => {
-                    if let Err(e) = r.and_then(|open| {
-                        open.then_some(()).ok_or_else(|| {
-                            std::io::Error::new(
-                                std::io::ErrorKind::UnexpectedEof,
-                                "the device closed the connection",
-                            )
-                        })
-                    }) {
-                        self.io = None;
-                        drops
-                            .dropped(&self.device, self.policy.reconnect_window, e)
-                            .await?;
-                        continue;
-                    }
-                }
-            }
-            let line = String::from_utf8_lossy(&buf);
-            match judge(&line) {
-                Verdict::Ok(v) => return Ok(v),
-                Verdict::Refused(reason) => {
-                    return Err(DeviceError::Refused {
-                        device: self.device.clone(),
-                        request: name,
-                        reason,
-                    });
-                }
-                Verdict::Malformed(detail) => {
-                    last_problem = Some(detail);
-                    attempt += 1;
-                }
+            let t = self
+                .try_once(request, &mut buf, &judge, &mut a.drops)
+                .await?;
+            if let Some(v) = a.judge(t, &name).await? {
+                return Ok(v);
             }
         }
-        Err(match last_problem {
-            Some(detail) => DeviceError::Malformed {
-                device: self.device.clone(),
-                request: name,
-                detail,
-                attempts,
-            },
-            None => DeviceError::Timeout {
-                device: self.device.clone(),
-                request: name,
-                timeout_s: self.policy.timeout.as_secs_f64(),
-                attempts,
-            },
+        Err(a.spent(name))
+    }
+
+    /// One try of `request`: sent on the open link (reopened first if it
+    /// dropped), its reply line judged.
+    async fn try_once<T>(
+        &mut self,
+        request: &[u8],
+        buf: &mut Vec<u8>,
+        judge: &impl Fn(&str) -> Verdict<T>,
+        drops: &mut Drops,
+    ) -> Result<Try<T>, DeviceError> {
+        let timeout = self.policy.timeout;
+        let io = self.ensure_open(drops).await?;
+        Self::drain(io).await;
+        let sent = async {
+            io.get_mut().write_all(request).await?;
+            io.get_mut().flush().await
+        }
+        .await;
+        if let Err(e) = sent {
+            self.io = None;
+            return Ok(Try::Broken(e));
+        }
+        let open = match tokio::time::timeout(timeout, read_line(io, buf, MAX_REPLY)).await {
+            Err(_) => return Ok(Try::Late),
+            Ok(r) => r,
+        };
+        if let Err(e) = open.and_then(|open| {
+            open.then_some(()).ok_or_else(|| {
+                std::io::Error::new(
+                    std::io::ErrorKind::UnexpectedEof,
+                    "the device closed the connection",
+                )
+            })
+        }) {
+            self.io = None;
+            return Ok(Try::Broken(e));
+        }
+        Ok(match judge(&String::from_utf8_lossy(buf)) {
+            Verdict::Ok(v) => Try::Done(v),
+            Verdict::Refused(reason) => Try::Refused(reason),
+            Verdict::Malformed(detail) => Try::Again(Some(detail)),
         })
     }
 }
@@ -279,6 +262,111 @@ impl Drops {
     /// The link works again: the next drop starts a new outage.
     pub fn reset(&mut self) {
         *self = Self::default();
+    }
+}
+
+/// What one try of a request came to.
+#[derive(Debug)]
+pub enum Try<T> {
+    /// The answer.
+    Done(T),
+    /// The device refused the request: it is not tried again.
+    Refused(String),
+    /// A reply that cannot be used (garbled, cut, or the device busy):
+    /// another attempt, with what was wrong when there is something to say.
+    Again(Option<String>),
+    /// No reply within the timeout: another attempt.
+    Late,
+    /// The link broke: it is reopened (backoff, within the reconnect
+    /// window) without spending an attempt.
+    Broken(std::io::Error),
+}
+
+/// The retry policy applied to one request, the one loop every
+/// request/reply driver runs: `while a.left() { ... a.judge(try) ... }`,
+/// then `a.spent(request)`.
+#[derive(Debug)]
+pub struct Attempts<'a> {
+    device: &'a str,
+    policy: &'a RetryPolicy,
+    /// The drops of the link during this request (reopening waits on them).
+    pub drops: Drops,
+    attempt: u32,
+    last_problem: Option<String>,
+}
+
+impl<'a> Attempts<'a> {
+    /// A request to `device` under `policy`, not yet tried.
+    pub fn new(device: &'a str, policy: &'a RetryPolicy) -> Self {
+        Self {
+            device,
+            policy,
+            drops: Drops::default(),
+            attempt: 0,
+            last_problem: None,
+        }
+    }
+
+    /// True while attempts are left.
+    pub fn left(&self) -> bool {
+        self.attempt < self.policy.attempts.max(1)
+    }
+
+    /// True when this try is a retry (after a failed attempt or a drop):
+    /// the link's `retries` counts it.
+    pub fn retrying(&self) -> bool {
+        self.attempt > 0 || self.drops.since.is_some()
+    }
+
+    /// Take a try's result: the answer, none to try again, or the error
+    /// that ends the request (a refusal, or a link that stayed down past
+    /// its window).
+    pub async fn judge<T>(&mut self, t: Try<T>, request: &str) -> Result<Option<T>, DeviceError> {
+        match t {
+            Try::Done(v) => Ok(Some(v)),
+            Try::Refused(reason) => Err(DeviceError::Refused {
+                device: self.device.to_owned(),
+                request: request.to_owned(),
+                reason,
+            }),
+            Try::Again(problem) => {
+                if problem.is_some() {
+                    self.last_problem = problem;
+                }
+                self.attempt += 1;
+                Ok(None)
+            }
+            Try::Late => {
+                self.attempt += 1;
+                Ok(None)
+            }
+            Try::Broken(e) => {
+                self.drops
+                    .dropped(self.device, self.policy.reconnect_window, e)
+                    .await?;
+                Ok(None)
+            }
+        }
+    }
+
+    /// The error once every attempt is spent: the last unusable reply,
+    /// else the timeout.
+    pub fn spent(self, request: String) -> DeviceError {
+        let attempts = self.policy.attempts.max(1);
+        match self.last_problem {
+            Some(detail) => DeviceError::Malformed {
+                device: self.device.to_owned(),
+                request,
+                detail,
+                attempts,
+            },
+            None => DeviceError::Timeout {
+                device: self.device.to_owned(),
+                request,
+                timeout_s: self.policy.timeout.as_secs_f64(),
+                attempts,
+            },
+        }
     }
 }
 

@@ -7,7 +7,7 @@ use async_trait::async_trait;
 use tokio_modbus::client::{Context, Reader, Writer};
 use tokio_modbus::{ExceptionCode, Slave};
 
-use super::link::{Connector, LinkCounters, open_once};
+use super::link::{Attempts, Connector, LinkCounters, Try, open_once};
 use super::{Chamber, ChamberMode, ChamberReading, DeviceError, Identity, RetryPolicy};
 use crate::protocol::watlow::{self as w, decode_f32, encode_f32, mode};
 use crate::transport::BoxTransport;
@@ -69,81 +69,71 @@ impl WatlowChamber {
     }
 
     async fn op(&mut self, op: Op) -> Result<Vec<u16>, DeviceError> {
-        let attempts = self.policy.attempts.max(1);
-        let mut drops = super::link::Drops::default();
-        let mut attempt = 0;
-        while attempt < attempts {
-            if attempt > 0 {
+        let request = op.to_string();
+        let device = self.device.clone();
+        let policy = self.policy;
+        let mut a = Attempts::new(&device, &policy);
+        while a.left() {
+            if a.retrying() {
                 self.counters.retries += 1;
             }
-            if self.ctx.is_none() {
-                match open_once(&self.device, self.connector.as_ref()).await? {
-                    Ok(t) => {
-                        self.counters.reconnects += 1;
-                        self.ctx = Some(tokio_modbus::client::tcp::attach_slave(t, Slave(1)));
-                    }
-                    Err(e) => {
-                        drops
-                            .dropped(&self.device, self.policy.reconnect_window, e)
-                            .await?;
-                        continue;
-                    }
-                }
+            let t = self.try_once(&op).await?;
+            if let Some(words) = a.judge(t, &request).await? {
+                return Ok(words);
             }
-            let Some(ctx) = self.ctx.as_mut() else {
-                continue;
-            };
-            let call = async {
-                match &op {
-                    Op::Read(a, n) => ctx.read_holding_registers(*a, *n).await,
-                    Op::Write(a, v) if v.len() == 1 => ctx
-                        .write_single_register(*a, v[0])
-                        .await
-                        .map(|r| r.map(|()| Vec::new())),
-                    Op::Write(a, v) => ctx
-                        .write_multiple_registers(*a, v)
-                        .await
-                        .map(|r| r.map(|()| Vec::new())),
+        }
+        Err(a.spent(request))
+    }
+
+    /// One try of `op` on the Modbus session, reopened first if it was
+    /// dropped (a broken or late session is dropped: the next try opens a
+    /// fresh one).
+    async fn try_once(&mut self, op: &Op) -> Result<Try<Vec<u16>>, DeviceError> {
+        if self.ctx.is_none() {
+            match open_once(&self.device, self.connector.as_ref()).await? {
+                Ok(t) => {
+                    self.counters.reconnects += 1;
+                    self.ctx = Some(tokio_modbus::client::tcp::attach_slave(t, Slave(1)));
                 }
-            };
+                // Not reopened: a drop to wait out, like a broken session.
+                Err(e) => return Ok(Try::Broken(e)),
+            }
+        }
+        let Some(ctx) = self.ctx.as_mut() else {
+            return Ok(Try::Late);
+        };
+        let call = async {
+            match op {
+                Op::Read(a, n) => ctx.read_holding_registers(*a, *n).await,
+                Op::Write(a, v) if v.len() == 1 => ctx
+                    .write_single_register(*a, v[0])
+                    .await
+                    .map(|r| r.map(|()| Vec::new())),
+                Op::Write(a, v) => ctx
+                    .write_multiple_registers(*a, v)
+                    .await
+                    .map(|r| r.map(|()| Vec::new())),
+            }
+        };
+        Ok(
             match tokio::time::timeout(self.policy.timeout, call).await {
-                Ok(Ok(Ok(words))) => return Ok(words),
+                Ok(Ok(Ok(words))) => Try::Done(words),
                 Ok(Ok(Err(ExceptionCode::ServerDeviceBusy | ExceptionCode::Acknowledge))) => {
-                    attempt += 1;
-                    continue;
+                    Try::Again(None)
                 }
-                Ok(Ok(Err(e))) => {
-                    return Err(DeviceError::Refused {
-                        device: self.device.clone(),
-                        request: op.to_string(),
-                        reason: format!("Modbus exception {e:?}"),
-                    });
-                }
+                Ok(Ok(Err(e))) => Try::Refused(format!("Modbus exception {e:?}")),
                 // A broken session is reopened (with backoff, within the
                 // reconnect window); a late one too, and counts as an attempt.
                 Ok(Err(e)) => {
                     self.ctx = None;
-                    self.counters.retries += 1;
-                    drops
-                        .dropped(
-                            &self.device,
-                            self.policy.reconnect_window,
-                            std::io::Error::other(e),
-                        )
-                        .await?;
+                    Try::Broken(std::io::Error::other(e))
                 }
                 Err(_) => {
                     self.ctx = None;
-                    attempt += 1;
+                    Try::Late
                 }
-            }
-        }
-        Err(DeviceError::Timeout {
-            device: self.device.clone(),
-            request: op.to_string(),
-            timeout_s: self.policy.timeout.as_secs_f64(),
-            attempts,
-        })
+            },
+        )
     }
 
     async fn read_f32(&mut self, addr: u16, what: &'static str) -> Result<f64, DeviceError> {
