@@ -329,7 +329,8 @@ fn warm_up_chart(r: &Report, records: &Records) -> Option<String> {
 }
 
 /// The supply current against device time (60-reading means), with each
-/// turn-on's highest reading.
+/// turn-on's highest reading; none for a run that switched nothing on
+/// (the unit powered throughout: no turn-on to show).
 fn current_chart(records: &Records) -> Option<String> {
     let p = records.power();
     if p.len() < 2 {
@@ -358,24 +359,32 @@ fn current_chart(records: &Records) -> Option<String> {
         }
     }
     peaks.extend(best);
+    if peaks.is_empty() {
+        return None;
+    }
     let top = peaks.iter().chain(&means).map(|p| p.1).fold(0.0, f64::max);
-    let mut c = Chart::new("Supply current", "device time, h", "A")
+    let c = Chart::new("Supply current", "device time, h", "A")
         .y_range(0.0, 1.1 * top.max(0.01))
         .series(
-            Series::line(if block > 1 { "60 s means" } else { "readings" }, means)
-                .colour(0)
-                .width(1)
-                .gap(None),
-        );
-    if !peaks.is_empty() {
-        c = c.series(
+            Series::line(
+                if block > 1 {
+                    "means of 60 readings"
+                } else {
+                    "readings"
+                },
+                means,
+            )
+            .colour(0)
+            .width(1)
+            .gap(None),
+        )
+        .series(
             Series::points("highest reading of each turn-on", peaks, Marker::Triangle)
                 .marker(Marker::Triangle, 5)
                 .colour(1),
         );
-    }
     Some(
-        c.caption("The unit draws its current only while the supply's output is on; the highest reading of each turn-on is its inrush as read at 50 Hz in the turn-on's first second (the 60 s means smooth it away).")
+        c.caption("The unit draws its current only while the supply's output is on; the highest reading of each turn-on is its inrush as read at 50 Hz in the turn-on's first second (the means smooth it away).")
             .render(),
     )
 }

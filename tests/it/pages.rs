@@ -89,6 +89,12 @@ fn report_html_loads_in_chromium_with_every_chart_and_prints_on_a4() {
     assert!(expected >= 3, "{expected} charts in report.html");
     assert_eq!(dom.matches("<figure><svg").count(), expected, "{dom}");
     assert!(!dom.contains("not drawn"), "a chart failed to draw");
+    // The embedded bench powers the unit throughout: nothing was switched
+    // on, so there is no turn-on section.
+    assert!(
+        !dom.contains("Turn-ons"),
+        "a turn-on section without turn-ons"
+    );
     let body = dom.split("<body>").nth(1).expect("a body");
     assert!(
         body.trim_start().starts_with("<div class=\"verdict\""),
