@@ -1366,12 +1366,20 @@ fn inconclusive(
         e,
         Effect::GSensitivity | Effect::MagneticSensitivity | Effect::AxisMisalignment
     );
+    // A lab whose table turns the axis north (near the equator) repeats
+    // its own runs: the study's east-pointing poses are out of its reach.
+    let north = axis_horizontal_north(runs);
     let (procedure, what, device_time_h, text) = if positional {
-        let text = repeated_positions(crate::study::ORIENTATION_TOML, passes);
+        let (name, toml) = if north {
+            ("orientation_north", crate::study::ORIENTATION_NORTH_TOML)
+        } else {
+            ("orientation", crate::study::ORIENTATION_TOML)
+        };
+        let text = repeated_positions(toml, name, passes);
         (
-            "orientation".to_owned(),
+            name.to_owned(),
             format!(
-                "the study's nine positions at +20 degC, {passes} pass(es) after one warm-up (the effect lives between positions), diagnosed together with {} alone",
+                "the nine positions of procedures/{name}.toml at +20 degC, {passes} pass(es) after one warm-up (the effect lives between positions), diagnosed together with {} alone",
                 runs[r_star].name
             ),
             0.5 + passes as f64 * 9.0 * 25.0 / 60.0,
@@ -1380,6 +1388,11 @@ fn inconclusive(
     } else {
         let (name, toml) = if matches!(e, Effect::ScaleFactorTemperature | Effect::ThermalLag) {
             ("separating", crate::study::SEPARATING_TOML)
+        } else if north {
+            (
+                "thermal_cycle_north",
+                crate::study::THERMAL_CYCLE_NORTH_TOML,
+            )
         } else {
             ("thermal_cycle", crate::study::THERMAL_CYCLE_TOML)
         };
@@ -1567,9 +1580,29 @@ impl Simulation<'_> {
     }
 }
 
-/// The orientation procedure with its positions taken `passes` times (the
-/// labels of later passes suffixed `-p2`, `-p3`, ...).
-fn repeated_positions(toml: &str, passes: usize) -> String {
+/// Runs made with the axis horizontal along north-south rather than
+/// east-west (a lab near the equator, its table turned north): most of
+/// their horizontal records point the axis within 45 deg of north or
+/// south.
+fn axis_horizontal_north(runs: &[RunData]) -> bool {
+    let (mut north, mut east) = (0usize, 0usize);
+    for s in runs.iter().flat_map(|r| &r.samples) {
+        let o = &s.orientation;
+        if o.elevation_deg.abs() < 10.0 && s.table_rate_body_dph == nalgebra::Vector3::zeros() {
+            let az = o.azimuth_deg.to_radians();
+            if az.cos().abs() > az.sin().abs() {
+                north += 1;
+            } else {
+                east += 1;
+            }
+        }
+    }
+    north > east
+}
+
+/// An orientation procedure (`name`) with its positions taken `passes`
+/// times (the labels of later passes suffixed `-p2`, `-p3`, ...).
+fn repeated_positions(toml: &str, name: &str, passes: usize) -> String {
     let Some(start) = toml.find("positions = [\n") else {
         return toml.to_owned();
     };
@@ -1599,7 +1632,7 @@ fn repeated_positions(toml: &str, passes: usize) -> String {
         out.trim_end_matches('\n'),
         &toml[body_start + len..]
     )
-    .replace("name = \"orientation\"", "name = \"deciding-run\"")
+    .replace(&format!("name = \"{name}\""), "name = \"deciding-run\"")
 }
 
 /// The twin with the accepted effects enabled and fitted.
@@ -1697,4 +1730,62 @@ pub fn updated_twin(base: &TwinConfig, d: &Diagnosis) -> TwinConfig {
         }
     }
     t
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::bench::BenchConfig;
+    use crate::config::Source;
+    use crate::geometry::{Orientation, TableGeometry};
+    use crate::procedure::Procedure;
+    use data::Sample;
+
+    fn run_at(poses: &[(f64, f64)]) -> RunData {
+        RunData {
+            name: "r".into(),
+            site: crate::twin::TwinConfig::default_rl16().site,
+            samples: poses
+                .iter()
+                .map(|&(az, el)| Sample {
+                    iv: crate::analysis::series::Interval::default(),
+                    orientation: Orientation::new(az, el, 0.0),
+                    record: "x".into(),
+                    step: "main.1".into(),
+                    table_rate_body_dph: nalgebra::Vector3::zeros(),
+                })
+                .collect(),
+        }
+    }
+
+    #[test]
+    fn a_lab_with_the_axis_north_gets_its_own_procedures_as_the_deciding_run() {
+        // The study's horizontal poses point east and west; a table turned
+        // north points the axis north and south.
+        let east = run_at(&[(90.0, 0.0), (90.0, 0.0), (270.0, 0.0), (0.0, 90.0)]);
+        let north = run_at(&[(0.0, 0.0), (0.0, 0.0), (180.0, 0.0), (90.0, 90.0)]);
+        assert!(!axis_horizontal_north(std::slice::from_ref(&east)));
+        assert!(axis_horizontal_north(std::slice::from_ref(&north)));
+        // The repeated positions are a procedure its own table takes.
+        for (toml, name, geometry) in [
+            (
+                crate::study::ORIENTATION_TOML,
+                "orientation",
+                TableGeometry::study(),
+            ),
+            (
+                crate::study::ORIENTATION_NORTH_TOML,
+                "orientation_north",
+                TableGeometry::north(),
+            ),
+        ] {
+            let text = repeated_positions(toml, name, 2);
+            assert!(text.contains("name = \"deciding-run\""), "{name}");
+            assert!(text.contains("\"roll090-p2\""), "{name}");
+            let mut bench = BenchConfig::embedded();
+            bench.table.geometry = geometry;
+            let p = Procedure::from_source(&Source::from_text(name, &text), &bench);
+            assert!(p.is_ok(), "{name}: {p:?}");
+        }
+    }
 }

@@ -68,6 +68,8 @@ pub struct DeviceBench {
     /// Whether the gyro's silence is expected now: while the run has the
     /// unit's power off, and for a while after switching it on.
     quiet: Arc<Mutex<Quiet>>,
+    /// The table as the last tick ended (device time, angles, rates).
+    last_pose: Option<(f64, (TableAngles, TableAngles))>,
 }
 
 impl std::fmt::Debug for DeviceBench {
@@ -159,6 +161,7 @@ impl DeviceBench {
             temp_lsb_c: layout.temp_lsb_c,
             supply,
             quiet,
+            last_pose: None,
         })
     }
 
@@ -326,12 +329,23 @@ impl BenchIo for DeviceBench {
         self.last_air_c = chamber.air_c;
         let table = self.table.read().await?;
         let power = self.read_power().await?;
+        // The frames' mean reads the tick's mean of the turning reference:
+        // from the table read at the last tick's end (none after an idle
+        // wait) to this one.
+        let end = (table.angles, table.rates);
+        let reference_dph = match self.last_pose.replace((now, end)) {
+            Some((t, from)) => {
+                self.geometry
+                    .mean_kinematic_rate_dph(&self.site, from, end, now - t)
+            }
+            _ => self
+                .geometry
+                .kinematic_rate_dph(&self.site, table.angles, table.rates),
+        };
         tick.state = Some(BenchState {
             t_s: now,
             orientation: self.geometry.orientation(table.angles),
-            reference_dph: self
-                .geometry
-                .kinematic_rate_dph(&self.site, table.angles, table.rates),
+            reference_dph,
             in_position: at_rest_on(&table, self.commanded),
             chamber,
             table,
@@ -349,6 +363,7 @@ impl BenchIo for DeviceBench {
         &mut self,
         t_s: f64,
     ) -> Result<(crate::driver::ChamberReading, crate::driver::TableReading), DeviceError> {
+        self.last_pose = None;
         let wall = ((t_s - self.now_s()) / self.time_scale).max(0.0);
         tokio::time::sleep(Duration::try_from_secs_f64(wall).unwrap_or(Duration::ZERO)).await;
         // Frames that arrive now are not the run's: dropped, so the

@@ -435,6 +435,11 @@ impl BenchIo for EmbeddedBench {
         let stuck = self.active(Fault::GyroStuck);
         let saturated = self.active(Fault::GyroSaturated);
         let mut crc_errors = 0;
+        let from = (
+            self.twin.time_s(),
+            self.twin.table_angles(),
+            self.twin.table_rates(),
+        );
         self.run_to(t_s, |g| {
             if corrupt && g.index % 50 == 0 {
                 crc_errors += 1;
@@ -454,7 +459,16 @@ impl BenchIo for EmbeddedBench {
         });
         self.crc_errors += crc_errors;
         self.frames += tick.frames.len() as u64;
-        tick.state = Some(self.state());
+        let mut state = self.state();
+        // The frames' mean reads the interval's mean of the turning
+        // reference, not its end's.
+        state.reference_dph = self.geometry.mean_kinematic_rate_dph(
+            &self.site,
+            (from.1, from.2),
+            (state.table.angles, state.table.rates),
+            state.t_s - from.0,
+        );
+        tick.state = Some(state);
         Ok(())
     }
 
