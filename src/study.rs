@@ -331,7 +331,10 @@ mod tests {
             let c = g.try_inverse().unwrap() * h;
             // The 1 Hz noise leaves about 0.04 deg/h on each coefficient
             // of a record.
-            assert!(c.norm() < 0.2, "{r}: the bias follows the turning axis: {c}");
+            assert!(
+                c.norm() < 0.2,
+                "{r}: the bias follows the turning axis: {c}"
+            );
         }
     }
 }

@@ -437,11 +437,13 @@ fn run_randomized(a: &SelfcheckArgs) -> Result<Outcome> {
     )?;
     let l = &r.low_latitude;
     outln!(
-        "  of them {} low-latitude units (table turned north): named first {:.0} % at >= 2x, {:.0} % at 1.5x; pairs both named {:.0} %; false attribution {:.0} %; thermal layer within 0.05 degC {:.0} %",
+        "  of them {} low-latitude units (table turned north): named first {:.0} % at >= 2x ({:.0} % with the separating run), {:.0} % at 1.5x; pairs both named {:.0} % ({:.0} % with the separating run); false attribution {:.0} %; thermal layer within 0.05 degC {:.0} %",
         l.units,
         100.0 * l.named_at_2x,
+        100.0 * l.named_at_2x_with_separating_run,
         100.0 * l.named_at_1_5x,
         100.0 * l.pairs_both_named,
+        100.0 * l.pairs_both_named_with_separating_run,
         100.0 * l.false_attribution,
         100.0 * l.thermal_within_0_05
     )?;

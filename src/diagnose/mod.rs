@@ -1036,6 +1036,7 @@ pub(crate) fn diagnose_rate(runs: &[RunData], opts: &Options) -> Diagnosis {
     let mut effects: Vec<Accepted> = Vec::new();
     let mut accepted: Vec<Effect> = Vec::new();
     let mut confounded: Vec<Confounded> = Vec::new();
+    let mut tied_better: Vec<(Effect, Effect)> = Vec::new();
     let mut step_scores: Vec<(Effect, Scored, f64, f64)> = first;
     let mut outside: Vec<OutsideFound> = Vec::new();
     let mut held_outside = 0;
@@ -1110,7 +1111,22 @@ pub(crate) fn diagnose_rate(runs: &[RunData], opts: &Options) -> Diagnosis {
         // the accepted one would add nothing over it either, explains the
         // same thing with these runs: confounded with the accepted one.
         // (When the accepted one still adds over it, the runs tell them
-        // apart: a partial overlap, not a confound.)
+        // apart: a partial overlap, not a confound.) A tied candidate that
+        // explained more held out than the simpler one named, and is not
+        // named in the end, is reported so as well: the tie named the
+        // simpler, the runs did not.
+        tied_better.extend(
+            step_scores
+                .iter()
+                .filter(|x| {
+                    x.0 != e
+                        && x.3 < level
+                        && x.2 > MIN_GAIN * current.sse()
+                        && x.2 >= (1.0 - TIE) * top
+                        && x.2 > cand_gain
+                })
+                .map(|x| (e, x.0)),
+        );
         let rivals: Vec<(Effect, Scored)> = step_scores
             .iter()
             .filter(|(o, _, gain, p)| {
@@ -1166,6 +1182,17 @@ pub(crate) fn diagnose_rate(runs: &[RunData], opts: &Options) -> Diagnosis {
         outside.extend(found);
         current = os;
         step_scores = each_against(&data, &remaining, &current, &free);
+    }
+    for (e, o) in tied_better {
+        let known = confounded.iter().any(|c| {
+            c.effects.contains(&e.name().to_owned()) && c.effects.contains(&o.name().to_owned())
+        });
+        if !known && !accepted.contains(&o) {
+            confounded.push(Confounded {
+                effects: [e.name().into(), o.name().into()],
+                separate_with: separate_with(e, o),
+            });
+        }
     }
     confounded.extend(swaps(
         &data,

@@ -397,6 +397,11 @@ pub struct Subset {
     pub named_at_1_5x: f64,
     /// Both effects named (pairs).
     pub pairs_both_named: f64,
+    /// Named first at amplitude >= 2, with the separating run a confounded
+    /// pair names where there is one (as the engineer goes on).
+    pub named_at_2x_with_separating_run: f64,
+    /// Both effects named, with that run.
+    pub pairs_both_named_with_separating_run: f64,
     /// Anything accepted on null and outside units.
     pub false_attribution: f64,
     /// Thermal layer within 0.05 degC held out.
@@ -727,6 +732,8 @@ fn summarise(units: usize, seed: u64, trials: Vec<UnitTrial>) -> Randomized {
         named_at_2x: frac(&effects_at(v, |a| a >= 2.0), &named),
         named_at_1_5x: frac(&effects_at(v, |a| (a - 1.5).abs() < 1e-9), &named),
         pairs_both_named: frac(&pairs_in(v), &named),
+        named_at_2x_with_separating_run: frac(&effects_at(v, |a| a >= 2.0), &named_after),
+        pairs_both_named_with_separating_run: frac(&pairs_in(v), &named_after),
         false_attribution: frac(&quiet_in(v), &named),
         thermal_within_0_05: frac(v, &|t| t.thermal_gap_c <= 0.05),
     };
@@ -762,6 +769,35 @@ fn summarise(units: usize, seed: u64, trials: Vec<UnitTrial>) -> Randomized {
 mod tests {
     use super::*;
     use crate::twin::config::EffectTemperature;
+
+    #[test]
+    fn near_the_equator_a_magnetic_unit_named_misaligned_is_reported_confounded_and_separated() {
+        // Seed 122: a magnetic sensitivity at 3x near the equator, where
+        // the field and the Earth rate both lie close to north. The two
+        // static runs tie it with the simpler misalignment; the pair must
+        // be reported with the run that separates it, and that run (the
+        // outer axis turning across the axis pointing north) must name
+        // the field.
+        let seed = 122;
+        let case = &cases()[(seed as usize - 1) % cases().len()];
+        assert!(
+            matches!(case, Case::Effect { effect, .. } if effect == "magnetic_sensitivity"),
+            "{case:?}"
+        );
+        let t = trial(seed, case, true).expect("trial");
+        assert!(t.low_latitude);
+        let pair = |c: &[String; 2]| {
+            c.contains(&"axis_misalignment".to_owned())
+                && c.contains(&"magnetic_sensitivity".to_owned())
+        };
+        assert!(t.confounded.iter().any(pair), "{t:?}");
+        let after = t.with_separating_run.as_ref().expect("the separating run");
+        assert_eq!(
+            after.accepted.first().map(String::as_str),
+            Some("magnetic_sensitivity"),
+            "{after:?}"
+        );
+    }
 
     #[test]
     fn one_unit_in_four_is_a_low_latitude_labs_on_a_table_turned_north() {

@@ -57,6 +57,8 @@ ORIENT_POS = [
     ("tilt55", (90.0, 35.0, 0.0)),
 ]
 RAMP = 1.0 / 60.0  # degC/s
+# Seconds per position of the orientation run (the first 300 s unrecorded).
+POS_S = 1500
 
 
 def r_nb(yaw, pitch, roll):
@@ -92,7 +94,7 @@ def timeline(kind):
             t0 += n
         orients = [CYCLE_ORIENT]
     else:
-        total = 1800 + 9 * 1500
+        total = 1800 + 9 * POS_S
         sp = np.full(total, 20.0)
         labels = np.empty(total, dtype=object)
         ori = np.zeros(total, dtype=int)
@@ -100,9 +102,9 @@ def timeline(kind):
         t0 = 1800
         for i, (lab, o) in enumerate(ORIENT_POS):
             orients.append(o)
-            ori[t0:t0 + 1500] = i
-            labels[t0 + 300:t0 + 1500] = lab
-            t0 += 1500
+            ori[t0:t0 + POS_S] = i
+            labels[t0 + 300:t0 + POS_S] = lab
+            t0 += POS_S
     return np.arange(total, dtype=float), sp, ori, orients, labels
 
 
@@ -284,7 +286,22 @@ def main():
                     help="a lab near the equator: latitude within 12 deg of it, the thermal cycle with the "
                          "axis horizontal pointing north, the orientation run's four azimuths with the axis "
                          "horizontal, its four rolls about the axis pointing north, the 55 deg tilt toward north")
+    ap.add_argument("--long", action="store_true",
+                    help="runs of a lab's own length: a 9 h thermal cycle (longer soaks) and a 7 h "
+                         "orientation run (2600 s per position) instead of 6.5 h and 4.25 h")
     a = ap.parse_args()
+    if a.long:
+        global CYCLE, POS_S
+        CYCLE = [
+            ("self_heating", 1800.0, None),
+            ("ramp_to_hot", 2400.0, 50.0),
+            ("soak_hot", 5400.0, None),
+            ("ramp_to_cold", 5400.0, -40.0),
+            ("soak_cold", 7200.0, None),
+            ("ramp_back", 3600.0, 20.0),
+            ("soak_end", 6600.0, None),
+        ]
+        POS_S = 2600
     if a.low_latitude:
         global CYCLE_ORIENT, ORIENT_POS
         CYCLE_ORIENT = (0.0, 0.0, 0.0)
