@@ -244,7 +244,7 @@ pub fn run(args: DiagnoseArgs) -> Result<Outcome> {
                 "  {:<26} removes {:.0} % of it (bar {:.0} %), p {:.4} (bar {:.4})",
                 c.name,
                 100.0 * c.improvement,
-                100.0 * diagnose::MIN_GAIN,
+                100.0 * diagnose::THRESHOLDS.min_gain,
                 c.p_value,
                 c.level
             )?;

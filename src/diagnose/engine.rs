@@ -921,9 +921,6 @@ pub const NEWEY_WEST_LAGS: usize = 20;
 /// Lags of the long-run variance of the record means (ours: 2 records: a
 /// slow disturbance moves neighbouring records together).
 pub const BETWEEN_LAGS: usize = 2;
-/// A candidate that adds less than this to the degrees of freedom spent on
-/// the record means does not live between records: no between-record test.
-const MIN_BETWEEN_DOF: f64 = 0.05;
 
 /// Does `better` (base plus a candidate) beat `base`? Returns the held-out
 /// improvement (reduction of the held-out sum of squares of 60 s means)
@@ -950,7 +947,7 @@ pub fn improvement(base: &Scored, better: &Scored) -> (f64, f64) {
     let (g0, g1) = (record_means(base), record_means(better));
     let n_records = g1.len() as f64 / long_run_factor(&g1, BETWEEN_LAGS);
     let q_between = better.between_spent - base.between_spent;
-    let p_between = if q_between < MIN_BETWEEN_DOF {
+    let p_between = if q_between < super::THRESHOLDS.min_between_dof {
         1.0
     } else {
         f_test(

@@ -531,7 +531,7 @@ pub fn render(d: &Diagnosis) -> String {
         };
         confounded.push_str(&format!(
             "<h2>Inconclusive</h2><p>These improve the held-out gap but miss a bar: an effect must remove {:.0} % of the held-out sum of squares and its p-value be under the bar. {decide}</p>\n<table><tr><th>candidate</th><th>held-out gap with it</th><th>removes</th><th>p</th><th>bar</th></tr>{rows}</table>\n",
-            100.0 * super::MIN_GAIN
+            100.0 * super::THRESHOLDS.min_gain
         ));
     }
     let candidates: String = d

@@ -18,6 +18,7 @@ mod lsq;
 pub mod randomized;
 pub mod selfcheck;
 pub mod thermal;
+pub mod thresholds;
 
 use std::collections::BTreeMap;
 
@@ -27,24 +28,7 @@ use crate::twin::TwinConfig;
 use data::RunData;
 use engine::{Data, Scored, improvement, score, with_best_parameter};
 use library::{Effect, LIBRARY, MODEL4, pack_periodic, separate_with, unpack_periodic};
-
-/// Family-wise significance level of the selection (ours): each step
-/// tests every remaining candidate at 0.05 / their number (Bonferroni).
-pub const ALPHA: f64 = 0.05;
-/// Smallest held-out improvement an effect must bring, as a fraction of
-/// the held-out sum of squares (ours: an effect at 1.5x the noise removes
-/// about 70 %; on the tuning seeds 101..140 of the self-check, the best
-/// candidate removed at most 6 % in null runs and up to 18 % in runs with
-/// the periodic disturbance outside the library, so 25 % keeps them out;
-/// checked on fresh seeds, docs/diagnosis.md).
-pub const MIN_GAIN: f64 = 0.25;
-/// At most this many effects are added.
-pub const MAX_EFFECTS: usize = 3;
-/// Candidates whose held-out gains lie within this fraction of the best
-/// are tied (ours: measured by the self-check, where a case-temperature
-/// term, a short thermal lag and, axis up, a scale-factor drift come within
-/// 1-2 % of each other).
-pub const TIE: f64 = 0.03;
+pub use thresholds::{THRESHOLDS, Thresholds};
 
 /// `layers.thermal` / `layers.rate`.
 #[derive(Debug, Clone, Serialize)]
@@ -268,7 +252,7 @@ pub struct CandidateScore {
 }
 
 /// Between named and nothing: the best candidate improves the held-out
-/// gap but misses the significance bar (or [`MIN_GAIN`]).
+/// gap but misses the significance bar (or [`Thresholds::min_gain`]).
 #[derive(Debug, Clone, Serialize)]
 pub struct Inconclusive {
     /// Candidates that improve the held-out gap, best first.
@@ -357,6 +341,9 @@ pub struct Diagnosis {
     pub mixed_units: Vec<String>,
     /// How the held-out figures were made.
     pub protocol: String,
+    /// The decision thresholds it was made with, each documented with its
+    /// source in [`thresholds`].
+    pub thresholds: Thresholds,
     /// Both layers.
     pub layers: Layers,
     /// Segments ranked by their share of the reference's held-out gap.
@@ -632,35 +619,45 @@ fn periodicity(data: &Data<'_>, residual: &[f64]) -> (Option<f64>, f64) {
     best
 }
 
-/// Most disturbances outside the library held as nuisances (ours).
-const MAX_OUTSIDE: usize = 2;
+/// A candidate tried over a model: the effect, its fit, the held-out
+/// improvement it makes (the reduction of the held-out sum of squares) and
+/// that improvement's p-value ([`engine::improvement`]).
+#[derive(Debug, Clone)]
+struct Tried {
+    effect: Effect,
+    scored: Scored,
+    gain: f64,
+    p: f64,
+}
+
 /// Every candidate of `remaining` added to `over` (its parameter chosen
-/// jointly with the `free` ones) and scored held out: the effect, its fit,
-/// the held-out improvement and its p-value.
+/// jointly with the `free` ones) and scored held out.
 fn each_against(
     data: &Data<'_>,
     remaining: &[Effect],
     over: &Scored,
     free: &[Effect],
-) -> Vec<(Effect, Scored, f64, f64)> {
+) -> Vec<Tried> {
     remaining
         .iter()
         .map(|&e| {
             let s = score(data, &with_best_parameter(data, &over.model, e, free));
             let (gain, p) = improvement(over, &s);
-            (e, s, gain, p)
+            Tried {
+                effect: e,
+                scored: s,
+                gain,
+                p,
+            }
         })
         .collect()
 }
 
-/// Candidates a joint step pairs: the best by held-out gain alone.
-const JOINT_FROM: usize = 3;
-
 /// Two candidates that pass together where neither passes alone: each
-/// pair of the [`JOINT_FROM`] best (by held-out gain, positive) is refitted
+/// pair of the [`Thresholds::joint_from`] best (by held-out gain, positive) is refitted
 /// jointly with the model and tested as one step of both effects' terms,
 /// at a bar corrected for every pair the candidates left could form
-/// (0.05 / (k (k - 1) / 2)), and must clear `MIN_GAIN`; each of the two
+/// (0.05 / (k (k - 1) / 2)), and must clear `Thresholds::min_gain`; each of the two
 /// must improve on the other alone, held out, and the pair must add
 /// significantly over the best candidate alone (parsimony: two effects
 /// that together mimic a third, a g- and a magnetic sensitivity standing
@@ -670,7 +667,7 @@ const JOINT_FROM: usize = 3;
 /// by its better member.
 fn joint_step(
     data: &Data<'_>,
-    step_scores: &[(Effect, Scored, f64, f64)],
+    step_scores: &[Tried],
     current: &Scored,
     free: &[Effect],
 ) -> Option<((Effect, Effect), Scored, f64)> {
@@ -678,49 +675,42 @@ fn joint_step(
     if k < 2 {
         return None;
     }
-    let level = ALPHA / (k * (k - 1) / 2) as f64;
-    let mut top: Vec<&(Effect, Scored, f64, f64)> =
-        step_scores.iter().filter(|x| x.2 > 0.0).collect();
-    top.sort_by(|x, y| y.2.total_cmp(&x.2));
-    top.truncate(JOINT_FROM);
+    let level = THRESHOLDS.alpha / (k * (k - 1) / 2) as f64;
+    let mut top: Vec<&Tried> = step_scores.iter().filter(|x| x.gain > 0.0).collect();
+    top.sort_by(|x, y| y.gain.total_cmp(&x.gain));
+    top.truncate(THRESHOLDS.joint_from);
     let mut best: Option<((Effect, Effect), Scored, f64, f64)> = None;
     for (i, a) in top.iter().enumerate() {
         for b in &top[i + 1..] {
-            let model = with_best_parameter(data, &a.1.model, b.0, free);
+            let model = with_best_parameter(data, &a.scored.model, b.effect, free);
             let joint = score(data, &model);
             let (gain, p) = improvement(current, &joint);
-            let both_matter = joint.sse() < a.1.sse() && joint.sse() < b.1.sse();
+            let both_matter = joint.sse() < a.scored.sse() && joint.sse() < b.scored.sse();
             // Over the best single candidate (`top[0]`; within the pair
             // when it is `a`).
             let over_best = || {
-                let with_best = if a.0 == top[0].0 {
+                let with_best = if a.effect == top[0].effect {
                     joint.clone()
                 } else {
                     score(
                         data,
-                        &with_best_parameter(data, &joint.model, top[0].0, free),
+                        &with_best_parameter(data, &joint.model, top[0].effect, free),
                     )
                 };
-                improvement(&top[0].1, &with_best).1 < level
+                improvement(&top[0].scored, &with_best).1 < level
             };
             if p < level
-                && gain > MIN_GAIN * current.sse()
+                && gain > THRESHOLDS.min_gain * current.sse()
                 && both_matter
                 && best.as_ref().is_none_or(|x| gain > x.3)
                 && over_best()
             {
-                best = Some(((a.0, b.0), joint, p, gain));
+                best = Some(((a.effect, b.effect), joint, p, gain));
             }
         }
     }
     best.map(|(pair, joint, p, _)| (pair, joint, p))
 }
-
-/// A swap explains as much as the accepted effect when it leaves no more
-/// than this fraction of what the effect removed (held-out sum of squares)
-/// unexplained (ours: a fifth; two sets that are one at these positions
-/// differ by their parameter count and the noise).
-const SWAP_WITHIN: f64 = 0.2;
 
 /// Accepted effects that a candidate left out could stand in for, given
 /// the rest of the final model: the swap (the accepted effect out, the
@@ -733,12 +723,12 @@ const SWAP_WITHIN: f64 = 0.2;
 fn swaps(
     data: &Data<'_>,
     accepted: &[Effect],
-    step_scores: &[(Effect, Scored, f64, f64)],
+    step_scores: &[Tried],
     current: &Scored,
     free: &[Effect],
     known: &[Confounded],
 ) -> Vec<Confounded> {
-    let level = ALPHA / step_scores.len().max(1) as f64;
+    let level = THRESHOLDS.alpha / step_scores.len().max(1) as f64;
     let reported = |a: Effect, b: Effect, out: &[Confounded]| {
         known.iter().chain(out).any(|c| {
             let names = [a.name(), b.name()];
@@ -752,14 +742,14 @@ fn swaps(
         if contribution <= 0.0 {
             continue;
         }
-        for &(o, _, _, p) in step_scores {
+        for &Tried { effect: o, p, .. } in step_scores {
             // A candidate that adds over the final model is told apart.
             if reported(e, o, &out) || p < level {
                 continue;
             }
             let swapped = score(data, &with_best_parameter(data, &rest, o, free));
             // The swap must explain nearly what the accepted effect did...
-            if swapped.sse() - current.sse() > SWAP_WITHIN * contribution {
+            if swapped.sse() - current.sse() > THRESHOLDS.swap_within * contribution {
                 continue;
             }
             // ...and the accepted effect add nothing significant over it.
@@ -792,11 +782,7 @@ const STEP_APART_ROWS: usize = 1800;
 /// (by the cumulative-sum statistic, searched minute by minute away from
 /// record ends), or a linear drift through every run; scored held out with
 /// the model, as a candidate is.
-fn outside_rival(
-    data: &Data<'_>,
-    current: &Scored,
-    free: &[Effect],
-) -> Option<(Effect, Scored, f64, f64)> {
+fn outside_rival(data: &Data<'_>, current: &Scored, free: &[Effect]) -> Option<Tried> {
     let e = &current.residual;
     let n = e.len();
     // Every admissible jump with its cumulative-sum gain on the residual.
@@ -893,9 +879,14 @@ fn outside_rival(
             model.extend(&terms);
             let s = score(data, &engine::refit_free(data, &model, free));
             let (gain, p) = improvement(current, &s);
-            (terms[0].0, s, gain, p)
+            Tried {
+                effect: terms[0].0,
+                scored: s,
+                gain,
+                p,
+            }
         })
-        .max_by(|a, b| a.2.total_cmp(&b.2))
+        .max_by(|a, b| a.gain.total_cmp(&b.gain))
 }
 
 /// The reports of an outside disturbance held in `s` (its terms from the
@@ -951,7 +942,7 @@ fn outside_found(
 }
 
 /// The best outside disturbance over `current` when it passes the bars
-/// (p below `level`, a gain above `MIN_GAIN`) and explains at least as much
+/// (p below `level`, a gain above `Thresholds::min_gain`) and explains at least as much
 /// as `candidate` (a library effect and its gain, which is then not named):
 /// the model holding it and its reports.
 fn outside_instead(
@@ -961,9 +952,14 @@ fn outside_instead(
     level: f64,
     candidate: (Effect, f64),
 ) -> Option<(Scored, Vec<OutsideFound>)> {
-    let (o, os, gain, p) = outside_rival(data, current, free)?;
+    let Tried {
+        effect: o,
+        scored: os,
+        gain,
+        p,
+    } = outside_rival(data, current, free)?;
     // Written as the bars, so a NaN fails them.
-    let passes = p < level && gain > MIN_GAIN * current.sse() && gain >= candidate.1;
+    let passes = p < level && gain > THRESHOLDS.min_gain * current.sse() && gain >= candidate.1;
     if !passes {
         return None;
     }
@@ -978,9 +974,6 @@ fn outside_instead(
     );
     Some((os, found))
 }
-
-/// Share of the total above which a periodic fit is reported (ours).
-pub const PERIODIC_ABOVE: f64 = 0.3;
 
 /// Diagnose `runs` against the reference (model 4, or `opts.twin`).
 pub fn diagnose(runs: &[RunData], opts: &Options) -> Diagnosis {
@@ -1025,11 +1018,18 @@ pub(crate) fn diagnose_rate(runs: &[RunData], opts: &Options) -> Diagnosis {
     let first = each_against(&data, &remaining, &base, &free);
     let candidates = first
         .iter()
-        .map(|(e, s, _, p)| CandidateScore {
-            name: e.name().into(),
-            held_out_gap_dph: s.gap(),
-            p_value: *p,
-        })
+        .map(
+            |Tried {
+                 effect: e,
+                 scored: s,
+                 p,
+                 ..
+             }| CandidateScore {
+                name: e.name().into(),
+                held_out_gap_dph: s.gap(),
+                p_value: *p,
+            },
+        )
         .collect();
 
     let mut current = base.clone();
@@ -1037,33 +1037,40 @@ pub(crate) fn diagnose_rate(runs: &[RunData], opts: &Options) -> Diagnosis {
     let mut accepted: Vec<Effect> = Vec::new();
     let mut confounded: Vec<Confounded> = Vec::new();
     let mut tied_better: Vec<(Effect, Effect)> = Vec::new();
-    let mut step_scores: Vec<(Effect, Scored, f64, f64)> = first;
+    let mut step_scores: Vec<Tried> = first;
     let mut outside: Vec<OutsideFound> = Vec::new();
     let mut held_outside = 0;
-    while effects.len() < MAX_EFFECTS && !remaining.is_empty() {
-        let level = ALPHA / remaining.len() as f64;
-        let passing: Vec<&(Effect, Scored, f64, f64)> = step_scores
+    while effects.len() < THRESHOLDS.max_effects && !remaining.is_empty() {
+        let level = THRESHOLDS.alpha / remaining.len() as f64;
+        let passing: Vec<&Tried> = step_scores
             .iter()
-            .filter(|(_, _, gain, p)| *p < level && *gain > MIN_GAIN * current.sse())
+            .filter(|x| x.p < level && x.gain > THRESHOLDS.min_gain * current.sse())
             .collect();
-        let top = passing.iter().map(|x| x.2).fold(0.0, f64::max);
-        // Tied candidates (within TIE of the best gain) are the same
+        let top = passing.iter().map(|x| x.gain).fold(0.0, f64::max);
+        // Tied candidates (within THRESHOLDS.tie of the best gain) are the same
         // explanation with these runs: name the simplest, and among the
         // simplest the one that explains more (the pair is reported below
         // when neither adds over the other).
         let best = passing
             .iter()
-            .filter(|x| x.2 >= (1.0 - TIE) * top)
+            .filter(|x| x.gain >= (1.0 - THRESHOLDS.tie) * top)
             .min_by(|a, b| {
-                a.0.complexity()
-                    .cmp(&b.0.complexity())
-                    .then(b.2.total_cmp(&a.2))
+                a.effect
+                    .complexity()
+                    .cmp(&b.effect.complexity())
+                    .then(b.gain.total_cmp(&a.gain))
             })
             .map(|x| (*x).clone());
-        let Some((e, s, cand_gain, p)) = best else {
+        let Some(Tried {
+            effect: e,
+            scored: s,
+            gain: cand_gain,
+            p,
+        }) = best
+        else {
             // No candidate passes alone: two effects that act together
             // (and partly cancel) may still pass jointly.
-            if effects.len() + 2 > MAX_EFFECTS {
+            if effects.len() + 2 > THRESHOLDS.max_effects {
                 break;
             }
             let Some(((a, b), joint, p)) = joint_step(&data, &step_scores, &current, &free) else {
@@ -1071,17 +1078,21 @@ pub(crate) fn diagnose_rate(runs: &[RunData], opts: &Options) -> Diagnosis {
             };
             // The pair is weighed against a disturbance outside the library
             // as a single candidate is.
-            if outside_rival(&data, &current, &free).is_some_and(|(_, _, ogain, op)| {
-                op < level
-                    && ogain > MIN_GAIN * current.sse()
-                    && ogain >= current.sse() - joint.sse()
-            }) {
+            if outside_rival(&data, &current, &free).is_some_and(
+                |Tried {
+                     gain: ogain, p: op, ..
+                 }| {
+                    op < level
+                        && ogain > THRESHOLDS.min_gain * current.sse()
+                        && ogain >= current.sse() - joint.sse()
+                },
+            ) {
                 break;
             }
             let first = step_scores
                 .iter()
-                .find(|x| x.0 == a)
-                .map_or(current.gap(), |x| x.1.gap());
+                .find(|x| x.effect == a)
+                .map_or(current.gap(), |x| x.scored.gap());
             for (x, before, after) in [(a, current.gap(), first), (b, first, joint.gap())] {
                 effects.push(Accepted::fitted(&joint, x, before, after, p));
                 accepted.push(x);
@@ -1096,7 +1107,7 @@ pub(crate) fn diagnose_rate(runs: &[RunData], opts: &Options) -> Diagnosis {
         // through a run, which a thermal or positional term can partly
         // mimic); when the disturbance explains more, it is held as a
         // nuisance and reported, and selection goes on over it.
-        if held_outside < MAX_OUTSIDE
+        if held_outside < THRESHOLDS.max_outside
             && let Some((os, found)) =
                 outside_instead(&data, &current, &free, level, (e, cand_gain))
         {
@@ -1119,22 +1130,27 @@ pub(crate) fn diagnose_rate(runs: &[RunData], opts: &Options) -> Diagnosis {
             step_scores
                 .iter()
                 .filter(|x| {
-                    x.0 != e
-                        && x.3 < level
-                        && x.2 > MIN_GAIN * current.sse()
-                        && x.2 >= (1.0 - TIE) * top
-                        && x.2 > cand_gain
+                    x.effect != e
+                        && x.p < level
+                        && x.gain > THRESHOLDS.min_gain * current.sse()
+                        && x.gain >= (1.0 - THRESHOLDS.tie) * top
+                        && x.gain > cand_gain
                 })
-                .map(|x| (e, x.0)),
+                .map(|x| (e, x.effect)),
         );
         let rivals: Vec<(Effect, Scored)> = step_scores
             .iter()
-            .filter(|(o, _, gain, p)| {
-                *o != e
-                    && *p < level
-                    && *gain > 0.5 * step_scores.iter().find(|x| x.0 == e).map_or(0.0, |x| x.2)
+            .filter(|x| {
+                x.effect != e
+                    && x.p < level
+                    && x.gain
+                        > 0.5
+                            * step_scores
+                                .iter()
+                                .find(|y| y.effect == e)
+                                .map_or(0.0, |y| y.gain)
             })
-            .map(|(o, sc, _, _)| (*o, sc.clone()))
+            .map(|x| (x.effect, x.scored.clone()))
             .collect();
         accepted.push(e);
         remaining.retain(|x| *x != e);
@@ -1142,12 +1158,12 @@ pub(crate) fn diagnose_rate(runs: &[RunData], opts: &Options) -> Diagnosis {
         step_scores = each_against(&data, &remaining, &current, &free);
         // Told apart when either adds significantly over the other (the
         // relevance bar is for naming, not for telling apart).
-        let level = ALPHA / remaining.len().max(1) as f64;
+        let level = THRESHOLDS.alpha / remaining.len().max(1) as f64;
         for (o, alone) in rivals {
             let still = step_scores
                 .iter()
-                .find(|x| x.0 == o)
-                .is_some_and(|x| x.3 < level);
+                .find(|x| x.effect == o)
+                .is_some_and(|x| x.p < level);
             let both = score(&data, &with_best_parameter(&data, &alone.model, e, &free));
             let (_, p) = improvement(&alone, &both);
             if !still && p >= level {
@@ -1166,16 +1182,16 @@ pub(crate) fn diagnose_rate(runs: &[RunData], opts: &Options) -> Diagnosis {
     // to decide a candidate that only stood in for it.
     let best_left = step_scores
         .iter()
-        .filter(|x| remaining.contains(&x.0))
-        .max_by(|a, b| a.2.total_cmp(&b.2))
-        .map(|x| (x.0, x.2));
-    if held_outside < MAX_OUTSIDE
+        .filter(|x| remaining.contains(&x.effect))
+        .max_by(|a, b| a.gain.total_cmp(&b.gain))
+        .map(|x| (x.effect, x.gain));
+    if held_outside < THRESHOLDS.max_outside
         && let Some(left) = best_left
         && let Some((os, found)) = outside_instead(
             &data,
             &current,
             &free,
-            ALPHA / remaining.len().max(1) as f64,
+            THRESHOLDS.alpha / remaining.len().max(1) as f64,
             left,
         )
     {
@@ -1202,7 +1218,7 @@ pub(crate) fn diagnose_rate(runs: &[RunData], opts: &Options) -> Diagnosis {
         &free,
         &confounded,
     ));
-    let level = ALPHA / remaining.len().max(1) as f64;
+    let level = THRESHOLDS.alpha / remaining.len().max(1) as f64;
     let (inconclusive, deciding_procedure) = match inconclusive(
         &data,
         &remaining,
@@ -1226,6 +1242,7 @@ pub(crate) fn diagnose_rate(runs: &[RunData], opts: &Options) -> Diagnosis {
             data.folds.len(),
             runs.len()
         ),
+        thresholds: THRESHOLDS,
         layers: Layers {
             thermal: ThermalLayer::default(),
             rate: RateLayer {
@@ -1242,7 +1259,7 @@ pub(crate) fn diagnose_rate(runs: &[RunData], opts: &Options) -> Diagnosis {
         unexplained: Unexplained {
             gap_dph: current.gap(),
             r#where: left.into_iter().take(3).collect(),
-            period_s: period.filter(|_| frac >= PERIODIC_ABOVE),
+            period_s: period.filter(|_| frac >= THRESHOLDS.periodic_above),
             periodic_fraction: frac,
             outside,
         },
@@ -1271,29 +1288,19 @@ pub(crate) fn diagnose_rate(runs: &[RunData], opts: &Options) -> Diagnosis {
     }
 }
 
-/// Smallest held-out improvement, as a fraction of the held-out sum of
-/// squares, for a candidate that misses the bar to be reported as
-/// inconclusive rather than nothing (ours: the null runs' best candidate
-/// removes up to 6 %).
-pub const INCONCLUSIVE_GAIN: f64 = 0.10;
-/// Power the deciding run is sized for.
-pub const DECIDING_POWER: f64 = 0.8;
 /// Most passes a deciding run is sized to.
 const MAX_PASSES: usize = 12;
 /// Rows of simulated runs one simulated size may take (ours: 40
 /// replications of a thermal cycle and two passes, about 5 s).
 const SIMULATED_ROWS: usize = 2_800_000;
-/// The repeated run's share of the gap the candidate removes, taken this
-/// much smaller for its scatter (ours).
-const SHARE_MARGIN: f64 = 0.8;
 
 /// The inconclusive step, if selection stopped at one: every remaining
-/// candidate that improves the held-out gap by [`INCONCLUSIVE_GAIN`] or
+/// candidate that improves the held-out gap by [`Thresholds::inconclusive_gain`] or
 /// more, ranked, and the run that would decide the first, as a procedure.
 fn inconclusive(
     data: &Data<'_>,
     remaining: &[Effect],
-    step_scores: &[(Effect, Scored, f64, f64)],
+    step_scores: &[Tried],
     current: &Scored,
     level: f64,
     free: &[Effect],
@@ -1302,13 +1309,15 @@ fn inconclusive(
     use statrs::distribution::{ContinuousCDF, Normal};
     let runs = data.runs;
     let sse = current.sse();
-    let mut ranked: Vec<&(Effect, Scored, f64, f64)> = step_scores
+    let mut ranked: Vec<&Tried> = step_scores
         .iter()
-        .filter(|(e, _, gain, p)| {
-            remaining.contains(e) && *gain >= INCONCLUSIVE_GAIN * sse && *p < 0.5
+        .filter(|x| {
+            remaining.contains(&x.effect)
+                && x.gain >= THRESHOLDS.inconclusive_gain * sse
+                && x.p < 0.5
         })
         .collect();
-    ranked.sort_by(|a, b| b.2.total_cmp(&a.2));
+    ranked.sort_by(|a, b| b.gain.total_cmp(&a.gain));
     let best = ranked.first()?;
     // Per run: the held-out sum of squares now, and what the candidate
     // removes of it. The deciding run repeats the run where it removes
@@ -1318,7 +1327,7 @@ fn inconclusive(
     let mut per_run = vec![(0.0, 0.0); runs.len()];
     for (k, f) in data.folds.iter().enumerate() {
         let now = current.fold_sse.get(k).copied().unwrap_or(0.0);
-        let with = best.1.fold_sse.get(k).copied().unwrap_or(now);
+        let with = best.scored.fold_sse.get(k).copied().unwrap_or(now);
         per_run[f.run].0 += now;
         per_run[f.run].1 += now - with;
     }
@@ -1326,38 +1335,39 @@ fn inconclusive(
         .iter()
         .enumerate()
         .max_by(|a, b| a.1.1.total_cmp(&b.1.1))?;
-    let gain = best.2;
+    let gain = best.gain;
     let normal = Normal::standard();
-    let z_obs = normal.inverse_cdf(1.0 - best.3.max(1e-300));
+    let z_obs = normal.inverse_cdf(1.0 - best.p.max(1e-300));
     let z_bar = normal.inverse_cdf(1.0 - level);
     // (That run's share, fitted on few records, is taken a fifth smaller
     // for its scatter: ours.)
     let ceiling = g_star.max(0.0) / s_star.max(f64::MIN_POSITIVE);
-    let share = SHARE_MARGIN * ceiling;
+    let share = THRESHOLDS.share_margin * ceiling;
     // Both bars must be passed: the share of the held-out sum of squares
-    // (MIN_GAIN) and the significance, whose statistic's expected z grows
+    // (THRESHOLDS.min_gain) and the significance, whose statistic's expected z grows
     // with the square root of the information (the gain it rests on).
     let power = |k: usize| {
-        if share < MIN_GAIN {
+        if share < THRESHOLDS.min_gain {
             return 0.0;
         }
-        let info = (1 + k) as f64 * SHARE_MARGIN * g_star.max(0.0) / gain.max(f64::MIN_POSITIVE);
+        let info = (1 + k) as f64 * THRESHOLDS.share_margin * g_star.max(0.0)
+            / gain.max(f64::MIN_POSITIVE);
         normal.cdf(z_obs * info.sqrt() - z_bar)
     };
-    let e = best.0;
+    let e = best.effect;
     let estimated = (1..=MAX_PASSES)
-        .find(|&k| power(k) >= DECIDING_POWER)
+        .find(|&k| power(k) >= THRESHOLDS.deciding_power)
         .unwrap_or(MAX_PASSES);
     // The estimate sizes the run; a simulation, when asked for, checks it
     // and adds passes until the simulated power is reached.
     let mut passes = estimated;
     let mut simulated = None;
     let mut used_replications = 0;
-    if replications > 0 && power(estimated) >= DECIDING_POWER {
+    if replications > 0 && power(estimated) >= THRESHOLDS.deciding_power {
         let sim = Simulation {
             data,
             current,
-            candidate: &best.1,
+            candidate: &best.scored,
             effect: e,
             run: r_star,
             free,
@@ -1384,7 +1394,7 @@ fn inconclusive(
             used_replications = n;
             let p = sim.power(k, n);
             simulated = Some(p);
-            if p >= DECIDING_POWER || k >= MAX_PASSES {
+            if p >= THRESHOLDS.deciding_power || k >= MAX_PASSES {
                 break;
             }
         }
@@ -1443,14 +1453,14 @@ fn inconclusive(
         )
     };
     let achievable = simulated.unwrap_or_else(|| power(passes));
-    let (what, passes, device_time_h) = if achievable < DECIDING_POWER {
+    let (what, passes, device_time_h) = if achievable < THRESHOLDS.deciding_power {
         (
             format!(
-                "no repeat of these runs decides: where it acts most ({}) it removes {:.0} % of the held-out sum of squares of 60 s means, a fifth less counted for its scatter, and an effect must remove {:.0} % (MIN_GAIN) with a power of {:.0} % ({:.0} % at {} passes{}); an effect this small beside the noise of 60 s means needs a quieter unit or a run where it is larger (other positions, a wider temperature range)",
+                "no repeat of these runs decides: where it acts most ({}) it removes {:.0} % of the held-out sum of squares of 60 s means, a fifth less counted for its scatter, and an effect must remove {:.0} % (min_gain) with a power of {:.0} % ({:.0} % at {} passes{}); an effect this small beside the noise of 60 s means needs a quieter unit or a run where it is larger (other positions, a wider temperature range)",
                 runs[r_star].name,
                 100.0 * ceiling,
-                100.0 * MIN_GAIN,
-                100.0 * DECIDING_POWER,
+                100.0 * THRESHOLDS.min_gain,
+                100.0 * THRESHOLDS.deciding_power,
                 100.0 * achievable,
                 passes,
                 if simulated.is_some() {
@@ -1468,11 +1478,11 @@ fn inconclusive(
     let candidates = ranked
         .iter()
         .take(4)
-        .map(|(e, s, gain, p)| InconclusiveCandidate {
-            name: e.name().into(),
-            held_out_gap_dph: s.gap(),
-            improvement: gain / sse.max(f64::MIN_POSITIVE),
-            p_value: *p,
+        .map(|x| InconclusiveCandidate {
+            name: x.effect.name().into(),
+            held_out_gap_dph: x.scored.gap(),
+            improvement: x.gain / sse.max(f64::MIN_POSITIVE),
+            p_value: x.p,
             level,
         })
         .collect();
@@ -1594,10 +1604,10 @@ impl Simulation<'_> {
             // Named: both bars passed, and no rival explains more (a
             // g-sensitivity can take a small misalignment's place).
             let named = p < self.level
-                && gain > MIN_GAIN * before.sse()
+                && gain > THRESHOLDS.min_gain * before.sse()
                 && self.rivals.iter().all(|&r| {
                     let rival = score(&sim, &with_best_parameter(&sim, &base, r, self.free));
-                    (1.0 - TIE) * (before.sse() - rival.sse()) <= gain
+                    (1.0 - THRESHOLDS.tie) * (before.sse() - rival.sse()) <= gain
                 });
             if named {
                 decided += 1;

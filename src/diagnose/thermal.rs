@@ -142,11 +142,34 @@ const SHAPE: [(&str, f64, f64); SHAPE_LEN] = [
     ("block_capacity_1_over_2", 0.05, 20.0),
 ];
 const SHAPE_LEN: usize = 11;
+/// Where each quantity of [`SHAPE`] sits in a shape (the search works on
+/// the vector; the code reads it by these names).
+mod at {
+    pub const MOUNT_TAU: usize = 0;
+    pub const CASE_TAU: usize = 1;
+    pub const BLOCK1_TAU: usize = 2;
+    pub const BLOCK2_TAU: usize = 3;
+    pub const COUPLING_TAU: usize = 4;
+    pub const CONVECTION: usize = 5;
+    pub const RATIO1: usize = 6;
+    pub const RATIO2: usize = 7;
+    pub const SINK_TAU: usize = 8;
+    pub const SINK_RATIO: usize = 9;
+    pub const BLOCKS_1_OVER_2: usize = 10;
+}
 /// The quantities searched in the simpler form: no heat sink (its
 /// capacity ratio 0), blocks of equal capacity.
 const SIMPLE_LEN: usize = 8;
 /// The searched quantities held as logarithms.
-const LOG_SCALED: [usize; 7] = [0, 1, 2, 3, 4, 8, 10];
+const LOG_SCALED: [usize; 7] = [
+    at::MOUNT_TAU,
+    at::CASE_TAU,
+    at::BLOCK1_TAU,
+    at::BLOCK2_TAU,
+    at::COUPLING_TAU,
+    at::SINK_TAU,
+    at::BLOCKS_1_OVER_2,
+];
 /// Self-heating rises, degC: never negative (ours: at most 30).
 const RISE_MAX_C: f64 = 30.0;
 /// The air gain's range (ours: a chamber sensor or a workspace gradient
@@ -214,12 +237,12 @@ fn shape_of(c: &ThermalConfig) -> Shape {
 /// A network beyond the simpler form: a heat sink, or blocks of unequal
 /// capacity.
 fn is_full(q: &Shape) -> bool {
-    has_sink(q) || q[10] != 0.0
+    has_sink(q) || q[at::BLOCKS_1_OVER_2] != 0.0
 }
 
 /// A network with a heat sink on the case.
 fn has_sink(q: &Shape) -> bool {
-    q[9] > 0.0
+    q[at::SINK_RATIO] > 0.0
 }
 
 /// The sink's time constant a shape without one carries, s (where a
@@ -246,11 +269,19 @@ where
     Const<M>: DimMin<Const<M>, Output = Const<M>>,
 {
     debug_assert!(M == N + INPUTS && (N == 4 || N == 5));
-    let [tm, tk, t1, t2, tc, ts] = [0, 1, 2, 3, 4, 8].map(|i| q[i].exp());
+    let [tm, tk, t1, t2, tc, ts] = [
+        at::MOUNT_TAU,
+        at::CASE_TAU,
+        at::BLOCK1_TAU,
+        at::BLOCK2_TAU,
+        at::COUPLING_TAU,
+        at::SINK_TAU,
+    ]
+    .map(|i| q[i].exp());
     let kc = convection / tc;
     // One conductance between the blocks, seen from both ends.
-    let kc2 = kc * q[10].exp();
-    let (r1, r2) = (q[6] / t1, q[7] / t2);
+    let kc2 = kc * q[at::BLOCKS_1_OVER_2].exp();
+    let (r1, r2) = (q[at::RATIO1] / t1, q[at::RATIO2] / t2);
     let mut m = SMatrix::<f64, M, M>::zeros();
     m[(0, 0)] = -1.0 / tm;
     m[(1, 0)] = 1.0 / tk;
@@ -258,7 +289,7 @@ where
     m[(1, 2)] = r1;
     m[(1, 3)] = r2;
     if N == 5 {
-        let rs = q[9] / ts;
+        let rs = q[at::SINK_RATIO] / ts;
         m[(1, 1)] -= rs;
         m[(1, 4)] = rs;
         m[(4, 1)] = 1.0 / ts;
@@ -316,7 +347,7 @@ where
     let mut t = 0.0;
     run.iter()
         .map(|b| {
-            let convection = 1.0 + q[5] * b.gravity_along_axis;
+            let convection = 1.0 + q[at::CONVECTION] * b.gravity_along_axis;
             let k = match cache.iter().position(|c| c.0 == convection) {
                 Some(k) => k,
                 None => {
@@ -563,7 +594,7 @@ impl Cost<'_> {
     /// outside they were.
     fn shape(&self, p: &[f64]) -> (Shape, f64) {
         let mut q = [0.0; SHAPE_LEN];
-        q[8] = SINK_START_S.ln();
+        q[at::SINK_TAU] = SINK_START_S.ln();
         let n = p.len().min(self.len());
         q[..n].copy_from_slice(&p[..n]);
         clamp_shape(&q)
@@ -814,9 +845,9 @@ fn in_full_form(data: &[Vec<Block>], shapes: &[Shape]) -> Vec<Shape> {
         .iter()
         .map(|&(tau, ratio, blocks)| {
             let mut q = *first;
-            q[8] = tau.ln();
-            q[9] = ratio;
-            q[10] = blocks.ln();
+            q[at::SINK_TAU] = tau.ln();
+            q[at::SINK_RATIO] = ratio;
+            q[at::BLOCKS_1_OVER_2] = blocks.ln();
             q
         })
         .collect();
@@ -948,23 +979,23 @@ fn to_config(base: &ThermalConfig, q: &Shape, lin: &Linear) -> ThermalConfig {
     let mut c = base.clone();
     // (exp(ln(x)) can land a rounding below the bound.)
     let tau = |i: usize| q[i].exp().clamp(SHAPE[i].1, SHAPE[i].2);
-    c.mount_tau_s = if q[0] <= SHAPE[0].1.ln() + 1e-9 {
+    c.mount_tau_s = if q[at::MOUNT_TAU] <= SHAPE[at::MOUNT_TAU].1.ln() + 1e-9 {
         0.0
     } else {
-        tau(0)
+        tau(at::MOUNT_TAU)
     };
-    c.case_tau_s = tau(1);
-    c.block1_tau_s = tau(2);
-    c.block2_tau_s = tau(3);
-    c.coupling_tau_s = tau(4);
-    c.convection_gain = q[5];
-    c.block_capacity_ratio = [q[6], q[7]];
+    c.case_tau_s = tau(at::CASE_TAU);
+    c.block1_tau_s = tau(at::BLOCK1_TAU);
+    c.block2_tau_s = tau(at::BLOCK2_TAU);
+    c.coupling_tau_s = tau(at::COUPLING_TAU);
+    c.convection_gain = q[at::CONVECTION];
+    c.block_capacity_ratio = [q[at::RATIO1], q[at::RATIO2]];
     (c.sink_tau_s, c.sink_capacity_ratio) = if has_sink(q) {
-        (tau(8), q[9])
+        (tau(at::SINK_TAU), q[at::SINK_RATIO])
     } else {
         (0.0, 0.0)
     };
-    c.block_capacity_1_over_2 = tau(10);
+    c.block_capacity_1_over_2 = tau(at::BLOCKS_1_OVER_2);
     c.air_gain = lin[0];
     c.case_rise_c = lin[1];
     c.block1_rise_c = lin[2];
@@ -2051,7 +2082,13 @@ mod tests {
     #[test]
     fn a_block_as_one_map_is_the_block_stepped() {
         let mut q = shape_of(&TwinConfig::default_rl16().thermal);
-        (q[0], q[6], q[8], q[9], q[10]) = (300f64.ln(), 0.4, 2000f64.ln(), 1.5, 0.5f64.ln());
+        (
+            q[at::MOUNT_TAU],
+            q[at::RATIO1],
+            q[at::SINK_TAU],
+            q[at::SINK_RATIO],
+            q[at::BLOCKS_1_OVER_2],
+        ) = (300f64.ln(), 0.4, 2000f64.ln(), 1.5, 0.5f64.ln());
         let (phi, gamma) = discretize::<5, 9>(&q, 1.3, STEP_S);
         let air = [20.0, 21.5, 23.0, 22.0, 19.0, 18.5];
         let mut x = Nodes::<5>::from_fn(|i, j| (i * 4 + j) as f64 * 0.1 + 15.0);

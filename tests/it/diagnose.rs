@@ -531,10 +531,11 @@ fn a_small_effect_is_inconclusive_and_the_deciding_run_decides_it() {
     let inc = &d["inconclusive"];
     assert_eq!(inc["candidates"][0]["name"], "axis_misalignment", "{inc}");
     let c = &inc["candidates"][0];
-    // It misses a bar: significance, or the held-out share (MIN_GAIN).
+    // It misses a bar: significance, or the held-out share (min_gain).
     assert!(
         c["p_value"].as_f64().expect("p") >= c["level"].as_f64().expect("level")
-            || c["improvement"].as_f64().expect("improvement") < gyrobench::diagnose::MIN_GAIN,
+            || c["improvement"].as_f64().expect("improvement")
+                < gyrobench::diagnose::THRESHOLDS.min_gain,
         "{c}"
     );
     let run = &inc["deciding_run"];
