@@ -307,20 +307,34 @@ impl TableGeometry {
             return at(to);
         }
         // Each axis: the angle the rates say it turned, corrected to the
-        // end angle read (whole turns are the rates' to say).
+        // end angle read (whole turns are the rates' to say); the rate is
+        // the table's own reading, between the two ends (an angle read
+        // over a link carries the read's timing: on a device bench a few
+        // milliseconds of it would put tens of ppm into a rate run's
+        // reference, where the table's rate reading does not).
         let axis = |a0: f64, a1: f64, r0: f64, r1: f64| {
             let expected = 0.5 * (r0 + r1) * dt_s;
             let read = a1 - a0;
             let turned = read + 360.0 * ((expected - read) / 360.0).round();
+            let correction = turned - expected;
             move |s: f64| {
-                let angle =
-                    a0 + dt_s * (r0 * s + 0.5 * (r1 - r0) * s * s) + (turned - expected) * s;
+                let angle = a0 + dt_s * (r0 * s + 0.5 * (r1 - r0) * s * s) + correction * s;
                 (angle, r0 + (r1 - r0) * s)
             }
         };
-        let (a, r) = (from, to);
-        let outer = axis(a.0.outer_deg, r.0.outer_deg, a.1.outer_deg, r.1.outer_deg);
-        let inner = axis(a.0.inner_deg, r.0.inner_deg, a.1.inner_deg, r.1.inner_deg);
+        let (start, end) = (from, to);
+        let outer = axis(
+            start.0.outer_deg,
+            end.0.outer_deg,
+            start.1.outer_deg,
+            end.1.outer_deg,
+        );
+        let inner = axis(
+            start.0.inner_deg,
+            end.0.inner_deg,
+            start.1.inner_deg,
+            end.1.inner_deg,
+        );
         const PANELS: usize = 8;
         let mut sum = 0.0;
         for k in 0..=PANELS {
@@ -642,11 +656,62 @@ mod tests {
                 assert!((end - exact).abs() > 0.3, "{start}: {end} against {exact}");
             }
         }
-        // At rest the end's value, bit for bit.
-        let still = (pose(30.0).0, TableAngles::default());
-        assert_eq!(
-            g.mean_kinematic_rate_dph(&site, still, still, 1.0),
-            g.kinematic_rate_dph(&site, still.0, still.1)
-        );
+    }
+
+    #[test]
+    fn the_interval_mean_follows_either_axis_and_a_rate_that_changes() {
+        // Against a brute-force mean of the instantaneous reference along
+        // the motion, on the study's table: the inner axis, both at once, a
+        // spin-up, a reversal within the interval, a turn through +-180 deg,
+        // a 20 ms tick.
+        let g = TableGeometry::study();
+        let site = crate::twin::TwinConfig::default_rl16().site;
+        let a = |o: f64, i: f64| TableAngles {
+            outer_deg: o,
+            inner_deg: i,
+        };
+        // (start angles, start rates, end rates, seconds)
+        let cases = [
+            (a(10.0, 0.0), a(0.0, 7.0), a(0.0, 7.0), 1.0),
+            (a(30.0, 60.0), a(4.0, -6.0), a(4.0, -6.0), 1.0),
+            (a(0.0, 90.0), a(0.0, 0.0), a(10.0, 0.0), 1.0),
+            (a(20.0, 45.0), a(8.0, 0.0), a(-8.0, 0.0), 1.0),
+            (a(177.0, -178.0), a(5.0, -5.0), a(5.0, -5.0), 1.0),
+            (a(0.0, 0.0), a(5.0, 0.0), a(5.0, 0.0), 0.02),
+        ];
+        for (k, (a0, r0, r1, dt)) in cases.into_iter().enumerate() {
+            // Rates linear in time, angles their integral.
+            let at = |t: f64| {
+                let s = t / dt;
+                let ang = |x0: f64, v0: f64, v1: f64| x0 + dt * (v0 * s + 0.5 * (v1 - v0) * s * s);
+                let rate = |v0: f64, v1: f64| v0 + (v1 - v0) * s;
+                (
+                    a(
+                        ang(a0.outer_deg, r0.outer_deg, r1.outer_deg),
+                        ang(a0.inner_deg, r0.inner_deg, r1.inner_deg),
+                    ),
+                    a(
+                        rate(r0.outer_deg, r1.outer_deg),
+                        rate(r0.inner_deg, r1.inner_deg),
+                    ),
+                )
+            };
+            let n = 10_000;
+            let brute = (0..n)
+                .map(|j| {
+                    let (x, v) = at((j as f64 + 0.5) / n as f64 * dt);
+                    g.kinematic_rate_dph(&site, x, v)
+                })
+                .sum::<f64>()
+                / n as f64;
+            let (x1, v1) = at(dt);
+            // The end angles as a table reads them: wrapped.
+            let read = a(wrap_deg(x1.outer_deg), wrap_deg(x1.inner_deg));
+            let mean = g.mean_kinematic_rate_dph(&site, (a0, r0), (read, v1), dt);
+            assert!(
+                (mean - brute).abs() < 1e-4,
+                "case {k}: {mean} against {brute}"
+            );
+        }
     }
 }

@@ -15,7 +15,7 @@ use crate::analysis::study::{ThermalFigures, self_heating_dph, thermal_figures};
 use crate::bench::BenchConfig;
 use crate::clock::Pacing;
 use crate::config::{ConfigError, Source};
-use crate::geometry::{Orientation, TableGeometry};
+use crate::geometry::{Orientation, TableAngles, TableGeometry};
 use crate::procedure::Procedure;
 use crate::sequencer::{self, BenchState, Quiet, RunError, Sink, Tick};
 use crate::twin::TwinConfig;
@@ -63,7 +63,8 @@ pub struct Sample {
     pub interval: Interval,
     /// Record it belongs to.
     pub record: String,
-    /// Body orientation at the end of the interval.
+    /// Body orientation: at the end of the interval, or at its middle
+    /// while the table turns.
     pub orientation: Orientation,
     /// Key of the procedure step it was recorded in.
     pub step: String,
@@ -78,6 +79,8 @@ struct Collect {
     geometry: TableGeometry,
     orientation: Option<Orientation>,
     table_rate_body_dph: Vector3<f64>,
+    /// The last tick's end while the table turned: time, angles, rates.
+    turning: Option<(f64, TableAngles, TableAngles)>,
     step: String,
     samples: Vec<Sample>,
 }
@@ -88,6 +91,7 @@ impl Collect {
             geometry,
             orientation: None,
             table_rate_body_dph: Vector3::zeros(),
+            turning: None,
             step: String::new(),
             samples: Vec::new(),
         }
@@ -101,13 +105,30 @@ impl Sink for Collect {
             self.table_rate_body_dph = self
                 .geometry
                 .table_rate_body_dph(s.table.angles, s.table.rates);
+            self.turning = (s.table.rates != TableAngles::default()).then_some((
+                s.t_s,
+                s.table.angles,
+                s.table.rates,
+            ));
         }
         step.clone_into(&mut self.step);
         Ok(())
     }
 
     fn interval(&mut self, iv: &Interval, record: Option<&str>) -> std::io::Result<()> {
-        if let (Some(record), Some(orientation)) = (record, self.orientation) {
+        // While the table turns, the pose at the interval's middle, which
+        // its mean reads gravity and the field at (the state is its end's).
+        let orientation = match self.turning {
+            Some((t_s, angles, rates)) => {
+                let lead_s = t_s - iv.time_s;
+                Some(self.geometry.orientation(TableAngles {
+                    outer_deg: angles.outer_deg - rates.outer_deg * lead_s,
+                    inner_deg: angles.inner_deg - rates.inner_deg * lead_s,
+                }))
+            }
+            None => self.orientation,
+        };
+        if let (Some(record), Some(orientation)) = (record, orientation) {
             self.samples.push(Sample {
                 interval: *iv,
                 record: record.to_owned(),

@@ -119,7 +119,8 @@ pub fn load(path: &Path) -> Result<RunData, ReplayError> {
     let mut table: Option<TableState> = None;
     // Each recorded sample with the table's angles and rates it was taken
     // at (turned into a body rate once the logged bench is known).
-    let mut samples: Vec<(Sample, Option<TableAngles>, TableAngles)> = Vec::new();
+    // (And how far the table state's time leads the interval's middle.)
+    let mut samples: Vec<(Sample, Option<TableAngles>, TableAngles, f64)> = Vec::new();
     runlog::read(path, |item| {
         match item {
             Item::Meta { name, entries } if name == RUN_META => {
@@ -163,6 +164,7 @@ pub fn load(path: &Path) -> Result<RunData, ReplayError> {
                         outer_deg: t.outer_rate_dps,
                         inner_deg: t.inner_rate_dps,
                     },
+                    t.t_s - r.t_s,
                 ));
             }
             _ => {}
@@ -172,7 +174,7 @@ pub fn load(path: &Path) -> Result<RunData, ReplayError> {
     let site = site.ok_or_else(|| log_err("no site in the run metadata".into()))?;
     let samples = samples
         .into_iter()
-        .map(|(mut s, angles, rates)| {
+        .map(|(mut s, angles, rates, lead_s)| {
             if rates.outer_deg != 0.0 || rates.inner_deg != 0.0 {
                 let g = match &geometry {
                     Some(Ok(g)) => g,
@@ -196,6 +198,12 @@ pub fn load(path: &Path) -> Result<RunData, ReplayError> {
                     )));
                 };
                 s.table_rate_body_dph = g.table_rate_body_dph(angles, rates);
+                // The pose at the interval's middle, which its mean reads
+                // gravity and the field at (the state is its end's).
+                s.orientation = g.orientation(TableAngles {
+                    outer_deg: angles.outer_deg - rates.outer_deg * lead_s,
+                    inner_deg: angles.inner_deg - rates.inner_deg * lead_s,
+                });
             }
             Ok(s)
         })

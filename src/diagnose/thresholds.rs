@@ -1,8 +1,11 @@
-//! Every decision threshold of the diagnosis in one place, each with where
-//! its value comes from. "Ours" marks a choice of this project, measured on
-//! the self-check (`docs/diagnosis.md`); the rest are conventions of the
-//! statistics they belong to. `diagnosis.json` carries the set it was made
-//! with (`thresholds`), so a reviewer reads the bars beside the figures.
+//! The decision thresholds of the diagnosis's selection in one place, each
+//! with where its value comes from. "Ours" marks a choice of this project,
+//! measured on the self-check (`docs/diagnosis.md`); the rest are
+//! conventions of the statistics they belong to. `diagnosis.json` carries
+//! the set it was made with (`thresholds`), so a reviewer reads the bars
+//! beside the figures. (Search limits and the bias-jump search's spacing,
+//! `MAX_PASSES` and the `STEP_*` constants in `diagnose`, are not bars and
+//! stay beside their code.)
 
 use serde::Serialize;
 
@@ -36,6 +39,13 @@ pub struct Thresholds {
     /// inconclusive rather than nothing (ours: the null runs' best
     /// candidate removes up to 6 %).
     pub inconclusive_gain: f64,
+    /// Largest p-value of a candidate reported as inconclusive (ours: one
+    /// whose improvement is as likely as not noise is not worth a run).
+    pub inconclusive_p: f64,
+    /// A candidate that passed alone is a rival of the one named (checked
+    /// for a confound) when its held-out gain is over this share of the
+    /// named one's (ours).
+    pub rival_share: f64,
     /// Power the deciding run is sized for (the conventional 80 %).
     pub deciding_power: f64,
     /// The repeated run's share of the gap the candidate removes, taken
@@ -65,6 +75,8 @@ pub const THRESHOLDS: Thresholds = Thresholds {
     tie: 0.03,
     swap_within: 0.2,
     inconclusive_gain: 0.10,
+    inconclusive_p: 0.5,
+    rival_share: 0.5,
     deciding_power: 0.8,
     share_margin: 0.8,
     periodic_above: 0.3,

@@ -72,6 +72,10 @@ pub struct DeviceBench {
     last_pose: Option<(f64, (TableAngles, TableAngles))>,
 }
 
+/// Longest time between two table reads over which the reference is
+/// averaged, s of device time (two ticks); beyond it the end's value.
+const POSE_GAP_S: f64 = 2.0;
+
 impl std::fmt::Debug for DeviceBench {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("DeviceBench")
@@ -331,10 +335,11 @@ impl BenchIo for DeviceBench {
         let power = self.read_power().await?;
         // The frames' mean reads the tick's mean of the turning reference:
         // from the table read at the last tick's end (none after an idle
-        // wait) to this one.
+        // wait, or a gap longer than two ticks: a prompt, a failed tick)
+        // to this one.
         let end = (table.angles, table.rates);
         let reference_dph = match self.last_pose.replace((now, end)) {
-            Some((t, from)) => {
+            Some((t, from)) if now - t <= POSE_GAP_S => {
                 self.geometry
                     .mean_kinematic_rate_dph(&self.site, from, end, now - t)
             }
