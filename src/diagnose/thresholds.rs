@@ -58,8 +58,7 @@ pub struct Thresholds {
     /// on the record means does not live between records: no
     /// between-record test (ours).
     pub min_between_dof: f64,
-    /// At most this many effects are named (ours: the study's runs hold
-    /// the information for about three).
+    /// At most this many effects are named (ours).
     pub max_effects: usize,
     /// Most disturbances outside the library held as nuisances (ours).
     pub max_outside: usize,
