@@ -166,6 +166,16 @@ pub struct Confounded {
     pub separate_with: String,
 }
 
+impl Confounded {
+    /// `a` and `b` reported confounded, with what would separate them.
+    fn pair(a: Effect, b: Effect) -> Self {
+        Self {
+            effects: [a.name().into(), b.name().into()],
+            separate_with: separate_with(a, b),
+        }
+    }
+}
+
 /// What is left.
 #[derive(Debug, Clone, Serialize)]
 pub struct Unexplained {
@@ -712,6 +722,13 @@ fn joint_step(
     best.map(|(pair, joint, p, _)| (pair, joint, p))
 }
 
+/// Whether `list` already reports the pair `a`, `b` (either order).
+fn is_reported(list: &[Confounded], a: Effect, b: Effect) -> bool {
+    let names = [a.name(), b.name()];
+    list.iter()
+        .any(|c| names.contains(&c.effects[0].as_str()) && names.contains(&c.effects[1].as_str()))
+}
+
 /// Accepted effects that a candidate left out could stand in for, given
 /// the rest of the final model: the swap (the accepted effect out, the
 /// candidate in) explains as much, held out, and neither adds over the
@@ -730,10 +747,7 @@ fn swaps(
 ) -> Vec<Confounded> {
     let level = THRESHOLDS.alpha / step_scores.len().max(1) as f64;
     let reported = |a: Effect, b: Effect, out: &[Confounded]| {
-        known.iter().chain(out).any(|c| {
-            let names = [a.name(), b.name()];
-            names.contains(&c.effects[0].as_str()) && names.contains(&c.effects[1].as_str())
-        })
+        is_reported(known, a, b) || is_reported(out, a, b)
     };
     let mut out = Vec::new();
     for &e in accepted {
@@ -756,10 +770,7 @@ fn swaps(
             let back = score(data, &with_best_parameter(data, &swapped.model, e, free));
             let (_, pv) = improvement(&swapped, &back);
             if pv >= level {
-                out.push(Confounded {
-                    effects: [e.name().into(), o.name().into()],
-                    separate_with: separate_with(e, o),
-                });
+                out.push(Confounded::pair(e, o));
             }
         }
     }
@@ -1171,10 +1182,7 @@ pub(crate) fn diagnose_rate(runs: &[RunData], opts: &Options) -> Diagnosis {
             let both = score(&data, &with_best_parameter(&data, &alone.model, e, &free));
             let (_, p) = improvement(&alone, &both);
             if !still && p >= level {
-                confounded.push(Confounded {
-                    effects: [e.name().into(), o.name().into()],
-                    separate_with: separate_with(e, o),
-                });
+                confounded.push(Confounded::pair(e, o));
             }
         }
     }
@@ -1204,14 +1212,8 @@ pub(crate) fn diagnose_rate(runs: &[RunData], opts: &Options) -> Diagnosis {
         step_scores = each_against(&data, &remaining, &current, &free);
     }
     for (e, o) in tied_better {
-        let known = confounded.iter().any(|c| {
-            c.effects.contains(&e.name().to_owned()) && c.effects.contains(&o.name().to_owned())
-        });
-        if !known && !accepted.contains(&o) {
-            confounded.push(Confounded {
-                effects: [e.name().into(), o.name().into()],
-                separate_with: separate_with(e, o),
-            });
+        if !is_reported(&confounded, e, o) && !accepted.contains(&o) {
+            confounded.push(Confounded::pair(e, o));
         }
     }
     confounded.extend(swaps(
