@@ -111,6 +111,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 frames: 16_000_000,
                 records: Records::default(),
                 bench_left: None,
+                others: Vec::new(),
             };
             store.finish_part(
                 &key,
@@ -119,6 +120,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     result: &result,
                     link: LinkStats::default(),
                     ended_utc: meta.part_start_time_utc.clone(),
+                    slots: Vec::new(),
                 },
             )?;
         }

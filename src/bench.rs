@@ -48,6 +48,49 @@ pub struct BenchConfig {
     /// or `refuse` (the run does not start).
     #[serde(default, skip_serializing_if = "OverduePolicy::is_warn")]
     pub overdue_calibration: OverduePolicy,
+    /// The units' places on the table's platform, in the bench's order
+    /// (none: one unit, mounted as `[table.geometry] mount` says). A bench
+    /// with slots runs a batch: one procedure, every unit.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub slots: Vec<Slot>,
+}
+
+/// `[[slots]]`: one unit's place on the table's platform.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Slot {
+    /// The slot's name (`A`, `B`, `X`, ...), given with `--dut NAME=SERIAL`.
+    pub name: String,
+    /// The unit's body orientation in NED with both table angles at zero,
+    /// as `[table.geometry] mount` gives it (default: that mount). The
+    /// table turns every slot together, so the slots keep their angles to
+    /// one another: that is the mount relative to the platform.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mount: Option<crate::geometry::Orientation>,
+    /// The embedded bench: the seed of this slot's twin (default: the
+    /// run's seed plus the slot's index), its own noise streams and
+    /// turn-on bias.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub seed: Option<u64>,
+    /// The embedded bench: this slot's twin file, relative to the bench
+    /// file (default: the run's twin), its own parameters and effects.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub twin: Option<String>,
+}
+
+/// Most slots a bench may declare (ours: the largest fixtures labs build
+/// hold four to six units; eight leaves room and bounds a typo).
+pub const MAX_SLOTS: usize = 8;
+
+impl Slot {
+    /// A slot name: 1-16 ASCII letters, digits, `-` or `_` (it names log
+    /// channels, files and command-line arguments).
+    pub fn valid_name(name: &str) -> bool {
+        (1..=16).contains(&name.len())
+            && name
+                .bytes()
+                .all(|b| b.is_ascii_alphanumeric() || b == b'-' || b == b'_')
+    }
 }
 
 /// `overdue_calibration`: a run on an instrument past its calibration due
@@ -457,6 +500,7 @@ impl BenchConfig {
         }
         self.site.validate(&c, "site")?;
         self.table.geometry.validate(&c, "table.geometry")?;
+        self.validate_slots(&c)?;
         let d = &self.devices;
         for (key, spec, role) in [
             ("devices.chamber.spec", &d.chamber.spec, "chamber"),
@@ -578,6 +622,71 @@ impl BenchConfig {
         }
         c.within(l.dut_max_c, -100.0, 300.0, "limits.dut_max_c")?;
         Ok(())
+    }
+
+    fn validate_slots(&self, c: &Checker) -> Result<(), ConfigError> {
+        c.ensure(
+            self.slots.len() <= MAX_SLOTS,
+            "slots",
+            &format!("a bench holds at most {MAX_SLOTS} slots"),
+        )?;
+        for (i, slot) in self.slots.iter().enumerate() {
+            let key = format!("slots.{i}");
+            c.ensure(
+                Slot::valid_name(&slot.name),
+                &format!("{key}.name"),
+                "must be 1 to 16 letters, digits, '-' or '_'",
+            )?;
+            c.ensure(
+                !self.slots[..i].iter().any(|s| s.name == slot.name),
+                &format!("{key}.name"),
+                &format!("slot {:?} is declared twice", slot.name),
+            )?;
+            if let Some(m) = &slot.mount {
+                let mut g = self.table.geometry;
+                g.mount = *m;
+                g.validate(c, &key)?;
+            }
+            c.ensure(
+                slot.seed.is_none() && slot.twin.is_none() || self.is_embedded(),
+                &format!("{key}.seed"),
+                "a slot's seed and twin are the embedded bench's (sim:// devices)",
+            )?;
+        }
+        c.ensure(
+            self.slots.is_empty() || self.devices.supply.is_none(),
+            "devices.supply",
+            "a bench with slots has no supply yet (one output per unit is to come): power its units by hand and leave out [devices.supply]",
+        )?;
+        c.ensure(
+            self.slots.is_empty() || self.is_embedded(),
+            "slots",
+            "slots are run on the embedded bench (sim:// devices) for now; a real bench runs one unit per run",
+        )?;
+        Ok(())
+    }
+
+    /// The bench's units as slots: its `[[slots]]`, or the one unit of a
+    /// bench without them (an unnamed slot on the table's mount).
+    pub fn unit_slots(&self) -> Vec<Slot> {
+        if self.slots.is_empty() {
+            return vec![Slot {
+                name: String::new(),
+                mount: None,
+                seed: None,
+                twin: None,
+            }];
+        }
+        self.slots.clone()
+    }
+
+    /// The table's geometry with the unit in `slot` mounted on it.
+    pub fn slot_geometry(&self, slot: &Slot) -> crate::geometry::TableGeometry {
+        let mut g = self.table.geometry;
+        if let Some(m) = slot.mount {
+            g.mount = m;
+        }
+        g
     }
 
     fn validate_supply(c: &Checker, src: &Source, p: &SupplyDevice) -> Result<(), ConfigError> {

@@ -21,7 +21,7 @@ use crate::analysis::series::Interval;
 use crate::analysis::study::DRIFT_SMOOTHING_S;
 use crate::coeffs::{CoefficientSet, ScaleFactorCoeffs};
 use crate::procedure::{Metric, StepKind};
-use crate::runlog::replay::{ReplayError, replay};
+use crate::runlog::replay::{ReplayError, replay_unit};
 
 /// Correlation above which two regressors are reported as collinear.
 pub const COLLINEAR_ABOVE: f64 = 0.9;
@@ -45,7 +45,13 @@ pub struct RunSeries {
 
 /// Load the calibration series of a run from its log.
 pub fn load(path: &Path) -> Result<RunSeries, ReplayError> {
-    let r = replay(path, None)?;
+    load_unit(path, None)
+}
+
+/// Load the calibration series of unit `unit` (a serial) of a batch's log
+/// (`runlog::view`; none: the log as written).
+pub fn load_unit(path: &Path, unit: Option<&str>) -> Result<RunSeries, ReplayError> {
+    let r = replay_unit(path, None, unit)?;
     // Records of `rate` steps: a record right after a turn at a rate.
     let steps: Vec<&crate::procedure::Step> = r.procedure.steps().collect();
     let turning: Vec<String> = steps

@@ -74,7 +74,7 @@ pub fn gravity_ned_g() -> Vector3<f64> {
 }
 
 /// Orientation of the gyro body in NED, degrees.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Orientation {
     /// Azimuth of the sensitive axis (yaw), deg.

@@ -105,6 +105,21 @@ pub fn check_operator(s: &str) -> Result<&str, SerialError> {
     check_serial(s)
 }
 
+/// A serial as a file name's part: characters a file system or a shell
+/// would take amiss become `_`.
+pub fn file_safe(serial: &str) -> String {
+    serial
+        .chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.') {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -12,7 +12,7 @@ use super::Outcome;
 use crate::analysis::allan::{Allan, NoiseTerms, TERM_KEYS, Taus, analyse};
 use crate::analysis::figures::bias_stability;
 use crate::runlog::interchange;
-use crate::runlog::replay::record_rates;
+use crate::runlog::replay::record_rates_unit;
 
 #[derive(Debug, Clone, Copy, ValueEnum)]
 enum TauSet {
@@ -35,6 +35,9 @@ pub struct AllanArgs {
     /// Print JSON (tau_s, adev_dph, lo_dph, hi_dph, noise, ...) instead of a table.
     #[arg(long)]
     json: bool,
+    /// A batch's unit, by serial (default: the batch's first unit).
+    #[arg(long, value_name = "SERIAL")]
+    unit: Option<String>,
 }
 
 /// `--json` output. Field names are a contract (other tools read them):
@@ -124,7 +127,7 @@ fn load(args: &AllanArgs) -> Result<(String, Vec<f64>, f64)> {
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("csv"));
     if !is_csv {
-        let r = record_rates(&args.file, args.record.as_deref())?;
+        let r = record_rates_unit(&args.file, args.record.as_deref(), args.unit.as_deref())?;
         if let Some(d) = r.read.damage(r.start_ns) {
             anyhow::bail!(
                 "{}: {d}; an Allan deviation across the missing frames would be wrong \

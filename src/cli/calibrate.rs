@@ -10,7 +10,7 @@ use clap::Args;
 
 use super::{Outcome, Usage};
 use crate::calibrate::{
-    ABSURD_OVER_RAW, Calibration, calibrate, load, mixed_serials, scale_factor,
+    ABSURD_OVER_RAW, Calibration, calibrate, load_unit, mixed_serials, scale_factor,
 };
 use crate::coeffs::{CoefficientSet, FittedOn, SetSection, UnitSection};
 use crate::fsutil::ensure_distinct;
@@ -39,6 +39,10 @@ pub struct CalibrateArgs {
     /// $GYROBENCH_DB, else ~/.local/share/gyrobench/results.sqlite).
     #[arg(long, value_name = "STORE")]
     db: Option<String>,
+    /// A batch's unit, by serial, in every log given (default: each log's
+    /// first unit).
+    #[arg(long, value_name = "SERIAL")]
+    unit: Option<String>,
 }
 
 pub fn run(args: CalibrateArgs) -> Result<Outcome> {
@@ -51,7 +55,7 @@ pub fn run(args: CalibrateArgs) -> Result<Outcome> {
     let runs = args
         .runs
         .iter()
-        .map(|p| load(p).map_err(anyhow::Error::from))
+        .map(|p| load_unit(p, args.unit.as_deref()).map_err(anyhow::Error::from))
         .collect::<Result<Vec<_>>>()?;
     // One run given twice (or a copy of it) would validate the fit on its
     // own data: held-out figures would be a lie.

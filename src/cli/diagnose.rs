@@ -24,6 +24,10 @@ pub struct DiagnoseArgs {
     command: Option<DiagnoseCommand>,
     /// Run logs (live, simulated or imported) of one unit.
     runs: Vec<PathBuf>,
+    /// A batch's unit, by serial, in every log given (default: each log's
+    /// first unit).
+    #[arg(long, value_name = "SERIAL")]
+    unit: Option<String>,
     /// Reference simulator: this twin configuration (default: the study's
     /// model 4 fitted on held-out records).
     #[arg(long)]
@@ -162,7 +166,7 @@ pub fn run(args: DiagnoseArgs) -> Result<Outcome> {
     let runs = args
         .runs
         .iter()
-        .map(|p| data::load(p).map_err(anyhow::Error::from))
+        .map(|p| data::load_unit(p, args.unit.as_deref()).map_err(anyhow::Error::from))
         .collect::<Result<Vec<_>>>()?;
     let mut d = diagnose::diagnose(
         &runs,

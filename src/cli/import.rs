@@ -9,7 +9,7 @@ use clap::Args;
 
 use super::{Outcome, Usage};
 use crate::fsutil::{ensure_distinct, ensure_not_a_record};
-use crate::runlog::exchange::{export, import, import_mapped, load_site};
+use crate::runlog::exchange::{export_unit, import, import_mapped, load_site};
 
 #[derive(Debug, Args)]
 #[command(after_help = after_help!(
@@ -64,6 +64,9 @@ pub struct ExportArgs {
     /// directory.
     #[arg(long)]
     force: bool,
+    /// A batch's unit, by serial (default: the batch's first unit).
+    #[arg(long, value_name = "SERIAL")]
+    unit: Option<String>,
 }
 
 pub fn run_import(args: ImportArgs) -> Result<Outcome> {
@@ -102,7 +105,7 @@ pub fn run_import(args: ImportArgs) -> Result<Outcome> {
 pub fn run_export(args: ExportArgs) -> Result<Outcome> {
     ensure_distinct(&args.out, &[&args.log])?;
     ensure_not_a_record(&args.out, args.force)?;
-    let done = export(&args.log, &args.out)?;
+    let done = export_unit(&args.log, &args.out, args.unit.as_deref())?;
     super::warn_incomplete(&args.log, &done.read, "exported what it holds");
     outln!(
         "exported {} rows (1 Hz) to {}",

@@ -10,7 +10,7 @@ use super::{Outcome, Usage};
 use crate::clock::Stopwatch;
 use crate::coeffs::Chosen;
 use crate::report::{Report, render_html};
-use crate::runlog::replay::replay;
+use crate::runlog::replay::replay_unit;
 use crate::sequencer;
 
 #[derive(Debug, Args)]
@@ -37,23 +37,59 @@ pub struct ReplayArgs {
     /// (default: $GYROBENCH_DB, else ~/.local/share/gyrobench/results.sqlite).
     #[arg(long, value_name = "STORE", requires = "store")]
     db: Option<String>,
+    /// A batch's unit to replay, by serial (default: every unit of a
+    /// batch, each to report-SERIAL.json and .html).
+    #[arg(long, value_name = "SERIAL")]
+    unit: Option<String>,
 }
 
 pub fn run(args: ReplayArgs) -> Result<Outcome> {
     let coeffs = match &args.coeffs {
         Some(p) => {
             let chosen = Chosen::from_file(p).context("loading the coefficient set")?;
-            Some(chosen.compensation().ok_or_else(|| {
-                Usage(format!(
+            if chosen.compensation().is_none() {
+                return Err(Usage(format!(
                     "{} holds no [model4]: a set of the scale factor alone compensates nothing",
                     p.display()
                 ))
-            })?)
+                .into());
+            }
+            Some(chosen)
         }
         None => None,
     };
+    // A log that cannot be read says why in the replay itself.
+    let units = crate::runlog::view::log_units(&args.log).unwrap_or_default();
+    let batch = units.len() > 1;
+    let serials: Vec<Option<String>> = match (&args.unit, batch) {
+        (Some(u), _) => vec![Some(u.clone())],
+        (None, true) => units.into_iter().map(|(_, serial)| Some(serial)).collect(),
+        (None, false) => vec![None],
+    };
+    let mut worst = Outcome::Success;
+    for serial in &serials {
+        let o = replay_one(&args, coeffs.as_ref(), serial.as_deref(), batch)?;
+        worst = match (&worst, &o) {
+            (Outcome::Success, _) | (Outcome::Fail, Outcome::Error | Outcome::Interrupted(_)) => o,
+            (Outcome::Error, Outcome::Interrupted(_)) => o,
+            _ => worst,
+        };
+    }
+    Ok(worst)
+}
+
+/// Replay one unit (`serial`; none: the log as written) and write its
+/// report: `report.json` and `.html`, or for a batch's unit
+/// `report-SERIAL.json` and `.html`, the names its run wrote.
+fn replay_one(
+    args: &ReplayArgs,
+    coeffs: Option<&crate::coeffs::Chosen>,
+    serial: Option<&str>,
+    batch: bool,
+) -> Result<Outcome> {
+    let coeffs = coeffs.and_then(Chosen::compensation);
     let watch = Stopwatch::start();
-    let r = replay(&args.log, coeffs.as_ref())?;
+    let r = replay_unit(&args.log, coeffs.as_ref(), serial)?;
     let secs = watch.elapsed_s();
     super::warn_incomplete(
         &args.log,
@@ -87,7 +123,7 @@ pub fn run(args: ReplayArgs) -> Result<Outcome> {
     if let Some(c) = &coeffs {
         report.coefficients = c.used.clone();
     }
-    let out = args.out.unwrap_or_else(|| {
+    let out = args.out.clone().unwrap_or_else(|| {
         args.log
             .parent()
             .map_or_else(|| PathBuf::from("replay"), |d| d.join("replay"))
@@ -102,9 +138,16 @@ pub fn run(args: ReplayArgs) -> Result<Outcome> {
         .into());
     }
     std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
+    let name = match serial.filter(|_| batch) {
+        Some(s) => format!("report-{}", crate::unit::file_safe(s)),
+        None => "report".to_owned(),
+    };
     for (name, bytes) in [
-        ("report.json", report.to_json()),
-        ("report.html", render_html(&report, &r.result.records)),
+        (format!("{name}.json"), report.to_json()),
+        (
+            format!("{name}.html"),
+            render_html(&report, &r.result.records),
+        ),
     ] {
         let path = out.join(name);
         crate::fsutil::write_atomic(&path, bytes.as_bytes())
@@ -112,7 +155,7 @@ pub fn run(args: ReplayArgs) -> Result<Outcome> {
     }
     outf!("{}", report.render_text())?;
     errln!("report in {}", out.display());
-    if args.store {
+    if args.store && serial.is_none_or(|s| r.meta.units.first().is_some_and(|u| u.serial == s)) {
         let loc = crate::results::Location::resolve(args.db.as_deref(), None);
         if let Some(mut s) = crate::results::Store::open(&loc)? {
             let done = s.index_log(&args.log)?;

@@ -69,9 +69,10 @@ pub struct RunArgs {
     twin: Option<PathBuf>,
     /// Serial number of the unit under test (required with a bench file;
     /// on the embedded simulated bench it defaults to SIMULATED, which
-    /// names no unit and no real bench accepts).
-    #[arg(long)]
-    dut: Option<String>,
+    /// names no unit and no real bench accepts). On a bench with slots,
+    /// SLOT=SERIAL for each unit, repeated (a slot not named stays empty).
+    #[arg(long, value_name = "SERIAL|SLOT=SERIAL")]
+    dut: Vec<String>,
     /// Who runs it (recorded in the log and the results store).
     #[arg(long, default_value = "")]
     operator: String,
@@ -247,7 +248,32 @@ fn fresh(args: &RunArgs, procedure_path: &std::path::Path, pacing: Pacing) -> Re
     if !bench_cfg.is_embedded() && !args.inject.is_empty() {
         return Err(Usage("--inject applies to the embedded simulated bench only".into()).into());
     }
-    let dut = serial(args.dut.as_deref(), bench_cfg.is_embedded())?;
+    let batch = if bench_cfg.slots.is_empty() {
+        Vec::new()
+    } else {
+        batch_units(&args.dut, &bench_cfg, args.bench.as_deref())?
+    };
+    let dut = match batch.first() {
+        Some(u) => u.serial.clone(),
+        None if args.dut.len() > 1 => {
+            return Err(Usage(
+                "this bench holds one unit: give --dut once (SLOT=SERIAL is for a bench with [[slots]])"
+                    .into(),
+            )
+            .into());
+        }
+        None => serial(
+            args.dut.first().map(String::as_str),
+            bench_cfg.is_embedded(),
+        )?,
+    };
+    if !batch.is_empty() && args.coeffs.is_some() {
+        return Err(Usage(
+            "--coeffs names one unit's set; a batch compensates each unit with the model fitted on its own records"
+                .into(),
+        )
+        .into());
+    }
     check_operator(&args.operator).map_err(|e| Usage(format!("--operator: {e}")))?;
     let twin = match &args.twin {
         Some(p) => TwinConfig::load(p).context("loading the twin file")?,
@@ -294,7 +320,81 @@ fn fresh(args: &RunArgs, procedure_path: &std::path::Path, pacing: Pacing) -> Re
     .with_coeffs(coeffs)
     .with_seed(args.seed)
     .with_speed(args.speed.clone(), pacing)
-    .with_faults(faults))
+    .with_faults(faults)
+    .with_batch(batch))
+}
+
+/// A batch's units from `--dut SLOT=SERIAL` arguments, in the bench's slot
+/// order, each slot's twin file read (relative to the bench file); the
+/// slots not named are said on stderr.
+fn batch_units(
+    duts: &[String],
+    bench: &crate::bench::BenchConfig,
+    bench_path: Option<&std::path::Path>,
+) -> Result<Vec<session::BatchUnit>> {
+    let names = bench
+        .slots
+        .iter()
+        .map(|s| s.name.as_str())
+        .collect::<Vec<_>>()
+        .join(", ");
+    if duts.is_empty() {
+        return Err(Usage(format!(
+            "this bench holds slots {names}: give --dut SLOT=SERIAL for each unit on it"
+        ))
+        .into());
+    }
+    let mut given: Vec<(usize, String)> = Vec::new();
+    for d in duts {
+        let Some((slot, serial)) = d.split_once('=') else {
+            return Err(Usage(format!(
+                "--dut {d:?}: this bench holds slots {names}: give SLOT=SERIAL"
+            ))
+            .into());
+        };
+        let Some(index) = bench.slots.iter().position(|s| s.name == slot) else {
+            return Err(Usage(format!(
+                "--dut {d:?}: the bench has no slot {slot:?} (its slots: {names})"
+            ))
+            .into());
+        };
+        check_serial(serial).map_err(|e| Usage(format!("--dut {d:?}: {e}")))?;
+        if given.iter().any(|(i, _)| *i == index) {
+            return Err(Usage(format!("--dut {d:?}: slot {slot} is given twice")).into());
+        }
+        if given.iter().any(|(_, s)| s == serial) {
+            return Err(Usage(format!("--dut {d:?}: unit {serial} is given for two slots")).into());
+        }
+        given.push((index, serial.to_owned()));
+    }
+    given.sort_by_key(|(i, _)| *i);
+    for (i, slot) in bench.slots.iter().enumerate() {
+        if !given.iter().any(|(k, _)| *k == i) {
+            errln!("slot {}: empty (no --dut {}=SERIAL)", slot.name, slot.name);
+        }
+    }
+    let dir = bench_path
+        .and_then(std::path::Path::parent)
+        .unwrap_or_else(|| std::path::Path::new("."));
+    given
+        .into_iter()
+        .map(|(index, serial)| {
+            let slot = bench.slots[index].clone();
+            let twin = match &slot.twin {
+                Some(t) => Some(
+                    TwinConfig::load(&dir.join(t))
+                        .with_context(|| format!("loading the twin file of slot {}", slot.name))?,
+                ),
+                None => None,
+            };
+            Ok(session::BatchUnit {
+                slot,
+                index,
+                serial,
+                twin,
+            })
+        })
+        .collect()
 }
 
 /// The serial a run is recorded under: `--dut` (checked), or on the
@@ -467,7 +567,14 @@ pub fn run(args: RunArgs) -> Result<Outcome> {
     if let Some(live) = live.and_then(|l| Arc::try_unwrap(l).ok()) {
         rt.block_on(live.stop());
     }
-    outf!("{}", finished.report.render_text())?;
+    if finished.units.is_empty() {
+        outf!("{}", finished.report.render_text())?;
+    } else {
+        for u in &finished.units {
+            outf!("{}", u.report.render_text())?;
+        }
+        outf!("{}", render_batch(&finished.units))?;
+    }
     outf!("  run directory: {}\n", finished.dir.display())?;
     match &finished.report_error {
         None => errln!("log and report in {}", finished.dir.display()),
@@ -479,13 +586,34 @@ pub fn run(args: RunArgs) -> Result<Outcome> {
             errln!("{}", finished.report.to_json());
         }
     }
-    Ok(match finished.result.outcome {
+    // A batch ends as its worst unit.
+    Ok(match finished.result.worst() {
         _ if finished.report_error.is_some() => Outcome::Error,
         sequencer::Outcome::Pass => Outcome::Success,
         sequencer::Outcome::Fail => Outcome::Fail,
         sequencer::Outcome::Error => Outcome::Error,
         sequencer::Outcome::Aborted => Outcome::Interrupted(exit_code.load(Ordering::Relaxed)),
     })
+}
+
+/// The batch's summary: one line per unit (slot, serial, verdict, report).
+fn render_batch(units: &[session::FinishedUnit]) -> String {
+    let mut out = format!("batch of {} units:\n", units.len());
+    for u in units {
+        let why = u
+            .report
+            .error
+            .as_ref()
+            .map_or(String::new(), |e| format!(" ({})", e.message));
+        out.push_str(&format!(
+            "  slot {:<4} {:<20} {:<7} {}.html{why}\n",
+            u.slot,
+            u.serial,
+            u.report.outcome.as_str().to_uppercase(),
+            u.file
+        ));
+    }
+    out
 }
 
 /// The signals that stop a run, how the report names them, and the exit

@@ -109,6 +109,12 @@ fn without_moves(samples: Vec<Sample>) -> Vec<Sample> {
 
 /// Load a run's log (live, simulated or imported).
 pub fn load(path: &Path) -> Result<RunData, ReplayError> {
+    load_unit(path, None)
+}
+
+/// Load unit `unit` (a serial) of a batch's log as that unit's run
+/// (`runlog::view`; none: the log as written).
+pub fn load_unit(path: &Path, unit: Option<&str>) -> Result<RunData, ReplayError> {
     let log_err = |message: String| ReplayError::Log {
         path: path.display().to_string(),
         message,
@@ -121,7 +127,7 @@ pub fn load(path: &Path) -> Result<RunData, ReplayError> {
     // at (turned into a body rate once the logged bench is known).
     // (And how far the table state's time leads the interval's middle.)
     let mut samples: Vec<(Sample, Option<TableAngles>, TableAngles, f64)> = Vec::new();
-    runlog::read(path, |item| {
+    runlog::view::read_unit(path, unit, |item| {
         match item {
             Item::Meta { name, entries } if name == RUN_META => {
                 let meta = RunMeta::from_entries(entries).map_err(|e| e.to_string())?;
@@ -129,7 +135,15 @@ pub fn load(path: &Path) -> Result<RunData, ReplayError> {
                     serde_json::from_str(&meta.site_json)
                         .map_err(|e| format!("the run metadata's site: {e}"))?,
                 );
-                geometry = Some(logged_bench(&meta).map(|b| b.table.geometry));
+                // A batch's unit sits on its slot's mount.
+                let mount = meta.unit().and_then(|u| u.mount);
+                geometry = Some(logged_bench(&meta).map(|b| {
+                    let mut g = b.table.geometry;
+                    if let Some(m) = mount {
+                        g.mount = m;
+                    }
+                    g
+                }));
             }
             Item::Message { topic, data, .. } if topic == topics::TABLE => {
                 table = Some(

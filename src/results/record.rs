@@ -9,8 +9,9 @@ use super::{Store, StoreError};
 use crate::coeffs::CoefficientSet;
 use crate::protocol::frame::LinkStats;
 use crate::runlog::meta::RunMeta;
-use crate::runlog::replay::replay;
+use crate::runlog::replay::{replay, replay_unit};
 use crate::sequencer::RunResult;
+use crate::sequencer::measure::Measurement;
 
 pub use crate::fsutil::{sha256_file, sha256_text};
 
@@ -66,6 +67,9 @@ pub struct PartEnd<'a> {
     pub link: LinkStats,
     /// When the part ended, UTC, RFC 3339.
     pub ended_utc: String,
+    /// A batch's slots, in the order of `result`'s units (empty: one unit,
+    /// its slot as begun).
+    pub slots: Vec<String>,
 }
 
 /// What indexing a log did.
@@ -174,6 +178,7 @@ impl Store {
                 serial: meta.dut_serial.clone(),
                 dut_type: meta.dut_type.clone(),
                 coefficients: crate::coeffs::CoeffsUsed::fitted(),
+                mount: None,
             }];
             let units = if meta.units.is_empty() {
                 &fallback[..]
@@ -234,7 +239,7 @@ impl Store {
                     end.ended_utc.clone().into(),
                     r.device_time_s.into(),
                     i64::try_from(r.frames).ok().into(),
-                    r.outcome.as_str().into(),
+                    r.worst().as_str().into(),
                     r.error.as_ref().map(|e| e.step.clone()).into(),
                     r.error.as_ref().and_then(|e| e.device.clone()).into(),
                     r.error.as_ref().map(|e| e.message.clone()).into(),
@@ -267,15 +272,38 @@ impl Store {
                 "UPDATE run_units SET outcome = (SELECT outcome FROM runs WHERE id = $1) WHERE run = $1",
                 &[key.into()],
             )?;
+            // A batch: each unit its own outcome (an imported run's stay
+            // `reference`), and its measurements under its slot.
+            let units: Vec<(String, RunResult)> = match end.slots.len() {
+                0 | 1 => vec![(end.slots.first().cloned().unwrap_or_default(), r.unit(0))],
+                _ => end
+                    .slots
+                    .iter()
+                    .cloned()
+                    .zip((0..r.units()).map(|k| r.unit(k)))
+                    .collect(),
+            };
+            if units.len() > 1 {
+                for (slot, u) in &units {
+                    sql.execute(
+                        "UPDATE run_units SET outcome = $3 WHERE run = $1 AND slot = $2 AND outcome <> 'reference'",
+                        &[key.into(), slot.clone().into(), u.outcome.as_str().into()],
+                    )?;
+                }
+            }
+            let all: Vec<(&str, &Measurement)> = units
+                .iter()
+                .flat_map(|(slot, u)| u.measurements.iter().map(move |m| (slot.as_str(), m)))
+                .collect();
             // One statement for every measurement (a round trip each would
             // cost a lab's server more than the rest of the run's record).
-            for (chunk_at, chunk) in r.measurements.chunks(100).enumerate() {
+            for (chunk_at, chunk) in all.chunks(100).enumerate() {
                 let mut values = Vec::with_capacity(chunk.len());
-                let mut params: Vec<Value> = Vec::with_capacity(10 * chunk.len());
-                for (i, m) in chunk.iter().enumerate() {
+                let mut params: Vec<Value> = Vec::with_capacity(11 * chunk.len());
+                for (i, (slot, m)) in chunk.iter().enumerate() {
                     let b = params.len();
                     values.push(format!(
-                        "(${}, ${}, ${}, ${}, ${}, ${}, ${}, ${}, ${}, ${})",
+                        "(${}, ${}, ${}, ${}, ${}, ${}, ${}, ${}, ${}, ${}, ${})",
                         b + 1,
                         b + 2,
                         b + 3,
@@ -285,7 +313,8 @@ impl Store {
                         b + 7,
                         b + 8,
                         b + 9,
-                        b + 10
+                        b + 10,
+                        b + 11
                     ));
                     params.extend([
                         key.into(),
@@ -298,11 +327,12 @@ impl Store {
                         m.outcome.as_str().into(),
                         m.step.clone().into(),
                         m.note.clone().into(),
+                        (*slot).into(),
                     ]);
                 }
                 sql.execute(
                     &format!(
-                        "INSERT INTO measurements (run, seq, name, value, unit, low, high, outcome, step, note) VALUES {}",
+                        "INSERT INTO measurements (run, seq, name, value, unit, low, high, outcome, step, note, slot) VALUES {}",
                         values.join(", ")
                     ),
                     &params,
@@ -327,7 +357,19 @@ impl Store {
         {
             return Ok(Indexed::AlreadyThere);
         }
-        let r = replay(log, None).map_err(|e| bad(e.to_string()))?;
+        let mut r = replay(log, None).map_err(|e| bad(e.to_string()))?;
+        // A batch: its other units replayed each from its own view.
+        for u in r.meta.units.iter().skip(1) {
+            let o = replay_unit(log, None, Some(&u.serial)).map_err(|e| bad(e.to_string()))?;
+            r.result.others.push(crate::sequencer::UnitResult {
+                outcome: Some(o.result.outcome),
+                measurements: o.result.measurements,
+                error: o.result.error,
+                frames: o.result.frames,
+                records: Default::default(),
+            });
+        }
+        let slots = r.meta.units.iter().map(|u| u.slot.clone()).collect();
         let key = part_key(&r.meta, log)?;
         let before = outcome_of(self.sql(), &key)?;
         if before.as_deref().is_some_and(|o| o != "running") {
@@ -347,6 +389,7 @@ impl Store {
                 result: &r.result,
                 link: r.link,
                 ended_utc: ended,
+                slots,
             },
         )?;
         Ok(if before.is_none() {

@@ -94,26 +94,47 @@ fn first_difference(stored: &[ResultMeasurement], log: &[ResultMeasurement]) -> 
 /// none: replayed), or replayed when asked.
 fn log_figures(log: &Path, replay: bool) -> Result<Vec<ResultMeasurement>, String> {
     if replay {
-        let r = crate::runlog::replay::replay(log, None).map_err(|e| e.to_string())?;
-        return Ok(r
-            .result
-            .measurements
-            .iter()
-            .map(ResultMeasurement::new)
-            .collect());
+        // A batch's units in order, each from its own view of the log.
+        let units = crate::runlog::view::log_units(log).unwrap_or_default();
+        let serials: Vec<Option<&str>> = match units.len() {
+            0 | 1 => vec![None],
+            _ => units.iter().map(|(_, s)| Some(s.as_str())).collect(),
+        };
+        let mut all = Vec::new();
+        for serial in serials {
+            let r =
+                crate::runlog::replay::replay_unit(log, None, serial).map_err(|e| e.to_string())?;
+            all.extend(r.result.measurements.iter().map(ResultMeasurement::new));
+        }
+        return Ok(all);
     }
+    // The run's `result`, then a batch's other units' (`result/NAME`, in
+    // unit order as written).
     let mut found = None;
+    let mut others: Vec<Result<ResultMeta, String>> = Vec::new();
     crate::runlog::read(log, |item| {
-        if let crate::runlog::Item::Meta { name, entries } = item
-            && name == crate::runlog::schema::RESULT_META
-        {
-            found = Some(ResultMeta::from_entries(entries).map_err(|e| e.to_string()));
+        if let crate::runlog::Item::Meta { name, entries } = item {
+            let result = crate::runlog::schema::RESULT_META;
+            if name == result {
+                found = Some(ResultMeta::from_entries(entries).map_err(|e| e.to_string()));
+            } else if name
+                .strip_prefix(result)
+                .is_some_and(|r| r.starts_with('/'))
+            {
+                others.push(ResultMeta::from_entries(entries).map_err(|e| e.to_string()));
+            }
         }
         Ok(())
     })
     .map_err(|e| e.to_string())?;
     match found {
-        Some(r) => Ok(r?.measurements),
+        Some(r) => {
+            let mut all = r?.measurements;
+            for o in others {
+                all.extend(o?.measurements);
+            }
+            Ok(all)
+        }
         // A killed run's log ends without one: its figures are what a
         // replay makes of it, as the sync that completed it did.
         None => log_figures(log, true),

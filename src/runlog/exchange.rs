@@ -392,6 +392,7 @@ fn import_rows(
             serial,
             dut_type: "gyro".into(),
             coefficients: crate::coeffs::CoeffsUsed::fitted(),
+            mount: None,
         }],
         ..RunMeta::default()
     };
@@ -482,6 +483,7 @@ fn write_log(
                 t0_s: r.time_s - 0.5,
                 frames: Vec::new(),
                 state: Some(state.clone()),
+                slots: Vec::new(),
             };
             rec.tick(&tick, Some(label), &step.key).map_err(io)?;
             let iv = Interval {
@@ -547,6 +549,7 @@ fn write_log(
         frames: 0,
         records,
         bench_left: None,
+        others: Vec::new(),
     };
     rec.finish_run(&ResultMeta::new(&result), None, end_s)
         .map_err(io)?;
@@ -568,6 +571,11 @@ pub struct Exported {
 /// `out`; `step` is the record label, or the procedure step while not
 /// recording. A log with no interval at all is an error, and leaves no file.
 pub fn export(log: &Path, out: &Path) -> Result<Exported, ImportError> {
+    export_unit(log, out, None)
+}
+
+/// [`export`] of unit `unit` (a serial) of a batch's log (`super::view`).
+pub fn export_unit(log: &Path, out: &Path, unit: Option<&str>) -> Result<Exported, ImportError> {
     ensure_distinct(out, &[log])?;
     let mut pending =
         Pending::output(out).map_err(|e| ImportError::Other(format!("{}: {e}", out.display())))?;
@@ -583,7 +591,7 @@ pub fn export(log: &Path, out: &Path) -> Result<Exported, ImportError> {
     let mut rows = 0usize;
     let mut saw_run = false;
     let mut start_ns = None;
-    let read = reader::read(log, |item| {
+    let read = super::view::read_unit(log, unit, |item| {
         match item {
             Item::Meta { name, entries } if name == RUN_META => {
                 saw_run = true;

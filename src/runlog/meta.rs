@@ -93,7 +93,7 @@ pub struct RunMeta {
 
 /// A unit of a run: its slot on the bench (empty on a bench with one unit
 /// position), its identity, and the coefficients it was compensated with.
-#[derive(Debug, Clone, PartialEq, Eq, Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, serde::Deserialize)]
 pub struct RunUnit {
     /// Slot on the bench's fixture (empty: the bench's only one).
     pub slot: String,
@@ -104,6 +104,10 @@ pub struct RunUnit {
     pub dut_type: String,
     /// The coefficients its compensated figures use.
     pub coefficients: CoeffsUsed,
+    /// Its body orientation in NED with both table angles at zero (a
+    /// batch's slots; none: the bench's `[table.geometry] mount`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mount: Option<crate::geometry::Orientation>,
 }
 
 fn take(m: &mut BTreeMap<String, String>, k: &str) -> String {
@@ -227,6 +231,7 @@ impl RunMeta {
                     },
                     None => CoeffsUsed::fitted(),
                 },
+                mount: None,
             });
         }
         self
@@ -240,6 +245,17 @@ impl RunMeta {
     /// The run's first unit (its only one on a bench with one position).
     pub fn unit(&self) -> Option<&RunUnit> {
         self.units.first()
+    }
+
+    /// The run as unit `k` of a batch is recorded: its serial and its
+    /// unit alone (what its report and its store record name).
+    pub fn for_unit(&self, k: usize) -> Self {
+        let mut m = self.clone();
+        if let Some(u) = self.units.get(k) {
+            m.dut_serial = u.serial.clone();
+            m.units = vec![u.clone()];
+        }
+        m
     }
 
     /// The entries as written to the log.
@@ -512,6 +528,7 @@ mod tests {
                     from: Some("results.sqlite".into()),
                     override_reason: None,
                 },
+                mount: Some(crate::geometry::Orientation::new(90.0, 0.0, 0.0)),
             }],
             ..RunMeta::default()
         };

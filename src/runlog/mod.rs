@@ -7,6 +7,7 @@
 //! - [`live`]: the same messages on a Foxglove WebSocket server, live.
 //! - [`reader`]: streaming, bounded reading in file order.
 //! - [`recover`]: a complete log from a killed run's file.
+//! - [`view`]: one unit of a batch's log read as that unit's log alone.
 //! - [`replay`]: a run's measurements and verdict from its log alone.
 //! - [`exchange`] and [`interchange`]: runs recorded elsewhere (the
 //!   interchange CSV) in and out; [`import_map`]: a lab's own CSV read
@@ -21,6 +22,7 @@ pub mod reader;
 pub mod recover;
 pub mod replay;
 pub mod schema;
+pub mod view;
 pub mod writer;
 
 pub use reader::{Item, ReadError, ReadSummary, read};

@@ -551,6 +551,17 @@ mod format1 {
 
 /// Replay the log at `path`; `coeffs` replace the coefficients the run used.
 pub fn replay(path: &Path, coeffs: Option<&Compensation>) -> Result<Replayed, ReplayError> {
+    replay_unit(path, coeffs, None)
+}
+
+/// Replay unit `unit` (a serial) of the log at `path` as the log of that
+/// unit alone (`super::view`; none: the log as written, a batch's first
+/// unit).
+pub fn replay_unit(
+    path: &Path,
+    coeffs: Option<&Compensation>,
+    unit: Option<&str>,
+) -> Result<Replayed, ReplayError> {
     let mut st = State {
         path,
         coeffs_override: coeffs,
@@ -573,7 +584,7 @@ pub fn replay(path: &Path, coeffs: Option<&Compensation>) -> Result<Replayed, Re
         completed: 0,
         earlier: None,
     };
-    let read = reader::read(path, |item| match item {
+    let read = super::view::read_unit(path, unit, |item| match item {
         Item::Meta { name, entries } => st.meta(name, entries),
         Item::Message { topic, data, .. } => {
             if st.procedure.is_none() && topic != topics::EVENTS {
@@ -673,6 +684,7 @@ pub fn replay(path: &Path, coeffs: Option<&Compensation>) -> Result<Replayed, Re
             frames: st.frames,
             records: st.records,
             bench_left,
+            others: Vec::new(),
         },
         link,
         read,
@@ -725,6 +737,15 @@ struct FrameCounts {
 /// logged procedure) as a rate series at the frame rate; for an imported
 /// run (no frames), its 1 Hz means.
 pub fn record_rates(path: &Path, label: Option<&str>) -> Result<RecordRates, ReplayError> {
+    record_rates_unit(path, label, None)
+}
+
+/// [`record_rates`] of unit `unit` (a serial) of a batch's log.
+pub fn record_rates_unit(
+    path: &Path,
+    label: Option<&str>,
+    unit: Option<&str>,
+) -> Result<RecordRates, ReplayError> {
     let log_err = |message: String| ReplayError::Log {
         path: path.display().to_string(),
         message,
@@ -739,7 +760,7 @@ pub fn record_rates(path: &Path, label: Option<&str>) -> Result<RecordRates, Rep
         read: ReadSummary::default(),
         start_ns: None,
     };
-    let read = reader::read(path, |item| {
+    let read = super::view::read_unit(path, unit, |item| {
         match item {
             Item::Meta { name, entries } if name == RUN_META => {
                 out.start_ns = out

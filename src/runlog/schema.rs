@@ -31,6 +31,22 @@ pub mod topics {
     pub const SUPPLY: &str = "/supply/state";
 }
 
+/// The topics a batch's other units have each (under [`slot_topic`]): the
+/// first unit of a batch is on the single-unit topics.
+pub const SLOT_TOPICS: [&str; 4] = [
+    topics::FRAMES,
+    topics::RATE_1HZ,
+    topics::TABLE,
+    topics::LINK,
+];
+
+/// Unit `slot`'s own copy of `topic` in a batch's log: `/slots/B/gyro/frames`;
+/// its `/table/state` is the table as that unit sees it (its orientation
+/// and reference).
+pub fn slot_topic(slot: &str, topic: &str) -> String {
+    format!("/slots/{slot}{topic}")
+}
+
 /// Version of the log layout this build writes. Format 1 logs (no
 /// `/steps`, no attachments) still replay.
 pub const FORMAT: u32 = 2;
@@ -63,7 +79,7 @@ const TABLE_SCHEMA: &str = r#"{"type":"object","title":"gyrobench.TableState","d
 const SUPPLY_SCHEMA: &str = r#"{"type":"object","title":"gyrobench.SupplyState","description":"The supply output the unit hangs on","properties":{"t_s":{"type":"number"},"v":{"type":"number","description":"voltage measured at the output, V"},"a":{"type":"number","description":"current measured, A"},"w":{"type":"number","description":"power delivered, W"},"set_v":{"type":"number","description":"voltage setting, V"},"limit_a":{"type":"number","description":"current limit, A"},"on":{"type":"boolean"},"tripped":{"type":"boolean","description":"over-current protection tripped"}},"required":["t_s","v","a","w","set_v","limit_a","on","tripped"]}"#;
 const LOG_SCHEMA: &str = r#"{"type":"object","title":"foxglove.Log","properties":{"timestamp":{"type":"object","properties":{"sec":{"type":"integer","minimum":0},"nsec":{"type":"integer","minimum":0}}},"level":{"type":"integer","description":"1 debug, 2 info, 3 warning, 4 error, 5 fatal"},"message":{"type":"string"},"name":{"type":"string"},"file":{"type":"string"},"line":{"type":"integer"}},"required":["timestamp","level","message","name","file","line"]}"#;
 const LINK_SCHEMA: &str = r#"{"type":"object","title":"gyrobench.LinkStats","properties":{"t_s":{"type":"number"},"bytes":{"type":"integer"},"frames":{"type":"integer"},"resyncs":{"type":"integer"},"skipped_bytes":{"type":"integer"},"crc_errors":{"type":"integer"},"lost_frames":{"type":"integer"},"duplicates":{"type":"integer"},"reconnects":{"type":"integer"},"longest_gap_ms":{"type":"integer","description":"longest stretch without a valid frame, ms (host clock)"}},"required":["t_s","frames","lost_frames","crc_errors"]}"#;
-const STEP_SCHEMA: &str = r#"{"type":"object","title":"gyrobench.StepEvent","description":"A procedure step started, ended, or was run to restore a resumed run's conditions","properties":{"t_s":{"type":"number","description":"device time, s since this part of the run started"},"phase":{"type":"string","enum":["start","end","restore"]},"index":{"type":"integer","description":"position of the step in run order (setup, main, cleanup)"},"key":{"type":"string","description":"dotted key of the step in the procedure file"},"line":{"type":"integer"},"group":{"type":"string","enum":["setup","main","cleanup"]},"action":{"type":"string"},"description":{"type":"string"},"link":{"type":"object","description":"at the end of a record: the gyro link's figures over it"}},"required":["t_s","phase","index","key","line","group","action","description"]}"#;
+const STEP_SCHEMA: &str = r#"{"type":"object","title":"gyrobench.StepEvent","description":"A procedure step started, ended, or was run to restore a resumed run's conditions","properties":{"t_s":{"type":"number","description":"device time, s since this part of the run started"},"phase":{"type":"string","enum":["start","end","restore"]},"index":{"type":"integer","description":"position of the step in run order (setup, main, cleanup)"},"key":{"type":"string","description":"dotted key of the step in the procedure file"},"line":{"type":"integer"},"group":{"type":"string","enum":["setup","main","cleanup"]},"action":{"type":"string"},"description":{"type":"string"},"link":{"type":"object","description":"at the end of a record: the gyro link's figures over it"},"slot_links":{"type":"array","items":{"type":"object"},"description":"at the end of a record of a batch: each other unit's link figures over it, in slot order"}},"required":["t_s","phase","index","key","line","group","action","description"]}"#;
 
 /// `foxglove.Log` time stamp.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -306,6 +322,7 @@ mod tests {
             action: "chamber".into(),
             description: "chamber to +20.0 degC".into(),
             link: None,
+            slot_links: Vec::new(),
         };
         let text = serde_json::to_string(&e).expect("json");
         assert!(text.contains(r#""phase":"restore""#), "{text}");

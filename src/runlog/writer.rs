@@ -26,18 +26,18 @@ use super::live::Live;
 use super::meta::{ResultMeta, RunMeta};
 use super::schema::{
     CHANNELS, ChamberState, GyroFrames, Level, LinkSample, LogLine, PROCEDURE_ATTACHMENT,
-    REPORT_ATTACHMENT, RESULT_META, RUN_META, Rate1Hz, StepEvent, SupplyState, TableState,
-    Timestamp, topics,
+    REPORT_ATTACHMENT, RESULT_META, RUN_META, Rate1Hz, SLOT_TOPICS, StepEvent, SupplyState,
+    TableState, Timestamp, slot_topic, topics,
 };
 use crate::analysis::series::Interval;
 use crate::clock::Stopwatch;
-use crate::sequencer::{Sink, Tick};
+use crate::sequencer::{BenchState, FrameRecord, Sink, Tick};
 
 /// Writes a run's MCAP file.
 pub struct Recorder {
     path: PathBuf,
     w: mcap::Writer<BufWriter<File>>,
-    ch: BTreeMap<&'static str, u16>,
+    ch: BTreeMap<String, u16>,
     seq: u32,
     start_ns: u64,
     frame_dt_s: f64,
@@ -47,11 +47,13 @@ pub struct Recorder {
     /// Device time of the last flush, s.
     flushed_t_s: f64,
     buf: Vec<u8>,
-    messages: BTreeMap<&'static str, u64>,
+    messages: BTreeMap<String, u64>,
     /// The first write failure, in words (file and cause).
     failed: Option<String>,
     /// Where every message is also published live, if anywhere.
     live: Option<Arc<Live>>,
+    /// A batch's other units' topics (slots after the first).
+    slots: Vec<SlotTopics>,
     /// Device time from which the disk is full (`--inject disk-full@T` on
     /// the simulated bench).
     full_from_s: Option<f64>,
@@ -94,6 +96,26 @@ pub struct FrameScales {
     pub temp_lsb_c: f64,
 }
 
+/// The topics of one more unit of a batch.
+#[derive(Debug)]
+struct SlotTopics {
+    frames: String,
+    rate_1hz: String,
+    table: String,
+    link: String,
+}
+
+impl SlotTopics {
+    fn of(slot: &str) -> Self {
+        Self {
+            frames: slot_topic(slot, topics::FRAMES),
+            rate_1hz: slot_topic(slot, topics::RATE_1HZ),
+            table: slot_topic(slot, topics::TABLE),
+            link: slot_topic(slot, topics::LINK),
+        }
+    }
+}
+
 impl Recorder {
     /// Create `path` (which must not exist: a log is never overwritten)
     /// and write the header, schemas, channels, the `run` metadata and the
@@ -133,8 +155,40 @@ impl Recorder {
             let cid = w
                 .add_channel(sid, topic, "json", &BTreeMap::new())
                 .map_err(mcap_err)?;
-            ch.insert(topic, cid);
+            ch.insert(topic.to_owned(), cid);
         }
+        // A batch's other units: each one's frames, 1 Hz rate and table
+        // state as it sees it, under its slot (the first unit's are the
+        // single-unit channels, so every reader of one-unit logs reads it).
+        let mut slot_schemas = BTreeMap::new();
+        for unit in meta.units.iter().skip(1) {
+            for (topic, name, schema) in CHANNELS {
+                if !SLOT_TOPICS.contains(&topic) {
+                    continue;
+                }
+                let sid = match slot_schemas.get(name) {
+                    Some(&sid) => sid,
+                    None => {
+                        let sid = w
+                            .add_schema(name, "jsonschema", schema.as_bytes())
+                            .map_err(mcap_err)?;
+                        slot_schemas.insert(name, sid);
+                        sid
+                    }
+                };
+                let topic = slot_topic(&unit.slot, topic);
+                let cid = w
+                    .add_channel(sid, &topic, "json", &BTreeMap::new())
+                    .map_err(mcap_err)?;
+                ch.insert(topic, cid);
+            }
+        }
+        let slots = meta
+            .units
+            .iter()
+            .skip(1)
+            .map(|u| SlotTopics::of(&u.slot))
+            .collect();
         w.write_metadata(&mcap::records::Metadata {
             name: RUN_META.into(),
             metadata: meta.to_entries(),
@@ -165,6 +219,7 @@ impl Recorder {
             full_from_s: None,
             table_angles_known: true,
             live: None,
+            slots,
         })
     }
 
@@ -212,12 +267,7 @@ impl Recorder {
         })
     }
 
-    fn write_json(
-        &mut self,
-        topic: &'static str,
-        t_s: f64,
-        value: &impl Serialize,
-    ) -> std::io::Result<()> {
+    fn write_json(&mut self, topic: &str, t_s: f64, value: &impl Serialize) -> std::io::Result<()> {
         if self.failed.is_none() && self.full_from_s.is_some_and(|t| t_s >= t) {
             self.failed = Some(format!(
                 "writing {}: {} (simulated: --inject disk-full)",
@@ -254,8 +304,49 @@ impl Recorder {
             self.since_flush.lap_s();
             self.flushed_t_s = t_s;
         }
-        *self.messages.entry(topic).or_default() += 1;
+        *self.messages.entry(topic.to_owned()).or_default() += 1;
         Ok(())
+    }
+
+    /// A tick's frames (nothing when there are none).
+    fn write_frames(&mut self, topic: &str, t0_s: f64, f: &[FrameRecord]) -> std::io::Result<()> {
+        if f.is_empty() {
+            return Ok(());
+        }
+        let msg = GyroFrames {
+            t0_s,
+            dt_s: self.frame_dt_s,
+            lsb_arcsec: self.lsb_arcsec,
+            temp_lsb_c: self.temp_lsb_c,
+            seq: f.iter().map(|x| x.seq).collect(),
+            counts: f.iter().map(|x| x.counts).collect(),
+            t1_raw: f.iter().map(|x| x.temps_raw[0]).collect(),
+            t2_raw: f.iter().map(|x| x.temps_raw[1]).collect(),
+            tcase_raw: f.iter().map(|x| x.temps_raw[2]).collect(),
+            status: f.iter().map(|x| x.status).collect(),
+        };
+        self.write_json(topic, t0_s, &msg)
+    }
+
+    /// The table's state with a unit's orientation and reference.
+    fn write_table(&mut self, topic: &str, s: &BenchState, step: &str) -> std::io::Result<()> {
+        let known = self.table_angles_known;
+        let table = TableState {
+            t_s: s.t_s,
+            outer_deg: known.then_some(s.table.angles.outer_deg),
+            inner_deg: known.then_some(s.table.angles.inner_deg),
+            outer_rate_dps: s.table.rates.outer_deg,
+            inner_rate_dps: s.table.rates.inner_deg,
+            commanded_outer_deg: known.then_some(s.commanded.outer_deg),
+            commanded_inner_deg: known.then_some(s.commanded.inner_deg),
+            azimuth_deg: s.orientation.azimuth_deg,
+            elevation_deg: s.orientation.elevation_deg,
+            roll_deg: s.orientation.roll_deg,
+            earth_rate_dph: s.reference_dph,
+            in_position: s.in_position,
+            step: step.to_owned(),
+        };
+        self.write_json(topic, s.t_s, &table)
     }
 
     fn ns(&self, t_s: f64) -> u64 {
@@ -264,8 +355,36 @@ impl Recorder {
     }
 
     /// Messages written per topic.
-    pub fn message_counts(&self) -> &BTreeMap<&'static str, u64> {
+    pub fn message_counts(&self) -> &BTreeMap<String, u64> {
         &self.messages
+    }
+
+    /// A batch's unit in `slot` (not the first): its result as the
+    /// metadata record `result/SLOT` and its report as the attachment
+    /// `report-SERIAL.json`, before [`Recorder::finish_run`].
+    pub fn unit_result(
+        &mut self,
+        slot: &str,
+        serial: &str,
+        result: &ResultMeta,
+        report_json: &str,
+        end_s: f64,
+    ) -> std::io::Result<()> {
+        let at = self.ns(end_s);
+        let entries = result.to_entries();
+        self.guarded(|w| {
+            w.write_metadata(&mcap::records::Metadata {
+                name: format!("{RESULT_META}/{slot}"),
+                metadata: entries,
+            })?;
+            w.attach(&mcap::Attachment {
+                log_time: at,
+                create_time: at,
+                name: format!("report-{}.json", crate::unit::file_safe(serial)),
+                media_type: "application/json".into(),
+                data: std::borrow::Cow::Borrowed(report_json.as_bytes()),
+            })
+        })
     }
 
     /// End the log of a run: the `result` metadata, the report (when there
@@ -320,21 +439,10 @@ impl Sink for Recorder {
     }
 
     fn tick(&mut self, tick: &Tick, _record: Option<&str>, step: &str) -> std::io::Result<()> {
-        if !tick.frames.is_empty() {
-            let f = &tick.frames;
-            let msg = GyroFrames {
-                t0_s: tick.t0_s,
-                dt_s: self.frame_dt_s,
-                lsb_arcsec: self.lsb_arcsec,
-                temp_lsb_c: self.temp_lsb_c,
-                seq: f.iter().map(|x| x.seq).collect(),
-                counts: f.iter().map(|x| x.counts).collect(),
-                t1_raw: f.iter().map(|x| x.temps_raw[0]).collect(),
-                t2_raw: f.iter().map(|x| x.temps_raw[1]).collect(),
-                tcase_raw: f.iter().map(|x| x.temps_raw[2]).collect(),
-                status: f.iter().map(|x| x.status).collect(),
-            };
-            self.write_json(topics::FRAMES, tick.t0_s, &msg)?;
+        self.write_frames(topics::FRAMES, tick.t0_s, &tick.frames)?;
+        for k in 0..self.slots.len().min(tick.slots.len()) {
+            let topic = self.slots[k].frames.clone();
+            self.write_frames(&topic, tick.t0_s, &tick.slots[k].frames)?;
         }
         if let Some(s) = &tick.state {
             let chamber = ChamberState {
@@ -345,28 +453,42 @@ impl Sink for Recorder {
                 alarms: s.chamber.alarms.clone(),
             };
             self.write_json(topics::CHAMBER, s.t_s, &chamber)?;
-            let known = self.table_angles_known;
-            let table = TableState {
-                t_s: s.t_s,
-                outer_deg: known.then_some(s.table.angles.outer_deg),
-                inner_deg: known.then_some(s.table.angles.inner_deg),
-                outer_rate_dps: s.table.rates.outer_deg,
-                inner_rate_dps: s.table.rates.inner_deg,
-                commanded_outer_deg: known.then_some(s.commanded.outer_deg),
-                commanded_inner_deg: known.then_some(s.commanded.inner_deg),
-                azimuth_deg: s.orientation.azimuth_deg,
-                elevation_deg: s.orientation.elevation_deg,
-                roll_deg: s.orientation.roll_deg,
-                earth_rate_dph: s.reference_dph,
-                in_position: s.in_position,
-                step: step.to_owned(),
-            };
-            self.write_json(topics::TABLE, s.t_s, &table)?;
+            self.write_table(topics::TABLE, s, step)?;
+            for k in 0..self.slots.len().min(tick.slots.len()) {
+                let topic = self.slots[k].table.clone();
+                self.write_table(&topic, &s.for_slot(k + 1, tick), step)?;
+            }
             if let Some(p) = &s.power {
                 self.write_json(topics::SUPPLY, s.t_s, &SupplyState::new(s.t_s, p))?;
             }
         }
         Ok(())
+    }
+
+    fn slot_link(
+        &mut self,
+        slot: usize,
+        t_s: f64,
+        s: &crate::protocol::frame::LinkStats,
+    ) -> std::io::Result<()> {
+        let Some(topics) = slot.checked_sub(1).and_then(|k| self.slots.get(k)) else {
+            return Ok(());
+        };
+        let topic = topics.link.clone();
+        self.write_json(&topic, t_s, &LinkSample { t_s, stats: *s })
+    }
+
+    fn slot_interval(
+        &mut self,
+        slot: usize,
+        iv: &Interval,
+        record: Option<&str>,
+    ) -> std::io::Result<()> {
+        let Some(topics) = slot.checked_sub(1).and_then(|k| self.slots.get(k)) else {
+            return Ok(());
+        };
+        let topic = topics.rate_1hz.clone();
+        self.write_json(&topic, iv.time_s, &Rate1Hz::new(iv, record))
     }
 
     fn interval(&mut self, iv: &Interval, record: Option<&str>) -> std::io::Result<()> {

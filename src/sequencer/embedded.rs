@@ -6,7 +6,7 @@ use std::sync::Arc;
 
 use async_trait::async_trait;
 
-use super::{BenchIo, BenchState, FrameRecord, Tick};
+use super::{BenchIo, BenchState, FrameRecord, SlotTick, Tick};
 use crate::bench::{SupplyDevice, SupplySafe};
 use crate::clock::{Clock, VirtualClock};
 use crate::driver::{ChamberMode, ChamberReading, DeviceError, TableReading};
@@ -116,6 +116,18 @@ impl std::str::FromStr for Fault {
     }
 }
 
+/// A frame as the twin's gyro sends it, with `counts` (a fault may replace
+/// the sample's own).
+fn frame_of(g: &GyroSample, counts: i32) -> FrameRecord {
+    let raw = |t: f64| (t / TEMP_LSB_C).round() as i16;
+    FrameRecord {
+        seq: (g.index % 256) as u8,
+        counts,
+        temps_raw: [raw(g.t1_c), raw(g.t2_c), raw(g.tcase_c)],
+        status: g.status,
+    }
+}
+
 /// The twin as a bench.
 #[derive(Debug)]
 pub struct EmbeddedBench {
@@ -129,6 +141,21 @@ pub struct EmbeddedBench {
     frames: u64,
     crc_errors: u64,
     supply: Option<EmbeddedSupply>,
+    /// A batch's other units, each its own twin in the same chamber air
+    /// on the same table (slots after the first, in the bench's order).
+    slots: Vec<SlotTwin>,
+}
+
+/// One more unit of a batch: its own twin (parameters, seed, noise) on its
+/// own mount, given every chamber and table command the first is given.
+/// The twins' chamber air and table follow the same deterministic models
+/// from the same commands, so they share one air and one table; a test
+/// holds them to that.
+#[derive(Debug)]
+struct SlotTwin {
+    twin: Twin,
+    geometry: TableGeometry,
+    frames: u64,
 }
 
 /// The simulated supply powering the unit, with the bench file's settings.
@@ -154,7 +181,29 @@ impl EmbeddedBench {
             frames: 0,
             crc_errors: 0,
             supply: None,
+            slots: Vec::new(),
         }
+    }
+
+    /// Add a batch's next unit: `cfg`'s twin seeded `seed`, mounted as
+    /// `cfg.table.geometry` says, in this bench's chamber on its table.
+    pub fn with_slot(mut self, cfg: TwinConfig, seed: u64) -> Self {
+        let geometry = cfg.table.geometry;
+        let mut twin = Twin::new(cfg, seed);
+        if !self.twin.is_powered() {
+            twin.power_off();
+        }
+        self.slots.push(SlotTwin {
+            twin,
+            geometry,
+            frames: 0,
+        });
+        self
+    }
+
+    /// Every twin: the first unit's, then the batch's others.
+    fn twins(&mut self) -> impl Iterator<Item = &mut Twin> {
+        std::iter::once(&mut self.twin).chain(self.slots.iter_mut().map(|s| &mut s.twin))
     }
 
     /// Power the unit from a simulated supply as the bench file describes
@@ -198,6 +247,34 @@ impl EmbeddedBench {
             }
         }
         self.twin.run_until(t_s, |_, g| on_frame(g));
+    }
+
+    /// Run a batch's other twins to `t_s` (the first is run by
+    /// [`EmbeddedBench::run_to`]), each slot's frames into `ticks`, and
+    /// each one's pose: its orientation and the mean reference over the
+    /// tick from `from` (the table's angles and rates at its start).
+    fn run_slots(
+        &mut self,
+        t_s: f64,
+        from: (f64, TableAngles, TableAngles),
+        ticks: &mut Vec<SlotTick>,
+    ) {
+        ticks.resize_with(self.slots.len(), SlotTick::default);
+        for (slot, tick) in self.slots.iter_mut().zip(ticks.iter_mut()) {
+            tick.frames.clear();
+            let frames = &mut tick.frames;
+            slot.twin
+                .run_until(t_s, |_, g| frames.push(frame_of(g, g.delta_counts)));
+            slot.frames += frames.len() as u64;
+            let (angles, rates) = (slot.twin.table_angles(), slot.twin.table_rates());
+            tick.orientation = slot.geometry.orientation(angles);
+            tick.reference_dph = slot.geometry.mean_kinematic_rate_dph(
+                &self.site,
+                (from.1, from.2),
+                (angles, rates),
+                slot.twin.time_s() - from.0,
+            );
+        }
     }
 
     /// Play `fault` from device time `at_s` on.
@@ -296,13 +373,14 @@ impl BenchIo for EmbeddedBench {
 
     async fn set_chamber(&mut self, set_c: f64, ramp_c_per_min: f64) -> Result<(), DeviceError> {
         self.check(&["chamber"])?;
-        self.twin
-            .set_chamber(set_c, ramp_c_per_min)
-            .map_err(|e| DeviceError::Refused {
-                device: "chamber".into(),
-                request: format!("set point {set_c} degC at {ramp_c_per_min} degC/min"),
-                reason: e.to_string(),
-            })?;
+        for twin in self.twins() {
+            twin.set_chamber(set_c, ramp_c_per_min)
+                .map_err(|e| DeviceError::Refused {
+                    device: "chamber".into(),
+                    request: format!("set point {set_c} degC at {ramp_c_per_min} degC/min"),
+                    reason: e.to_string(),
+                })?;
+        }
         self.mode = ChamberMode::Constant;
         Ok(())
     }
@@ -310,17 +388,21 @@ impl BenchIo for EmbeddedBench {
     async fn move_table(&mut self, angles: TableAngles) -> Result<(), DeviceError> {
         self.check(&["table"])?;
         self.commanded = angles;
-        self.twin.move_table(angles);
+        for twin in self.twins() {
+            twin.move_table(angles);
+        }
         Ok(())
     }
 
     async fn rotate_table(&mut self, inner: bool, rate_dps: f64) -> Result<(), DeviceError> {
         self.check(&["table"])?;
         let d = Some(AxisDemand::Rate(rate_dps));
-        if inner {
-            self.twin.demand_table(None, d);
-        } else {
-            self.twin.demand_table(d, None);
+        for twin in self.twins() {
+            if inner {
+                twin.demand_table(None, d);
+            } else {
+                twin.demand_table(d, None);
+            }
         }
         Ok(())
     }
@@ -328,8 +410,9 @@ impl BenchIo for EmbeddedBench {
     async fn safe_state(&mut self) -> Result<(), DeviceError> {
         // An interlocked table is stopped already; a silent chamber cannot
         // be told anything.
-        self.twin
-            .demand_table(Some(AxisDemand::Stop), Some(AxisDemand::Stop));
+        for twin in self.twins() {
+            twin.demand_table(Some(AxisDemand::Stop), Some(AxisDemand::Stop));
+        }
         let supply = match self.supply.as_mut() {
             Some(p) if p.cfg.safe_state == SupplySafe::Off => {
                 let errors = p.sim.program(p.cfg.channel, &[Command::Output(false)]);
@@ -339,13 +422,14 @@ impl BenchIo for EmbeddedBench {
         };
         self.check(&["chamber"])?;
         let room = self.twin.config().chamber.initial_c;
-        self.twin
-            .set_chamber(room, PASSIVE_DRIFT_C_PER_MIN)
-            .map_err(|e| DeviceError::Refused {
-                device: "chamber".into(),
-                request: "standby".into(),
-                reason: e.to_string(),
-            })?;
+        for twin in self.twins() {
+            twin.set_chamber(room, PASSIVE_DRIFT_C_PER_MIN)
+                .map_err(|e| DeviceError::Refused {
+                    device: "chamber".into(),
+                    request: "standby".into(),
+                    reason: e.to_string(),
+                })?;
+        }
         self.mode = ChamberMode::Standby;
         supply
     }
@@ -394,8 +478,9 @@ impl BenchIo for EmbeddedBench {
     async fn advance(&mut self, t_s: f64, tick: &mut Tick) -> Result<(), DeviceError> {
         if self.active(Fault::TableInterlock) {
             // What the interlock does on the real table: both axes stop.
-            self.twin
-                .demand_table(Some(AxisDemand::Stop), Some(AxisDemand::Stop));
+            for twin in self.twins() {
+                twin.demand_table(Some(AxisDemand::Stop), Some(AxisDemand::Stop));
+            }
         }
         self.check(&["chamber", "table", "gyro"])?;
         for (f, signal) in [
@@ -430,7 +515,6 @@ impl BenchIo for EmbeddedBench {
         tick.frames.clear();
         tick.t0_s = self.twin.time_s() + self.twin.frame_dt_s();
         let frames = &mut tick.frames;
-        let raw = |t: f64| (t / TEMP_LSB_C).round() as i16;
         let corrupt = self.active(Fault::GyroCorrupt);
         let stuck = self.active(Fault::GyroStuck);
         let saturated = self.active(Fault::GyroSaturated);
@@ -450,13 +534,9 @@ impl BenchIo for EmbeddedBench {
                 (true, _) => 3,
                 _ => g.delta_counts,
             };
-            frames.push(FrameRecord {
-                seq: (g.index % 256) as u8,
-                counts,
-                temps_raw: [raw(g.t1_c), raw(g.t2_c), raw(g.tcase_c)],
-                status: g.status,
-            });
+            frames.push(frame_of(g, counts));
         });
+        self.run_slots(t_s, from, &mut tick.slots);
         self.crc_errors += crc_errors;
         self.frames += tick.frames.len() as u64;
         let mut state = self.state();
@@ -470,6 +550,21 @@ impl BenchIo for EmbeddedBench {
         );
         tick.state = Some(state);
         Ok(())
+    }
+
+    fn units(&self) -> usize {
+        1 + self.slots.len()
+    }
+
+    fn slot_link_stats(&self, slot: usize) -> LinkStats {
+        match slot.checked_sub(1).and_then(|k| self.slots.get(k)) {
+            Some(s) => LinkStats {
+                frames: s.frames,
+                bytes: s.frames * 20,
+                ..LinkStats::default()
+            },
+            None => self.link_stats(),
+        }
     }
 
     async fn read_back(&mut self) -> Result<(ChamberReading, TableReading), DeviceError> {

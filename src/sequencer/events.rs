@@ -77,6 +77,10 @@ pub struct StepEvent {
     /// At the end of a record: the gyro link's figures over it.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub link: Option<crate::protocol::frame::LinkStats>,
+    /// At the end of a record of a batch: each other unit's link figures
+    /// over it, in slot order (the first unit's are `link`).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub slot_links: Vec<crate::protocol::frame::LinkStats>,
 }
 
 impl StepEvent {
@@ -92,6 +96,7 @@ impl StepEvent {
             action: s.kind.action().to_owned(),
             description: s.describe(),
             link: None,
+            slot_links: Vec::new(),
         }
     }
 }

@@ -30,8 +30,16 @@ impl<B: BenchIo> Guarded<B> {
         }
     }
 
+    /// The same guard around the bench `f` makes of the guarded one.
+    #[must_use]
+    pub fn map_inner(mut self, f: impl FnOnce(B) -> B) -> Self {
+        self.inner = f(self.inner);
+        self
+    }
+
     /// Refuse power commands beyond the supply's `max_volts` and
     /// `max_limit_a` from the bench file.
+    #[must_use]
     pub fn with_supply(mut self, supply: Option<&crate::bench::SupplyDevice>) -> Self {
         self.supply_max = supply.map(|p| (p.max_volts(), p.max_limit_a()));
         self
@@ -172,6 +180,14 @@ impl<B: BenchIo> BenchIo for Guarded<B> {
 
     fn link_stats(&self) -> LinkStats {
         self.inner.link_stats()
+    }
+
+    fn units(&self) -> usize {
+        self.inner.units()
+    }
+
+    fn slot_link_stats(&self, slot: usize) -> LinkStats {
+        self.inner.slot_link_stats(slot)
     }
 
     fn pending_s(&self) -> f64 {

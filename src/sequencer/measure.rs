@@ -4,8 +4,8 @@ use std::collections::BTreeMap;
 
 use serde::Serialize;
 
+use super::BenchState;
 use super::health::{RecordHealth, Runs};
-use super::{BenchState, Tick};
 use crate::analysis::figures::{DriftTrace, bias_stability, drift_trace, mean};
 use crate::analysis::model::{self, ModelKind};
 use crate::analysis::rate::{self, Figure, RatePoint};
@@ -183,7 +183,7 @@ impl Records {
     /// Reduce a tick to its interval mean and file it; returns it.
     pub fn push_tick(
         &mut self,
-        tick: &Tick,
+        frames: &[super::FrameRecord],
         state: &BenchState,
         record: Option<&str>,
         frame_dt_s: f64,
@@ -191,7 +191,7 @@ impl Records {
         temp_lsb_c: f64,
     ) -> Option<Interval> {
         let mut sums = TickSums::default();
-        for f in &tick.frames {
+        for f in frames {
             sums.add(f.counts, f.temps_raw);
         }
         let at = IntervalState {
@@ -763,7 +763,7 @@ mod tests {
     use super::*;
     use crate::driver::{ChamberMode, ChamberReading, TableReading};
     use crate::geometry::{Orientation, TableAngles};
-    use crate::sequencer::FrameRecord;
+    use crate::sequencer::{FrameRecord, Tick};
 
     #[test]
     fn a_measurement_outcome_has_one_word_in_json_text_and_the_store() {
@@ -834,6 +834,7 @@ mod tests {
             t0_s: 10.0025,
             frames,
             state: None,
+            slots: Vec::new(),
         };
         let state = BenchState {
             t_s: 11.0,
@@ -856,7 +857,7 @@ mod tests {
         let mut r = Records::default();
         r.start("up");
         let iv = r
-            .push_tick(&tick, &state, Some("up"), 1.0 / 400.0, 0.1, 0.01)
+            .push_tick(&tick.frames, &state, Some("up"), 1.0 / 400.0, 0.1, 0.01)
             .expect("an interval");
         // 600 counts of 0.1 arcsec in 1 s = 60 arcsec/s = 60 deg/h.
         assert!((iv.rate_dph - 60.0).abs() < 1e-9, "{iv:?}");
@@ -865,10 +866,7 @@ mod tests {
         assert!((iv.time_s - 10.5).abs() < 1e-9);
         assert_eq!(iv.frames, 400);
         assert_eq!(r.get("up").map(<[Interval]>::len), Some(1));
-        assert!(
-            r.push_tick(&Tick::default(), &state, None, 0.0025, 0.1, 0.01)
-                .is_none()
-        );
+        assert!(r.push_tick(&[], &state, None, 0.0025, 0.1, 0.01).is_none());
         assert_eq!(r.all.len(), 1);
     }
 }

@@ -72,6 +72,45 @@ pub struct Tick {
     pub frames: Vec<FrameRecord>,
     /// State at the end of the tick.
     pub state: Option<BenchState>,
+    /// A batch's other units (slots after the first, in the bench's
+    /// order): each one's frames and pose (the first unit's are `frames`
+    /// and `state`'s).
+    pub slots: Vec<SlotTick>,
+}
+
+/// What one tick brought from one more unit of a batch.
+#[derive(Debug, Clone, Default)]
+pub struct SlotTick {
+    /// Frames received during the tick.
+    pub frames: Vec<FrameRecord>,
+    /// Its body orientation at the end of the tick (from the table's
+    /// angles and its slot's mount).
+    pub orientation: Orientation,
+    /// Earth + table rate on its sensitive axis, the tick's mean, deg/h.
+    pub reference_dph: f64,
+}
+
+impl BenchState {
+    /// The state as unit `slot` of a batch sees it (0: the first, as is):
+    /// its own orientation and reference.
+    pub fn for_slot(&self, slot: usize, tick: &Tick) -> Self {
+        let mut st = self.clone();
+        if let Some(s) = slot.checked_sub(1).and_then(|k| tick.slots.get(k)) {
+            st.orientation = s.orientation;
+            st.reference_dph = s.reference_dph;
+        }
+        st
+    }
+}
+
+impl Tick {
+    /// The frames unit `slot` sent during the tick (0: the first).
+    pub fn slot_frames(&self, slot: usize) -> &[FrameRecord] {
+        match slot.checked_sub(1) {
+            None => &self.frames,
+            Some(k) => self.slots.get(k).map_or(&[], |s| &s.frames),
+        }
+    }
 }
 
 /// A bench the sequencer can drive.
@@ -113,6 +152,19 @@ pub trait BenchIo: Send {
     async fn advance(&mut self, t_s: f64, tick: &mut Tick) -> Result<(), DeviceError>;
     /// Link figures of the gyro so far.
     fn link_stats(&self) -> crate::protocol::frame::LinkStats;
+    /// Units the bench reads: 1, or a batch's slots.
+    fn units(&self) -> usize {
+        1
+    }
+    /// Link figures of unit `slot`'s gyro so far (0: the first unit's,
+    /// [`BenchIo::link_stats`]).
+    fn slot_link_stats(&self, slot: usize) -> crate::protocol::frame::LinkStats {
+        if slot == 0 {
+            self.link_stats()
+        } else {
+            crate::protocol::frame::LinkStats::default()
+        }
+    }
     /// Device time until the commands given are carried out by the bench
     /// itself, s: a chamber ramp stepped by the host goes on only while
     /// the run ticks (0 when nothing is pending).
@@ -152,6 +204,26 @@ pub trait Sink {
         iv: &crate::analysis::series::Interval,
         record: Option<&str>,
     ) -> std::io::Result<()>;
+    /// A 1 Hz interval of unit `slot` of a batch closed (slots after the
+    /// first; the first unit's go to [`Sink::interval`]).
+    fn slot_interval(
+        &mut self,
+        _slot: usize,
+        _iv: &crate::analysis::series::Interval,
+        _record: Option<&str>,
+    ) -> std::io::Result<()> {
+        Ok(())
+    }
+    /// Unit `slot`'s gyro link figures so far (a batch's units after the
+    /// first; the first unit's go to [`Sink::link`]).
+    fn slot_link(
+        &mut self,
+        _slot: usize,
+        _t_s: f64,
+        _stats: &crate::protocol::frame::LinkStats,
+    ) -> std::io::Result<()> {
+        Ok(())
+    }
     /// A line for people (note, measurement, error; step starts and ends
     /// in words at [`Level::Debug`]).
     fn event(&mut self, t_s: f64, level: Level, message: &str) -> std::io::Result<()>;
@@ -224,6 +296,73 @@ pub struct RunResult {
     pub records: Records,
     /// The state the bench was left in, as read back at the end.
     pub bench_left: Option<BenchLeft>,
+    /// A batch's other units, in the bench's slot order (the fields above
+    /// are the first unit's).
+    pub others: Vec<UnitResult>,
+}
+
+/// What a run produced for one more unit of a batch.
+#[derive(Debug, Clone, Default)]
+pub struct UnitResult {
+    /// Its verdict (none: the run stopped before its end, and every unit
+    /// with it: the run's outcome and error are its).
+    pub outcome: Option<Outcome>,
+    /// Its measurements (in step order).
+    pub measurements: Vec<Measurement>,
+    /// Why it is an error, when it is.
+    pub error: Option<RunError>,
+    /// Frames received from it.
+    pub frames: u64,
+    /// Its 1 Hz records.
+    pub records: Records,
+}
+
+impl RunResult {
+    /// Units in the run: 1, or a batch's slots.
+    pub fn units(&self) -> usize {
+        1 + self.others.len()
+    }
+
+    /// The outcome of the whole run: its one unit's, or a batch's worst
+    /// unit's (an aborted run aborted every unit; then an error before a
+    /// failure before a pass).
+    pub fn worst(&self) -> Outcome {
+        (0..self.units())
+            .map(|k| self.unit(k).outcome)
+            .max_by_key(|o| match o {
+                Outcome::Pass => 0,
+                Outcome::Fail => 1,
+                Outcome::Error => 2,
+                Outcome::Aborted => 3,
+            })
+            .unwrap_or(self.outcome)
+    }
+
+    /// The run as unit `k` of a batch had it (0: the first): its verdict,
+    /// measurements, frames and records, the shared end (cleanup, the
+    /// bench left) as is.
+    pub fn unit(&self, k: usize) -> Self {
+        let Some(u) = k.checked_sub(1).and_then(|k| self.others.get(k)) else {
+            return Self {
+                others: Vec::new(),
+                ..self.clone()
+            };
+        };
+        Self {
+            outcome: u.outcome.unwrap_or(self.outcome),
+            measurements: u.measurements.clone(),
+            error: match u.outcome {
+                Some(_) => u.error.clone(),
+                None => self.error.clone(),
+            },
+            cleanup_completed: self.cleanup_completed,
+            device_time_s: self.device_time_s,
+            frames: u.frames,
+            records: u.records.clone(),
+            bench_left: self.bench_left.clone(),
+            others: Vec::new(),
+        }
+    }
 }
 
 /// The state a run left the bench in, read back from the devices.
@@ -369,6 +508,20 @@ struct Run<'a> {
     record_link: Option<crate::protocol::frame::LinkStats>,
     /// What the bench was last asked to do (verified at the end).
     expected: finish::Expected,
+    /// A batch's other units (slots after the first).
+    others: Vec<Lane>,
+}
+
+/// One more unit of a batch as the run keeps it: the first unit's are the
+/// run's own `records`, `frames` and `measurements`.
+#[derive(Debug, Default)]
+struct Lane {
+    records: Records,
+    frames: u64,
+    measurements: Vec<Measurement>,
+    link_before: crate::protocol::frame::LinkStats,
+    /// Its link figures over the record step that just ended.
+    record_link: Option<crate::protocol::frame::LinkStats>,
 }
 
 impl Run<'_> {
@@ -473,6 +626,13 @@ impl Run<'_> {
         let mut e = StepEvent::new(self.bench.now_s(), phase, index, s);
         if phase == StepPhase::End {
             e.link = self.record_link.take();
+            if e.link.is_some() {
+                e.slot_links = self
+                    .others
+                    .iter_mut()
+                    .filter_map(|l| l.record_link.take())
+                    .collect();
+            }
         }
         let r = self.sink.step(&e);
         self.written(r)?;
@@ -519,10 +679,8 @@ impl Run<'_> {
                     limit_a: p.limit_a,
                 }));
             }
-            let hot = self
-                .tick
-                .frames
-                .iter()
+            let hot = (0..self.bench.units())
+                .flat_map(|k| self.tick.slot_frames(k))
                 .flat_map(|f| f.temps_raw)
                 .map(|r| f64::from(r) * tl)
                 .fold(f64::NEG_INFINITY, f64::max);
@@ -534,7 +692,16 @@ impl Run<'_> {
             }
             let iv = self
                 .records
-                .push_tick(&self.tick, state, record, dt, lsb, tl);
+                .push_tick(&self.tick.frames, state, record, dt, lsb, tl);
+            for (k, lane) in self.others.iter_mut().enumerate() {
+                let frames = self.tick.slot_frames(k + 1);
+                lane.frames += frames.len() as u64;
+                let st = state.for_slot(k + 1, &self.tick);
+                if let Some(iv) = lane.records.push_tick(frames, &st, record, dt, lsb, tl) {
+                    let r = self.sink.slot_interval(k + 1, &iv, record);
+                    written(&mut self.log_failed, self.cleaning_up, r)?;
+                }
+            }
             if let Some(p) = &state.power {
                 // Replay files the logged reading the same way.
                 self.records.push_power(
@@ -553,6 +720,11 @@ impl Run<'_> {
                 let stats = self.bench.link_stats();
                 let r = self.sink.link(state.t_s, &stats);
                 written(&mut self.log_failed, self.cleaning_up, r)?;
+                for k in 1..self.bench.units() {
+                    let stats = self.bench.slot_link_stats(k);
+                    let r = self.sink.slot_link(k, state.t_s, &stats);
+                    written(&mut self.log_failed, self.cleaning_up, r)?;
+                }
             }
             self.last = Some(state.clone());
         }
@@ -613,7 +785,18 @@ impl Run<'_> {
                 self.records
                     .start_frames(label, *duration_s, self.bench.record_edge_s());
                 let before = self.bench.link_stats();
+                for (k, lane) in self.others.iter_mut().enumerate() {
+                    lane.records
+                        .start_frames(label, *duration_s, self.bench.record_edge_s());
+                    lane.link_before = self.bench.slot_link_stats(k + 1);
+                }
                 self.run_for(*duration_s, Some(label), key).await?;
+                for (k, lane) in self.others.iter_mut().enumerate() {
+                    let after = self.bench.slot_link_stats(k + 1);
+                    let link = health::link_delta(&lane.link_before, &after);
+                    lane.records.set_link(label, link);
+                    lane.record_link = Some(link);
+                }
                 let link = health::link_delta(&before, &self.bench.link_stats());
                 self.records.set_link(label, link);
                 self.record_link = Some(link);
@@ -667,26 +850,37 @@ impl Run<'_> {
     ) -> Result<(), Stop> {
         let start = self.bench.now_s();
         let mut held_since: Option<f64> = None;
-        let mut case = std::collections::VecDeque::new();
+        // Every unit's case (a batch soaks until the slowest has settled).
+        let mut cases = vec![std::collections::VecDeque::new(); self.bench.units()];
         loop {
             self.tick(f64::INFINITY, None, key).await?;
             let Some(st) = &self.last else { continue };
-            let tk = self
-                .tick
-                .frames
-                .last()
-                .map(|f| f64::from(f.temps_raw[2]) * self.bench.temp_lsb_c());
-            if let Some(tk) = tk {
-                case.push_back((st.t_s, tk));
+            for (k, case) in cases.iter_mut().enumerate() {
+                let tk = self
+                    .tick
+                    .slot_frames(k)
+                    .last()
+                    .map(|f| f64::from(f.temps_raw[2]) * self.bench.temp_lsb_c());
+                if let Some(tk) = tk {
+                    case.push_back((st.t_s, tk));
+                }
+                while case.len() > 120 {
+                    case.pop_front();
+                }
             }
-            while case.len() > 120 {
-                case.pop_front();
-            }
-            let slope = slope_per_min(&case);
+            let (slope, settled) = cases.iter().fold((0.0_f64, true), |(worst, all), case| {
+                let slope = slope_per_min(case);
+                let worst = if slope.abs() > worst.abs() {
+                    slope
+                } else {
+                    worst
+                };
+                (worst, all && case.len() >= 60)
+            });
             // An air-only soak (no case criterion) needs no frames:
             // it holds while the unit is off.
             let case_ok = case_slope_c_per_min.is_infinite()
-                || (case.len() >= 60 && slope.abs() <= case_slope_c_per_min);
+                || (settled && slope.abs() <= case_slope_c_per_min);
             let ok = (st.chamber.air_c - st.chamber.set_point_c).abs() <= band_c && case_ok;
             held_since = if ok {
                 held_since.or(Some(st.t_s))
@@ -867,6 +1061,12 @@ impl Run<'_> {
         self.log(level, &msg)?;
         self.progress.measured(&meas);
         self.measurements.push(meas);
+        for lane in &mut self.others {
+            // Each unit is judged on its own records; coefficients are the
+            // first unit's alone (a batch fits each unit's on its run).
+            let meas = measure::compute(m, &lane.records, None, key);
+            lane.measurements.push(meas);
+        }
         Ok(())
     }
 }
@@ -918,7 +1118,10 @@ pub async fn run(
             power_on: Some(true),
             ..finish::Expected::default()
         },
+        others: Vec::new(),
     };
+    r.others
+        .resize_with(r.bench.units().saturating_sub(1), Lane::default);
     let total = p.steps().count();
     let mut stop: Option<(Stop, String)> = None;
     let start_at = opts.resume.as_ref().map_or(0, |res| res.start_at);
@@ -972,8 +1175,10 @@ pub async fn run(
     {
         stop = Some((Stop::Data(e), "cleanup".into()));
     }
+    let others = r.unit_results(stop.as_ref());
     let (outcome, error) = r.outcome(stop, interrupted);
     RunResult {
+        others,
         outcome,
         measurements: r.measurements,
         error,
@@ -1093,6 +1298,31 @@ impl Run<'_> {
             }
         }
         (left, cleanup_completed)
+    }
+
+    /// A batch's other units at the end: each judged on its own
+    /// measurements when the run went to its end; a run stopped early
+    /// stopped every unit with it (the first unit's outcome and error).
+    fn unit_results(&mut self, stop: Option<&(Stop, String)>) -> Vec<UnitResult> {
+        let stopped = stop.is_some();
+        std::mem::take(&mut self.others)
+            .into_iter()
+            .map(|lane| {
+                let (outcome, error) = if stopped {
+                    (None, None)
+                } else {
+                    let (o, e) = verdict(&lane.measurements);
+                    (Some(o), e)
+                };
+                UnitResult {
+                    outcome,
+                    measurements: lane.measurements,
+                    error,
+                    frames: lane.frames,
+                    records: lane.records,
+                }
+            })
+            .collect()
     }
 
     /// The run's outcome and error from what stopped it (none: the

@@ -118,6 +118,23 @@ pub struct Plan {
     /// Where the run's channels are also published live (`run --live`,
     /// the station).
     pub live: Option<Arc<crate::runlog::live::Live>>,
+    /// A batch's units, in the bench's slot order (empty: the one unit
+    /// `dut` of a bench without slots). The first is `dut`.
+    pub batch: Vec<BatchUnit>,
+}
+
+/// One unit of a batch: the slot it sits in and its serial.
+#[derive(Debug, Clone)]
+pub struct BatchUnit {
+    /// Its slot on the bench.
+    pub slot: crate::bench::Slot,
+    /// The slot's place in the bench's `[[slots]]` (its default seed is
+    /// the run's plus this).
+    pub index: usize,
+    /// Its serial.
+    pub serial: String,
+    /// The embedded bench: the slot's own twin (none: the run's).
+    pub twin: Option<TwinConfig>,
 }
 
 impl Plan {
@@ -153,7 +170,38 @@ impl Plan {
             faults: Vec::new(),
             resume: None,
             live: None,
+            batch: Vec::new(),
         }
+    }
+
+    /// Run `units` as a batch (the first is the plan's `dut`).
+    #[must_use]
+    pub fn with_batch(mut self, units: Vec<BatchUnit>) -> Self {
+        if let Some(first) = units.first() {
+            self.dut = first.serial.clone();
+        }
+        self.batch = units;
+        self
+    }
+
+    /// Unit `k`'s twin on the embedded bench, standing at the bench's site
+    /// in its slot, and its seed for `part`.
+    fn unit_twin(&self, k: usize, part: u32) -> (TwinConfig, u64) {
+        let u = self.batch.get(k);
+        let mut twin = u
+            .and_then(|u| u.twin.clone())
+            .unwrap_or_else(|| self.twin.clone());
+        twin.site = self.bench_cfg.site;
+        twin.table.geometry = match u {
+            Some(u) => self.bench_cfg.slot_geometry(&u.slot),
+            None => self.bench_cfg.table.geometry,
+        };
+        let seed = u.map_or(self.seed, |u| {
+            u.slot
+                .seed
+                .unwrap_or_else(|| self.seed.wrapping_add(u.index as u64))
+        });
+        (twin, seed.wrapping_add(u64::from(part) - 1))
     }
 
     /// The embedded bench's twin.
@@ -289,6 +337,13 @@ pub fn plan_resume(
             "the run in {} finished (outcome {}); there is nothing to resume",
             dir.display(),
             prev.result.outcome.as_str()
+        )));
+    }
+    if prev.meta.units.len() > 1 {
+        return Err(SessionError::NotResumable(format!(
+            "the run in {} is a batch of {} units; a batch cannot be resumed yet: run it again",
+            dir.display(),
+            prev.meta.units.len()
         )));
     }
     let config = logged(&prev.meta)
@@ -435,6 +490,21 @@ pub struct Finished {
     pub notes: Vec<String>,
     /// How many of `notes` were given to [`Progress::begin`] already.
     pub notes_at_begin: usize,
+    /// A batch's units, each with its report (empty: one unit, `report`).
+    pub units: Vec<FinishedUnit>,
+}
+
+/// One unit of a batch at the end of its run.
+#[derive(Debug, Clone)]
+pub struct FinishedUnit {
+    /// Its slot.
+    pub slot: String,
+    /// Its serial.
+    pub serial: String,
+    /// Its report.
+    pub report: Report,
+    /// Its report files' name without the extension (`report-SERIAL`).
+    pub file: String,
 }
 
 /// Longest a table move may take before it is a failure, s.
@@ -543,10 +613,8 @@ pub fn execute(
     // The embedded bench simulates the bench its file describes: the twin
     // stands at the bench's site on the bench's table (a lab's simulated
     // bench near the equator has its own latitude and its table turned).
-    let mut twin = plan.twin.clone();
-    twin.site = plan.bench_cfg.site;
-    twin.table.geometry = plan.bench_cfg.table.geometry;
-    let mut bench = bench_for(&plan, &twin, part, rt)?;
+    let (twin, _) = plan.unit_twin(0, part);
+    let mut bench = bench_for(&plan, part, rt)?;
     let identities = rt.block_on(bench.identify());
     let instruments = plan.bench_cfg.instruments(
         identities.chamber,
@@ -613,12 +681,54 @@ pub fn execute(
         Some(r) => add_link(&r.link, &part_link),
         None => part_link,
     };
-    let finish = |result: &RunResult| Report::new(&plan.procedure, result, &meta, link);
+    let unit_links: Vec<LinkStats> = (0..meta.units.len().max(1))
+        .map(|k| {
+            if k == 0 {
+                link
+            } else {
+                bench.slot_link_stats(k)
+            }
+        })
+        .collect();
+    let finish = |result: &RunResult, k: usize| {
+        let link = unit_links.get(k).copied().unwrap_or_default();
+        Report::new(&plan.procedure, &result.unit(k), &meta.for_unit(k), link)
+    };
     let end_s = bench.now_s();
     let (result, report) = close_log(
-        recorder, &log, result, finish, end_s, &part_link, &mut notes,
+        recorder,
+        &log,
+        result,
+        &meta,
+        finish,
+        (end_s, &part_link, unit_links.get(1..).unwrap_or_default()),
+        &mut notes,
     );
-    let report_error = write_report(&dir.path, &report, &result).err();
+    let mut units = Vec::new();
+    let report_error = if plan.batch.is_empty() {
+        write_report(&dir.path, &report, &result).err()
+    } else {
+        // A batch: one report per unit, named by its serial.
+        let mut error = None;
+        for (k, u) in meta.units.iter().enumerate() {
+            let r = if k == 0 {
+                report.clone()
+            } else {
+                finish(&result, k)
+            };
+            let name = format!("report-{}", crate::unit::file_safe(&u.serial));
+            if let Err(e) = write_report_as(&dir.path, &name, &r, &result.unit(k)) {
+                error.get_or_insert(e);
+            }
+            units.push(FinishedUnit {
+                slot: u.slot.clone(),
+                serial: u.serial.clone(),
+                report: r,
+                file: name,
+            });
+        }
+        error
+    };
     store.finish(&log, &result, link, &mut notes);
     Ok(Finished {
         dir: dir.path.clone(),
@@ -628,6 +738,7 @@ pub fn execute(
         report_error,
         notes,
         notes_at_begin,
+        units,
     })
 }
 
@@ -638,16 +749,42 @@ fn close_log(
     mut recorder: Recorder,
     log: &std::path::Path,
     mut result: RunResult,
-    report_of: impl Fn(&RunResult) -> Report,
-    end_s: f64,
-    part_link: &LinkStats,
+    meta: &RunMeta,
+    report_of: impl Fn(&RunResult, usize) -> Report,
+    (end_s, part_link, slot_links): (f64, &LinkStats, &[LinkStats]),
     notes: &mut Vec<String>,
 ) -> (RunResult, Report) {
     use crate::sequencer::Sink;
-    let report = report_of(&result);
-    let log_end = recorder.link(end_s, part_link).and_then(|()| {
-        recorder.finish_run(&ResultMeta::new(&result), Some(&report.to_json()), end_s)
-    });
+    let report = report_of(&result, 0);
+    let log_end = recorder
+        .link(end_s, part_link)
+        .and_then(|()| {
+            slot_links
+                .iter()
+                .enumerate()
+                .try_for_each(|(i, l)| recorder.slot_link(i + 1, end_s, l))
+        })
+        .and_then(|()| {
+            // A batch's other units: each one's result and report.
+            meta.units
+                .iter()
+                .enumerate()
+                .skip(1)
+                .try_for_each(|(k, u)| {
+                    let unit = result.unit(k);
+                    let r = report_of(&result, k);
+                    recorder.unit_result(
+                        &u.slot,
+                        &u.serial,
+                        &ResultMeta::new(&unit),
+                        &r.to_json(),
+                        end_s,
+                    )
+                })
+        })
+        .and_then(|()| {
+            recorder.finish_run(&ResultMeta::new(&result), Some(&report.to_json()), end_s)
+        });
     let Err(e) = log_end else {
         return (result, report);
     };
@@ -664,7 +801,7 @@ fn close_log(
         log.display(),
         log.display()
     ));
-    let report = report_of(&result);
+    let report = report_of(&result, 0);
     (result, report)
 }
 
@@ -683,6 +820,12 @@ fn check_plan(plan: &Plan, today: chrono::NaiveDate) -> Result<(), SessionError>
         return Err(SessionError::Bench(
             "the bench file mixes sim:// and real devices; use all sim:// (the embedded bench) or none".into(),
         ));
+    }
+    if !plan.bench_cfg.slots.is_empty() && plan.batch.is_empty() {
+        return Err(SessionError::Bench(format!(
+            "the bench {} holds slots: name the unit in each (`run --dut SLOT=SERIAL`, repeated)",
+            plan.bench_label
+        )));
     }
     if !embedded && !plan.faults.is_empty() {
         return Err(SessionError::Bench(
@@ -729,21 +872,30 @@ fn open_run_dir(
 /// or the bench file's devices opened behind the bench's limits.
 fn bench_for(
     plan: &Plan,
-    twin: &TwinConfig,
     part: u32,
     rt: &tokio::runtime::Runtime,
 ) -> Result<Box<dyn BenchIo>, SessionError> {
     let limits = plan.bench_cfg.limits.clone();
     let bench: Box<dyn BenchIo> = if plan.bench_cfg.is_embedded() {
-        let seed = plan.seed.wrapping_add(u64::from(part) - 1);
-        Box::new(embedded_bench(
-            twin,
-            seed,
-            plan.pacing,
-            &plan.faults,
-            limits,
-            plan.bench_cfg.devices.supply.as_ref(),
-        ))
+        let (twin, seed) = plan.unit_twin(0, part);
+        let others = (1..plan.batch.len())
+            .map(|k| plan.unit_twin(k, part))
+            .collect::<Vec<_>>();
+        Box::new(
+            embedded_bench(
+                &twin,
+                seed,
+                plan.pacing,
+                &plan.faults,
+                limits,
+                plan.bench_cfg.devices.supply.as_ref(),
+            )
+            .map_inner(|b| {
+                others
+                    .into_iter()
+                    .fold(b, |b, (twin, seed)| b.with_slot(twin, seed))
+            }),
+        )
     } else {
         let bench_err = |source| SessionError::Device {
             bench: plan.bench_label.clone(),
@@ -819,15 +971,31 @@ fn run_meta(
         host: rundir::hostname(),
         software_revision: crate::version::REVISION.to_owned(),
         instruments,
-        units: vec![crate::runlog::meta::RunUnit {
-            slot: String::new(),
-            serial: plan.dut.clone(),
-            dut_type: plan.procedure.meta.dut_type.clone(),
-            coefficients: plan
-                .coeffs
-                .as_ref()
-                .map_or_else(crate::coeffs::CoeffsUsed::fitted, |c| c.used.clone()),
-        }],
+        units: if plan.batch.is_empty() {
+            vec![crate::runlog::meta::RunUnit {
+                slot: String::new(),
+                serial: plan.dut.clone(),
+                dut_type: plan.procedure.meta.dut_type.clone(),
+                coefficients: plan
+                    .coeffs
+                    .as_ref()
+                    .map_or_else(crate::coeffs::CoeffsUsed::fitted, |c| c.used.clone()),
+                mount: None,
+            }]
+        } else {
+            // Each unit of a batch is compensated with the model fitted on
+            // its own records.
+            plan.batch
+                .iter()
+                .map(|u| crate::runlog::meta::RunUnit {
+                    slot: u.slot.name.clone(),
+                    serial: u.serial.clone(),
+                    dut_type: plan.procedure.meta.dut_type.clone(),
+                    coefficients: crate::coeffs::CoeffsUsed::fitted(),
+                    mount: Some(plan.bench_cfg.slot_geometry(&u.slot).mount),
+                })
+                .collect()
+        },
         other: Default::default(),
     })
 }
@@ -839,6 +1007,8 @@ struct StoreLink {
     store: Option<crate::results::Store>,
     key: Option<String>,
     location: crate::results::Location,
+    /// The run's units' slots, in order.
+    slots: Vec<String>,
 }
 
 impl StoreLink {
@@ -852,6 +1022,7 @@ impl StoreLink {
             store: None,
             key: None,
             location: loc.clone(),
+            slots: meta.units.iter().map(|u| u.slot.clone()).collect(),
         };
         match crate::results::Store::open(loc) {
             Ok(Some(mut s)) => {
@@ -890,6 +1061,7 @@ impl StoreLink {
                         result,
                         link,
                         ended_utc: utc_now().to_rfc3339(),
+                        slots: self.slots.clone(),
                     },
                 )
                 .map(|()| s.name().to_owned()),
@@ -973,14 +1145,28 @@ async fn after_panic(
         frames: bench.link_stats().frames,
         records: Default::default(),
         bench_left: Some(left),
+        // Every unit of a batch ends with the run.
+        others: (1..bench.units())
+            .map(|_| sequencer::UnitResult::default())
+            .collect(),
     }
 }
 
 /// `report.json` and `report.html` in `dir`.
 pub fn write_report(dir: &Path, report: &Report, result: &RunResult) -> Result<(), String> {
+    write_report_as(dir, "report", report, result)
+}
+
+/// `NAME.json` and `NAME.html` in `dir`.
+pub fn write_report_as(
+    dir: &Path,
+    name: &str,
+    report: &Report,
+    result: &RunResult,
+) -> Result<(), String> {
     for (name, bytes) in [
-        ("report.json", report.to_json()),
-        ("report.html", render_html(report, &result.records)),
+        (format!("{name}.json"), report.to_json()),
+        (format!("{name}.html"), render_html(report, &result.records)),
     ] {
         let path = dir.join(name);
         crate::fsutil::write_atomic(&path, bytes.as_bytes())

@@ -1,0 +1,348 @@
+//! Batch runs: several units on one table in one chamber, one procedure,
+//! a verdict and a report per unit. Each test runs the binary as an
+//! operator would, on the embedded bench with slots.
+
+use std::path::Path;
+
+use crate::cli::{command, temp_dir};
+use crate::common::{MINI, json, s, stderr, write};
+
+/// The embedded bench's site, table, devices and limits (no supply: a
+/// bench with slots powers its units by hand), then `tail`.
+fn bench(dir: &Path, name: &str, mount: Option<&str>, tail: &str) -> std::path::PathBuf {
+    let text = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/bench/embedded.toml"),
+    )
+    .expect("the embedded bench file");
+    let mut out = String::new();
+    let mut skip = false;
+    for line in text.lines() {
+        if line.starts_with('[') {
+            skip = line.starts_with("[devices.supply]");
+        }
+        if let (Some(m), true) = (mount, line.starts_with("mount = ")) {
+            out.push_str(&format!("mount = {m}\n"));
+            continue;
+        }
+        if !skip {
+            out.push_str(line);
+            out.push('\n');
+        }
+    }
+    out.push_str(tail);
+    write(dir, name, &out)
+}
+
+fn run(args: &[&str]) -> std::process::Output {
+    command()
+        .args(["run", "--db", "none"])
+        .args(args)
+        .output()
+        .expect("the gyrobench binary runs")
+}
+
+/// name -> value of every measurement of a report.
+fn figures(report: &Path) -> Vec<(String, f64)> {
+    json(report)["measurements"]
+        .as_array()
+        .expect("measurements")
+        .iter()
+        .map(|m| {
+            (
+                m["name"].as_str().expect("name").to_owned(),
+                m["value"].as_f64().expect("value"),
+            )
+        })
+        .collect()
+}
+
+const Y_MOUNT: &str = "{ azimuth_deg = 0.0, elevation_deg = 0.0, roll_deg = 0.0 }";
+
+#[test]
+fn a_unit_of_a_batch_gives_the_figures_of_the_same_unit_run_alone() {
+    let dir = temp_dir("batch-same");
+    let p = write(&dir, "mini.toml", MINI);
+    // Slot B: its own seed and a mount turned a quarter turn from A's.
+    let quad = bench(
+        &dir,
+        "pair.toml",
+        None,
+        &format!(
+            "\n[[slots]]\nname = \"A\"\n\n[[slots]]\nname = \"B\"\nseed = 7\nmount = {Y_MOUNT}\n"
+        ),
+    );
+    let o = run(&[
+        s(&p),
+        "--bench",
+        s(&quad),
+        "--dut",
+        "B=RL16-0902",
+        "--dut",
+        "A=RL16-0901",
+        "--out",
+        s(&dir.join("batch")),
+    ]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let out = String::from_utf8_lossy(&o.stdout);
+    for line in ["slot A", "slot B", "RL16-0901", "RL16-0902"] {
+        assert!(out.contains(line), "{line} in\n{out}");
+    }
+    // The same unit alone: a bench whose only unit sits on B's mount.
+    let alone = bench(&dir, "alone.toml", Some(Y_MOUNT), "");
+    let o = run(&[
+        s(&p),
+        "--bench",
+        s(&alone),
+        "--dut",
+        "RL16-0902",
+        "--seed",
+        "7",
+        "--out",
+        s(&dir.join("alone")),
+    ]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let batch = figures(&dir.join("batch/report-RL16-0902.json"));
+    let single = figures(&dir.join("alone/report.json"));
+    assert!(!batch.is_empty());
+    assert_eq!(batch, single, "unit B of the batch against B alone");
+    // And unit A is another unit: its own noise, its own figures.
+    let a = figures(&dir.join("batch/report-RL16-0901.json"));
+    assert_ne!(a, batch);
+    let report = json(&dir.join("batch/report-RL16-0902.json"));
+    assert_eq!(report["dut"]["serial"], "RL16-0902");
+    assert_eq!(report["slot"], "B");
+}
+
+#[test]
+fn a_batch_in_which_one_unit_carries_an_effect_fails_that_unit_alone() {
+    let dir = temp_dir("batch-effect");
+    let p = write(&dir, "mini.toml", MINI);
+    // Unit C is g-sensitive along its axis: 8 deg/h with the axis up, past
+    // the +-5 deg/h bias limit.
+    let twin = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/twin/rl16.toml"),
+    )
+    .expect("the twin file")
+    .replace(
+        "[effects.g_sensitivity]\nenabled = false\ncoeff_dph_per_g = [0.0, 0.03, 0.02]",
+        "[effects.g_sensitivity]\nenabled = true\ncoeff_dph_per_g = [8.0, 0.0, 0.0]",
+    );
+    assert!(twin.contains("coeff_dph_per_g = [8.0"));
+    write(&dir, "g.toml", &twin);
+    let quad = bench(
+        &dir,
+        "quad.toml",
+        None,
+        "\n[[slots]]\nname = \"A\"\n\n[[slots]]\nname = \"B\"\n\n[[slots]]\nname = \"C\"\ntwin = \"g.toml\"\n\n[[slots]]\nname = \"D\"\n",
+    );
+    let mut args = vec![s(&p), "--bench", s(&quad)];
+    let duts = ["A=U-1", "B=U-2", "C=U-3", "D=U-4"];
+    for d in &duts {
+        args.extend(["--dut", d]);
+    }
+    let out = dir.join("run");
+    args.extend(["--out", s(&out)]);
+    let o = run(&args);
+    assert_eq!(o.status.code(), Some(3), "{}", stderr(&o));
+    for (serial, want) in [
+        ("U-1", "pass"),
+        ("U-2", "pass"),
+        ("U-3", "fail"),
+        ("U-4", "pass"),
+    ] {
+        let r = json(&out.join(format!("report-{serial}.json")));
+        assert_eq!(r["outcome"], want, "{serial}");
+        let up = r["measurements"]
+            .as_array()
+            .expect("measurements")
+            .iter()
+            .find(|m| m["name"] == "bias_dph:up")
+            .expect("bias_dph:up");
+        let v = up["value"].as_f64().expect("value");
+        if serial == "U-3" {
+            assert!(v.abs() > 5.0, "{serial}: {v}");
+        } else {
+            assert!(v.abs() < 2.0, "{serial}: {v}");
+        }
+    }
+    assert!(out.join("report-U-3.html").is_file());
+    assert!(
+        !out.join("report.json").exists(),
+        "a batch's reports are per unit"
+    );
+
+    // Replay gives every unit's report byte for byte, --unit one of them.
+    let log = out.join("run.mcap");
+    let again = dir.join("replay");
+    let o = command()
+        .args(["replay", s(&log), "--out", s(&again)])
+        .output()
+        .expect("replay runs");
+    assert_eq!(o.status.code(), Some(3), "{}", stderr(&o));
+    for serial in ["U-1", "U-2", "U-3", "U-4"] {
+        for ext in ["json", "html"] {
+            let name = format!("report-{serial}.{ext}");
+            assert_eq!(
+                std::fs::read(out.join(&name)).expect("run's report"),
+                std::fs::read(again.join(&name)).expect("replay's report"),
+                "{name}"
+            );
+        }
+    }
+    let one = dir.join("replay-one");
+    let o = command()
+        .args(["replay", s(&log), "--unit", "U-2", "--out", s(&one)])
+        .output()
+        .expect("replay runs");
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    assert!(one.join("report-U-2.json").is_file());
+    assert!(!one.join("report-U-3.json").exists());
+    // The other tools read one unit with --unit; a unit the log lacks is
+    // named with the ones it holds.
+    let csv = dir.join("u3.csv");
+    let o = command()
+        .args(["export", s(&log), "--unit", "U-3", "-o", s(&csv)])
+        .output()
+        .expect("export runs");
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let o = command()
+        .args([
+            "export",
+            s(&log),
+            "--unit",
+            "U-9",
+            "-o",
+            s(&dir.join("u9.csv")),
+        ])
+        .output()
+        .expect("export runs");
+    assert_eq!(o.status.code(), Some(1));
+    assert!(
+        stderr(&o).contains("the log holds no unit U-9 (its units: U-1, U-2, U-3, U-4)"),
+        "{}",
+        stderr(&o)
+    );
+}
+
+#[test]
+fn a_batch_is_recorded_in_the_store_unit_by_unit_and_verifies_against_its_log() {
+    let dir = temp_dir("batch-store");
+    let p = write(&dir, "mini.toml", MINI);
+    let db = dir.join("results.sqlite");
+    let quad = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/bench/quad.toml");
+    let out = dir.join("run");
+    let o = command()
+        .env("GYROBENCH_DB", &db)
+        .args(["run", s(&p), "--bench", s(&quad), "--out", s(&out)])
+        .args(["--dut", "A=S-1", "--dut", "B=S-2", "--dut", "D=S-4"])
+        .output()
+        .expect("run");
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let results = |args: &[&str]| {
+        command()
+            .env("GYROBENCH_DB", &db)
+            .arg("results")
+            .args(args)
+            .output()
+            .expect("results")
+    };
+    for serial in ["S-1", "S-2", "S-4"] {
+        let o = results(&["unit", serial, "--json"]);
+        assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+        let text = String::from_utf8_lossy(&o.stdout).into_owned();
+        // Its own figures: the report's, not another unit's.
+        let report = json(&out.join(format!("report-{serial}.json")));
+        let bias = report["measurements"]
+            .as_array()
+            .expect("measurements")
+            .iter()
+            .find(|m| m["name"] == "bias_dph:up")
+            .expect("bias_dph:up")["value"]
+            .as_f64()
+            .expect("value");
+        assert!(
+            text.contains(&format!("{bias}")),
+            "{serial}: {bias} in {text}"
+        );
+    }
+    for args in [&["verify"][..], &["verify", "--replay"][..]] {
+        let o = results(args);
+        assert_eq!(o.status.code(), Some(0), "{args:?}: {}", stderr(&o));
+    }
+}
+
+#[test]
+fn a_batch_names_its_units_by_slot_and_refuses_what_does_not_fit() {
+    let dir = temp_dir("batch-args");
+    let p = write(&dir, "mini.toml", MINI);
+    let quad = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/bench/quad.toml");
+    for (duts, says) in [
+        (
+            vec![],
+            "this bench holds slots A, B, C, D: give --dut SLOT=SERIAL",
+        ),
+        (vec!["RL16-1"], "give SLOT=SERIAL"),
+        (
+            vec!["E=RL16-1"],
+            "the bench has no slot \"E\" (its slots: A, B, C, D)",
+        ),
+        (vec!["A=RL16-1", "A=RL16-2"], "slot A is given twice"),
+        (
+            vec!["A=RL16-1", "B=RL16-1"],
+            "unit RL16-1 is given for two slots",
+        ),
+    ] {
+        let mut args = vec![s(&p), "--bench", s(&quad)];
+        for d in &duts {
+            args.extend(["--dut", d]);
+        }
+        let o = run(&args);
+        assert_eq!(o.status.code(), Some(2), "{duts:?}: {}", stderr(&o));
+        assert!(stderr(&o).contains(says), "{duts:?}: {}", stderr(&o));
+    }
+    // A slot left empty is said, and the others run.
+    let out = dir.join("two");
+    let o = run(&[
+        s(&p),
+        "--bench",
+        s(&quad),
+        "--dut",
+        "A=RL16-1",
+        "--dut",
+        "C=RL16-3",
+        "--out",
+        s(&out),
+    ]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    assert!(stderr(&o).contains("slot B: empty"), "{}", stderr(&o));
+    assert!(stderr(&o).contains("slot D: empty"), "{}", stderr(&o));
+    assert!(out.join("report-RL16-1.json").is_file());
+    assert!(out.join("report-RL16-3.json").is_file());
+    // One unit's bench takes one --dut.
+    let o = run(&[s(&p), "--dut", "X", "--dut", "Y"]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("this bench holds one unit"));
+}
+
+#[test]
+fn a_bench_file_checks_its_slots() {
+    let dir = temp_dir("batch-bench");
+    let p = write(&dir, "mini.toml", MINI);
+    for (tail, says) in [
+        (
+            "\n[[slots]]\nname = \"A\"\n\n[[slots]]\nname = \"A\"\n",
+            "slot \"A\" is declared twice",
+        ),
+        ("\n[[slots]]\nname = \"A B\"\n", "must be 1 to 16 letters"),
+        (
+            "\n[[slots]]\nname = \"A\"\nmount = { azimuth_deg = nan, elevation_deg = 0.0, roll_deg = 0.0 }\n",
+            "slots.0.mount.azimuth_deg",
+        ),
+    ] {
+        let b = bench(&dir, "bad.toml", None, tail);
+        let o = run(&[s(&p), "--bench", s(&b), "--dut", "A=RL16-1"]);
+        assert_eq!(o.status.code(), Some(1), "{tail}: {}", stderr(&o));
+        assert!(stderr(&o).contains(says), "{tail}: {}", stderr(&o));
+        assert!(stderr(&o).contains("bad.toml:"), "{tail}: {}", stderr(&o));
+    }
+}
