@@ -325,8 +325,8 @@ fn fresh(args: &RunArgs, procedure_path: &std::path::Path, pacing: Pacing) -> Re
 }
 
 /// A batch's units from `--dut SLOT=SERIAL` arguments, in the bench's slot
-/// order, each slot's twin file read (relative to the bench file); the
-/// slots not named are said on stderr.
+/// order ([`session::batch_units`]); the slots not named are said on
+/// stderr.
 fn batch_units(
     duts: &[String],
     bench: &crate::bench::BenchConfig,
@@ -344,7 +344,7 @@ fn batch_units(
         ))
         .into());
     }
-    let mut given: Vec<(usize, String)> = Vec::new();
+    let mut given = Vec::new();
     for d in duts {
         let Some((slot, serial)) = d.split_once('=') else {
             return Err(Usage(format!(
@@ -352,49 +352,16 @@ fn batch_units(
             ))
             .into());
         };
-        let Some(index) = bench.slots.iter().position(|s| s.name == slot) else {
-            return Err(Usage(format!(
-                "--dut {d:?}: the bench has no slot {slot:?} (its slots: {names})"
-            ))
-            .into());
-        };
-        check_serial(serial).map_err(|e| Usage(format!("--dut {d:?}: {e}")))?;
-        if given.iter().any(|(i, _)| *i == index) {
-            return Err(Usage(format!("--dut {d:?}: slot {slot} is given twice")).into());
-        }
-        if given.iter().any(|(_, s)| s == serial) {
-            return Err(Usage(format!("--dut {d:?}: unit {serial} is given for two slots")).into());
-        }
-        given.push((index, serial.to_owned()));
+        given.push((slot.to_owned(), serial.to_owned()));
     }
-    given.sort_by_key(|(i, _)| *i);
-    for (i, slot) in bench.slots.iter().enumerate() {
-        if !given.iter().any(|(k, _)| *k == i) {
+    let units = session::batch_units(bench, bench_path, &given)
+        .map_err(|(at, why)| Usage(format!("--dut {:?}: {why}", duts[at])))?;
+    for slot in &bench.slots {
+        if !units.iter().any(|u| u.slot.name == slot.name) {
             errln!("slot {}: empty (no --dut {}=SERIAL)", slot.name, slot.name);
         }
     }
-    let dir = bench_path
-        .and_then(std::path::Path::parent)
-        .unwrap_or_else(|| std::path::Path::new("."));
-    given
-        .into_iter()
-        .map(|(index, serial)| {
-            let slot = bench.slots[index].clone();
-            let twin = match &slot.twin {
-                Some(t) => Some(
-                    TwinConfig::load(&dir.join(t))
-                        .with_context(|| format!("loading the twin file of slot {}", slot.name))?,
-                ),
-                None => None,
-            };
-            Ok(session::BatchUnit {
-                slot,
-                index,
-                serial,
-                twin,
-            })
-        })
-        .collect()
+    Ok(units)
 }
 
 /// The serial a run is recorded under: `--dut` (checked), or on the

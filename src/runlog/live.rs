@@ -25,7 +25,7 @@ use std::sync::Arc;
 
 use foxglove::{Context, PartialMetadata, RawChannel, Schema, WebSocketServer};
 
-use super::schema::CHANNELS;
+use super::schema::{CHANNELS, SLOT_TOPICS};
 
 /// Port Foxglove and Lichtblick try first for a live connection.
 pub const DEFAULT_PORT: u16 = 8765;
@@ -52,9 +52,11 @@ pub enum LiveError {
 
 /// A running live server and the log's channels on it.
 pub struct Live {
-    _ctx: Arc<Context>,
+    ctx: Arc<Context>,
     server: Option<foxglove::WebSocketServerHandle>,
-    channels: BTreeMap<&'static str, Arc<RawChannel>>,
+    /// The log's channels; a batch's other units' are made (and
+    /// advertised) when their first message comes.
+    channels: std::sync::Mutex<BTreeMap<String, Arc<RawChannel>>>,
     addr: SocketAddr,
     /// Ends the gate and every connection through it.
     closing: tokio::sync::watch::Sender<bool>,
@@ -177,6 +179,19 @@ impl std::fmt::Debug for Live {
     }
 }
 
+/// A JSON channel on `ctx` with its JSON Schema.
+fn channel(
+    ctx: &Arc<Context>,
+    topic: &str,
+    name: &str,
+    schema: &'static str,
+) -> Result<Arc<RawChannel>, foxglove::FoxgloveError> {
+    ctx.channel_builder(topic)
+        .message_encoding("json")
+        .schema(Schema::new(name, "jsonschema", schema.as_bytes()))
+        .build_raw()
+}
+
 impl Live {
     /// Serve the log's channels on `addr` (port 0: any free port) from the
     /// current async runtime.
@@ -191,13 +206,8 @@ impl Live {
         let ctx = Context::new();
         let mut channels = BTreeMap::new();
         for (topic, name, schema) in CHANNELS {
-            let ch = ctx
-                .channel_builder(topic)
-                .message_encoding("json")
-                .schema(Schema::new(name, "jsonschema", schema.as_bytes()))
-                .build_raw()
-                .map_err(start_err)?;
-            channels.insert(topic, ch);
+            let ch = channel(&ctx, topic, name, schema).map_err(start_err)?;
+            channels.insert(topic.to_owned(), ch);
         }
         // The SDK's server on a loopback port of its own; the gate takes
         // the address asked for.
@@ -243,9 +253,9 @@ impl Live {
             }
         });
         Ok(Self {
-            _ctx: ctx,
+            ctx,
             server: Some(server),
-            channels,
+            channels: std::sync::Mutex::new(channels),
             addr,
             closing,
         })
@@ -272,7 +282,20 @@ impl Live {
     /// Offer one logged message (its JSON and log time, ns since the
     /// epoch) to the clients subscribed to `topic`.
     pub fn publish(&self, topic: &str, log_time_ns: u64, json: &[u8]) {
-        if let Some(ch) = self.channels.get(topic) {
+        let ch = {
+            // A publisher that panicked left the map whole: go on with it.
+            let mut channels = self
+                .channels
+                .lock()
+                .unwrap_or_else(std::sync::PoisonError::into_inner);
+            match channels.get(topic) {
+                Some(ch) => Some(ch.clone()),
+                None => self.slot_channel(topic).inspect(|ch| {
+                    channels.insert(topic.to_owned(), ch.clone());
+                }),
+            }
+        };
+        if let Some(ch) = ch {
             ch.log_with_meta(
                 json,
                 PartialMetadata {
@@ -280,6 +303,18 @@ impl Live {
                 },
             );
         }
+    }
+
+    /// The channel of a batch's unit's topic (`/slots/NAME/gyro/frames`,
+    /// ...), with the schema of the single-unit topic it copies; none for
+    /// any other topic.
+    fn slot_channel(&self, topic: &str) -> Option<Arc<RawChannel>> {
+        let rest = topic.strip_prefix("/slots/")?;
+        let own = &rest[rest.find('/')?..];
+        let (_, name, schema) = CHANNELS
+            .into_iter()
+            .find(|(t, _, _)| *t == own && SLOT_TOPICS.contains(t))?;
+        channel(&self.ctx, topic, name, schema).ok()
     }
 
     /// Stop listening, drop every client's connection (one that does not

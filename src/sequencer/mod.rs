@@ -418,8 +418,14 @@ pub trait Progress {
     fn answers_prompts(&self) -> bool {
         false
     }
+    /// A 1 Hz interval of unit `slot` of a batch closed (slots after the
+    /// first; the first unit's comes with [`Progress::tick`]).
+    fn slot_interval(&mut self, _slot: usize, _iv: &crate::analysis::series::Interval) {}
     /// A measurement was computed.
     fn measured(&mut self, _m: &measure::Measurement) {}
+    /// A measurement of unit `slot` of a batch was computed (slots after
+    /// the first; the first unit's go to [`Progress::measured`]).
+    fn slot_measured(&mut self, _slot: usize, _m: &measure::Measurement) {}
     /// The gyro link's figures so far, once a second of device time.
     fn link(&mut self, _stats: &crate::protocol::frame::LinkStats) {}
 }
@@ -698,6 +704,7 @@ impl Run<'_> {
                 lane.frames += frames.len() as u64;
                 let st = state.for_slot(k + 1, &self.tick);
                 if let Some(iv) = lane.records.push_tick(frames, &st, record, dt, lsb, tl) {
+                    self.progress.slot_interval(k + 1, &iv);
                     let r = self.sink.slot_interval(k + 1, &iv, record);
                     written(&mut self.log_failed, self.cleaning_up, r)?;
                 }
@@ -1061,10 +1068,11 @@ impl Run<'_> {
         self.log(level, &msg)?;
         self.progress.measured(&meas);
         self.measurements.push(meas);
-        for lane in &mut self.others {
+        for (k, lane) in self.others.iter_mut().enumerate() {
             // Each unit is judged on its own records; coefficients are the
             // first unit's alone (a batch fits each unit's on its run).
             let meas = measure::compute(m, &lane.records, None, key);
+            self.progress.slot_measured(k + 1, &meas);
             lane.measurements.push(meas);
         }
         Ok(())

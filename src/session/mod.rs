@@ -137,6 +137,65 @@ pub struct BatchUnit {
     pub twin: Option<TwinConfig>,
 }
 
+/// A batch's units on `bench` (its file at `bench_path`, whose directory
+/// slot twin files are read from) from `(slot, serial)` pairs, in the
+/// bench's slot order; the error names the pair at fault (its index in
+/// `given`) and what is wrong. Slots not given stay empty.
+pub fn batch_units(
+    bench: &BenchConfig,
+    bench_path: Option<&Path>,
+    given: &[(String, String)],
+) -> Result<Vec<BatchUnit>, (usize, String)> {
+    let names = bench
+        .slots
+        .iter()
+        .map(|s| s.name.as_str())
+        .collect::<Vec<_>>()
+        .join(", ");
+    let mut taken: Vec<(usize, usize)> = Vec::new();
+    for (at, (slot, serial)) in given.iter().enumerate() {
+        let Some(index) = bench.slots.iter().position(|s| s.name == *slot) else {
+            return Err((
+                at,
+                format!("the bench has no slot {slot:?} (its slots: {names})"),
+            ));
+        };
+        crate::unit::check_serial(serial).map_err(|e| (at, e.to_string()))?;
+        if taken.iter().any(|(i, _)| *i == index) {
+            return Err((at, format!("slot {slot} is given twice")));
+        }
+        if taken.iter().any(|(_, g)| given[*g].1 == *serial) {
+            return Err((at, format!("unit {serial} is given for two slots")));
+        }
+        taken.push((index, at));
+    }
+    taken.sort_by_key(|(i, _)| *i);
+    let dir = bench_path
+        .and_then(Path::parent)
+        .unwrap_or_else(|| Path::new("."));
+    taken
+        .into_iter()
+        .map(|(index, at)| {
+            let slot = bench.slots[index].clone();
+            let twin = match &slot.twin {
+                Some(t) => Some(TwinConfig::load(&dir.join(t)).map_err(|e| {
+                    (
+                        at,
+                        format!("loading the twin file of slot {}: {e}", slot.name),
+                    )
+                })?),
+                None => None,
+            };
+            Ok(BatchUnit {
+                slot,
+                index,
+                serial: given[at].1.clone(),
+                twin,
+            })
+        })
+        .collect()
+}
+
 impl Plan {
     /// A new run of `procedure` (read from `procedure_path`) on the bench
     /// `bench_cfg` (named `bench_label` to the operator) for unit `dut`,

@@ -140,8 +140,13 @@ impl IntoResponse for Refused {
 pub struct Start {
     /// File name of the procedure (as offered).
     pub procedure: String,
-    /// Unit serial (scanned or typed).
+    /// Unit serial (scanned or typed); on a bench with slots, `serials`.
+    #[serde(default)]
     pub serial: String,
+    /// A bench with slots: each slot's unit serial by slot name (a slot
+    /// left blank stays empty).
+    #[serde(default)]
+    pub serials: std::collections::BTreeMap<String, String>,
     /// Who runs it.
     #[serde(default)]
     pub operator: String,
@@ -249,8 +254,11 @@ impl Station {
     /// Start a run: refused when the serial is empty, the procedure does
     /// not pass `check`, or the bench is busy.
     pub fn start(self: &Arc<Self>, req: &Start) -> Result<u64, Refused> {
+        let batch = self.batch(req)?;
         // A scanner's trailing newline or blank is not part of the serial.
-        let serial = req.serial.trim();
+        let serial = batch
+            .first()
+            .map_or(req.serial.trim(), |u| u.serial.as_str());
         crate::unit::check_serial(serial).map_err(|e| Refused::Bad(e.to_string()))?;
         if serial == crate::unit::SIMULATED_SERIAL && !self.cfg.bench.is_embedded() {
             return Err(Refused::Bad(format!(
@@ -292,11 +300,35 @@ impl Station {
         )
         .with_seed(self.runs_started.load(std::sync::atomic::Ordering::Relaxed) + 1)
         .with_speed(self.cfg.speed.clone(), self.cfg.pacing)
-        .with_live(self.cfg.live.clone());
+        .with_live(self.cfg.live.clone())
+        .with_batch(batch);
         let place = Place::Auto {
             base: self.cfg.runs.clone(),
         };
         self.launch(plan, place, offer.device_s.unwrap_or(0.0), None)
+    }
+
+    /// A bench with slots: the batch the request's serials make (every
+    /// serial trimmed, blank slots empty, at least one unit); empty on a
+    /// bench without.
+    fn batch(&self, req: &Start) -> Result<Vec<session::BatchUnit>, Refused> {
+        if self.cfg.bench.slots.is_empty() {
+            return Ok(Vec::new());
+        }
+        let given: Vec<(String, String)> = req
+            .serials
+            .iter()
+            .map(|(slot, serial)| (slot.clone(), serial.trim().to_owned()))
+            .filter(|(_, serial)| !serial.is_empty())
+            .collect();
+        if given.is_empty() {
+            return Err(Refused::Bad(
+                "scan the serial of the unit in each slot (a slot left blank stays empty)".into(),
+            ));
+        }
+        let path = Path::new(&self.cfg.bench_label);
+        session::batch_units(&self.cfg.bench, Some(path), &given)
+            .map_err(|(at, why)| Refused::Bad(format!("slot {}: {why}", given[at].0)))
     }
 
     /// Resume run `number` (interrupted: aborted or stopped by an error)
@@ -387,6 +419,15 @@ impl Station {
                 .collect(),
             estimate_s,
             events: note.into_iter().collect(),
+            units: plan
+                .batch
+                .iter()
+                .map(|u| state::UnitView {
+                    slot: u.slot.name.clone(),
+                    serial: u.serial.clone(),
+                    ..state::UnitView::default()
+                })
+                .collect(),
             ..RunView::default()
         };
         self.shared.update(|b| {
@@ -442,6 +483,13 @@ impl Station {
                     run.bench_left = f.report.bench_left.as_ref().map(|l| l.summary.clone());
                     run.dir = f.dir.display().to_string();
                     run.link = Some(f.report.link);
+                    for (view, u) in run.units.iter_mut().zip(&f.units) {
+                        view.outcome = Some(u.report.outcome);
+                        view.report = Some(format!("{}.html", u.file));
+                    }
+                    if !f.units.is_empty() {
+                        run.outcome = Some(f.result.worst());
+                    }
                     if let Some(e) = &f.report_error {
                         run.error = Some(format!("the report could not be written: {e}"));
                     }
@@ -618,6 +666,8 @@ struct Snapshot {
     /// True when the bench is simulated (the embedded twin, or every
     /// device `sim://`): no hardware moves.
     simulated: bool,
+    /// The bench's slots, in order (empty: one unit).
+    slots: Vec<String>,
 }
 
 fn snapshot_of(station: &Station, from: usize) -> Snapshot {
@@ -632,6 +682,13 @@ fn snapshot_of(station: &Station, from: usize) -> Snapshot {
         live_url: b.live_url.clone(),
         bench: station.cfg.bench_label.clone(),
         simulated: station.cfg.bench.is_embedded(),
+        slots: station
+            .cfg
+            .bench
+            .slots
+            .iter()
+            .map(|s| s.name.clone())
+            .collect(),
     }
 }
 
@@ -717,6 +774,8 @@ async fn history(State(s): St, headers: HeaderMap, Query(q): Query<HistoryQuery>
 #[derive(Debug, Deserialize)]
 struct ReportQuery {
     run: String,
+    /// The unit, for a batch's run (its report is `report-SERIAL.html`).
+    unit: Option<String>,
     token: Option<String>,
 }
 
@@ -742,7 +801,12 @@ async fn stored_report(State(s): St, headers: HeaderMap, Query(q): Query<ReportQ
             .find(|(k, _)| k == "log_path")
             .map(|(_, v)| PathBuf::from(v))
             .unwrap_or_default();
-        let page = log.with_file_name("report.html");
+        let page = q
+            .unit
+            .as_deref()
+            .map(|u| log.with_file_name(format!("report-{}.html", crate::unit::file_safe(u))))
+            .filter(|p| p.is_file())
+            .unwrap_or_else(|| log.with_file_name("report.html"));
         let inside = match (
             log.parent().map(std::fs::canonicalize),
             std::fs::canonicalize(&runs),
@@ -831,10 +895,19 @@ async fn run_file(
     if let Err(e) = s.check_token(&headers, q.token.as_deref()) {
         return e.into_response();
     }
+    // A batch's unit's report: `report-SERIAL.html` with the serial as its
+    // run wrote it into a file name.
+    let unit_report = |ext: &str| {
+        file.strip_prefix("report-")
+            .and_then(|f| f.strip_suffix(ext))
+            .is_some_and(|serial| !serial.is_empty() && crate::unit::file_safe(serial) == serial)
+    };
     let (name, kind) = match file.as_str() {
         "report.html" => ("report.html", "text/html; charset=utf-8"),
         "report.json" => ("report.json", "application/json"),
         "run.mcap" => ("run.mcap", "application/octet-stream"),
+        _ if unit_report(".html") => (file.as_str(), "text/html; charset=utf-8"),
+        _ if unit_report(".json") => (file.as_str(), "application/json"),
         _ => return Refused::NotFound(format!("no {file} in a run")).into_response(),
     };
     let path = match s.run_file(number, name) {

@@ -104,6 +104,28 @@ pub struct RunView {
     pub link: Option<crate::protocol::frame::LinkStats>,
     /// The unit's supply output as last read (benches with a supply).
     pub supply: Option<SupplyView>,
+    /// A batch's units, one tile each (empty: one unit, `serial`).
+    pub units: Vec<UnitView>,
+}
+
+/// One unit of a batch, as its tile shows it.
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct UnitView {
+    /// Its slot.
+    pub slot: String,
+    /// Its serial.
+    pub serial: String,
+    /// Its rate with the Earth rate removed, the last second's, deg/h.
+    pub bias_dph: Option<f64>,
+    /// Its case temperature, degC.
+    pub tcase_c: Option<f64>,
+    /// Its verdict once the run ended (as in its report).
+    pub outcome: Option<crate::sequencer::Outcome>,
+    /// Its measurements outside their limits so far.
+    pub failed: usize,
+    /// Its report's file in the run directory, once written
+    /// (`report-SERIAL.html`).
+    pub report: Option<String>,
 }
 
 /// The unit's supply output, as the page shows it.
@@ -266,6 +288,10 @@ impl Progress for Reporter {
             if let Some(run) = &mut b.run {
                 run.device_s = st.t_s;
                 run.elapsed_wall_s = wall;
+                if let (Some(u), Some(i)) = (run.units.first_mut(), iv) {
+                    u.bias_dph = Some(i.bias_dph());
+                    u.tcase_c = Some(i.tcase_c);
+                }
                 if let Some(p) = st.power {
                     run.supply = Some(SupplyView {
                         v: p.v,
@@ -279,6 +305,15 @@ impl Progress for Reporter {
             if let Some(s) = sample {
                 b.samples.push(s);
                 b.sample_unix_ms = crate::clock::utc_now().timestamp_millis();
+            }
+        });
+    }
+
+    fn slot_interval(&mut self, slot: usize, iv: &Interval) {
+        self.shared.update(|b| {
+            if let Some(u) = b.run.as_mut().and_then(|r| r.units.get_mut(slot)) {
+                u.bias_dph = Some(iv.bias_dph());
+                u.tcase_c = Some(iv.tcase_c);
             }
         });
     }
@@ -331,9 +366,22 @@ impl Progress for Reporter {
             limits: m.limits_text(),
             outcome: m.outcome,
         };
+        let failed = m.outcome != crate::sequencer::measure::MeasureOutcome::Pass;
         self.shared.update(|b| {
             if let Some(run) = &mut b.run {
                 run.measurements.push(view);
+                if let Some(u) = run.units.first_mut() {
+                    u.failed += usize::from(failed);
+                }
+            }
+        });
+    }
+
+    fn slot_measured(&mut self, slot: usize, m: &Measurement) {
+        let failed = m.outcome != crate::sequencer::measure::MeasureOutcome::Pass;
+        self.shared.update(|b| {
+            if let Some(u) = b.run.as_mut().and_then(|r| r.units.get_mut(slot)) {
+                u.failed += usize::from(failed);
             }
         });
     }

@@ -16,7 +16,11 @@ own MCAP read with the `mcap` package, that
   all arrived live.
 
     live_foxglove.py run GYROBENCH WORKDIR       # gyrobench run --live
+    live_foxglove.py batch GYROBENCH WORKDIR     # a batch of two units (quad.toml)
     live_foxglove.py station BASE_URL TOKEN      # a station's runs
+
+In batch mode the second unit's topics (`/slots/B/...`) must arrive live
+too, each advertised with its single-unit topic's schema.
 
 Exit 0 when all holds, else 1 with what did not.
 """
@@ -87,7 +91,10 @@ async def listen(url, got, done):
             got.messages.append((subs[sub]["topic"], log_time, bytes(raw[13:])))
 
 
-def check(got, log_path):
+BATCH_TOPICS = ["/slots/B/gyro/frames", "/slots/B/gyro/rate_1hz", "/slots/B/table/state"]
+
+
+def check(got, log_path, live_topics=LIVE_TOPICS):
     problems = []
     if got.server_info is None:
         problems.append("no serverInfo")
@@ -133,7 +140,7 @@ def check(got, log_path):
                 problems.append(f"{topic} at {log_time}: {errors[0].message}")
         if (topic, log_time, data) not in logged:
             problems.append(f"{topic} at {log_time}: received live but not in the log")
-    for topic in LIVE_TOPICS:
+    for topic in live_topics:
         if counts.get(topic, 0) == 0:
             problems.append(f"no {topic} message arrived live")
     print(
@@ -144,12 +151,17 @@ def check(got, log_path):
     return problems[:20]
 
 
-async def run_mode(gyrobench, workdir):
-    out = Path(workdir) / "live-run"
+async def run_mode(gyrobench, workdir, batch=False):
+    root = Path(__file__).parents[2]
+    out = Path(workdir) / ("live-batch" if batch else "live-run")
+    units = ["--dut", "LIVE-0001"]
+    if batch:
+        units = ["--bench", str(root / "fixtures/bench/quad.toml"),
+                 "--dut", "A=LIVE-0011", "--dut", "B=LIVE-0012"]
     proc = await asyncio.create_subprocess_exec(
-        gyrobench, "run", str(Path(__file__).parents[2] / "procedures/smoke.toml"),
+        gyrobench, "run", str(root / "procedures/smoke.toml"),
         "--live", "127.0.0.1:0", "--speed", "60", "--out", str(out), "--db", "none",
-        "--dut", "LIVE-0001",
+        *units,
         stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
     )
     url = None
@@ -171,7 +183,7 @@ async def run_mode(gyrobench, workdir):
     await listener
     if code != 0:
         raise AssertionError(f"gyrobench run --live exited {code}: {(await rest).decode()}")
-    return check(got, out / "run.mcap")
+    return check(got, out / "run.mcap", LIVE_TOPICS + (BATCH_TOPICS if batch else []))
 
 
 def api(base, token, method, path, body=None):
@@ -215,8 +227,8 @@ async def station_mode(base, token):
 
 
 def main():
-    if len(sys.argv) == 4 and sys.argv[1] == "run":
-        problems = asyncio.run(run_mode(sys.argv[2], sys.argv[3]))
+    if len(sys.argv) == 4 and sys.argv[1] in ("run", "batch"):
+        problems = asyncio.run(run_mode(sys.argv[2], sys.argv[3], sys.argv[1] == "batch"))
     elif len(sys.argv) == 4 and sys.argv[1] == "station":
         problems = asyncio.run(station_mode(sys.argv[2], sys.argv[3]))
     else:

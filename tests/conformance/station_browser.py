@@ -2,6 +2,7 @@
 driven over WebDriver (selenium, Debian's chromium-driver).
 
     station_browser.py URL [CHROMEDRIVER]
+    station_browser.py --batch URL [CHROMEDRIVER] [SCREENSHOT.png]
 
 URL is the one `gyrobench station` prints (with its token). Runs the smoke
 procedure: types the serial and the operator (Enter, as a barcode scanner
@@ -13,6 +14,11 @@ PASS, the Abort button greyed, the unit's history refreshed with a link to
 the report, and the report; then starts again and aborts at the prompt:
 cleanup runs, the verdict is ABORTED, and the first run's report is still
 served.
+With --batch, against a station on a bench with slots (quad.toml): one
+serial field per slot (Enter moves to the next slot), two slots filled and
+two left empty, the form empty again after the start, one tile per unit
+with its live rate, each tile's verdict PASS and its own report (the
+unit's serial on it); the page is saved as SCREENSHOT.png when asked.
 Exits non-zero with the step that failed.
 """
 
@@ -144,7 +150,52 @@ def main():
         b.quit()
 
 
+def batch(url, driver_path, shot):
+    a = browser(driver_path)
+    try:
+        a.get(url)
+        wait(a, "procedures listed", lambda d: len(d.find_elements(By.CSS_SELECTOR, "#procedure option")) > 0)
+        wait(a, "a serial field per slot", lambda d: len(d.find_elements(By.CSS_SELECTOR, "#slot-serials input")) == 4)
+        assert not a.find_element(By.ID, "serial").is_displayed(), "the one-unit serial field shows on a bench with slots"
+        a.find_element(By.CSS_SELECTOR, "#procedure option[value='smoke.toml']").click()
+        a.find_element(By.ID, "serial-A").send_keys("RL16-0101", Keys.ENTER)
+        wait(a, "Enter moves to the next slot", lambda d: d.switch_to.active_element.get_attribute("id") == "serial-B")
+        a.find_element(By.ID, "serial-C").send_keys("RL16-0103", Keys.ENTER)
+        a.find_element(By.ID, "operator").send_keys("ann")
+        for box in a.find_elements(By.CSS_SELECTOR, "#checklist input[type=checkbox]"):
+            box.click()
+        a.find_element(By.ID, "start").click()
+        wait(a, "a tile per unit", lambda d: len(d.find_elements(By.CSS_SELECTOR, "#units .tile")) == 2)
+        assert all(i.get_attribute("value") == "" for i in a.find_elements(By.CSS_SELECTOR, "#slot-serials input")), "a slot's serial stayed after the start"
+        tiles = a.find_elements(By.CSS_SELECTOR, "#units .tile")
+        assert "Slot A" in tiles[0].text and "RL16-0101" in tiles[0].text, tiles[0].text
+        assert "Slot C" in tiles[1].text and "RL16-0103" in tiles[1].text, tiles[1].text
+        assert "2 units" in text_of(a, "#run-title"), text_of(a, "#run-title")
+        wait(a, "the prompt", ec.visibility_of_element_located((By.ID, "prompt")))
+        a.find_element(By.ID, "prompt-ok").click()
+        wait(a, "PASS on every tile", lambda d: len(d.find_elements(By.CSS_SELECTOR, "#units .tile .v.pass")) == 2)
+        rates = [t.find_element(By.CSS_SELECTOR, ".rate").text for t in a.find_elements(By.CSS_SELECTOR, "#units .tile")]
+        assert all(r.endswith("deg/h") for r in rates) and rates[0] != rates[1], f"the tiles' rates: {rates}"
+        wait(a, "the batch's verdict", lambda d: d.find_elements(By.CSS_SELECTOR, ".verdict.pass"))
+        assert not a.find_elements(By.ID, "report-link"), "a batch has no single report"
+        if shot:
+            a.save_screenshot(shot)
+        links = [e.get_attribute("href") for e in a.find_elements(By.CSS_SELECTOR, "#units .tile a.unit-report")]
+        assert len(links) == 2, links
+        for serial, link in zip(["RL16-0101", "RL16-0103"], links):
+            a.get(link)
+            wait(a, f"the report of {serial}", lambda d: "PASS" in d.find_element(By.CSS_SELECTOR, ".verdict").text)
+            assert serial in a.page_source, f"{serial} not on its report"
+        print("station page, batch: a serial field per slot, Enter to the next slot, empty slots, an empty form after the start, a tile per unit with its live rate and verdict, each unit's report: ok")
+    finally:
+        a.quit()
+
+
 if __name__ == "__main__":
     t0 = time.time()
-    main()
+    if len(sys.argv) > 1 and sys.argv[1] == "--batch":
+        args = sys.argv[2:] + [None, None]
+        batch(args[0], args[1], args[2])
+    else:
+        main()
     print(f"in {time.time() - t0:.1f} s")

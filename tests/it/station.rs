@@ -271,6 +271,117 @@ fn the_station_runs_a_procedure_from_start_to_report_and_refuses_what_it_must() 
     std::fs::remove_dir_all(&dir).expect("cleanup");
 }
 
+/// A station on a bench with slots: a serial per slot (blank ones empty),
+/// one tile per unit with its live rate and verdict, each unit's report
+/// served; the page driven in Chromium when CI has it.
+#[test]
+fn the_station_runs_a_batch_with_a_tile_and_a_report_per_unit() {
+    let _busy = crate::common::busy_turn();
+    let dir = temp_dir("station-batch");
+    let quad = concat!(env!("CARGO_MANIFEST_DIR"), "/fixtures/bench/quad.toml");
+    let st = Served::start(&dir, &["--bench", quad]);
+    assert_eq!(
+        st.state()["slots"],
+        serde_json::json!(["A", "B", "C", "D"]),
+        "the page is told the bench's slots"
+    );
+    // No serial in any slot: refused with its reason; a slot the bench
+    // lacks too.
+    for (body, says) in [
+        (
+            r#"{"procedure":"smoke.toml","serials":{"A":" ","B":""}}"#,
+            "each slot",
+        ),
+        (
+            r#"{"procedure":"smoke.toml","serials":{"E":"RL16-1"}}"#,
+            "its slots: A, B, C, D",
+        ),
+    ] {
+        let (code, text) = st.request("POST", "/api/start", true, body);
+        assert_eq!(code, 400, "{text}");
+        assert!(text.contains(says), "{text}");
+    }
+    let (code, body) = st.request(
+        "POST",
+        "/api/start",
+        true,
+        r#"{"procedure":"smoke.toml","serials":{"A":"RL16-0101","B":"","C":" RL16-0103 "},"operator":"ann"}"#,
+    );
+    assert_eq!(code, 200, "{body}");
+    let waiting = st.until("the prompt", |s| !s["run"]["prompt"].is_null());
+    let units = waiting["run"]["units"].as_array().expect("units").clone();
+    assert_eq!(units.len(), 2, "{units:?}");
+    assert_eq!(
+        (&units[0]["slot"], &units[1]["slot"]),
+        (&"A".into(), &"C".into())
+    );
+    assert_eq!(units[1]["serial"], "RL16-0103", "trimmed as scanned");
+    let id = waiting["run"]["prompt"]["id"].as_u64().expect("prompt id");
+    let (code, body) = st.request("POST", "/api/answer", true, &format!(r#"{{"id":{id}}}"#));
+    assert_eq!(code, 200, "{body}");
+    let done = st.until("the verdicts", |s| s["run"]["phase"] == "finished");
+    // Each tile had its own unit's rate, to its last second.
+    let rates: Vec<f64> = done["run"]["units"]
+        .as_array()
+        .expect("units")
+        .iter()
+        .map(|u| u["bias_dph"].as_f64().expect("a live rate"))
+        .collect();
+    assert_ne!(rates[0], rates[1], "each tile has its own unit's rate");
+    let run = &done["run"];
+    assert_eq!(run["outcome"], "pass", "{run}");
+    for (u, serial) in run["units"]
+        .as_array()
+        .expect("units")
+        .iter()
+        .zip(["RL16-0101", "RL16-0103"])
+    {
+        assert_eq!(u["outcome"], "pass", "{u}");
+        let file = u["report"].as_str().expect("report file");
+        assert_eq!(file, format!("report-{serial}.html"));
+        let (code, page) = st.request("GET", &format!("/runs/1/{file}"), true, "");
+        assert_eq!(code, 200);
+        assert!(page.contains(serial) && page.contains("PASS"));
+        // And from the unit's history (the store's row, its own report).
+        let (code, body) = st.request("GET", &format!("/api/history?serial={serial}"), true, "");
+        assert_eq!(code, 200, "{body}");
+        let h: serde_json::Value = serde_json::from_str(&body).expect("history");
+        let run_id = h["runs"][0]["id"]
+            .as_str()
+            .expect("a stored run")
+            .to_owned();
+        let (code, page) = st.request(
+            "GET",
+            &format!("/api/report?run={run_id}&unit={serial}"),
+            true,
+            "",
+        );
+        assert_eq!(code, 200);
+        assert!(
+            page.contains(serial),
+            "the history's report is the unit's own"
+        );
+    }
+    let (code, _) = st.request("GET", "/runs/1/report-..%2Fx.html", true, "");
+    assert_ne!(code, 200);
+    // The page, as an operator uses it.
+    if let Some(python) = crate::common::python("the station page driven in Chromium")
+        && let Some(driver) = ["/usr/bin/chromedriver", "/usr/lib/chromium/chromedriver"]
+            .into_iter()
+            .find(|p| Path::new(p).is_file())
+    {
+        let shot = std::env::var("GYROBENCH_STATION_SHOT").unwrap_or_default();
+        let url = st.url();
+        let mut args = vec!["--batch", url.as_str(), driver];
+        if !shot.is_empty() {
+            args.push(&shot);
+        }
+        crate::common::conformance(&python, "station_browser.py", &args);
+    }
+    assert!(st.stop().success());
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
+
 /// `tests/conformance/station_browser.py` against the station: required
 /// in CI, skipped (said) elsewhere without selenium and chromedriver.
 fn browser_check(st: &Served) {
@@ -303,11 +414,13 @@ fn the_live_foxglove_stream_carries_the_logs_channels_to_a_third_party_client() 
         return;
     };
     let dir = temp_dir("live");
-    crate::common::conformance(
-        &python,
-        "live_foxglove.py",
-        &["run", env!("CARGO_BIN_EXE_gyrobench"), s(&dir)],
-    );
+    for mode in ["run", "batch"] {
+        crate::common::conformance(
+            &python,
+            "live_foxglove.py",
+            &[mode, env!("CARGO_BIN_EXE_gyrobench"), s(&dir)],
+        );
+    }
     let st = Served::start(&dir, &["--speed", "60"]);
     let state = st.state();
     let live = state["live_url"]
