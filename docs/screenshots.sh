@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # The pages as a person sees them, in headless Chromium: report.html of a
 # PASS and of a FAIL, the FAIL printed to A4 (page 1), diagnosis.html, the
-# calibration page, a rate-transfer report and the station. Writes docs/img/*.png from a fresh build; run from
+# calibration page, a rate-transfer report and the station (one unit, and a batch). Writes docs/img/*.png from a fresh build; run from
 # the repository root:
 #
 #   docs/screenshots.sh
@@ -78,6 +78,33 @@ d.save_screenshot(sys.argv[2]); d.quit()
 PY
     kill -TERM "$station"; wait "$station" || true
     echo "$img/station.png"
+
+    # A batch of four on the quad bench, mid-run: a tile per unit.
+    $gb station --bench fixtures/bench/quad.toml --listen 127.0.0.1:0 --live 127.0.0.1:0 --db none \
+        --runs "$work/station-batch" --speed 2000 >"$work/station-batch.out" 2>/dev/null &
+    station=$!
+    sleep 1.5
+    url=$(head -1 "$work/station-batch.out" | cut -d' ' -f2)
+    .venv/bin/python - "$url" "$img/station-batch.png" <<'PY'
+import sys, time, shutil
+from selenium import webdriver
+from selenium.webdriver.common.by import By
+from selenium.webdriver.common.keys import Keys
+o = webdriver.ChromeOptions()
+for a in ("--headless=new", "--no-sandbox", "--disable-gpu", "--window-size=1400,1000"):
+    o.add_argument(a)
+d = webdriver.Chrome(options=o, service=webdriver.ChromeService(executable_path=shutil.which("chromedriver")))
+d.get(sys.argv[1]); time.sleep(1)
+d.find_element(By.CSS_SELECTOR, "#procedure option[value='acceptance.toml']").click()
+for slot, serial in zip("ABCD", ["RL16-0101", "RL16-0102", "RL16-0103", "RL16-0104"]):
+    d.find_element(By.ID, f"serial-{slot}").send_keys(serial, Keys.ENTER)
+d.switch_to.active_element.send_keys("ann", Keys.ENTER)
+d.find_element(By.ID, "start").click()
+time.sleep(9)
+d.save_screenshot(sys.argv[2]); d.quit()
+PY
+    kill -TERM "$station"; wait "$station" || true
+    echo "$img/station-batch.png"
 else
     echo "screenshots: no .venv with selenium: the station was not shot" >&2
 fi
