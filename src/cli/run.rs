@@ -84,7 +84,8 @@ pub struct RunArgs {
     /// Simulated bench only: play a fault, FAULT@SECONDS of device time
     /// (chamber-alarm, chamber-silent, table-interlock, gyro-silent,
     /// gyro-corrupt, gyro-stuck, gyro-saturated, process-kill, panic,
-    /// supply-overcurrent, disk-full, sighup, sigquit).
+    /// supply-overcurrent, disk-full, sighup, sigquit; unit-lost: a
+    /// batch's last unit's link lost for good, the others go on).
     #[arg(long, value_name = "FAULT@SECONDS")]
     inject: Vec<String>,
     /// Publish the run's channels live on a Foxglove WebSocket server
@@ -284,7 +285,7 @@ fn fresh(args: &RunArgs, procedure_path: &std::path::Path, pacing: Pacing) -> Re
     }
     let procedure =
         Procedure::load(procedure_path, &bench_cfg).context("checking the procedure")?;
-    let faults = args
+    let faults: Vec<(f64, Fault)> = args
         .inject
         .iter()
         .map(|s| parse_inject(s))
@@ -303,6 +304,12 @@ fn fresh(args: &RunArgs, procedure_path: &std::path::Path, pacing: Pacing) -> Re
             &dut,
         )?),
     };
+    if batch.len() < 2 && faults.iter().any(|(_, f)| *f == Fault::UnitLost) {
+        return Err(Usage(
+            "--inject unit-lost loses a batch's last unit: it needs a bench with slots and two units or more".into(),
+        )
+        .into());
+    }
     let bench_label = args
         .bench
         .as_ref()

@@ -68,11 +68,14 @@ pub enum Fault {
     Hangup,
     /// The process gets SIGQUIT (Ctrl-\), once.
     Quit,
+    /// A batch's last unit's gyro link is lost for good: it sends nothing
+    /// more (the others go on).
+    UnitLost,
 }
 
 impl Fault {
     /// Every fault by the name `--inject` takes.
-    pub const NAMES: [&str; 13] = [
+    pub const NAMES: [&str; 14] = [
         "chamber-alarm",
         "chamber-silent",
         "table-interlock",
@@ -86,6 +89,7 @@ impl Fault {
         "disk-full",
         "sighup",
         "sigquit",
+        "unit-lost",
     ];
 }
 
@@ -106,6 +110,7 @@ impl std::str::FromStr for Fault {
             "disk-full" => Self::DiskFull,
             "sighup" => Self::Hangup,
             "sigquit" => Self::Quit,
+            "unit-lost" => Self::UnitLost,
             _ => {
                 return Err(format!(
                     "unknown fault {s:?}; expected {}",
@@ -260,11 +265,18 @@ impl EmbeddedBench {
         ticks: &mut Vec<SlotTick>,
     ) {
         ticks.resize_with(self.slots.len(), SlotTick::default);
-        for (slot, tick) in self.slots.iter_mut().zip(ticks.iter_mut()) {
+        let lost = self
+            .active(Fault::UnitLost)
+            .then(|| self.slots.len().saturating_sub(1));
+        for (k, (slot, tick)) in self.slots.iter_mut().zip(ticks.iter_mut()).enumerate() {
             tick.frames.clear();
             let frames = &mut tick.frames;
-            slot.twin
-                .run_until(t_s, |_, g| frames.push(frame_of(g, g.delta_counts)));
+            let sends = lost != Some(k);
+            slot.twin.run_until(t_s, |_, g| {
+                if sends {
+                    frames.push(frame_of(g, g.delta_counts));
+                }
+            });
             slot.frames += frames.len() as u64;
             let (angles, rates) = (slot.twin.table_angles(), slot.twin.table_rates());
             tick.orientation = slot.geometry.orientation(angles);

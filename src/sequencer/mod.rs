@@ -473,6 +473,11 @@ pub const TURN_ON_WATCH_S: f64 = 1.0;
 /// moment they are powered; the RL-16 draws 55 % of its 1 A limit).
 pub const NO_DRAW_SHARE: f64 = 0.01;
 
+/// How long a batch's unit may send no frame before a soak stops waiting
+/// on its case, s (ours: ten ticks; a unit whose link is lost would
+/// otherwise hold the whole batch until the soak's timeout).
+pub const SOAK_STALE_S: f64 = 10.0;
+
 /// The tick while a turn-on is watched, s (50 readings a second; a real
 /// bench reads as fast as its instruments answer, at most this fast).
 pub const TURN_ON_TICK_S: f64 = 0.02;
@@ -875,15 +880,24 @@ impl Run<'_> {
                     case.pop_front();
                 }
             }
-            let (slope, settled) = cases.iter().fold((0.0_f64, true), |(worst, all), case| {
-                let slope = slope_per_min(case);
-                let worst = if slope.abs() > worst.abs() {
-                    slope
-                } else {
-                    worst
-                };
-                (worst, all && case.len() >= 60)
-            });
+            // A batch's unit that has sent nothing for a while (its link
+            // lost) is not waited on: the others soak on.
+            let batch = cases.len() > 1;
+            let read = cases
+                .iter()
+                .filter(|c| !batch || c.back().is_some_and(|(t, _)| st.t_s - t <= SOAK_STALE_S))
+                .collect::<Vec<_>>();
+            let (slope, settled) =
+                read.iter()
+                    .fold((0.0_f64, !read.is_empty()), |(worst, all), case| {
+                        let slope = slope_per_min(case);
+                        let worst = if slope.abs() > worst.abs() {
+                            slope
+                        } else {
+                            worst
+                        };
+                        (worst, all && case.len() >= 60)
+                    });
             // An air-only soak (no case criterion) needs no frames:
             // it holds while the unit is off.
             let case_ok = case_slope_c_per_min.is_infinite()

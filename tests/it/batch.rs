@@ -346,3 +346,46 @@ fn a_bench_file_checks_its_slots() {
         assert!(stderr(&o).contains("bad.toml:"), "{tail}: {}", stderr(&o));
     }
 }
+
+#[test]
+fn a_unit_whose_link_is_lost_ends_in_error_and_the_others_are_judged() {
+    let dir = temp_dir("batch-lost");
+    let p = write(&dir, "mini.toml", MINI);
+    let quad = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/bench/quad.toml");
+    let out = dir.join("run");
+    // Unit C (the batch's last) sends nothing from 600 s on.
+    let o = run(&[
+        s(&p),
+        "--bench",
+        s(&quad),
+        "--dut",
+        "A=L-1",
+        "--dut",
+        "B=L-2",
+        "--dut",
+        "C=L-3",
+        "--inject",
+        "unit-lost@600",
+        "--out",
+        s(&out),
+    ]);
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    for serial in ["L-1", "L-2"] {
+        let r = json(&out.join(format!("report-{serial}.json")));
+        assert_eq!(r["outcome"], "pass", "{serial}: {r}");
+    }
+    let lost = json(&out.join("report-L-3.json"));
+    assert_eq!(lost["outcome"], "error", "{lost}");
+    let why = lost["error"]["message"].as_str().expect("a reason");
+    assert!(why.contains("no gyro frame"), "{why}");
+    // The shared bench was left as cleanup asked, for every unit.
+    assert_eq!(lost["bench_left"]["verified"], true, "{lost}");
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        stdout.contains("L-3") && stdout.contains("ERROR"),
+        "{stdout}"
+    );
+    // One unit's bench has no batch to lose a unit of.
+    let o = run(&[s(&p), "--inject", "unit-lost@600"]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+}
