@@ -127,6 +127,16 @@ impl Position {
             .collect()
     }
 
+    /// The position as a batch's unit on its own mount (`geometry`) saw
+    /// it: its orientation from the table's angles (none: as it is).
+    fn on(mut self, geometry: Option<crate::geometry::TableGeometry>) -> Self {
+        if let (Some(g), Some(t)) = (geometry, self.table) {
+            self.orientation = g.orientation(t);
+            self.description = describe(&self.orientation);
+        }
+        self
+    }
+
     /// The pose of every record of `p` a measurement uses: the last move
     /// before the record step (records before any move have none).
     pub fn of(p: &Procedure) -> Vec<Self> {
@@ -255,6 +265,16 @@ impl NoiseFigures {
     }
 }
 
+/// The table's geometry with a batch's unit on its slot's mount (none: the
+/// run's one unit, on the bench's mount as the procedure was checked).
+fn unit_geometry(meta: &RunMeta) -> Option<crate::geometry::TableGeometry> {
+    let mount = meta.unit()?.mount?;
+    let bench: crate::bench::BenchConfig = toml::from_str(&meta.bench_toml).ok()?;
+    let mut g = bench.table.geometry;
+    g.mount = mount;
+    Some(g)
+}
+
 impl Report {
     /// Assemble the report of a run from its procedure, its result and
     /// its log's `run` metadata (so a replay of the log gives the same).
@@ -295,7 +315,10 @@ impl Report {
             bench: meta.bench.clone(),
             software_version: meta.software_version.clone(),
             noise: NoiseFigures::of(&r.measurements, &r.records),
-            positions: Position::of(p),
+            positions: Position::of(p)
+                .into_iter()
+                .map(|q| q.on(unit_geometry(meta)))
+                .collect(),
         }
     }
 

@@ -389,3 +389,66 @@ fn a_unit_whose_link_is_lost_ends_in_error_and_the_others_are_judged() {
     let o = run(&[s(&p), "--inject", "unit-lost@600"]);
     assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
 }
+
+#[test]
+fn a_triads_units_each_measure_and_describe_what_their_own_axis_saw() {
+    let dir = temp_dir("batch-triad");
+    let p = write(&dir, "mini.toml", MINI);
+    let triad = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/bench/triad.toml");
+    let out = dir.join("run");
+    let o = run(&[
+        s(&p),
+        "--bench",
+        s(&triad),
+        "--dut",
+        "X=T-1",
+        "--dut",
+        "Y=T-2",
+        "--dut",
+        "Z=T-3",
+        "--out",
+        s(&out),
+    ]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    // The platform "up" puts X's axis up and Y's and Z's horizontal (Y
+    // north, Z west); "east" puts X's axis east, Y's north, Z's up.
+    for (serial, up, east) in [
+        ("T-1", "axis up", "axis horizontal toward azimuth 90"),
+        (
+            "T-2",
+            "axis horizontal toward azimuth 0",
+            "axis horizontal toward azimuth 0",
+        ),
+        ("T-3", "axis horizontal toward azimuth 270", "axis up"),
+    ] {
+        let r = json(&out.join(format!("report-{serial}.json")));
+        let pose = |record: &str| {
+            r["positions"]
+                .as_array()
+                .expect("positions")
+                .iter()
+                .find(|q| q["record"] == record)
+                .and_then(|q| q["description"].as_str())
+                .unwrap_or_default()
+                .to_owned()
+        };
+        assert!(pose("up").starts_with(up), "{serial} up: {}", pose("up"));
+        assert!(
+            pose("east").starts_with(east),
+            "{serial} east: {}",
+            pose("east")
+        );
+        // Each unit's reference is its own axis's Earth rate: its bias is
+        // the twin's (about 0.5 deg/h), not off by the difference between
+        // the platform's axis and its own (several deg/h at 50 deg N).
+        for m in r["measurements"].as_array().expect("measurements") {
+            if m["name"]
+                .as_str()
+                .is_some_and(|n| n.starts_with("bias_dph:"))
+            {
+                let v = m["value"].as_f64().expect("value");
+                assert!(v.abs() < 1.5, "{serial} {}: {v}", m["name"]);
+            }
+        }
+    }
+}
