@@ -179,6 +179,7 @@ impl Store {
                 dut_type: meta.dut_type.clone(),
                 coefficients: crate::coeffs::CoeffsUsed::fitted(),
                 mount: None,
+                twin_toml: None,
             }];
             let units = if meta.units.is_empty() {
                 &fallback[..]

@@ -393,6 +393,7 @@ fn import_rows(
             dut_type: "gyro".into(),
             coefficients: crate::coeffs::CoeffsUsed::fitted(),
             mount: None,
+            twin_toml: None,
         }],
         ..RunMeta::default()
     };

@@ -108,6 +108,10 @@ pub struct RunUnit {
     /// batch's slots; none: the bench's `[table.geometry] mount`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub mount: Option<crate::geometry::Orientation>,
+    /// A batch unit's own twin (its slot's twin file, as read; none: the
+    /// run's, `twin_toml`), for a resume on the same units.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub twin_toml: Option<String>,
 }
 
 fn take(m: &mut BTreeMap<String, String>, k: &str) -> String {
@@ -232,6 +236,7 @@ impl RunMeta {
                     None => CoeffsUsed::fitted(),
                 },
                 mount: None,
+                twin_toml: None,
             });
         }
         self
@@ -529,6 +534,7 @@ mod tests {
                     override_reason: None,
                 },
                 mount: Some(crate::geometry::Orientation::new(90.0, 0.0, 0.0)),
+                twin_toml: None,
             }],
             ..RunMeta::default()
         };

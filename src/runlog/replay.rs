@@ -154,6 +154,8 @@ struct LoggedTable {
 struct State<'a> {
     path: &'a Path,
     coeffs_override: Option<&'a Compensation>,
+    /// The batch's unit replayed (its earlier parts are its too).
+    unit: Option<&'a str>,
     meta: Option<RunMeta>,
     result_meta: Option<ResultMeta>,
     procedure: Option<Procedure>,
@@ -262,7 +264,27 @@ pub fn resume_from(prev: &Replayed, completed: usize) -> Resume {
         measurements,
         frames: prev.result.frames,
         device_time_s: prev.result.device_time_s,
+        others: Vec::new(),
     }
+}
+
+/// [`resume_from`] for a batch: the first unit's from `prev`, each other
+/// unit's from its own replay of the same log (`others`, in unit order),
+/// trimmed at the same step.
+pub fn resume_batch_from(prev: &Replayed, others: &[Replayed], completed: usize) -> Resume {
+    let mut r = resume_from(prev, completed);
+    r.others = others
+        .iter()
+        .map(|o| {
+            let u = resume_from(o, completed);
+            crate::sequencer::resume::UnitResume {
+                records: u.records,
+                measurements: u.measurements,
+                frames: u.frames,
+            }
+        })
+        .collect();
+    r
 }
 
 impl State<'_> {
@@ -297,7 +319,7 @@ impl State<'_> {
                         )));
                     }
                     let prev_path = self.path.with_file_name(prev);
-                    let earlier = replay(&prev_path, self.coeffs_override)
+                    let earlier = replay_unit(&prev_path, self.coeffs_override, self.unit)
                         .map_err(|e| self.log_err(format!("its earlier part {prev}: {e}")))?;
                     // A part of another run (a file copied in, a directory
                     // reused) is not this run's: its steps and figures
@@ -565,6 +587,7 @@ pub fn replay_unit(
     let mut st = State {
         path,
         coeffs_override: coeffs,
+        unit,
         meta: None,
         result_meta: None,
         procedure: None,

@@ -1151,6 +1151,12 @@ pub async fn run(
         r.records = res.records.clone();
         r.records.set_part(res.part);
         r.measurements = res.measurements.clone();
+        for (lane, earlier) in r.others.iter_mut().zip(&res.others) {
+            lane.records = earlier.records.clone();
+            lane.records.set_part(res.part);
+            lane.measurements = earlier.measurements.clone();
+            lane.frames = earlier.frames;
+        }
         stop = restore(&mut r, p, res).await.err();
     }
     let run_order = p.setup.iter().chain(&p.main).enumerate();

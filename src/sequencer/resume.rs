@@ -40,6 +40,20 @@ pub struct Resume {
     pub frames: u64,
     /// Device time of the earlier parts, s.
     pub device_time_s: f64,
+    /// A batch's other units: what the earlier parts left of each (in
+    /// unit order).
+    pub others: Vec<UnitResume>,
+}
+
+/// What the earlier parts of a batch left of one more unit.
+#[derive(Debug, Clone, Default)]
+pub struct UnitResume {
+    /// Its records ([`Resume::trim`]med).
+    pub records: Records,
+    /// Its measurements (trimmed).
+    pub measurements: Vec<Measurement>,
+    /// Its frames.
+    pub frames: u64,
 }
 
 /// Room temperature a chamber starts from, degC (a procedure's first

@@ -17,7 +17,9 @@ use crate::procedure::estimate::min_total_s;
 use crate::protocol::frame::LinkStats;
 use crate::report::{Report, render_html};
 use crate::runlog::meta::{ResultMeta, RunMeta};
-use crate::runlog::replay::{ReplayError, add_link, logged, replay, resume_from};
+use crate::runlog::replay::{
+    ReplayError, add_link, logged, replay, replay_unit, resume_batch_from,
+};
 use crate::runlog::schema::FORMAT;
 use crate::runlog::writer::{FrameScales, Recorder};
 use crate::sequencer::device::DeviceBench;
@@ -317,6 +319,9 @@ pub struct Resumed {
     pub previous_file: String,
     /// Link figures of the earlier parts.
     pub link: LinkStats,
+    /// A batch's other units' link figures of the earlier parts (in unit
+    /// order).
+    pub unit_links: Vec<LinkStats>,
     /// A summary line for the operator.
     pub summary: String,
 }
@@ -398,13 +403,6 @@ pub fn plan_resume(
             prev.result.outcome.as_str()
         )));
     }
-    if prev.meta.units.len() > 1 {
-        return Err(SessionError::NotResumable(format!(
-            "the run in {} is a batch of {} units; a batch cannot be resumed yet: run it again",
-            dir.display(),
-            prev.meta.units.len()
-        )));
-    }
     let config = logged(&prev.meta)
         .map_err(|e| SessionError::NotResumable(format!("{}: {e}", last.display())))?;
     let steps = prev.procedure.setup.len() + prev.procedure.main.len();
@@ -429,7 +427,15 @@ pub fn plan_resume(
             ))
         })?;
     }
-    let state = resume_from(&prev, completed);
+    // A batch: each other unit as its own view of the log replays it.
+    let others = prev
+        .meta
+        .units
+        .iter()
+        .skip(1)
+        .map(|u| replay_unit(&last, None, Some(&u.serial)))
+        .collect::<Result<Vec<_>, _>>()?;
+    let state = resume_batch_from(&prev, &others, completed);
     let summary = format!(
         "resuming {} (its last part {} ended: {}): {}",
         dir.display(),
@@ -488,6 +494,10 @@ pub fn plan_resume(
     if !meta.station.is_empty() {
         plan.station = meta.station.clone();
     }
+    if meta.units.len() > 1 {
+        let batch = logged_batch(&plan.bench_cfg, meta, &last)?;
+        plan = plan.with_batch(batch);
+    }
     plan.resume = Some(Resumed {
         run_id: meta.run_id.clone(),
         start_time_utc: meta.start_time_utc.clone(),
@@ -496,9 +506,46 @@ pub fn plan_resume(
             .file_name()
             .map_or(String::new(), |f| f.to_string_lossy().into_owned()),
         link: prev.link,
+        unit_links: others.iter().map(|o| o.link).collect(),
         summary,
     });
     Ok(plan)
+}
+
+/// A logged batch's units again, on the logged bench: each in its slot
+/// (by name), with its own twin as logged.
+fn logged_batch(
+    bench: &BenchConfig,
+    meta: &RunMeta,
+    log: &Path,
+) -> Result<Vec<BatchUnit>, SessionError> {
+    let bad = |why: String| SessionError::NotResumable(format!("{}: {why}", log.display()));
+    meta.units
+        .iter()
+        .map(|u| {
+            let index = bench
+                .slots
+                .iter()
+                .position(|s| s.name == u.slot)
+                .ok_or_else(|| bad(format!("its bench has no slot {:?}", u.slot)))?;
+            let twin = match &u.twin_toml {
+                Some(text) => Some(
+                    TwinConfig::from_source(&crate::config::Source::from_text(
+                        &format!("the logged twin of slot {}", u.slot),
+                        text,
+                    ))
+                    .map_err(|e| bad(e.to_string()))?,
+                ),
+                None => None,
+            };
+            Ok(BatchUnit {
+                slot: bench.slots[index].clone(),
+                index,
+                serial: u.serial.clone(),
+                twin,
+            })
+        })
+        .collect()
 }
 
 /// Run-order index of the procedure's last record step.
@@ -740,13 +787,19 @@ pub fn execute(
         Some(r) => add_link(&r.link, &part_link),
         None => part_link,
     };
+    // A batch's other units' link figures of this part (what the log
+    // gets), and with the earlier parts' (what their reports give).
+    let part_slot_links: Vec<LinkStats> = (1..meta.units.len())
+        .map(|k| bench.slot_link_stats(k))
+        .collect();
     let unit_links: Vec<LinkStats> = (0..meta.units.len().max(1))
-        .map(|k| {
-            if k == 0 {
-                link
-            } else {
-                bench.slot_link_stats(k)
-            }
+        .map(|k| match (k, &plan.resume) {
+            (0, _) => link,
+            (k, Some(r)) => add_link(
+                &r.unit_links.get(k - 1).copied().unwrap_or_default(),
+                &bench.slot_link_stats(k),
+            ),
+            (k, None) => bench.slot_link_stats(k),
         })
         .collect();
     let finish = |result: &RunResult, k: usize| {
@@ -760,7 +813,7 @@ pub fn execute(
         result,
         &meta,
         finish,
-        (end_s, &part_link, unit_links.get(1..).unwrap_or_default()),
+        (end_s, &part_link, &part_slot_links),
         &mut notes,
     );
     let mut units = Vec::new();
@@ -1040,23 +1093,41 @@ fn run_meta(
                     .as_ref()
                     .map_or_else(crate::coeffs::CoeffsUsed::fitted, |c| c.used.clone()),
                 mount: None,
+                twin_toml: None,
             }]
         } else {
-            // Each unit of a batch is compensated with the model fitted on
-            // its own records.
-            plan.batch
-                .iter()
-                .map(|u| crate::runlog::meta::RunUnit {
-                    slot: u.slot.name.clone(),
-                    serial: u.serial.clone(),
-                    dut_type: plan.procedure.meta.dut_type.clone(),
-                    coefficients: crate::coeffs::CoeffsUsed::fitted(),
-                    mount: Some(plan.bench_cfg.slot_geometry(&u.slot).mount),
-                })
-                .collect()
+            batch_meta_units(plan)?
         },
         other: Default::default(),
     })
+}
+
+/// A batch's units as its log's `run` record names them: each compensated
+/// with the model fitted on its own records, its slot's mount, and its
+/// own twin when its slot has one (a resume simulates the same unit).
+fn batch_meta_units(plan: &Plan) -> Result<Vec<crate::runlog::meta::RunUnit>, SessionError> {
+    plan.batch
+        .iter()
+        .map(|u| {
+            let twin_toml = match &u.twin {
+                Some(t) => Some(t.to_toml().map_err(|e| {
+                    SessionError::Bench(format!(
+                        "the twin of slot {} cannot be logged: {e}",
+                        u.slot.name
+                    ))
+                })?),
+                None => None,
+            };
+            Ok(crate::runlog::meta::RunUnit {
+                slot: u.slot.name.clone(),
+                serial: u.serial.clone(),
+                dut_type: plan.procedure.meta.dut_type.clone(),
+                coefficients: crate::coeffs::CoeffsUsed::fitted(),
+                mount: Some(plan.bench_cfg.slot_geometry(&u.slot).mount),
+                twin_toml,
+            })
+        })
+        .collect()
 }
 
 /// The run's link to the results store: recorded when it starts and when
