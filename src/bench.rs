@@ -647,11 +647,13 @@ impl BenchConfig {
                 g.mount = *m;
                 g.validate(c, &key)?;
             }
-            c.ensure(
-                slot.seed.is_none() && slot.twin.is_none() || self.is_embedded(),
-                &format!("{key}.seed"),
-                "a slot's seed and twin are the embedded bench's (sim:// devices)",
-            )?;
+            for (given, name) in [(slot.seed.is_some(), "seed"), (slot.twin.is_some(), "twin")] {
+                c.ensure(
+                    !given || self.is_embedded(),
+                    &format!("{key}.{name}"),
+                    &format!("a slot's {name} is the embedded bench's (sim:// devices)"),
+                )?;
+            }
         }
         c.ensure(
             self.slots.is_empty() || self.devices.supply.is_none(),
@@ -682,8 +684,17 @@ impl BenchConfig {
 
     /// The table's geometry with the unit in `slot` mounted on it.
     pub fn slot_geometry(&self, slot: &Slot) -> crate::geometry::TableGeometry {
+        self.geometry_with(slot.mount)
+    }
+
+    /// The table's geometry with a unit on `mount` (none: the table's own
+    /// mount).
+    pub fn geometry_with(
+        &self,
+        mount: Option<crate::geometry::Orientation>,
+    ) -> crate::geometry::TableGeometry {
         let mut g = self.table.geometry;
-        if let Some(m) = slot.mount {
+        if let Some(m) = mount {
             g.mount = m;
         }
         g

@@ -120,6 +120,12 @@ pub fn file_safe(serial: &str) -> String {
         .collect()
 }
 
+/// A batch's unit's report files' name without the extension:
+/// `report-SERIAL` (the serial [`file_safe`]).
+pub fn report_name(serial: &str) -> String {
+    format!("report-{}", file_safe(serial))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -60,20 +60,38 @@ pub fn run(args: ReplayArgs) -> Result<Outcome> {
     };
     // A log that cannot be read says why in the replay itself.
     let units = crate::runlog::view::log_units(&args.log).unwrap_or_default();
-    let batch = units.len() > 1;
+    let batch = crate::runlog::view::is_batch(&units);
+    if batch && args.unit.is_none() && coeffs.is_some() {
+        return Err(Usage(
+            "--coeffs is one unit's set: give the batch's unit it is for with --unit SERIAL".into(),
+        )
+        .into());
+    }
     let serials: Vec<Option<String>> = match (&args.unit, batch) {
         (Some(u), _) => vec![Some(u.clone())],
         (None, true) => units.into_iter().map(|(_, serial)| Some(serial)).collect(),
         (None, false) => vec![None],
     };
+    // The log's exit code is its worst unit's.
+    let rank = |o: &Outcome| match o {
+        Outcome::Success => 0,
+        Outcome::Fail => 1,
+        Outcome::Error => 2,
+        _ => 3,
+    };
     let mut worst = Outcome::Success;
     for serial in &serials {
         let o = replay_one(&args, coeffs.as_ref(), serial.as_deref(), batch)?;
-        worst = match (&worst, &o) {
-            (Outcome::Success, _) | (Outcome::Fail, Outcome::Error | Outcome::Interrupted(_)) => o,
-            (Outcome::Error, Outcome::Interrupted(_)) => o,
-            _ => worst,
-        };
+        if rank(&o) > rank(&worst) {
+            worst = o;
+        }
+    }
+    if args.store {
+        let loc = crate::results::Location::resolve(args.db.as_deref(), None);
+        if let Some(mut s) = crate::results::Store::open(&loc)? {
+            let done = s.index_log(&args.log)?;
+            errln!("{done:?} in the results store {}", s.name());
+        }
     }
     Ok(worst)
 }
@@ -139,7 +157,7 @@ fn replay_one(
     }
     std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
     let name = match serial.filter(|_| batch) {
-        Some(s) => format!("report-{}", crate::unit::file_safe(s)),
+        Some(s) => crate::unit::report_name(s),
         None => "report".to_owned(),
     };
     for (name, bytes) in [
@@ -155,13 +173,6 @@ fn replay_one(
     }
     outf!("{}", report.render_text())?;
     errln!("report in {}", out.display());
-    if args.store && serial.is_none_or(|s| r.meta.units.first().is_some_and(|u| u.serial == s)) {
-        let loc = crate::results::Location::resolve(args.db.as_deref(), None);
-        if let Some(mut s) = crate::results::Store::open(&loc)? {
-            let done = s.index_log(&args.log)?;
-            errln!("{done:?} in the results store {}", s.name());
-        }
-    }
     Ok(match r.result.outcome {
         sequencer::Outcome::Pass => Outcome::Success,
         sequencer::Outcome::Fail => Outcome::Fail,

@@ -127,7 +127,7 @@ pub fn load_unit(path: &Path, unit: Option<&str>) -> Result<RunData, ReplayError
     // at (turned into a body rate once the logged bench is known).
     // (And how far the table state's time leads the interval's middle.)
     let mut samples: Vec<(Sample, Option<TableAngles>, TableAngles, f64)> = Vec::new();
-    runlog::view::read_unit(path, unit, |item| {
+    let read = runlog::view::read_unit(path, unit, |item| {
         match item {
             Item::Meta { name, entries } if name == RUN_META => {
                 let meta = RunMeta::from_entries(entries).map_err(|e| e.to_string())?;
@@ -137,13 +137,7 @@ pub fn load_unit(path: &Path, unit: Option<&str>) -> Result<RunData, ReplayError
                 );
                 // A batch's unit sits on its slot's mount.
                 let mount = meta.unit().and_then(|u| u.mount);
-                geometry = Some(logged_bench(&meta).map(|b| {
-                    let mut g = b.table.geometry;
-                    if let Some(m) = mount {
-                        g.mount = m;
-                    }
-                    g
-                }));
+                geometry = Some(logged_bench(&meta).map(|b| b.geometry_with(mount)));
             }
             Item::Message { topic, data, .. } if topic == topics::TABLE => {
                 table = Some(
@@ -185,6 +179,11 @@ pub fn load_unit(path: &Path, unit: Option<&str>) -> Result<RunData, ReplayError
         }
         Ok(())
     })?;
+    // A read stopped on purpose (`--unit` naming a unit the log lacks)
+    // says why.
+    if let (Some(why), true) = (&read.stopped, site.is_none()) {
+        return Err(log_err(why.clone()));
+    }
     let site = site.ok_or_else(|| log_err("no site in the run metadata".into()))?;
     let samples = samples
         .into_iter()

@@ -270,9 +270,7 @@ impl NoiseFigures {
 fn unit_geometry(meta: &RunMeta) -> Option<crate::geometry::TableGeometry> {
     let mount = meta.unit()?.mount?;
     let bench: crate::bench::BenchConfig = toml::from_str(&meta.bench_toml).ok()?;
-    let mut g = bench.table.geometry;
-    g.mount = mount;
-    Some(g)
+    Some(bench.geometry_with(Some(mount)))
 }
 
 impl Report {

@@ -180,6 +180,7 @@ impl Store {
                 coefficients: crate::coeffs::CoeffsUsed::fitted(),
                 mount: None,
                 twin_toml: None,
+                seed: None,
             }];
             let units = if meta.units.is_empty() {
                 &fallback[..]
@@ -225,6 +226,8 @@ impl Store {
     ) -> Result<(), StoreError> {
         let sha = sha256_file(log).ok();
         let r = end.result;
+        // A batch's row carries its worst unit's error.
+        let error = r.unit(r.worst_unit()).error;
         let l = &end.link;
         let left = r.bench_left.as_ref();
         let store = self.name.clone();
@@ -241,9 +244,9 @@ impl Store {
                     r.device_time_s.into(),
                     i64::try_from(r.frames).ok().into(),
                     r.worst().as_str().into(),
-                    r.error.as_ref().map(|e| e.step.clone()).into(),
-                    r.error.as_ref().and_then(|e| e.device.clone()).into(),
-                    r.error.as_ref().map(|e| e.message.clone()).into(),
+                    error.as_ref().map(|e| e.step.clone()).into(),
+                    error.as_ref().and_then(|e| e.device.clone()).into(),
+                    error.as_ref().map(|e| e.message.clone()).into(),
                     r.cleanup_completed.into(),
                     left.map(|b| b.summary.clone()).into(),
                     left.map(|b| b.verified).into(),

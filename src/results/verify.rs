@@ -96,9 +96,10 @@ fn log_figures(log: &Path, replay: bool) -> Result<Vec<ResultMeasurement>, Strin
     if replay {
         // A batch's units in order, each from its own view of the log.
         let units = crate::runlog::view::log_units(log).unwrap_or_default();
-        let serials: Vec<Option<&str>> = match units.len() {
-            0 | 1 => vec![None],
-            _ => units.iter().map(|(_, s)| Some(s.as_str())).collect(),
+        let serials: Vec<Option<&str>> = if crate::runlog::view::is_batch(&units) {
+            units.iter().map(|(_, s)| Some(s.as_str())).collect()
+        } else {
+            vec![None]
         };
         let mut all = Vec::new();
         for serial in serials {

@@ -394,6 +394,7 @@ fn import_rows(
             coefficients: crate::coeffs::CoeffsUsed::fitted(),
             mount: None,
             twin_toml: None,
+            seed: None,
         }],
         ..RunMeta::default()
     };
@@ -628,6 +629,10 @@ pub fn export_unit(log: &Path, out: &Path, unit: Option<&str>) -> Result<Exporte
         Ok(())
     })?;
     let fail = |m: String| ImportError::Other(m);
+    // `--unit` naming a unit the log lacks stopped the read: say so.
+    if let (false, Some(why), Some(_)) = (saw_run, &read.stopped, unit) {
+        return Err(fail(format!("{}: {why}", log.display())));
+    }
     if !saw_run {
         return Err(fail(format!(
             "{}: not a gyrobench log (no run metadata){}",

@@ -112,6 +112,10 @@ pub struct RunUnit {
     /// run's, `twin_toml`), for a resume on the same units.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub twin_toml: Option<String>,
+    /// A simulated batch unit's own seed (its slot's, or the run's plus
+    /// the slot's index; none: the run's `seed`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub seed: Option<u64>,
 }
 
 fn take(m: &mut BTreeMap<String, String>, k: &str) -> String {
@@ -237,6 +241,7 @@ impl RunMeta {
                 },
                 mount: None,
                 twin_toml: None,
+                seed: None,
             });
         }
         self
@@ -252,12 +257,19 @@ impl RunMeta {
         self.units.first()
     }
 
+    /// A batch: its units sit in named slots (a bench with `[[slots]]`,
+    /// even with one unit in it).
+    pub fn is_batch(&self) -> bool {
+        self.units.iter().any(|u| !u.slot.is_empty())
+    }
+
     /// The run as unit `k` of a batch is recorded: its serial and its
     /// unit alone (what its report and its store record name).
     pub fn for_unit(&self, k: usize) -> Self {
         let mut m = self.clone();
         if let Some(u) = self.units.get(k) {
             m.dut_serial = u.serial.clone();
+            m.seed = u.seed.or(m.seed);
             m.units = vec![u.clone()];
         }
         m
@@ -535,6 +547,7 @@ mod tests {
                 },
                 mount: Some(crate::geometry::Orientation::new(90.0, 0.0, 0.0)),
                 twin_toml: None,
+                seed: None,
             }],
             ..RunMeta::default()
         };

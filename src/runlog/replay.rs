@@ -630,6 +630,10 @@ pub fn replay_unit(
         return Err(log_err(why.clone()));
     }
     let (Some(procedure), Some(meta)) = (st.procedure.take(), st.meta.take()) else {
+        // `--unit` naming a unit the log lacks stopped the read: say so.
+        if let (Some(why), Some(_)) = (&read.stopped, unit) {
+            return Err(log_err(why.clone()));
+        }
         return Err(log_err(format!(
             "no run metadata (procedure, bench) in the log{}; is this a gyrobench log?",
             read.trouble()

@@ -78,7 +78,7 @@ impl Unit {
             k,
             prefix: (k > 0).then(|| slot_topic(slot, "")),
             result: format!("{RESULT_META}/{slot}"),
-            report: format!("report-{}.json", crate::unit::file_safe(serial)),
+            report: format!("{}.json", crate::unit::report_name(serial)),
         }
     }
 
@@ -197,4 +197,10 @@ pub fn log_units(path: &Path) -> Result<Vec<(String, String)>, ReadError> {
         _ => Ok(()),
     })?;
     Ok(units)
+}
+
+/// Whether `units` ([`log_units`]) are a batch's: in named slots (a bench
+/// with `[[slots]]`, even with one unit in it).
+pub fn is_batch(units: &[(String, String)]) -> bool {
+    units.iter().any(|(slot, _)| !slot.is_empty())
 }

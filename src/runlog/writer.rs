@@ -380,7 +380,7 @@ impl Recorder {
             w.attach(&mcap::Attachment {
                 log_time: at,
                 create_time: at,
-                name: format!("report-{}.json", crate::unit::file_safe(serial)),
+                name: format!("{}.json", crate::unit::report_name(serial)),
                 media_type: "application/json".into(),
                 data: std::borrow::Cow::Borrowed(report_json.as_bytes()),
             })

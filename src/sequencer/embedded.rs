@@ -483,6 +483,9 @@ impl BenchIo for EmbeddedBench {
         }
         self.clock.sleep_until(t_s);
         self.run_to(t_s, |_| {});
+        for slot in &mut self.slots {
+            slot.twin.run_until(t_s, |_, _| {});
+        }
         let st = self.state();
         Ok((st.chamber, st.table))
     }

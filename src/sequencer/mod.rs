@@ -327,15 +327,25 @@ impl RunResult {
     /// unit's (an aborted run aborted every unit; then an error before a
     /// failure before a pass).
     pub fn worst(&self) -> Outcome {
+        self.unit(self.worst_unit()).outcome
+    }
+
+    /// Which unit is the worst ([`RunResult::worst`]; the first of equals).
+    pub fn worst_unit(&self) -> usize {
+        let rank = |o: Outcome| match o {
+            Outcome::Pass => 0,
+            Outcome::Fail => 1,
+            Outcome::Error => 2,
+            Outcome::Aborted => 3,
+        };
+        let outcome = |k: usize| match k.checked_sub(1).and_then(|i| self.others.get(i)) {
+            Some(u) => u.outcome.unwrap_or(self.outcome),
+            None => self.outcome,
+        };
         (0..self.units())
-            .map(|k| self.unit(k).outcome)
-            .max_by_key(|o| match o {
-                Outcome::Pass => 0,
-                Outcome::Fail => 1,
-                Outcome::Error => 2,
-                Outcome::Aborted => 3,
-            })
-            .unwrap_or(self.outcome)
+            .rev()
+            .max_by_key(|&k| rank(outcome(k)))
+            .unwrap_or(0)
     }
 
     /// The run as unit `k` of a batch had it (0: the first): its verdict,
@@ -690,14 +700,27 @@ impl Run<'_> {
                     limit_a: p.limit_a,
                 }));
             }
-            let hot = (0..self.bench.units())
-                .flat_map(|k| self.tick.slot_frames(k))
-                .flat_map(|f| f.temps_raw)
-                .map(|r| f64::from(r) * tl)
-                .fold(f64::NEG_INFINITY, f64::max);
+            let units = self.bench.units();
+            let (unit, hot) = (0..units)
+                .map(|k| {
+                    let hottest = self
+                        .tick
+                        .slot_frames(k)
+                        .iter()
+                        .flat_map(|f| f.temps_raw)
+                        .map(|r| f64::from(r) * tl)
+                        .fold(f64::NEG_INFINITY, f64::max);
+                    (k, hottest)
+                })
+                .fold((0, f64::NEG_INFINITY), |a, b| if b.1 > a.1 { b } else { a });
             if hot > self.opts.dut_max_c {
+                let which = if units > 1 {
+                    format!(" of the batch's unit {} (of {units})", unit + 1)
+                } else {
+                    String::new()
+                };
                 return Err(Stop::Data(format!(
-                    "the gyro reads {hot:.2} degC, above the bench limit dut_max_c = {} degC",
+                    "the gyro{which} reads {hot:.2} degC, above the bench limit dut_max_c = {} degC",
                     self.opts.dut_max_c
                 )));
             }

@@ -139,6 +139,16 @@ pub struct BatchUnit {
     pub twin: Option<TwinConfig>,
 }
 
+impl BatchUnit {
+    /// Its twin's seed on the embedded bench in a run seeded `run_seed`:
+    /// its slot's, or the run's plus the slot's index.
+    pub fn seed(&self, run_seed: u64) -> u64 {
+        self.slot
+            .seed
+            .unwrap_or_else(|| run_seed.wrapping_add(self.index as u64))
+    }
+}
+
 /// A batch's units on `bench` (its file at `bench_path`, whose directory
 /// slot twin files are read from) from `(slot, serial)` pairs, in the
 /// bench's slot order; the error names the pair at fault (its index in
@@ -168,6 +178,19 @@ pub fn batch_units(
         }
         if taken.iter().any(|(_, g)| given[*g].1 == *serial) {
             return Err((at, format!("unit {serial} is given for two slots")));
+        }
+        // Each unit's report is named by its serial as a file name.
+        if let Some((_, g)) = taken.iter().find(|(_, g)| {
+            crate::unit::report_name(&given[*g].1) == crate::unit::report_name(serial)
+        }) {
+            return Err((
+                at,
+                format!(
+                    "units {} and {serial} would share one report file ({}.html): their serials differ only in characters a file name cannot hold",
+                    given[*g].1,
+                    crate::unit::report_name(serial)
+                ),
+            ));
         }
         taken.push((index, at));
     }
@@ -252,16 +275,18 @@ impl Plan {
         let mut twin = u
             .and_then(|u| u.twin.clone())
             .unwrap_or_else(|| self.twin.clone());
+        // The bench is one: a slot's own twin gives its unit (thermal
+        // network, bias, noise, effects, rate response); the chamber, the
+        // table and the gyro links' rate and resolution are the run's.
+        twin.chamber = self.twin.chamber.clone();
+        twin.table = self.twin.table.clone();
+        twin.gyro = self.twin.gyro.clone();
         twin.site = self.bench_cfg.site;
         twin.table.geometry = match u {
             Some(u) => self.bench_cfg.slot_geometry(&u.slot),
             None => self.bench_cfg.table.geometry,
         };
-        let seed = u.map_or(self.seed, |u| {
-            u.slot
-                .seed
-                .unwrap_or_else(|| self.seed.wrapping_add(u.index as u64))
-        });
+        let seed = u.map_or(self.seed, |u| u.seed(self.seed));
         (twin, seed.wrapping_add(u64::from(part) - 1))
     }
 
@@ -494,7 +519,7 @@ pub fn plan_resume(
     if !meta.station.is_empty() {
         plan.station = meta.station.clone();
     }
-    if meta.units.len() > 1 {
+    if meta.is_batch() {
         let batch = logged_batch(&plan.bench_cfg, meta, &last)?;
         plan = plan.with_batch(batch);
     }
@@ -828,7 +853,7 @@ pub fn execute(
             } else {
                 finish(&result, k)
             };
-            let name = format!("report-{}", crate::unit::file_safe(&u.serial));
+            let name = crate::unit::report_name(&u.serial);
             if let Err(e) = write_report_as(&dir.path, &name, &r, &result.unit(k)) {
                 error.get_or_insert(e);
             }
@@ -907,6 +932,10 @@ fn close_log(
             step: "end of run".into(),
             message: format!("the log could not be completed: {e}"),
         });
+    }
+    // Every unit of a batch ends with the run's error: its log is cut.
+    for u in &mut result.others {
+        u.outcome = None;
     }
     notes.push(format!(
         "the log {} is incomplete ({e}); `gyrobench recover {}` rewrites what it holds as a complete log",
@@ -1094,6 +1123,7 @@ fn run_meta(
                     .map_or_else(crate::coeffs::CoeffsUsed::fitted, |c| c.used.clone()),
                 mount: None,
                 twin_toml: None,
+                seed: None,
             }]
         } else {
             batch_meta_units(plan)?
@@ -1125,6 +1155,7 @@ fn batch_meta_units(plan: &Plan) -> Result<Vec<crate::runlog::meta::RunUnit>, Se
                 coefficients: crate::coeffs::CoeffsUsed::fitted(),
                 mount: Some(plan.bench_cfg.slot_geometry(&u.slot).mount),
                 twin_toml,
+                seed: plan.bench_cfg.is_embedded().then(|| u.seed(plan.seed)),
             })
         })
         .collect()
@@ -1277,7 +1308,10 @@ async fn after_panic(
         bench_left: Some(left),
         // Every unit of a batch ends with the run.
         others: (1..bench.units())
-            .map(|_| sequencer::UnitResult::default())
+            .map(|k| sequencer::UnitResult {
+                frames: bench.slot_link_stats(k).frames,
+                ..sequencer::UnitResult::default()
+            })
             .collect(),
     }
 }

@@ -804,7 +804,7 @@ async fn stored_report(State(s): St, headers: HeaderMap, Query(q): Query<ReportQ
         let page = q
             .unit
             .as_deref()
-            .map(|u| log.with_file_name(format!("report-{}.html", crate::unit::file_safe(u))))
+            .map(|u| log.with_file_name(format!("{}.html", crate::unit::report_name(u))))
             .filter(|p| p.is_file())
             .unwrap_or_else(|| log.with_file_name("report.html"));
         let inside = match (

@@ -452,3 +452,73 @@ fn a_triads_units_each_measure_and_describe_what_their_own_axis_saw() {
         }
     }
 }
+
+#[test]
+fn a_killed_batch_resumes_every_unit_and_replays_to_the_same_reports() {
+    let dir = temp_dir("batch-resume");
+    let p = write(&dir, "mini.toml", MINI);
+    let quad = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/bench/quad.toml");
+    let out = dir.join("run");
+    let o = run(&[
+        s(&p),
+        "--bench",
+        s(&quad),
+        "--dut",
+        "A=Q-1",
+        "--dut",
+        "C=Q-3",
+        "--inject",
+        "process-kill@2000",
+        "--out",
+        s(&out),
+    ]);
+    assert_eq!(
+        std::os::unix::process::ExitStatusExt::signal(&o.status),
+        Some(9),
+        "killed: {}",
+        stderr(&o)
+    );
+    let o = run(&["--resume", s(&out)]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    assert!(out.join("run.part2.mcap").is_file());
+    let again = dir.join("replay");
+    let o = command()
+        .args(["replay", s(&out.join("run.part2.mcap")), "--out", s(&again)])
+        .output()
+        .expect("replay runs");
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    for serial in ["Q-1", "Q-3"] {
+        let name = format!("report-{serial}.json");
+        let r = json(&out.join(&name));
+        assert_eq!(r["outcome"], "pass", "{serial}: {r}");
+        // Every measurement of the procedure, from both parts' records.
+        assert_eq!(r["measurements"].as_array().map(Vec::len), Some(6), "{r}");
+        assert_eq!(
+            std::fs::read(out.join(&name)).expect("run's"),
+            std::fs::read(again.join(&name)).expect("replay's"),
+            "{name}"
+        );
+    }
+}
+
+#[test]
+fn serials_that_would_share_a_report_file_are_refused() {
+    let dir = temp_dir("batch-names");
+    let p = write(&dir, "mini.toml", MINI);
+    let quad = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/bench/quad.toml");
+    let o = run(&[
+        s(&p),
+        "--bench",
+        s(&quad),
+        "--dut",
+        "A=SN/1",
+        "--dut",
+        "B=SN 1",
+    ]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("would share one report file (report-SN_1.html)"),
+        "{}",
+        stderr(&o)
+    );
+}
