@@ -181,7 +181,7 @@ pub fn load_unit(path: &Path, unit: Option<&str>) -> Result<RunData, ReplayError
     })?;
     // A read stopped on purpose (`--unit` naming a unit the log lacks)
     // says why.
-    if let (Some(why), true) = (&read.stopped, site.is_none()) {
+    if let (Some(why), true, Some(_)) = (&read.stopped, site.is_none(), unit) {
         return Err(log_err(why.clone()));
     }
     let site = site.ok_or_else(|| log_err("no site in the run metadata".into()))?;

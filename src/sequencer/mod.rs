@@ -467,6 +467,9 @@ pub struct Options {
     /// The bench's safe state leaves the supply's output on
     /// (`devices.supply.safe_state = "on"`).
     pub supply_safe_on: bool,
+    /// A batch's units as the operator knows them (`slot A (RL16-0101)`),
+    /// in order (empty: one unit).
+    pub units: Vec<String>,
 }
 
 /// How long past its expected end the bench may take to settle at the end
@@ -714,10 +717,9 @@ impl Run<'_> {
                 })
                 .fold((0, f64::NEG_INFINITY), |a, b| if b.1 > a.1 { b } else { a });
             if hot > self.opts.dut_max_c {
-                let which = if units > 1 {
-                    format!(" of the batch's unit {} (of {units})", unit + 1)
-                } else {
-                    String::new()
+                let which = match self.opts.units.get(unit).filter(|_| units > 1) {
+                    Some(name) => format!(" of {name}"),
+                    None => String::new(),
                 };
                 return Err(Stop::Data(format!(
                     "the gyro{which} reads {hot:.2} degC, above the bench limit dut_max_c = {} degC",

@@ -418,10 +418,22 @@ pub fn plan_resume(
 ) -> Result<Plan, SessionError> {
     let last = last_part(dir)?;
     let prev = replay(&last, None)?;
-    if !matches!(
-        prev.result.outcome,
-        sequencer::Outcome::Error | sequencer::Outcome::Aborted
-    ) {
+    // A batch: each other unit as its own view of the log replays it, and
+    // the batch resumes when any unit of it was cut short.
+    let others = prev
+        .meta
+        .units
+        .iter()
+        .skip(1)
+        .map(|u| replay_unit(&last, None, Some(&u.serial)))
+        .collect::<Result<Vec<_>, _>>()?;
+    let units = || std::iter::once(&prev).chain(&others);
+    if !units().any(|u| {
+        matches!(
+            u.result.outcome,
+            sequencer::Outcome::Error | sequencer::Outcome::Aborted
+        )
+    }) {
         return Err(SessionError::NotResumable(format!(
             "the run in {} finished (outcome {}); there is nothing to resume",
             dir.display(),
@@ -439,27 +451,20 @@ pub fn plan_resume(
         // (the disk filled, or the process ended, before the end record)
         // cannot stand as the run's record: its last record is taken
         // again, so the run ends on a log that says how it ended.
-        completed = first_unsound_record(&prev)
+        completed = units()
+            .filter_map(first_unsound_record)
+            .min()
             .or_else(|| (!prev.ended).then(|| last_record(&prev.procedure)).flatten())
             .ok_or_else(|| {
             SessionError::NotResumable(format!(
                 "every step of the run in {} completed; it ended in error ({}), which no step taken again would change",
                 dir.display(),
-                prev.result
-                    .error
-                    .as_ref()
+                units()
+                    .find_map(|u| u.result.error.as_ref())
                     .map_or("-".to_owned(), |e| e.message.clone())
             ))
         })?;
     }
-    // A batch: each other unit as its own view of the log replays it.
-    let others = prev
-        .meta
-        .units
-        .iter()
-        .skip(1)
-        .map(|u| replay_unit(&last, None, Some(&u.serial)))
-        .collect::<Result<Vec<_>, _>>()?;
     let state = resume_batch_from(&prev, &others, completed);
     let summary = format!(
         "resuming {} (its last part {} ended: {}): {}",
@@ -553,6 +558,12 @@ fn logged_batch(
                 .iter()
                 .position(|s| s.name == u.slot)
                 .ok_or_else(|| bad(format!("its bench has no slot {:?}", u.slot)))?;
+            if bench.slots[index].twin.is_some() && u.twin_toml.is_none() {
+                return Err(bad(format!(
+                    "slot {} has its own twin file, and the log does not hold it: the same unit cannot be simulated again",
+                    u.slot
+                )));
+            }
             let twin = match &u.twin_toml {
                 Some(text) => Some(
                     TwinConfig::from_source(&crate::config::Source::from_text(
@@ -663,6 +674,7 @@ pub fn options(
             .supply
             .as_ref()
             .is_some_and(|p| p.safe_state == crate::bench::SupplySafe::On),
+        units: Vec::new(),
     }
 }
 
@@ -744,7 +756,11 @@ pub fn execute(
     // The embedded bench simulates the bench its file describes: the twin
     // stands at the bench's site on the bench's table (a lab's simulated
     // bench near the equator has its own latitude and its table turned).
-    let (twin, _) = plan.unit_twin(0, part);
+    // The run's twin as the bench stands it (a batch's units' own twins
+    // are logged with each unit).
+    let mut twin = plan.twin.clone();
+    twin.site = plan.bench_cfg.site;
+    twin.table.geometry = plan.bench_cfg.table.geometry;
     let mut bench = bench_for(&plan, part, rt)?;
     let identities = rt.block_on(bench.identify());
     let instruments = plan.bench_cfg.instruments(
@@ -779,12 +795,17 @@ pub fn execute(
     let mut store = StoreLink::open(&plan.store, &meta, &log, &mut notes);
     progress.begin(&dir.path, &notes);
     let notes_at_begin = notes.len();
-    let opts = options(
+    let mut opts = options(
         &plan.bench_cfg,
         plan.coeffs.as_ref().and_then(Chosen::compensation),
         interrupt,
         plan.resume.as_ref().map(|r| r.state.clone()),
     );
+    opts.units = plan
+        .batch
+        .iter()
+        .map(|u| format!("slot {} ({})", u.slot.name, u.serial))
+        .collect();
     // A bug that panics mid-run must not leave the bench where it was:
     // the panic is caught, the bench brought to its safe state and read
     // back, and the run ends as an error with everything logged kept.
@@ -933,9 +954,17 @@ fn close_log(
             message: format!("the log could not be completed: {e}"),
         });
     }
-    // Every unit of a batch ends with the run's error: its log is cut.
+    // Every unit of a batch ends in error: its log is cut.
+    let cut = sequencer::RunError {
+        device: None,
+        step: "end of run".into(),
+        message: format!("the log could not be completed: {e}"),
+    };
     for u in &mut result.others {
-        u.outcome = None;
+        if u.outcome != Some(sequencer::Outcome::Error) {
+            u.outcome = Some(sequencer::Outcome::Error);
+            u.error = Some(cut.clone());
+        }
     }
     notes.push(format!(
         "the log {} is incomplete ({e}); `gyrobench recover {}` rewrites what it holds as a complete log",

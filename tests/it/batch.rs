@@ -56,6 +56,21 @@ fn figures(report: &Path) -> Vec<(String, f64)> {
         .collect()
 }
 
+/// The RL-16 twin g-sensitive along its axis: 8 deg/h with the axis up or
+/// down, past the +-5 deg/h bias limit.
+fn g_sensitive_twin() -> String {
+    let twin = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/twin/rl16.toml"),
+    )
+    .expect("the twin file")
+    .replace(
+        "[effects.g_sensitivity]\nenabled = false\ncoeff_dph_per_g = [0.0, 0.03, 0.02]",
+        "[effects.g_sensitivity]\nenabled = true\ncoeff_dph_per_g = [8.0, 0.0, 0.0]",
+    );
+    assert!(twin.contains("coeff_dph_per_g = [8.0"));
+    twin
+}
+
 const Y_MOUNT: &str = "{ azimuth_deg = 0.0, elevation_deg = 0.0, roll_deg = 0.0 }";
 
 #[test]
@@ -117,18 +132,7 @@ fn a_unit_of_a_batch_gives_the_figures_of_the_same_unit_run_alone() {
 fn a_batch_in_which_one_unit_carries_an_effect_fails_that_unit_alone() {
     let dir = temp_dir("batch-effect");
     let p = write(&dir, "mini.toml", MINI);
-    // Unit C is g-sensitive along its axis: 8 deg/h with the axis up, past
-    // the +-5 deg/h bias limit.
-    let twin = std::fs::read_to_string(
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/twin/rl16.toml"),
-    )
-    .expect("the twin file")
-    .replace(
-        "[effects.g_sensitivity]\nenabled = false\ncoeff_dph_per_g = [0.0, 0.03, 0.02]",
-        "[effects.g_sensitivity]\nenabled = true\ncoeff_dph_per_g = [8.0, 0.0, 0.0]",
-    );
-    assert!(twin.contains("coeff_dph_per_g = [8.0"));
-    write(&dir, "g.toml", &twin);
+    write(&dir, "g.toml", &g_sensitive_twin());
     let quad = bench(
         &dir,
         "quad.toml",
@@ -457,7 +461,15 @@ fn a_triads_units_each_measure_and_describe_what_their_own_axis_saw() {
 fn a_killed_batch_resumes_every_unit_and_replays_to_the_same_reports() {
     let dir = temp_dir("batch-resume");
     let p = write(&dir, "mini.toml", MINI);
-    let quad = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/bench/quad.toml");
+    // Unit A on a twin of its own (g-sensitive: it fails), C on the run's:
+    // a resume must not give C the first unit's twin.
+    write(&dir, "g.toml", &g_sensitive_twin());
+    let quad = bench(
+        &dir,
+        "pair.toml",
+        None,
+        "\n[[slots]]\nname = \"A\"\ntwin = \"g.toml\"\n\n[[slots]]\nname = \"C\"\n",
+    );
     let out = dir.join("run");
     let o = run(&[
         s(&p),
@@ -479,18 +491,19 @@ fn a_killed_batch_resumes_every_unit_and_replays_to_the_same_reports() {
         stderr(&o)
     );
     let o = run(&["--resume", s(&out)]);
-    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    assert_eq!(o.status.code(), Some(3), "{}", stderr(&o));
     assert!(out.join("run.part2.mcap").is_file());
     let again = dir.join("replay");
     let o = command()
         .args(["replay", s(&out.join("run.part2.mcap")), "--out", s(&again)])
         .output()
         .expect("replay runs");
-    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
-    for serial in ["Q-1", "Q-3"] {
+    assert_eq!(o.status.code(), Some(3), "{}", stderr(&o));
+    // Each unit resumed on its own twin: A still g-sensitive, C not.
+    for (serial, want) in [("Q-1", "fail"), ("Q-3", "pass")] {
         let name = format!("report-{serial}.json");
         let r = json(&out.join(&name));
-        assert_eq!(r["outcome"], "pass", "{serial}: {r}");
+        assert_eq!(r["outcome"], want, "{serial}: {r}");
         // Every measurement of the procedure, from both parts' records.
         assert_eq!(r["measurements"].as_array().map(Vec::len), Some(6), "{r}");
         assert_eq!(
