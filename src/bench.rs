@@ -48,11 +48,35 @@ pub struct BenchConfig {
     /// or `refuse` (the run does not start).
     #[serde(default, skip_serializing_if = "OverduePolicy::is_warn")]
     pub overdue_calibration: OverduePolicy,
+    /// What a batch does when one of its units cannot be judged (its link
+    /// lost, its data unsound): `continue` (the default: that unit ends in
+    /// error, the others go on) or `stop` (the whole batch stops, the
+    /// bench to its safe state).
+    #[serde(default, skip_serializing_if = "OnUnitError::is_continue")]
+    pub on_unit_error: OnUnitError,
     /// The units' places on the table's platform, in the bench's order
     /// (none: one unit, mounted as `[table.geometry] mount` says). A bench
     /// with slots runs a batch: one procedure, every unit.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub slots: Vec<Slot>,
+}
+
+/// `on_unit_error`: a batch goes on without a unit that cannot be judged,
+/// or stops.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum OnUnitError {
+    /// The unit ends in error; the others go on.
+    #[default]
+    Continue,
+    /// The batch stops for every unit.
+    Stop,
+}
+
+impl OnUnitError {
+    fn is_continue(&self) -> bool {
+        *self == Self::Continue
+    }
 }
 
 /// `[[slots]]`: one unit's place on the table's platform.
@@ -655,6 +679,11 @@ impl BenchConfig {
                 )?;
             }
         }
+        c.ensure(
+            self.on_unit_error.is_continue() || !self.slots.is_empty(),
+            "on_unit_error",
+            "is a batch's: a bench without [[slots]] has one unit, whose error ends its run",
+        )?;
         c.ensure(
             self.slots.is_empty() || self.devices.supply.is_none(),
             "devices.supply",

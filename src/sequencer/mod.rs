@@ -470,6 +470,9 @@ pub struct Options {
     /// A batch's units as the operator knows them (`slot A (RL16-0101)`),
     /// in order (empty: one unit).
     pub units: Vec<String>,
+    /// A batch stops when one of its units cannot be judged (the bench's
+    /// `on_unit_error = "stop"`); else that unit ends in error alone.
+    pub stop_on_unit_error: bool,
 }
 
 /// How long past its expected end the bench may take to settle at the end
@@ -1106,15 +1109,28 @@ impl Run<'_> {
         };
         self.log(level, &msg)?;
         self.progress.measured(&meas);
+        let mut unjudged = (meas.outcome == measure::MeasureOutcome::Error)
+            .then(|| (0, format!("{} was {}", meas.name, meas.note)));
         self.measurements.push(meas);
         for (k, lane) in self.others.iter_mut().enumerate() {
             // Each unit is judged on its own records; coefficients are the
             // first unit's alone (a batch fits each unit's on its run).
             let meas = measure::compute(m, &lane.records, None, key);
             self.progress.slot_measured(k + 1, &meas);
+            if meas.outcome == measure::MeasureOutcome::Error && unjudged.is_none() {
+                unjudged = Some((k + 1, format!("{} was {}", meas.name, meas.note)));
+            }
             lane.measurements.push(meas);
         }
-        Ok(())
+        match unjudged {
+            Some((unit, why)) if self.opts.stop_on_unit_error && !self.others.is_empty() => {
+                let name = self.opts.units.get(unit).map_or("a unit", String::as_str);
+                Err(Stop::Data(format!(
+                    "{name}: {why}; the bench stops the batch when a unit cannot be judged (on_unit_error = \"stop\")"
+                )))
+            }
+            _ => Ok(()),
+        }
     }
 }
 

@@ -675,6 +675,7 @@ pub fn options(
             .as_ref()
             .is_some_and(|p| p.safe_state == crate::bench::SupplySafe::On),
         units: Vec::new(),
+        stop_on_unit_error: bench.on_unit_error == crate::bench::OnUnitError::Stop,
     }
 }
 

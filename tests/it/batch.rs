@@ -535,3 +535,57 @@ fn serials_that_would_share_a_report_file_are_refused() {
         stderr(&o)
     );
 }
+
+#[test]
+fn a_bench_may_stop_the_whole_batch_when_a_unit_cannot_be_judged() {
+    let dir = temp_dir("batch-stop");
+    let p = write(&dir, "mini.toml", MINI);
+    let quad = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/bench/quad.toml"),
+    )
+    .expect("quad.toml");
+    // Top-level keys come before the first table.
+    let b = write(
+        &dir,
+        "stop.toml",
+        &format!("on_unit_error = \"stop\"\n{quad}"),
+    );
+    let out = dir.join("run");
+    let o = run(&[
+        s(&p),
+        "--bench",
+        s(&b),
+        "--dut",
+        "A=S-1",
+        "--dut",
+        "B=S-2",
+        "--inject",
+        "unit-lost@600",
+        "--out",
+        s(&out),
+    ]);
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    for serial in ["S-1", "S-2"] {
+        let r = json(&out.join(format!("report-{serial}.json")));
+        assert_eq!(r["outcome"], "error", "{serial}: {r}");
+        let why = r["error"]["message"].as_str().expect("a reason");
+        assert!(
+            why.contains("slot B (S-2)") && why.contains("on_unit_error = \"stop\""),
+            "{serial}: {why}"
+        );
+        assert_eq!(r["bench_left"]["verified"], true, "{serial}: {r}");
+    }
+    // A bench of one unit has no batch to stop.
+    let one = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/bench/embedded.toml"),
+    )
+    .expect("embedded.toml");
+    let b = write(
+        &dir,
+        "one.toml",
+        &format!("on_unit_error = \"stop\"\n{one}"),
+    );
+    let o = run(&[s(&p), "--bench", s(&b), "--dut", "S-9"]);
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    assert!(stderr(&o).contains("on_unit_error"), "{}", stderr(&o));
+}
