@@ -711,6 +711,15 @@ impl BenchConfig {
         self.slots.clone()
     }
 
+    /// The slots' names as an operator reads them (`A, B, C, D`).
+    pub fn slot_names(&self) -> String {
+        self.slots
+            .iter()
+            .map(|s| s.name.as_str())
+            .collect::<Vec<_>>()
+            .join(", ")
+    }
+
     /// The table's geometry with the unit in `slot` mounted on it.
     pub fn slot_geometry(&self, slot: &Slot) -> crate::geometry::TableGeometry {
         self.geometry_with(slot.mount)

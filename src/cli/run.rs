@@ -339,12 +339,7 @@ fn batch_units(
     bench: &crate::bench::BenchConfig,
     bench_path: Option<&std::path::Path>,
 ) -> Result<Vec<session::BatchUnit>> {
-    let names = bench
-        .slots
-        .iter()
-        .map(|s| s.name.as_str())
-        .collect::<Vec<_>>()
-        .join(", ");
+    let names = bench.slot_names();
     if duts.is_empty() {
         return Err(Usage(format!(
             "this bench holds slots {names}: give --dut SLOT=SERIAL for each unit on it"

@@ -299,50 +299,7 @@ impl Store {
                 .iter()
                 .flat_map(|(slot, u)| u.measurements.iter().map(move |m| (slot.as_str(), m)))
                 .collect();
-            // One statement for every measurement (a round trip each would
-            // cost a lab's server more than the rest of the run's record).
-            for (chunk_at, chunk) in all.chunks(100).enumerate() {
-                let mut values = Vec::with_capacity(chunk.len());
-                let mut params: Vec<Value> = Vec::with_capacity(11 * chunk.len());
-                for (i, (slot, m)) in chunk.iter().enumerate() {
-                    let b = params.len();
-                    values.push(format!(
-                        "(${}, ${}, ${}, ${}, ${}, ${}, ${}, ${}, ${}, ${}, ${})",
-                        b + 1,
-                        b + 2,
-                        b + 3,
-                        b + 4,
-                        b + 5,
-                        b + 6,
-                        b + 7,
-                        b + 8,
-                        b + 9,
-                        b + 10,
-                        b + 11
-                    ));
-                    params.extend([
-                        key.into(),
-                        ((chunk_at * 100 + i) as i64).into(),
-                        m.name.clone().into(),
-                        m.value.into(),
-                        m.unit.clone().into(),
-                        m.low.into(),
-                        m.high.into(),
-                        m.outcome.as_str().into(),
-                        m.step.clone().into(),
-                        m.note.clone().into(),
-                        (*slot).into(),
-                    ]);
-                }
-                sql.execute(
-                    &format!(
-                        "INSERT INTO measurements (run, seq, name, value, unit, low, high, outcome, step, note, slot) VALUES {}",
-                        values.join(", ")
-                    ),
-                    &params,
-                )?;
-            }
-            Ok(())
+            insert_measurements(sql, key, &all)
         })
     }
 
@@ -681,6 +638,59 @@ pub fn run_dirs(dir: &Path) -> Vec<std::path::PathBuf> {
     }
     out.sort();
     out
+}
+
+/// Every measurement of a part (each with its unit's slot), numbered in
+/// order, one statement per hundred.
+fn insert_measurements(
+    sql: &mut dyn Sql,
+    key: &str,
+    all: &[(&str, &Measurement)],
+) -> Result<(), StoreError> {
+    // One statement for every measurement (a round trip each would
+    // cost a lab's server more than the rest of the run's record).
+    for (chunk_at, chunk) in all.chunks(100).enumerate() {
+        let mut values = Vec::with_capacity(chunk.len());
+        let mut params: Vec<Value> = Vec::with_capacity(11 * chunk.len());
+        for (i, (slot, m)) in chunk.iter().enumerate() {
+            let b = params.len();
+            values.push(format!(
+                "(${}, ${}, ${}, ${}, ${}, ${}, ${}, ${}, ${}, ${}, ${})",
+                b + 1,
+                b + 2,
+                b + 3,
+                b + 4,
+                b + 5,
+                b + 6,
+                b + 7,
+                b + 8,
+                b + 9,
+                b + 10,
+                b + 11
+            ));
+            params.extend([
+                key.into(),
+                ((chunk_at * 100 + i) as i64).into(),
+                m.name.clone().into(),
+                m.value.into(),
+                m.unit.clone().into(),
+                m.low.into(),
+                m.high.into(),
+                m.outcome.as_str().into(),
+                m.step.clone().into(),
+                m.note.clone().into(),
+                (*slot).into(),
+            ]);
+        }
+        sql.execute(
+            &format!(
+                "INSERT INTO measurements (run, seq, name, value, unit, low, high, outcome, step, note, slot) VALUES {}",
+                values.join(", ")
+            ),
+            &params,
+        )?;
+    }
+    Ok(())
 }
 
 #[cfg(test)]

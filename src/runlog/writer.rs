@@ -372,18 +372,15 @@ impl Recorder {
     ) -> std::io::Result<()> {
         let at = self.ns(end_s);
         let entries = result.to_entries();
+        let report = format!("{}.json", crate::unit::report_name(serial));
         self.guarded(|w| {
-            w.write_metadata(&mcap::records::Metadata {
-                name: format!("{RESULT_META}/{slot}"),
-                metadata: entries,
-            })?;
-            w.attach(&mcap::Attachment {
-                log_time: at,
-                create_time: at,
-                name: format!("{}.json", crate::unit::report_name(serial)),
-                media_type: "application/json".into(),
-                data: std::borrow::Cow::Borrowed(report_json.as_bytes()),
-            })
+            write_result(
+                w,
+                format!("{RESULT_META}/{slot}"),
+                entries,
+                Some((report, report_json)),
+                at,
+            )
         })
     }
 
@@ -398,23 +395,37 @@ impl Recorder {
     ) -> std::io::Result<()> {
         let at = self.ns(end_s);
         let entries = result.to_entries();
+        let report = report_json.map(|r| (REPORT_ATTACHMENT.to_owned(), r));
         self.guarded(|w| {
-            w.write_metadata(&mcap::records::Metadata {
-                name: RESULT_META.into(),
-                metadata: entries,
-            })?;
-            if let Some(report) = report_json {
-                w.attach(&mcap::Attachment {
-                    log_time: at,
-                    create_time: at,
-                    name: REPORT_ATTACHMENT.into(),
-                    media_type: "application/json".into(),
-                    data: std::borrow::Cow::Borrowed(report.as_bytes()),
-                })?;
-            }
+            write_result(w, RESULT_META.into(), entries, report, at)?;
             w.finish().map(|_| ())
         })
     }
+}
+
+/// A result metadata record `name`, and its report (attachment name, JSON)
+/// when there is one, at log time `at`.
+fn write_result(
+    w: &mut mcap::Writer<BufWriter<File>>,
+    name: String,
+    entries: BTreeMap<String, String>,
+    report: Option<(String, &str)>,
+    at: u64,
+) -> mcap::McapResult<()> {
+    w.write_metadata(&mcap::records::Metadata {
+        name,
+        metadata: entries,
+    })?;
+    if let Some((name, json)) = report {
+        w.attach(&mcap::Attachment {
+            log_time: at,
+            create_time: at,
+            name,
+            media_type: "application/json".into(),
+            data: std::borrow::Cow::Borrowed(json.as_bytes()),
+        })?;
+    }
+    Ok(())
 }
 
 fn mcap_err(e: mcap::McapError) -> std::io::Error {

@@ -323,6 +323,13 @@ impl RunResult {
         1 + self.others.len()
     }
 
+    /// Unit `k`'s 1 Hz records (0: the first unit's).
+    pub fn unit_records(&self, k: usize) -> &Records {
+        k.checked_sub(1)
+            .and_then(|i| self.others.get(i))
+            .map_or(&self.records, |u| &u.records)
+    }
+
     /// The outcome of the whole run: its one unit's, or a batch's worst
     /// unit's (an aborted run aborted every unit; then an error before a
     /// failure before a pass).

@@ -158,12 +158,7 @@ pub fn batch_units(
     bench_path: Option<&Path>,
     given: &[(String, String)],
 ) -> Result<Vec<BatchUnit>, (usize, String)> {
-    let names = bench
-        .slots
-        .iter()
-        .map(|s| s.name.as_str())
-        .collect::<Vec<_>>()
-        .join(", ");
+    let names = bench.slot_names();
     let mut taken: Vec<(usize, usize)> = Vec::new();
     for (at, (slot, serial)) in given.iter().enumerate() {
         let Some(index) = bench.slots.iter().position(|s| s.name == *slot) else {
@@ -854,7 +849,7 @@ pub fn execute(
         Report::new(&plan.procedure, &result.unit(k), &meta.for_unit(k), link)
     };
     let end_s = bench.now_s();
-    let (result, report) = close_log(
+    let (result, reports) = close_log(
         recorder,
         &log,
         result,
@@ -863,31 +858,11 @@ pub fn execute(
         (end_s, &part_link, &part_slot_links),
         &mut notes,
     );
-    let mut units = Vec::new();
-    let report_error = if plan.batch.is_empty() {
-        write_report(&dir.path, &report, &result).err()
-    } else {
-        // A batch: one report per unit, named by its serial.
-        let mut error = None;
-        for (k, u) in meta.units.iter().enumerate() {
-            let r = if k == 0 {
-                report.clone()
-            } else {
-                finish(&result, k)
-            };
-            let name = crate::unit::report_name(&u.serial);
-            if let Err(e) = write_report_as(&dir.path, &name, &r, &result.unit(k)) {
-                error.get_or_insert(e);
-            }
-            units.push(FinishedUnit {
-                slot: u.slot.clone(),
-                serial: u.serial.clone(),
-                report: r,
-                file: name,
-            });
-        }
-        error
-    };
+    let (report_error, units) = write_reports(&dir.path, &meta, &result, &reports);
+    let report = reports
+        .into_iter()
+        .next()
+        .unwrap_or_else(|| finish(&result, 0));
     store.finish(&log, &result, link, &mut notes);
     Ok(Finished {
         dir: dir.path.clone(),
@@ -902,7 +877,8 @@ pub fn execute(
 }
 
 /// Write the link's last figures and the result into the log and close
-/// it; the run's report. A log that cannot be completed keeps what reached
+/// it; every unit's report (one for a run of one unit). A log that cannot
+/// be completed keeps what reached
 /// the disk, makes the run an error and tells how to recover it.
 fn close_log(
     mut recorder: Recorder,
@@ -912,9 +888,14 @@ fn close_log(
     report_of: impl Fn(&RunResult, usize) -> Report,
     (end_s, part_link, slot_links): (f64, &LinkStats, &[LinkStats]),
     notes: &mut Vec<String>,
-) -> (RunResult, Report) {
+) -> (RunResult, Vec<Report>) {
     use crate::sequencer::Sink;
-    let report = report_of(&result, 0);
+    let reports_of = |result: &RunResult| {
+        (0..result.units())
+            .map(|k| report_of(result, k))
+            .collect::<Vec<_>>()
+    };
+    let reports = reports_of(&result);
     let log_end = recorder
         .link(end_s, part_link)
         .and_then(|()| {
@@ -927,25 +908,25 @@ fn close_log(
             // A batch's other units: each one's result and report.
             meta.units
                 .iter()
+                .zip(&reports)
                 .enumerate()
                 .skip(1)
-                .try_for_each(|(k, u)| {
-                    let unit = result.unit(k);
-                    let r = report_of(&result, k);
+                .try_for_each(|(k, (u, r))| {
                     recorder.unit_result(
                         &u.slot,
                         &u.serial,
-                        &ResultMeta::new(&unit),
+                        &ResultMeta::new(&result.unit(k)),
                         &r.to_json(),
                         end_s,
                     )
                 })
         })
         .and_then(|()| {
-            recorder.finish_run(&ResultMeta::new(&result), Some(&report.to_json()), end_s)
+            let first = reports.first().map(Report::to_json);
+            recorder.finish_run(&ResultMeta::new(&result), first.as_deref(), end_s)
         });
     let Err(e) = log_end else {
-        return (result, report);
+        return (result, reports);
     };
     if result.error.is_none() {
         result.outcome = sequencer::Outcome::Error;
@@ -972,8 +953,8 @@ fn close_log(
         log.display(),
         log.display()
     ));
-    let report = report_of(&result, 0);
-    (result, report)
+    let reports = reports_of(&result);
+    (result, reports)
 }
 
 /// What stops a plan before anything is opened: an instrument past its
@@ -1346,21 +1327,48 @@ async fn after_panic(
     }
 }
 
-/// `report.json` and `report.html` in `dir`.
-pub fn write_report(dir: &Path, report: &Report, result: &RunResult) -> Result<(), String> {
-    write_report_as(dir, "report", report, result)
+/// The run's reports in `dir`: `report.json` and `report.html`, or for a
+/// batch each unit's `report-SERIAL.json` and `.html`; the first write
+/// that failed, and a batch's units with their reports.
+fn write_reports(
+    dir: &Path,
+    meta: &RunMeta,
+    result: &RunResult,
+    reports: &[Report],
+) -> (Option<String>, Vec<FinishedUnit>) {
+    if !meta.is_batch() {
+        let error = reports
+            .first()
+            .and_then(|r| write_report_as(dir, "report", r, result.unit_records(0)).err());
+        return (error, Vec::new());
+    }
+    let mut error = None;
+    let mut units = Vec::new();
+    for (k, (u, r)) in meta.units.iter().zip(reports).enumerate() {
+        let name = crate::unit::report_name(&u.serial);
+        if let Err(e) = write_report_as(dir, &name, r, result.unit_records(k)) {
+            error.get_or_insert(e);
+        }
+        units.push(FinishedUnit {
+            slot: u.slot.clone(),
+            serial: u.serial.clone(),
+            report: r.clone(),
+            file: name,
+        });
+    }
+    (error, units)
 }
 
 /// `NAME.json` and `NAME.html` in `dir`.
-pub fn write_report_as(
+fn write_report_as(
     dir: &Path,
     name: &str,
     report: &Report,
-    result: &RunResult,
+    records: &crate::sequencer::measure::Records,
 ) -> Result<(), String> {
     for (name, bytes) in [
         (format!("{name}.json"), report.to_json()),
-        (format!("{name}.html"), render_html(report, &result.records)),
+        (format!("{name}.html"), render_html(report, records)),
     ] {
         let path = dir.join(name);
         crate::fsutil::write_atomic(&path, bytes.as_bytes())
