@@ -100,6 +100,23 @@ pub struct Slot {
     /// file (default: the run's twin), its own parameters and effects.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub twin: Option<String>,
+    /// A real bench: this slot's gyro link (default: `[devices.gyro]`'s,
+    /// which one slot at most may read).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub gyro: Option<SlotGyro>,
+}
+
+/// `[slots.gyro]`: one unit's own gyro link. Its frame rate, resolution,
+/// silence and reconnect window are `[devices.gyro]`'s: a batch's units
+/// are read at one rate, into one set of records.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SlotGyro {
+    /// Where it is (`tcp://...`, a serial port, `pty://...`).
+    pub spec: String,
+    /// Its frame layout (default: `[devices.gyro]`'s).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub frame: Option<FrameLayout>,
 }
 
 /// Most slots a bench may declare (ours: the largest fixtures labs build
@@ -678,6 +695,46 @@ impl BenchConfig {
                     &format!("a slot's {name} is the embedded bench's (sim:// devices)"),
                 )?;
             }
+            if let Some(g) = &slot.gyro {
+                c.ensure(
+                    !self.is_embedded(),
+                    &format!("{key}.gyro"),
+                    "the embedded bench simulates each slot's unit: its slots name no gyro link",
+                )?;
+                let spec_key = format!("{key}.gyro.spec");
+                if let Err(e) = g.spec.parse::<DeviceSpec>() {
+                    c.ensure(false, &spec_key, &e.to_string())?;
+                }
+                c.ensure(
+                    !g.spec.starts_with("sim://"),
+                    &spec_key,
+                    "a slot's gyro is a real link (tcp://, pty:// or a serial port)",
+                )?;
+                if let Some(Err(e)) = g.frame.as_ref().map(FrameLayout::validate) {
+                    c.ensure(false, &format!("{key}.gyro.frame"), &e.to_string())?;
+                }
+            }
+            if !self.is_embedded() {
+                let spec = self.slot_gyro_spec(slot);
+                let first = self.slots[..i]
+                    .iter()
+                    .position(|s| self.slot_gyro_spec(s) == spec);
+                c.ensure(
+                    first.is_none(),
+                    &format!("{key}.gyro"),
+                    &match first {
+                        Some(j) if slot.gyro.is_none() => format!(
+                            "slots {:?} and {:?} would both read [devices.gyro]'s link: give every slot but one its own [slots.gyro] spec",
+                            self.slots[j].name, slot.name
+                        ),
+                        Some(j) => format!(
+                            "slot {:?} reads {spec:?} too: every unit needs its own link",
+                            self.slots[j].name
+                        ),
+                        None => String::new(),
+                    },
+                )?;
+            }
         }
         c.ensure(
             self.on_unit_error.is_continue() || !self.slots.is_empty(),
@@ -689,12 +746,22 @@ impl BenchConfig {
             "devices.supply",
             "a bench with slots has no supply yet (one output per unit is to come): power its units by hand and leave out [devices.supply]",
         )?;
-        c.ensure(
-            self.slots.is_empty() || self.is_embedded(),
-            "slots",
-            "slots are run on the embedded bench (sim:// devices) for now; a real bench runs one unit per run",
-        )?;
         Ok(())
+    }
+
+    /// The spec of the gyro link `slot`'s unit is read on.
+    pub fn slot_gyro_spec<'a>(&'a self, slot: &'a Slot) -> &'a str {
+        slot.gyro
+            .as_ref()
+            .map_or(self.devices.gyro.spec.as_str(), |g| g.spec.as_str())
+    }
+
+    /// The frame layout of `slot`'s gyro link.
+    pub fn slot_frame_layout(&self, slot: &Slot) -> FrameLayout {
+        slot.gyro
+            .as_ref()
+            .and_then(|g| g.frame.clone())
+            .unwrap_or_else(|| self.frame_layout())
     }
 
     /// The bench's units as slots: its `[[slots]]`, or the one unit of a
@@ -706,6 +773,7 @@ impl BenchConfig {
                 mount: None,
                 seed: None,
                 twin: None,
+                gyro: None,
             }];
         }
         self.slots.clone()
@@ -899,8 +967,10 @@ pub struct OpenBench {
     pub chamber: Box<dyn Chamber>,
     /// Table driver.
     pub table: AclTable,
-    /// Gyro link.
+    /// Gyro link (a batch's first slot's).
     pub gyro: GyroReader<BoxTransport>,
+    /// A batch's other slots' gyro links, in the bench's order.
+    pub others: Vec<GyroReader<BoxTransport>>,
     /// The unit's supply, if the bench has one.
     pub supply: Option<ScpiSupply>,
 }
@@ -969,15 +1039,35 @@ pub async fn open_bench(cfg: &BenchConfig) -> Result<OpenBench, DeviceError> {
         None => None,
     };
     let gt = Duration::from_secs_f64(d.gyro.silence_s);
-    let (gs, t) = open_device("gyro", &d.gyro.spec, gt).await?;
-    let gyro = GyroReader::new("gyro", t, cfg.frame_layout(), gt).with_reconnect(
-        connector(gs, gt),
-        Duration::from_secs_f64(d.gyro.reconnect_window_s),
-    );
+    let window = Duration::from_secs_f64(d.gyro.reconnect_window_s);
+    let open_gyro = |device: String, spec: String, layout: FrameLayout| async move {
+        let (gs, t) = open_device(&device, &spec, gt).await?;
+        Ok::<_, DeviceError>(
+            GyroReader::new(&device, t, layout, gt).with_reconnect(connector(gs, gt), window),
+        )
+    };
+    // A batch's units each on their own link, `gyro/SLOT`.
+    let mut gyros = Vec::new();
+    for slot in &cfg.slots {
+        gyros.push(
+            open_gyro(
+                format!("gyro/{}", slot.name),
+                cfg.slot_gyro_spec(slot).to_owned(),
+                cfg.slot_frame_layout(slot),
+            )
+            .await?,
+        );
+    }
+    let mut gyros = gyros.into_iter();
+    let gyro = match gyros.next() {
+        Some(g) => g,
+        None => open_gyro("gyro".into(), d.gyro.spec.clone(), cfg.frame_layout()).await?,
+    };
     Ok(OpenBench {
         chamber,
         table,
         gyro,
+        others: gyros.collect(),
         supply,
     })
 }
@@ -1064,5 +1154,64 @@ mod tests {
         let err =
             BenchConfig::from_source(&Source::from_text("b.toml", &text)).expect_err("inverted");
         assert!(err.to_string().contains("limits.outer_range_deg"), "{err}");
+    }
+
+    const QUAD: &str = include_str!("../fixtures/bench/sim-quad.toml");
+
+    fn quad_with(from: &str, to: &str) -> Result<BenchConfig, ConfigError> {
+        BenchConfig::from_source(&Source::from_text("q.toml", &QUAD.replacen(from, to, 1)))
+    }
+
+    #[test]
+    fn a_real_batch_reads_each_unit_on_its_own_link() {
+        let q = quad_with("", "").expect("the fixture loads");
+        let specs: Vec<_> = q.slots.iter().map(|s| q.slot_gyro_spec(s)).collect();
+        assert_eq!(
+            specs,
+            [
+                "tcp://127.0.0.1:5004",
+                "tcp://127.0.0.1:5005",
+                "tcp://127.0.0.1:5006",
+                "tcp://127.0.0.1:5007"
+            ]
+        );
+        // A slot's own layout, else the bench's.
+        let mut q = q;
+        if let Some(g) = q.slots[2].gyro.as_mut() {
+            g.frame = Some(FrameLayout {
+                frame_type: 0x52,
+                ..FrameLayout::default()
+            });
+        }
+        assert_eq!(q.slot_frame_layout(&q.slots[2]).frame_type, 0x52);
+        assert_eq!(q.slot_frame_layout(&q.slots[1]), q.frame_layout());
+
+        let two_on_the_bench_link = quad_with("gyro = { spec = \"tcp://127.0.0.1:5005\" }\n", "")
+            .expect_err("two slots on [devices.gyro]'s link");
+        let e = two_on_the_bench_link.to_string();
+        assert!(
+            e.contains("q.toml:") && e.contains("slots.1.gyro") && e.contains("would both read"),
+            "{e}"
+        );
+        let shared = quad_with("127.0.0.1:5006", "127.0.0.1:5005").expect_err("one link twice");
+        assert!(
+            shared
+                .to_string()
+                .contains("slot \"B\" reads \"tcp://127.0.0.1:5005\" too"),
+            "{shared}"
+        );
+        let bad = quad_with("tcp://127.0.0.1:5007", "127.0.0.1:5007").expect_err("no scheme");
+        assert!(bad.to_string().contains("slots.3.gyro.spec"), "{bad}");
+    }
+
+    #[test]
+    fn the_embedded_benchs_slots_name_no_link() {
+        let text = include_str!("../fixtures/bench/quad.toml").replace(
+            "name = \"D\"",
+            "name = \"D\"\ngyro = { spec = \"tcp://127.0.0.1:5004\" }",
+        );
+        let e = BenchConfig::from_source(&Source::from_text("e.toml", &text))
+            .expect_err("a link on the embedded bench");
+        assert!(e.to_string().contains("slots.3.gyro"), "{e}");
     }
 }

@@ -126,6 +126,10 @@ impl Progress for Live {
             .println(&format!("[{}/{n}] {}", i + 1, s.describe()));
     }
 
+    fn warn(&mut self, text: &str) {
+        self.bar.println(&format!("warning: {text}"));
+    }
+
     fn restore(&mut self, s: &crate::procedure::Step, i: usize, n: usize) {
         self.bar
             .println(&format!("[restore {}/{n}] {}", i + 1, s.describe()));

@@ -59,6 +59,11 @@ impl<R: AsyncRead + Unpin> GyroReader<R> {
         self
     }
 
+    /// The device's name in errors (`gyro`, a batch's `gyro/SLOT`).
+    pub fn device(&self) -> &str {
+        &self.device
+    }
+
     /// Link figures so far.
     pub fn stats(&self) -> LinkStats {
         LinkStats {

@@ -51,8 +51,15 @@ impl Quiet {
 pub struct DeviceBench {
     chamber: Box<dyn Chamber>,
     table: AclTable,
-    frames: mpsc::Receiver<Result<FrameRecord, DeviceError>>,
-    stats: Arc<Mutex<LinkStats>>,
+    /// Every unit's frames, by unit (0: the first; a batch's others after).
+    frames: mpsc::Receiver<(usize, Result<FrameRecord, DeviceError>)>,
+    /// Each unit's link figures.
+    stats: Vec<Arc<Mutex<LinkStats>>>,
+    /// A batch's other units' geometries (each unit on its own mount).
+    slot_geometries: Vec<TableGeometry>,
+    /// A batch's links that failed since the run last asked: unit, device
+    /// and why. A batch goes on without a unit whose link is lost.
+    unit_faults: Vec<(usize, String)>,
     clock: WallClock,
     time_scale: f64,
     site: Site,
@@ -90,7 +97,8 @@ impl DeviceBench {
         let OpenBench {
             mut chamber,
             mut table,
-            mut gyro,
+            gyro,
+            others,
             supply,
         } = open;
         table.servo_on().await?;
@@ -109,53 +117,51 @@ impl DeviceBench {
             _ => None,
         };
         let reading = chamber.read().await?;
-        let stats = Arc::new(Mutex::new(LinkStats::default()));
-        let (tx, rx) = mpsc::channel(1 << 16);
-        let shared = stats.clone();
         let quiet = Arc::new(Mutex::new(if booting {
             Quiet::Booting(std::time::Instant::now() + Duration::from_secs_f64(BOOT_S))
         } else {
             Quiet::No
         }));
-        let expected = quiet.clone();
-        tokio::spawn(async move {
-            loop {
-                let next = gyro.next_frame().await;
-                if matches!(next, Err(DeviceError::Silent { .. }))
-                    && expected.lock().is_ok_and(|q| q.now())
-                {
-                    // An unpowered unit sends nothing; a booting one not yet.
-                    continue;
-                }
-                if let Ok(mut s) = shared.lock() {
-                    *s = gyro.stats();
-                }
-                let msg = match next {
-                    Ok(Some(f)) => Ok(FrameRecord {
-                        seq: f.seq,
-                        counts: f.delta_counts,
-                        temps_raw: f.temps_raw,
-                        status: f.status,
-                    }),
-                    Ok(None) => Err(gyro_stream_ended()),
-                    Err(e) => Err(e),
-                };
-                let stop = msg.is_err();
-                if tx.send(msg).await.is_err() || stop {
-                    return;
-                }
-            }
-        });
+        let batch = !cfg.slots.is_empty();
+        let (tx, rx) = mpsc::channel(1 << 16);
+        let stats: Vec<_> = std::iter::once(gyro)
+            .chain(others)
+            .enumerate()
+            .map(|(unit, gyro)| {
+                let stats = Arc::new(Mutex::new(LinkStats::default()));
+                tokio::spawn(read_gyro(
+                    unit,
+                    gyro,
+                    tx.clone(),
+                    stats.clone(),
+                    quiet.clone(),
+                    batch,
+                ));
+                stats
+            })
+            .collect();
+        let slot_geometries = cfg
+            .slots
+            .iter()
+            .skip(1)
+            .map(|s| cfg.slot_geometry(s))
+            .collect();
+        let geometry = cfg
+            .slots
+            .first()
+            .map_or(cfg.table.geometry, |s| cfg.slot_geometry(s));
         let layout = cfg.frame_layout();
         Ok(Self {
             chamber,
             table,
             frames: rx,
             stats,
+            slot_geometries,
+            unit_faults: Vec::new(),
             clock: WallClock::scaled(cfg.time_scale),
             time_scale: cfg.time_scale,
             site: cfg.site,
-            geometry: cfg.table.geometry,
+            geometry,
             commanded: TableAngles::default(),
             ramp: None,
             last_air_c: reading.set_point_c,
@@ -197,10 +203,50 @@ impl DeviceBench {
     }
 }
 
+/// Read unit `unit`'s gyro onto `tx` until its link fails for good (or
+/// the run is gone), keeping its figures in `stats`. An unpowered or
+/// booting unit's silence is expected (`quiet`). In a `batch`, a unit's
+/// silence is said and reading goes on (its records show the gap; the
+/// run judges them); on a one-unit bench it ends the run.
+async fn read_gyro(
+    unit: usize,
+    mut gyro: crate::driver::gyro::GyroReader<crate::transport::BoxTransport>,
+    tx: mpsc::Sender<(usize, Result<FrameRecord, DeviceError>)>,
+    stats: Arc<Mutex<LinkStats>>,
+    quiet: Arc<Mutex<Quiet>>,
+    batch: bool,
+) {
+    loop {
+        let next = gyro.next_frame().await;
+        let silent = matches!(next, Err(DeviceError::Silent { .. }));
+        if silent && quiet.lock().is_ok_and(|q| q.now()) {
+            // An unpowered unit sends nothing; a booting one not yet.
+            continue;
+        }
+        if let Ok(mut s) = stats.lock() {
+            *s = gyro.stats();
+        }
+        let msg = match next {
+            Ok(Some(f)) => Ok(FrameRecord {
+                seq: f.seq,
+                counts: f.delta_counts,
+                temps_raw: f.temps_raw,
+                status: f.status,
+            }),
+            Ok(None) => Err(gyro_stream_ended(gyro.device())),
+            Err(e) => Err(e),
+        };
+        let stop = msg.is_err() && !(batch && silent);
+        if tx.send((unit, msg)).await.is_err() || stop {
+            return;
+        }
+    }
+}
+
 /// The gyro's stream ended and cannot be reopened.
-fn gyro_stream_ended() -> DeviceError {
+fn gyro_stream_ended(device: &str) -> DeviceError {
     DeviceError::Connect {
-        device: "gyro".into(),
+        device: device.into(),
         cause: std::io::Error::new(
             std::io::ErrorKind::UnexpectedEof,
             "the gyro's data stream ended",
@@ -317,12 +363,31 @@ impl BenchIo for DeviceBench {
         let wall = ((t_s - self.now_s()) / self.time_scale).max(0.0);
         let deadline = tokio::time::sleep(Duration::from_secs_f64(wall));
         tokio::pin!(deadline);
+        tick.slots
+            .resize_with(self.slot_geometries.len(), Default::default);
+        for s in &mut tick.slots {
+            s.frames.clear();
+        }
+        let batch = !self.slot_geometries.is_empty();
         loop {
             tokio::select! {
                 f = self.frames.recv() => match f {
-                    Some(Ok(f)) => tick.frames.push(f),
-                    Some(Err(e)) => return Err(self.cause_of(e).await),
-                    None => return Err(gyro_stream_ended()),
+                    Some((0, Ok(f))) => tick.frames.push(f),
+                    Some((k, Ok(f))) => {
+                        if let Some(s) = tick.slots.get_mut(k - 1) {
+                            s.frames.push(f);
+                        }
+                    }
+                    // A batch goes on without the unit; its records say
+                    // what it lost.
+                    Some((k, Err(e))) if batch => self.unit_faults.push((k, e.to_string())),
+                    Some((_, Err(e))) => return Err(self.cause_of(e).await),
+                    // Every link's reader has ended: each said why.
+                    None if batch => {
+                        deadline.as_mut().await;
+                        break;
+                    }
+                    None => return Err(gyro_stream_ended("gyro")),
                 },
                 () = &mut deadline => break,
             }
@@ -338,15 +403,19 @@ impl BenchIo for DeviceBench {
         // wait, or a gap longer than two ticks: a prompt, a failed tick)
         // to this one.
         let end = (table.angles, table.rates);
-        let reference_dph = match self.last_pose.replace((now, end)) {
-            Some((t, from)) if now - t <= POSE_GAP_S => {
-                self.geometry
-                    .mean_kinematic_rate_dph(&self.site, from, end, now - t)
-            }
-            _ => self
-                .geometry
-                .kinematic_rate_dph(&self.site, table.angles, table.rates),
+        let from = self
+            .last_pose
+            .replace((now, end))
+            .filter(|(t, _)| now - t <= POSE_GAP_S);
+        let reference = |g: &TableGeometry| match from {
+            Some((t, from)) => g.mean_kinematic_rate_dph(&self.site, from, end, now - t),
+            None => g.kinematic_rate_dph(&self.site, table.angles, table.rates),
         };
+        let reference_dph = reference(&self.geometry);
+        for (s, g) in tick.slots.iter_mut().zip(&self.slot_geometries) {
+            s.orientation = g.orientation(table.angles);
+            s.reference_dph = reference(g);
+        }
         tick.state = Some(BenchState {
             t_s: now,
             orientation: self.geometry.orientation(table.angles),
@@ -361,7 +430,21 @@ impl BenchIo for DeviceBench {
     }
 
     fn link_stats(&self) -> LinkStats {
-        self.stats.lock().map_or_else(|p| *p.into_inner(), |s| *s)
+        self.slot_link_stats(0)
+    }
+
+    fn units(&self) -> usize {
+        self.stats.len()
+    }
+
+    fn slot_link_stats(&self, slot: usize) -> LinkStats {
+        self.stats.get(slot).map_or_else(LinkStats::default, |s| {
+            s.lock().map_or_else(|p| *p.into_inner(), |s| *s)
+        })
+    }
+
+    fn take_unit_faults(&mut self) -> Vec<(usize, String)> {
+        std::mem::take(&mut self.unit_faults)
     }
 
     async fn idle(
@@ -373,7 +456,11 @@ impl BenchIo for DeviceBench {
         tokio::time::sleep(Duration::try_from_secs_f64(wall).unwrap_or(Duration::ZERO)).await;
         // Frames that arrive now are not the run's: dropped, so the
         // channel never fills.
-        while self.frames.try_recv().is_ok() {}
+        while let Ok((k, f)) = self.frames.try_recv() {
+            if let (Err(e), false) = (f, self.slot_geometries.is_empty()) {
+                self.unit_faults.push((k, e.to_string()));
+            }
+        }
         let now = self.now_s();
         self.step_ramp(now).await?;
         let chamber = self.chamber.read().await?;

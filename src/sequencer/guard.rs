@@ -190,6 +190,10 @@ impl<B: BenchIo> BenchIo for Guarded<B> {
         self.inner.slot_link_stats(slot)
     }
 
+    fn take_unit_faults(&mut self) -> Vec<(usize, String)> {
+        self.inner.take_unit_faults()
+    }
+
     fn pending_s(&self) -> f64 {
         self.inner.pending_s()
     }

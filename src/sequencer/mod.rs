@@ -165,6 +165,12 @@ pub trait BenchIo: Send {
             crate::protocol::frame::LinkStats::default()
         }
     }
+    /// A batch's units whose links failed since last asked: the unit (0:
+    /// the first) and why. The batch goes on without them; the run says
+    /// so, and their records show what they lost.
+    fn take_unit_faults(&mut self) -> Vec<(usize, String)> {
+        Vec::new()
+    }
     /// Device time until the commands given are carried out by the bench
     /// itself, s: a chamber ramp stepped by the host goes on only while
     /// the run ticks (0 when nothing is pending).
@@ -445,6 +451,9 @@ pub trait Progress {
     fn slot_measured(&mut self, _slot: usize, _m: &measure::Measurement) {}
     /// The gyro link's figures so far, once a second of device time.
     fn link(&mut self, _stats: &crate::protocol::frame::LinkStats) {}
+    /// Something the operator should know now, the run going on (a
+    /// batch's unit whose link failed).
+    fn warn(&mut self, _text: &str) {}
 }
 
 /// No progress display.
@@ -688,6 +697,16 @@ impl Run<'_> {
             .advance(t, &mut self.tick)
             .await
             .map_err(Stop::Device)?;
+        for (k, why) in self.bench.take_unit_faults() {
+            let unit = self
+                .opts
+                .units
+                .get(k)
+                .map_or_else(|| format!("unit {}", k + 1), Clone::clone);
+            let text = format!("{unit}: {why}; the batch goes on, its records say what it lost");
+            self.progress.warn(&text);
+            self.note(Level::Warning, &text);
+        }
         self.frames += self.tick.frames.len() as u64;
         let r = self.sink.tick(&self.tick, record, step);
         self.written(r)?;

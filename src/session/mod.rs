@@ -267,15 +267,12 @@ impl Plan {
     /// in its slot, and its seed for `part`.
     fn unit_twin(&self, k: usize, part: u32) -> (TwinConfig, u64) {
         let u = self.batch.get(k);
+        // The bench is one: a slot's own twin gives its unit; the
+        // chamber, the table and the gyro links are the run's.
         let mut twin = u
             .and_then(|u| u.twin.clone())
-            .unwrap_or_else(|| self.twin.clone());
-        // The bench is one: a slot's own twin gives its unit (thermal
-        // network, bias, noise, effects, rate response); the chamber, the
-        // table and the gyro links' rate and resolution are the run's.
-        twin.chamber = self.twin.chamber.clone();
-        twin.table = self.twin.table.clone();
-        twin.gyro = self.twin.gyro.clone();
+            .unwrap_or_else(|| self.twin.clone())
+            .on_bench_of(&self.twin);
         twin.site = self.bench_cfg.site;
         twin.table.geometry = match u {
             Some(u) => self.bench_cfg.slot_geometry(&u.slot),

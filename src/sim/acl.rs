@@ -33,8 +33,8 @@ impl SimBench {
 
     fn demand(&mut self, a: Axis, d: AxisDemand) {
         match a {
-            Axis::Outer => self.twin.demand_table(Some(d), None),
-            Axis::Inner => self.twin.demand_table(None, Some(d)),
+            Axis::Outer => self.demand_table(Some(d), None),
+            Axis::Inner => self.demand_table(None, Some(d)),
         }
     }
 
@@ -106,7 +106,9 @@ impl SimBench {
                 if !(v > 0.0 && v <= max) {
                     self.acl_error(ScpiError::OUT_OF_RANGE);
                 } else {
-                    self.twin.set_axis_limits(a == Axis::Inner, new.0, new.1);
+                    for t in self.twins_mut() {
+                        t.set_axis_limits(a == Axis::Inner, new.0, new.1);
+                    }
                 }
             }
             Command::InterlockClose(a) => {

@@ -92,7 +92,9 @@ impl SimBench {
             ),
         };
         // Both values are within the chamber's capability by construction.
-        let _ = self.twin.set_chamber(target, ramp);
+        for t in self.twins_mut() {
+            let _ = t.set_chamber(target, ramp);
+        }
     }
 }
 

@@ -26,19 +26,39 @@ pub const MAX_LINE_DELAY: Duration = Duration::from_millis(500);
 /// a real unit's UART would: chunks older than [`MAX_LINE_DELAY`] when the
 /// line has room again are dropped whole.
 pub async fn serve_gyro<W: AsyncWrite + Unpin>(
-    mut w: W,
+    w: W,
     bench: Arc<SharedBench>,
 ) -> std::io::Result<()> {
-    let mut rx = bench.lock().subscribe_gyro();
+    serve_unit_gyro(w, bench, 0).await
+}
+
+/// Stream unit `unit`'s gyro bytes (0: the first unit's; a batch's
+/// others after it) to `w`, as [`serve_gyro`]. The gyro faults play on
+/// the first unit's line.
+pub async fn serve_unit_gyro<W: AsyncWrite + Unpin>(
+    mut w: W,
+    bench: Arc<SharedBench>,
+    unit: usize,
+) -> std::io::Result<()> {
+    let Some(mut rx) = bench.lock().subscribe_unit_gyro(unit) else {
+        return Ok(());
+    };
     let mut position = 0u64;
+    let faulty = unit == 0;
     loop {
-        if bench.faults.gyro.outage.active() {
+        if faulty && bench.faults.gyro.outage.active() {
             return Ok(());
         }
         match rx.recv().await {
             Ok(chunk) => {
                 let f = &bench.faults.gyro;
-                if f.silent.load(Ordering::Relaxed) || chunk.at.elapsed() > MAX_LINE_DELAY {
+                let silent = faulty && f.silent.load(Ordering::Relaxed);
+                if silent || chunk.at.elapsed() > MAX_LINE_DELAY {
+                    continue;
+                }
+                if !faulty {
+                    w.write_all(&chunk.bytes).await?;
+                    w.flush().await?;
                     continue;
                 }
                 let bytes = mangle_stream(f, &chunk.bytes, &mut position);

@@ -116,10 +116,24 @@ pub struct SimBench {
     pub chamber: ChamberState,
     /// Motion simulator.
     pub table: TableState,
-    /// The unit's power supply.
+    /// The unit's power supply (a batch's fixture: every unit's).
     pub supply: supply::Supply,
     gyro_tx: broadcast::Sender<GyroChunk>,
     out: Vec<u8>,
+    /// A batch's further units, after the first (`twin`): each its own
+    /// twin in the same air, on the same table, on its own gyro line.
+    pub units: Vec<SimUnit>,
+}
+
+/// One more unit of a simulated batch: its own twin (its parameters, its
+/// noise streams, its mount) and its own gyro line.
+#[derive(Debug)]
+pub struct SimUnit {
+    /// The slot it sits in.
+    pub name: String,
+    /// Its physics; every chamber and table command reaches it too.
+    pub twin: Twin,
+    gyro_tx: broadcast::Sender<GyroChunk>,
 }
 
 /// Gyro bytes encoded together, with the wall time they were made at (the
@@ -156,7 +170,29 @@ impl SimBench {
             supply: supply::Supply::powering_unit(crate::protocol::supply::Dialect::default()),
             gyro_tx,
             out: Vec::new(),
+            units: Vec::new(),
         }
+    }
+
+    /// Add a batch's further unit in slot `name`: twin `cfg` (whose
+    /// chamber and table are taken to be this bench's) seeded `seed`.
+    #[must_use]
+    pub fn with_unit(mut self, name: &str, cfg: TwinConfig, seed: u64) -> Self {
+        let mut twin = Twin::new(cfg, seed);
+        twin.set_powered(self.twin.is_powered());
+        let (gyro_tx, _) = broadcast::channel(4096);
+        self.units.push(SimUnit {
+            name: name.to_owned(),
+            twin,
+            gyro_tx,
+        });
+        self
+    }
+
+    /// Every twin: the first unit's, then a batch's others. The chamber
+    /// and table commands go to each, so they share one air and one table.
+    pub(crate) fn twins_mut(&mut self) -> impl Iterator<Item = &mut Twin> {
+        std::iter::once(&mut self.twin).chain(self.units.iter_mut().map(|u| &mut u.twin))
     }
 
     /// Advance the physics to `t_s`, encoding every gyro frame.
@@ -164,44 +200,53 @@ impl SimBench {
         // The unit runs on the supply's power: the twin is run up to each
         // moment the power came or went, and switched there (and at once
         // when a command took it away between two advances: `*RST`).
-        self.twin.set_powered(self.supply.unit_powered());
+        // A batch's fixture is fed by the one supply.
+        self.set_powered(self.supply.unit_powered());
         while let Some(t_change) = self.supply.advance_until_change(t_s) {
-            self.run_twin(t_change);
-            self.twin.set_powered(self.supply.unit_powered());
+            self.run_twins(t_change);
+            self.set_powered(self.supply.unit_powered());
         }
-        self.run_twin(t_s);
+        self.run_twins(t_s);
     }
 
-    fn run_twin(&mut self, t_s: f64) {
-        let layout = &self.layout;
-        let out = &mut self.out;
-        self.twin.run_until(t_s, |_, g| {
-            let wf = WireFrame {
-                frame_type: layout.frame_type,
-                seq: (g.index % 256) as u8,
-                delta_counts: g.delta_counts,
-                temps_raw: [
-                    layout.temp_to_raw(g.t1_c),
-                    layout.temp_to_raw(g.t2_c),
-                    layout.temp_to_raw(g.tcase_c),
-                ],
-                status: g.status,
-            };
-            layout.encode(&wf, out);
-        });
-        if !self.out.is_empty() {
-            let bytes = std::mem::take(&mut self.out);
-            // No subscriber = nobody on the cable: the bytes are gone.
-            let _ = self.gyro_tx.send(GyroChunk {
-                at: std::time::Instant::now(),
-                bytes: Arc::new(bytes),
-            });
+    fn set_powered(&mut self, on: bool) {
+        self.twins_mut().for_each(|t| t.set_powered(on));
+    }
+
+    fn run_twins(&mut self, t_s: f64) {
+        run_twin(
+            &mut self.twin,
+            &self.layout,
+            &mut self.out,
+            &self.gyro_tx,
+            t_s,
+        );
+        for u in &mut self.units {
+            run_twin(&mut u.twin, &self.layout, &mut self.out, &u.gyro_tx, t_s);
         }
     }
 
     /// Subscribe to the gyro's byte stream.
     pub fn subscribe_gyro(&self) -> broadcast::Receiver<GyroChunk> {
         self.gyro_tx.subscribe()
+    }
+
+    /// Subscribe to unit `unit`'s gyro line (0: the first unit's; none
+    /// past the batch's units).
+    pub fn subscribe_unit_gyro(&self, unit: usize) -> Option<broadcast::Receiver<GyroChunk>> {
+        match unit.checked_sub(1) {
+            None => Some(self.gyro_tx.subscribe()),
+            Some(k) => self.units.get(k).map(|u| u.gyro_tx.subscribe()),
+        }
+    }
+
+    /// Drive the table's axes (every unit's twin: one table).
+    pub(crate) fn demand_table(
+        &mut self,
+        outer: Option<crate::twin::AxisDemand>,
+        inner: Option<crate::twin::AxisDemand>,
+    ) {
+        self.twins_mut().for_each(|t| t.demand_table(outer, inner));
     }
 
     /// Chamber alarm codes active now (injected ones and limit alarms).
@@ -226,10 +271,43 @@ impl SimBench {
     pub fn trip_interlock(&mut self) {
         self.table.tripped = true;
         self.table.closed = [false; 2];
-        self.twin.demand_table(
+        self.demand_table(
             Some(crate::twin::AxisDemand::Stop),
             Some(crate::twin::AxisDemand::Stop),
         );
+    }
+}
+
+/// Run `twin` to `t_s`, encoding its frames in `layout` (through the
+/// scratch buffer `out`) onto its line `tx`.
+fn run_twin(
+    twin: &mut Twin,
+    layout: &FrameLayout,
+    out: &mut Vec<u8>,
+    tx: &broadcast::Sender<GyroChunk>,
+    t_s: f64,
+) {
+    twin.run_until(t_s, |_, g| {
+        let wf = WireFrame {
+            frame_type: layout.frame_type,
+            seq: (g.index % 256) as u8,
+            delta_counts: g.delta_counts,
+            temps_raw: [
+                layout.temp_to_raw(g.t1_c),
+                layout.temp_to_raw(g.t2_c),
+                layout.temp_to_raw(g.tcase_c),
+            ],
+            status: g.status,
+        };
+        layout.encode(&wf, out);
+    });
+    if !out.is_empty() {
+        let bytes = std::mem::take(out);
+        // No subscriber = nobody on the cable: the bytes are gone.
+        let _ = tx.send(GyroChunk {
+            at: std::time::Instant::now(),
+            bytes: Arc::new(bytes),
+        });
     }
 }
 

@@ -12,7 +12,7 @@ use super::{
     SharedBench, SimBench,
     acl::serve_acl,
     espec::serve_espec,
-    gyro::serve_gyro,
+    gyro::serve_unit_gyro,
     supply::{Supply, serve_supply},
     watlow::WatlowService,
 };
@@ -48,6 +48,46 @@ pub struct ServeConfig {
     /// `keysight-e36300`; or `rigol-dp800`).
     #[serde(default)]
     pub supply: Dialect,
+    /// A batch's fixture: the units on the table's platform, in the
+    /// bench's order, each on its own gyro line (none: one unit).
+    #[serde(default)]
+    pub slots: Vec<ServeSlot>,
+}
+
+/// `[[slots]]` of a serve file: one unit of a simulated batch.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ServeSlot {
+    /// The slot's name, as the bench file's `[[slots]]` give it; its gyro
+    /// is served as `gyro/NAME`.
+    pub name: String,
+    /// The unit's body orientation with both table angles at zero
+    /// (default: the twin's `[table.geometry] mount`).
+    #[serde(default)]
+    pub mount: Option<crate::geometry::Orientation>,
+    /// Its twin's seed (default: `seed` plus the slot's index).
+    #[serde(default)]
+    pub seed: Option<u64>,
+    /// Its twin file, relative to this file (default: `twin`): its own
+    /// unit in the bench's chamber, on the bench's table.
+    #[serde(default)]
+    pub twin: Option<String>,
+    /// Its gyro's TCP port (0 or absent: chosen by the OS).
+    #[serde(default)]
+    pub port: u16,
+}
+
+/// One unit of a simulated batch, resolved.
+#[derive(Debug, Clone)]
+pub struct ServedUnit {
+    /// Its slot.
+    pub name: String,
+    /// Its twin, on the bench's chamber and table.
+    pub twin: TwinConfig,
+    /// Its seed.
+    pub seed: u64,
+    /// Its gyro's TCP port (0: any).
+    pub port: u16,
 }
 
 fn one() -> u64 {
@@ -90,6 +130,8 @@ pub struct Serve {
     pub twin: TwinConfig,
     /// The frame layout.
     pub layout: FrameLayout,
+    /// A batch's units (empty: one unit, `twin` seeded `config.seed`).
+    pub units: Vec<ServedUnit>,
 }
 
 impl Serve {
@@ -105,6 +147,7 @@ impl Serve {
                 },
                 twin: TwinConfig::default_rl16(),
                 layout: FrameLayout::default(),
+                units: Vec::new(),
             });
         };
         let base = path.parent().unwrap_or(Path::new("."));
@@ -118,37 +161,114 @@ impl Serve {
         let c = Checker::new(src);
         c.within(config.speed, 0.001, 1e6, "speed")?;
         let twin = match &config.twin {
-            Some(rel) => TwinConfig::load(&base.join(rel)).map_err(|e| match e {
-                // The twin file's own errors point into it; one that cannot
-                // be read points at this file's `twin`.
-                ConfigError::Read { path, cause } => src.invalid(
-                    "twin",
-                    format!(
-                        "cannot read {}: {cause}; the path is relative to this file",
-                        path.display()
-                    ),
-                ),
-                e => e,
-            })?,
+            Some(rel) => load_twin(src, base, rel, "twin")?,
             None => TwinConfig::default_rl16(),
         };
         let layout = config.frame.clone().unwrap_or_default();
         layout
             .validate()
             .map_err(|e| src.invalid("frame", e.to_string()))?;
+        let units = Self::units(&config, src, base, &twin)?;
         Ok(Self {
             config,
             twin,
             layout,
+            units,
         })
     }
+
+    /// The batch's units of `config`, each on `bench`'s chamber and table.
+    fn units(
+        config: &ServeConfig,
+        src: &Source,
+        base: &Path,
+        bench: &TwinConfig,
+    ) -> Result<Vec<ServedUnit>, ConfigError> {
+        let c = Checker::new(src);
+        c.ensure(
+            config.slots.len() <= crate::bench::MAX_SLOTS,
+            "slots",
+            &format!("a fixture holds at most {} slots", crate::bench::MAX_SLOTS),
+        )?;
+        c.ensure(
+            config.slots.is_empty() || config.ports.gyro == 0,
+            "ports.gyro",
+            "with [[slots]], each slot's `port` is its gyro's",
+        )?;
+        let mut units: Vec<ServedUnit> = Vec::new();
+        for (i, slot) in config.slots.iter().enumerate() {
+            let key = |k: &str| format!("slots.{i}.{k}");
+            c.ensure(
+                crate::bench::Slot::valid_name(&slot.name),
+                &key("name"),
+                "must be 1 to 16 letters, digits, '-' or '_'",
+            )?;
+            c.ensure(
+                units.iter().all(|u| u.name != slot.name),
+                &key("name"),
+                &format!("slot {:?} is declared twice", slot.name),
+            )?;
+            c.ensure(
+                slot.port == 0
+                    || (units.iter().all(|u| u.port != slot.port)
+                        && ![
+                            config.ports.espec,
+                            config.ports.watlow,
+                            config.ports.acl,
+                            config.ports.supply,
+                        ]
+                        .contains(&slot.port)),
+                &key("port"),
+                &format!("port {} is another device's", slot.port),
+            )?;
+            let own = match &slot.twin {
+                Some(rel) => load_twin(src, base, rel, &key("twin"))?,
+                None => bench.clone(),
+            };
+            let mut twin = own.on_bench_of(bench);
+            if let Some(m) = slot.mount {
+                c.ensure(
+                    [m.azimuth_deg, m.elevation_deg, m.roll_deg]
+                        .iter()
+                        .all(|v| v.is_finite()),
+                    &key("mount"),
+                    "every angle must be a finite number of degrees",
+                )?;
+                twin.table.geometry.mount = m;
+            }
+            units.push(ServedUnit {
+                name: slot.name.clone(),
+                twin,
+                seed: slot.seed.unwrap_or(config.seed.wrapping_add(i as u64)),
+                port: slot.port,
+            });
+        }
+        Ok(units)
+    }
+}
+
+/// Load the twin file `rel` (relative to `base`) named at `key` of `src`.
+fn load_twin(src: &Source, base: &Path, rel: &str, key: &str) -> Result<TwinConfig, ConfigError> {
+    TwinConfig::load(&base.join(rel)).map_err(|e| match e {
+        // The twin file's own errors point into it; one that cannot be
+        // read points at this file's key.
+        ConfigError::Read { path, cause } => src.invalid(
+            key,
+            format!(
+                "cannot read {}: {cause}; the path is relative to this file",
+                path.display()
+            ),
+        ),
+        e => e,
+    })
 }
 
 /// One served endpoint: `<device> <protocol> <address>`.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Endpoint {
-    /// `chamber`, `table`, `gyro` or `supply`.
-    pub device: &'static str,
+    /// `chamber`, `table`, `gyro` or `supply`; a batch's gyros are
+    /// `gyro/SLOT`.
+    pub device: String,
     /// `espec-ascii`, `watlow-f4t-modbus`, `acl`, `rlg-frame`,
     /// `keysight-e36300`, `rigol-dp800`.
     pub protocol: &'static str,
@@ -168,14 +288,14 @@ pub enum ServeError {
     /// A TCP endpoint could not listen (the port is taken, or not allowed).
     #[error("{device} {protocol}: cannot listen on {addr}: {cause}; {hint}")]
     Listen {
-        /// `chamber`, `table` or `gyro`.
-        device: &'static str,
+        /// `chamber`, `table`, `gyro` (`gyro/SLOT`) or `supply`.
+        device: String,
         /// The protocol served there.
         protocol: &'static str,
         /// The address asked for (port 0: any free one).
         addr: SocketAddr,
         /// The serve configuration's key of the port (`ports.espec`, ...).
-        key: &'static str,
+        key: String,
         /// Why.
         cause: std::io::Error,
         /// What to do about it.
@@ -187,7 +307,7 @@ pub enum ServeError {
     )]
     Pty {
         /// The device it was for.
-        device: &'static str,
+        device: String,
         /// Why.
         cause: std::io::Error,
     },
@@ -195,7 +315,7 @@ pub enum ServeError {
     #[error("{device} {protocol}: cannot read the listening address: {cause}")]
     Address {
         /// The device.
-        device: &'static str,
+        device: String,
         /// Its protocol.
         protocol: &'static str,
         /// Why.
@@ -205,11 +325,12 @@ pub enum ServeError {
 
 /// Listen on loopback `port` (0: one the OS picks) for `device`.
 async fn listen(
-    device: &'static str,
+    device: &str,
     protocol: &'static str,
     port: u16,
-    key: &'static str,
+    key: &str,
 ) -> Result<(TcpListener, Endpoint), ServeError> {
+    let device = device.to_owned();
     let addr = SocketAddr::from((Ipv4Addr::LOCALHOST, port));
     let l = TcpListener::bind(addr).await.map_err(|cause| {
         let hint = if cause.kind() == std::io::ErrorKind::AddrInUse {
@@ -221,16 +342,16 @@ async fn listen(
             format!("choose another `{key}` in the serve configuration (0 lets the system choose)")
         };
         ServeError::Listen {
-            device,
+            device: device.clone(),
             protocol,
             addr,
-            key,
+            key: key.to_owned(),
             cause,
             hint,
         }
     })?;
     let local = l.local_addr().map_err(|cause| ServeError::Address {
-        device,
+        device: device.clone(),
         protocol,
         cause,
     })?;
@@ -270,7 +391,13 @@ pub struct Served {
 /// Start every simulated device; returns once all endpoints listen.
 pub async fn start(s: &Serve) -> Result<Served, ServeError> {
     let clock = Arc::new(WallClock::scaled(s.config.speed));
-    let mut sim = SimBench::new(s.twin.clone(), s.config.seed, s.layout.clone());
+    let mut sim = match s.units.split_first() {
+        None => SimBench::new(s.twin.clone(), s.config.seed, s.layout.clone()),
+        Some((first, others)) => others.iter().fold(
+            SimBench::new(first.twin.clone(), first.seed, s.layout.clone()),
+            |b, u| b.with_unit(&u.name, u.twin.clone(), u.seed),
+        ),
+    };
     sim.supply = Supply::powering_unit(s.config.supply);
     let bench = SharedBench::new(sim, clock);
     bench.spawn_ticker(Duration::from_millis(5));
@@ -301,9 +428,27 @@ pub async fn start(s: &Serve) -> Result<Served, ServeError> {
     endpoints.push(e);
     spawn_accept(acl, bench.clone(), serve_acl);
 
-    let (gyro, e) = listen("gyro", "rlg-frame", p.gyro, "ports.gyro").await?;
-    endpoints.push(e);
-    spawn_accept(gyro, bench.clone(), serve_gyro);
+    // One gyro line per unit: `gyro`, or a batch's `gyro/SLOT`.
+    let gyros: Vec<(String, u16, String)> = if s.units.is_empty() {
+        vec![("gyro".into(), p.gyro, "ports.gyro".into())]
+    } else {
+        s.units
+            .iter()
+            .enumerate()
+            .map(|(i, u)| {
+                (
+                    format!("gyro/{}", u.name),
+                    u.port,
+                    format!("slots.{i}.port"),
+                )
+            })
+            .collect()
+    };
+    for (unit, (device, port, key)) in gyros.iter().enumerate() {
+        let (gyro, e) = listen(device, "rlg-frame", *port, key).await?;
+        endpoints.push(e);
+        spawn_accept(gyro, bench.clone(), move |w, b| serve_unit_gyro(w, b, unit));
+    }
 
     let dialect = s.config.supply.as_str();
     let (supply, e) = listen("supply", dialect, p.supply, "ports.supply").await?;
@@ -312,27 +457,36 @@ pub async fn start(s: &Serve) -> Result<Served, ServeError> {
 
     let mut ptys = Vec::new();
     if s.config.ptys {
-        for (device, protocol) in [
-            ("chamber", "espec-ascii"),
-            ("table", "acl"),
-            ("gyro", "rlg-frame"),
-            ("supply", dialect),
-        ] {
+        let mut served: Vec<(String, &'static str, Option<usize>)> = vec![
+            ("chamber".into(), "espec-ascii", None),
+            ("table".into(), "acl", None),
+        ];
+        served.extend(
+            gyros
+                .iter()
+                .enumerate()
+                .map(|(unit, (device, ..))| (device.clone(), "rlg-frame", Some(unit))),
+        );
+        served.push(("supply".into(), dialect, None));
+        for (device, protocol, unit) in served {
             let crate::transport::PtyPair {
                 master,
                 slave,
                 path,
-            } = pty_pair().map_err(|cause| ServeError::Pty { device, cause })?;
+            } = pty_pair().map_err(|cause| ServeError::Pty {
+                device: device.clone(),
+                cause,
+            })?;
             endpoints.push(Endpoint {
                 device,
                 protocol,
                 address: format!("pty://{path}"),
             });
             let b = bench.clone();
-            match protocol {
-                "espec-ascii" => drop(tokio::spawn(serve_espec(master, b))),
-                "acl" => drop(tokio::spawn(serve_acl(master, b))),
-                "rlg-frame" => drop(tokio::spawn(serve_gyro(master, b))),
+            match (protocol, unit) {
+                (_, Some(unit)) => drop(tokio::spawn(serve_unit_gyro(master, b, unit))),
+                ("espec-ascii", _) => drop(tokio::spawn(serve_espec(master, b))),
+                ("acl", _) => drop(tokio::spawn(serve_acl(master, b))),
                 _ => drop(tokio::spawn(serve_supply(master, b))),
             }
             ptys.push(slave);
@@ -343,4 +497,64 @@ pub async fn start(s: &Serve) -> Result<Served, ServeError> {
         bench,
         _ptys: ptys,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn load(text: &str) -> Result<Serve, ConfigError> {
+        let base = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/fixtures/sim"));
+        Serve::from_source(&Source::from_text("serve.toml", text), base)
+    }
+
+    #[test]
+    fn a_fixtures_units_share_the_benchs_chamber_and_table_each_on_its_mount_and_seed() {
+        let quad = load(include_str!("../../fixtures/sim/quad.toml")).expect("the fixture");
+        let names: Vec<_> = quad.units.iter().map(|u| u.name.as_str()).collect();
+        assert_eq!(names, ["A", "B", "C", "D"]);
+        let seeds: Vec<_> = quad.units.iter().map(|u| u.seed).collect();
+        assert_eq!(seeds, [1, 2, 3, 4]);
+        let ports: Vec<_> = quad.units.iter().map(|u| u.port).collect();
+        assert_eq!(ports, [5004, 5005, 5006, 5007]);
+
+        let s = load(
+            "seed = 5\n[[slots]]\nname = \"X\"\n[[slots]]\nname = \"Y\"\nseed = 9\n\
+             mount = { azimuth_deg = 0.0, elevation_deg = 0.0, roll_deg = 0.0 }\n",
+        )
+        .expect("two units");
+        assert_eq!((s.units[0].seed, s.units[1].seed), (5, 9));
+        assert_eq!(s.units[1].twin.table.geometry.mount.azimuth_deg, 0.0);
+        assert_eq!(
+            s.units[0].twin.table.geometry.mount,
+            s.twin.table.geometry.mount
+        );
+        assert_eq!(s.units[1].twin.chamber, s.twin.chamber);
+    }
+
+    #[test]
+    fn a_fixtures_slots_are_checked_where_they_are_written() {
+        for (text, says) in [
+            (
+                "[ports]\ngyro = 5004\n[[slots]]\nname = \"A\"\n",
+                "ports.gyro",
+            ),
+            (
+                "[[slots]]\nname = \"A\"\n[[slots]]\nname = \"A\"\n",
+                "slots.1.name",
+            ),
+            ("[[slots]]\nname = \"A B\"\n", "slots.0.name"),
+            (
+                "[ports]\nacl = 5003\n[[slots]]\nname = \"A\"\nport = 5003\n",
+                "slots.0.port",
+            ),
+            (
+                "[[slots]]\nname = \"A\"\ntwin = \"nowhere.toml\"\n",
+                "slots.0.twin",
+            ),
+        ] {
+            let e = load(text).expect_err(text).to_string();
+            assert!(e.contains("serve.toml:") && e.contains(says), "{text}: {e}");
+        }
+    }
 }

@@ -245,6 +245,15 @@ impl Progress for Reporter {
         });
     }
 
+    fn warn(&mut self, text: &str) {
+        let line = format!("warning: {text}");
+        self.shared.update(|b| {
+            if let Some(run) = &mut b.run {
+                run.events.push(line);
+            }
+        });
+    }
+
     fn step(&mut self, step: &Step, index: usize, _total: usize) {
         let line = step.start_message();
         let wall = self.started.elapsed().as_secs_f64();

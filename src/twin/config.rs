@@ -519,6 +519,21 @@ pub struct Periodic {
 }
 
 impl TwinConfig {
+    /// This unit on `bench`'s bench: one of a batch's units keeps its own
+    /// thermal network, bias, noise, effects and rate response; the
+    /// chamber, the table, the site and the gyro links' rate and
+    /// resolution are the bench's, shared by every unit.
+    #[must_use]
+    pub fn on_bench_of(self, bench: &Self) -> Self {
+        Self {
+            site: bench.site,
+            chamber: bench.chamber.clone(),
+            gyro: bench.gyro.clone(),
+            table: bench.table.clone(),
+            ..self
+        }
+    }
+
     /// The embedded default (the study's RL-16 bench).
     pub fn default_rl16() -> Self {
         // The embedded file is validated by a unit test, so this cannot fail.

@@ -589,3 +589,241 @@ fn a_bench_may_stop_the_whole_batch_when_a_unit_cannot_be_judged() {
     assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
     assert!(stderr(&o).contains("on_unit_error"), "{}", stderr(&o));
 }
+
+/// Two positions, each unit's bias judged on its own axis's reference.
+const TWO_POSITIONS: &str = r#"
+[procedure]
+name = "two-positions"
+dut_type = "RL-16"
+
+[[setup]]
+action = "chamber"
+set_c = 20.0
+ramp_c_per_min = 1.0
+
+[[main]]
+action = "repeat"
+positions = [
+  { label = "up", table = { outer_deg = 90.0, inner_deg = 0.0 } },
+  { label = "east", table = { outer_deg = 0.0, inner_deg = 0.0 } },
+]
+
+[[main.steps]]
+action = "record"
+label = "{label}"
+duration_s = 120.0
+
+[[main.steps]]
+action = "measure"
+name = "bias_dph:{label}"
+metric = "mean_bias"
+records = ["{label}"]
+low = -5.0
+high = 5.0
+unit = "deg/h"
+
+[[cleanup]]
+action = "move"
+table = { outer_deg = 90.0, inner_deg = 0.0 }
+"#;
+
+/// `sim serve` with four units at `speed`, slot D turned a quarter turn
+/// (its axis north where A's is east), every port the OS's.
+fn serve_quad(dir: &Path, speed: f64) -> crate::common::SimServe {
+    let text = format!(
+        "speed = {speed}\nseed = 1\n\
+         [[slots]]\nname = \"A\"\n[[slots]]\nname = \"B\"\n[[slots]]\nname = \"C\"\n\
+         [[slots]]\nname = \"D\"\nmount = {Y_MOUNT}\n"
+    );
+    // Chamber (2), table, four gyros and the supply on TCP; the same but
+    // the Watlow chamber on ptys.
+    crate::common::SimServe::with_config(dir, &text, 15)
+}
+
+/// A bench file reading `served`'s chamber and table over TCP and slot
+/// k's gyro at `gyros[k]`, at `time_scale`, with `tail` appended.
+fn served_quad_bench(
+    dir: &Path,
+    served: &crate::common::SimServe,
+    gyros: [&str; 4],
+    time_scale: f64,
+    tail: &str,
+) -> std::path::PathBuf {
+    let fixture = std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/bench/sim-quad.toml"),
+    )
+    .expect("the fixture");
+    let text = fixture
+        .replace("time_scale = 1.0", &format!("time_scale = {time_scale}"))
+        .replace(
+            "tcp://127.0.0.1:5001",
+            &served.addr("chamber", "espec-ascii", "tcp://"),
+        )
+        .replace(
+            "tcp://127.0.0.1:5003",
+            &served.addr("table", "acl", "tcp://"),
+        )
+        .replace("tcp://127.0.0.1:5004", gyros[0])
+        .replace("tcp://127.0.0.1:5005", gyros[1])
+        .replace("tcp://127.0.0.1:5006", gyros[2])
+        .replace(
+            "gyro = { spec = \"tcp://127.0.0.1:5007\" }",
+            &format!("gyro = {{ spec = \"{}\" }}\nmount = {Y_MOUNT}", gyros[3]),
+        );
+    write(dir, "bench.toml", &format!("{text}{tail}"))
+}
+
+fn quad_duts() -> Vec<&'static str> {
+    vec![
+        "--dut", "A=S-1", "--dut", "B=S-2", "--dut", "C=S-3", "--dut", "D=S-4",
+    ]
+}
+
+#[test]
+fn a_batch_through_sim_serve_over_tcp_and_ptys_loses_no_frame() {
+    let dir = temp_dir("batch-served");
+    let p = write(&dir, "two.toml", TWO_POSITIONS);
+    let _turn = crate::common::wall_clock_turn();
+    let speed = 60.0;
+    let served = serve_quad(&dir, speed);
+    let gyro = |slot: &str, scheme: &str| served.addr(&format!("gyro/{slot}"), "rlg-frame", scheme);
+    // Two units on TCP, two on ptys.
+    let (a, b, c, d) = (
+        gyro("A", "tcp://"),
+        gyro("B", "tcp://"),
+        gyro("C", "pty://"),
+        gyro("D", "pty://"),
+    );
+    let bench = served_quad_bench(&dir, &served, [&a, &b, &c, &d], speed, "");
+    let out = dir.join("out");
+    let o = run(&[
+        &[s(&p), "--bench", s(&bench), "--out", s(&out)],
+        &quad_duts()[..],
+    ]
+    .concat());
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    for serial in ["S-1", "S-2", "S-3", "S-4"] {
+        let r = json(&out.join(format!("report-{serial}.json")));
+        assert_eq!(r["outcome"], "pass", "{serial}: {r}");
+        let link = &r["link"];
+        for k in [
+            "lost_frames",
+            "crc_errors",
+            "resyncs",
+            "duplicates",
+            "reconnects",
+        ] {
+            assert_eq!(link[k], 0, "{serial}: {k} in {link}");
+        }
+        // Both records whole: 2 x 120 s at 400 Hz at the least.
+        let frames = r["frames"].as_u64().expect("frames");
+        assert!(frames >= 96_000, "{serial}: {frames} frames");
+    }
+    // D's axis is north where A's is east: each bias is judged against
+    // its own axis's share of the Earth's rate (9.6 deg/h apart at the
+    // east position), so both pass only if each unit's reference is its own.
+    let east = |serial: &str| {
+        figures(&out.join(format!("report-{serial}.json")))
+            .into_iter()
+            .find(|(n, _)| n == "bias_dph:east")
+            .expect("bias east")
+            .1
+    };
+    assert!(east("S-1").abs() < 1.5 && east("S-4").abs() < 1.5);
+    // The log holds every unit's frames: replay gives every report.
+    let again = dir.join("again");
+    let o = command()
+        .args(["replay", s(&out.join("run.mcap")), "--out", s(&again)])
+        .output()
+        .expect("replay");
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    for serial in ["S-1", "S-2", "S-3", "S-4"] {
+        let name = format!("report-{serial}.json");
+        assert_eq!(
+            std::fs::read(out.join(&name)).expect("run"),
+            std::fs::read(again.join(&name)).expect("replay"),
+            "{name}"
+        );
+    }
+    drop(served);
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
+
+/// Forward `upstream`'s bytes to one client of a loopback port for
+/// `bytes` bytes, then drop both ends and stop listening: a link that is
+/// lost for good. Returns the port's address.
+fn cut_after(upstream: &str, bytes: usize) -> String {
+    use std::io::{Read, Write};
+    let listener = std::net::TcpListener::bind("127.0.0.1:0").expect("listen");
+    let addr = listener.local_addr().expect("address");
+    let upstream = upstream.trim_start_matches("tcp://").to_owned();
+    std::thread::spawn(move || {
+        let Ok((mut client, _)) = listener.accept() else {
+            return;
+        };
+        drop(listener);
+        let Ok(mut up) = std::net::TcpStream::connect(upstream) else {
+            return;
+        };
+        let mut left = bytes;
+        let mut buf = [0u8; 4096];
+        while left > 0 {
+            let Ok(n) = up.read(&mut buf[..left.min(4096)]) else {
+                return;
+            };
+            if n == 0 || client.write_all(&buf[..n]).is_err() {
+                return;
+            }
+            left -= n;
+        }
+    });
+    format!("tcp://{addr}")
+}
+
+#[test]
+fn a_served_batch_goes_on_without_a_unit_whose_link_is_lost_for_good() {
+    let dir = temp_dir("batch-served-lost");
+    let p = write(&dir, "two.toml", TWO_POSITIONS);
+    let _turn = crate::common::wall_clock_turn();
+    let speed = 60.0;
+    let served = serve_quad(&dir, speed);
+    let gyro = |slot: &str| served.addr(&format!("gyro/{slot}"), "rlg-frame", "tcp://");
+    // B's link carries 80 s of frames (20-byte frames at 400 Hz), less
+    // than its two records need, and then is gone: no reconnect finds it.
+    let b = cut_after(&gyro("B"), 80 * 400 * 20);
+    let (a, c, d) = (gyro("A"), gyro("C"), gyro("D"));
+    let bench = served_quad_bench(&dir, &served, [&a, &b, &c, &d], speed, "");
+    let bench_text = std::fs::read_to_string(&bench).expect("bench").replace(
+        "silence_s = 1.0",
+        "silence_s = 1.0\nreconnect_window_s = 1.0",
+    );
+    std::fs::write(&bench, bench_text).expect("bench");
+    let out = dir.join("out");
+    let o = run(&[
+        &[s(&p), "--bench", s(&bench), "--out", s(&out)],
+        &quad_duts()[..],
+    ]
+    .concat());
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    let err = stderr(&o);
+    assert!(
+        err.contains("slot B (S-2): gyro/B") && err.contains("the batch goes on"),
+        "{err}"
+    );
+    let lost = json(&out.join("report-S-2.json"));
+    assert_eq!(lost["outcome"], "error", "{lost}");
+    assert!(lost["error"]["message"].as_str().is_some(), "{lost}");
+    for serial in ["S-1", "S-3", "S-4"] {
+        let r = json(&out.join(format!("report-{serial}.json")));
+        assert_eq!(r["outcome"], "pass", "{serial}: {r}");
+        assert_eq!(r["link"]["lost_frames"], 0, "{serial}");
+    }
+    // The shared bench was left safe for every unit.
+    assert_eq!(
+        lost["bench_left"]["verified"], true,
+        "{}",
+        lost["bench_left"]
+    );
+    drop(served);
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}

@@ -230,19 +230,25 @@ pub struct SimServe {
 impl SimServe {
     /// Serve the simulated bench at `speed` (a config file written in `dir`).
     pub fn start(dir: &Path, speed: f64) -> Self {
+        Self::with_config(dir, &format!("speed = {speed}\nseed = 1\n"), 9)
+    }
+
+    /// Serve the simulated bench of serve file `text` (written in `dir`),
+    /// which prints `lines` endpoints.
+    pub fn with_config(dir: &Path, text: &str, lines: usize) -> Self {
         use std::io::BufRead;
-        let config = write(dir, "serve.toml", &format!("speed = {speed}\nseed = 1\n"));
+        let config = write(dir, "serve.toml", text);
         let mut child = crate::cli::command()
             .args(["sim", "serve", "--config", s(&config)])
             .stdout(std::process::Stdio::piped())
             .stderr(std::process::Stdio::null())
             .spawn()
             .expect("sim serve starts");
-        let mut lines = std::io::BufReader::new(child.stdout.take().expect("stdout"));
+        let mut out = std::io::BufReader::new(child.stdout.take().expect("stdout"));
         let mut endpoints = Vec::new();
-        for _ in 0..9 {
+        for _ in 0..lines {
             let mut l = String::new();
-            lines.read_line(&mut l).expect("endpoint");
+            out.read_line(&mut l).expect("endpoint");
             endpoints.push(l.trim().to_owned());
         }
         Self { child, endpoints }
