@@ -687,16 +687,9 @@ impl Run<'_> {
         self.log(Level::Debug, &words)
     }
 
-    /// Advance one tick (at most 1 s, never past `until_s`).
-    async fn tick(&mut self, until_s: f64, record: Option<&str>, step: &str) -> Result<(), Stop> {
-        if self.opts.interrupt.is_requested() {
-            return Err(Stop::Interrupted);
-        }
-        let t = (self.bench.now_s() + 1.0).min(until_s);
-        self.bench
-            .advance(t, &mut self.tick)
-            .await
-            .map_err(Stop::Device)?;
+    /// Say which of a batch's links failed since the last tick: the batch
+    /// goes on without those units.
+    fn say_unit_faults(&mut self) {
         for (k, why) in self.bench.take_unit_faults() {
             let unit = self
                 .opts
@@ -707,6 +700,19 @@ impl Run<'_> {
             self.progress.warn(&text);
             self.note(Level::Warning, &text);
         }
+    }
+
+    /// Advance one tick (at most 1 s, never past `until_s`).
+    async fn tick(&mut self, until_s: f64, record: Option<&str>, step: &str) -> Result<(), Stop> {
+        if self.opts.interrupt.is_requested() {
+            return Err(Stop::Interrupted);
+        }
+        let t = (self.bench.now_s() + 1.0).min(until_s);
+        self.bench
+            .advance(t, &mut self.tick)
+            .await
+            .map_err(Stop::Device)?;
+        self.say_unit_faults();
         self.frames += self.tick.frames.len() as u64;
         let r = self.sink.tick(&self.tick, record, step);
         self.written(r)?;

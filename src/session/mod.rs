@@ -827,19 +827,21 @@ pub fn execute(
         None => part_link,
     };
     // A batch's other units' link figures of this part (what the log
-    // gets), and with the earlier parts' (what their reports give).
+    // gets), and with the earlier parts' (what their reports give): read
+    // once, as a real link's go on counting the frames that still come.
     let part_slot_links: Vec<LinkStats> = (1..meta.units.len())
         .map(|k| bench.slot_link_stats(k))
         .collect();
-    let unit_links: Vec<LinkStats> = (0..meta.units.len().max(1))
-        .map(|k| match (k, &plan.resume) {
-            (0, _) => link,
-            (k, Some(r)) => add_link(
-                &r.unit_links.get(k - 1).copied().unwrap_or_default(),
-                &bench.slot_link_stats(k),
-            ),
-            (k, None) => bench.slot_link_stats(k),
-        })
+    let unit_links: Vec<LinkStats> = std::iter::once(link)
+        .chain(
+            part_slot_links
+                .iter()
+                .enumerate()
+                .map(|(i, part)| match &plan.resume {
+                    Some(r) => add_link(&r.unit_links.get(i).copied().unwrap_or_default(), part),
+                    None => *part,
+                }),
+        )
         .collect();
     let finish = |result: &RunResult, k: usize| {
         let link = unit_links.get(k).copied().unwrap_or_default();

@@ -294,11 +294,10 @@ pub enum ServeError {
         protocol: &'static str,
         /// The address asked for (port 0: any free one).
         addr: SocketAddr,
-        /// The serve configuration's key of the port (`ports.espec`, ...).
-        key: String,
         /// Why.
         cause: std::io::Error,
-        /// What to do about it.
+        /// What to do about it, naming the serve configuration's key of
+        /// the port (`ports.espec`, `slots.0.port`, ...).
         hint: String,
     },
     /// A pty pair could not be made.
@@ -345,7 +344,6 @@ async fn listen(
             device: device.clone(),
             protocol,
             addr,
-            key: key.to_owned(),
             cause,
             hint,
         }
@@ -428,22 +426,7 @@ pub async fn start(s: &Serve) -> Result<Served, ServeError> {
     endpoints.push(e);
     spawn_accept(acl, bench.clone(), serve_acl);
 
-    // One gyro line per unit: `gyro`, or a batch's `gyro/SLOT`.
-    let gyros: Vec<(String, u16, String)> = if s.units.is_empty() {
-        vec![("gyro".into(), p.gyro, "ports.gyro".into())]
-    } else {
-        s.units
-            .iter()
-            .enumerate()
-            .map(|(i, u)| {
-                (
-                    format!("gyro/{}", u.name),
-                    u.port,
-                    format!("slots.{i}.port"),
-                )
-            })
-            .collect()
-    };
+    let gyros = gyro_lines(s);
     for (unit, (device, port, key)) in gyros.iter().enumerate() {
         let (gyro, e) = listen(device, "rlg-frame", *port, key).await?;
         endpoints.push(e);
@@ -455,48 +438,82 @@ pub async fn start(s: &Serve) -> Result<Served, ServeError> {
     endpoints.push(e);
     spawn_accept(supply, bench.clone(), serve_supply);
 
-    let mut ptys = Vec::new();
-    if s.config.ptys {
-        let mut served: Vec<(String, &'static str, Option<usize>)> = vec![
-            ("chamber".into(), "espec-ascii", None),
-            ("table".into(), "acl", None),
-        ];
-        served.extend(
-            gyros
-                .iter()
-                .enumerate()
-                .map(|(unit, (device, ..))| (device.clone(), "rlg-frame", Some(unit))),
-        );
-        served.push(("supply".into(), dialect, None));
-        for (device, protocol, unit) in served {
-            let crate::transport::PtyPair {
-                master,
-                slave,
-                path,
-            } = pty_pair().map_err(|cause| ServeError::Pty {
-                device: device.clone(),
-                cause,
-            })?;
-            endpoints.push(Endpoint {
-                device,
-                protocol,
-                address: format!("pty://{path}"),
-            });
-            let b = bench.clone();
-            match (protocol, unit) {
-                (_, Some(unit)) => drop(tokio::spawn(serve_unit_gyro(master, b, unit))),
-                ("espec-ascii", _) => drop(tokio::spawn(serve_espec(master, b))),
-                ("acl", _) => drop(tokio::spawn(serve_acl(master, b))),
-                _ => drop(tokio::spawn(serve_supply(master, b))),
-            }
-            ptys.push(slave);
-        }
-    }
+    let ptys = if s.config.ptys {
+        serve_ptys(&bench, &gyros, dialect, &mut endpoints)?
+    } else {
+        Vec::new()
+    };
     Ok(Served {
         endpoints,
         bench,
         _ptys: ptys,
     })
+}
+
+/// One gyro line per unit: `gyro`, or a batch's `gyro/SLOT`; each with
+/// its TCP port and the serve file's key of it.
+fn gyro_lines(s: &Serve) -> Vec<(String, u16, String)> {
+    if s.units.is_empty() {
+        return vec![("gyro".into(), s.config.ports.gyro, "ports.gyro".into())];
+    }
+    s.units
+        .iter()
+        .enumerate()
+        .map(|(i, u)| {
+            (
+                format!("gyro/{}", u.name),
+                u.port,
+                format!("slots.{i}.port"),
+            )
+        })
+        .collect()
+}
+
+/// Serve the Espec chamber, the table, every gyro line and the supply
+/// (`dialect`) on a pty each, adding their endpoints; returns the slave
+/// sides, to be held open.
+fn serve_ptys(
+    bench: &Arc<SharedBench>,
+    gyros: &[(String, u16, String)],
+    dialect: &'static str,
+    endpoints: &mut Vec<Endpoint>,
+) -> Result<Vec<tokio_serial::SerialStream>, ServeError> {
+    let mut served: Vec<(String, &'static str, Option<usize>)> = vec![
+        ("chamber".into(), "espec-ascii", None),
+        ("table".into(), "acl", None),
+    ];
+    served.extend(
+        gyros
+            .iter()
+            .enumerate()
+            .map(|(unit, (device, ..))| (device.clone(), "rlg-frame", Some(unit))),
+    );
+    served.push(("supply".into(), dialect, None));
+    let mut ptys = Vec::new();
+    for (device, protocol, unit) in served {
+        let crate::transport::PtyPair {
+            master,
+            slave,
+            path,
+        } = pty_pair().map_err(|cause| ServeError::Pty {
+            device: device.clone(),
+            cause,
+        })?;
+        endpoints.push(Endpoint {
+            device,
+            protocol,
+            address: format!("pty://{path}"),
+        });
+        let b = bench.clone();
+        match (protocol, unit) {
+            (_, Some(unit)) => drop(tokio::spawn(serve_unit_gyro(master, b, unit))),
+            ("espec-ascii", _) => drop(tokio::spawn(serve_espec(master, b))),
+            ("acl", _) => drop(tokio::spawn(serve_acl(master, b))),
+            _ => drop(tokio::spawn(serve_supply(master, b))),
+        }
+        ptys.push(slave);
+    }
+    Ok(ptys)
 }
 
 #[cfg(test)]
