@@ -1019,7 +1019,7 @@ pub(crate) fn diagnose_rate(runs: &[RunData], opts: &Options) -> Diagnosis {
         .map(|x| x.0)
         .collect();
     let in_base: Vec<Effect> = base_model.iter().map(|m| m.0).collect();
-    let (mut remaining, not_identifiable): (Vec<Effect>, Vec<Effect>) = LIBRARY
+    let (remaining, not_identifiable): (Vec<Effect>, Vec<Effect>) = LIBRARY
         .iter()
         .copied()
         .filter(|e| !in_base.contains(e))
@@ -1029,214 +1029,47 @@ pub(crate) fn diagnose_rate(runs: &[RunData], opts: &Options) -> Diagnosis {
     let first = each_against(&data, &remaining, &base, &free);
     let candidates = first
         .iter()
-        .map(
-            |Tried {
-                 effect: e,
-                 scored: s,
-                 p,
-                 ..
-             }| CandidateScore {
-                name: e.name().into(),
-                held_out_gap_dph: s.gap(),
-                p_value: *p,
-            },
-        )
+        .map(|t| CandidateScore {
+            name: t.effect.name().into(),
+            held_out_gap_dph: t.scored.gap(),
+            p_value: t.p,
+        })
         .collect();
-
-    let mut current = base.clone();
-    let mut effects: Vec<Accepted> = Vec::new();
-    let mut accepted: Vec<Effect> = Vec::new();
-    let mut confounded: Vec<Confounded> = Vec::new();
-    let mut tied_better: Vec<(Effect, Effect)> = Vec::new();
-    let mut step_scores: Vec<Tried> = first;
-    let mut outside: Vec<OutsideFound> = Vec::new();
-    let mut held_outside = 0;
-    while effects.len() < THRESHOLDS.max_effects && !remaining.is_empty() {
-        let level = THRESHOLDS.alpha / remaining.len() as f64;
-        let passing: Vec<&Tried> = step_scores
-            .iter()
-            .filter(|x| x.p < level && x.gain > THRESHOLDS.min_gain * current.sse())
-            .collect();
-        let top = passing.iter().map(|x| x.gain).fold(0.0, f64::max);
-        // Tied candidates (within THRESHOLDS.tie of the best gain) are the same
-        // explanation with these runs: name the simplest, and among the
-        // simplest the one that explains more (the pair is reported below
-        // when neither adds over the other).
-        let best = passing
-            .iter()
-            .filter(|x| x.gain >= (1.0 - THRESHOLDS.tie) * top)
-            .min_by(|a, b| {
-                a.effect
-                    .complexity()
-                    .cmp(&b.effect.complexity())
-                    .then(b.gain.total_cmp(&a.gain))
-            })
-            .map(|x| (*x).clone());
-        let Some(Tried {
-            effect: e,
-            scored: s,
-            gain: cand_gain,
-            p,
-        }) = best
-        else {
-            // No candidate passes alone: two effects that act together
-            // (and partly cancel) may still pass jointly.
-            if effects.len() + 2 > THRESHOLDS.max_effects {
-                break;
-            }
-            let Some(((a, b), joint, p)) = joint_step(&data, &step_scores, &current, &free) else {
-                break;
-            };
-            // The pair is weighed against a disturbance outside the library
-            // as a single candidate is.
-            if outside_rival(&data, &current, &free).is_some_and(
-                |Tried {
-                     gain: ogain, p: op, ..
-                 }| {
-                    op < level
-                        && ogain > THRESHOLDS.min_gain * current.sse()
-                        && ogain >= current.sse() - joint.sse()
-                },
-            ) {
-                break;
-            }
-            let first = step_scores
-                .iter()
-                .find(|x| x.effect == a)
-                .map_or(current.gap(), |x| x.scored.gap());
-            for (x, before, after) in [(a, current.gap(), first), (b, first, joint.gap())] {
-                effects.push(Accepted::fitted(&joint, x, before, after, p));
-                accepted.push(x);
-                remaining.retain(|r| *r != x);
-            }
-            current = joint;
-            step_scores = each_against(&data, &remaining, &current, &free);
-            continue;
-        };
-        // A candidate is named only when it explains more than a
-        // disturbance outside the library would (a bias jump or a drift
-        // through a run, which a thermal or positional term can partly
-        // mimic); when the disturbance explains more, it is held as a
-        // nuisance and reported, and selection goes on over it.
-        if held_outside < THRESHOLDS.max_outside
-            && let Some((os, found)) =
-                outside_instead(&data, &current, &free, level, (e, cand_gain))
-        {
-            outside.extend(found);
-            held_outside += 1;
-            current = os;
-            step_scores = each_against(&data, &remaining, &current, &free);
-            continue;
-        }
-        effects.push(Accepted::fitted(&s, e, current.gap(), s.gap(), p));
-        // A candidate that was as good alone but adds nothing now, while
-        // the accepted one would add nothing over it either, explains the
-        // same thing with these runs: confounded with the accepted one.
-        // (When the accepted one still adds over it, the runs tell them
-        // apart: a partial overlap, not a confound.) A tied candidate that
-        // explained more held out than the simpler one named, and is not
-        // named in the end, is reported so as well, even when the named
-        // one adds over it: the tie named the simpler, and within a tie
-        // what one adds over the other is the noise's to decide (seeds 122
-        // and 156 of the self-check: magnetic units near the equator named
-        // misaligned on the static runs, whose turning run then names the
-        // field alone).
-        tied_better.extend(
-            step_scores
-                .iter()
-                .filter(|x| {
-                    x.effect != e
-                        && x.p < level
-                        && x.gain > THRESHOLDS.min_gain * current.sse()
-                        && x.gain >= (1.0 - THRESHOLDS.tie) * top
-                        && x.gain > cand_gain
-                })
-                .map(|x| (e, x.effect)),
-        );
-        let rivals: Vec<(Effect, Scored)> = step_scores
-            .iter()
-            .filter(|x| {
-                x.effect != e
-                    && x.p < level
-                    && x.gain
-                        > THRESHOLDS.rival_share
-                            * step_scores
-                                .iter()
-                                .find(|y| y.effect == e)
-                                .map_or(0.0, |y| y.gain)
-            })
-            .map(|x| (x.effect, x.scored.clone()))
-            .collect();
-        accepted.push(e);
-        remaining.retain(|x| *x != e);
-        current = s;
-        step_scores = each_against(&data, &remaining, &current, &free);
-        // Told apart when either adds significantly over the other (the
-        // relevance bar is for naming, not for telling apart).
-        let level = THRESHOLDS.alpha / remaining.len().max(1) as f64;
-        for (o, alone) in rivals {
-            let still = step_scores
-                .iter()
-                .find(|x| x.effect == o)
-                .is_some_and(|x| x.p < level);
-            let both = score(&data, &with_best_parameter(&data, &alone.model, e, &free));
-            let (_, p) = improvement(&alone, &both);
-            if !still && p >= level {
-                confounded.push(Confounded::pair(e, o));
-            }
-        }
-    }
-    // Selection weighs a disturbance outside the library only against a
-    // candidate about to be named. When it ends with none, such a
-    // disturbance may still hold the rest (a bias jump in a cold soak
-    // that no library term follows): reported and held when it passes the
-    // bars itself, so the rest is judged over it and no run is proposed
-    // to decide a candidate that only stood in for it.
-    let best_left = step_scores
-        .iter()
-        .filter(|x| remaining.contains(&x.effect))
-        .max_by(|a, b| a.gain.total_cmp(&b.gain))
-        .map(|x| (x.effect, x.gain));
-    if held_outside < THRESHOLDS.max_outside
-        && let Some(left) = best_left
-        && let Some((os, found)) = outside_instead(
-            &data,
-            &current,
-            &free,
-            THRESHOLDS.alpha / remaining.len().max(1) as f64,
-            left,
-        )
-    {
-        outside.extend(found);
-        current = os;
-        step_scores = each_against(&data, &remaining, &current, &free);
-    }
-    for (e, o) in tied_better {
-        if !is_reported(&confounded, e, o) && !accepted.contains(&o) {
-            confounded.push(Confounded::pair(e, o));
-        }
-    }
-    confounded.extend(swaps(
-        &data,
-        &accepted,
-        &step_scores,
-        &current,
-        &free,
-        &confounded,
-    ));
-    let level = THRESHOLDS.alpha / remaining.len().max(1) as f64;
+    let mut sel = Selection {
+        data: &data,
+        free,
+        remaining,
+        current: base.clone(),
+        effects: Vec::new(),
+        accepted: Vec::new(),
+        confounded: Vec::new(),
+        tied_better: Vec::new(),
+        step_scores: first,
+        outside: Vec::new(),
+        held_outside: 0,
+    };
+    while sel.effects.len() < THRESHOLDS.max_effects && !sel.remaining.is_empty() && sel.step() {}
+    sel.hold_what_is_left();
+    sel.settle_confounds();
     let (inconclusive, deciding_procedure) = match inconclusive(
         &data,
-        &remaining,
-        &step_scores,
-        &current,
-        level,
-        &free,
+        &sel.remaining,
+        &sel.step_scores,
+        &sel.current,
+        sel.level(),
+        &sel.free,
         opts.power_replications,
     ) {
         Some((i, text)) => (Some(i), text),
         None => (None, None),
     };
+    let Selection {
+        current,
+        effects,
+        confounded,
+        outside,
+        ..
+    } = sel;
     let where_ = segments(&data, &base.fold_sse, &base.fold_blocks);
     let left = segments(&data, &current.fold_sse, &current.fold_blocks);
     let (period, frac) = periodicity(&data, &current.residual);
@@ -1274,23 +1107,271 @@ pub(crate) fn diagnose_rate(runs: &[RunData], opts: &Options) -> Diagnosis {
             .iter()
             .map(|e| e.name().to_owned())
             .collect(),
+        data: Some(rows(runs, &data)),
         fits: Some((base, current)),
-        data: Some(Rows {
-            run_of: data.run_of.clone(),
-            time_s: runs
-                .iter()
-                .flat_map(|r| r.samples.iter().map(|s| s.iv.time_s))
-                .collect(),
-            orientation: runs
-                .iter()
-                .flat_map(|r| {
-                    r.samples.iter().map(|s| {
-                        let o = &s.orientation;
-                        [o.azimuth_deg, o.elevation_deg, o.roll_deg]
-                    })
+    }
+}
+
+/// The diagnosed rows: each sample's run, time and orientation.
+fn rows(runs: &[RunData], data: &Data<'_>) -> Rows {
+    Rows {
+        run_of: data.run_of.clone(),
+        time_s: runs
+            .iter()
+            .flat_map(|r| r.samples.iter().map(|s| s.iv.time_s))
+            .collect(),
+        orientation: runs
+            .iter()
+            .flat_map(|r| {
+                r.samples.iter().map(|s| {
+                    let o = &s.orientation;
+                    [o.azimuth_deg, o.elevation_deg, o.roll_deg]
                 })
-                .collect(),
-        }),
+            })
+            .collect(),
+    }
+}
+
+/// Forward selection over the library, as [`diagnose_rate`] steps
+/// through it: each step names one effect, a pair that acts together, or
+/// holds a disturbance outside the library that explains more.
+struct Selection<'d, 'a> {
+    data: &'d Data<'a>,
+    /// The reference's parameters refitted with every candidate.
+    free: Vec<Effect>,
+    /// Candidates not named yet.
+    remaining: Vec<Effect>,
+    /// The model so far, scored.
+    current: Scored,
+    /// The effects named, in order.
+    effects: Vec<Accepted>,
+    accepted: Vec<Effect>,
+    confounded: Vec<Confounded>,
+    /// A named effect and a tied candidate that explained more than it.
+    tied_better: Vec<(Effect, Effect)>,
+    /// Every remaining candidate tried over `current`.
+    step_scores: Vec<Tried>,
+    /// Disturbances outside the library held, with their reports.
+    outside: Vec<OutsideFound>,
+    held_outside: usize,
+}
+
+impl Selection<'_, '_> {
+    /// The bar of a step: `alpha` corrected for the candidates left.
+    fn level(&self) -> f64 {
+        THRESHOLDS.alpha / self.remaining.len().max(1) as f64
+    }
+
+    /// Try every remaining candidate over the model so far.
+    fn rescore(&mut self) {
+        self.step_scores = each_against(self.data, &self.remaining, &self.current, &self.free);
+    }
+
+    /// One step of the selection; false when it ends.
+    fn step(&mut self) -> bool {
+        let level = self.level();
+        let current_sse = self.current.sse();
+        let passing: Vec<&Tried> = self
+            .step_scores
+            .iter()
+            .filter(|x| x.p < level && x.gain > THRESHOLDS.min_gain * current_sse)
+            .collect();
+        let top = passing.iter().map(|x| x.gain).fold(0.0, f64::max);
+        // Tied candidates (within THRESHOLDS.tie of the best gain) are the same
+        // explanation with these runs: name the simplest, and among the
+        // simplest the one that explains more (the pair is reported below
+        // when neither adds over the other).
+        let best = passing
+            .iter()
+            .filter(|x| x.gain >= (1.0 - THRESHOLDS.tie) * top)
+            .min_by(|a, b| {
+                a.effect
+                    .complexity()
+                    .cmp(&b.effect.complexity())
+                    .then(b.gain.total_cmp(&a.gain))
+            })
+            .map(|x| (*x).clone());
+        let Some(best) = best else {
+            // No candidate passes alone: two effects that act together
+            // (and partly cancel) may still pass jointly.
+            return self.joint(level);
+        };
+        // A candidate is named only when it explains more than a
+        // disturbance outside the library would (a bias jump or a drift
+        // through a run, which a thermal or positional term can partly
+        // mimic); when the disturbance explains more, it is held as a
+        // nuisance and reported, and selection goes on over it.
+        if self.held_outside < THRESHOLDS.max_outside
+            && let Some((os, found)) = outside_instead(
+                self.data,
+                &self.current,
+                &self.free,
+                level,
+                (best.effect, best.gain),
+            )
+        {
+            self.outside.extend(found);
+            self.held_outside += 1;
+            self.current = os;
+            self.rescore();
+            return true;
+        }
+        self.accept(best, top, level);
+        true
+    }
+
+    /// Name a pair that passes together where neither passes alone;
+    /// false when there is none (or a disturbance outside the library
+    /// explains as much).
+    fn joint(&mut self, level: f64) -> bool {
+        if self.effects.len() + 2 > THRESHOLDS.max_effects {
+            return false;
+        }
+        let Some(((a, b), joint, p)) =
+            joint_step(self.data, &self.step_scores, &self.current, &self.free)
+        else {
+            return false;
+        };
+        // The pair is weighed against a disturbance outside the library
+        // as a single candidate is.
+        let sse = self.current.sse();
+        if outside_rival(self.data, &self.current, &self.free).is_some_and(
+            |Tried {
+                 gain: ogain, p: op, ..
+             }| {
+                op < level && ogain > THRESHOLDS.min_gain * sse && ogain >= sse - joint.sse()
+            },
+        ) {
+            return false;
+        }
+        let first = self
+            .step_scores
+            .iter()
+            .find(|x| x.effect == a)
+            .map_or(self.current.gap(), |x| x.scored.gap());
+        for (x, before, after) in [(a, self.current.gap(), first), (b, first, joint.gap())] {
+            self.effects
+                .push(Accepted::fitted(&joint, x, before, after, p));
+            self.accepted.push(x);
+            self.remaining.retain(|r| *r != x);
+        }
+        self.current = joint;
+        self.rescore();
+        true
+    }
+
+    /// Name `best` (the step's `top` gain, its bar `level`), and note the
+    /// candidates it cannot be told apart from.
+    fn accept(&mut self, best: Tried, top: f64, level: f64) {
+        let Tried {
+            effect: e,
+            scored: s,
+            gain: cand_gain,
+            p,
+        } = best;
+        let sse = self.current.sse();
+        self.effects
+            .push(Accepted::fitted(&s, e, self.current.gap(), s.gap(), p));
+        // A candidate that was as good alone but adds nothing now, while
+        // the accepted one would add nothing over it either, explains the
+        // same thing with these runs: confounded with the accepted one.
+        // (When the accepted one still adds over it, the runs tell them
+        // apart: a partial overlap, not a confound.) A tied candidate that
+        // explained more held out than the simpler one named, and is not
+        // named in the end, is reported so as well, even when the named
+        // one adds over it: the tie named the simpler, and within a tie
+        // what one adds over the other is the noise's to decide (seeds 122
+        // and 156 of the self-check: magnetic units near the equator named
+        // misaligned on the static runs, whose turning run then names the
+        // field alone).
+        self.tied_better.extend(
+            self.step_scores
+                .iter()
+                .filter(|x| {
+                    x.effect != e
+                        && x.p < level
+                        && x.gain > THRESHOLDS.min_gain * sse
+                        && x.gain >= (1.0 - THRESHOLDS.tie) * top
+                        && x.gain > cand_gain
+                })
+                .map(|x| (e, x.effect)),
+        );
+        let own_gain = self
+            .step_scores
+            .iter()
+            .find(|y| y.effect == e)
+            .map_or(0.0, |y| y.gain);
+        let rivals: Vec<(Effect, Scored)> = self
+            .step_scores
+            .iter()
+            .filter(|x| x.effect != e && x.p < level && x.gain > THRESHOLDS.rival_share * own_gain)
+            .map(|x| (x.effect, x.scored.clone()))
+            .collect();
+        self.accepted.push(e);
+        self.remaining.retain(|x| *x != e);
+        self.current = s;
+        self.rescore();
+        // Told apart when either adds significantly over the other (the
+        // relevance bar is for naming, not for telling apart).
+        let level = self.level();
+        for (o, alone) in rivals {
+            let still = self
+                .step_scores
+                .iter()
+                .find(|x| x.effect == o)
+                .is_some_and(|x| x.p < level);
+            let both = score(
+                self.data,
+                &with_best_parameter(self.data, &alone.model, e, &self.free),
+            );
+            let (_, p) = improvement(&alone, &both);
+            if !still && p >= level {
+                self.confounded.push(Confounded::pair(e, o));
+            }
+        }
+    }
+
+    /// Selection weighs a disturbance outside the library only against a
+    /// candidate about to be named. When it ends with none, such a
+    /// disturbance may still hold the rest (a bias jump in a cold soak
+    /// that no library term follows): reported and held when it passes the
+    /// bars itself, so the rest is judged over it and no run is proposed
+    /// to decide a candidate that only stood in for it.
+    fn hold_what_is_left(&mut self) {
+        let best_left = self
+            .step_scores
+            .iter()
+            .filter(|x| self.remaining.contains(&x.effect))
+            .max_by(|a, b| a.gain.total_cmp(&b.gain))
+            .map(|x| (x.effect, x.gain));
+        if self.held_outside < THRESHOLDS.max_outside
+            && let Some(left) = best_left
+            && let Some((os, found)) =
+                outside_instead(self.data, &self.current, &self.free, self.level(), left)
+        {
+            self.outside.extend(found);
+            self.current = os;
+            self.rescore();
+        }
+    }
+
+    /// Report the tied candidates that explained more and were not named,
+    /// and the named effects a remaining candidate could swap for.
+    fn settle_confounds(&mut self) {
+        for (e, o) in std::mem::take(&mut self.tied_better) {
+            if !is_reported(&self.confounded, e, o) && !self.accepted.contains(&o) {
+                self.confounded.push(Confounded::pair(e, o));
+            }
+        }
+        let swapped = swaps(
+            self.data,
+            &self.accepted,
+            &self.step_scores,
+            &self.current,
+            &self.free,
+            &self.confounded,
+        );
+        self.confounded.extend(swapped);
     }
 }
 
