@@ -1393,7 +1393,6 @@ fn inconclusive(
     free: &[Effect],
     replications: usize,
 ) -> Option<(Inconclusive, Option<String>)> {
-    use statrs::distribution::{ContinuousCDF, Normal};
     let runs = data.runs;
     let sse = current.sse();
     let mut ranked: Vec<&Tried> = step_scores
@@ -1406,159 +1405,40 @@ fn inconclusive(
         .collect();
     ranked.sort_by(|a, b| b.gain.total_cmp(&a.gain));
     let best = ranked.first()?;
-    // Per run: the held-out sum of squares now, and what the candidate
-    // removes of it. The deciding run repeats the run where it removes
-    // most, and is diagnosed together with that run alone: the candidate's
-    // share of the gap is then that run's (the other runs would dilute
-    // it), and the information the test has grows with each pass.
-    let mut per_run = vec![(0.0, 0.0); runs.len()];
-    for (k, f) in data.folds.iter().enumerate() {
-        let now = current.fold_sse.get(k).copied().unwrap_or(0.0);
-        let with = best.scored.fold_sse.get(k).copied().unwrap_or(now);
-        per_run[f.run].0 += now;
-        per_run[f.run].1 += now - with;
-    }
-    let (r_star, &(s_star, g_star)) = per_run
-        .iter()
-        .enumerate()
-        .max_by(|a, b| a.1.1.total_cmp(&b.1.1))?;
-    let gain = best.gain;
-    let normal = Normal::standard();
-    let z_obs = normal.inverse_cdf(1.0 - best.p.max(1e-300));
-    let z_bar = normal.inverse_cdf(1.0 - level);
-    // (That run's share, fitted on few records, is taken a fifth smaller
-    // for its scatter: ours.)
-    let ceiling = g_star.max(0.0) / s_star.max(f64::MIN_POSITIVE);
-    let share = THRESHOLDS.share_margin * ceiling;
-    // Both bars must be passed: the share of the held-out sum of squares
-    // (THRESHOLDS.min_gain) and the significance, whose statistic's expected z grows
-    // with the square root of the information (the gain it rests on).
-    let power = |k: usize| {
-        if share < THRESHOLDS.min_gain {
-            return 0.0;
-        }
-        let info = (1 + k) as f64 * THRESHOLDS.share_margin * g_star.max(0.0)
-            / gain.max(f64::MIN_POSITIVE);
-        normal.cdf(z_obs * info.sqrt() - z_bar)
-    };
+    let sizing = Sizing::of(data, current, best, level)?;
+    let r_star = sizing.run;
     let e = best.effect;
     let estimated = (1..=MAX_PASSES)
-        .find(|&k| power(k) >= THRESHOLDS.deciding_power)
+        .find(|&k| sizing.power(k) >= THRESHOLDS.deciding_power)
         .unwrap_or(MAX_PASSES);
     // The estimate sizes the run; a simulation, when asked for, checks it
     // and adds passes until the simulated power is reached.
-    let mut passes = estimated;
-    let mut simulated = None;
-    let mut used_replications = 0;
-    if replications > 0 && power(estimated) >= THRESHOLDS.deciding_power {
-        let sim = Simulation {
-            data,
-            current,
-            candidate: &best.scored,
-            effect: e,
-            run: r_star,
-            free,
-            level,
-            rivals: remaining
-                .iter()
-                .copied()
-                .filter(|&r| r != e && r.grid()[0].is_nan())
-                .collect(),
-        };
-        // At most three sizes are simulated (the estimate, twice it, the
-        // most), each with as many replications as a budget of simulated
-        // rows allows (at least 10): one simulation per pass of a thermal
-        // cycle took a diagnosis past a minute and a half.
-        let rows = data.run_of.iter().filter(|&&r| r == r_star).count().max(1);
-        for k in [estimated, 2 * estimated, MAX_PASSES] {
-            let k = k.min(MAX_PASSES);
-            if simulated.is_some() && k <= passes {
-                continue;
-            }
-            passes = k;
-            let n = (SIMULATED_ROWS / (rows * (1 + k))).clamp(10, replications.max(10));
-            let n = n.min(replications);
-            used_replications = n;
-            let p = sim.power(k, n);
-            simulated = Some(p);
-            if p >= THRESHOLDS.deciding_power || k >= MAX_PASSES {
-                break;
-            }
-        }
-    }
-    let positional = matches!(
-        e,
-        Effect::GSensitivity | Effect::MagneticSensitivity | Effect::AxisMisalignment
-    );
-    // A lab whose table turns the axis north (near the equator) repeats
-    // its own runs: the study's east-pointing poses are out of its reach.
-    let north = axis_horizontal_north(runs);
-    let (procedure, what, device_time_h, text) = if positional {
-        let (name, toml) = if north {
-            ("orientation_north", crate::study::ORIENTATION_NORTH_TOML)
+    let (passes, simulated, used_replications) =
+        if replications > 0 && sizing.power(estimated) >= THRESHOLDS.deciding_power {
+            let sim = Simulation {
+                data,
+                current,
+                candidate: &best.scored,
+                effect: e,
+                run: r_star,
+                free,
+                level,
+                rivals: remaining
+                    .iter()
+                    .copied()
+                    .filter(|&r| r != e && r.grid()[0].is_nan())
+                    .collect(),
+            };
+            let (passes, p, n) = sim.passes(estimated, replications);
+            (passes, Some(p), n)
         } else {
-            ("orientation", crate::study::ORIENTATION_TOML)
+            (estimated, None, 0)
         };
-        let text = repeated_positions(toml, name, passes);
-        (
-            name.to_owned(),
-            format!(
-                "the nine positions of procedures/{name}.toml at +20 degC, {passes} pass(es) after one warm-up (the effect lives between positions), diagnosed together with {} alone",
-                runs[r_star].name
-            ),
-            0.5 + passes as f64 * 9.0 * 25.0 / 60.0,
-            text,
-        )
-    } else {
-        let (name, toml) = if matches!(e, Effect::ScaleFactorTemperature | Effect::ThermalLag) {
-            ("separating", crate::study::SEPARATING_TOML)
-        } else if north {
-            (
-                "thermal_cycle_north",
-                crate::study::THERMAL_CYCLE_NORTH_TOML,
-            )
-        } else {
-            ("thermal_cycle", crate::study::THERMAL_CYCLE_TOML)
-        };
-        // The run it acts most in stands for one run of the profile.
-        let one_h = runs[r_star]
-            .samples
-            .last()
-            .map_or(0.0, |s| s.iv.time_s / 3600.0);
-        (
-            name.to_owned(),
-            format!(
-                "procedures/{name}.toml run {passes} time(s), a power-on each (the effect lives in the temperature profile), diagnosed together with {} alone",
-                runs[r_star].name
-            ),
-            passes as f64 * one_h,
-            format!(
-                "# The deciding run for {}: run this procedure {passes} time(s), a power-on each,\n# then diagnose them together with {}.\n{toml}",
-                e.name(),
-                runs[r_star].name
-            ),
-        )
-    };
-    let achievable = simulated.unwrap_or_else(|| power(passes));
+    let (procedure, what, device_time_h, text) = deciding_procedure(runs, e, r_star, passes);
+    let achievable = simulated.unwrap_or_else(|| sizing.power(passes));
     let (what, passes, device_time_h) = if achievable < THRESHOLDS.deciding_power {
-        (
-            format!(
-                "no repeat of these runs decides: where it acts most ({}) it removes {:.0} % of the held-out sum of squares of 60 s means, a fifth less counted for its scatter, and an effect must remove {:.0} % (min_gain) with a power of {:.0} % ({:.0} % at {} passes{}); an effect this small beside the noise of 60 s means needs a quieter unit or a run where it is larger (other positions, a wider temperature range)",
-                runs[r_star].name,
-                100.0 * ceiling,
-                100.0 * THRESHOLDS.min_gain,
-                100.0 * THRESHOLDS.deciding_power,
-                100.0 * achievable,
-                passes,
-                if simulated.is_some() {
-                    ", simulated"
-                } else {
-                    ""
-                }
-            ),
-            0,
-            0.0,
-        )
+        let why = sizing.undecidable(runs, achievable, passes, simulated.is_some());
+        (why, 0, 0.0)
     } else {
         (what, passes, device_time_h)
     };
@@ -1584,13 +1464,9 @@ fn inconclusive(
                 passes,
                 device_time_h,
                 power: achievable,
-                replications: if simulated.is_some() {
-                    used_replications
-                } else {
-                    0
-                },
-                estimated_power: power(estimated),
-                share_ceiling: ceiling,
+                replications: used_replications,
+                estimated_power: sizing.power(estimated),
+                share_ceiling: sizing.ceiling,
                 file: if passes > 0 {
                     "deciding-run.toml".into()
                 } else {
@@ -1600,6 +1476,160 @@ fn inconclusive(
         },
         text,
     ))
+}
+
+/// How a deciding run is sized for a candidate: the run it acts most in,
+/// its share of that run's held-out sum of squares, and the power of `k`
+/// passes of it against both bars.
+struct Sizing {
+    /// The run where the candidate removes most.
+    run: usize,
+    /// What it removes of that run's held-out sum of squares, a fraction.
+    ceiling: f64,
+    /// The ceiling a fifth smaller, for its scatter.
+    share: f64,
+    /// What it removes there, and over every run.
+    g_star: f64,
+    gain: f64,
+    /// Its observed z, and the bar's.
+    z_obs: f64,
+    z_bar: f64,
+}
+
+impl Sizing {
+    /// The sizing for `best` over `current` at the bar `level`.
+    fn of(data: &Data<'_>, current: &Scored, best: &Tried, level: f64) -> Option<Self> {
+        use statrs::distribution::{ContinuousCDF, Normal};
+        // Per run: the held-out sum of squares now, and what the candidate
+        // removes of it. The deciding run repeats the run where it removes
+        // most, and is diagnosed together with that run alone: the
+        // candidate's share of the gap is then that run's (the other runs
+        // would dilute it), and the information the test has grows with
+        // each pass.
+        let mut per_run = vec![(0.0, 0.0); data.runs.len()];
+        for (k, f) in data.folds.iter().enumerate() {
+            let now = current.fold_sse.get(k).copied().unwrap_or(0.0);
+            let with = best.scored.fold_sse.get(k).copied().unwrap_or(now);
+            per_run[f.run].0 += now;
+            per_run[f.run].1 += now - with;
+        }
+        let (run, &(s_star, g_star)) = per_run
+            .iter()
+            .enumerate()
+            .max_by(|a, b| a.1.1.total_cmp(&b.1.1))?;
+        let normal = Normal::standard();
+        // (That run's share, fitted on few records, is taken a fifth
+        // smaller for its scatter: ours.)
+        let ceiling = g_star.max(0.0) / s_star.max(f64::MIN_POSITIVE);
+        Some(Self {
+            run,
+            ceiling,
+            share: THRESHOLDS.share_margin * ceiling,
+            g_star,
+            gain: best.gain,
+            z_obs: normal.inverse_cdf(1.0 - best.p.max(1e-300)),
+            z_bar: normal.inverse_cdf(1.0 - level),
+        })
+    }
+
+    /// The power of `k` passes. Both bars must be passed: the share of the
+    /// held-out sum of squares (THRESHOLDS.min_gain) and the significance,
+    /// whose statistic's expected z grows with the square root of the
+    /// information (the gain it rests on).
+    fn power(&self, k: usize) -> f64 {
+        use statrs::distribution::{ContinuousCDF, Normal};
+        if self.share < THRESHOLDS.min_gain {
+            return 0.0;
+        }
+        let info = (1 + k) as f64 * THRESHOLDS.share_margin * self.g_star.max(0.0)
+            / self.gain.max(f64::MIN_POSITIVE);
+        Normal::standard().cdf(self.z_obs * info.sqrt() - self.z_bar)
+    }
+
+    /// Why no repeat of `runs` decides: `achievable` at `passes` (by
+    /// simulation or not) falls short.
+    fn undecidable(
+        &self,
+        runs: &[RunData],
+        achievable: f64,
+        passes: usize,
+        simulated: bool,
+    ) -> String {
+        format!(
+            "no repeat of these runs decides: where it acts most ({}) it removes {:.0} % of the held-out sum of squares of 60 s means, a fifth less counted for its scatter, and an effect must remove {:.0} % (min_gain) with a power of {:.0} % ({:.0} % at {} passes{}); an effect this small beside the noise of 60 s means needs a quieter unit or a run where it is larger (other positions, a wider temperature range)",
+            runs[self.run].name,
+            100.0 * self.ceiling,
+            100.0 * THRESHOLDS.min_gain,
+            100.0 * THRESHOLDS.deciding_power,
+            100.0 * achievable,
+            passes,
+            if simulated { ", simulated" } else { "" }
+        )
+    }
+}
+
+/// The procedure that decides `e` with `passes` repeats of run `r_star`
+/// of `runs`: its name, what it is in words, its device time, h, and its
+/// text (a positional effect: the orientation positions repeated; else
+/// the thermal profile run again).
+fn deciding_procedure(
+    runs: &[RunData],
+    e: Effect,
+    r_star: usize,
+    passes: usize,
+) -> (String, String, f64, String) {
+    let positional = matches!(
+        e,
+        Effect::GSensitivity | Effect::MagneticSensitivity | Effect::AxisMisalignment
+    );
+    // A lab whose table turns the axis north (near the equator) repeats
+    // its own runs: the study's east-pointing poses are out of its reach.
+    let north = axis_horizontal_north(runs);
+    if positional {
+        let (name, toml) = if north {
+            ("orientation_north", crate::study::ORIENTATION_NORTH_TOML)
+        } else {
+            ("orientation", crate::study::ORIENTATION_TOML)
+        };
+        let text = repeated_positions(toml, name, passes);
+        return (
+            name.to_owned(),
+            format!(
+                "the nine positions of procedures/{name}.toml at +20 degC, {passes} pass(es) after one warm-up (the effect lives between positions), diagnosed together with {} alone",
+                runs[r_star].name
+            ),
+            0.5 + passes as f64 * 9.0 * 25.0 / 60.0,
+            text,
+        );
+    }
+    let (name, toml) = if matches!(e, Effect::ScaleFactorTemperature | Effect::ThermalLag) {
+        ("separating", crate::study::SEPARATING_TOML)
+    } else if north {
+        (
+            "thermal_cycle_north",
+            crate::study::THERMAL_CYCLE_NORTH_TOML,
+        )
+    } else {
+        ("thermal_cycle", crate::study::THERMAL_CYCLE_TOML)
+    };
+    // The run it acts most in stands for one run of the profile.
+    let one_h = runs[r_star]
+        .samples
+        .last()
+        .map_or(0.0, |s| s.iv.time_s / 3600.0);
+    (
+        name.to_owned(),
+        format!(
+            "procedures/{name}.toml run {passes} time(s), a power-on each (the effect lives in the temperature profile), diagnosed together with {} alone",
+            runs[r_star].name
+        ),
+        passes as f64 * one_h,
+        format!(
+            "# The deciding run for {}: run this procedure {passes} time(s), a power-on each,\n# then diagnose them together with {}.\n{toml}",
+            e.name(),
+            runs[r_star].name
+        ),
+    )
 }
 
 /// A deciding run simulated on the fitted unit.
@@ -1620,6 +1650,40 @@ struct Simulation<'a> {
 }
 
 impl Simulation<'_> {
+    /// Passes enough for the deciding power, checked by simulation from
+    /// `estimated` on, with at most `replications` per size: the passes,
+    /// the simulated power there and the replications it took. At most
+    /// three sizes are simulated (the estimate, twice it, the most), each
+    /// with as many replications as a budget of simulated rows allows (at
+    /// least 10): one simulation per pass of a thermal cycle took a
+    /// diagnosis past a minute and a half.
+    fn passes(&self, estimated: usize, replications: usize) -> (usize, f64, usize) {
+        let rows = self
+            .data
+            .run_of
+            .iter()
+            .filter(|&&r| r == self.run)
+            .count()
+            .max(1);
+        let (mut passes, mut power, mut used) = (estimated, 0.0, 0);
+        let mut simulated = false;
+        for k in [estimated, 2 * estimated, MAX_PASSES] {
+            let k = k.min(MAX_PASSES);
+            if simulated && k <= passes {
+                continue;
+            }
+            passes = k;
+            let n = (SIMULATED_ROWS / (rows * (1 + k))).clamp(10, replications.max(10));
+            used = n.min(replications);
+            power = self.power(k, used);
+            simulated = true;
+            if power >= THRESHOLDS.deciding_power || k >= MAX_PASSES {
+                break;
+            }
+        }
+        (passes, power, used)
+    }
+
     /// Block of the residual drawn at a time, rows (the folds' length).
     const BLOCK: usize = engine::FOLD_MAX_S;
 
