@@ -746,44 +746,14 @@ pub fn execute(
         .map_or_else(|| start.to_rfc3339(), |r| r.start_time_utc.clone());
     let (dir, mut notes) = open_run_dir(place, &plan.procedure.meta.name, &start)?;
 
-    // The embedded bench simulates the bench its file describes: the twin
-    // stands at the bench's site on the bench's table (a lab's simulated
-    // bench near the equator has its own latitude and its table turned).
-    // The run's twin as the bench stands it (a batch's units' own twins
-    // are logged with each unit).
-    let mut twin = plan.twin.clone();
-    twin.site = plan.bench_cfg.site;
-    twin.table.geometry = plan.bench_cfg.table.geometry;
     let mut bench = bench_for(&plan, part, rt)?;
-    let identities = rt.block_on(bench.identify());
-    let instruments = plan.bench_cfg.instruments(
-        identities.chamber,
-        identities.table,
-        identities.supply,
-        today,
-    );
-    let meta = run_meta(&plan, &twin, part, &run_start, &start, instruments)?;
-    let log = if part == 1 {
-        dir.path.join("run.mcap")
-    } else {
-        dir.path.join(format!("run.part{part}.mcap"))
-    };
-    let start_ns = start.timestamp_nanos_opt().unwrap_or(0).max(0) as u64;
-    let scales = FrameScales {
-        dt_s: bench.frame_dt_s(),
-        lsb_arcsec: bench.lsb_arcsec(),
-        temp_lsb_c: bench.temp_lsb_c(),
-    };
-    let mut recorder = Recorder::create(&log, &meta, start_ns, scales)
-        .map_err(io_err("creating the log", &log))?;
-    if let Some(live) = &plan.live {
-        recorder.publish_live(live.clone());
-    }
-    for (at, f) in &plan.faults {
-        if *f == Fault::DiskFull {
-            recorder.fill_disk_at(*at);
-        }
-    }
+    let (meta, log, mut recorder) = open_log(
+        &plan,
+        (part, &run_start, &start, today),
+        &dir.path,
+        bench.as_mut(),
+        rt,
+    )?;
 
     let mut store = StoreLink::open(&plan.store, &meta, &log, &mut notes);
     progress.begin(&dir.path, &notes);
@@ -799,50 +769,10 @@ pub fn execute(
         .iter()
         .map(|u| format!("slot {} ({})", u.slot.name, u.serial))
         .collect();
-    // A bug that panics mid-run must not leave the bench where it was:
-    // the panic is caught, the bench brought to its safe state and read
-    // back, and the run ends as an error with everything logged kept.
-    let ran = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-        rt.block_on(sequencer::run(
-            &plan.procedure,
-            bench.as_mut(),
-            &mut recorder,
-            progress,
-            &opts,
-        ))
-    }));
-    let result = match ran {
-        Ok(r) => r,
-        Err(panic) => rt.block_on(after_panic(
-            bench.as_mut(),
-            &mut recorder,
-            &panic_text(panic.as_ref()),
-            plan.bench_cfg.devices.table.in_position_deg,
-            opts.supply_safe_on,
-        )),
-    };
-    let part_link = bench.link_stats();
-    let link = match &plan.resume {
-        Some(r) => add_link(&r.link, &part_link),
-        None => part_link,
-    };
-    // A batch's other units' link figures of this part (what the log
-    // gets), and with the earlier parts' (what their reports give): read
-    // once, as a real link's go on counting the frames that still come.
-    let part_slot_links: Vec<LinkStats> = (1..meta.units.len())
-        .map(|k| bench.slot_link_stats(k))
-        .collect();
-    let unit_links: Vec<LinkStats> = std::iter::once(link)
-        .chain(
-            part_slot_links
-                .iter()
-                .enumerate()
-                .map(|(i, part)| match &plan.resume {
-                    Some(r) => add_link(&r.unit_links.get(i).copied().unwrap_or_default(), part),
-                    None => *part,
-                }),
-        )
-        .collect();
+    let result = run_guarded(&plan, rt, bench.as_mut(), &mut recorder, progress, &opts);
+    let (part_link, part_slot_links) = part_links(bench.as_ref(), meta.units.len());
+    let unit_links = unit_links(plan.resume.as_ref(), &part_link, &part_slot_links);
+    let link = unit_links.first().copied().unwrap_or_default();
     let finish = |result: &RunResult, k: usize| {
         let link = unit_links.get(k).copied().unwrap_or_default();
         Report::new(&plan.procedure, &result.unit(k), &meta.for_unit(k), link)
@@ -873,6 +803,117 @@ pub fn execute(
         notes_at_begin,
         units,
     })
+}
+
+/// The run's log, created: its metadata (`part` of the run started at
+/// `run_start`, this part at `start`, instruments due on `today`) with
+/// the bench's identities and the run's twin as the bench stands it, its
+/// path in `dir`, and its recorder (live stream and disk faults set).
+fn open_log(
+    plan: &Plan,
+    (part, run_start, start, today): (u32, &str, &chrono::DateTime<chrono::Utc>, chrono::NaiveDate),
+    dir: &Path,
+    bench: &mut dyn BenchIo,
+    rt: &tokio::runtime::Runtime,
+) -> Result<(RunMeta, PathBuf, Recorder), SessionError> {
+    // The embedded bench simulates the bench its file describes: the twin
+    // stands at the bench's site on the bench's table (a lab's simulated
+    // bench near the equator has its own latitude and its table turned).
+    // The run's twin as the bench stands it (a batch's units' own twins
+    // are logged with each unit).
+    let mut twin = plan.twin.clone();
+    twin.site = plan.bench_cfg.site;
+    twin.table.geometry = plan.bench_cfg.table.geometry;
+    let identities = rt.block_on(bench.identify());
+    let instruments = plan.bench_cfg.instruments(
+        identities.chamber,
+        identities.table,
+        identities.supply,
+        today,
+    );
+    let meta = run_meta(plan, &twin, part, run_start, start, instruments)?;
+    let log = if part == 1 {
+        dir.join("run.mcap")
+    } else {
+        dir.join(format!("run.part{part}.mcap"))
+    };
+    let start_ns = start.timestamp_nanos_opt().unwrap_or(0).max(0) as u64;
+    let scales = FrameScales {
+        dt_s: bench.frame_dt_s(),
+        lsb_arcsec: bench.lsb_arcsec(),
+        temp_lsb_c: bench.temp_lsb_c(),
+    };
+    let mut recorder = Recorder::create(&log, &meta, start_ns, scales)
+        .map_err(io_err("creating the log", &log))?;
+    if let Some(live) = &plan.live {
+        recorder.publish_live(live.clone());
+    }
+    for (at, f) in &plan.faults {
+        if *f == Fault::DiskFull {
+            recorder.fill_disk_at(*at);
+        }
+    }
+    Ok((meta, log, recorder))
+}
+
+/// Run the procedure on `bench` into `recorder`. A bug that panics
+/// mid-run must not leave the bench where it was: the panic is caught,
+/// the bench brought to its safe state and read back, and the run ends as
+/// an error with everything logged kept.
+fn run_guarded(
+    plan: &Plan,
+    rt: &tokio::runtime::Runtime,
+    bench: &mut dyn BenchIo,
+    recorder: &mut Recorder,
+    progress: &mut dyn Progress,
+    opts: &sequencer::Options,
+) -> RunResult {
+    let ran = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+        rt.block_on(sequencer::run(
+            &plan.procedure,
+            &mut *bench,
+            &mut *recorder,
+            progress,
+            opts,
+        ))
+    }));
+    match ran {
+        Ok(r) => r,
+        Err(panic) => rt.block_on(after_panic(
+            bench,
+            recorder,
+            &panic_text(panic.as_ref()),
+            plan.bench_cfg.devices.table.in_position_deg,
+            opts.supply_safe_on,
+        )),
+    }
+}
+
+/// Every unit's link figures of this part (the first unit's, then a
+/// batch's others'), read once: a real link goes on counting the frames
+/// that still come, and the log and the reports must give the same.
+fn part_links(bench: &dyn BenchIo, units: usize) -> (LinkStats, Vec<LinkStats>) {
+    (
+        bench.link_stats(),
+        (1..units).map(|k| bench.slot_link_stats(k)).collect(),
+    )
+}
+
+/// Every unit's link figures over the whole run: this part's, with the
+/// earlier parts' of a resumed run (what the reports give).
+fn unit_links(resume: Option<&Resumed>, first: &LinkStats, others: &[LinkStats]) -> Vec<LinkStats> {
+    let whole = |earlier: Option<LinkStats>, part: &LinkStats| match resume {
+        Some(_) => add_link(&earlier.unwrap_or_default(), part),
+        None => *part,
+    };
+    std::iter::once(whole(resume.map(|r| r.link), first))
+        .chain(
+            others
+                .iter()
+                .enumerate()
+                .map(|(i, part)| whole(resume.and_then(|r| r.unit_links.get(i).copied()), part)),
+        )
+        .collect()
 }
 
 /// Write the link's last figures and the result into the log and close
