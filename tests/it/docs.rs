@@ -113,6 +113,45 @@ fn the_served_bench_file_runs_at_the_speed_of_the_serve_configuration() {
     assert!(cfg.devices.supply.is_some(), "{uncommented}");
 }
 
+/// The batch's served bench reads each unit on the gyro line its serve
+/// file gives that slot, at its speed, every unit where the serve file
+/// mounts it.
+#[test]
+fn the_served_batch_bench_reads_each_unit_on_the_line_its_fixture_serves() {
+    let bench =
+        gyrobench::bench::BenchConfig::load(&Path::new(ROOT).join("fixtures/bench/sim-quad.toml"))
+            .expect("fixtures/bench/sim-quad.toml");
+    let serve =
+        gyrobench::sim::serve::Serve::load(Some(&Path::new(ROOT).join("fixtures/sim/quad.toml")))
+            .expect("fixtures/sim/quad.toml");
+    assert_eq!(bench.time_scale, serve.config.speed);
+    assert_eq!(bench.slots.len(), serve.units.len());
+    for (slot, unit) in bench.slots.iter().zip(&serve.units) {
+        assert_eq!(slot.name, unit.name);
+        assert_eq!(
+            bench.slot_gyro_spec(slot),
+            format!("tcp://127.0.0.1:{}", unit.port),
+            "slot {}",
+            slot.name
+        );
+        assert_eq!(
+            bench.slot_geometry(slot).mount,
+            unit.twin.table.geometry.mount,
+            "slot {}",
+            slot.name
+        );
+    }
+    let p = serve.config.ports;
+    assert_eq!(
+        bench.devices.chamber.spec,
+        format!("tcp://127.0.0.1:{}", p.espec)
+    );
+    assert_eq!(
+        bench.devices.table.spec,
+        format!("tcp://127.0.0.1:{}", p.acl)
+    );
+}
+
 /// Every `docs/NAME.md` the code or the documentation cites is a file of
 /// the project (not a note kept elsewhere).
 #[test]
