@@ -125,64 +125,39 @@ fn write(path: &Path, text: &str) -> Result<()> {
         .with_context(|| format!("writing {}", path.display()))
 }
 
-pub fn run(args: DiagnoseArgs) -> Result<Outcome> {
-    if let Some(DiagnoseCommand::Selfcheck(a)) = args.command {
-        return run_selfcheck(a);
-    }
-    if args.runs.is_empty() {
-        return Err(Usage("give one or more run logs (RUN.mcap...)".into()).into());
-    }
-    let Some(out) = args.out else {
-        return Err(Usage(
-            "--out DIR is required: where diagnosis.json, diagnosis.html and twin-updated.toml go"
-                .into(),
-        )
-        .into());
-    };
-    let twin = match &args.twin {
-        Some(p) => Some(TwinConfig::load(p).context("loading the twin file")?),
-        None => None,
-    };
-    let units = units_of(&args.runs)?;
+/// The units `runs` are of; refused as a usage error when they are of
+/// several unless `allow` (then each named, `RUN: UNIT`, for the report).
+fn mixed_units_of(runs: &[PathBuf], allow: bool) -> Result<Vec<String>> {
+    let units = units_of(runs)?;
     let distinct: std::collections::BTreeSet<&str> =
         units.iter().map(|(_, u)| u.as_str()).collect();
-    let mixed_units = if distinct.len() > 1 {
-        let named: Vec<String> = units
-            .iter()
-            .map(|(p, u)| format!("{}: {u}", p.display()))
-            .collect();
-        if !args.allow_mixed_units {
-            return Err(Usage(format!(
-                "the runs are of {} units ({}); a diagnosis is of one unit: give one unit's runs, or --allow-mixed-units to diagnose them together anyway",
-                distinct.len(),
-                named.join(", ")
-            ))
-            .into());
-        }
-        named
-    } else {
-        Vec::new()
-    };
-    let runs = args
-        .runs
+    if distinct.len() <= 1 {
+        return Ok(Vec::new());
+    }
+    let named: Vec<String> = units
         .iter()
-        .map(|p| data::load_unit(p, args.unit.as_deref()).map_err(anyhow::Error::from))
-        .collect::<Result<Vec<_>>>()?;
-    let mut d = diagnose::diagnose(
-        &runs,
-        &Options {
-            twin: twin.clone(),
-            fit_thermal: true,
-            power_replications: args.power_replications,
-        },
-    );
-    d.mixed_units = mixed_units;
-    std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
+        .map(|(p, u)| format!("{}: {u}", p.display()))
+        .collect();
+    if !allow {
+        return Err(Usage(format!(
+            "the runs are of {} units ({}); a diagnosis is of one unit: give one unit's runs, or --allow-mixed-units to diagnose them together anyway",
+            distinct.len(),
+            named.join(", ")
+        ))
+        .into());
+    }
+    Ok(named)
+}
+
+/// Write `d` into `out`: diagnosis.json, diagnosis.html, the deciding run
+/// (or remove an earlier one) and `twin` (default: the RL-16's) updated.
+fn write_outputs(out: &Path, d: &diagnose::Diagnosis, twin: Option<TwinConfig>) -> Result<()> {
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     write(
         &out.join("diagnosis.json"),
-        &serde_json::to_string_pretty(&d)?,
+        &serde_json::to_string_pretty(d)?,
     )?;
-    write(&out.join("diagnosis.html"), &html::render(&d))?;
+    write(&out.join("diagnosis.html"), &html::render(d))?;
     let deciding = out.join("deciding-run.toml");
     match &d.deciding_procedure {
         Some(text) => write(&deciding, text)?,
@@ -196,12 +171,18 @@ pub fn run(args: DiagnoseArgs) -> Result<Outcome> {
         &out.join("twin-updated.toml"),
         &format!(
             "# The twin with the effects gyrobench diagnose accepted enabled and fitted,\n# and its thermal network fitted to the runs.\n{}",
-            diagnose::updated_twin(&base, &d)
+            diagnose::updated_twin(&base, d)
                 .to_toml()
                 .context("writing the updated twin as TOML")?
         ),
     )?;
-    outln!("{}", diagnose::html::headline(&d))?;
+    Ok(())
+}
+
+/// The diagnosis in words on stdout; `fitted_twin`: the runs were
+/// diagnosed against a twin file, whose network was fitted.
+fn print_summary(d: &diagnose::Diagnosis, out: &Path, fitted_twin: bool) -> Result<()> {
+    outln!("{}", diagnose::html::headline(d))?;
     let th = &d.layers.thermal;
     let network = match (&th.form_misfit, th.fitted_gap_c) {
         (Some(m), _) => format!(
@@ -211,7 +192,7 @@ pub fn run(args: DiagnoseArgs) -> Result<Outcome> {
             m.r#where.first().map_or("", |w| w.sensor.as_str()),
             m.r#where.first().map_or(0.0, |w| w.start_s),
         ),
-        (None, Some(g)) if args.twin.is_some() => {
+        (None, Some(g)) if fitted_twin => {
             format!(" ({g:.4} degC with the network fitted to the runs, in twin-updated.toml)")
         }
         _ => String::new(),
@@ -289,6 +270,44 @@ pub fn run(args: DiagnoseArgs) -> Result<Outcome> {
     for o in &d.unexplained.outside {
         outln!("  unexplained: {}", o.describe())?;
     }
+    Ok(())
+}
+
+pub fn run(args: DiagnoseArgs) -> Result<Outcome> {
+    if let Some(DiagnoseCommand::Selfcheck(a)) = args.command {
+        return run_selfcheck(a);
+    }
+    if args.runs.is_empty() {
+        return Err(Usage("give one or more run logs (RUN.mcap...)".into()).into());
+    }
+    let Some(out) = args.out else {
+        return Err(Usage(
+            "--out DIR is required: where diagnosis.json, diagnosis.html and twin-updated.toml go"
+                .into(),
+        )
+        .into());
+    };
+    let twin = match &args.twin {
+        Some(p) => Some(TwinConfig::load(p).context("loading the twin file")?),
+        None => None,
+    };
+    let mixed_units = mixed_units_of(&args.runs, args.allow_mixed_units)?;
+    let runs = args
+        .runs
+        .iter()
+        .map(|p| data::load_unit(p, args.unit.as_deref()).map_err(anyhow::Error::from))
+        .collect::<Result<Vec<_>>>()?;
+    let mut d = diagnose::diagnose(
+        &runs,
+        &Options {
+            twin: twin.clone(),
+            fit_thermal: true,
+            power_replications: args.power_replications,
+        },
+    );
+    d.mixed_units = mixed_units;
+    write_outputs(&out, &d, twin)?;
+    print_summary(&d, &out, args.twin.is_some())?;
     errln!("diagnosis in {}", out.display());
     Ok(Outcome::Success)
 }
