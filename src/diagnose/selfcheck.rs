@@ -455,12 +455,7 @@ pub fn run(
             trial,
         });
     };
-    let (runs, seed, effects, separating) = (
-        plan.runs,
-        plan.seed,
-        plan.effects.as_slice(),
-        plan.separating,
-    );
+    let (runs, seed, separating) = (plan.runs, plan.seed, plan.separating);
     let base = TwinConfig::default_rl16();
     // Null runs first: they give the noise unit.
     let mut trials: Vec<(Injected, Trial)> = Vec::new();
@@ -478,18 +473,77 @@ pub fn run(
     }
     let noise = null_gaps.iter().sum::<f64>() / null_gaps.len().max(1) as f64;
     let probe = null_runs.unwrap_or_default();
+    let Cases {
+        cases,
+        sizes,
+        coefficients,
+    } = cases(plan, &base, &probe, noise);
+    trials.extend(run_cases(plan, &cases, noise, &report)?);
 
+    let mut confusion: BTreeMap<String, BTreeMap<String, usize>> = BTreeMap::new();
+    for (inj, t) in &trials {
+        *confusion
+            .entry(inj.label())
+            .or_default()
+            .entry(t.attributed.clone().unwrap_or_else(|| "none".into()))
+            .or_default() += 1;
+    }
+    let power = power_of(&plan.effects, &trials, &coefficients);
+    let rate = |label: &Injected, f: &dyn Fn(&Trial) -> bool| {
+        let v: Vec<&Trial> = trials
+            .iter()
+            .filter(|(i, _)| i == label)
+            .map(|(_, t)| t)
+            .collect();
+        v.iter().filter(|t| f(t)).count() as f64 / v.len().max(1) as f64
+    };
+    let mut procedures = vec!["thermal_cycle".to_owned(), "orientation".to_owned()];
+    if separating {
+        procedures.push("separating".into());
+        procedures.push("rate_transfer_temperatures".into());
+    }
+    Ok(SelfCheck {
+        runs,
+        seed,
+        procedures,
+        unit: plan.unit,
+        noise_dph: noise,
+        sizes,
+        power,
+        confusion,
+        false_positive_rate: rate(&Injected::Null, &|t| t.attributed.is_some()),
+        periodic_attributed: rate(&Injected::Periodic, &|t| t.attributed.is_some()),
+        periodic_period_found: rate(&Injected::Periodic, &|t| {
+            t.period_s
+                .is_some_and(|p| (p / PERIODIC_PERIOD_S - 1.0).abs() < 0.2)
+        }),
+        trials: trials.into_iter().map(|(_, t)| t).collect(),
+    })
+}
+
+/// The injected cases of a self-check, each with the twin its runs are
+/// made on and the reference it is diagnosed against; every effect's
+/// size on the null runs; the coefficient each effect and amplitude got.
+struct Cases {
+    cases: Vec<(Injected, TwinConfig, TwinConfig)>,
+    sizes: Vec<EffectSize>,
+    coefficients: BTreeMap<(String, u64), f64>,
+}
+
+/// Every effect of `plan` at every amplitude (in units of `noise`, the
+/// null runs' gap, sized on `probe`), and the outside periodic effect.
+fn cases(plan: &Plan, base: &TwinConfig, probe: &[RunData], noise: f64) -> Cases {
     let mut cases: Vec<(Injected, TwinConfig, TwinConfig)> = Vec::new();
     let mut sizes = Vec::new();
     let mut coefficients: BTreeMap<(String, u64), f64> = BTreeMap::new();
-    for &e in effects {
+    for &e in &plan.effects {
         let p = match e {
             Effect::SelfHeating => base.bias.model4.warmup_tau_s,
             Effect::Hysteresis => 2.0,
             Effect::ThermalLag => 1800.0,
             _ => f64::NAN,
         };
-        let unit = size(&probe, e, p, &inject(&base, e, 1.0).1);
+        let unit = size(probe, e, p, &inject(base, e, 1.0).1);
         sizes.push(EffectSize {
             effect: e.name().into(),
             rms_dph: unit.rms,
@@ -507,7 +561,7 @@ pub fn run(
                 0.0
             };
             coefficients.insert((e.name().to_owned(), amp.to_bits()), a);
-            let (data, reference) = inject(&base, e, a);
+            let (data, reference) = inject(base, e, a);
             cases.push((Injected::Effect(e.name().into(), amp), data, reference));
         }
     }
@@ -519,8 +573,22 @@ pub fn run(
         period_s: PERIODIC_PERIOD_S,
     });
     cases.push((Injected::Periodic, periodic, base.clone()));
+    Cases {
+        cases,
+        sizes,
+        coefficients,
+    }
+}
 
-    // Two workers over the (case, seed) pairs.
+/// `plan.runs` trials of every case, on up to four worker threads over
+/// the (case, seed) pairs, `report`ed as each ends; in the pairs' order.
+fn run_cases(
+    plan: &Plan,
+    cases: &[(Injected, TwinConfig, TwinConfig)],
+    noise: f64,
+    report: &(dyn Fn(&Injected, &Trial) + Sync),
+) -> Result<Vec<(Injected, Trial)>, StudyError> {
+    let (runs, seed, separating) = (plan.runs, plan.seed, plan.separating);
     let jobs: Vec<(usize, u64)> = (0..cases.len())
         .flat_map(|c| (0..runs).map(move |k| (c, seed + 1000 * (c as u64 + 1) + k as u64)))
         .collect();
@@ -554,18 +622,18 @@ pub fn run(
         .into_inner()
         .unwrap_or_else(std::sync::PoisonError::into_inner);
     done.sort_by_key(|(i, _, _)| *i);
-    for (_, inj, r) in done {
-        trials.push((inj, r?));
-    }
+    done.into_iter()
+        .map(|(_, inj, r)| r.map(|t| (inj, t)))
+        .collect()
+}
 
-    let mut confusion: BTreeMap<String, BTreeMap<String, usize>> = BTreeMap::new();
-    for (inj, t) in &trials {
-        *confusion
-            .entry(inj.label())
-            .or_default()
-            .entry(t.attributed.clone().unwrap_or_else(|| "none".into()))
-            .or_default() += 1;
-    }
+/// Each effect's power at each amplitude over `trials`: how often it was
+/// named first, the excess it closed then, how often it was confounded.
+fn power_of(
+    effects: &[Effect],
+    trials: &[(Injected, Trial)],
+    coefficients: &BTreeMap<(String, u64), f64>,
+) -> Vec<Power> {
     let mut power = Vec::new();
     for &e in effects {
         for &amp in &AMPLITUDES {
@@ -605,36 +673,7 @@ pub fn run(
             });
         }
     }
-    let rate = |label: &Injected, f: &dyn Fn(&Trial) -> bool| {
-        let v: Vec<&Trial> = trials
-            .iter()
-            .filter(|(i, _)| i == label)
-            .map(|(_, t)| t)
-            .collect();
-        v.iter().filter(|t| f(t)).count() as f64 / v.len().max(1) as f64
-    };
-    let mut procedures = vec!["thermal_cycle".to_owned(), "orientation".to_owned()];
-    if separating {
-        procedures.push("separating".into());
-        procedures.push("rate_transfer_temperatures".into());
-    }
-    Ok(SelfCheck {
-        runs,
-        seed,
-        procedures,
-        unit: plan.unit,
-        noise_dph: noise,
-        sizes,
-        power,
-        confusion,
-        false_positive_rate: rate(&Injected::Null, &|t| t.attributed.is_some()),
-        periodic_attributed: rate(&Injected::Periodic, &|t| t.attributed.is_some()),
-        periodic_period_found: rate(&Injected::Periodic, &|t| {
-            t.period_s
-                .is_some_and(|p| (p / PERIODIC_PERIOD_S - 1.0).abs() < 0.2)
-        }),
-        trials: trials.into_iter().map(|(_, t)| t).collect(),
-    })
+    power
 }
 
 /// Every library effect.
