@@ -710,8 +710,20 @@ impl BenchConfig {
                     &spec_key,
                     "a slot's gyro is a real link (tcp://, pty:// or a serial port)",
                 )?;
-                if let Some(Err(e)) = g.frame.as_ref().map(FrameLayout::validate) {
-                    c.ensure(false, &format!("{key}.gyro.frame"), &e.to_string())?;
+                if let Some(frame) = &g.frame {
+                    let key = format!("{key}.gyro.frame");
+                    if let Err(e) = frame.validate() {
+                        c.ensure(false, &key, &e.to_string())?;
+                    }
+                    // Every unit's temperatures are read at one scale.
+                    let bench = self.frame_layout().temp_lsb_c;
+                    c.ensure(
+                        frame.temp_lsb_c == bench,
+                        &format!("{key}.temp_lsb_c"),
+                        &format!(
+                            "must be [devices.gyro]'s ({bench} degC): a batch's units are read at one temperature scale"
+                        ),
+                    )?;
                 }
             }
             if !self.is_embedded() {
@@ -1184,6 +1196,23 @@ mod tests {
             });
         }
         assert_eq!(q.slot_frame_layout(&q.slots[2]).frame_type, 0x52);
+        // ... but not its own temperature scale.
+        let frame = toml::to_string(&FrameLayout {
+            temp_lsb_c: 0.02,
+            ..FrameLayout::default()
+        })
+        .expect("TOML");
+        let text = QUAD.replacen(
+            "gyro = { spec = \"tcp://127.0.0.1:5006\" }",
+            &format!("[slots.gyro]\nspec = \"tcp://127.0.0.1:5006\"\n[slots.gyro.frame]\n{frame}"),
+            1,
+        );
+        let e = BenchConfig::from_source(&Source::from_text("q.toml", &text))
+            .expect_err("another temperature scale");
+        assert!(
+            e.to_string().contains("slots.2.gyro.frame.temp_lsb_c"),
+            "{e}"
+        );
         assert_eq!(q.slot_frame_layout(&q.slots[1]), q.frame_layout());
 
         let two_on_the_bench_link = quad_with("gyro = { spec = \"tcp://127.0.0.1:5005\" }\n", "")

@@ -60,6 +60,10 @@ pub struct DeviceBench {
     /// A batch's links that failed since the run last asked: unit, device
     /// and why. A batch goes on without a unit whose link is lost.
     unit_faults: Vec<(usize, String)>,
+    /// A bench with slots (a batch, of one unit or more).
+    batch: bool,
+    /// The one unit's link failure seen while idle, for the next tick.
+    lost: Option<DeviceError>,
     clock: WallClock,
     time_scale: f64,
     site: Site,
@@ -158,6 +162,8 @@ impl DeviceBench {
             stats,
             slot_geometries,
             unit_faults: Vec::new(),
+            batch,
+            lost: None,
             clock: WallClock::scaled(cfg.time_scale),
             time_scale: cfg.time_scale,
             site: cfg.site,
@@ -216,13 +222,16 @@ async fn read_gyro(
     quiet: Arc<Mutex<Quiet>>,
     batch: bool,
 ) {
+    // In a batch, a silence is said once, when it starts.
+    let mut said_silent = false;
     loop {
         let next = gyro.next_frame().await;
         let silent = matches!(next, Err(DeviceError::Silent { .. }));
-        if silent && quiet.lock().is_ok_and(|q| q.now()) {
+        if silent && (said_silent || quiet.lock().is_ok_and(|q| q.now())) {
             // An unpowered unit sends nothing; a booting one not yet.
             continue;
         }
+        said_silent = batch && silent;
         if let Ok(mut s) = stats.lock() {
             *s = gyro.stats();
         }
@@ -240,6 +249,17 @@ async fn read_gyro(
         if tx.send((unit, msg)).await.is_err() || stop {
             return;
         }
+    }
+}
+
+/// Every gyro link of a batch failed for good.
+fn every_link_lost() -> DeviceError {
+    DeviceError::Connect {
+        device: "gyro".into(),
+        cause: std::io::Error::new(
+            std::io::ErrorKind::UnexpectedEof,
+            "every unit's gyro link is lost (each was said as it went)",
+        ),
     }
 }
 
@@ -368,7 +388,10 @@ impl BenchIo for DeviceBench {
         for s in &mut tick.slots {
             s.frames.clear();
         }
-        let batch = !self.slot_geometries.is_empty();
+        if let Some(e) = self.lost.take() {
+            return Err(self.cause_of(e).await);
+        }
+        let batch = self.batch;
         loop {
             tokio::select! {
                 f = self.frames.recv() => match f {
@@ -382,11 +405,9 @@ impl BenchIo for DeviceBench {
                     // what it lost.
                     Some((k, Err(e))) if batch => self.unit_faults.push((k, e.to_string())),
                     Some((_, Err(e))) => return Err(self.cause_of(e).await),
-                    // Every link's reader has ended: each said why.
-                    None if batch => {
-                        deadline.as_mut().await;
-                        break;
-                    }
+                    // Every link's reader has ended (each said why): no
+                    // unit is left to read.
+                    None if batch => return Err(every_link_lost()),
                     None => return Err(gyro_stream_ended("gyro")),
                 },
                 () = &mut deadline => break,
@@ -457,8 +478,10 @@ impl BenchIo for DeviceBench {
         // Frames that arrive now are not the run's: dropped, so the
         // channel never fills.
         while let Ok((k, f)) = self.frames.try_recv() {
-            if let (Err(e), false) = (f, self.slot_geometries.is_empty()) {
-                self.unit_faults.push((k, e.to_string()));
+            match f {
+                Err(e) if self.batch => self.unit_faults.push((k, e.to_string())),
+                Err(e) => self.lost = Some(e),
+                Ok(_) => {}
             }
         }
         let now = self.now_s();

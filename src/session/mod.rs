@@ -1093,11 +1093,15 @@ fn bench_for(
             bench: plan.bench_label.clone(),
             source,
         };
-        let open = rt
-            .block_on(open_bench(&plan.bench_cfg))
-            .map_err(bench_err)?;
+        // A batch's devices are its filled slots': an empty slot's link is
+        // not opened (nothing may be behind it), and the units keep the
+        // run's order.
+        let mut cfg = plan.bench_cfg.clone();
+        cfg.slots
+            .retain(|s| plan.batch.iter().any(|u| u.slot.name == s.name));
+        let open = rt.block_on(open_bench(&cfg)).map_err(bench_err)?;
         let device = rt
-            .block_on(DeviceBench::start(&plan.bench_cfg, open))
+            .block_on(DeviceBench::start(&cfg, open))
             .map_err(bench_err)?;
         Box::new(Guarded::new(device, limits).with_supply(plan.bench_cfg.devices.supply.as_ref()))
     };

@@ -827,3 +827,91 @@ fn a_served_batch_goes_on_without_a_unit_whose_link_is_lost_for_good() {
     drop(served);
     std::fs::remove_dir_all(&dir).expect("cleanup");
 }
+
+#[test]
+fn a_served_batch_leaves_an_empty_slots_link_closed_and_reads_the_others_as_theirs() {
+    let dir = temp_dir("batch-served-empty");
+    let p = write(&dir, "two.toml", TWO_POSITIONS);
+    let _turn = crate::common::wall_clock_turn();
+    let speed = 60.0;
+    let served = serve_quad(&dir, speed);
+    let gyro = |slot: &str| served.addr(&format!("gyro/{slot}"), "rlg-frame", "tcp://");
+    // Nothing listens behind slot B's link: it is left empty, and must
+    // not be opened.
+    let nowhere = {
+        let l = std::net::TcpListener::bind("127.0.0.1:0").expect("a free port");
+        format!("tcp://{}", l.local_addr().expect("address"))
+    };
+    let (a, c, d) = (gyro("A"), gyro("C"), gyro("D"));
+    let bench = served_quad_bench(&dir, &served, [&a, &nowhere, &c, &d], speed, "");
+    let out = dir.join("out");
+    let o = run(&[
+        s(&p),
+        "--bench",
+        s(&bench),
+        "--out",
+        s(&out),
+        "--dut",
+        "A=S-1",
+        "--dut",
+        "C=S-3",
+        "--dut",
+        "D=S-4",
+    ]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    // D (axis north) passes only on its own frames and its own reference.
+    for serial in ["S-1", "S-3", "S-4"] {
+        let r = json(&out.join(format!("report-{serial}.json")));
+        assert_eq!(r["outcome"], "pass", "{serial}: {r}");
+        assert_eq!(r["link"]["lost_frames"], 0, "{serial}");
+    }
+    assert!(!out.join("report-S-2.json").exists());
+    drop(served);
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
+
+#[test]
+fn a_served_batch_whose_every_link_is_lost_stops_with_the_bench_safe() {
+    let dir = temp_dir("batch-served-all-lost");
+    let p = write(&dir, "two.toml", TWO_POSITIONS);
+    let _turn = crate::common::wall_clock_turn();
+    let speed = 60.0;
+    let served = serve_quad(&dir, speed);
+    let gyro = |slot: &str| served.addr(&format!("gyro/{slot}"), "rlg-frame", "tcp://");
+    let (a, b) = (
+        cut_after(&gyro("A"), 80 * 400 * 20),
+        cut_after(&gyro("B"), 80 * 400 * 20),
+    );
+    let (c, d) = (gyro("C"), gyro("D"));
+    let bench = served_quad_bench(&dir, &served, [&a, &b, &c, &d], speed, "");
+    let bench_text = std::fs::read_to_string(&bench).expect("bench").replace(
+        "silence_s = 1.0",
+        "silence_s = 1.0\nreconnect_window_s = 1.0",
+    );
+    std::fs::write(&bench, bench_text).expect("bench");
+    let out = dir.join("out");
+    let o = run(&[
+        s(&p),
+        "--bench",
+        s(&bench),
+        "--out",
+        s(&out),
+        "--dut",
+        "A=S-1",
+        "--dut",
+        "B=S-2",
+    ]);
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    for serial in ["S-1", "S-2"] {
+        let r = json(&out.join(format!("report-{serial}.json")));
+        assert_eq!(r["outcome"], "error", "{serial}: {r}");
+        let why = r["error"]["message"].as_str().expect("a reason");
+        assert!(
+            why.contains("every unit's gyro link is lost"),
+            "{serial}: {why}"
+        );
+        assert_eq!(r["bench_left"]["verified"], true, "{}", r["bench_left"]);
+    }
+    drop(served);
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
