@@ -296,40 +296,10 @@ pub fn headline(d: &Diagnosis) -> String {
 fn headline_of_one_unit(d: &Diagnosis) -> String {
     let t = &d.layers.thermal;
     let r = &d.layers.rate;
-    let thermal = if t.gap_c > thermal_limit_c(t) {
-        format!(
-            "The thermal layer carries a gap: the simulated sensors miss the measured ones by {:.3} degC held out against a noise floor of {:.3} degC (a network that fits leaves a few hundredths), so look at the thermal model first.",
-            t.gap_c, t.noise_floor_c
-        )
-    } else {
-        // When the network form misses, the layer matches by the modal
-        // model: said, so the line below it does not read as a second verdict.
-        let by = t.form_misfit.as_ref().map_or(String::new(), |m| {
-            format!(
-                " by the linear model of the sensors; the twin's network form misses by {:.3} degC",
-                m.gap_c
-            )
-        });
-        format!(
-            "The thermal layer matches ({:.3} degC held out, noise floor {:.3} degC{by}); the gap is in the rate layer.",
-            t.gap_c, t.noise_floor_c
-        )
-    };
     let noise = noise_of_means(d);
-    let at_noise = |gap: f64| noise.is_some_and(|n| gap <= 1.5 * n);
-    // The ratio said, not only "at the noise": a gap 1.4 times it still
-    // leaves room for something small.
-    let noise_text = |gap: f64| {
-        noise.map_or(String::new(), |n| {
-            format!(
-                "{:.2} times the noise of 60 s means alone (about {n:.5} deg/h)",
-                gap / n
-            )
-        })
-    };
     if d.effects.is_empty()
         && d.inconclusive.is_none()
-        && at_noise(r.gap_dph)
+        && at_noise(noise, r.gap_dph)
         && t.gap_c <= thermal_limit_c(t)
     {
         return format!(
@@ -337,112 +307,165 @@ fn headline_of_one_unit(d: &Diagnosis) -> String {
             t.gap_c,
             t.noise_floor_c,
             r.gap_dph,
-            noise_text(r.gap_dph)
+            noise_text(noise, r.gap_dph)
         );
     }
-    let rate = if d.effects.is_empty() && d.inconclusive.is_none() && at_noise(r.gap_dph) {
+    let rate = if d.effects.is_empty() && d.inconclusive.is_none() && at_noise(noise, r.gap_dph) {
         format!(
             " The rate gap of {:.5} deg/h held out is {}.",
             r.gap_dph,
-            noise_text(r.gap_dph)
+            noise_text(noise, r.gap_dph)
         )
     } else if d.effects.is_empty() {
-        let place = d.r#where.first().map_or(String::new(), |g| {
-            format!(
-                "; most of it lies in {} record {} ({}, {:.0} % of it)",
-                g.run,
-                g.record,
-                g.regime,
-                100.0 * g.share
-            )
-        });
-        let period = d.unexplained.period_s.map_or(String::new(), |p| {
-            format!(", with a period of about {p:.0} s")
-        });
-        let confounded = d.confounded.first().map_or(String::new(), |c| {
-            format!(
-                " {} and {} fit it equally: separate them with {}.",
-                c.effects[0], c.effects[1], c.separate_with
-            )
-        });
-        let undecided = d.inconclusive.as_ref().map_or(String::new(), |i| {
-            let r = &i.deciding_run;
-            if r.passes > 0 {
-                format!(
-                    " Inconclusive: {} improves it but misses a bar; {} would decide ({:.1} h of device time, {}, {}).",
-                    r.effect,
-                    r.what,
-                    r.device_time_h,
-                    r.power_phrase(),
-                    r.file
-                )
-            } else {
-                format!(
-                    " Inconclusive: {} improves it but misses a bar, and {}.",
-                    r.effect, r.what
-                )
-            }
-        });
-        let outside: String = d
-            .unexplained
-            .outside
-            .iter()
-            .map(|o| format!(" The residual holds {}.", o.describe()))
-            .collect();
+        unexplained_sentence(d)
+    } else {
+        named_sentence(d, noise)
+    };
+    thermal_sentence(t) + &rate
+}
+
+/// Whether a rate gap is at the noise of 60 s means alone (`noise`).
+fn at_noise(noise: Option<f64>, gap: f64) -> bool {
+    noise.is_some_and(|n| gap <= 1.5 * n)
+}
+
+/// A gap against the noise of 60 s means: the ratio said, not only "at
+/// the noise" (a gap 1.4 times it still leaves room for something small).
+fn noise_text(noise: Option<f64>, gap: f64) -> String {
+    noise.map_or(String::new(), |n| {
         format!(
-            " No effect of the library explains the rate gap of {:.5} deg/h held out{place}{period}.{outside}{confounded}{undecided}",
-            r.gap_dph
+            "{:.2} times the noise of 60 s means alone (about {n:.5} deg/h)",
+            gap / n
+        )
+    })
+}
+
+/// The thermal layer's verdict, the headline's first sentence.
+fn thermal_sentence(t: &super::ThermalLayer) -> String {
+    if t.gap_c > thermal_limit_c(t) {
+        return format!(
+            "The thermal layer carries a gap: the simulated sensors miss the measured ones by {:.3} degC held out against a noise floor of {:.3} degC (a network that fits leaves a few hundredths), so look at the thermal model first.",
+            t.gap_c, t.noise_floor_c
+        );
+    }
+    // When the network form misses, the layer matches by the modal
+    // model: said, so the line below it does not read as a second verdict.
+    let by = t.form_misfit.as_ref().map_or(String::new(), |m| {
+        format!(
+            " by the linear model of the sensors; the twin's network form misses by {:.3} degC",
+            m.gap_c
+        )
+    });
+    format!(
+        "The thermal layer matches ({:.3} degC held out, noise floor {:.3} degC{by}); the gap is in the rate layer.",
+        t.gap_c, t.noise_floor_c
+    )
+}
+
+/// No library effect named: where the gap lies, its period, what holds
+/// it outside the library, what is confounded or undecided.
+fn unexplained_sentence(d: &Diagnosis) -> String {
+    let place = d.r#where.first().map_or(String::new(), |g| {
+        format!(
+            "; most of it lies in {} record {} ({}, {:.0} % of it)",
+            g.run,
+            g.record,
+            g.regime,
+            100.0 * g.share
+        )
+    });
+    let period = d.unexplained.period_s.map_or(String::new(), |p| {
+        format!(", with a period of about {p:.0} s")
+    });
+    let confounded = d.confounded.first().map_or(String::new(), |c| {
+        format!(
+            " {} and {} fit it equally: separate them with {}.",
+            c.effects[0], c.effects[1], c.separate_with
+        )
+    });
+    let undecided = d.inconclusive.as_ref().map_or(String::new(), |i| {
+        let r = &i.deciding_run;
+        if r.passes > 0 {
+            format!(
+                " Inconclusive: {} improves it but misses a bar; {} would decide ({:.1} h of device time, {}, {}).",
+                r.effect,
+                r.what,
+                r.device_time_h,
+                r.power_phrase(),
+                r.file
+            )
+        } else {
+            format!(
+                " Inconclusive: {} improves it but misses a bar, and {}.",
+                r.effect, r.what
+            )
+        }
+    });
+    let outside: String = d
+        .unexplained
+        .outside
+        .iter()
+        .map(|o| format!(" The residual holds {}.", o.describe()))
+        .collect();
+    format!(
+        " No effect of the library explains the rate gap of {:.5} deg/h held out{place}{period}.{outside}{confounded}{undecided}",
+        d.layers.rate.gap_dph
+    )
+}
+
+/// The effects named: how far they shrink the gap, what remains, and the
+/// effects these runs cannot tell from them.
+fn named_sentence(d: &Diagnosis, noise: Option<f64>) -> String {
+    let r = &d.layers.rate;
+    let names: Vec<&str> = d.effects.iter().map(|e| e.name.as_str()).collect();
+    let shrink = if r.gap_dph > 0.0 {
+        100.0 * (1.0 - r.gap_after_dph / r.gap_dph)
+    } else {
+        0.0
+    };
+    let rest = if at_noise(noise, d.unexplained.gap_dph) {
+        format!(
+            " What remains is {}.",
+            noise_text(noise, d.unexplained.gap_dph)
         )
     } else {
-        let names: Vec<&str> = d.effects.iter().map(|e| e.name.as_str()).collect();
-        let shrink = if r.gap_dph > 0.0 {
-            100.0 * (1.0 - r.gap_after_dph / r.gap_dph)
-        } else {
-            0.0
-        };
-        let rest = if at_noise(d.unexplained.gap_dph) {
-            format!(" What remains is {}.", noise_text(d.unexplained.gap_dph))
-        } else {
-            format!(" {:.5} deg/h remain unexplained.", d.unexplained.gap_dph)
-        };
-        let names = names.join(" and ");
-        let mut initial = names.chars();
-        let names: String = initial
-            .next()
-            .map(|c| c.to_uppercase().chain(initial).collect())
-            .unwrap_or_default();
-        // Effects these runs cannot tell from a named one: said here, not
-        // only in the list below.
-        let mut could_be: Vec<&str> = Vec::new();
-        for c in &d.confounded {
-            for (a, b) in [(0, 1), (1, 0)] {
-                let named = d.effects.iter().any(|e| e.name == c.effects[a]);
-                let other = c.effects[b].as_str();
-                if named && !d.effects.iter().any(|e| e.name == other) && !could_be.contains(&other)
-                {
-                    could_be.push(other);
-                }
+        format!(" {:.5} deg/h remain unexplained.", d.unexplained.gap_dph)
+    };
+    let names = names.join(" and ");
+    let mut initial = names.chars();
+    let names: String = initial
+        .next()
+        .map(|c| c.to_uppercase().chain(initial).collect())
+        .unwrap_or_default();
+    // Effects these runs cannot tell from a named one: said here, not
+    // only in the list below.
+    let mut could_be: Vec<&str> = Vec::new();
+    for c in &d.confounded {
+        for (a, b) in [(0, 1), (1, 0)] {
+            let named = d.effects.iter().any(|e| e.name == c.effects[a]);
+            let other = c.effects[b].as_str();
+            if named && !d.effects.iter().any(|e| e.name == other) && !could_be.contains(&other) {
+                could_be.push(other);
             }
         }
-        let could_be = if could_be.is_empty() {
-            String::new()
-        } else {
-            format!(
-                " These runs cannot tell {} from {} (see Confounded for the run that would).",
-                if d.effects.len() == 1 { "it" } else { "them" },
-                could_be.join(" or ")
-            )
-        };
+    }
+    let could_be = if could_be.is_empty() {
+        String::new()
+    } else {
         format!(
-            " {} explain{} it: with {} the held-out rate gap shrinks from {:.5} to {:.5} deg/h ({shrink:.0} % smaller).{rest}{could_be}",
-            names,
-            if d.effects.len() == 1 { "s" } else { "" },
+            " These runs cannot tell {} from {} (see Confounded for the run that would).",
             if d.effects.len() == 1 { "it" } else { "them" },
-            r.gap_dph,
-            r.gap_after_dph
+            could_be.join(" or ")
         )
     };
-    thermal + &rate
+    format!(
+        " {} explain{} it: with {} the held-out rate gap shrinks from {:.5} to {:.5} deg/h ({shrink:.0} % smaller).{rest}{could_be}",
+        names,
+        if d.effects.len() == 1 { "s" } else { "" },
+        if d.effects.len() == 1 { "it" } else { "them" },
+        r.gap_dph,
+        r.gap_after_dph
+    )
 }
 
 /// The page.
