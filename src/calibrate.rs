@@ -67,7 +67,7 @@ pub fn load_unit(path: &Path, unit: Option<&str>) -> Result<RunSeries, ReplayErr
         .collect();
     let rate: Vec<RatePoint> = turning
         .iter()
-        .filter_map(|l| RatePoint::of(r.result.records.get(l)?))
+        .filter_map(|l| RatePoint::of(&r.result.records.get(l)?))
         .collect();
     let thermal: Vec<String> = r
         .procedure
@@ -89,10 +89,10 @@ pub fn load_unit(path: &Path, unit: Option<&str>) -> Result<RunSeries, ReplayErr
     let series: Vec<Interval> = if thermal.is_empty() {
         r.result
             .records
-            .all
-            .iter()
+            .all()
+            .into_iter()
             .filter(|(rec, _)| *rec)
-            .map(|(_, iv)| *iv)
+            .map(|(_, iv)| iv)
             // Not the rate records (their "bias" carries the scale factor
             // times the rate).
             .filter(|iv| !in_turns.contains(&iv.time_s.to_bits()))
@@ -107,7 +107,7 @@ pub fn load_unit(path: &Path, unit: Option<&str>) -> Result<RunSeries, ReplayErr
                 new
             })
             .filter_map(|l| r.result.records.get(l))
-            .flat_map(|s| s.iter().copied())
+            .flatten()
             .collect()
     };
     Ok(RunSeries {

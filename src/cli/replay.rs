@@ -123,7 +123,7 @@ fn replay_one(
     if r.result.frames == 0 {
         errln!(
             "replayed {} intervals in {secs:.2} s (no frames: an imported run)",
-            r.result.records.all.len()
+            r.result.records.intervals()
         );
     } else {
         errln!(

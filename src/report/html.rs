@@ -17,13 +17,40 @@ use crate::view::chart::{Band, Rule};
 use crate::view::{Chart, Marker, Series, Stroke, esc, limit, num, page, utc_seconds};
 
 /// 60 s means against device time in hours.
-fn means_h(iv: &[&Interval], f: impl Fn(&Interval) -> f64) -> Vec<(f64, f64)> {
+fn means_h(iv: &[Interval], f: impl Fn(&Interval) -> f64) -> Vec<(f64, f64)> {
     let t = block_means(
         &iv.iter().map(|i| i.time_s / 3600.0).collect::<Vec<_>>(),
         60,
     );
-    let v = block_means(&iv.iter().map(|i| f(i)).collect::<Vec<_>>(), 60);
+    let v = block_means(&iv.iter().map(&f).collect::<Vec<_>>(), 60);
     t.into_iter().zip(v).collect()
+}
+
+/// [`means_h`] of each of `fs` over the run's intervals (those in a record
+/// alone when `recorded`), read 60 at a time: a chart of a long run holds
+/// its means, not its intervals. Also the number of intervals read.
+fn run_means_h(
+    records: &Records,
+    recorded: bool,
+    fs: &[fn(&Interval) -> f64],
+) -> (usize, Vec<Vec<(f64, f64)>>) {
+    let mut block = Vec::with_capacity(60);
+    let mut out = vec![Vec::new(); fs.len()];
+    let mut n = 0;
+    records.for_each_interval(|rec, iv| {
+        if recorded && !rec {
+            return;
+        }
+        n += 1;
+        block.push(iv);
+        if block.len() == 60 {
+            for (o, f) in out.iter_mut().zip(fs) {
+                o.extend(means_h(&block, f));
+            }
+            block.clear();
+        }
+    });
+    (n, out)
 }
 
 /// A trace's stretches as one series in hours (the gaps between
@@ -122,13 +149,8 @@ fn sentence(s: &str) -> String {
 /// reference cannot follow it, so those stretches are left out (and the
 /// line breaks there).
 fn rate_chart(r: &Report, records: &Records) -> Option<String> {
-    let recorded: Vec<&Interval> = records
-        .all
-        .iter()
-        .filter(|(rec, _)| *rec)
-        .map(|(_, iv)| iv)
-        .collect();
-    if recorded.len() < 120 {
+    let (n, mut means) = run_means_h(records, true, &[Interval::bias_dph]);
+    if n < 120 {
         return None;
     }
     let mut c = Chart::new(
@@ -137,7 +159,7 @@ fn rate_chart(r: &Report, records: &Records) -> Option<String> {
         "deg/h",
     )
     .series(
-        Series::line("60 s means", means_h(&recorded, Interval::bias_dph))
+        Series::line("60 s means", means.pop().unwrap_or_default())
             .colour(5)
             .width(1),
     );
@@ -392,30 +414,27 @@ fn current_chart(records: &Records) -> Option<String> {
 /// Chamber air and the gyro's sensors against time, each with its own
 /// line style.
 fn temperature_chart(records: &Records) -> Option<String> {
-    let all: Vec<&Interval> = records.all.iter().map(|(_, iv)| iv).collect();
-    if all.len() < 120 {
+    let (n, means) = run_means_h(
+        records,
+        false,
+        &[|i| i.chamber_c, |i| i.tcase_c, |i| i.t1_c, |i| i.t2_c],
+    );
+    if n < 120 {
         return None;
     }
+    let [air, case, t1, t2] = <[Vec<(f64, f64)>; 4]>::try_from(means).unwrap_or_default();
     Some(
         Chart::new("Temperatures (60 s means)", "device time, h", "degC")
+            .series(Series::line("chamber air", air).colour(6).width(2))
             .series(
-                Series::line("chamber air", means_h(&all, |i| i.chamber_c))
-                    .colour(6)
-                    .width(2),
-            )
-            .series(
-                Series::line("case", means_h(&all, |i| i.tcase_c))
+                Series::line("case", case)
                     .colour(0)
                     .stroke(Stroke::Dashed)
                     .width(2),
             )
+            .series(Series::line("block T1", t1).colour(1).width(2))
             .series(
-                Series::line("block T1", means_h(&all, |i| i.t1_c))
-                    .colour(1)
-                    .width(2),
-            )
-            .series(
-                Series::line("block T2", means_h(&all, |i| i.t2_c))
+                Series::line("block T2", t2)
                     .colour(2)
                     .stroke(Stroke::Dotted)
                     .width(3),
@@ -501,7 +520,7 @@ fn rate_points(m: &Measurement, records: &Records) -> Vec<RatePoint> {
         .records
         .iter()
         .filter_map(|l| records.get(l))
-        .filter_map(RatePoint::of)
+        .filter_map(|ivs| RatePoint::of(&ivs))
         .collect();
     pts.sort_by(|a, b| a.input_dph.total_cmp(&b.input_dph));
     pts

@@ -226,16 +226,18 @@ pub struct NoiseFigures {
 impl NoiseFigures {
     /// Figures of the longest record a bias-stability measurement judges.
     pub fn of(measurements: &[Measurement], records: &Records) -> Option<Self> {
-        let (label, series) = records
+        // Chosen by length, then read: one record's intervals in memory.
+        let (label, _) = records
             .order
             .iter()
-            .filter_map(|l| Some((l, records.get(l)?)))
+            .filter_map(|l| Some((l, records.len_of(l)?)))
             .filter(|(l, _)| {
                 measurements
                     .iter()
                     .any(|m| m.metric == Metric::BiasStability && m.records.contains(l))
             })
-            .max_by_key(|(_, s)| s.len())?;
+            .max_by_key(|&(_, n)| n)?;
+        let series = records.get(label)?;
         let bias: Vec<f64> = series.iter().map(Interval::bias_dph).collect();
         let a = analyse(&bias, 1.0, Taus::Octave);
         if a.points.len() < 2 {

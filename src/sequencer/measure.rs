@@ -1,11 +1,13 @@
 //! The 1 Hz record store and the figures `measure` steps compute on it.
 
 use std::collections::BTreeMap;
+use std::ops::Range;
 
 use serde::Serialize;
 
 use super::BenchState;
 use super::health::{RecordHealth, Runs};
+use super::spill::{Row, Spill, bytes_at, f64_at};
 use crate::analysis::figures::{DriftTrace, bias_stability, drift_trace, mean};
 use crate::analysis::model::{self, ModelKind};
 use crate::analysis::rate::{self, Figure, RatePoint};
@@ -14,12 +16,17 @@ use crate::analysis::study::{self_heating_dph, temperature_sensitivity_parts};
 use crate::procedure::{Measure, Metric};
 
 /// 1 Hz intervals of the whole run, and by record label.
+///
+/// The intervals and supply readings are filed in a [`Spill`]: a run holds
+/// a constant amount of memory however long it is, and a clone (a unit's
+/// result, a resumed run's earlier part) shares what is filed.
 #[derive(Debug, Clone, Default)]
 pub struct Records {
     /// Every interval of the run, and whether it belongs to a record
     /// (the table at rest); labels are in `by_label`.
-    pub all: Vec<(bool, Interval)>,
-    by_label: BTreeMap<String, Vec<Interval>>,
+    all: Spill<(bool, Interval)>,
+    /// Each record's intervals: indices in `all`.
+    by_label: BTreeMap<String, Vec<Range<u64>>>,
     /// Labels in the order they were recorded.
     pub order: Vec<String>,
     /// Whether each record's frames can be judged (records with frames).
@@ -33,9 +40,68 @@ pub struct Records {
     turning: BTreeMap<String, (f64, f64, u64)>,
     /// Every reading of the unit's supply, in the order the bench took
     /// them (benches with a supply).
-    power: Vec<PowerSample>,
-    /// The first and last index in `power` of each record's readings.
-    power_of: BTreeMap<String, (usize, usize)>,
+    power: Spill<PowerSample>,
+    /// The index in `power` of the last reading with the output off.
+    last_off: Option<u64>,
+    /// For each record: the index in `power` of the first reading after
+    /// the turn-on before it, and of the record's first and last readings.
+    power_of: BTreeMap<String, (u64, u64, u64)>,
+}
+
+impl Row for (bool, Interval) {
+    const SIZE: usize = 7 * 8 + 4 + 1;
+
+    fn encode(&self, out: &mut Vec<u8>) {
+        let (in_record, iv) = self;
+        for v in [
+            iv.time_s,
+            iv.rate_dph,
+            iv.reference_dph,
+            iv.t1_c,
+            iv.t2_c,
+            iv.tcase_c,
+            iv.chamber_c,
+        ] {
+            out.extend_from_slice(&v.to_le_bytes());
+        }
+        out.extend_from_slice(&iv.frames.to_le_bytes());
+        out.push(u8::from(*in_record));
+    }
+
+    fn decode(b: &[u8]) -> Self {
+        let f = |i: usize| f64_at(b, i * 8);
+        let iv = Interval {
+            time_s: f(0),
+            rate_dph: f(1),
+            reference_dph: f(2),
+            t1_c: f(3),
+            t2_c: f(4),
+            tcase_c: f(5),
+            chamber_c: f(6),
+            frames: u32::from_le_bytes(bytes_at(b, 56)),
+        };
+        (b.get(60) == Some(&1), iv)
+    }
+}
+
+impl Row for PowerSample {
+    const SIZE: usize = 3 * 8 + 1;
+
+    fn encode(&self, out: &mut Vec<u8>) {
+        for v in [self.t_s, self.v, self.a] {
+            out.extend_from_slice(&v.to_le_bytes());
+        }
+        out.push(u8::from(self.on));
+    }
+
+    fn decode(b: &[u8]) -> Self {
+        Self {
+            t_s: f64_at(b, 0),
+            v: f64_at(b, 8),
+            a: f64_at(b, 16),
+            on: b.get(24) == Some(&1),
+        }
+    }
 }
 
 /// One reading of the unit's supply output.
@@ -83,16 +149,30 @@ impl Records {
     }
 
     /// The intervals of `labels`, grouped by the part of the run they were
-    /// taken in (in part order; one group for a run never resumed).
-    pub fn by_part(&self, labels: &[String]) -> Vec<Vec<Interval>> {
-        let mut parts: BTreeMap<u32, Vec<Interval>> = BTreeMap::new();
+    /// taken in (in part order; one group for a run never resumed): one
+    /// series, and the length of each part's stretch of it (none empty).
+    pub fn by_part(&self, labels: &[String]) -> (Vec<Interval>, Vec<usize>) {
+        let mut parts: BTreeMap<u32, Vec<&Range<u64>>> = BTreeMap::new();
         for l in labels {
-            if let Some(ivs) = self.by_label.get(l) {
+            if let Some(ranges) = self.by_label.get(l) {
                 let part = self.part_of.get(l).copied().unwrap_or(1);
-                parts.entry(part).or_default().extend_from_slice(ivs);
+                parts.entry(part).or_default().extend(ranges);
             }
         }
-        parts.into_values().filter(|v| !v.is_empty()).collect()
+        let rows = |r: &Range<u64>| (r.end - r.start) as usize;
+        let total = parts.values().flatten().map(|r| rows(r)).sum();
+        let mut series = Vec::with_capacity(total);
+        let mut lens = Vec::new();
+        for ranges in parts.values() {
+            let before = series.len();
+            for r in ranges {
+                self.all.for_each((*r).clone(), |(_, iv)| series.push(iv));
+            }
+            if series.len() > before {
+                lens.push(series.len() - before);
+            }
+        }
+        (series, lens)
     }
 
     /// A record of frames starts: its health is watched from here; its
@@ -116,41 +196,40 @@ impl Records {
     /// File a reading of the supply; `record` is the record whose
     /// interval the same tick made (none for a tick without frames).
     pub fn push_power(&mut self, p: PowerSample, record: Option<&str>) {
-        let i = self.power.len();
-        self.power.push(p);
+        let i = self.power.push(p);
         if let Some(label) = record {
+            let turn_on = self.last_off.map_or(0, |off| off + 1);
             self.power_of
                 .entry(label.to_owned())
-                .and_modify(|r| r.1 = i)
-                .or_insert((i, i));
+                .and_modify(|r| r.2 = i)
+                .or_insert((turn_on, i, i));
+        }
+        if !p.on {
+            self.last_off = Some(i);
         }
     }
 
     /// Every supply reading of the run so far.
-    pub fn power(&self) -> &[PowerSample] {
-        &self.power
+    pub fn power(&self) -> Vec<PowerSample> {
+        self.power.all()
     }
 
     /// The supply readings taken during a record.
-    pub fn power_during(&self, label: &str) -> &[PowerSample] {
+    pub fn power_during(&self, label: &str) -> Vec<PowerSample> {
         self.power_of
             .get(label)
-            .and_then(|&(a, b)| self.power.get(a..=b))
+            .map(|&(_, a, b)| self.power.get(a..b + 1))
             .unwrap_or_default()
     }
 
     /// The supply readings from the turn-on a record was made after to
     /// the record's end: back from its first reading to the last reading
     /// with the output off (or the run's first reading).
-    pub fn power_from_turn_on(&self, label: &str) -> &[PowerSample] {
-        let Some(&(a, b)) = self.power_of.get(label) else {
-            return &[];
-        };
-        let from = self.power[..a]
-            .iter()
-            .rposition(|p| !p.on)
-            .map_or(0, |i| i + 1);
-        self.power.get(from..=b).unwrap_or_default()
+    pub fn power_from_turn_on(&self, label: &str) -> Vec<PowerSample> {
+        self.power_of
+            .get(label)
+            .map(|&(from, _, b)| self.power.get(from..b + 1))
+            .unwrap_or_default()
     }
 
     /// The health of a record of frames.
@@ -167,6 +246,9 @@ impl Records {
 
     /// Why the data of `labels` cannot be judged, or none.
     pub fn problem(&self, labels: &[String]) -> Option<String> {
+        if let Some(fault) = self.all.fault().or_else(|| self.power.fault()) {
+            return Some(fault);
+        }
         labels.iter().find_map(|l| {
             self.health
                 .get(l)
@@ -176,8 +258,35 @@ impl Records {
     }
 
     /// Intervals of one record.
-    pub fn get(&self, label: &str) -> Option<&[Interval]> {
-        self.by_label.get(label).map(Vec::as_slice)
+    pub fn get(&self, label: &str) -> Option<Vec<Interval>> {
+        let ranges = self.by_label.get(label)?;
+        let mut out = Vec::with_capacity(self.len_of(label).unwrap_or(0) as usize);
+        for r in ranges {
+            self.all.for_each(r.clone(), |(_, iv)| out.push(iv));
+        }
+        Some(out)
+    }
+
+    /// The number of intervals of one record.
+    pub fn len_of(&self, label: &str) -> Option<u64> {
+        let ranges = self.by_label.get(label)?;
+        Some(ranges.iter().map(|r| r.end - r.start).sum())
+    }
+
+    /// Every interval of the run, and whether it belongs to a record.
+    pub fn all(&self) -> Vec<(bool, Interval)> {
+        self.all.all()
+    }
+
+    /// Hand every interval of the run to `f` in order, with whether it
+    /// belongs to a record (without holding them all in memory).
+    pub fn for_each_interval(&self, mut f: impl FnMut(bool, Interval)) {
+        self.all.for_each(0..self.all.len(), |(rec, iv)| f(rec, iv));
+    }
+
+    /// The number of intervals of the run.
+    pub fn intervals(&self) -> u64 {
+        self.all.len()
     }
 
     /// Reduce a tick to its interval mean and file it; returns it.
@@ -247,10 +356,14 @@ impl Records {
 
     /// File an interval under `record` (and in the whole run).
     pub fn push(&mut self, iv: Interval, record: Option<&str>) {
+        let i = self.all.push((record.is_some(), iv));
         if let Some(label) = record {
-            self.by_label.entry(label.to_owned()).or_default().push(iv);
+            let ranges = self.by_label.entry(label.to_owned()).or_default();
+            match ranges.last_mut() {
+                Some(r) if r.end == i => r.end += 1,
+                _ => ranges.push(i..i + 1),
+            }
         }
-        self.all.push((record.is_some(), iv));
     }
 }
 
@@ -417,11 +530,19 @@ pub fn compute(
     coeffs: Option<&crate::coeffs::Compensation>,
     step: &str,
 ) -> Measurement {
-    let parts = records.by_part(&m.records);
-    let series: Vec<Interval> = parts.iter().flatten().copied().collect();
+    // The parts are slices of the one series (one copy in memory).
+    let (series, lens) = records.by_part(&m.records);
+    let mut rest = series.as_slice();
+    let part_refs: Vec<&[Interval]> = lens
+        .iter()
+        .map(|&n| {
+            let (part, after) = rest.split_at(n.min(rest.len()));
+            rest = after;
+            part
+        })
+        .collect();
     let bias: Vec<f64> = series.iter().map(Interval::bias_dph).collect();
     let window = m.averaging_s.round().max(1.0) as usize;
-    let part_refs: Vec<&[Interval]> = parts.iter().map(Vec::as_slice).collect();
     let c = match m.metric {
         Metric::ScaleFactor
         | Metric::ScaleFactorNonlinearity
@@ -431,7 +552,7 @@ pub fn compute(
         | Metric::Threshold
         | Metric::AxisMisalignment => rate_figure(m, records),
         Metric::BiasStability => Computed::value(Some(bias_stability(&bias, window))),
-        Metric::DriftPp => drift(&parts, window),
+        Metric::DriftPp => drift(&part_refs, window),
         Metric::MeanBias => Computed::value(Some(mean(&bias))),
         Metric::BiasRepeatability => repeatability(m, records),
         Metric::WarmUpTime => warm_up(m, &series, &bias),
@@ -527,7 +648,7 @@ fn rate_figure(m: &Measure, records: &Records) -> Computed {
         m.records
             .iter()
             .filter_map(|l| records.get(l))
-            .filter_map(RatePoint::of)
+            .filter_map(|ivs| RatePoint::of(&ivs))
             .collect()
     };
     const RATES: &str =
@@ -557,7 +678,7 @@ fn rate_figure(m: &Measure, records: &Records) -> Computed {
                 &m.records
                     .iter()
                     .filter_map(|l| {
-                        let p = RatePoint::of(records.get(l)?)?;
+                        let p = RatePoint::of(&records.get(l)?)?;
                         Some((records.turn_rate_dps(l)? * 3600.0, p))
                     })
                     .collect::<Vec<_>>(),
@@ -571,19 +692,18 @@ fn rate_figure(m: &Measure, records: &Records) -> Computed {
 /// differs between power-ons: over several parts each is shifted by its
 /// offset from the first, as the model-4 fit with one offset per part
 /// estimates it.
-fn drift(parts: &[Vec<Interval>], window: usize) -> Computed {
+fn drift(parts: &[&[Interval]], window: usize) -> Computed {
     if parts.len() <= 1 {
-        let series: Vec<Interval> = parts.iter().flatten().copied().collect();
+        let series = parts.first().copied().unwrap_or_default();
         let bias = series.iter().map(Interval::bias_dph).collect();
-        let trace = drift_trace(&[(times(&series), bias)], window);
+        let trace = drift_trace(&[(times(series), bias)], window);
         return Computed {
             value: trace.as_ref().map(DriftTrace::pp),
             trace,
             ..Computed::default()
         };
     }
-    let part_refs: Vec<&[Interval]> = parts.iter().map(Vec::as_slice).collect();
-    match model::fit_runs(ModelKind::Model4, &part_refs) {
+    match model::fit_runs(ModelKind::Model4, parts) {
         Ok(f) => {
             let shifted: Vec<(Vec<f64>, Vec<f64>)> = parts
                 .iter()
@@ -679,7 +799,7 @@ fn power(m: &Measure, records: &Records) -> Computed {
             }
         })
         .filter(|p| p.on)
-        .map(PowerSample::w)
+        .map(|p| p.w())
         .collect();
     let (value, note) = if readings.is_empty() {
         (
@@ -797,7 +917,7 @@ mod tests {
         r.push_power(p(4.0, 0.6, true), None);
         r.push_power(p(5.0, 0.5, true), Some("b"));
         r.push_power(p(6.0, 0.5, true), Some("b"));
-        let times = |s: &[PowerSample]| s.iter().map(|p| p.t_s).collect::<Vec<_>>();
+        let times = |s: Vec<PowerSample>| s.iter().map(|p| p.t_s).collect::<Vec<_>>();
         assert_eq!(times(r.power_during("b")), [5.0, 6.0]);
         assert_eq!(times(r.power_from_turn_on("b")), [3.0, 4.0, 5.0, 6.0]);
         assert_eq!(times(r.power_from_turn_on("a")), [0.0, 1.0]);
@@ -865,8 +985,60 @@ mod tests {
         assert!((iv.t1_c - 20.5).abs() < 1e-12 && (iv.tcase_c - 18.0).abs() < 1e-12);
         assert!((iv.time_s - 10.5).abs() < 1e-9);
         assert_eq!(iv.frames, 400);
-        assert_eq!(r.get("up").map(<[Interval]>::len), Some(1));
+        assert_eq!(r.len_of("up"), Some(1));
         assert!(r.push_tick(&[], &state, None, 0.0025, 0.1, 0.01).is_none());
         assert_eq!(r.all.len(), 1);
+    }
+
+    /// A record longer than the store keeps in memory, a resumed run's
+    /// copy that discards and records again, and the two read back as
+    /// they were filed.
+    #[test]
+    fn records_longer_than_memory_holds_read_back_as_filed_in_each_copy() {
+        let iv = |t: f64| Interval {
+            time_s: t,
+            rate_dph: 15.0 + t * 1e-6,
+            reference_dph: 9.7,
+            t1_c: 20.0 + t * 1e-4,
+            t2_c: 20.5,
+            tcase_c: 21.0,
+            chamber_c: -40.0,
+            frames: 400,
+        };
+        let mut r = Records::default();
+        r.start("soak");
+        let n = 10_000;
+        for k in 0..n {
+            r.push(iv(f64::from(k)), Some("soak"));
+        }
+        r.push(iv(-1.0), None);
+        r.start("after");
+        r.push(iv(1e6), Some("after"));
+        let soak = r.get("soak").expect("filed");
+        assert_eq!(soak.len(), 10_000);
+        assert!(soak.iter().enumerate().all(|(k, v)| *v == iv(k as f64)));
+        assert_eq!(r.len_of("soak"), Some(10_000));
+        assert_eq!(r.intervals(), 10_002);
+        let mut seen = 0;
+        r.for_each_interval(|rec, v| {
+            assert_eq!(rec, v.time_s >= 0.0, "interval {seen}");
+            seen += 1;
+        });
+        assert_eq!(seen, 10_002);
+
+        // A resume: the copy takes "after" again in part 2.
+        let mut resumed = r.clone();
+        resumed.discard("after");
+        resumed.set_part(2);
+        resumed.start("after");
+        resumed.push(iv(2e6), Some("after"));
+        r.push(iv(3e6), Some("after"));
+        assert_eq!(resumed.get("after"), Some(vec![iv(2e6)]));
+        assert_eq!(r.get("after"), Some(vec![iv(1e6), iv(3e6)]));
+        let (series, lens) = resumed.by_part(&["soak".into(), "after".into()]);
+        assert_eq!(lens, [10_000, 1]);
+        assert_eq!(series.last(), Some(&iv(2e6)));
+        assert_eq!(resumed.get("soak"), Some(soak));
+        assert!(resumed.problem(&["soak".into()]).is_none());
     }
 }

@@ -15,6 +15,7 @@ pub mod health;
 pub mod interrupt;
 pub mod measure;
 pub mod resume;
+pub mod spill;
 
 use std::sync::Arc;
 

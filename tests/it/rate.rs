@@ -48,7 +48,7 @@ fn truth_points(log: &Path, response: &RateResponseConfig, prefix: &str) -> Vec<
         .order
         .iter()
         .filter(|l| l.starts_with(prefix))
-        .filter_map(|l| RatePoint::of(records.get(l)?))
+        .filter_map(|l| RatePoint::of(&records.get(l)?))
         .map(|p| RatePoint {
             output_dph: response.output_dph(p.input_dph, 1.0, 0.0),
             ..p
@@ -310,8 +310,8 @@ table = { outer_deg = 90.0, inner_deg = 0.0 }
     let between: Vec<f64> = replayed
         .result
         .records
-        .all
-        .iter()
+        .all()
+        .into_iter()
         .filter(|(rec, _)| !*rec)
         .map(|(_, iv)| iv.reference_dph / 3600.0)
         .filter(|r| *r > 11.0 && *r < 39.0)
