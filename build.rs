@@ -41,6 +41,7 @@ fn main() {
             }
         }
         println!("cargo:rerun-if-changed=src");
+        println!("cargo:rerun-if-changed=crates");
         let dirty =
             git(&["status", "--porcelain", "--untracked-files=no"]).is_some_and(|s| !s.is_empty());
         Some(if dirty {

@@ -17,8 +17,8 @@
 //! - **Query results**: open a [`Store`] at a [`Location`]; its rows carry
 //!   each run's [`RunState`] and each measurement's [`MeasureOutcome`].
 //! - **Simulate devices**: `sim` serves the chamber, table, gyro and supply
-//!   on their wire protocols; `protocol` holds the codecs drivers and
-//!   simulators share.
+//!   on their wire protocols; `protocol` (the `gyrobench-protocol` crate)
+//!   holds the codecs drivers and simulators share.
 
 pub mod analysis;
 pub mod bench;
@@ -33,7 +33,9 @@ pub mod driver;
 pub mod fsutil;
 pub mod geometry;
 pub mod procedure;
-pub mod protocol;
+/// The wire protocols, sans-IO: the `gyrobench-protocol` crate
+/// (`crates/protocol`), which drivers and simulators share.
+pub use gyrobench_protocol as protocol;
 pub mod report;
 pub mod results;
 pub mod runlog;
