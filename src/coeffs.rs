@@ -143,7 +143,7 @@ impl CoefficientSet {
         let f: Self = src.parse()?;
         let c = Checker::new(src);
         if let Some(m) = &f.model4 {
-            m.check(&c, "model4")?;
+            c.model4(m, "model4")?;
         }
         if let Some(u) = &f.unit {
             c.ensure(

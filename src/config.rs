@@ -8,6 +8,7 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
+use gyrobench_analysis::compensation::Model4;
 use serde::de::DeserializeOwned;
 use toml::de::{DeTable, DeValue};
 
@@ -390,6 +391,24 @@ impl<'a> Checker<'a> {
             &format!("must be a finite number, got {}", num(value)),
         )?;
         Ok(value)
+    }
+
+    /// The values of a model 4 read from a file (a coefficient set's
+    /// `[model4]`, the twin's `[bias]`): finite, tau_w > 0; errors name
+    /// `section.key` and its line.
+    pub fn model4(&self, m: &Model4, section: &str) -> Result<(), ConfigError> {
+        for (v, k) in [
+            (m.k1_dph_per_c, "k1_dph_per_c"),
+            (m.k2_dph_per_c2, "k2_dph_per_c2"),
+            (m.k3_dph_per_c_per_s, "k3_dph_per_c_per_s"),
+            (m.k4_dph_per_c, "k4_dph_per_c"),
+            (m.k5_dph, "k5_dph"),
+            (m.offset_dph, "offset_dph"),
+        ] {
+            self.finite(v, &format!("{section}.{k}"))?;
+        }
+        self.positive(m.warmup_tau_s, &format!("{section}.warmup_tau_s"))?;
+        Ok(())
     }
 }
 

@@ -20,13 +20,16 @@
 //!   on their wire protocols; `protocol` (the `gyrobench-protocol` crate)
 //!   holds the codecs drivers and simulators share.
 
-pub mod analysis;
+/// Pure math on recorded series: the `gyrobench-analysis` crate
+/// (`crates/analysis`).
+pub use gyrobench_analysis as analysis;
 pub mod bench;
 pub mod calibrate;
 pub mod cli;
 pub mod clock;
 pub mod coeffs;
-pub mod compensation;
+/// The study's compensation models as data (in `gyrobench-analysis`).
+pub use gyrobench_analysis::compensation;
 pub mod config;
 pub mod diagnose;
 pub mod driver;

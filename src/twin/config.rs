@@ -637,7 +637,7 @@ impl TwinConfig {
         c.within(g.temp_lsb_c, 1e-6, 1.0, "gyro.temp_lsb_c")?;
 
         c.non_negative(self.bias.turn_on_sigma_dph, "bias.turn_on_sigma_dph")?;
-        self.bias.model4.check(c, "bias")?;
+        c.model4(&self.bias.model4, "bias")?;
 
         let nz = &self.noise;
         c.non_negative(nz.arw_deg_per_rt_h, "noise.arw_deg_per_rt_h")?;

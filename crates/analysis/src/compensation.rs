@@ -12,8 +12,6 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::config::{Checker, ConfigError};
-
 /// The study's model 4 (`[model4]` of a coefficient set, the twin's
 /// `[bias]`).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -87,23 +85,6 @@ impl Model4 {
             + on(terms.gradient_rate) * self.k3_dph_per_c_per_s * x.gradient_rate_c_per_s
             + on(terms.case_temperature) * self.k4_dph_per_c * x.case_c
             + on(terms.self_heating) * self.k5_dph * (-x.tau_s / self.warmup_tau_s).exp()
-    }
-
-    /// Check the values of a model read from a file: finite, tau_w > 0;
-    /// errors name `section.key` and its line.
-    pub fn check(&self, c: &Checker<'_>, section: &str) -> Result<(), ConfigError> {
-        for (v, k) in [
-            (self.k1_dph_per_c, "k1_dph_per_c"),
-            (self.k2_dph_per_c2, "k2_dph_per_c2"),
-            (self.k3_dph_per_c_per_s, "k3_dph_per_c_per_s"),
-            (self.k4_dph_per_c, "k4_dph_per_c"),
-            (self.k5_dph, "k5_dph"),
-            (self.offset_dph, "offset_dph"),
-        ] {
-            c.finite(v, &format!("{section}.{k}"))?;
-        }
-        c.positive(self.warmup_tau_s, &format!("{section}.warmup_tau_s"))?;
-        Ok(())
     }
 }
 

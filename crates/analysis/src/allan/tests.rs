@@ -41,7 +41,7 @@ fn a_constant_rate_has_zero_deviation_and_taus_stop_at_a_third() {
 /// the same noise type at every tau, the same EDF and interval.
 #[test]
 fn agrees_with_allantools_on_adev_noise_type_edf_and_interval() {
-    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/allan");
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fixtures/allan");
     let reference: serde_json::Value = serde_json::from_str(
         &std::fs::read_to_string(root.join("reference.json")).expect("reference.json"),
     )

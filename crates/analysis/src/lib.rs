@@ -1,0 +1,15 @@
+//! Analysis: pure math on recorded series, no I/O.
+//!
+//! `series` reduces frames to interval means, `figures` computes figures of
+//! merit, `model` fits the study's compensation models (`compensation`
+//! holds them as data), `study` holds the definitions of the study's
+//! figures, `rate` the rate-table figures, `allan` the Allan deviation and
+//! its noise terms.
+
+pub mod allan;
+pub mod compensation;
+pub mod figures;
+pub mod model;
+pub mod rate;
+pub mod series;
+pub mod study;
