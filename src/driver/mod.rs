@@ -6,12 +6,17 @@
 //! ones end in a [`DeviceError`] that names the device, what failed and
 //! what to check.
 
-pub mod acl;
-pub mod espec;
-pub mod gyro;
-pub mod link;
-pub mod supply;
-pub mod watlow;
+// The drivers are the crate's own: the sequencer, the bench file and the
+// station reach the devices through the traits below and
+// `bench::open_bench`.
+pub(crate) mod acl;
+pub(crate) mod espec;
+pub(crate) mod gyro;
+pub(crate) mod link;
+#[cfg(test)]
+mod sim_tests;
+pub(crate) mod supply;
+pub(crate) mod watlow;
 
 use std::time::Duration;
 

@@ -8,7 +8,6 @@
 
 mod bad_input;
 mod batch;
-mod bench_io;
 mod calibrate;
 mod cli;
 mod common;

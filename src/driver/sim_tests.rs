@@ -1,25 +1,27 @@
 //! Every driver against its simulator, over loopback TCP and a real pty,
-//! with the simulators' fault injection.
+//! with the simulators' fault injection. Here, beside the drivers, since
+//! they are the crate's own: the rest of the crate and other programs reach
+//! the devices through the traits and `bench::open_bench`.
 
 use std::sync::Arc;
 use std::sync::atomic::Ordering;
 use std::time::Duration;
 
-use gyrobench::driver::acl::AclTable;
-use gyrobench::driver::espec::EspecChamber;
-use gyrobench::driver::gyro::GyroReader;
-use gyrobench::driver::link::{Connector, LineLink};
-use gyrobench::driver::supply::ScpiSupply;
-use gyrobench::driver::watlow::WatlowChamber;
-use gyrobench::driver::{
+use crate::driver::acl::AclTable;
+use crate::driver::espec::EspecChamber;
+use crate::driver::gyro::GyroReader;
+use crate::driver::link::{Connector, LineLink};
+use crate::driver::supply::ScpiSupply;
+use crate::driver::watlow::WatlowChamber;
+use crate::driver::{
     Chamber, ChamberMode, DeviceError, InPosition, MotionTable, PowerSupply, RetryPolicy,
     SupplyReading,
 };
-use gyrobench::geometry::TableAngles;
-use gyrobench::protocol::frame::FrameLayout;
-use gyrobench::protocol::supply::Dialect;
-use gyrobench::sim::serve::{Serve, Served, start};
-use gyrobench::transport::{BoxTransport, DeviceSpec, open};
+use crate::geometry::TableAngles;
+use crate::protocol::frame::FrameLayout;
+use crate::protocol::supply::Dialect;
+use crate::sim::serve::{Serve, Served, start};
+use crate::transport::{BoxTransport, DeviceSpec, open};
 
 const POLICY: RetryPolicy = RetryPolicy {
     timeout: Duration::from_millis(300),
@@ -411,8 +413,8 @@ async fn gyro_link_trouble_is_counted_and_silence_is_an_error() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_bench_file_opens_every_device_of_sim_serve() {
-    use gyrobench::bench::{BenchConfig, open_bench};
-    use gyrobench::config::Source;
+    use crate::bench::{BenchConfig, open_bench};
+    use crate::config::Source;
     let served = serve(1.0).await;
     let addr = |device: &str, protocol: &str| spec(&served, device, protocol, "tcp://").to_string();
     let text = std::fs::read_to_string(concat!(
@@ -445,10 +447,9 @@ async fn a_bench_file_opens_every_device_of_sim_serve() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn drivers_work_over_an_in_memory_duplex_too() {
-    use gyrobench::sim::{SharedBench, SimBench, acl::serve_acl, espec::serve_espec};
-    use gyrobench::twin::TwinConfig;
-    let clock: Arc<dyn gyrobench::clock::Clock> =
-        Arc::new(gyrobench::clock::WallClock::scaled(20.0));
+    use crate::sim::{SharedBench, SimBench, acl::serve_acl, espec::serve_espec};
+    use crate::twin::TwinConfig;
+    let clock: Arc<dyn crate::clock::Clock> = Arc::new(crate::clock::WallClock::scaled(20.0));
     let bench = SharedBench::new(
         SimBench::new(TwinConfig::default_rl16(), 3, FrameLayout::default()),
         clock,
