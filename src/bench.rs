@@ -542,6 +542,13 @@ impl BenchConfig {
         self.site.validate(&c, "site")?;
         self.table.geometry.validate(&c, "table.geometry")?;
         self.validate_slots(&c)?;
+        self.validate_devices(&c, src)?;
+        self.validate_limits(&c)
+    }
+
+    /// `[devices]`: each spec, timeouts, attempts, windows, the supply and
+    /// the gyro's frame.
+    fn validate_devices(&self, c: &Checker, src: &Source) -> Result<(), ConfigError> {
         let d = &self.devices;
         for (key, spec, role) in [
             ("devices.chamber.spec", &d.chamber.spec, "chamber"),
@@ -602,13 +609,18 @@ impl BenchConfig {
             c.within(v, 0.0, 3600.0, key)?;
         }
         if let Some(p) = &d.supply {
-            Self::validate_supply(&c, src, p)?;
+            Self::validate_supply(c, src, p)?;
         }
         if let Some(layout) = &d.gyro.frame {
             layout
                 .validate()
                 .map_err(|e| src.invalid("devices.gyro.frame", e.to_string()))?;
         }
+        Ok(())
+    }
+
+    /// `[limits]`: the chamber's and the table's, and the unit's.
+    fn validate_limits(&self, c: &Checker) -> Result<(), ConfigError> {
         let l = &self.limits;
         c.within(l.chamber_min_c, -100.0, 300.0, "limits.chamber_min_c")?;
         c.within(l.chamber_max_c, -100.0, 300.0, "limits.chamber_max_c")?;

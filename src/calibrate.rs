@@ -110,6 +110,15 @@ pub fn load_unit(path: &Path, unit: Option<&str>) -> Result<RunSeries, ReplayErr
             .flatten()
             .collect()
     };
+    // A fit on part of a record would be a fit on other data than the log's.
+    if let (n, Some(why)) = r.result.records.read_faults()
+        && n > 0
+    {
+        return Err(ReplayError::Log {
+            path: path.display().to_string(),
+            message: why,
+        });
+    }
     Ok(RunSeries {
         name: path.display().to_string(),
         serial: r.meta.dut_serial.clone(),

@@ -354,23 +354,31 @@ fn warm_up_chart(r: &Report, records: &Records) -> Option<String> {
 /// turn-on's highest reading; none for a run that switched nothing on
 /// (the unit powered throughout: no turn-on to show).
 fn current_chart(records: &Records) -> Option<String> {
-    let p = records.power();
-    if p.len() < 2 {
+    let n = records.power_len();
+    if n < 2 {
         return None;
     }
-    let t: Vec<f64> = p.iter().map(|s| s.t_s / 3600.0).collect();
-    let a: Vec<f64> = p.iter().map(|s| s.a).collect();
-    let block = if p.len() > 2000 { 60 } else { 1 };
-    let means: Vec<(f64, f64)> = block_means(&t, block)
-        .into_iter()
-        .zip(block_means(&a, block))
-        .collect();
+    let block = if n > 2000 { 60 } else { 1 };
+    // The readings are read in order, `block` at a time into a mean.
+    let mut means: Vec<(f64, f64)> = Vec::new();
+    let (mut t, mut a) = (Vec::with_capacity(block), Vec::with_capacity(block));
     // Each stretch with the output on that began with a turn-on (not
     // the run's start), and its highest reading.
     let mut peaks = Vec::new();
     let mut best: Option<(f64, f64)> = None;
     let mut was_off = false;
-    for s in p {
+    records.for_each_power(|s| {
+        t.push(s.t_s / 3600.0);
+        a.push(s.a);
+        if t.len() == block {
+            means.extend(
+                block_means(&t, block)
+                    .into_iter()
+                    .zip(block_means(&a, block)),
+            );
+            t.clear();
+            a.clear();
+        }
         if s.on && was_off {
             if best.is_none_or(|(_, a)| s.a > a) {
                 best = Some((s.t_s / 3600.0, s.a));
@@ -379,7 +387,7 @@ fn current_chart(records: &Records) -> Option<String> {
             was_off = true;
             peaks.extend(best.take());
         }
-    }
+    });
     peaks.extend(best);
     if peaks.is_empty() {
         return None;
@@ -904,14 +912,8 @@ fn headline(r: &Report) -> String {
     esc(&s)
 }
 
-/// The whole page.
-pub fn render_html(r: &Report, records: &Records) -> String {
-    let (colour, word) = match r.outcome {
-        Outcome::Pass => ("var(--pass)", "PASS"),
-        Outcome::Fail => ("var(--fail)", "FAIL"),
-        Outcome::Error => ("var(--error)", "ERROR"),
-        Outcome::Aborted => ("var(--aborted)", "ABORTED"),
-    };
+/// The measurements table's rows.
+fn measurement_rows(r: &Report) -> String {
     let mut rows = String::new();
     for m in &r.measurements {
         let class = m.outcome.as_str();
@@ -930,7 +932,12 @@ pub fn render_html(r: &Report, records: &Records) -> String {
             esc(&m.note),
         ));
     }
-    let error = r.error.as_ref().map_or(String::new(), |e| {
+    rows
+}
+
+/// Where and why the run stopped, for a run that stopped in error.
+fn stopped_box(r: &Report) -> String {
+    r.error.as_ref().map_or(String::new(), |e| {
         format!(
             "<p class=box>Stopped in step <b>{}</b>{}: {}</p>\n",
             esc(&e.step),
@@ -939,8 +946,12 @@ pub fn render_html(r: &Report, records: &Records) -> String {
                 .map_or(String::new(), |d| format!(" (device <b>{}</b>)", esc(d))),
             esc(&e.message)
         )
-    });
-    let bench_left = match &r.bench_left {
+    })
+}
+
+/// The state the run left the bench in, as read back.
+fn bench_left_line(r: &Report) -> String {
+    match &r.bench_left {
         Some(b) => format!(
             "<p class={}><b>Bench left:</b> {}</p>\n",
             if b.verified && r.cleanup_completed {
@@ -954,19 +965,12 @@ pub fn render_html(r: &Report, records: &Records) -> String {
             "<p class=box><b>Cleanup did not complete: check the bench.</b></p>\n".to_owned()
         }
         None => String::new(),
-    };
-    let headline_chart = r
-        .measurements
-        .iter()
-        .find(|m| m.metric == Metric::CompensatedDriftPp)
-        .and_then(drift_chart)
-        .unwrap_or_default();
-    let traces: String = [rate_chart(r, records), temperature_chart(records)]
-        .into_iter()
-        .flatten()
-        .collect();
-    let l = &r.link;
-    let overdue = if r.calibration_overdue.is_empty() {
+    }
+}
+
+/// The box naming the instruments past their calibration's due date.
+fn overdue_box(r: &Report) -> String {
+    if r.calibration_overdue.is_empty() {
         String::new()
     } else {
         format!(
@@ -980,8 +984,34 @@ pub fn render_html(r: &Report, records: &Records) -> String {
                 .collect::<Vec<_>>()
                 .join("; "))
         )
+    }
+}
+
+/// The whole page.
+pub fn render_html(r: &Report, records: &Records) -> String {
+    let (faults_before, _) = records.read_faults();
+    let (colour, word) = match r.outcome {
+        Outcome::Pass => ("var(--pass)", "PASS"),
+        Outcome::Fail => ("var(--fail)", "FAIL"),
+        Outcome::Error => ("var(--error)", "ERROR"),
+        Outcome::Aborted => ("var(--aborted)", "ABORTED"),
     };
-    let body = format!(
+    let rows = measurement_rows(r);
+    let error = stopped_box(r);
+    let bench_left = bench_left_line(r);
+    let headline_chart = r
+        .measurements
+        .iter()
+        .find(|m| m.metric == Metric::CompensatedDriftPp)
+        .and_then(drift_chart)
+        .unwrap_or_default();
+    let traces: String = [rate_chart(r, records), temperature_chart(records)]
+        .into_iter()
+        .flatten()
+        .collect();
+    let l = &r.link;
+    let overdue = overdue_box(r);
+    let mut body = format!(
         r#"<div class=verdict style="background:{colour}">{word}</div>{overdue_tag}
 <h1>{proc} &mdash; {dut_type} {serial}</h1>
 <p class=headline>{headline}</p>
@@ -1025,6 +1055,19 @@ pub fn render_html(r: &Report, records: &Records) -> String {
         res = l.resyncs,
         dup = l.duplicates,
     );
+    // The charts were drawn from the records' temporary file: say when
+    // part of it could not be read back.
+    if let (faults, Some(why)) = records.read_faults()
+        && faults > faults_before
+    {
+        body.insert_str(
+            0,
+            &format!(
+                "<p class=box><b>Charts incomplete:</b> {}; the figures stand as judged during the run.</p>\n",
+                esc(&why)
+            ),
+        );
+    }
     page(
         &format!("{} {}: {word}", r.procedure, r.dut.serial),
         &print_margins(r),

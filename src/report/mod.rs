@@ -237,7 +237,12 @@ impl NoiseFigures {
                     .any(|m| m.metric == Metric::BiasStability && m.records.contains(l))
             })
             .max_by_key(|&(_, n)| n)?;
+        let (faults_before, _) = records.read_faults();
         let series = records.get(label)?;
+        // Not from a record the temporary file could not give back whole.
+        if records.read_faults().0 > faults_before {
+            return None;
+        }
         let bias: Vec<f64> = series.iter().map(Interval::bias_dph).collect();
         let a = analyse(&bias, 1.0, Taus::Octave);
         if a.points.len() < 2 {

@@ -246,9 +246,6 @@ impl Records {
 
     /// Why the data of `labels` cannot be judged, or none.
     pub fn problem(&self, labels: &[String]) -> Option<String> {
-        if let Some(fault) = self.all.fault().or_else(|| self.power.fault()) {
-            return Some(fault);
-        }
         labels.iter().find_map(|l| {
             self.health
                 .get(l)
@@ -271,6 +268,32 @@ impl Records {
     pub fn len_of(&self, label: &str) -> Option<u64> {
         let ranges = self.by_label.get(label)?;
         Some(ranges.iter().map(|r| r.end - r.start).sum())
+    }
+
+    /// Reads of the store's temporary file that failed so far, and the
+    /// last one's reason: what a figure or chart was made from is whole
+    /// when the count did not rise while it was made.
+    pub fn read_faults(&self) -> (u64, Option<String>) {
+        let (a, why_a) = self.all.read_faults();
+        let (p, why_p) = self.power.read_faults();
+        (a + p, why_p.or(why_a))
+    }
+
+    /// Why the store keeps its rows in memory, once it does (its temporary
+    /// file could not be made or written: nothing is lost).
+    pub fn write_fault(&self) -> Option<String> {
+        self.all.write_fault().or_else(|| self.power.write_fault())
+    }
+
+    /// The number of supply readings.
+    pub fn power_len(&self) -> u64 {
+        self.power.len()
+    }
+
+    /// Hand every supply reading to `f` in order (without holding them
+    /// all in memory).
+    pub fn for_each_power(&self, f: impl FnMut(PowerSample)) {
+        self.power.for_each(0..self.power.len(), f);
     }
 
     /// Every interval of the run, and whether it belongs to a record.
@@ -530,6 +553,7 @@ pub fn compute(
     coeffs: Option<&crate::coeffs::Compensation>,
     step: &str,
 ) -> Measurement {
+    let (faults_before, _) = records.read_faults();
     // The parts are slices of the one series (one copy in memory).
     let (series, lens) = records.by_part(&m.records);
     let mut rest = series.as_slice();
@@ -582,7 +606,10 @@ pub fn compute(
     }
     let within =
         value.is_some_and(|v| m.low.is_none_or(|lo| v >= lo) && m.high.is_none_or(|hi| v <= hi));
-    let outcome = match records.problem(&m.records) {
+    let (faults, why) = records.read_faults();
+    // Rows this measure's reads could not get back: its data are not whole.
+    let unread = (faults > faults_before).then(|| why.unwrap_or_default());
+    let outcome = match unread.or_else(|| records.problem(&m.records)) {
         Some(p) => {
             note = format!("not judged: {p}");
             MeasureOutcome::Error
@@ -1040,5 +1067,54 @@ mod tests {
         assert_eq!(series.last(), Some(&iv(2e6)));
         assert_eq!(resumed.get("soak"), Some(soak));
         assert!(resumed.problem(&["soak".into()]).is_none());
+    }
+
+    /// Rows the temporary file cannot give back make the measure that read
+    /// them an error, not a figure on part of its record; a measure whose
+    /// rows were all in memory is judged as before.
+    #[test]
+    fn a_measure_whose_rows_cannot_be_read_back_is_not_judged() {
+        let mut r = Records::default();
+        r.start("long");
+        for k in 0..5000 {
+            let iv = Interval {
+                time_s: f64::from(k),
+                rate_dph: 10.0 + f64::from(k % 7) * 0.01,
+                reference_dph: 9.7,
+                t1_c: 20.0,
+                t2_c: 20.0,
+                tcase_c: 20.0,
+                chamber_c: 20.0,
+                frames: 400,
+            };
+            r.push(iv, Some("long"));
+        }
+        r.start("short");
+        r.push(Interval::default(), Some("short"));
+        let m = |label: &str| Measure {
+            name: "bias".into(),
+            metric: Metric::MeanBias,
+            records: vec![label.to_owned()],
+            averaging_s: 1.0,
+            band: None,
+            low: None,
+            high: Some(100.0),
+            unit: "deg/h".into(),
+        };
+        assert_eq!(
+            compute(&m("long"), &r, None, "s").outcome,
+            MeasureOutcome::Pass
+        );
+        r.all.lose_file();
+        let lost = compute(&m("long"), &r, None, "s");
+        assert_eq!(lost.outcome, MeasureOutcome::Error, "{}", lost.note);
+        assert!(
+            lost.note.contains("could not be read back"),
+            "{}",
+            lost.note
+        );
+        // The short record sits in the memory tail: still judged.
+        let short = compute(&m("short"), &r, None, "s");
+        assert_eq!(short.outcome, MeasureOutcome::Pass, "{}", short.note);
     }
 }

@@ -554,6 +554,8 @@ struct Run<'a> {
     expected: finish::Expected,
     /// A batch's other units (slots after the first).
     others: Vec<Lane>,
+    /// The record store's temporary file failed and that was said.
+    spill_said: bool,
 }
 
 /// One more unit of a batch as the run keeps it: the first unit's are the
@@ -698,6 +700,16 @@ impl Run<'_> {
                 .get(k)
                 .map_or_else(|| format!("unit {}", k + 1), Clone::clone);
             let text = format!("{unit}: {why}; the batch goes on, its records say what it lost");
+            self.progress.warn(&text);
+            self.note(Level::Warning, &text);
+        }
+        if !self.spill_said
+            && let Some(why) = std::iter::once(&self.records)
+                .chain(self.others.iter().map(|l| &l.records))
+                .find_map(Records::write_fault)
+        {
+            self.spill_said = true;
+            let text = format!("{why}: the run goes on, its memory now grows with its length");
             self.progress.warn(&text);
             self.note(Level::Warning, &text);
         }
@@ -1215,6 +1227,7 @@ pub async fn run(
             ..finish::Expected::default()
         },
         others: Vec::new(),
+        spill_said: false,
     };
     r.others
         .resize_with(r.bench.units().saturating_sub(1), Lane::default);

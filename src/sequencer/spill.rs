@@ -13,9 +13,11 @@
 //! of the part before it.
 //!
 //! When the temporary file cannot be made or written (no space), rows stay
-//! in memory: nothing is lost, the store only stops being constant. A file
-//! that cannot be read back is said ([`Spill::fault`]) and the rows it held
-//! are missing from what is read, so the figures on them are not judged.
+//! in memory: nothing is lost, the store only stops being constant, and
+//! [`Spill::write_fault`] says why. Rows the file cannot give back are
+//! missing from what is read, and each such read is counted
+//! ([`Spill::read_faults`]): a figure computed while the count rose is not
+//! judged, a chart drawn while it rose says so.
 
 use std::fs::File;
 use std::io::{Read, Seek, SeekFrom, Write};
@@ -47,8 +49,10 @@ struct Arena<T> {
     file: Option<File>,
     /// Set once the file could not be made or written: rows stay in memory.
     in_memory: bool,
-    /// Why rows could not be read back, once they could not.
-    fault: Option<String>,
+    /// Why the file could not be made or written, once it could not.
+    write_fault: Option<String>,
+    /// Reads the file could not answer, and the last one's reason.
+    read_faults: (u64, Option<String>),
 }
 
 impl<T: Row> Arena<T> {
@@ -58,7 +62,8 @@ impl<T: Row> Arena<T> {
             tail: Vec::new(),
             file: None,
             in_memory: false,
-            fault: None,
+            write_fault: None,
+            read_faults: (0, None),
         }
     }
 
@@ -85,8 +90,11 @@ impl<T: Row> Arena<T> {
         if self.file.is_none() {
             match tempfile::tempfile() {
                 Ok(f) => self.file = Some(f),
-                Err(_) => {
+                Err(e) => {
                     self.in_memory = true;
+                    self.write_fault = Some(format!(
+                        "the record store's temporary file could not be made ({e}); its rows stay in memory"
+                    ));
                     return;
                 }
             }
@@ -103,43 +111,42 @@ impl<T: Row> Arena<T> {
             }
             // The rows already written stay readable; these and every
             // later one stay here.
-            _ => self.in_memory = true,
+            Some(Err(e)) => {
+                self.in_memory = true;
+                self.write_fault = Some(format!(
+                    "the record store's temporary file could not be written ({e}); its rows stay in memory"
+                ));
+            }
+            None => self.in_memory = true,
         }
     }
 
-    /// Hand rows `r` of the arena to `f`, in order (read from the file a
-    /// tail's worth at a time).
-    fn read(&mut self, r: Range<u64>, f: &mut dyn FnMut(T)) {
-        let mut at = r.start;
-        let on_file = r.end.min(self.flushed);
-        while at < on_file {
-            let n = (on_file - at).min(TAIL_ROWS as u64);
-            let mut bytes = vec![0; n as usize * T::SIZE];
+    /// Rows `r` of the arena (at most a tail's worth), appended to `out`.
+    fn read(&mut self, r: Range<u64>, out: &mut Vec<T>) {
+        let on_file = r.start..r.end.min(self.flushed);
+        if !on_file.is_empty() {
+            let mut bytes = vec![0; (on_file.end - on_file.start) as usize * T::SIZE];
             let read = match self.file.as_mut() {
                 Some(file) => file
-                    .seek(SeekFrom::Start(at * T::SIZE as u64))
+                    .seek(SeekFrom::Start(on_file.start * T::SIZE as u64))
                     .and_then(|_| file.read_exact(&mut bytes)),
                 None => Err(std::io::Error::other("the file is gone")),
             };
-            if let Err(e) = read {
-                self.fault.get_or_insert_with(|| {
-                    format!("the record store's temporary file could not be read back: {e}")
-                });
-                break;
+            match read {
+                Ok(()) => out.extend(bytes.chunks_exact(T::SIZE).map(T::decode)),
+                Err(e) => {
+                    self.read_faults.0 += 1;
+                    self.read_faults.1 = Some(format!(
+                        "the record store's temporary file could not be read back ({e})"
+                    ));
+                }
             }
-            bytes.chunks_exact(T::SIZE).map(T::decode).for_each(&mut *f);
-            at += n;
         }
         let in_tail = r.start.max(self.flushed)..r.end;
         if !in_tail.is_empty() {
             let from = (in_tail.start - self.flushed) as usize;
             let to = (in_tail.end - self.flushed) as usize;
-            self.tail
-                .get(from..to)
-                .unwrap_or_default()
-                .iter()
-                .copied()
-                .for_each(f);
+            out.extend_from_slice(self.tail.get(from..to).unwrap_or_default());
         }
     }
 }
@@ -207,17 +214,24 @@ impl<T: Row> Spill<T> {
         out
     }
 
-    /// Hand the view's rows `r` to `f` in order (clipped to its length).
+    /// Hand the view's rows `r` to `f` in order (clipped to its length),
+    /// a tail's worth at a time: the store is not locked while `f` runs,
+    /// so `f` may read the store too.
     pub fn for_each(&self, r: Range<u64>, mut f: impl FnMut(T)) {
         let r = r.start.min(self.len)..r.end.min(self.len);
-        let mut arena = self.arena();
+        let mut chunk = Vec::new();
         let mut at = 0;
         for range in &self.ranges {
             let n = range.end - range.start;
-            let from = r.start.max(at);
+            let mut from = r.start.max(at);
             let to = r.end.min(at + n);
-            if from < to {
-                arena.read(range.start + from - at..range.start + to - at, &mut f);
+            while from < to {
+                let upto = to.min(from + TAIL_ROWS as u64);
+                chunk.clear();
+                self.arena()
+                    .read(range.start + from - at..range.start + upto - at, &mut chunk);
+                chunk.iter().copied().for_each(&mut f);
+                from = upto;
             }
             at += n;
             if at >= r.end {
@@ -231,15 +245,23 @@ impl<T: Row> Spill<T> {
         self.get(0..self.len)
     }
 
-    /// Why some rows could not be read back, once they could not.
-    pub fn fault(&self) -> Option<String> {
-        self.arena().fault.clone()
+    /// Reads the file could not answer so far (in every view of the
+    /// store), and the last one's reason.
+    pub fn read_faults(&self) -> (u64, Option<String>) {
+        self.arena().read_faults.clone()
     }
 
-    /// Whether the store keeps its rows in memory (its file could not be
-    /// made or written).
-    pub fn in_memory(&self) -> bool {
-        self.arena().in_memory
+    /// Lose the file, as a disk that fails would (tests of what a failed
+    /// read does).
+    #[cfg(test)]
+    pub(crate) fn lose_file(&self) {
+        self.arena().file = None;
+    }
+
+    /// Why the store keeps its rows in memory (its file could not be made
+    /// or written), once it does.
+    pub fn write_fault(&self) -> Option<String> {
+        self.arena().write_fault.clone()
     }
 }
 
@@ -288,7 +310,8 @@ mod tests {
         );
         assert_eq!(s.get(n - 1..n + 10), [(n - 1) * 3], "clipped to the view");
         assert!(s.get(n..n + 1).is_empty());
-        assert!(s.fault().is_none());
+        assert_eq!(s.read_faults(), (0, None));
+        assert!(s.write_fault().is_none());
     }
 
     #[test]
@@ -313,5 +336,22 @@ mod tests {
             [0..15, 16..17],
             "b's rows: its own after the shared, then past a's"
         );
+    }
+
+    #[test]
+    fn what_reads_each_row_may_read_the_store_too() {
+        let mut s = Spill::<u64>::default();
+        for i in 0..(TAIL_ROWS as u64 + 10) {
+            s.push(i);
+        }
+        let mut firsts = 0;
+        s.for_each(0..s.len(), |_| firsts += s.get(0..1)[0]);
+        assert_eq!(firsts, 0);
+        let mut n = 0;
+        s.for_each(TAIL_ROWS as u64 - 1..TAIL_ROWS as u64 + 1, |row| {
+            n += 1;
+            assert_eq!(s.get(row..row + 1), [row]);
+        });
+        assert_eq!(n, 2);
     }
 }
