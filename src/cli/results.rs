@@ -263,20 +263,7 @@ pub fn run(args: ResultsArgs) -> Result<Outcome> {
             let t = store.trend(&measurement, &f)?;
             if let Some(path) = &html {
                 let points = store.trend_points(&measurement, &f, 5000)?;
-                let page_dir = path
-                    .parent()
-                    .filter(|d| !d.as_os_str().is_empty())
-                    .unwrap_or(std::path::Path::new("."))
-                    .to_owned();
-                let link = |p: &crate::results::query::TrendPoint| {
-                    crate::results::page::report_link(p, &page_dir)
-                };
-                crate::fsutil::write_output(
-                    path,
-                    crate::results::page::trend_page(&t, &points, &link).as_bytes(),
-                )
-                .with_context(|| format!("writing {}", path.display()))?;
-                errln!("chart page in {}", path.display());
+                write_trend_page(path, &t, &points)?;
             }
             if json {
                 outln!("{}", serde_json::to_string_pretty(&t)?)?;
@@ -319,31 +306,59 @@ pub fn run(args: ResultsArgs) -> Result<Outcome> {
                 return Ok(Outcome::Fail);
             }
         }
-        ResultsCommand::Sync { dirs } => {
-            let mut failed_any = false;
-            for d in &dirs {
-                anyhow::ensure!(d.is_dir(), "{}: not a directory", d.display());
-                let synced = store.sync_dir(d);
-                outln!(
-                    "{}: {} part(s) indexed, {} already in {} ({} of them unchanged since the last sync, not read)",
-                    d.display(),
-                    synced.added,
-                    synced.there + synced.unchanged,
-                    store.name(),
-                    synced.unchanged
-                )?;
-                let failed = synced.failed;
-                for f in &failed {
-                    errln!("warning: {f}");
-                }
-                failed_any |= !failed.is_empty();
-            }
-            if failed_any {
-                return Ok(Outcome::Error);
-            }
-        }
+        ResultsCommand::Sync { dirs } => return sync(&mut store, &dirs),
     }
     Ok(Outcome::Success)
+}
+
+/// The trend's chart page at `path`, each point linked to its report.
+fn write_trend_page(
+    path: &std::path::Path,
+    t: &Trend,
+    points: &[crate::results::query::TrendPoint],
+) -> Result<()> {
+    let page_dir = path
+        .parent()
+        .filter(|d| !d.as_os_str().is_empty())
+        .unwrap_or(std::path::Path::new("."))
+        .to_owned();
+    let link =
+        |p: &crate::results::query::TrendPoint| crate::results::page::report_link(p, &page_dir);
+    crate::fsutil::write_output(
+        path,
+        crate::results::page::trend_page(t, points, &link).as_bytes(),
+    )
+    .with_context(|| format!("writing {}", path.display()))?;
+    errln!("chart page in {}", path.display());
+    Ok(())
+}
+
+/// `results sync`: index each run directory's logs; an error when one
+/// could not be read.
+fn sync(store: &mut Store, dirs: &[PathBuf]) -> Result<Outcome> {
+    let mut failed_any = false;
+    for d in dirs {
+        anyhow::ensure!(d.is_dir(), "{}: not a directory", d.display());
+        let synced = store.sync_dir(d);
+        outln!(
+            "{}: {} part(s) indexed, {} already in {} ({} of them unchanged since the last sync, not read)",
+            d.display(),
+            synced.added,
+            synced.there + synced.unchanged,
+            store.name(),
+            synced.unchanged
+        )?;
+        let failed = synced.failed;
+        for f in &failed {
+            errln!("warning: {f}");
+        }
+        failed_any |= !failed.is_empty();
+    }
+    Ok(if failed_any {
+        Outcome::Error
+    } else {
+        Outcome::Success
+    })
 }
 
 fn opt(v: Option<f64>, digits: usize) -> String {

@@ -538,125 +538,135 @@ fn rate_points(m: &Measurement, records: &Records) -> Vec<RatePoint> {
 /// fit in ppm (with its standard error and the nonlinearity limit), and
 /// near zero the output against the input with the lock-in fit.
 fn rate_table_charts(r: &Report, records: &Records) -> String {
-    let mut out = String::new();
     let transfer = r.measurements.iter().find(|m| {
         matches!(
             m.metric,
             Metric::ScaleFactorNonlinearity | Metric::ScaleFactor | Metric::ScaleFactorAsymmetry
         )
     });
-    if let Some(m) = transfer {
-        let pts = rate_points(m, records);
-        if let Some(t) = Transfer::fit(&pts) {
-            let labels: Vec<String> = pts
-                .iter()
-                .map(|p| format!("{:+}", (p.input_dph / 3600.0 * 10.0).round() / 10.0))
-                .collect();
-            let resid: Vec<(f64, f64, f64)> = pts
-                .iter()
-                .enumerate()
-                .map(|(i, p)| {
-                    let net = (t.output_dph(p.input_dph) - t.bias_dph).abs().max(1e-12);
-                    let r = (p.output_dph - t.output_dph(p.input_dph)) / net * 1e6;
-                    let se = p.se_dph / net * 1e6;
-                    (i as f64, r, se)
-                })
-                .collect();
-            let mut c = Chart::new(
-                format!(
-                    "Scale-factor residuals: K+ {:.1} ppm, K- {:.1} ppm from nominal, bias {:.3} deg/h",
-                    (t.k_pos - 1.0) * 1e6,
-                    (t.k_neg - 1.0) * 1e6,
-                    t.bias_dph
-                ),
-                "input rate (table + Earth), deg/s",
-                "residual, ppm of the output",
-            )
-            .categories(labels)
-            .height(320)
-            .series(
-                Series::points(
-                    "record mean minus the transfer fit (one slope per direction), with its standard error",
-                    resid.iter().map(|(x, y, _)| (*x, *y)).collect(),
-                    Marker::Circle,
-                )
-                .marker(Marker::Circle, 6)
-                .colour(0)
-                .errors(resid.iter().map(|(x, y, e)| (*x, y - e, y + e)).collect()),
-            );
-            if let Some(nl) = r
-                .measurements
-                .iter()
-                .find(|m| m.metric == Metric::ScaleFactorNonlinearity)
-                && let Some(hi) = nl.high
-            {
-                c = c.band(Band {
-                    label: format!("nonlinearity limit +-{hi} ppm"),
-                    y: (-hi, hi),
-                    x: Some((-0.5, pts.len() as f64 - 0.5)),
-                });
-            }
-            out.push_str(&c.render());
-        }
-    }
     let band = r
         .measurements
         .iter()
         .find(|m| matches!(m.metric, Metric::DeadBand | Metric::Threshold));
-    if let Some(m) = band {
-        let pts = rate_points(m, records);
-        if let Some((b, l, _)) = lock_in(&pts) {
-            let (lo, hi) = (
-                pts.first().map_or(0.0, |p| p.input_dph),
-                pts.last().map_or(0.0, |p| p.input_dph),
-            );
-            let curve: Vec<(f64, f64)> = (0..=400)
-                .map(|i| {
-                    let x = lo + (hi - lo) * f64::from(i) / 400.0;
-                    (x, locked_output(x, b, l))
-                })
-                .collect();
-            let c = Chart::new(
-                format!(
-                    "Output near zero input: lock-in {l:.3} deg/h, dead band {:.3} deg/h, threshold {:.3} deg/h",
-                    input_for_share(l, DEAD_BAND_SHARE),
-                    input_for_share(l, THRESHOLD_SHARE)
-                ),
-                "input rate (table + Earth), deg/h",
-                "output rate, deg/h",
-            )
-            .height(320)
-            .series(
-                Series::line(
-                    format!("no lock-in: output = input + bias ({b:.3} deg/h)"),
-                    vec![(lo, lo + b), (hi, hi + b)],
-                )
-                .colour(2)
-                .stroke(Stroke::Dashed)
-                .width(1),
-            )
-            .series(
-                Series::line("lock-in fit (Adler equation)", curve)
-                    .colour(5)
-                    .width(2),
-            )
-            .series(
-                Series::points(
-                    "record means",
-                    pts.iter().map(|p| (p.input_dph, p.output_dph)).collect(),
-                    Marker::Circle,
-                )
-                .marker(Marker::Circle, 6)
-                .colour(0),
-            );
-            out.push_str(&c.render());
-        }
-    }
+    let out: String = [
+        transfer.and_then(|m| transfer_chart(r, m, records)),
+        band.and_then(|m| lock_in_chart(m, records)),
+    ]
+    .into_iter()
+    .flatten()
+    .collect();
     if out.is_empty() {
         out
     } else {
         format!("<h2>Rate table</h2>\n{out}")
     }
+}
+
+/// Each rate record's residual from the transfer fit of `m`'s records, in
+/// ppm, with its standard error and the nonlinearity limit.
+fn transfer_chart(r: &Report, m: &Measurement, records: &Records) -> Option<String> {
+    let pts = rate_points(m, records);
+    let t = Transfer::fit(&pts)?;
+    let labels: Vec<String> = pts
+        .iter()
+        .map(|p| format!("{:+}", (p.input_dph / 3600.0 * 10.0).round() / 10.0))
+        .collect();
+    let resid: Vec<(f64, f64, f64)> = pts
+        .iter()
+        .enumerate()
+        .map(|(i, p)| {
+            let net = (t.output_dph(p.input_dph) - t.bias_dph).abs().max(1e-12);
+            let r = (p.output_dph - t.output_dph(p.input_dph)) / net * 1e6;
+            let se = p.se_dph / net * 1e6;
+            (i as f64, r, se)
+        })
+        .collect();
+    let mut c = Chart::new(
+        format!(
+            "Scale-factor residuals: K+ {:.1} ppm, K- {:.1} ppm from nominal, bias {:.3} deg/h",
+            (t.k_pos - 1.0) * 1e6,
+            (t.k_neg - 1.0) * 1e6,
+            t.bias_dph
+        ),
+        "input rate (table + Earth), deg/s",
+        "residual, ppm of the output",
+    )
+    .categories(labels)
+    .height(320)
+    .series(
+        Series::points(
+            "record mean minus the transfer fit (one slope per direction), with its standard error",
+            resid.iter().map(|(x, y, _)| (*x, *y)).collect(),
+            Marker::Circle,
+        )
+        .marker(Marker::Circle, 6)
+        .colour(0)
+        .errors(resid.iter().map(|(x, y, e)| (*x, y - e, y + e)).collect()),
+    );
+    if let Some(nl) = r
+        .measurements
+        .iter()
+        .find(|m| m.metric == Metric::ScaleFactorNonlinearity)
+        && let Some(hi) = nl.high
+    {
+        c = c.band(Band {
+            label: format!("nonlinearity limit +-{hi} ppm"),
+            y: (-hi, hi),
+            x: Some((-0.5, pts.len() as f64 - 0.5)),
+        });
+    }
+    Some(c.render())
+}
+
+/// The output against the input near zero with the lock-in fit of `m`'s
+/// records.
+fn lock_in_chart(m: &Measurement, records: &Records) -> Option<String> {
+    let pts = rate_points(m, records);
+    let (b, l, _) = lock_in(&pts)?;
+    let (lo, hi) = (
+        pts.first().map_or(0.0, |p| p.input_dph),
+        pts.last().map_or(0.0, |p| p.input_dph),
+    );
+    let curve: Vec<(f64, f64)> = (0..=400)
+        .map(|i| {
+            let x = lo + (hi - lo) * f64::from(i) / 400.0;
+            (x, locked_output(x, b, l))
+        })
+        .collect();
+    let c = Chart::new(
+            format!(
+                "Output near zero input: lock-in {l:.3} deg/h, dead band {:.3} deg/h, threshold {:.3} deg/h",
+                input_for_share(l, DEAD_BAND_SHARE),
+                input_for_share(l, THRESHOLD_SHARE)
+            ),
+            "input rate (table + Earth), deg/h",
+            "output rate, deg/h",
+        )
+        .height(320)
+        .series(
+            Series::line(
+                format!("no lock-in: output = input + bias ({b:.3} deg/h)"),
+                vec![(lo, lo + b), (hi, hi + b)],
+            )
+            .colour(2)
+            .stroke(Stroke::Dashed)
+            .width(1),
+        )
+        .series(
+            Series::line("lock-in fit (Adler equation)", curve)
+                .colour(5)
+                .width(2),
+        )
+        .series(
+            Series::points(
+                "record means",
+                pts.iter().map(|p| (p.input_dph, p.output_dph)).collect(),
+                Marker::Circle,
+            )
+            .marker(Marker::Circle, 6)
+            .colour(0),
+        );
+    Some(c.render())
 }
 
 /// The positions: a table (the record, the position in the operator's

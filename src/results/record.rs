@@ -83,6 +83,55 @@ pub enum Indexed {
     AlreadyThere,
 }
 
+/// A run part's units, each `running` with the coefficients it uses (a
+/// log of one unit written before batches: that unit, with fitted ones);
+/// `unit` is the id of the run's first unit.
+fn insert_run_units(
+    sql: &mut dyn Sql,
+    key: &str,
+    meta: &RunMeta,
+    unit: i64,
+) -> Result<(), StoreError> {
+    let fallback = [crate::runlog::meta::RunUnit {
+        slot: String::new(),
+        serial: meta.dut_serial.clone(),
+        dut_type: meta.dut_type.clone(),
+        coefficients: crate::coeffs::CoeffsUsed::fitted(),
+        mount: None,
+        twin_toml: None,
+        seed: None,
+    }];
+    let units = if meta.units.is_empty() {
+        &fallback[..]
+    } else {
+        &meta.units[..]
+    };
+    for u in units {
+        let id = if u.serial == meta.dut_serial && u.dut_type == meta.dut_type {
+            unit
+        } else {
+            unit_id(sql, &u.dut_type, &u.serial)?
+        };
+        let c = &u.coefficients;
+        sql.execute(
+            "INSERT INTO run_units (run, slot, unit_id, outcome, coeffs_source, coeffs_serial, \
+             coeffs_version, coeffs_sha256, coeffs_override_reason) \
+             VALUES ($1, $2, $3, 'running', $4, $5, $6, $7, $8)",
+            &[
+                key.into(),
+                u.slot.clone().into(),
+                id.into(),
+                coeffs_source(c.source).into(),
+                c.serial.clone().into(),
+                c.version.into(),
+                c.sha256.clone().into(),
+                c.override_reason.clone().into(),
+            ],
+        )?;
+    }
+    Ok(())
+}
+
 fn unit_id(sql: &mut dyn Sql, dut_type: &str, serial: &str) -> Result<i64, StoreError> {
     sql.execute(
         "INSERT INTO units (dut_type, serial) VALUES ($1, $2) ON CONFLICT (dut_type, serial) DO NOTHING",
@@ -173,44 +222,7 @@ impl Store {
                     (!overdue.is_empty()).then(|| overdue.join(",")).into(),
                 ],
             )?;
-            let fallback = [crate::runlog::meta::RunUnit {
-                slot: String::new(),
-                serial: meta.dut_serial.clone(),
-                dut_type: meta.dut_type.clone(),
-                coefficients: crate::coeffs::CoeffsUsed::fitted(),
-                mount: None,
-                twin_toml: None,
-                seed: None,
-            }];
-            let units = if meta.units.is_empty() {
-                &fallback[..]
-            } else {
-                &meta.units[..]
-            };
-            for u in units {
-                let id = if u.serial == meta.dut_serial && u.dut_type == meta.dut_type {
-                    unit
-                } else {
-                    unit_id(sql, &u.dut_type, &u.serial)?
-                };
-                let c = &u.coefficients;
-                sql.execute(
-                    "INSERT INTO run_units (run, slot, unit_id, outcome, coeffs_source, coeffs_serial, \
-                     coeffs_version, coeffs_sha256, coeffs_override_reason) \
-                     VALUES ($1, $2, $3, 'running', $4, $5, $6, $7, $8)",
-                    &[
-                        key.clone().into(),
-                        u.slot.clone().into(),
-                        id.into(),
-                        coeffs_source(c.source).into(),
-                        c.serial.clone().into(),
-                        c.version.into(),
-                        c.sha256.clone().into(),
-                        c.override_reason.clone().into(),
-                    ],
-                )?;
-            }
-            Ok(())
+            insert_run_units(sql, &key, meta, unit)
         })?;
         Ok(key)
     }

@@ -65,6 +65,39 @@ pub fn part_start_ns(entries: &std::collections::BTreeMap<String, String>) -> Op
     super::meta::utc_ns(entries.get("part_start_time_utc")?)
 }
 
+/// Copy one message to `w` on the output's channel for its input channel
+/// (added on its first message, with its schema), counting it (and its
+/// frames) in `r`. `header`'s channel id is set here.
+fn copy_message(
+    w: &mut mcap::Writer<BufWriter<std::fs::File>>,
+    ids: &mut HashMap<u16, u16>,
+    r: &mut Recovered,
+    topic: &str,
+    channel: &reader::ChannelInfo,
+    mut header: mcap::records::MessageHeader,
+    data: &[u8],
+) -> Result<(), mcap::McapError> {
+    header.channel_id = match ids.get(&channel.id) {
+        Some(id) => *id,
+        None => {
+            let schema = match &channel.schema {
+                Some(s) => w.add_schema(&s.name, &s.encoding, &s.data)?,
+                None => 0,
+            };
+            let id = w.add_channel(schema, topic, &channel.message_encoding, &channel.metadata)?;
+            ids.insert(channel.id, id);
+            id
+        }
+    };
+    if topic == topics::FRAMES
+        && let Ok(v) = serde_json::from_slice::<serde_json::Value>(data)
+    {
+        r.frames += v["counts"].as_array().map_or(0, |a| a.len() as u64);
+    }
+    r.messages += 1;
+    w.write_to_known_channel(&header, data)
+}
+
 /// Rewrite the possibly truncated log at `input` as a complete, indexed
 /// file at `out`: every message of every complete chunk, the metadata and
 /// the attachments are copied; what follows the last complete record is
@@ -118,40 +151,15 @@ pub fn recover(input: &Path, out: &Path) -> Result<Recovered, RecoverError> {
                 log_time_ns,
                 publish_time_ns,
                 data,
-            } => (|| {
-                let id = match ids.get(&channel.id) {
-                    Some(id) => *id,
-                    None => {
-                        let schema = match &channel.schema {
-                            Some(s) => w.add_schema(&s.name, &s.encoding, &s.data)?,
-                            None => 0,
-                        };
-                        let id = w.add_channel(
-                            schema,
-                            topic,
-                            &channel.message_encoding,
-                            &channel.metadata,
-                        )?;
-                        ids.insert(channel.id, id);
-                        id
-                    }
+            } => {
+                let header = mcap::records::MessageHeader {
+                    channel_id: 0,
+                    sequence,
+                    log_time: log_time_ns,
+                    publish_time: publish_time_ns,
                 };
-                if topic == topics::FRAMES
-                    && let Ok(v) = serde_json::from_slice::<serde_json::Value>(data)
-                {
-                    r.frames += v["counts"].as_array().map_or(0, |a| a.len() as u64);
-                }
-                r.messages += 1;
-                w.write_to_known_channel(
-                    &mcap::records::MessageHeader {
-                        channel_id: id,
-                        sequence,
-                        log_time: log_time_ns,
-                        publish_time: publish_time_ns,
-                    },
-                    data,
-                )
-            })(),
+                copy_message(&mut w, &mut ids, &mut r, topic, channel, header, data)
+            }
         };
         res.map_err(|e| {
             let text = e.to_string();

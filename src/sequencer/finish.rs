@@ -3,7 +3,7 @@
 //! cleanup commands, or the bench's safe state), in words for the report.
 
 use super::{BenchIo, BenchLeft};
-use crate::driver::{ChamberMode, ChamberReading, TableReading};
+use crate::driver::{ChamberMode, ChamberReading, DeviceError, SupplyReading, TableReading};
 use crate::geometry::TableAngles;
 
 /// Air temperature below which a chamber is not opened: water condenses
@@ -146,28 +146,74 @@ pub async fn bench_left(
     };
     let (c, t) = match bench.read_back().await {
         Ok(v) => v,
-        Err(e) => {
-            return BenchLeft {
-                intended: intended.into(),
-                chamber_mode: "unknown".into(),
-                chamber_set_point_c: None,
-                chamber_air_c: None,
-                table_deg: None,
-                table_at_rest: None,
-                supply_on: None,
-                supply_v: None,
-                supply_a: None,
-                verified: false,
-                summary: format!(
-                    "UNKNOWN: the bench could not be read back ({e}); check the chamber and the table before anyone opens the chamber or touches the fixture"
-                ),
-            };
-        }
+        Err(e) => return unreadable(intended, &e),
     };
     let mut bad = mismatches(&c, &t, expected, in_position_deg);
-    // The supply, when the bench has one: its output as asked.
     let power = bench.read_power().await;
-    let supply = match &power {
+    let supply = supply_words(&power, expected, &mut bad);
+    let at_rest = t.rates.outer_deg.abs() <= AT_REST_DPS && t.rates.inner_deg.abs() <= AT_REST_DPS;
+    let table = format!(
+        "table {} at outer {:.2} / inner {:.2} deg",
+        if at_rest { "at rest" } else { "moving" },
+        t.angles.outer_deg,
+        t.angles.inner_deg
+    );
+    let chamber = chamber_words(&c);
+    let devices = match supply {
+        Some(s) => format!("{chamber}, {table}, {s}"),
+        None => format!("{chamber}, {table}"),
+    };
+    let mut summary = if bad.is_empty() {
+        format!("{devices}: {}, read back", what_was_asked(expected))
+    } else {
+        format!(
+            "NOT as asked: {}; check the bench before anyone opens the chamber or touches the fixture",
+            bad.join("; ")
+        )
+    };
+    summary.push_str(&cautions(&c, &power));
+    BenchLeft {
+        intended: intended.into(),
+        chamber_mode: c.mode.as_str().into(),
+        chamber_set_point_c: Some(c.set_point_c),
+        chamber_air_c: Some(c.air_c),
+        table_deg: Some([t.angles.outer_deg, t.angles.inner_deg]),
+        table_at_rest: Some(at_rest),
+        supply_on: power.as_ref().ok().and_then(|p| p.map(|p| p.on)),
+        supply_v: power.as_ref().ok().and_then(|p| p.map(|p| p.v)),
+        supply_a: power.as_ref().ok().and_then(|p| p.map(|p| p.a)),
+        verified: bad.is_empty(),
+        summary,
+    }
+}
+
+/// What is left to say of a bench that could not be read back.
+fn unreadable(intended: &str, e: &DeviceError) -> BenchLeft {
+    BenchLeft {
+        intended: intended.into(),
+        chamber_mode: "unknown".into(),
+        chamber_set_point_c: None,
+        chamber_air_c: None,
+        table_deg: None,
+        table_at_rest: None,
+        supply_on: None,
+        supply_v: None,
+        supply_a: None,
+        verified: false,
+        summary: format!(
+            "UNKNOWN: the bench could not be read back ({e}); check the chamber and the table before anyone opens the chamber or touches the fixture"
+        ),
+    }
+}
+
+/// The supply, when the bench has one, in words; an output not as asked,
+/// or a supply that could not be read, goes to `bad`.
+fn supply_words(
+    power: &Result<Option<SupplyReading>, DeviceError>,
+    expected: &Expected,
+    bad: &mut Vec<String>,
+) -> Option<String> {
+    match power {
         Ok(Some(p)) => {
             if let Some(want) = expected.power_on
                 && p.on != want
@@ -195,9 +241,12 @@ pub async fn bench_left(
             ));
             None
         }
-    };
-    let at_rest = t.rates.outer_deg.abs() <= AT_REST_DPS && t.rates.inner_deg.abs() <= AT_REST_DPS;
-    let chamber = match c.mode {
+    }
+}
+
+/// The chamber as read back, in words.
+fn chamber_words(c: &ChamberReading) -> String {
+    match c.mode {
         ChamberMode::Constant if (c.air_c - c.set_point_c).abs() > 1.0 => format!(
             "chamber on its way to {:+.1} degC (air {:+.1} degC now)",
             c.set_point_c, c.air_c
@@ -207,14 +256,12 @@ pub async fn bench_left(
             c.set_point_c, c.air_c
         ),
         m => format!("chamber {} (air {:+.1} degC)", mode_word(m), c.air_c),
-    };
-    let table = format!(
-        "table {} at outer {:.2} / inner {:.2} deg",
-        if at_rest { "at rest" } else { "moving" },
-        t.angles.outer_deg,
-        t.angles.inner_deg
-    );
-    let what = if expected.safe_state {
+    }
+}
+
+/// What the end of the run asked the bench for, in words.
+fn what_was_asked(expected: &Expected) -> String {
+    if expected.safe_state {
         "the bench's safe state".to_owned()
     } else if expected.skipped.is_empty() {
         "as cleanup left it".to_owned()
@@ -223,19 +270,13 @@ pub async fn bench_left(
             "as cleanup left it, except the {} (its cleanup was skipped; it stays in its safe state)",
             expected.skipped.join(" and the ")
         )
-    };
-    let devices = match supply {
-        Some(s) => format!("{chamber}, {table}, {s}"),
-        None => format!("{chamber}, {table}"),
-    };
-    let mut summary = if bad.is_empty() {
-        format!("{devices}: {what}, read back")
-    } else {
-        format!(
-            "NOT as asked: {}; check the bench before anyone opens the chamber or touches the fixture",
-            bad.join("; ")
-        )
-    };
+    }
+}
+
+/// What a person must mind before touching the bench: the chamber's
+/// alarms, a tripped supply, a cold chamber ("; ..." each, or nothing).
+fn cautions(c: &ChamberReading, power: &Result<Option<SupplyReading>, DeviceError>) -> String {
+    let mut summary = String::new();
     if !c.alarms.is_empty() {
         summary.push_str(&format!(
             "; the chamber shows alarms {:?}: clear their cause at its panel",
@@ -255,17 +296,5 @@ pub async fn bench_left(
             c.air_c
         ));
     }
-    BenchLeft {
-        intended: intended.into(),
-        chamber_mode: c.mode.as_str().into(),
-        chamber_set_point_c: Some(c.set_point_c),
-        chamber_air_c: Some(c.air_c),
-        table_deg: Some([t.angles.outer_deg, t.angles.inner_deg]),
-        table_at_rest: Some(at_rest),
-        supply_on: power.as_ref().ok().and_then(|p| p.map(|p| p.on)),
-        supply_v: power.as_ref().ok().and_then(|p| p.map(|p| p.v)),
-        supply_a: power.as_ref().ok().and_then(|p| p.map(|p| p.a)),
-        verified: bad.is_empty(),
-        summary,
-    }
+    summary
 }

@@ -1235,15 +1235,7 @@ pub async fn run(
     let mut stop: Option<(Stop, String)> = None;
     let start_at = opts.resume.as_ref().map_or(0, |res| res.start_at);
     if let Some(res) = &opts.resume {
-        r.records = res.records.clone();
-        r.records.set_part(res.part);
-        r.measurements = res.measurements.clone();
-        for (lane, earlier) in r.others.iter_mut().zip(&res.others) {
-            lane.records = earlier.records.clone();
-            lane.records.set_part(res.part);
-            lane.measurements = earlier.measurements.clone();
-            lane.frames = earlier.frames;
-        }
+        r.carry_on_from(res);
         stop = restore(&mut r, p, res).await.err();
     }
     let run_order = p.setup.iter().chain(&p.main).enumerate();
@@ -1306,6 +1298,21 @@ pub async fn run(
 }
 
 impl Run<'_> {
+    /// A resumed run starts from what its earlier parts leave: every unit's
+    /// records (taken from here in part `res.part`), measurements and
+    /// frames.
+    fn carry_on_from(&mut self, res: &Resume) {
+        self.records = res.records.clone();
+        self.records.set_part(res.part);
+        self.measurements = res.measurements.clone();
+        for (lane, earlier) in self.others.iter_mut().zip(&res.others) {
+            lane.records = earlier.records.clone();
+            lane.records.set_part(res.part);
+            lane.measurements = earlier.measurements.clone();
+            lane.frames = earlier.frames;
+        }
+    }
+
     /// The cleanup steps, each skipped when it would drive the device that
     /// failed (`faulted`); false when one was skipped or failed. A failed
     /// cleanup step becomes the run's stop when nothing else stopped it.

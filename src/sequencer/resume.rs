@@ -238,23 +238,11 @@ fn restore_conditions(steps: &[&Step], start_at: usize) -> (usize, Vec<(usize, S
             ),
         )),
         _ => {
-            // As long as the procedure held the set point: the segment's
-            // time less the ramp into it from the set point before.
             let before = last_chamber_before(pc).map_or(ROOM_C, |b| match steps[b].kind {
                 StepKind::Chamber { set_c, .. } => set_c,
                 _ => ROOM_C,
             });
-            let ramp_s = 60.0 * (set_c - before).abs() / ramp_c_per_min;
-            let held_s = segment
-                .iter()
-                .map(|s| match s.kind {
-                    StepKind::Wait { duration_s } | StepKind::Record { duration_s, .. } => {
-                        duration_s
-                    }
-                    _ => 0.0,
-                })
-                .sum::<f64>()
-                - ramp_s;
+            let held_s = held_s(segment, 60.0 * (set_c - before).abs() / ramp_c_per_min);
             if held_s >= 1.0 {
                 restore.push((
                     pc,
@@ -264,6 +252,19 @@ fn restore_conditions(steps: &[&Step], start_at: usize) -> (usize, Vec<(usize, S
         }
     }
     (start_at, restore)
+}
+
+/// How long a segment without a soak held its set point, s: its waits
+/// and records less the ramp into it (`ramp_s` from the set point before).
+fn held_s(segment: &[&Step], ramp_s: f64) -> f64 {
+    segment
+        .iter()
+        .map(|s| match s.kind {
+            StepKind::Wait { duration_s } | StepKind::Record { duration_s, .. } => duration_s,
+            _ => 0.0,
+        })
+        .sum::<f64>()
+        - ramp_s
 }
 
 /// What a resume after `completed` steps retakes, in the words every

@@ -434,46 +434,11 @@ pub fn plan_resume(
     }
     let config = logged(&prev.meta)
         .map_err(|e| SessionError::NotResumable(format!("{}: {e}", last.display())))?;
-    let steps = prev.procedure.setup.len() + prev.procedure.main.len();
-    let mut completed = prev.completed_steps;
-    if completed >= steps {
-        // Every step ran but a record could not be judged (a link that
-        // lost frames, a stuck output): take it again, from its thermal
-        // segment as after any break. A log cut short after its last step
-        // (the disk filled, or the process ended, before the end record)
-        // cannot stand as the run's record: its last record is taken
-        // again, so the run ends on a log that says how it ended.
-        completed = units()
-            .filter_map(first_unsound_record)
-            .min()
-            .or_else(|| (!prev.ended).then(|| last_record(&prev.procedure)).flatten())
-            .ok_or_else(|| {
-            SessionError::NotResumable(format!(
-                "every step of the run in {} completed; it ended in error ({}), which no step taken again would change",
-                dir.display(),
-                units()
-                    .find_map(|u| u.result.error.as_ref())
-                    .map_or("-".to_owned(), |e| e.message.clone())
-            ))
-        })?;
-    }
+    let completed = steps_to_keep(dir, &prev, &others)?;
     let state = resume_batch_from(&prev, &others, completed);
-    let summary = format!(
-        "resuming {} (its last part {} ended: {}): {}",
-        dir.display(),
-        last.display(),
-        prev.result
-            .error
-            .as_ref()
-            .map_or("-".to_owned(), |e| format!(
-                "{} in step {}",
-                e.message, e.step
-            )),
-        crate::sequencer::resume::describe_resume(&prev.procedure, completed)
-    );
+    let summary = resume_summary(dir, &last, &prev, completed);
     let meta = &prev.meta;
-    let embedded = config.bench.is_embedded();
-    let seed = match (meta.seed, embedded) {
+    let seed = match (meta.seed, config.bench.is_embedded()) {
         (Some(s), _) => s,
         (None, false) => 0,
         (None, true) => {
@@ -487,6 +452,7 @@ pub fn plan_resume(
         store,
         config.bench.results.as_ref().and_then(|r| r.db.as_deref()),
     );
+    // The coefficients the run compensated with, as its log holds them.
     let coeffs = match (&meta.coeffs_toml, config.coeffs) {
         (Some(text), Some(set)) => Some(Chosen {
             set,
@@ -532,6 +498,62 @@ pub fn plan_resume(
         summary,
     });
     Ok(plan)
+}
+
+/// `resuming DIR (its last part LOG ended: WHY): what is taken again`.
+fn resume_summary(
+    dir: &Path,
+    last: &Path,
+    prev: &crate::runlog::replay::Replayed,
+    completed: usize,
+) -> String {
+    format!(
+        "resuming {} (its last part {} ended: {}): {}",
+        dir.display(),
+        last.display(),
+        prev.result
+            .error
+            .as_ref()
+            .map_or("-".to_owned(), |e| format!(
+                "{} in step {}",
+                e.message, e.step
+            )),
+        crate::sequencer::resume::describe_resume(&prev.procedure, completed)
+    )
+}
+
+/// How many of the run's steps a resume keeps: those its last part
+/// completed, or, when every step ran, those before the first record that
+/// must be taken again.
+fn steps_to_keep(
+    dir: &Path,
+    prev: &crate::runlog::replay::Replayed,
+    others: &[crate::runlog::replay::Replayed],
+) -> Result<usize, SessionError> {
+    let units = || std::iter::once(prev).chain(others);
+    let steps = prev.procedure.setup.len() + prev.procedure.main.len();
+    if prev.completed_steps < steps {
+        return Ok(prev.completed_steps);
+    }
+    // Every step ran but a record could not be judged (a link that lost
+    // frames, a stuck output): take it again, from its thermal segment as
+    // after any break. A log cut short after its last step (the disk
+    // filled, or the process ended, before the end record) cannot stand as
+    // the run's record: its last record is taken again, so the run ends on
+    // a log that says how it ended.
+    units()
+        .filter_map(first_unsound_record)
+        .min()
+        .or_else(|| (!prev.ended).then(|| last_record(&prev.procedure)).flatten())
+        .ok_or_else(|| {
+            SessionError::NotResumable(format!(
+                "every step of the run in {} completed; it ended in error ({}), which no step taken again would change",
+                dir.display(),
+                units()
+                    .find_map(|u| u.result.error.as_ref())
+                    .map_or("-".to_owned(), |e| e.message.clone())
+            ))
+        })
 }
 
 /// A logged batch's units again, on the logged bench: each in its slot

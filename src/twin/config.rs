@@ -578,7 +578,53 @@ impl TwinConfig {
         c.positive(ch.air_tau_s, "chamber.air_tau_s")?;
         c.within(ch.initial_c, ch.min_c, ch.max_c, "chamber.initial_c")?;
 
-        let th = &self.thermal;
+        self.thermal.validate(c)?;
+
+        let g = &self.gyro;
+        c.within(g.frame_rate_hz, 1.0, 100_000.0, "gyro.frame_rate_hz")?;
+        c.within(g.lsb_arcsec, 1e-6, 100.0, "gyro.lsb_arcsec")?;
+        c.within(g.temp_lsb_c, 1e-6, 1.0, "gyro.temp_lsb_c")?;
+
+        c.non_negative(self.bias.turn_on_sigma_dph, "bias.turn_on_sigma_dph")?;
+        c.model4(&self.bias.model4, "bias")?;
+
+        let nz = &self.noise;
+        c.non_negative(nz.arw_deg_per_rt_h, "noise.arw_deg_per_rt_h")?;
+        c.non_negative(nz.bias_instability_dph, "noise.bias_instability_dph")?;
+        c.non_negative(nz.rrw_dph_per_rt_h, "noise.rrw_dph_per_rt_h")?;
+
+        let t = &self.table;
+        c.positive(t.max_rate_dps, "table.max_rate_dps")?;
+        c.positive(t.max_acc_dps2, "table.max_acc_dps2")?;
+        c.positive(t.rate_mode_max_dps, "table.rate_mode_max_dps")?;
+        c.positive(t.rate_mode_max_acc_dps2, "table.rate_mode_max_acc_dps2")?;
+        t.geometry.validate(c, "table.geometry")?;
+        // A table's axes read within a turn or so; an angle far beyond
+        // is a slip of the keyboard (1e300 deg was reported as the bench's
+        // safe state).
+        c.within(
+            t.initial.outer_deg,
+            -360.0,
+            360.0,
+            "table.initial.outer_deg",
+        )?;
+        c.within(
+            t.initial.inner_deg,
+            -360.0,
+            360.0,
+            "table.initial.inner_deg",
+        )?;
+
+        self.rate_response.validate(c)?;
+        self.effects.validate(c)
+    }
+}
+
+impl ThermalConfig {
+    /// `[thermal]`: time constants, capacities, offsets, the sensor axis
+    /// and the rises, each within what a gyro's network can be.
+    fn validate(&self, c: &Checker<'_>) -> Result<(), ConfigError> {
+        let th = self;
         c.positive(th.case_tau_s, "thermal.case_tau_s")?;
         c.positive(th.block1_tau_s, "thermal.block1_tau_s")?;
         c.positive(th.block2_tau_s, "thermal.block2_tau_s")?;
@@ -630,44 +676,7 @@ impl TwinConfig {
         c.within(th.block1_rise_c, 0.0, 50.0, "thermal.block1_rise_c")?;
         c.within(th.block2_rise_c, 0.0, 50.0, "thermal.block2_rise_c")?;
         c.within(th.sensor_noise_c, 0.0, 5.0, "thermal.sensor_noise_c")?;
-
-        let g = &self.gyro;
-        c.within(g.frame_rate_hz, 1.0, 100_000.0, "gyro.frame_rate_hz")?;
-        c.within(g.lsb_arcsec, 1e-6, 100.0, "gyro.lsb_arcsec")?;
-        c.within(g.temp_lsb_c, 1e-6, 1.0, "gyro.temp_lsb_c")?;
-
-        c.non_negative(self.bias.turn_on_sigma_dph, "bias.turn_on_sigma_dph")?;
-        c.model4(&self.bias.model4, "bias")?;
-
-        let nz = &self.noise;
-        c.non_negative(nz.arw_deg_per_rt_h, "noise.arw_deg_per_rt_h")?;
-        c.non_negative(nz.bias_instability_dph, "noise.bias_instability_dph")?;
-        c.non_negative(nz.rrw_dph_per_rt_h, "noise.rrw_dph_per_rt_h")?;
-
-        let t = &self.table;
-        c.positive(t.max_rate_dps, "table.max_rate_dps")?;
-        c.positive(t.max_acc_dps2, "table.max_acc_dps2")?;
-        c.positive(t.rate_mode_max_dps, "table.rate_mode_max_dps")?;
-        c.positive(t.rate_mode_max_acc_dps2, "table.rate_mode_max_acc_dps2")?;
-        t.geometry.validate(c, "table.geometry")?;
-        // A table's axes read within a turn or so; an angle far beyond
-        // is a slip of the keyboard (1e300 deg was reported as the bench's
-        // safe state).
-        c.within(
-            t.initial.outer_deg,
-            -360.0,
-            360.0,
-            "table.initial.outer_deg",
-        )?;
-        c.within(
-            t.initial.inner_deg,
-            -360.0,
-            360.0,
-            "table.initial.inner_deg",
-        )?;
-
-        self.rate_response.validate(c)?;
-        self.effects.validate(c)
+        Ok(())
     }
 }
 
