@@ -40,8 +40,11 @@ fn main() {
                 }
             }
         }
-        println!("cargo:rerun-if-changed=src");
-        println!("cargo:rerun-if-changed=crates");
+        // Everything tracked that goes into the binary: the sources, the
+        // fixtures it embeds (the default twin), the manifest and the lock.
+        for path in ["src", "crates", "fixtures", "Cargo.toml", "Cargo.lock"] {
+            println!("cargo:rerun-if-changed={path}");
+        }
         let dirty =
             git(&["status", "--porcelain", "--untracked-files=no"]).is_some_and(|s| !s.is_empty());
         Some(if dirty {

@@ -985,18 +985,19 @@ async fn open_device(
     Ok((spec, t))
 }
 
-/// The configured instruments, opened.
+/// The configured instruments, opened (the drivers are the crate's own:
+/// a `DeviceBench` runs them).
 pub struct OpenBench {
     /// Chamber driver.
-    pub chamber: Box<dyn Chamber>,
+    pub(crate) chamber: Box<dyn Chamber>,
     /// Table driver.
-    pub table: AclTable,
+    pub(crate) table: AclTable,
     /// Gyro link (a batch's first slot's).
-    pub gyro: GyroReader<BoxTransport>,
+    pub(crate) gyro: GyroReader<BoxTransport>,
     /// A batch's other slots' gyro links, in the bench's order.
-    pub others: Vec<GyroReader<BoxTransport>>,
+    pub(crate) others: Vec<GyroReader<BoxTransport>>,
     /// The unit's supply, if the bench has one.
-    pub supply: Option<ScpiSupply>,
+    pub(crate) supply: Option<ScpiSupply>,
 }
 
 impl std::fmt::Debug for OpenBench {

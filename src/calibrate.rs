@@ -111,9 +111,7 @@ pub fn load_unit(path: &Path, unit: Option<&str>) -> Result<RunSeries, ReplayErr
             .collect()
     };
     // A fit on part of a record would be a fit on other data than the log's.
-    if let (n, Some(why)) = r.result.records.read_faults()
-        && n > 0
-    {
+    if let Some(why) = r.result.records.read_faults().any() {
         return Err(ReplayError::Log {
             path: path.display().to_string(),
             message: why,

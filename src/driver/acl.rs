@@ -23,11 +23,6 @@ impl AclTable {
         Self { link }
     }
 
-    /// The link (for its counters).
-    pub fn link(&self) -> &LineLink {
-        &self.link
-    }
-
     async fn numbers(&mut self, cmds: &[Command]) -> Result<Vec<f64>, DeviceError> {
         let n = cmds.len();
         self.link

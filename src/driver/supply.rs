@@ -41,12 +41,8 @@ impl ScpiSupply {
         Self { link, dialect }
     }
 
-    /// The link (for its counters).
-    pub fn link(&self) -> &LineLink {
-        &self.link
-    }
-
-    /// The dialect it speaks.
+    /// The dialect it speaks (the tests read it).
+    #[cfg(test)]
     pub fn dialect(&self) -> Dialect {
         self.dialect
     }

@@ -999,7 +999,7 @@ fn overdue_box(r: &Report) -> String {
 
 /// The whole page.
 pub fn render_html(r: &Report, records: &Records) -> String {
-    let (faults_before, _) = records.read_faults();
+    let faults_before = records.read_faults();
     let (colour, word) = match r.outcome {
         Outcome::Pass => ("var(--pass)", "PASS"),
         Outcome::Fail => ("var(--fail)", "FAIL"),
@@ -1067,9 +1067,7 @@ pub fn render_html(r: &Report, records: &Records) -> String {
     );
     // The charts were drawn from the records' temporary file: say when
     // part of it could not be read back.
-    if let (faults, Some(why)) = records.read_faults()
-        && faults > faults_before
-    {
+    if let Some(why) = records.read_faults().since(&faults_before) {
         body.insert_str(
             0,
             &format!(

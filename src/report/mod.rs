@@ -237,10 +237,10 @@ impl NoiseFigures {
                     .any(|m| m.metric == Metric::BiasStability && m.records.contains(l))
             })
             .max_by_key(|&(_, n)| n)?;
-        let (faults_before, _) = records.read_faults();
+        let faults_before = records.read_faults();
         let series = records.get(label)?;
         // Not from a record the temporary file could not give back whole.
-        if records.read_faults().0 > faults_before {
+        if records.read_faults().since(&faults_before).is_some() {
             return None;
         }
         let bias: Vec<f64> = series.iter().map(Interval::bias_dph).collect();

@@ -104,6 +104,27 @@ impl Row for PowerSample {
     }
 }
 
+/// Failed reads of each of a store's files, with the last one's reason.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct ReadFaults([(u64, Option<String>); 2]);
+
+impl ReadFaults {
+    /// Why reads failed after `before` was taken (the reason of a file
+    /// whose count rose), or none.
+    pub fn since(&self, before: &ReadFaults) -> Option<String> {
+        self.0
+            .iter()
+            .zip(&before.0)
+            .find(|(now, then)| now.0 > then.0)
+            .map(|(now, _)| now.1.clone().unwrap_or_default())
+    }
+
+    /// Why reads failed at all, or none.
+    pub fn any(&self) -> Option<String> {
+        self.since(&Self::default())
+    }
+}
+
 /// One reading of the unit's supply output.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PowerSample {
@@ -270,13 +291,11 @@ impl Records {
         Some(ranges.iter().map(|r| r.end - r.start).sum())
     }
 
-    /// Reads of the store's temporary file that failed so far, and the
-    /// last one's reason: what a figure or chart was made from is whole
-    /// when the count did not rise while it was made.
-    pub fn read_faults(&self) -> (u64, Option<String>) {
-        let (a, why_a) = self.all.read_faults();
-        let (p, why_p) = self.power.read_faults();
-        (a + p, why_p.or(why_a))
+    /// Reads of the store's temporary files (the intervals' and the supply
+    /// readings') that failed so far: what a figure or chart was made from
+    /// is whole when [`ReadFaults::since`] the start of it says nothing.
+    pub fn read_faults(&self) -> ReadFaults {
+        ReadFaults([self.all.read_faults(), self.power.read_faults()])
     }
 
     /// Why the store keeps its rows in memory, once it does (its temporary
@@ -553,7 +572,7 @@ pub fn compute(
     coeffs: Option<&crate::coeffs::Compensation>,
     step: &str,
 ) -> Measurement {
-    let (faults_before, _) = records.read_faults();
+    let faults_before = records.read_faults();
     // The parts are slices of the one series (one copy in memory).
     let (series, lens) = records.by_part(&m.records);
     let mut rest = series.as_slice();
@@ -606,9 +625,8 @@ pub fn compute(
     }
     let within =
         value.is_some_and(|v| m.low.is_none_or(|lo| v >= lo) && m.high.is_none_or(|hi| v <= hi));
-    let (faults, why) = records.read_faults();
     // Rows this measure's reads could not get back: its data are not whole.
-    let unread = (faults > faults_before).then(|| why.unwrap_or_default());
+    let unread = records.read_faults().since(&faults_before);
     let outcome = match unread.or_else(|| records.problem(&m.records)) {
         Some(p) => {
             note = format!("not judged: {p}");

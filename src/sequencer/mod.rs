@@ -554,8 +554,9 @@ struct Run<'a> {
     expected: finish::Expected,
     /// A batch's other units (slots after the first).
     others: Vec<Lane>,
-    /// The record store's temporary file failed and that was said.
-    spill_said: bool,
+    /// The units (0: the first) whose record store's temporary file
+    /// failed, and that was said.
+    spill_said: Vec<usize>,
 }
 
 /// One more unit of a batch as the run keeps it: the first unit's are the
@@ -703,13 +704,27 @@ impl Run<'_> {
             self.progress.warn(&text);
             self.note(Level::Warning, &text);
         }
-        if !self.spill_said
-            && let Some(why) = std::iter::once(&self.records)
-                .chain(self.others.iter().map(|l| &l.records))
-                .find_map(Records::write_fault)
-        {
-            self.spill_said = true;
-            let text = format!("{why}: the run goes on, its memory now grows with its length");
+        self.say_spill_faults();
+    }
+
+    /// Say once per unit that its record store's temporary file failed
+    /// (its rows stay in memory: nothing is lost).
+    fn say_spill_faults(&mut self) {
+        let faults: Vec<(usize, String)> = std::iter::once(&self.records)
+            .chain(self.others.iter().map(|l| &l.records))
+            .enumerate()
+            .filter(|(k, _)| !self.spill_said.contains(k))
+            .filter_map(|(k, r)| Some((k, r.write_fault()?)))
+            .collect();
+        for (k, why) in faults {
+            self.spill_said.push(k);
+            let unit = match self.opts.units.get(k) {
+                Some(serial) if !self.others.is_empty() => format!("{serial}: "),
+                _ if !self.others.is_empty() => format!("unit {}: ", k + 1),
+                _ => String::new(),
+            };
+            let text =
+                format!("{unit}{why}: the run goes on, its memory now grows with its length");
             self.progress.warn(&text);
             self.note(Level::Warning, &text);
         }
@@ -1227,7 +1242,7 @@ pub async fn run(
             ..finish::Expected::default()
         },
         others: Vec::new(),
-        spill_said: false,
+        spill_said: Vec::new(),
     };
     r.others
         .resize_with(r.bench.units().saturating_sub(1), Lane::default);
@@ -1282,6 +1297,8 @@ pub async fn run(
     {
         stop = Some((Stop::Data(e), "cleanup".into()));
     }
+    // A store that failed in the run's last ticks is said too.
+    r.say_spill_faults();
     let others = r.unit_results(stop.as_ref());
     let (outcome, error) = r.outcome(stop, interrupted);
     RunResult {
