@@ -230,11 +230,6 @@ impl Records {
         }
     }
 
-    /// Every supply reading of the run so far.
-    pub fn power(&self) -> Vec<PowerSample> {
-        self.power.all()
-    }
-
     /// The supply readings taken during a record.
     pub fn power_during(&self, label: &str) -> Vec<PowerSample> {
         self.power_of
