@@ -15,7 +15,7 @@ use std::sync::{Arc, Mutex};
 use nalgebra::{DMatrix, DVector};
 
 use super::data::RunData;
-use super::library::Effect;
+use super::library::{Effect, Param, Term};
 
 /// Averaging time of the scores, s (samples are 1 Hz).
 pub const AVERAGING_S: usize = 60;
@@ -80,10 +80,13 @@ pub struct Data<'a> {
 }
 
 /// Stacked columns by effect and parameter.
-type ColumnCache = Mutex<HashMap<(Effect, u64), Vec<Arc<Vec<f64>>>>>;
+type ColumnCache = Mutex<HashMap<(Effect, ParamKey), Vec<Arc<Vec<f64>>>>>;
 
-/// One stacked effect column: effect, parameter (bits), term.
-type ColumnKey = (Effect, u64, usize);
+/// A parameter told apart bit for bit ([`Param::key`]).
+type ParamKey = (u8, u64, u64);
+
+/// One stacked effect column: effect, parameter, term.
+type ColumnKey = (Effect, ParamKey, usize);
 
 /// What the Gram matrix needs of the columns every model has: per run its
 /// rows and the sum of its data; per rate run (as [`Data::turning_runs`])
@@ -230,10 +233,14 @@ impl<'a> Data<'a> {
     /// effect's columns at a parameter are built once per [`Data`] and
     /// shared (the selection fits the same effects at the same parameters
     /// many times over).
-    fn columns(&self, model: &[(Effect, f64)]) -> Vec<(ColumnKey, Arc<Vec<f64>>)> {
+    fn columns(&self, model: &[Term]) -> Vec<(ColumnKey, Arc<Vec<f64>>)> {
         let mut cols = Vec::new();
-        for &(e, p) in model {
-            let key = (e, p.to_bits());
+        for &Term {
+            effect: e,
+            param: p,
+        } in model
+        {
+            let key = (e, p.key());
             let cached = self
                 .cache
                 .lock()
@@ -270,7 +277,7 @@ impl<'a> Data<'a> {
                 built
                     .into_iter()
                     .enumerate()
-                    .map(|(t, c)| ((e, p.to_bits(), t), c)),
+                    .map(|(t, c)| ((e, p.key(), t), c)),
             );
         }
         cols
@@ -327,12 +334,13 @@ impl<'a> Data<'a> {
 }
 
 impl Data<'_> {
-    /// The columns of a disturbance outside the library: a step from row
-    /// `p` to the end of its run ([`Effect::BiasStep`]), the time from the
-    /// middle of run `p`, in hours ([`Effect::BiasDrift`]), or the sine and
+    /// The columns of a disturbance outside the library: a step from its
+    /// row to the end of its run ([`Effect::BiasStep`]), the time from the
+    /// middle of its run, in hours ([`Effect::BiasDrift`]), or the sine and
     /// cosine of the time through one run at a period
-    /// ([`Effect::Periodic`], [`super::library::pack_periodic`]).
-    fn outside_columns(&self, e: Effect, p: f64) -> Vec<Vec<f64>> {
+    /// ([`Effect::Periodic`]). One zero column per term when the parameter
+    /// is not the effect's kind.
+    fn outside_columns(&self, e: Effect, p: Param) -> Vec<Vec<f64>> {
         let n = self.y.len();
         let in_run = |run: usize, f: &dyn Fn(f64) -> f64| -> Vec<f64> {
             let mut t = self
@@ -350,25 +358,23 @@ impl Data<'_> {
                 })
                 .collect()
         };
-        match e {
-            Effect::BiasStep => {
-                let at = (p.max(0.0) as usize).min(n.saturating_sub(1));
+        match (e, p) {
+            (Effect::BiasStep, Param::Row(at)) => {
+                let at = at.min(n.saturating_sub(1));
                 vec![
                     (0..n)
                         .map(|i| f64::from(u8::from(i >= at && self.run_of[i] == self.run_of[at])))
                         .collect(),
                 ]
             }
-            Effect::Periodic => {
-                let (run, period) = super::library::unpack_periodic(p);
-                let w = std::f64::consts::TAU / period;
+            (Effect::Periodic, Param::Periodic { run, period_s }) => {
+                let w = std::f64::consts::TAU / period_s;
                 vec![
                     in_run(run, &|t| (w * t).sin()),
                     in_run(run, &|t| (w * t).cos()),
                 ]
             }
-            _ => {
-                let run = p.max(0.0) as usize;
+            (Effect::BiasDrift, Param::Run(run)) => {
                 let (lo, hi) = self
                     .runs
                     .get(run)
@@ -380,6 +386,7 @@ impl Data<'_> {
                 let mid = 0.5 * (lo + hi);
                 vec![in_run(run, &|t| (t - mid) / 3600.0)]
             }
+            _ => vec![vec![0.0; n]; e.terms().len()],
         }
     }
 }
@@ -388,7 +395,7 @@ impl Data<'_> {
 #[derive(Debug, Clone)]
 pub struct Scored {
     /// The effects and their parameters.
-    pub model: Vec<(Effect, f64)>,
+    pub model: Vec<Term>,
     /// Held-out sum of squares of the 60 s means, per fold.
     pub fold_sse: Vec<f64>,
     /// 60 s means per fold.
@@ -453,7 +460,7 @@ struct Design<'d> {
 }
 
 impl<'d> Design<'d> {
-    fn new(data: &'d Data<'d>, model: &[(Effect, f64)]) -> Self {
+    fn new(data: &'d Data<'d>, model: &[Term]) -> Self {
         let keyed = data.columns(model);
         let scales = keyed
             .iter()
@@ -505,7 +512,7 @@ impl<'d> Design<'d> {
 }
 
 /// Fit `model` on all data and score it fold by fold.
-pub fn score(data: &Data<'_>, model: &[(Effect, f64)]) -> Scored {
+pub fn score(data: &Data<'_>, model: &[Term]) -> Scored {
     let design = Design::new(data, model);
     let (q, p, scales) = (design.q, design.p, &design.scales);
     let n = data.y.len();
@@ -670,7 +677,7 @@ fn between_spent(
 /// put together from sums kept per column and per pair of columns (the
 /// selection asks for the same base model with each candidate many
 /// times: only the candidate's products with the others are new).
-pub fn in_sample_sse(data: &Data<'_>, model: &[(Effect, f64)]) -> f64 {
+pub fn in_sample_sse(data: &Data<'_>, model: &[Term]) -> f64 {
     let design = Design::new(data, model);
     let (keys, cols) = (&design.keys, &design.cols);
     let sums: Vec<Arc<ColumnSums>> = keys
@@ -725,19 +732,19 @@ pub fn in_sample_sse(data: &Data<'_>, model: &[(Effect, f64)]) -> f64 {
 /// the library, measured by the self-check).
 pub fn with_best_parameter(
     data: &Data<'_>,
-    model: &[(Effect, f64)],
+    model: &[Term],
     effect: Effect,
     free: &[Effect],
-) -> Vec<(Effect, f64)> {
+) -> Vec<Term> {
     let mut bases = vec![model.to_vec()];
     for &f in free {
-        if let Some(i) = model.iter().position(|m| m.0 == f) {
+        if let Some(i) = model.iter().position(|m| m.effect == f) {
             bases = bases
                 .iter()
                 .flat_map(|b| {
                     f.grid().iter().map(move |&p| {
                         let mut v = b.clone();
-                        v[i].1 = p;
+                        v[i].param = p;
                         v
                     })
                 })
@@ -749,17 +756,17 @@ pub fn with_best_parameter(
     // refined; its width or time constant then jointly with them (every
     // form against every free value would triple the cost for a choice the
     // first pass makes as well).
-    let mut grid: Vec<f64> = effect.grid().to_vec();
+    let mut grid: Vec<Param> = effect.grid().to_vec();
     if effect.has_forms() {
-        let mut best: Option<(f64, Vec<(Effect, f64)>)> = None;
+        let mut best: Option<(f64, Vec<Term>)> = None;
         for form in crate::twin::config::EffectTemperature::ALL {
-            let g: Vec<f64> = grid
+            let g: Vec<Param> = grid
                 .iter()
                 .copied()
-                .filter(|&p| effect.form(p) == Some(form))
+                .filter(|p| p.temperature() == Some(form))
                 .collect();
             let found = best_on_grid(data, &[model.to_vec()], effect, &g, true)
-                .map(|(sse, m)| refine(data, sse, m, effect, &g));
+                .map(|(sse, m)| refine(data, sse, m, &g));
             if let Some((sse, m)) = found
                 && best.as_ref().is_none_or(|(x, _)| sse < *x)
             {
@@ -772,12 +779,12 @@ pub fn with_best_parameter(
         if bases.len() == 1 {
             return first;
         }
-        let form = first.last().and_then(|m| effect.form(m.1));
-        grid.retain(|&p| effect.form(p) == form);
+        let form = first.last().and_then(|m| m.param.temperature());
+        grid.retain(|p| p.temperature() == form);
     }
     let choose = bases.len() > 1 || grid.len() > 1;
     match best_on_grid(data, &bases, effect, &grid, choose) {
-        Some((sse, m)) if grid.len() > 1 => refine(data, sse, m, effect, &grid).1,
+        Some((sse, m)) if grid.len() > 1 => refine(data, sse, m, &grid).1,
         Some((_, m)) => m,
         None => model.to_vec(),
     }
@@ -787,16 +794,16 @@ pub fn with_best_parameter(
 /// there is nothing to `choose`).
 fn best_on_grid(
     data: &Data<'_>,
-    bases: &[Vec<(Effect, f64)>],
+    bases: &[Vec<Term>],
     effect: Effect,
-    grid: &[f64],
+    grid: &[Param],
     choose: bool,
-) -> Option<(f64, Vec<(Effect, f64)>)> {
-    let mut best: Option<(f64, Vec<(Effect, f64)>)> = None;
+) -> Option<(f64, Vec<Term>)> {
+    let mut best: Option<(f64, Vec<Term>)> = None;
     for b in bases {
         for &p in grid {
             let mut m = b.clone();
-            m.push((effect, p));
+            m.push(Term::new(effect, p));
             let sse = if choose { in_sample_sse(data, &m) } else { 0.0 };
             if best.as_ref().is_none_or(|(x, _)| sse < *x) {
                 best = Some((sse, m));
@@ -810,22 +817,12 @@ fn best_on_grid(
 /// moved to the geometric middle toward either neighbour on the grid when
 /// that fits better: the grid's steps of 2-3x halved, so a play of 12
 /// degC is not taken for 8 or 16.
-fn refine(
-    data: &Data<'_>,
-    sse: f64,
-    model: Vec<(Effect, f64)>,
-    effect: Effect,
-    grid: &[f64],
-) -> (f64, Vec<(Effect, f64)>) {
-    let Some(&(_, p)) = model.last() else {
+fn refine(data: &Data<'_>, sse: f64, model: Vec<Term>, grid: &[Param]) -> (f64, Vec<Term>) {
+    let Some(&Term { param: p, .. }) = model.last() else {
         return (sse, model);
     };
-    let value = effect.value(p);
-    let pack = |v: f64| match effect.form(p) {
-        Some(t) => super::library::pack(t, v),
-        None => v,
-    };
-    let mut values: Vec<f64> = grid.iter().map(|&g| effect.value(g)).collect();
+    let value = p.value();
+    let mut values: Vec<f64> = grid.iter().map(|g| g.value()).collect();
     values.sort_by(f64::total_cmp);
     let Some(i) = values.iter().position(|&v| v == value) else {
         return (sse, model);
@@ -837,7 +834,7 @@ fn refine(
         };
         let mut m = best.1.clone();
         if let Some(last) = m.last_mut() {
-            last.1 = pack((value * other).sqrt());
+            last.param = p.with_value((value * other).sqrt());
         }
         let sse = in_sample_sse(data, &m);
         if sse < best.0 {
@@ -851,16 +848,16 @@ fn refine(
 /// in-sample fit (as [`with_best_parameter`] does with a candidate): for a
 /// model that gained a term with no parameter grid of its own (an outside
 /// disturbance).
-pub fn refit_free(data: &Data<'_>, model: &[(Effect, f64)], free: &[Effect]) -> Vec<(Effect, f64)> {
+pub fn refit_free(data: &Data<'_>, model: &[Term], free: &[Effect]) -> Vec<Term> {
     let mut best = model.to_vec();
     for &f in free {
-        let Some(i) = model.iter().position(|m| m.0 == f) else {
+        let Some(i) = model.iter().position(|m| m.effect == f) else {
             continue;
         };
         let mut best_sse = f64::INFINITY;
         for &p in f.grid() {
             let mut m = best.clone();
-            m[i].1 = p;
+            m[i].param = p;
             let sse = in_sample_sse(data, &m);
             if sse < best_sse {
                 best_sse = sse;
@@ -874,7 +871,7 @@ pub fn refit_free(data: &Data<'_>, model: &[(Effect, f64)], free: &[Effect]) -> 
 /// Whether an effect's regressors vary within a run at all (relative to
 /// their size): a regressor constant in every run is the run offset again,
 /// and the runs cannot say anything about it.
-pub fn identifiable(data: &Data<'_>, effect: Effect, p: f64) -> bool {
+pub fn identifiable(data: &Data<'_>, effect: Effect, p: Param) -> bool {
     data.runs.iter().any(|run| {
         effect.columns(run, p).iter().any(|c| {
             let n = c.len().max(1) as f64;
@@ -1017,7 +1014,7 @@ mod tests {
 
     /// The in-sample sum of squares row by row: the Gram matrix of every
     /// row and the residual of every row.
-    fn in_sample_sse_by_rows(data: &Data<'_>, model: &[(Effect, f64)]) -> f64 {
+    fn in_sample_sse_by_rows(data: &Data<'_>, model: &[Term]) -> f64 {
         let design = Design::new(data, model);
         let mut g = DMatrix::zeros(design.p, design.p);
         let mut h = DVector::zeros(design.p);
@@ -1050,12 +1047,12 @@ mod tests {
             .with_data(signal)
             .expect("one value per row");
         assert!(Data::new(&runs).with_data(vec![0.0; 3]).is_none());
-        let base: Vec<(Effect, f64)> = MODEL4.iter().map(|&e| (e, e.grid()[0])).collect();
+        let base: Vec<Term> = MODEL4.iter().map(|&e| Term::new(e, e.grid()[0])).collect();
         let mut models = vec![Vec::new(), base.clone()];
         for e in LIBRARY {
             for &p in e.grid().iter().take(2) {
                 let mut m = base.clone();
-                m.push((e, p));
+                m.push(Term::new(e, p));
                 models.push(m);
             }
         }

@@ -38,34 +38,110 @@ pub enum Effect {
     /// Scale factor drifting with the block temperature (times the input rate).
     ScaleFactorTemperature,
     /// Outside the library: a jump of the bias within one run (a ring laser
-    /// gyro's mode hop). Its parameter is the stacked row the jump is at;
-    /// [`super::engine::Data::columns`] builds it (never a candidate).
+    /// gyro's mode hop). Its parameter is the stacked row the jump is at
+    /// ([`Param::Row`]); [`super::engine::Data::columns`] builds it (never
+    /// a candidate).
     BiasStep,
     /// Outside the library: the bias drifting linearly through one run.
-    /// Its parameter is the run's index; built by
+    /// Its parameter is the run's index ([`Param::Run`]); built by
     /// [`super::engine::Data::columns`] (never a candidate).
     BiasDrift,
     /// Outside the library: a sine of the bias through one run, its phase
     /// free (a lab's air-conditioning cycle, a periodic supply). Its
-    /// parameter packs the run's index and the period ([`pack_periodic`]);
+    /// parameter is the run's index and the period ([`Param::Periodic`]);
     /// built by [`super::engine::Data::columns`] (never a candidate).
     Periodic,
 }
 
-/// Packing of a periodic disturbance's run and period in one parameter:
-/// `run * PERIODIC_PACK + period_s` (periods are shorter than a run, far
-/// below this).
-const PERIODIC_PACK: f64 = 1.0e7;
-
-/// A periodic disturbance's parameter for run `run` at `period_s`.
-pub fn pack_periodic(run: usize, period_s: f64) -> f64 {
-    run as f64 * PERIODIC_PACK + period_s.clamp(1.0, PERIODIC_PACK - 1.0)
+/// An effect's one nonlinear parameter, typed by what it is (each effect
+/// takes one kind: [`Effect::grid`] gives its values).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Param {
+    /// The effect has none (every linear effect).
+    None,
+    /// The warm-up's time constant, s ([`Effect::SelfHeating`]).
+    TauS(f64),
+    /// A memory effect ([`Effect::Hysteresis`], [`Effect::ThermalLag`]):
+    /// the temperature it acts on and its width (degC) or time constant (s).
+    Memory {
+        /// Case, block or their mean.
+        on: EffectTemperature,
+        /// The play's width, degC, or the lag's time constant, s.
+        value: f64,
+    },
+    /// A bias step: the stacked row it is at ([`Effect::BiasStep`]).
+    Row(usize),
+    /// A bias drift through this run, by index ([`Effect::BiasDrift`]).
+    Run(usize),
+    /// A periodic disturbance through one run ([`Effect::Periodic`]).
+    Periodic {
+        /// The run's index.
+        run: usize,
+        /// The period, s.
+        period_s: f64,
+    },
 }
 
-/// A periodic disturbance's run and period.
-pub fn unpack_periodic(p: f64) -> (usize, f64) {
-    let run = (p / PERIODIC_PACK).floor().max(0.0);
-    (run as usize, p - run * PERIODIC_PACK)
+impl Param {
+    /// The parameter's number, as the report gives it: the time constant,
+    /// width or period (`NaN` when the effect has none, a row or run
+    /// index as a number).
+    pub fn value(self) -> f64 {
+        match self {
+            Self::None => f64::NAN,
+            Self::TauS(v) | Self::Memory { value: v, .. } => v,
+            Self::Row(i) | Self::Run(i) => i as f64,
+            Self::Periodic { period_s, .. } => period_s,
+        }
+    }
+
+    /// The same parameter at another value (the temperature, run and kind
+    /// kept; a parameter without a value stays as it is).
+    pub fn with_value(self, v: f64) -> Self {
+        match self {
+            Self::TauS(_) => Self::TauS(v),
+            Self::Memory { on, .. } => Self::Memory { on, value: v },
+            Self::Periodic { run, .. } => Self::Periodic { run, period_s: v },
+            other => other,
+        }
+    }
+
+    /// The temperature a memory effect acts on.
+    pub fn temperature(self) -> Option<EffectTemperature> {
+        match self {
+            Self::Memory { on, .. } => Some(on),
+            _ => None,
+        }
+    }
+
+    /// A key that tells parameters apart bit for bit (the columns a
+    /// parameter gives are built once per key).
+    pub fn key(self) -> (u8, u64, u64) {
+        match self {
+            Self::None => (0, 0, 0),
+            Self::TauS(v) => (1, 0, v.to_bits()),
+            Self::Memory { on, value } => (2, on as u64, value.to_bits()),
+            Self::Row(i) => (3, i as u64, 0),
+            Self::Run(i) => (4, i as u64, 0),
+            Self::Periodic { run, period_s } => (5, run as u64, period_s.to_bits()),
+        }
+    }
+}
+
+/// One term of a model: an effect at its parameter.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Term {
+    /// The effect.
+    pub effect: Effect,
+    /// Its nonlinear parameter.
+    pub param: Param,
+}
+
+impl Term {
+    /// `effect` at `param`.
+    pub fn new(effect: Effect, param: Param) -> Self {
+        Self { effect, param }
+    }
 }
 
 /// The candidates named in diagnosis.md, in its order.
@@ -99,42 +175,18 @@ const SELF_HEATING_TAU_S: [f64; 6] = [150.0, 300.0, 600.0, 1200.0, 2400.0, 4800.
 const HYSTERESIS_WIDTH_C: [f64; 6] = [0.5, 1.0, 2.0, 4.0, 8.0, 16.0];
 const THERMAL_LAG_TAU_S: [f64; 6] = [300.0, 900.0, 1800.0, 3600.0, 7200.0, 14_400.0];
 
-/// A memory effect (hysteresis, thermal lag) acts on the case, the block or
-/// their mean: its one parameter carries the temperature too, as the value
-/// plus this stride times the temperature's index in
-/// [`EffectTemperature::ALL`], so a model stays a list of (effect,
-/// parameter). Widths and time constants are far below it.
-const FORM_STRIDE: f64 = 1e6;
-
-/// A memory effect's parameter: `value` on temperature `t`.
-pub fn pack(t: EffectTemperature, value: f64) -> f64 {
-    let k = EffectTemperature::ALL
-        .iter()
-        .position(|x| *x == t)
-        .unwrap_or(0);
-    value + FORM_STRIDE * k as f64
-}
-
-/// The temperature and the value of a memory effect's parameter.
-pub fn unpack(p: f64) -> (EffectTemperature, f64) {
-    let k = (p / FORM_STRIDE).floor();
-    let t = EffectTemperature::ALL
-        .get(k.max(0.0) as usize)
-        .copied()
-        .unwrap_or_default();
-    (t, p - FORM_STRIDE * k.max(0.0))
-}
-
 /// Every temperature with every value of a grid.
-fn forms(values: &[f64]) -> Vec<f64> {
+fn forms(values: &[f64]) -> Vec<Param> {
     EffectTemperature::ALL
         .iter()
-        .flat_map(|&t| values.iter().map(move |&v| pack(t, v)))
+        .flat_map(|&on| values.iter().map(move |&value| Param::Memory { on, value }))
         .collect()
 }
 
-static HYSTERESIS_GRID: LazyLock<Vec<f64>> = LazyLock::new(|| forms(&HYSTERESIS_WIDTH_C));
-static THERMAL_LAG_GRID: LazyLock<Vec<f64>> = LazyLock::new(|| forms(&THERMAL_LAG_TAU_S));
+static SELF_HEATING_GRID: LazyLock<Vec<Param>> =
+    LazyLock::new(|| SELF_HEATING_TAU_S.iter().map(|&v| Param::TauS(v)).collect());
+static HYSTERESIS_GRID: LazyLock<Vec<Param>> = LazyLock::new(|| forms(&HYSTERESIS_WIDTH_C));
+static THERMAL_LAG_GRID: LazyLock<Vec<Param>> = LazyLock::new(|| forms(&THERMAL_LAG_TAU_S));
 
 impl Effect {
     /// Library name (diagnosis.md).
@@ -166,13 +218,14 @@ impl Effect {
             .find(|e| e.name() == name)
     }
 
-    /// Values of the nonlinear parameter to try (one `NaN` when none).
-    pub fn grid(self) -> &'static [f64] {
+    /// Values of the nonlinear parameter to try (one [`Param::None`] when
+    /// none; the outside disturbances' parameters come from the data).
+    pub fn grid(self) -> &'static [Param] {
         match self {
-            Self::SelfHeating => &SELF_HEATING_TAU_S,
+            Self::SelfHeating => &SELF_HEATING_GRID,
             Self::Hysteresis => &HYSTERESIS_GRID,
             Self::ThermalLag => &THERMAL_LAG_GRID,
-            _ => &[f64::NAN],
+            _ => &[Param::None],
         }
     }
 
@@ -211,21 +264,9 @@ impl Effect {
         }
     }
 
-    /// Whether its parameter carries a temperature ([`pack`]).
+    /// Whether its parameter carries a temperature ([`Param::Memory`]).
     pub fn has_forms(self) -> bool {
         matches!(self, Self::Hysteresis | Self::ThermalLag)
-    }
-
-    /// The temperature a parameter `p` of this effect acts on (memory
-    /// effects only).
-    pub fn form(self, p: f64) -> Option<EffectTemperature> {
-        self.has_forms().then(|| unpack(p).0)
-    }
-
-    /// The nonlinear parameter's value (the width or time constant of a
-    /// memory effect, without its temperature).
-    pub fn value(self, p: f64) -> f64 {
-        if self.has_forms() { unpack(p).1 } else { p }
     }
 
     /// Whether this is a disturbance outside the library (a nuisance the
@@ -237,7 +278,7 @@ impl Effect {
     /// Regressor columns over one run's samples, for parameter `p` (the
     /// outside disturbances span runs and are built from the stacked data:
     /// here they are zero).
-    pub fn columns(self, run: &RunData, p: f64) -> Vec<Vec<f64>> {
+    pub fn columns(self, run: &RunData, p: Param) -> Vec<Vec<f64>> {
         let s = &run.samples;
         let col = |f: &dyn Fn(&Sample) -> f64| -> Vec<f64> { s.iter().map(f).collect() };
         match self {
@@ -245,13 +286,16 @@ impl Effect {
             Self::GradientQuadratic => vec![col(&|x| x.iv.gradient_c().powi(2))],
             Self::GradientRate => vec![gradient_rate(s)],
             Self::CaseTemperature => vec![col(&|x| x.iv.tcase_c)],
-            Self::SelfHeating => vec![col(&|x| (-x.iv.time_s / p).exp())],
+            Self::SelfHeating => {
+                let tau = p.value();
+                vec![col(&|x| (-x.iv.time_s / tau).exp())]
+            }
             Self::Hysteresis => {
-                let (t, w) = unpack(p);
+                let (t, w) = (p.temperature().unwrap_or_default(), p.value());
                 vec![play(s, t, w)]
             }
             Self::ThermalLag => {
-                let (t, tau) = unpack(p);
+                let (t, tau) = (p.temperature().unwrap_or_default(), p.value());
                 vec![lag(s, t, tau)]
             }
             Self::GSensitivity => (0..3).map(|i| col(&|x| x.gravity_body()[i])).collect(),
@@ -351,5 +395,47 @@ pub fn separate_with(a: Effect, b: Effect) -> String {
         "a power-on at another chamber temperature (a cold start after a soak at -20 degC)".into()
     } else {
         "a run with another temperature profile and more positions".into()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_memory_effects_parameter_keeps_its_temperature_and_its_value_exactly() {
+        // Packed into one f64 (value + 1e6 x the temperature's index), a
+        // width of sqrt(8 x 16) degC on the block came back 1e-10 off.
+        let w = (8.0_f64 * 16.0).sqrt();
+        let p = Param::Memory {
+            on: EffectTemperature::Block,
+            value: 8.0,
+        }
+        .with_value(w);
+        assert_eq!(p.temperature(), Some(EffectTemperature::Block));
+        assert_eq!(p.value().to_bits(), w.to_bits());
+        let on_case = Param::Memory {
+            on: EffectTemperature::Case,
+            value: w,
+        };
+        assert_ne!(p.key(), on_case.key());
+        assert_eq!(Param::TauS(w).with_value(2.0), Param::TauS(2.0));
+        assert_eq!(Param::Row(7).with_value(2.0), Param::Row(7));
+        assert_ne!(Param::Row(7).key(), Param::Run(7).key());
+    }
+
+    #[test]
+    fn every_grid_holds_its_effects_kind_of_parameter() {
+        for e in LIBRARY.iter().chain(&[Effect::Gradient]) {
+            for p in e.grid() {
+                let fits = match p {
+                    Param::None => e.parameter().is_none(),
+                    Param::TauS(_) => *e == Effect::SelfHeating,
+                    Param::Memory { .. } => e.has_forms(),
+                    Param::Row(_) | Param::Run(_) | Param::Periodic { .. } => false,
+                };
+                assert!(fits, "{e:?} at {p:?}");
+            }
+        }
     }
 }

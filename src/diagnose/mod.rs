@@ -27,7 +27,7 @@ use serde::Serialize;
 use crate::twin::TwinConfig;
 use data::RunData;
 use engine::{Data, Scored, improvement, score, with_best_parameter};
-use library::{Effect, LIBRARY, MODEL4, pack_periodic, separate_with, unpack_periodic};
+use library::{Effect, LIBRARY, MODEL4, Param, Term, separate_with};
 pub use thresholds::{THRESHOLDS, Thresholds};
 
 /// `layers.thermal` / `layers.rate`.
@@ -150,8 +150,8 @@ impl Accepted {
             temperature: s
                 .model
                 .iter()
-                .find(|m| m.0 == e)
-                .and_then(|m| e.form(m.1))
+                .find(|m| m.effect == e)
+                .and_then(|m| m.param.temperature())
                 .map(|t| t.name().to_owned()),
         }
     }
@@ -413,7 +413,7 @@ pub struct Options {
 pub const POWER_REPLICATIONS: usize = 40;
 
 /// The reference model: model 4, or the twin's enabled terms and effects.
-fn reference(twin: Option<&TwinConfig>) -> Vec<(Effect, Option<f64>)> {
+fn reference(twin: Option<&TwinConfig>) -> Vec<(Effect, Option<Param>)> {
     let Some(t) = twin else {
         return MODEL4.iter().map(|&e| (e, None)).collect();
     };
@@ -427,7 +427,7 @@ fn reference(twin: Option<&TwinConfig>) -> Vec<(Effect, Option<f64>)> {
         (
             terms.self_heating,
             Effect::SelfHeating,
-            Some(t.bias.model4.warmup_tau_s),
+            Some(Param::TauS(t.bias.model4.warmup_tau_s)),
         ),
     ] {
         if on {
@@ -439,17 +439,19 @@ fn reference(twin: Option<&TwinConfig>) -> Vec<(Effect, Option<f64>)> {
     if on(fx.hysteresis.as_ref().map(|h| h.enabled)) {
         m.push((
             Effect::Hysteresis,
-            fx.hysteresis
-                .as_ref()
-                .map(|h| library::pack(h.temperature, h.width_c)),
+            fx.hysteresis.as_ref().map(|h| Param::Memory {
+                on: h.temperature,
+                value: h.width_c,
+            }),
         ));
     }
     if on(fx.thermal_lag.as_ref().map(|h| h.enabled)) {
         m.push((
             Effect::ThermalLag,
-            fx.thermal_lag
-                .as_ref()
-                .map(|h| library::pack(h.temperature, h.tau_s)),
+            fx.thermal_lag.as_ref().map(|h| Param::Memory {
+                on: h.temperature,
+                value: h.tau_s,
+            }),
         ));
     }
     for (x, e) in [
@@ -478,12 +480,12 @@ fn reference(twin: Option<&TwinConfig>) -> Vec<(Effect, Option<f64>)> {
 }
 
 /// Build a model from the reference list, choosing free parameters.
-fn build(data: &Data<'_>, spec: &[(Effect, Option<f64>)]) -> Vec<(Effect, f64)> {
-    let mut m: Vec<(Effect, f64)> = spec
+fn build(data: &Data<'_>, spec: &[(Effect, Option<Param>)]) -> Vec<Term> {
+    let mut m: Vec<Term> = spec
         .iter()
         .filter_map(|&(e, p)| match p {
-            Some(v) => Some((e, v)),
-            None if e.grid().len() == 1 => Some((e, f64::NAN)),
+            Some(v) => Some(Term::new(e, v)),
+            None if e.grid().len() == 1 => Some(Term::new(e, Param::None)),
             None => None,
         })
         .collect();
@@ -510,7 +512,11 @@ pub fn visible_gap(runs: &[RunData], opts: &Options, signal: &[f64]) -> f64 {
 fn parameters(s: &Scored, effect: Effect) -> (BTreeMap<String, f64>, BTreeMap<String, f64>) {
     let mut at = 0;
     let (mut vals, mut errs) = (BTreeMap::new(), BTreeMap::new());
-    for &(e, p) in &s.model {
+    for &Term {
+        effect: e,
+        param: p,
+    } in &s.model
+    {
         let n = e.terms().len();
         if e == effect {
             for (i, t) in e.terms().iter().enumerate() {
@@ -518,7 +524,7 @@ fn parameters(s: &Scored, effect: Effect) -> (BTreeMap<String, f64>, BTreeMap<St
                 errs.insert((*t).to_owned(), s.stderr[at + i]);
             }
             if let Some(name) = e.parameter() {
-                vals.insert(name.to_owned(), e.value(p));
+                vals.insert(name.to_owned(), p.value());
             }
         }
         at += n;
@@ -751,7 +757,12 @@ fn swaps(
     };
     let mut out = Vec::new();
     for &e in accepted {
-        let rest: Vec<(Effect, f64)> = current.model.iter().copied().filter(|m| m.0 != e).collect();
+        let rest: Vec<Term> = current
+            .model
+            .iter()
+            .copied()
+            .filter(|m| m.effect != e)
+            .collect();
         let contribution = score(data, &rest).sse() - current.sse();
         if contribution <= 0.0 {
             continue;
@@ -840,12 +851,20 @@ fn outside_rival(data: &Data<'_>, current: &Scored, free: &[Effect]) -> Option<T
     // not the unit's: the same period, its phase free in each run that
     // holds a whole cycle of it).
     let period = periodicity(data, e).0;
-    let cycles: Vec<(Effect, f64)> = period
+    let cycles: Vec<Term> = period
         .into_iter()
         .flat_map(|period| {
             data.runs.iter().enumerate().filter_map(move |(r, run)| {
                 let span = run.samples.last()?.iv.time_s - run.samples.first()?.iv.time_s;
-                (span >= period).then(|| (Effect::Periodic, pack_periodic(r, period)))
+                (span >= period).then(|| {
+                    Term::new(
+                        Effect::Periodic,
+                        Param::Periodic {
+                            run: r,
+                            period_s: period,
+                        },
+                    )
+                })
             })
         })
         .collect();
@@ -870,17 +889,17 @@ fn outside_rival(data: &Data<'_>, current: &Scored, free: &[Effect]) -> Option<T
         .iter()
         .map(|&k| {
             let mut model = current.model.clone();
-            model.push((Effect::BiasStep, k as f64));
+            model.push(Term::new(Effect::BiasStep, Param::Row(k)));
             (engine::in_sample_sse(data, &model), k)
         })
         .min_by(|a, b| a.0.total_cmp(&b.0));
     let rivals = step
-        .map(|(_, k)| vec![(Effect::BiasStep, k as f64)])
+        .map(|(_, k)| vec![Term::new(Effect::BiasStep, Param::Row(k))])
         .into_iter()
         .chain((!drifts.is_empty()).then(|| {
             drifts
                 .iter()
-                .map(|&r| (Effect::BiasDrift, r as f64))
+                .map(|&r| Term::new(Effect::BiasDrift, Param::Run(r)))
                 .collect()
         }))
         .chain((!cycles.is_empty()).then_some(cycles));
@@ -891,7 +910,7 @@ fn outside_rival(data: &Data<'_>, current: &Scored, free: &[Effect]) -> Option<T
             let s = score(data, &engine::refit_free(data, &model, free));
             let (gain, p) = improvement(current, &s);
             Tried {
-                effect: terms[0].0,
+                effect: terms[0].effect,
                 scored: s,
                 gain,
                 p,
@@ -913,25 +932,28 @@ fn outside_found(
 ) -> Vec<OutsideFound> {
     let mut term = 0;
     let mut out = Vec::new();
-    for (k, &(e, param)) in s.model.iter().enumerate() {
+    for (k, &Term { effect: e, param }) in s.model.iter().enumerate() {
         term += e.terms().len();
         if k < from || e != o {
             continue;
         }
         let coeff = |back: usize| s.coeffs.get(term - back).copied().unwrap_or(f64::NAN);
-        let (run, at_s, period_s, size) = match o {
-            Effect::BiasStep => {
-                let row = (param as usize).min(data.run_of.len().saturating_sub(1));
+        let (run, at_s, period_s, size) = match param {
+            Param::Row(row) => {
+                let row = row.min(data.run_of.len().saturating_sub(1));
                 let r = data.run_of[row];
                 let first = data.run_of.iter().position(|&x| x == r).unwrap_or(0);
                 let at = data.runs[r].samples.get(row - first).map(|x| x.iv.time_s);
                 (r, at, None, coeff(1))
             }
-            Effect::Periodic => {
-                let (r, period) = unpack_periodic(param);
-                (r, None, Some(period), coeff(2).hypot(coeff(1)))
+            Param::Periodic { run, period_s } => {
+                (run, None, Some(period_s), coeff(2).hypot(coeff(1)))
             }
-            _ => (param as usize, None, None, coeff(1)),
+            Param::Run(run) => (run, None, None, coeff(1)),
+            // Not an outside disturbance's parameter: no run of it.
+            Param::None | Param::TauS(_) | Param::Memory { .. } => {
+                (usize::MAX, None, None, coeff(1))
+            }
         };
         out.push(OutsideFound {
             kind: o.name().into(),
@@ -1018,7 +1040,7 @@ pub(crate) fn diagnose_rate(runs: &[RunData], opts: &Options) -> Diagnosis {
         .filter(|(e, p)| p.is_none() && e.grid().len() > 1)
         .map(|x| x.0)
         .collect();
-    let in_base: Vec<Effect> = base_model.iter().map(|m| m.0).collect();
+    let in_base: Vec<Effect> = base_model.iter().map(|m| m.effect).collect();
     let (remaining, not_identifiable): (Vec<Effect>, Vec<Effect>) = LIBRARY
         .iter()
         .copied()
@@ -1087,7 +1109,10 @@ pub(crate) fn diagnose_rate(runs: &[RunData], opts: &Options) -> Diagnosis {
             rate: RateLayer {
                 gap_dph: base.gap(),
                 gap_after_dph: current.gap(),
-                reference: base_model.iter().map(|m| m.0.name().to_owned()).collect(),
+                reference: base_model
+                    .iter()
+                    .map(|m| m.effect.name().to_owned())
+                    .collect(),
             },
         },
         r#where: where_,
@@ -1426,7 +1451,7 @@ fn inconclusive(
                 rivals: remaining
                     .iter()
                     .copied()
-                    .filter(|&r| r != e && r.grid()[0].is_nan())
+                    .filter(|&r| r != e && r.grid()[0] == Param::None)
                     .collect(),
             };
             let (passes, p, n) = sim.passes(estimated, replications);
@@ -1710,11 +1735,11 @@ impl Simulation<'_> {
         let resid: Vec<f64> = rows.iter().map(|&i| self.candidate.residual[i]).collect();
         // Outside disturbances were held at rows of these runs: not
         // carried over.
-        let base: Vec<(Effect, f64)> = self
+        let base: Vec<Term> = self
             .current
             .model
             .iter()
-            .filter(|m| !m.0.is_outside())
+            .filter(|m| !m.effect.is_outside())
             .copied()
             .collect();
         let recorded = &d.runs[self.run];
@@ -1723,7 +1748,7 @@ impl Simulation<'_> {
             self.candidate
                 .model
                 .iter()
-                .filter(|m| m.0 == self.effect)
+                .filter(|m| m.effect == self.effect)
                 .copied(),
         );
         let mut rng = rand_xoshiro::Xoshiro256PlusPlus::seed_from_u64(0x00de_c1de ^ passes as u64);

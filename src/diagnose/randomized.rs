@@ -15,7 +15,7 @@ use rand_xoshiro::Xoshiro256PlusPlus;
 use serde::Serialize;
 
 use super::data::RunData;
-use super::library::{Effect, LIBRARY, MODEL4, pack, separating_procedure};
+use super::library::{Effect, LIBRARY, MODEL4, Param, separating_procedure};
 use super::selfcheck::{contribution, inject, runs_of, to_run};
 use super::{Options, diagnose, diagnose_rate, visible_gap};
 use crate::geometry::TableGeometry;
@@ -423,9 +423,15 @@ fn trial(seed: u64, case: &Case, go_on_to_separate: bool) -> Result<UnitTrial, S
         // cascade's mean delay for a lag (a smooth loop's mean width is
         // its width), so the amplitude is in noise units near enough.
         let p = match e {
-            Effect::Hysteresis => pack(form.temperature, form.width_c),
-            Effect::ThermalLag => pack(form.temperature, form.tau_s * f64::from(form.order)),
-            _ => f64::NAN,
+            Effect::Hysteresis => Param::Memory {
+                on: form.temperature,
+                value: form.width_c,
+            },
+            Effect::ThermalLag => Param::Memory {
+                on: form.temperature,
+                value: form.tau_s * f64::from(form.order),
+            },
+            _ => Param::None,
         };
         let gap = visible_gap(&null_runs, &opts, &contribution(&null_runs, e, p));
         if gap > 0.0 { amp * noise / gap } else { 0.0 }

@@ -10,7 +10,7 @@ use std::collections::BTreeMap;
 use serde::Serialize;
 
 use super::data::{RunData, Sample};
-use super::library::{Effect, LIBRARY};
+use super::library::{Effect, LIBRARY, Param};
 use super::{Options, diagnose};
 use crate::geometry::TableGeometry;
 use crate::study::{
@@ -208,7 +208,7 @@ const DIRECTION: [f64; 3] = [0.0, 0.8, 0.6];
 
 /// An effect's contribution with coefficient 1 along [`DIRECTION`], per
 /// sample, runs in order.
-pub(crate) fn contribution(runs: &[RunData], e: Effect, p: f64) -> Vec<f64> {
+pub(crate) fn contribution(runs: &[RunData], e: Effect, p: Param) -> Vec<f64> {
     let mut out = Vec::new();
     for run in runs {
         let cols = e.columns(run, p);
@@ -250,7 +250,7 @@ struct Size {
     rms: f64,
 }
 
-fn size(runs: &[RunData], e: Effect, p: f64, reference: &TwinConfig) -> Size {
+fn size(runs: &[RunData], e: Effect, p: Param, reference: &TwinConfig) -> Size {
     let c = contribution(runs, e, p);
     let opts = Options {
         twin: Some(reference.clone()),
@@ -538,10 +538,17 @@ fn cases(plan: &Plan, base: &TwinConfig, probe: &[RunData], noise: f64) -> Cases
     let mut coefficients: BTreeMap<(String, u64), f64> = BTreeMap::new();
     for &e in &plan.effects {
         let p = match e {
-            Effect::SelfHeating => base.bias.model4.warmup_tau_s,
-            Effect::Hysteresis => 2.0,
-            Effect::ThermalLag => 1800.0,
-            _ => f64::NAN,
+            Effect::SelfHeating => Param::TauS(base.bias.model4.warmup_tau_s),
+            // As `inject` puts them in: on the case.
+            Effect::Hysteresis => Param::Memory {
+                on: tc::EffectTemperature::Case,
+                value: 2.0,
+            },
+            Effect::ThermalLag => Param::Memory {
+                on: tc::EffectTemperature::Case,
+                value: 1800.0,
+            },
+            _ => Param::None,
         };
         let unit = size(probe, e, p, &inject(base, e, 1.0).1);
         sizes.push(EffectSize {
