@@ -171,24 +171,7 @@ impl Progress for Live {
 }
 
 fn parse_inject(s: &str) -> Result<(f64, Fault)> {
-    let (f, t) = s.split_once('@').ok_or_else(|| {
-        Usage(format!(
-            "--inject {s:?}: expected FAULT@SECONDS, e.g. chamber-silent@600"
-        ))
-    })?;
-    let fault: Fault = f
-        .parse()
-        .map_err(|e| Usage(format!("--inject {s:?}: {e}")))?;
-    let at: f64 = t
-        .parse()
-        .ok()
-        .filter(|v: &f64| v.is_finite() && *v >= 0.0)
-        .ok_or_else(|| {
-            Usage(format!(
-                "--inject {s:?}: the time must be seconds of device time"
-            ))
-        })?;
-    Ok((at, fault))
+    Ok(Fault::parse_at(s).map_err(|e| Usage(format!("--inject {e}")))?)
 }
 
 /// Slowest and fastest pacing of the embedded bench (factors over real time).
@@ -251,7 +234,10 @@ fn fresh(args: &RunArgs, procedure_path: &std::path::Path, pacing: Pacing) -> Re
         return Err(Usage("--twin applies to the embedded simulated bench only".into()).into());
     }
     if !bench_cfg.is_embedded() && !args.inject.is_empty() {
-        return Err(Usage("--inject applies to the embedded simulated bench only".into()).into());
+        return Err(Usage(
+            "--inject applies to the embedded simulated bench only; a served bench plays the device faults itself: `gyrobench sim serve --inject FAULT@SECONDS`".into(),
+        )
+        .into());
     }
     let batch = if bench_cfg.slots.is_empty() {
         Vec::new()

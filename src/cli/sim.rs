@@ -6,7 +6,8 @@ use anyhow::{Context, Result};
 use clap::{Args, Subcommand};
 
 use super::{Outcome, Usage};
-use crate::sim::serve::{Serve, start};
+use crate::sim::Fault;
+use crate::sim::serve::{Serve, can_play, schedule_faults, start};
 
 #[derive(Debug, Subcommand)]
 pub enum SimCommand {
@@ -14,7 +15,7 @@ pub enum SimCommand {
     /// Prints one line per endpoint, `<device> <protocol> <address>`, then
     /// serves until Ctrl-C or SIGTERM.
     #[command(after_help = after_help!(
-        "gyrobench sim serve --config fixtures/sim/serve.toml",
+        "gyrobench sim serve --config fixtures/sim/serve.toml --inject chamber-alarm@600",
         "0 stopped by Ctrl-C or SIGTERM, 1 it could not start (a port taken, a bad configuration), \
          2 usage"
     ))]
@@ -44,6 +45,13 @@ pub struct ServeArgs {
     /// fixtures/sim/serve.toml.
     #[arg(long)]
     config: Option<PathBuf>,
+    /// Play a device's fault, FAULT@SECONDS of the served device time, on
+    /// the wire (the same faults as `run --inject`: chamber-alarm,
+    /// chamber-silent, table-interlock, gyro-silent, gyro-corrupt,
+    /// gyro-stuck, gyro-saturated, supply-overcurrent; unit-lost on a
+    /// batch's fixture). Repeatable.
+    #[arg(long, value_name = "FAULT@SECONDS")]
+    inject: Vec<String>,
 }
 
 fn runtime() -> Result<tokio::runtime::Runtime> {
@@ -68,6 +76,15 @@ pub fn run(cmd: SimCommand) -> Result<Outcome> {
         SimCommand::Serve(args) => {
             let serve = Serve::load(args.config.as_deref())
                 .context("loading the sim serve configuration")?;
+            let faults = args
+                .inject
+                .iter()
+                .map(|s| {
+                    let (at, f) = Fault::parse_at(s).map_err(|e| Usage(format!("--inject {e}")))?;
+                    can_play(&serve, f).map_err(|e| Usage(format!("--inject {s:?}: {e}")))?;
+                    Ok((at, f))
+                })
+                .collect::<Result<Vec<_>>>()?;
             runtime()?.block_on(async {
                 // Listening for the stop signals before the endpoints are
                 // printed: a script that stops the server as soon as it
@@ -81,6 +98,10 @@ pub fn run(cmd: SimCommand) -> Result<Outcome> {
                 // (`sim serve | head -1`) does not stop the server.
                 let lines: String = served.endpoints.iter().map(|e| format!("{e}\n")).collect();
                 super::out(&lines)?;
+                schedule_faults(&served.bench, faults, |t, f, r| match r {
+                    Ok(()) => errln!("fault {} played at {t:.1} s of device time", f.name()),
+                    Err(e) => errln!("fault {} not played: {e}", f.name()),
+                });
                 errln!(
                     "serving the simulated bench (speed {}x); Ctrl-C or SIGTERM to stop",
                     serve.config.speed

@@ -536,3 +536,141 @@ async fn a_network_drop_within_the_window_is_ridden_out_and_a_longer_one_named()
     );
     assert!(t0.elapsed() >= Duration::from_secs(3));
 }
+
+/// Drain a gyro line until `done` holds for a frame (the frames already
+/// in flight first); the frame.
+async fn frame_until(
+    g: &mut GyroReader<BoxTransport>,
+    done: impl Fn(&crate::protocol::frame::WireFrame) -> bool,
+) -> crate::protocol::frame::WireFrame {
+    for _ in 0..4_000 {
+        let f = g.next_frame().await.expect("a frame").expect("open");
+        if done(&f) {
+            return f;
+        }
+    }
+    panic!("no such frame in 4,000 (10 s of the gyro)");
+}
+
+/// The named faults of `run --inject`, played by the served simulators at
+/// a device time and met by the real drivers as the embedded bench's
+/// drivers meet them: alarm 9, the interlock, a stuck output, a unit that
+/// draws three times its current until the protection trips, and a
+/// batch's last unit whose line goes silent while the first goes on. The
+/// controller's own faults are refused by name.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_named_faults_play_on_the_wire_at_their_device_time() {
+    use crate::sim::Fault;
+    use crate::sim::serve::{can_play, schedule_faults};
+    let served = serve(1.0).await;
+    let mut c = espec(&served, "tcp://").await;
+    let mut t = acl(&served, "tcp://").await;
+    let s = spec(&served, "gyro", "rlg-frame", "tcp://");
+    let mut g = GyroReader::new(
+        "gyro",
+        connect(&s).await,
+        FrameLayout::default(),
+        Duration::from_secs(1),
+    );
+    let mut p = supply(&served, Dialect::KeysightE36300, "tcp://").await;
+    p.configure(2, 15.0, 1.0, true)
+        .await
+        .expect("settings taken");
+    p.output(2, true).await.expect("output on");
+    supply_until(&mut p, |r| r.on && r.a < 0.551 && r.a > 0.5).await;
+    assert!(c.read().await.expect("reading").alarms.is_empty());
+    assert_ne!(
+        g.next_frame()
+            .await
+            .expect("frame")
+            .expect("open")
+            .delta_counts,
+        crate::sim::faults::STUCK_COUNTS
+    );
+
+    let at = served.bench.clock().now_s() + 0.2;
+    let (tx, mut rx) = tokio::sync::mpsc::unbounded_channel();
+    let faults = [
+        Fault::ChamberAlarm,
+        Fault::TableInterlock,
+        Fault::GyroStuck,
+        Fault::SupplyOvercurrent,
+    ];
+    schedule_faults(
+        &served.bench,
+        faults.iter().map(|&f| (at, f)).collect(),
+        move |when, f, r| {
+            let _ = tx.send((when, f, r));
+        },
+    );
+    for _ in faults {
+        let (when, f, r) = rx.recv().await.expect("every fault played");
+        assert!(r.is_ok() && when >= at, "{f:?} at {when} s: {r:?}");
+    }
+    assert_eq!(c.read().await.expect("reading").alarms, vec![9]);
+    let err = t.stop().await.expect_err("tripped");
+    assert!(matches!(err, DeviceError::Interlock { .. }), "{err}");
+    frame_until(&mut g, |f| {
+        f.delta_counts == crate::sim::faults::STUCK_COUNTS
+    })
+    .await;
+    let tripped = supply_until(&mut p, |r| r.tripped).await;
+    assert!(!tripped.on, "{tripped:?}");
+
+    let one = Serve::load(None).expect("defaults");
+    for f in [Fault::ProcessKill, Fault::DiskFull, Fault::Panic] {
+        let e = can_play(&one, f).expect_err("the controller's own");
+        assert!(e.contains("run --inject"), "{e}");
+        assert!(served.bench.play(f).is_err());
+    }
+    assert!(can_play(&one, Fault::UnitLost).is_err());
+    assert!(served.bench.play(Fault::UnitLost).is_err());
+
+    let quad = Serve::load(Some(std::path::Path::new(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/fixtures/sim/quad.toml"
+    ))))
+    .expect("the batch's fixture");
+    can_play(&quad, Fault::UnitLost).expect("a batch can lose a unit");
+    let batch = start(&quad).await.expect("simulated batch starts");
+    let line = |name: &str| {
+        batch
+            .endpoints
+            .iter()
+            .find(|e| e.device == name && e.address.starts_with("tcp://"))
+            .expect("its gyro line")
+            .address
+            .parse::<DeviceSpec>()
+            .expect("valid spec")
+    };
+    let names: Vec<String> = quad
+        .units
+        .iter()
+        .map(|u| format!("gyro/{}", u.name))
+        .collect();
+    let (first, last) = (line(&names[0]), line(&names[names.len() - 1]));
+    let reader = |t| {
+        GyroReader::new(
+            "gyro",
+            t,
+            FrameLayout::default(),
+            Duration::from_millis(500),
+        )
+    };
+    let mut g0 = reader(connect(&first).await);
+    let mut gn = reader(connect(&last).await);
+    gn.next_frame().await.expect("frame").expect("open");
+    batch.bench.play(Fault::UnitLost).expect("played");
+    let err = loop {
+        match gn.next_frame().await {
+            Ok(Some(_)) => continue,
+            Ok(None) => panic!("stream closed"),
+            Err(e) => break e,
+        }
+    };
+    assert!(matches!(err, DeviceError::Silent { .. }), "{err}");
+    g0.next_frame()
+        .await
+        .expect("the first unit goes on")
+        .expect("open");
+}

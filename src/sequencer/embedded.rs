@@ -33,93 +33,9 @@ fn refused_by_supply(request: &str, errors: Vec<String>) -> Result<(), DeviceErr
 /// Temperature resolution of the frames, degC (the documented layout).
 pub const TEMP_LSB_C: f64 = 0.01;
 
-/// A fault the embedded bench plays at a device time.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub enum Fault {
-    /// The chamber raises alarm 9.
-    ChamberAlarm,
-    /// The chamber stops answering.
-    ChamberSilent,
-    /// The table's system interlock trips.
-    TableInterlock,
-    /// The gyro stops sending.
-    GyroSilent,
-    /// The gyro link corrupts every 50th frame (dropped, counted as a CRC
-    /// error).
-    GyroCorrupt,
-    /// The gyro's output sticks at one value.
-    GyroStuck,
-    /// The gyro's output pins at the largest count.
-    GyroSaturated,
-    /// The process dies at once, as under SIGKILL: no cleanup, no footer
-    /// (for the fault-and-resume sweep).
-    ProcessKill,
-    /// A bug: the run panics mid-tick (the bench must still reach its safe
-    /// state).
-    Panic,
-    /// The unit shorts: it draws three times its current, and the supply's
-    /// over-current protection trips (a bench with a supply).
-    SupplyOvercurrent,
-    /// The disk the log is on fills: every write to the log fails from
-    /// then on, as with `No space left on device` (the recorder plays it;
-    /// the bench carries on).
-    DiskFull,
-    /// The process gets SIGHUP (its terminal or SSH session closed), once.
-    Hangup,
-    /// The process gets SIGQUIT (Ctrl-\), once.
-    Quit,
-    /// A batch's last unit's gyro link is lost for good: it sends nothing
-    /// more (the others go on).
-    UnitLost,
-}
-
-impl Fault {
-    /// Every fault by the name `--inject` takes.
-    pub const NAMES: [&str; 14] = [
-        "chamber-alarm",
-        "chamber-silent",
-        "table-interlock",
-        "gyro-silent",
-        "gyro-corrupt",
-        "gyro-stuck",
-        "gyro-saturated",
-        "process-kill",
-        "panic",
-        "supply-overcurrent",
-        "disk-full",
-        "sighup",
-        "sigquit",
-        "unit-lost",
-    ];
-}
-
-impl std::str::FromStr for Fault {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
-        Ok(match s {
-            "chamber-alarm" => Self::ChamberAlarm,
-            "chamber-silent" => Self::ChamberSilent,
-            "table-interlock" => Self::TableInterlock,
-            "gyro-silent" => Self::GyroSilent,
-            "gyro-corrupt" => Self::GyroCorrupt,
-            "gyro-stuck" => Self::GyroStuck,
-            "gyro-saturated" => Self::GyroSaturated,
-            "process-kill" => Self::ProcessKill,
-            "panic" => Self::Panic,
-            "supply-overcurrent" => Self::SupplyOvercurrent,
-            "disk-full" => Self::DiskFull,
-            "sighup" => Self::Hangup,
-            "sigquit" => Self::Quit,
-            "unit-lost" => Self::UnitLost,
-            _ => {
-                return Err(format!(
-                    "unknown fault {s:?}; expected {}",
-                    Self::NAMES.join(", ")
-                ));
-            }
-        })
-    }
-}
+/// The faults the embedded bench plays: the one fault model, shared with
+/// the served simulators (`sim serve --inject`).
+pub use crate::sim::faults::Fault;
 
 /// A frame as the twin's gyro sends it, with `counts` (a fault may replace
 /// the sample's own).

@@ -1,8 +1,158 @@
-//! Fault injection: what a simulated device does wrong, on demand.
+//! Fault injection: the faults a run can meet ([`Fault`], one model for
+//! the embedded bench and the served simulators) and the switches the
+//! served simulators play them with (what each device does wrong).
 
 use std::sync::Mutex;
-use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU32, AtomicUsize, Ordering};
 use std::time::Duration;
+
+/// A fault, by the name `--inject` takes: the one fault model. The embedded
+/// bench plays every one at a device time (`run --inject`); the served
+/// simulators play the devices' ones ([`Fault::device`]) on their wire
+/// protocols (`sim serve --inject`, [`super::SharedBench::play`]), so a
+/// run on the real drivers meets the same fault by the same name.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Fault {
+    /// The chamber raises alarm 9.
+    ChamberAlarm,
+    /// The chamber stops answering.
+    ChamberSilent,
+    /// The table's system interlock trips.
+    TableInterlock,
+    /// The gyro stops sending.
+    GyroSilent,
+    /// The gyro link corrupts every 50th frame (dropped, counted as a CRC
+    /// error; served: one bit flipped in every 50 frames' bytes).
+    GyroCorrupt,
+    /// The gyro's output sticks at one value ([`STUCK_COUNTS`]).
+    GyroStuck,
+    /// The gyro's output pins at the largest count ([`SATURATED_COUNTS`]).
+    GyroSaturated,
+    /// The process dies at once, as under SIGKILL: no cleanup, no footer
+    /// (for the fault-and-resume sweep).
+    ProcessKill,
+    /// A bug: the run panics mid-tick (the bench must still reach its safe
+    /// state).
+    Panic,
+    /// The unit shorts: it draws three times its current, and the supply's
+    /// over-current protection trips (a bench with a supply).
+    SupplyOvercurrent,
+    /// The disk the log is on fills: every write to the log fails from
+    /// then on, as with `No space left on device` (the recorder plays it;
+    /// the bench carries on).
+    DiskFull,
+    /// The process gets SIGHUP (its terminal or SSH session closed), once.
+    Hangup,
+    /// The process gets SIGQUIT (Ctrl-\), once.
+    Quit,
+    /// A batch's last unit's gyro link is lost for good: it sends nothing
+    /// more (the others go on).
+    UnitLost,
+}
+
+impl Fault {
+    /// Every fault, in the order `--help` lists them.
+    pub const ALL: [Self; 14] = [
+        Self::ChamberAlarm,
+        Self::ChamberSilent,
+        Self::TableInterlock,
+        Self::GyroSilent,
+        Self::GyroCorrupt,
+        Self::GyroStuck,
+        Self::GyroSaturated,
+        Self::ProcessKill,
+        Self::Panic,
+        Self::SupplyOvercurrent,
+        Self::DiskFull,
+        Self::Hangup,
+        Self::Quit,
+        Self::UnitLost,
+    ];
+
+    /// Every fault by the name `--inject` takes.
+    pub const NAMES: [&str; 14] = {
+        let mut names = [""; 14];
+        let mut i = 0;
+        while i < 14 {
+            names[i] = Self::ALL[i].name();
+            i += 1;
+        }
+        names
+    };
+}
+
+impl std::str::FromStr for Fault {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        Self::ALL
+            .into_iter()
+            .find(|f| f.name() == s)
+            .ok_or_else(|| format!("unknown fault {s:?}; expected {}", Self::NAMES.join(", ")))
+    }
+}
+
+/// Counts per frame of a gyro whose output is stuck.
+pub const STUCK_COUNTS: i32 = 3;
+
+/// Counts per frame of a gyro whose output is saturated.
+pub const SATURATED_COUNTS: i32 = i32::MAX;
+
+/// Frames between two corrupted ones under [`Fault::GyroCorrupt`].
+pub const CORRUPT_EVERY_FRAMES: u32 = 50;
+
+impl Fault {
+    /// The device the fault acts on (`chamber`, `table`, `gyro`, `supply`),
+    /// or `None` for a fault of the controller itself (its process, its
+    /// signals, its log's disk), which only `run --inject` plays.
+    pub fn device(self) -> Option<&'static str> {
+        match self {
+            Self::ChamberAlarm | Self::ChamberSilent => Some("chamber"),
+            Self::TableInterlock => Some("table"),
+            Self::GyroSilent
+            | Self::GyroCorrupt
+            | Self::GyroStuck
+            | Self::GyroSaturated
+            | Self::UnitLost => Some("gyro"),
+            Self::SupplyOvercurrent => Some("supply"),
+            Self::ProcessKill | Self::Panic | Self::DiskFull | Self::Hangup | Self::Quit => None,
+        }
+    }
+
+    /// Its name, as `--inject` takes it.
+    pub const fn name(self) -> &'static str {
+        match self {
+            Self::ChamberAlarm => "chamber-alarm",
+            Self::ChamberSilent => "chamber-silent",
+            Self::TableInterlock => "table-interlock",
+            Self::GyroSilent => "gyro-silent",
+            Self::GyroCorrupt => "gyro-corrupt",
+            Self::GyroStuck => "gyro-stuck",
+            Self::GyroSaturated => "gyro-saturated",
+            Self::ProcessKill => "process-kill",
+            Self::Panic => "panic",
+            Self::SupplyOvercurrent => "supply-overcurrent",
+            Self::DiskFull => "disk-full",
+            Self::Hangup => "sighup",
+            Self::Quit => "sigquit",
+            Self::UnitLost => "unit-lost",
+        }
+    }
+
+    /// `FAULT@SECONDS` (`chamber-silent@600`): the fault and the device
+    /// time it starts at, s. The error says what is wrong with `s`.
+    pub fn parse_at(s: &str) -> Result<(f64, Self), String> {
+        let (f, t) = s
+            .split_once('@')
+            .ok_or_else(|| format!("{s:?}: expected FAULT@SECONDS, e.g. chamber-silent@600"))?;
+        let fault: Self = f.parse().map_err(|e| format!("{s:?}: {e}"))?;
+        let at: f64 = t
+            .parse()
+            .ok()
+            .filter(|v: &f64| v.is_finite() && *v >= 0.0)
+            .ok_or_else(|| format!("{s:?}: the time must be seconds of device time"))?;
+        Ok((at, fault))
+    }
+}
 
 /// A network outage (a switch rebooting, a cable pulled): while it lasts,
 /// the device's connections are dropped and new ones closed at once.
@@ -97,6 +247,9 @@ pub struct GyroFaults {
     pub silent: AtomicBool,
     /// Unreachable for a while.
     pub outage: Outage,
+    /// A batch's unit whose line sends nothing more, by index (0: none;
+    /// the first unit's line takes `silent` instead).
+    pub lost_line: AtomicUsize,
 }
 
 /// Faults of every simulated device.

@@ -34,7 +34,7 @@ pub async fn serve_gyro<W: AsyncWrite + Unpin>(
 
 /// Stream unit `unit`'s gyro bytes (0: the first unit's; a batch's
 /// others after it) to `w`, as [`serve_gyro`]. The gyro faults play on
-/// the first unit's line.
+/// the first unit's line; a lost unit's line (`unit-lost`) sends nothing.
 pub async fn serve_unit_gyro<W: AsyncWrite + Unpin>(
     mut w: W,
     bench: Arc<SharedBench>,
@@ -52,7 +52,8 @@ pub async fn serve_unit_gyro<W: AsyncWrite + Unpin>(
         match rx.recv().await {
             Ok(chunk) => {
                 let f = &bench.faults.gyro;
-                let silent = faulty && f.silent.load(Ordering::Relaxed);
+                let lost = unit > 0 && f.lost_line.load(Ordering::Relaxed) == unit;
+                let silent = lost || (faulty && f.silent.load(Ordering::Relaxed));
                 if silent || chunk.at.elapsed() > MAX_LINE_DELAY {
                     continue;
                 }

@@ -20,7 +20,7 @@ use std::sync::{Arc, Mutex, MutexGuard};
 
 use tokio::sync::broadcast;
 
-pub use faults::{Action, DeviceFaults, Faults, GyroFaults};
+pub use faults::{Action, DeviceFaults, Fault, Faults, GyroFaults};
 
 use crate::clock::Clock;
 use crate::protocol::acl::ServoMode;
@@ -75,6 +75,9 @@ pub mod alarm {
     pub const UPPER_LIMIT: u16 = 1;
     /// Air below the lower alarm limit.
     pub const LOWER_LIMIT: u16 = 2;
+    /// The alarm [`super::faults::Fault::ChamberAlarm`] raises (the
+    /// embedded bench's too).
+    pub const INJECTED: u16 = 9;
 }
 
 /// Chamber controller state beyond the twin's air model.
@@ -123,6 +126,10 @@ pub struct SimBench {
     /// A batch's further units, after the first (`twin`): each its own
     /// twin in the same air, on the same table, on its own gyro line.
     pub units: Vec<SimUnit>,
+    /// Counts the first unit's gyro sends in every frame instead of its
+    /// own: a stuck or saturated output ([`faults::Fault::GyroStuck`],
+    /// [`faults::Fault::GyroSaturated`]).
+    pub forced_counts: Option<i32>,
 }
 
 /// One more unit of a simulated batch: its own twin (its parameters, its
@@ -171,6 +178,7 @@ impl SimBench {
             gyro_tx,
             out: Vec::new(),
             units: Vec::new(),
+            forced_counts: None,
         }
     }
 
@@ -214,15 +222,19 @@ impl SimBench {
     }
 
     fn run_twins(&mut self, t_s: f64) {
-        run_twin(
-            &mut self.twin,
-            &self.layout,
-            &mut self.out,
-            &self.gyro_tx,
-            t_s,
-        );
+        let first = Line {
+            layout: &self.layout,
+            tx: &self.gyro_tx,
+            forced_counts: self.forced_counts,
+        };
+        run_twin(&mut self.twin, &first, &mut self.out, t_s);
         for u in &mut self.units {
-            run_twin(&mut u.twin, &self.layout, &mut self.out, &u.gyro_tx, t_s);
+            let line = Line {
+                layout: &self.layout,
+                tx: &u.gyro_tx,
+                forced_counts: None,
+            };
+            run_twin(&mut u.twin, &line, &mut self.out, t_s);
         }
     }
 
@@ -278,20 +290,23 @@ impl SimBench {
     }
 }
 
-/// Run `twin` to `t_s`, encoding its frames in `layout` (through the
-/// scratch buffer `out`) onto its line `tx`.
-fn run_twin(
-    twin: &mut Twin,
-    layout: &FrameLayout,
-    out: &mut Vec<u8>,
-    tx: &broadcast::Sender<GyroChunk>,
-    t_s: f64,
-) {
+/// A unit's gyro line: its frame layout, where its bytes go, and the
+/// counts a fault sends instead of the unit's own.
+struct Line<'a> {
+    layout: &'a FrameLayout,
+    tx: &'a broadcast::Sender<GyroChunk>,
+    forced_counts: Option<i32>,
+}
+
+/// Run `twin` to `t_s`, encoding its frames (through the scratch buffer
+/// `out`) onto its `line`.
+fn run_twin(twin: &mut Twin, line: &Line<'_>, out: &mut Vec<u8>, t_s: f64) {
+    let (layout, tx) = (line.layout, line.tx);
     twin.run_until(t_s, |_, g| {
         let wf = WireFrame {
             frame_type: layout.frame_type,
             seq: (g.index % 256) as u8,
-            delta_counts: g.delta_counts,
+            delta_counts: line.forced_counts.unwrap_or(g.delta_counts),
             temps_raw: [
                 layout.temp_to_raw(g.t1_c),
                 layout.temp_to_raw(g.t2_c),
@@ -351,6 +366,45 @@ impl SharedBench {
     /// The clock the bench follows.
     pub fn clock(&self) -> &Arc<dyn Clock> {
         &self.clock
+    }
+
+    /// Play `fault` from now on, as the embedded bench plays it, on the
+    /// devices' wire protocols: the chamber raises alarm 9 or goes silent,
+    /// the table's interlock trips, the gyro line goes silent, corrupts a
+    /// frame in 50, sticks or saturates, a batch's last unit's line goes
+    /// silent for good, the unit draws three times its current. A fault
+    /// of the controller itself ([`Fault::device`] `None`) is refused, as
+    /// is `unit-lost` on a bench of one unit.
+    pub fn play(&self, fault: Fault) -> Result<(), String> {
+        use std::sync::atomic::Ordering::Relaxed;
+        let mut b = self.lock();
+        match fault {
+            Fault::ChamberAlarm => b.raise_chamber_alarm(alarm::INJECTED),
+            Fault::ChamberSilent => self.faults.chamber.silent.store(true, Relaxed),
+            Fault::TableInterlock => b.trip_interlock(),
+            Fault::GyroSilent => self.faults.gyro.silent.store(true, Relaxed),
+            Fault::GyroCorrupt => {
+                let every = faults::CORRUPT_EVERY_FRAMES.saturating_mul(b.layout.len() as u32);
+                self.faults.gyro.corrupt_every.store(every, Relaxed);
+            }
+            Fault::GyroStuck => b.forced_counts = Some(faults::STUCK_COUNTS),
+            Fault::GyroSaturated => b.forced_counts = Some(faults::SATURATED_COUNTS),
+            Fault::UnitLost if b.units.is_empty() => {
+                return Err(
+                    "unit-lost loses a batch's last unit: it needs a serve file with two slots or more"
+                        .into(),
+                );
+            }
+            Fault::UnitLost => self.faults.gyro.lost_line.store(b.units.len(), Relaxed),
+            Fault::SupplyOvercurrent => b.supply.load.0.steady_a *= 3.0,
+            Fault::ProcessKill | Fault::Panic | Fault::DiskFull | Fault::Hangup | Fault::Quit => {
+                return Err(format!(
+                    "{} is a fault of the controller (its process or its log), not of a device: `gyrobench run --inject` plays it on the embedded bench",
+                    fault.name()
+                ));
+            }
+        }
+        Ok(())
     }
 
     /// Keep the physics moving (and gyro frames flowing) every `period`

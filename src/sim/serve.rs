@@ -8,6 +8,7 @@ use std::time::Duration;
 use serde::Deserialize;
 use tokio::net::TcpListener;
 
+use super::faults::Fault;
 use super::{
     SharedBench, SimBench,
     acl::serve_acl,
@@ -448,6 +449,53 @@ pub async fn start(s: &Serve) -> Result<Served, ServeError> {
         bench,
         _ptys: ptys,
     })
+}
+
+/// Whether the served bench of `s` can play `fault`: a device's fault
+/// ([`Fault::device`]); `unit-lost` only on a batch of two units or more.
+/// The error says why not.
+pub fn can_play(s: &Serve, fault: Fault) -> Result<(), String> {
+    match fault.device() {
+        None => Err(format!(
+            "{} is a fault of the controller (its process or its log), not of a device: `gyrobench run --inject` plays it on the embedded bench; sim serve plays {}",
+            fault.name(),
+            Fault::ALL
+                .iter()
+                .filter(|f| f.device().is_some())
+                .map(|f| f.name())
+                .collect::<Vec<_>>()
+                .join(", ")
+        )),
+        Some(_) if fault == Fault::UnitLost && s.units.len() < 2 => Err(
+            "unit-lost loses a batch's last unit: it needs a serve file with two slots or more (fixtures/sim/quad.toml)"
+                .into(),
+        ),
+        Some(_) => Ok(()),
+    }
+}
+
+/// How often a scheduled fault looks at the served clock, wall time.
+const FAULT_POLL: Duration = Duration::from_millis(20);
+
+/// Play each of `faults` (device time, s; fault) on `bench` once its
+/// clock reaches that time, calling `played` with what [`SharedBench::play`]
+/// answered.
+pub fn schedule_faults(
+    bench: &Arc<SharedBench>,
+    faults: Vec<(f64, Fault)>,
+    played: impl Fn(f64, Fault, Result<(), String>) + Send + Sync + 'static,
+) {
+    let played = Arc::new(played);
+    for (at_s, fault) in faults {
+        let (bench, played) = (Arc::clone(bench), Arc::clone(&played));
+        tokio::spawn(async move {
+            while bench.clock().now_s() < at_s {
+                tokio::time::sleep(FAULT_POLL).await;
+            }
+            let r = bench.play(fault);
+            played(bench.clock().now_s(), fault, r);
+        });
+    }
 }
 
 /// One gyro line per unit: `gyro`, or a batch's `gyro/SLOT`; each with

@@ -199,6 +199,18 @@ fn usage_errors_exit_2_everywhere() {
         (vec!["diagnose", "selfcheck"], "--out"),
         (vec!["twin", "bench", "--hours", "0"], "--hours"),
         (vec!["sim", "link-bench", "--seconds", "0"], "--seconds"),
+        (
+            vec!["sim", "serve", "--inject", "process-kill@10"],
+            "a fault of the controller",
+        ),
+        (
+            vec!["sim", "serve", "--inject", "unit-lost@10"],
+            "two slots or more",
+        ),
+        (
+            vec!["sim", "serve", "--inject", "chamber-alarm"],
+            "FAULT@SECONDS",
+        ),
         (vec!["allan", "x.csv", "--taus", "sparse"], "--taus"),
         (vec!["import", csv, "--site", site], "--out"),
         (
