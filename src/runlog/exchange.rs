@@ -26,7 +26,7 @@ use crate::config::{Checker, ConfigError, Source};
 use crate::driver::{ChamberMode, ChamberReading, TableReading};
 use crate::fsutil::{Pending, ensure_distinct};
 use crate::geometry::{Site, TableAngles, TableGeometry};
-use crate::procedure::{Procedure, StepKind};
+use crate::procedure::{Procedure, Step, StepKind};
 use crate::sequencer::measure::{self, MeasureOutcome, Records};
 use crate::sequencer::{BenchState, Outcome, RunResult, Sink, Tick};
 
@@ -458,48 +458,7 @@ fn write_log(
             .map_err(io)?;
         records.start(label);
         for (r, known) in rows[*a..*b].iter().zip(&angles[*a..*b]) {
-            // The orientation is the measured fact; the table angles are
-            // written only where they are known.
-            let o = r.orientation();
-            rec.set_table_angles_known(known.is_some());
-            let angles = known.unwrap_or_default();
-            let state = BenchState {
-                t_s: r.time_s + 0.5,
-                chamber: ChamberReading {
-                    air_c: r.chamber_c,
-                    set_point_c: r.chamber_c,
-                    mode: ChamberMode::Constant,
-                    alarms: Vec::new(),
-                },
-                table: TableReading {
-                    angles,
-                    rates: TableAngles::default(),
-                },
-                commanded: angles,
-                orientation: o,
-                reference_dph: o.earth_rate_dph(&site),
-                in_position: true,
-                power: None,
-            };
-            let tick = Tick {
-                t0_s: r.time_s - 0.5,
-                frames: Vec::new(),
-                state: Some(state.clone()),
-                slots: Vec::new(),
-            };
-            rec.tick(&tick, Some(label), &step.key).map_err(io)?;
-            let iv = Interval {
-                time_s: r.time_s,
-                rate_dph: r.rate_dph,
-                reference_dph: state.reference_dph,
-                t1_c: r.t1_c,
-                t2_c: r.t2_c,
-                tcase_c: r.tcase_c,
-                chamber_c: r.chamber_c,
-                frames: 0,
-            };
-            records.push(iv, Some(label));
-            rec.interval(&iv, Some(label)).map_err(io)?;
+            write_row(&mut rec, &mut records, (label, &step.key), r, *known, &site).map_err(io)?;
         }
         let t1 = rows[b - 1].time_s + 0.5;
         rec.step(&StepEvent::new(t1, StepPhase::End, index, step))
@@ -508,36 +467,14 @@ fn write_log(
             .map_err(io)?;
     }
     let end_s = rows.last().map_or(0.0, |r| r.time_s + 0.5);
-    let mut measurements = Vec::new();
-    for (i, step) in steps.iter().enumerate().skip(step_at) {
-        if let StepKind::Measure(m) = &step.kind {
-            let index = setup + i;
-            rec.step(&StepEvent::new(end_s, StepPhase::Start, index, step))
-                .map_err(io)?;
-            rec.event(end_s, Level::Debug, &step.start_message())
-                .map_err(io)?;
-            let meas = measure::compute(m, &records, None, &step.key);
-            rec.event(
-                end_s,
-                if meas.outcome == MeasureOutcome::Pass {
-                    Level::Info
-                } else {
-                    Level::Warning
-                },
-                &format!(
-                    "{} = {}",
-                    meas.name,
-                    meas.value.map_or("n/a".into(), |v| format!("{v:.4}"))
-                ),
-            )
-            .map_err(io)?;
-            rec.step(&StepEvent::new(end_s, StepPhase::End, index, step))
-                .map_err(io)?;
-            rec.event(end_s, Level::Debug, &format!("end of step {}", step.key))
-                .map_err(io)?;
-            measurements.push(meas);
-        }
-    }
+    let measurements = write_measures(
+        &mut rec,
+        &steps[step_at..],
+        setup + step_at,
+        &records,
+        end_s,
+    )
+    .map_err(io)?;
     let failed = measurements
         .iter()
         .any(|m| m.outcome != MeasureOutcome::Pass);
@@ -556,6 +493,97 @@ fn write_log(
     rec.finish_run(&ResultMeta::new(&result), None, end_s)
         .map_err(io)?;
     Ok((outcome, measurements))
+}
+
+/// One imported row as the tick and 1 Hz interval a run logs, in record
+/// `label` of step `step_key`, filed in `records` too.
+fn write_row(
+    rec: &mut Recorder,
+    records: &mut Records,
+    (label, step_key): (&str, &str),
+    r: &Row,
+    known: Option<TableAngles>,
+    site: &Site,
+) -> std::io::Result<()> {
+    // The orientation is the measured fact; the table angles are
+    // written only where they are known.
+    let o = r.orientation();
+    rec.set_table_angles_known(known.is_some());
+    let angles = known.unwrap_or_default();
+    let state = BenchState {
+        t_s: r.time_s + 0.5,
+        chamber: ChamberReading {
+            air_c: r.chamber_c,
+            set_point_c: r.chamber_c,
+            mode: ChamberMode::Constant,
+            alarms: Vec::new(),
+        },
+        table: TableReading {
+            angles,
+            rates: TableAngles::default(),
+        },
+        commanded: angles,
+        orientation: o,
+        reference_dph: o.earth_rate_dph(site),
+        in_position: true,
+        power: None,
+    };
+    let tick = Tick {
+        t0_s: r.time_s - 0.5,
+        frames: Vec::new(),
+        state: Some(state.clone()),
+        slots: Vec::new(),
+    };
+    rec.tick(&tick, Some(label), step_key)?;
+    let iv = Interval {
+        time_s: r.time_s,
+        rate_dph: r.rate_dph,
+        reference_dph: state.reference_dph,
+        t1_c: r.t1_c,
+        t2_c: r.t2_c,
+        tcase_c: r.tcase_c,
+        chamber_c: r.chamber_c,
+        frames: 0,
+    };
+    records.push(iv, Some(label));
+    rec.interval(&iv, Some(label))
+}
+
+/// The measure steps of `steps` (the first at index `first`), computed on
+/// `records` and logged at `end_s` as a run logs them.
+fn write_measures(
+    rec: &mut Recorder,
+    steps: &[&Step],
+    first: usize,
+    records: &Records,
+    end_s: f64,
+) -> std::io::Result<Vec<measure::Measurement>> {
+    let mut measurements = Vec::new();
+    for (i, step) in steps.iter().enumerate() {
+        if let StepKind::Measure(m) = &step.kind {
+            let index = first + i;
+            rec.step(&StepEvent::new(end_s, StepPhase::Start, index, step))?;
+            rec.event(end_s, Level::Debug, &step.start_message())?;
+            let meas = measure::compute(m, records, None, &step.key);
+            rec.event(
+                end_s,
+                if meas.outcome == MeasureOutcome::Pass {
+                    Level::Info
+                } else {
+                    Level::Warning
+                },
+                &format!(
+                    "{} = {}",
+                    meas.name,
+                    meas.value.map_or("n/a".into(), |v| format!("{v:.4}"))
+                ),
+            )?;
+            rec.step(&StepEvent::new(end_s, StepPhase::End, index, step))?;
+            rec.event(end_s, Level::Debug, &format!("end of step {}", step.key))?;
+            measurements.push(meas);
+        }
+    }
+    Ok(measurements)
 }
 
 /// What an export wrote.

@@ -299,28 +299,42 @@ pub fn from_source(src: Source) -> Result<ImportMap, ConfigError> {
     if let Some(cm) = &m.file.comment {
         one_char(cm, "file.comment")?;
     }
-    c.positive(m.time.scale_s, "time.scale_s")?;
-    c.within(m.time.offset_s, -1e7, 1e7, "time.offset_s")?;
-    match m.time.form {
+    check_time(&c, &src, &m.time)?;
+    check_rate(&c, &src, &m.rate)?;
+    check_orientation(&c, &m.orientation)?;
+    check_step(&c, &m.step)?;
+    m.source = Some(src);
+    Ok(m)
+}
+
+/// `[time]`: its scale and offset, and what goes with its form.
+fn check_time(c: &Checker<'_>, src: &Source, t: &TimeMap) -> Result<(), ConfigError> {
+    c.positive(t.scale_s, "time.scale_s")?;
+    c.within(t.offset_s, -1e7, 1e7, "time.offset_s")?;
+    match t.form {
         TimeForm::Seconds => {
             c.ensure(
-                m.time.format.is_none() && m.time.power_on.is_none(),
+                t.format.is_none() && t.power_on.is_none(),
                 "time.form",
                 "is `seconds`: `format` and `power_on` are for a `datetime` column",
             )?;
         }
         TimeForm::Datetime => {
             c.ensure(
-                m.time.scale_s == 1.0 && m.time.offset_s == 0.0,
+                t.scale_s == 1.0 && t.offset_s == 0.0,
                 "time.form",
                 "is `datetime`: `scale_s` and `offset_s` are for a `seconds` column (give `power_on`)",
             )?;
-            if let Some(p) = &m.time.power_on {
+            if let Some(p) = &t.power_on {
                 parse_datetime(p, None).map_err(|e| src.invalid("time.power_on", e))?;
             }
         }
     }
-    let r = &m.rate;
+    Ok(())
+}
+
+/// `[rate]`: Earth rate included, and what its unit needs.
+fn check_rate(c: &Checker<'_>, src: &Source, r: &RateMap) -> Result<(), ConfigError> {
     c.ensure(
         r.earth_rate_included,
         "rate.earth_rate_included",
@@ -358,7 +372,11 @@ pub fn from_source(src: Source) -> Result<ImportMap, ConfigError> {
         }
         (_, None) => {}
     }
-    let o = &m.orientation;
+    Ok(())
+}
+
+/// `[orientation]`: exactly one way to a pose, each pose within range.
+fn check_orientation(c: &Checker<'_>, o: &OrientationMap) -> Result<(), ConfigError> {
     let given = [o.columns.is_some(), o.fixed.is_some(), o.by_step.is_some()];
     c.ensure(
         given.iter().filter(|g| **g).count() == 1,
@@ -366,15 +384,19 @@ pub fn from_source(src: Source) -> Result<ImportMap, ConfigError> {
         "needs exactly one of `columns`, `fixed` or `by_step`",
     )?;
     if let Some(f) = &o.fixed {
-        check_pose(&c, f, "orientation.fixed")?;
+        check_pose(c, f, "orientation.fixed")?;
     }
     if let Some(by) = &o.by_step {
         c.ensure(!by.is_empty(), "orientation.by_step", "names no step")?;
         for (label, p) in by {
-            check_pose(&c, p, &format!("orientation.by_step.{label}"))?;
+            check_pose(c, p, &format!("orientation.by_step.{label}"))?;
         }
     }
-    let s = &m.step;
+    Ok(())
+}
+
+/// `[step]`: a column or boundaries, the boundaries in order and named.
+fn check_step(c: &Checker<'_>, s: &StepMap) -> Result<(), ConfigError> {
     c.ensure(
         s.column.is_some() != s.boundaries.is_some(),
         "step",
@@ -400,8 +422,7 @@ pub fn from_source(src: Source) -> Result<ImportMap, ConfigError> {
             )?;
         }
     }
-    m.source = Some(src);
-    Ok(m)
+    Ok(())
 }
 
 fn check_pose(c: &Checker<'_>, o: &Orientation, key: &str) -> Result<(), ConfigError> {
@@ -514,47 +535,15 @@ impl ImportMap {
 
     /// Read a lab's file from any reader; `name` labels errors.
     pub fn parse(&self, mut input: impl std::io::BufRead, name: &str) -> Result<Mapped, MapError> {
-        let err = |line: u64, message: String| {
-            MapError::Csv(CsvError::Row {
-                path: name.to_owned(),
-                line,
-                message,
-            })
-        };
-        // The preamble, skipped by lines.
-        let mut skipped = 0u64;
-        for _ in 0..self.file.skip_lines {
-            let mut l = Vec::new();
-            let n = input
-                .read_until(b'\n', &mut l)
-                .map_err(|e| err(skipped + 1, format!("unreadable: {e}")))?;
-            if n == 0 {
-                return Err(err(
-                    skipped + 1,
-                    format!(
-                        "the file ends within the {} lines [file] skip_lines skips",
-                        self.file.skip_lines
-                    ),
-                ));
-            }
-            skipped += 1;
-        }
-        let mut b = csv::ReaderBuilder::new();
-        b.has_headers(true)
-            .trim(csv::Trim::All)
-            .delimiter(self.file.delimiter.as_bytes()[0]);
-        if let Some(c) = &self.file.comment {
-            b.comment(Some(c.as_bytes()[0]));
-        }
-        let mut rdr = b.from_reader(input);
+        let skipped = self.skip_preamble(&mut input, name)?;
+        let mut rdr = self.csv_reader(input);
         let header: Vec<String> = rdr
             .headers()
-            .map_err(|e| err(skipped + 1, format!("unreadable header: {e}")))?
+            .map_err(|e| row_error(name, skipped + 1, format!("unreadable header: {e}")))?
             .iter()
             .map(str::to_owned)
             .collect();
         let cols = self.resolve(&header, name).map_err(MapError::Map)?;
-        let cell_name = |i: usize| header.get(i).cloned().unwrap_or_default();
         let mut out = super::interchange::OneHz::default();
         let mut prev_time: Option<f64> = None;
         let mut power_on = match &self.time.power_on {
@@ -569,140 +558,23 @@ impl ImportMap {
         loop {
             let more = rdr.read_record(&mut rec).map_err(|e| {
                 let line = e.position().map_or(0, csv::Position::line) + skipped;
-                err(line, format!("unreadable row: {e}"))
+                row_error(name, line, format!("unreadable row: {e}"))
             })?;
             if !more {
                 break;
             }
-            let line = rec.position().map_or(0, csv::Position::line) + skipped;
-            let cell = |i: usize| rec.get(i).unwrap_or("");
-            let number = |i: usize, what: &str| -> Result<f64, MapError> {
-                let v = cell(i);
-                v.parse::<f64>().map_err(|_| {
-                    err(
-                        line,
-                        format!("column {:?} ({what}): {v:?} is not a number", cell_name(i)),
-                    )
-                })
+            let cells = Cells {
+                rec: &rec,
+                header: &header,
+                line: rec.position().map_or(0, csv::Position::line) + skipped,
+                name,
             };
-            let time_s = match self.time.form {
-                TimeForm::Seconds => {
-                    number(cols.time, "time")? * self.time.scale_s + self.time.offset_s
-                }
-                TimeForm::Datetime => {
-                    let t = parse_datetime(cell(cols.time), self.time.format.as_deref()).map_err(
-                        |e| {
-                            err(
-                                line,
-                                format!("column {:?} (time): {e}", cell_name(cols.time)),
-                            )
-                        },
-                    )?;
-                    let p0 = *power_on.get_or_insert(t);
-                    (t - p0)
-                        .num_nanoseconds()
-                        .map_or(f64::NAN, |ns| ns as f64 * 1e-9)
-                }
-            };
-            let raw = number(cols.rate, "rate")?;
-            let rate_dph = match self.rate.unit {
-                RateUnit::DegPerHour => raw,
-                RateUnit::DegPerSecond => raw * 3600.0,
-                RateUnit::RadPerSecond => raw.to_degrees() * 3600.0,
-                // 1 arcsec/s is 1 deg/h.
-                RateUnit::ArcsecPerSample => raw / self.rate.sample_s.unwrap_or(1.0),
-                RateUnit::Counts => {
-                    raw * self.rate.scale_arcsec.unwrap_or(1.0) / self.rate.sample_s.unwrap_or(1.0)
-                }
-            };
-            let mut temps = [0.0; 4];
-            for (k, (t, what)) in temps
-                .iter_mut()
-                .zip(["t1", "t2", "tcase", "chamber"])
-                .enumerate()
-            {
-                let v = number(cols.temps[k], what)?;
-                *t = match self.temperatures.unit {
-                    TempUnit::Celsius => v,
-                    TempUnit::Kelvin => v - 273.15,
-                };
-            }
-            let step = match (cols.step, &self.step.boundaries) {
-                (Some(i), _) => cell(i).to_owned(),
-                (None, Some(b)) => match b.iter().rev().find(|x| x.from_s <= time_s) {
-                    Some(x) => x.label.clone(),
-                    None => {
-                        return Err(err(
-                            line,
-                            format!(
-                                "time {time_s} s is before the first step boundary ({} s) of {}",
-                                b[0].from_s,
-                                self.src_name()
-                            ),
-                        ));
-                    }
-                },
-                (None, None) => String::new(),
-            };
-            let o = match (&cols.orientation, &self.orientation) {
-                (Some([a, e, r]), _) => Orientation::new(
-                    number(*a, "azimuth")?,
-                    number(*e, "elevation")?,
-                    number(*r, "roll")?,
-                ),
-                (None, OrientationMap { fixed: Some(f), .. }) => *f,
-                (
-                    None,
-                    OrientationMap {
-                        by_step: Some(by), ..
-                    },
-                ) => *by.get(&step).ok_or_else(|| {
-                    err(
-                        line,
-                        format!(
-                            "step {step:?} has no pose in [orientation.by_step] of {} (it has {})",
-                            self.src_name(),
-                            by.keys()
-                                .map(|k| format!("{k:?}"))
-                                .collect::<Vec<_>>()
-                                .join(", ")
-                        ),
-                    )
-                })?,
-                _ => Orientation::new(0.0, 0.0, 0.0),
-            };
-            let (outer_deg, inner_deg) = match cols.table {
-                Some([a, b]) => {
-                    let opt = |i: usize, what: &str| -> Result<Option<f64>, MapError> {
-                        if cell(i).is_empty() {
-                            Ok(None)
-                        } else {
-                            number(i, what).map(Some)
-                        }
-                    };
-                    (opt(a, "outer table angle")?, opt(b, "inner table angle")?)
-                }
-                None => (None, None),
-            };
-            let row = Row {
-                time_s,
-                rate_dph,
-                t1_c: temps[0],
-                t2_c: temps[1],
-                tcase_c: temps[2],
-                chamber_c: temps[3],
-                azimuth_deg: o.azimuth_deg,
-                elevation_deg: o.elevation_deg,
-                roll_deg: o.roll_deg,
-                step,
-                outer_deg,
-                inner_deg,
-            };
+            let row = self.map_row(&cols, &cells, &mut power_on)?;
             row.check_after(prev_time).map_err(|m| {
-                err(
-                    line,
-                    format!("{m} (after the map's conversions; {})", self.src_name()),
-                )
+                cells.error(format!(
+                    "{m} (after the map's conversions; {})",
+                    self.src_name()
+                ))
             })?;
             prev_time = Some(row.time_s);
             samples += 1;
@@ -710,13 +582,247 @@ impl ImportMap {
         }
         let rows = out.finish();
         if rows.is_empty() {
-            return Err(err(skipped + 2, "no samples after the header".into()));
+            return Err(row_error(
+                name,
+                skipped + 2,
+                "no samples after the header".into(),
+            ));
         }
         Ok(Mapped {
             rows,
             samples,
             power_on_utc: power_on.map(|p| p.with_timezone(&chrono::Utc).to_rfc3339()),
         })
+    }
+
+    /// Skip the preamble's `[file] skip_lines` lines; how many were skipped.
+    fn skip_preamble(
+        &self,
+        input: &mut impl std::io::BufRead,
+        name: &str,
+    ) -> Result<u64, MapError> {
+        let mut skipped = 0u64;
+        for _ in 0..self.file.skip_lines {
+            let mut l = Vec::new();
+            let n = input
+                .read_until(b'\n', &mut l)
+                .map_err(|e| row_error(name, skipped + 1, format!("unreadable: {e}")))?;
+            if n == 0 {
+                return Err(row_error(
+                    name,
+                    skipped + 1,
+                    format!(
+                        "the file ends within the {} lines [file] skip_lines skips",
+                        self.file.skip_lines
+                    ),
+                ));
+            }
+            skipped += 1;
+        }
+        Ok(skipped)
+    }
+
+    /// A CSV reader of the rest with the map's delimiter and comment.
+    fn csv_reader<R: std::io::Read>(&self, input: R) -> csv::Reader<R> {
+        let mut b = csv::ReaderBuilder::new();
+        b.has_headers(true)
+            .trim(csv::Trim::All)
+            .delimiter(self.file.delimiter.as_bytes()[0]);
+        if let Some(c) = &self.file.comment {
+            b.comment(Some(c.as_bytes()[0]));
+        }
+        b.from_reader(input)
+    }
+
+    /// One row of the lab's file as an interchange row: its time, rate,
+    /// temperatures, step, pose and table angles, in that order.
+    fn map_row(
+        &self,
+        cols: &Resolved,
+        c: &Cells<'_>,
+        power_on: &mut Option<chrono::DateTime<chrono::FixedOffset>>,
+    ) -> Result<Row, MapError> {
+        let time_s = self.time_of(cols, c, power_on)?;
+        let rate_dph = self.rate_dph(c.number(cols.rate, "rate")?);
+        let mut temps = [0.0; 4];
+        for (k, (t, what)) in temps
+            .iter_mut()
+            .zip(["t1", "t2", "tcase", "chamber"])
+            .enumerate()
+        {
+            let v = c.number(cols.temps[k], what)?;
+            *t = match self.temperatures.unit {
+                TempUnit::Celsius => v,
+                TempUnit::Kelvin => v - 273.15,
+            };
+        }
+        let step = self.step_of(cols, c, time_s)?;
+        let o = self.orientation_of(cols, c, &step)?;
+        let (outer_deg, inner_deg) = match cols.table {
+            Some([a, b]) => {
+                let opt = |i: usize, what: &str| -> Result<Option<f64>, MapError> {
+                    if c.cell(i).is_empty() {
+                        Ok(None)
+                    } else {
+                        c.number(i, what).map(Some)
+                    }
+                };
+                (opt(a, "outer table angle")?, opt(b, "inner table angle")?)
+            }
+            None => (None, None),
+        };
+        Ok(Row {
+            time_s,
+            rate_dph,
+            t1_c: temps[0],
+            t2_c: temps[1],
+            tcase_c: temps[2],
+            chamber_c: temps[3],
+            azimuth_deg: o.azimuth_deg,
+            elevation_deg: o.elevation_deg,
+            roll_deg: o.roll_deg,
+            step,
+            outer_deg,
+            inner_deg,
+        })
+    }
+
+    /// A row's time since power-on, s: seconds scaled and offset, or a
+    /// date and time less the power-on's (the first row's when the map
+    /// gives none).
+    fn time_of(
+        &self,
+        cols: &Resolved,
+        c: &Cells<'_>,
+        power_on: &mut Option<chrono::DateTime<chrono::FixedOffset>>,
+    ) -> Result<f64, MapError> {
+        Ok(match self.time.form {
+            TimeForm::Seconds => {
+                c.number(cols.time, "time")? * self.time.scale_s + self.time.offset_s
+            }
+            TimeForm::Datetime => {
+                let t = parse_datetime(c.cell(cols.time), self.time.format.as_deref()).map_err(
+                    |e| c.error(format!("column {:?} (time): {e}", c.cell_name(cols.time))),
+                )?;
+                let p0 = *power_on.get_or_insert(t);
+                (t - p0)
+                    .num_nanoseconds()
+                    .map_or(f64::NAN, |ns| ns as f64 * 1e-9)
+            }
+        })
+    }
+
+    /// A rate in the map's unit, in deg/h.
+    fn rate_dph(&self, raw: f64) -> f64 {
+        match self.rate.unit {
+            RateUnit::DegPerHour => raw,
+            RateUnit::DegPerSecond => raw * 3600.0,
+            RateUnit::RadPerSecond => raw.to_degrees() * 3600.0,
+            // 1 arcsec/s is 1 deg/h.
+            RateUnit::ArcsecPerSample => raw / self.rate.sample_s.unwrap_or(1.0),
+            RateUnit::Counts => {
+                raw * self.rate.scale_arcsec.unwrap_or(1.0) / self.rate.sample_s.unwrap_or(1.0)
+            }
+        }
+    }
+
+    /// A row's step: its column's, or the label of the last boundary at
+    /// or before its time, or none.
+    fn step_of(&self, cols: &Resolved, c: &Cells<'_>, time_s: f64) -> Result<String, MapError> {
+        Ok(match (cols.step, &self.step.boundaries) {
+            (Some(i), _) => c.cell(i).to_owned(),
+            (None, Some(b)) => match b.iter().rev().find(|x| x.from_s <= time_s) {
+                Some(x) => x.label.clone(),
+                None => {
+                    return Err(c.error(format!(
+                        "time {time_s} s is before the first step boundary ({} s) of {}",
+                        b[0].from_s,
+                        self.src_name()
+                    )));
+                }
+            },
+            (None, None) => String::new(),
+        })
+    }
+
+    /// A row's pose: its columns', the map's fixed one, or its step's.
+    fn orientation_of(
+        &self,
+        cols: &Resolved,
+        c: &Cells<'_>,
+        step: &str,
+    ) -> Result<Orientation, MapError> {
+        Ok(match (&cols.orientation, &self.orientation) {
+            (Some([a, e, r]), _) => Orientation::new(
+                c.number(*a, "azimuth")?,
+                c.number(*e, "elevation")?,
+                c.number(*r, "roll")?,
+            ),
+            (None, OrientationMap { fixed: Some(f), .. }) => *f,
+            (
+                None,
+                OrientationMap {
+                    by_step: Some(by), ..
+                },
+            ) => *by.get(step).ok_or_else(|| {
+                c.error(format!(
+                    "step {step:?} has no pose in [orientation.by_step] of {} (it has {})",
+                    self.src_name(),
+                    by.keys()
+                        .map(|k| format!("{k:?}"))
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ))
+            })?,
+            _ => Orientation::new(0.0, 0.0, 0.0),
+        })
+    }
+}
+
+/// A bad row of file `name` at `line`.
+fn row_error(name: &str, line: u64, message: String) -> MapError {
+    MapError::Csv(CsvError::Row {
+        path: name.to_owned(),
+        line,
+        message,
+    })
+}
+
+/// One record of the lab's file, with what its errors name.
+struct Cells<'a> {
+    rec: &'a csv::StringRecord,
+    header: &'a [String],
+    /// Its line in the file.
+    line: u64,
+    /// The file.
+    name: &'a str,
+}
+
+impl Cells<'_> {
+    /// Cell `i` (empty when the row is short).
+    fn cell(&self, i: usize) -> &str {
+        self.rec.get(i).unwrap_or("")
+    }
+
+    /// Column `i`'s header.
+    fn cell_name(&self, i: usize) -> String {
+        self.header.get(i).cloned().unwrap_or_default()
+    }
+
+    /// Cell `i` as a number; the error names the column and `what`.
+    fn number(&self, i: usize, what: &str) -> Result<f64, MapError> {
+        let v = self.cell(i);
+        v.parse::<f64>().map_err(|_| {
+            self.error(format!(
+                "column {:?} ({what}): {v:?} is not a number",
+                self.cell_name(i)
+            ))
+        })
+    }
+
+    /// An error at this row.
+    fn error(&self, message: String) -> MapError {
+        row_error(self.name, self.line, message)
     }
 }
 

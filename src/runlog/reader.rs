@@ -444,28 +444,57 @@ pub fn read(
             reason: "it does not start with the MCAP magic".into(),
         });
     }
-    let mut st = Reading {
-        schemas: HashMap::new(),
-        channels: HashMap::new(),
-        unknown: ChannelInfo {
-            id: u16::MAX,
-            topic: String::new(),
-            message_encoding: String::new(),
-            metadata: BTreeMap::new(),
-            schema: None,
-        },
-        summary: ReadSummary {
-            file_bytes,
-            ..ReadSummary::default()
-        },
-        in_summary_section: false,
-        counting: None,
-    };
+    let mut st = Reading::new(file_bytes);
     // Where the current pass starts: the file's start, or after damage the
     // next whole chunk.
     let mut pass_start: u64 = 0;
-    'passes: loop {
-        file.seek(SeekFrom::Start(pass_start)).map_err(io)?;
+    while let Some(next) = st
+        .pass(&mut file, pass_start, file_bytes, &mut f)
+        .map_err(io)?
+    {
+        pass_start = next;
+    }
+    let mut summary = st.summary;
+    if !summary.complete {
+        summary.bytes_lost = file_bytes.saturating_sub(complete_prefix(&mut file).map_err(io)?);
+    }
+    Ok(summary)
+}
+
+impl Reading {
+    /// Nothing read yet of a file of `file_bytes`.
+    fn new(file_bytes: u64) -> Self {
+        Reading {
+            schemas: HashMap::new(),
+            channels: HashMap::new(),
+            unknown: ChannelInfo {
+                id: u16::MAX,
+                topic: String::new(),
+                message_encoding: String::new(),
+                metadata: BTreeMap::new(),
+                schema: None,
+            },
+            summary: ReadSummary {
+                file_bytes,
+                ..ReadSummary::default()
+            },
+            in_summary_section: false,
+            counting: None,
+        }
+    }
+
+    /// One pass over the file from `pass_start` (its start, or a whole
+    /// chunk after damage), handing items to `f`: where the next pass
+    /// starts when it met damage it can read past, else `None` (the end,
+    /// or a stop said in the summary).
+    fn pass(
+        &mut self,
+        file: &mut File,
+        pass_start: u64,
+        file_bytes: u64,
+        f: &mut impl FnMut(Item<'_>) -> Result<(), String>,
+    ) -> std::io::Result<Option<u64>> {
+        file.seek(SeekFrom::Start(pass_start))?;
         let mut reader = LinearReader::new_with_options(
             LinearReaderOptions::default()
                 // Chunks come whole, checked here before any of their
@@ -484,64 +513,58 @@ pub fn read(
             let event = match event {
                 Ok(e) => e,
                 Err(mcap::McapError::UnexpectedEof) => {
-                    st.summary.stopped = Some(
+                    self.summary.stopped = Some(
                         "the file ends inside a record (the run did not finish writing it)".into(),
                     );
-                    break 'passes;
+                    return Ok(None);
                 }
                 Err(e) => {
                     // The record at `at` is not whole: look for the next
                     // chunk that is, and go on from there.
-                    match next_whole_chunk(&mut file, at + 1, file_bytes).map_err(io)? {
+                    return Ok(match next_whole_chunk(file, at + 1, file_bytes)? {
                         Some(next) => {
-                            st.summary.damaged.push(Gap {
+                            self.summary.damaged.push(Gap {
                                 from_ns: None,
                                 to_ns: None,
                                 messages: None,
                                 bytes: next - at,
                                 why: format!("unreadable records: {e}"),
                             });
-                            st.counting = None;
-                            pass_start = next;
-                            continue 'passes;
+                            self.counting = None;
+                            Some(next)
                         }
                         None => {
-                            st.summary.stopped = Some(format!("unreadable record: {e}"));
-                            break 'passes;
+                            self.summary.stopped = Some(format!("unreadable record: {e}"));
+                            None
                         }
-                    }
+                    });
                 }
             };
             match event {
                 LinearReadEvent::ReadRequest(n) => {
                     let buf = reader.insert(n.max(256 * 1024));
-                    let got = file.read(buf).map_err(io)?;
+                    let got = file.read(buf)?;
                     reader.notify_read(got);
                 }
                 LinearReadEvent::Record { data, opcode } => {
                     at += 9 + data.len() as u64;
                     let flow = if opcode == mcap::records::op::CHUNK {
-                        st.chunk(data, &mut f)
+                        self.chunk(data, f)
                     } else {
                         match mcap::parse_record(opcode, data) {
-                            Ok(rec) => st.record(rec, &mut f),
+                            Ok(rec) => self.record(rec, f),
                             Err(e) => Flow::Stop(format!("unreadable record: {e}")),
                         }
                     };
                     if let Flow::Stop(e) = flow {
-                        st.summary.stopped = Some(e);
-                        break 'passes;
+                        self.summary.stopped = Some(e);
+                        return Ok(None);
                     }
                 }
             }
         }
-        break;
+        Ok(None)
     }
-    let mut summary = st.summary;
-    if !summary.complete {
-        summary.bytes_lost = file_bytes.saturating_sub(complete_prefix(&mut file).map_err(io)?);
-    }
-    Ok(summary)
 }
 
 /// Offset just past the last top-level record that is whole.

@@ -287,7 +287,7 @@ pub fn resume_batch_from(prev: &Replayed, others: &[Replayed], completed: usize)
     r
 }
 
-impl State<'_> {
+impl<'a> State<'a> {
     fn log_err(&self, message: impl Into<String>) -> String {
         format!("{}: {}", self.path.display(), message.into())
     }
@@ -360,6 +360,87 @@ impl State<'_> {
         Ok(())
     }
 
+    /// A replay of `path` about to read it (`coeffs` replace the run's;
+    /// `unit`: a batch's unit by serial).
+    fn new(path: &'a Path, coeffs: Option<&'a Compensation>, unit: Option<&'a str>) -> Self {
+        State {
+            path,
+            coeffs_override: coeffs,
+            unit,
+            meta: None,
+            result_meta: None,
+            procedure: None,
+            coeffs: None,
+            records: Records::default(),
+            measurements: Vec::new(),
+            pending: None,
+            pending_power: None,
+            chamber_c: f64::NAN,
+            table: None,
+            poses: Vec::new(),
+            record_edge_s: 0.0,
+            link: LinkStats::default(),
+            frames: 0,
+            last_step: None,
+            cursor: 0,
+            completed: 0,
+            earlier: None,
+        }
+    }
+
+    /// How the run ended: as its end record says (a pass or fail judged
+    /// again on the recomputed figures), or an error where the log stops
+    /// without one, `last_state_s` into this part.
+    fn ending(&mut self, read: &ReadSummary, last_state_s: f64) -> Ending {
+        let earlier_s = self
+            .earlier
+            .as_ref()
+            .map_or(0.0, |e| e.result.device_time_s);
+        let (verdict, verdict_error) = crate::sequencer::verdict(&self.measurements);
+        let (outcome, error, cleanup_completed, device_time_s, bench_left) = match self
+            .result_meta
+            .take()
+        {
+            Some(r) => {
+                let (outcome, error) = match r.outcome {
+                    Outcome::Error | Outcome::Aborted => (r.outcome, r.error),
+                    // pass or fail: the verdict is the recomputed one.
+                    Outcome::Pass | Outcome::Fail => (verdict, verdict_error),
+                };
+                (
+                    outcome,
+                    error,
+                    r.cleanup_completed,
+                    r.device_time_s.unwrap_or(earlier_s + last_state_s),
+                    r.bench_left,
+                )
+            }
+            None => (
+                Outcome::Error,
+                Some(RunError {
+                    device: None,
+                    step: self.last_step.clone().unwrap_or_default(),
+                    message: format!(
+                        "the log ends at {:.0} s of device time without its end record ({}); {} bytes after the last complete chunk were lost",
+                        last_state_s,
+                        read.stopped.as_deref().unwrap_or("the run did not finish"),
+                        read.bytes_lost
+                    ),
+                }),
+                false,
+                earlier_s + last_state_s,
+                None,
+            ),
+        };
+        Ending {
+            outcome,
+            error,
+            cleanup_completed,
+            device_time_s,
+            bench_left,
+        }
+    }
+
     fn message(&mut self, topic: &str, data: &[u8]) -> Result<(), String> {
         let bad =
             |what: &str, e: serde_json::Error| format!("a {what} message does not parse: {e}");
@@ -380,25 +461,7 @@ impl State<'_> {
             }
             topics::FRAMES => {
                 let m: FramesMsg = serde_json::from_slice(data).map_err(|e| bad(topic, e))?;
-                if [m.t1_raw.n, m.t2_raw.n, m.tcase_raw.n] != [m.counts.n; 3] {
-                    return Err(self.log_err("a /gyro/frames message has arrays of unequal length"));
-                }
-                self.frames += m.counts.n;
-                let clamp =
-                    |v: i64| i32::try_from(v).unwrap_or(if v < 0 { i32::MIN } else { i32::MAX });
-                let sums = TickSums {
-                    n: m.counts.n,
-                    counts: m.counts.sum,
-                    temps: [m.t1_raw.sum, m.t2_raw.sum, m.tcase_raw.sum],
-                    extremes: m.counts.extremes.map(|(lo, hi)| (clamp(lo), clamp(hi))),
-                    runs: m.counts.runs,
-                };
-                let scales = Scales {
-                    dt_s: m.dt_s,
-                    lsb_arcsec: m.lsb_arcsec,
-                    temp_lsb_c: m.temp_lsb_c,
-                };
-                self.pending = Some((sums, scales));
+                self.on_frames(&m)?;
             }
             topics::CHAMBER => {
                 let m: ChamberState = serde_json::from_slice(data).map_err(|e| bad(topic, e))?;
@@ -406,53 +469,12 @@ impl State<'_> {
             }
             topics::TABLE => {
                 let m: TableState = serde_json::from_slice(data).map_err(|e| bad(topic, e))?;
-                self.table = Some(LoggedTable {
-                    t_s: m.t_s,
-                    earth_rate_dph: m.earth_rate_dph,
-                    rates_dps: (m.outer_rate_dps, m.inner_rate_dps),
-                    orientation: Orientation::new(m.azimuth_deg, m.elevation_deg, m.roll_deg),
-                    angles: m.outer_deg.zip(m.inner_deg).map(|(outer_deg, inner_deg)| {
-                        TableAngles {
-                            outer_deg,
-                            inner_deg,
-                        }
-                    }),
-                });
+                self.on_table(&m);
             }
             topics::RATE_1HZ => {
                 // The live run wrote this interval from the tick just logged.
                 let m: Rate1Hz = serde_json::from_slice(data).map_err(|e| bad(topic, e))?;
-                let Some((sums, sc)) = self.pending.take() else {
-                    // No frames before it: an imported run; take the interval as logged,
-                    // and the pose its record was taken in.
-                    if let (Some(label), Some(t)) = (&m.record, &self.table)
-                        && !self.poses.iter().any(|p| &p.0 == label)
-                    {
-                        self.poses.push((label.clone(), t.orientation, t.angles));
-                    }
-                    self.records.push(m.interval(), m.record.as_deref());
-                    return Ok(());
-                };
-                let Some(table) = self.table else {
-                    return Err(self.log_err("a 1 Hz interval without the state before it"));
-                };
-                let at = IntervalState {
-                    t_s: table.t_s,
-                    reference_dph: table.earth_rate_dph,
-                    chamber_c: self.chamber_c,
-                    table_rates_dps: table.rates_dps,
-                };
-                self.records.push_sums(
-                    &sums,
-                    &at,
-                    m.record.as_deref(),
-                    sc.dt_s,
-                    sc.lsb_arcsec,
-                    sc.temp_lsb_c,
-                );
-                if let Some(p) = self.pending_power.take() {
-                    self.records.push_power(p, m.record.as_deref());
-                }
+                self.on_interval(&m)?;
             }
             topics::LINK => {
                 let m: LinkSample = serde_json::from_slice(data).map_err(|e| bad(topic, e))?;
@@ -469,6 +491,83 @@ impl State<'_> {
                 }
             }
             _ => {}
+        }
+        Ok(())
+    }
+
+    /// A tick's frames, held until its 1 Hz interval comes.
+    fn on_frames(&mut self, m: &FramesMsg) -> Result<(), String> {
+        if [m.t1_raw.n, m.t2_raw.n, m.tcase_raw.n] != [m.counts.n; 3] {
+            return Err(self.log_err("a /gyro/frames message has arrays of unequal length"));
+        }
+        self.frames += m.counts.n;
+        let clamp = |v: i64| i32::try_from(v).unwrap_or(if v < 0 { i32::MIN } else { i32::MAX });
+        let sums = TickSums {
+            n: m.counts.n,
+            counts: m.counts.sum,
+            temps: [m.t1_raw.sum, m.t2_raw.sum, m.tcase_raw.sum],
+            extremes: m.counts.extremes.map(|(lo, hi)| (clamp(lo), clamp(hi))),
+            runs: m.counts.runs,
+        };
+        let scales = Scales {
+            dt_s: m.dt_s,
+            lsb_arcsec: m.lsb_arcsec,
+            temp_lsb_c: m.temp_lsb_c,
+        };
+        self.pending = Some((sums, scales));
+        Ok(())
+    }
+
+    /// The table's state: the pose and rates the next interval is taken in.
+    fn on_table(&mut self, m: &TableState) {
+        self.table = Some(LoggedTable {
+            t_s: m.t_s,
+            earth_rate_dph: m.earth_rate_dph,
+            rates_dps: (m.outer_rate_dps, m.inner_rate_dps),
+            orientation: Orientation::new(m.azimuth_deg, m.elevation_deg, m.roll_deg),
+            angles: m
+                .outer_deg
+                .zip(m.inner_deg)
+                .map(|(outer_deg, inner_deg)| TableAngles {
+                    outer_deg,
+                    inner_deg,
+                }),
+        });
+    }
+
+    /// A 1 Hz interval: made again from the frames before it, as the live
+    /// run made it; an imported run's (no frames) taken as logged.
+    fn on_interval(&mut self, m: &Rate1Hz) -> Result<(), String> {
+        let Some((sums, sc)) = self.pending.take() else {
+            // No frames before it: an imported run; take the interval as logged,
+            // and the pose its record was taken in.
+            if let (Some(label), Some(t)) = (&m.record, &self.table)
+                && !self.poses.iter().any(|p| &p.0 == label)
+            {
+                self.poses.push((label.clone(), t.orientation, t.angles));
+            }
+            self.records.push(m.interval(), m.record.as_deref());
+            return Ok(());
+        };
+        let Some(table) = self.table else {
+            return Err(self.log_err("a 1 Hz interval without the state before it"));
+        };
+        let at = IntervalState {
+            t_s: table.t_s,
+            reference_dph: table.earth_rate_dph,
+            chamber_c: self.chamber_c,
+            table_rates_dps: table.rates_dps,
+        };
+        self.records.push_sums(
+            &sums,
+            &at,
+            m.record.as_deref(),
+            sc.dt_s,
+            sc.lsb_arcsec,
+            sc.temp_lsb_c,
+        );
+        if let Some(p) = self.pending_power.take() {
+            self.records.push_power(p, m.record.as_deref());
         }
         Ok(())
     }
@@ -584,29 +683,7 @@ pub fn replay_unit(
     coeffs: Option<&Compensation>,
     unit: Option<&str>,
 ) -> Result<Replayed, ReplayError> {
-    let mut st = State {
-        path,
-        coeffs_override: coeffs,
-        unit,
-        meta: None,
-        result_meta: None,
-        procedure: None,
-        coeffs: None,
-        records: Records::default(),
-        measurements: Vec::new(),
-        pending: None,
-        pending_power: None,
-        chamber_c: f64::NAN,
-        table: None,
-        poses: Vec::new(),
-        record_edge_s: 0.0,
-        link: LinkStats::default(),
-        frames: 0,
-        last_step: None,
-        cursor: 0,
-        completed: 0,
-        earlier: None,
-    };
+    let mut st = State::new(path, coeffs, unit);
     let read = super::view::read_unit(path, unit, |item| match item {
         Item::Meta { name, entries } => st.meta(name, entries),
         Item::Message { topic, data, .. } => {
@@ -640,60 +717,13 @@ pub fn replay_unit(
         )));
     };
     let last_state_s = st.table.map_or(0.0, |t| t.t_s);
-    let earlier_s = st.earlier.as_ref().map_or(0.0, |e| e.result.device_time_s);
-    let (verdict, verdict_error) = crate::sequencer::verdict(&st.measurements);
     let ended = st.result_meta.is_some();
-    let (outcome, error, cleanup_completed, device_time_s, bench_left) = match st.result_meta {
-        Some(r) => {
-            let (outcome, error) = match r.outcome {
-                Outcome::Error | Outcome::Aborted => (r.outcome, r.error),
-                // pass or fail: the verdict is the recomputed one.
-                Outcome::Pass | Outcome::Fail => (verdict, verdict_error),
-            };
-            (
-                outcome,
-                error,
-                r.cleanup_completed,
-                r.device_time_s.unwrap_or(earlier_s + last_state_s),
-                r.bench_left,
-            )
-        }
-        None => (
-            Outcome::Error,
-            Some(RunError {
-                device: None,
-                step: st.last_step.clone().unwrap_or_default(),
-                message: format!(
-                    "the log ends at {:.0} s of device time without its end record ({}); {} bytes after the last complete chunk were lost",
-                    last_state_s,
-                    read.stopped.as_deref().unwrap_or("the run did not finish"),
-                    read.bytes_lost
-                ),
-            }),
-            false,
-            earlier_s + last_state_s,
-            None,
-        ),
-    };
+    let end = st.ending(&read, last_state_s);
     // Damaged parts skipped: what the log still holds is replayed, but the
     // run cannot be judged on a log with holes.
-    let start_ns = meta.part_start_ns();
-    // The damage comes first: the frames a record misses are the log's
-    // holes, not the gyro's (whatever else the run said of itself).
-    let (outcome, error) = match read.damage(start_ns) {
-        Some(d) => (
-            Outcome::Error,
-            Some(RunError {
-                device: None,
-                step: "log".into(),
-                message: format!(
-                    "the log is damaged: {d}; its figures lack those messages{}",
-                    error.map_or(String::new(), |e| format!(" (the run said: {})", e.message))
-                ),
-            }),
-        ),
-        None => (outcome, error),
-    };
+    let (outcome, error) = with_damage(&read, meta.part_start_ns(), end.outcome, end.error);
+    let (cleanup_completed, device_time_s, bench_left) =
+        (end.cleanup_completed, end.device_time_s, end.bench_left);
     let link = match &st.earlier {
         Some(e) => add_link(&e.link, &st.link),
         None => st.link,
@@ -721,6 +751,41 @@ pub fn replay_unit(
         ended,
         poses: st.poses,
     })
+}
+
+/// How a replayed run ended, before the log's damage is weighed.
+struct Ending {
+    outcome: Outcome,
+    error: Option<RunError>,
+    cleanup_completed: bool,
+    device_time_s: f64,
+    bench_left: Option<crate::sequencer::BenchLeft>,
+}
+
+/// The outcome and error of a run whose log is damaged from `start_ns`
+/// on: an error that says so (the damage comes first: the frames a record
+/// misses are the log's holes, not the gyro's, whatever else the run said
+/// of itself); else the run's own.
+fn with_damage(
+    read: &ReadSummary,
+    start_ns: Option<u64>,
+    outcome: Outcome,
+    error: Option<RunError>,
+) -> (Outcome, Option<RunError>) {
+    match read.damage(start_ns) {
+        Some(d) => (
+            Outcome::Error,
+            Some(RunError {
+                device: None,
+                step: "log".into(),
+                message: format!(
+                    "the log is damaged: {d}; its figures lack those messages{}",
+                    error.map_or(String::new(), |e| format!(" (the run said: {})", e.message))
+                ),
+            }),
+        ),
+        None => (outcome, error),
+    }
 }
 
 /// Link figures of two parts of a run, added.
