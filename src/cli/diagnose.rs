@@ -407,34 +407,7 @@ fn run_randomized(a: &SelfcheckArgs) -> Result<Outcome> {
         a.seed
     );
     let r = randomized::run(a.units, a.seed, a.separating, &|done, _, t| {
-        let line = format!(
-            "[{done}/{}] seed {}{} {}: named {} / inconclusive {} (thermal {:.3} degC)",
-            a.units,
-            t.seed,
-            if t.low_latitude {
-                " (low latitude)"
-            } else {
-                ""
-            },
-            serde_json::to_string(&t.case).unwrap_or_default(),
-            if t.accepted.is_empty() {
-                "nothing".to_owned()
-            } else {
-                t.accepted.join(", ")
-            },
-            t.inconclusive.as_deref().unwrap_or("-"),
-            t.thermal_gap_c
-        ) + &t.with_separating_run.as_ref().map_or(String::new(), |r| {
-            format!(
-                "; with {}: named {}",
-                r.procedures.join(", "),
-                if r.accepted.is_empty() {
-                    "nothing".to_owned()
-                } else {
-                    r.accepted.join(", ")
-                }
-            )
-        });
+        let line = render_unit_trial(done, a.units, t);
         bar.println(&line);
         bar.set(done as u64, line);
     })
@@ -445,6 +418,47 @@ fn run_randomized(a: &SelfcheckArgs) -> Result<Outcome> {
         &a.out.join("randomized.json"),
         &serde_json::to_string_pretty(&r)?,
     )?;
+    print_randomized(&r)?;
+    errln!("self-check in {}", a.out.display());
+    Ok(Outcome::Success)
+}
+
+/// One finished unit of the randomised self-check as a progress line:
+/// `[done/units] seed, case: what was named` (and with the separating run).
+fn render_unit_trial(done: usize, units: usize, t: &diagnose::randomized::UnitTrial) -> String {
+    format!(
+        "[{done}/{}] seed {}{} {}: named {} / inconclusive {} (thermal {:.3} degC)",
+        units,
+        t.seed,
+        if t.low_latitude {
+            " (low latitude)"
+        } else {
+            ""
+        },
+        serde_json::to_string(&t.case).unwrap_or_default(),
+        if t.accepted.is_empty() {
+            "nothing".to_owned()
+        } else {
+            t.accepted.join(", ")
+        },
+        t.inconclusive.as_deref().unwrap_or("-"),
+        t.thermal_gap_c
+    ) + &t.with_separating_run.as_ref().map_or(String::new(), |r| {
+        format!(
+            "; with {}: named {}",
+            r.procedures.join(", "),
+            if r.accepted.is_empty() {
+                "nothing".to_owned()
+            } else {
+                r.accepted.join(", ")
+            }
+        )
+    })
+}
+
+/// The randomised self-check's figures on stdout: the headline, the
+/// low-latitude units', the units not diagnosed, and a line per case.
+fn print_randomized(r: &diagnose::randomized::Randomized) -> Result<()> {
     outln!(
         "named first: {:.0} % at >= 2x, {:.0} % at 1.5x; pairs both named {:.0} % (or reported confounded with a named one {:.0} %; both named with the separating run a confounded pair names {:.0} %); false attribution {:.0} % ({:.0} % with the separating runs); thermal layer within 0.05 degC {:.0} % (network form {:.0} %); median excess closed {:.0} %",
         100.0 * r.named_at_2x,
@@ -493,8 +507,7 @@ fn run_randomized(a: &SelfcheckArgs) -> Result<Outcome> {
             }
         )?;
     }
-    errln!("self-check in {}", a.out.display());
-    Ok(Outcome::Success)
+    Ok(())
 }
 
 /// One finished trial as a progress line: `[n/N] what, seed: what was named`.

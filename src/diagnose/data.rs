@@ -119,66 +119,14 @@ pub fn load_unit(path: &Path, unit: Option<&str>) -> Result<RunData, ReplayError
         path: path.display().to_string(),
         message,
     };
-    let mut site: Option<Site> = None;
-    // The logged bench's table geometry, needed only for a turning record.
-    let mut geometry: Option<Result<TableGeometry, String>> = None;
-    let mut table: Option<TableState> = None;
-    // Each recorded sample with the table's angles and rates it was taken
-    // at (turned into a body rate once the logged bench is known).
-    // (And how far the table state's time leads the interval's middle.)
-    let mut samples: Vec<(Sample, Option<TableAngles>, TableAngles, f64)> = Vec::new();
-    let read = runlog::view::read_unit(path, unit, |item| {
-        match item {
-            Item::Meta { name, entries } if name == RUN_META => {
-                let meta = RunMeta::from_entries(entries).map_err(|e| e.to_string())?;
-                site = Some(
-                    serde_json::from_str(&meta.site_json)
-                        .map_err(|e| format!("the run metadata's site: {e}"))?,
-                );
-                // A batch's unit sits on its slot's mount.
-                let mount = meta.unit().and_then(|u| u.mount);
-                geometry = Some(logged_bench(&meta).map(|b| b.geometry_with(mount)));
-            }
-            Item::Message { topic, data, .. } if topic == topics::TABLE => {
-                table = Some(
-                    serde_json::from_slice::<TableState>(data)
-                        .map_err(|e| format!("{topic}: {e}"))?,
-                );
-            }
-            Item::Message { topic, data, .. } if topic == topics::RATE_1HZ => {
-                let r: Rate1Hz =
-                    serde_json::from_slice(data).map_err(|e| format!("{topic}: {e}"))?;
-                let Some(t) = &table else {
-                    return Err("a 1 Hz interval before any table state".into());
-                };
-                let Some(record) = r.record.clone() else {
-                    return Ok(());
-                };
-                samples.push((
-                    Sample {
-                        iv: r.interval(),
-                        orientation: Orientation::new(t.azimuth_deg, t.elevation_deg, t.roll_deg),
-                        record,
-                        step: t.step.clone(),
-                        table_rate_body_dph: Vector3::zeros(),
-                    },
-                    t.outer_deg
-                        .zip(t.inner_deg)
-                        .map(|(outer_deg, inner_deg)| TableAngles {
-                            outer_deg,
-                            inner_deg,
-                        }),
-                    TableAngles {
-                        outer_deg: t.outer_rate_dps,
-                        inner_deg: t.inner_rate_dps,
-                    },
-                    t.t_s - r.t_s,
-                ));
-            }
-            _ => {}
-        }
-        Ok(())
-    })?;
+    let mut reading = Reading::default();
+    let read = runlog::view::read_unit(path, unit, |item| reading.take(item))?;
+    let Reading {
+        site,
+        geometry,
+        samples,
+        ..
+    } = reading;
     // A read stopped on purpose (`--unit` naming a unit the log lacks)
     // says why.
     if let (Some(why), true, Some(_)) = (&read.stopped, site.is_none(), unit) {
@@ -187,39 +135,7 @@ pub fn load_unit(path: &Path, unit: Option<&str>) -> Result<RunData, ReplayError
     let site = site.ok_or_else(|| log_err("no site in the run metadata".into()))?;
     let samples = samples
         .into_iter()
-        .map(|(mut s, angles, rates, lead_s)| {
-            if rates.outer_deg != 0.0 || rates.inner_deg != 0.0 {
-                let g = match &geometry {
-                    Some(Ok(g)) => g,
-                    Some(Err(e)) => {
-                        return Err(log_err(format!(
-                            "record {:?} turns the table: {e}",
-                            s.record
-                        )));
-                    }
-                    None => {
-                        return Err(log_err(format!(
-                            "record {:?} turns the table, and the run metadata has no bench",
-                            s.record
-                        )));
-                    }
-                };
-                let Some(angles) = angles else {
-                    return Err(log_err(format!(
-                        "record {:?} turns the table, and the log has no table angles to say how",
-                        s.record
-                    )));
-                };
-                s.table_rate_body_dph = g.table_rate_body_dph(angles, rates);
-                // The pose at the interval's middle, which its mean reads
-                // gravity and the field at (the state is its end's).
-                s.orientation = g.orientation(TableAngles {
-                    outer_deg: angles.outer_deg - rates.outer_deg * lead_s,
-                    inner_deg: angles.inner_deg - rates.inner_deg * lead_s,
-                });
-            }
-            Ok(s)
-        })
+        .map(|s| s.on_the_bench(geometry.as_ref()).map_err(log_err))
         .collect::<Result<Vec<_>, _>>()?;
     let samples = without_moves(samples);
     if samples.len() < 60 {
@@ -232,6 +148,138 @@ pub fn load_unit(path: &Path, unit: Option<&str>) -> Result<RunData, ReplayError
         site,
         samples,
     })
+}
+
+/// A recorded sample as read, before the logged bench is known.
+struct ReadSample {
+    sample: Sample,
+    /// The table's angles it was taken at (when logged).
+    angles: Option<TableAngles>,
+    /// The table's axis rates it was taken at.
+    rates: TableAngles,
+    /// How far the table state's time leads the interval's middle, s.
+    lead_s: f64,
+}
+
+impl ReadSample {
+    /// The sample with the table's turning as a body rate, on the logged
+    /// bench's table `geometry` (needed only when the table turned), or
+    /// why it cannot be had.
+    fn on_the_bench(
+        self,
+        geometry: Option<&Result<TableGeometry, String>>,
+    ) -> Result<Sample, String> {
+        let Self {
+            sample: mut s,
+            angles,
+            rates,
+            lead_s,
+        } = self;
+        if rates.outer_deg != 0.0 || rates.inner_deg != 0.0 {
+            let g = match geometry {
+                Some(Ok(g)) => g,
+                Some(Err(e)) => {
+                    return Err(format!("record {:?} turns the table: {e}", s.record));
+                }
+                None => {
+                    return Err(format!(
+                        "record {:?} turns the table, and the run metadata has no bench",
+                        s.record
+                    ));
+                }
+            };
+            let Some(angles) = angles else {
+                return Err(format!(
+                    "record {:?} turns the table, and the log has no table angles to say how",
+                    s.record
+                ));
+            };
+            s.table_rate_body_dph = g.table_rate_body_dph(angles, rates);
+            // The pose at the interval's middle, which its mean reads
+            // gravity and the field at (the state is its end's).
+            s.orientation = g.orientation(TableAngles {
+                outer_deg: angles.outer_deg - rates.outer_deg * lead_s,
+                inner_deg: angles.inner_deg - rates.inner_deg * lead_s,
+            });
+        }
+        Ok(s)
+    }
+}
+
+/// What a log's items have told so far.
+#[derive(Default)]
+struct Reading {
+    site: Option<Site>,
+    /// The logged bench's table geometry, needed only for a turning record.
+    geometry: Option<Result<TableGeometry, String>>,
+    table: Option<TableState>,
+    /// Each recorded sample with the table's angles and rates it was taken
+    /// at (turned into a body rate once the logged bench is known).
+    samples: Vec<ReadSample>,
+}
+
+impl Reading {
+    /// Take the log's next item: the run metadata, a table state, or a
+    /// 1 Hz interval (kept when recorded).
+    fn take(&mut self, item: Item<'_>) -> Result<(), String> {
+        match item {
+            Item::Meta { name, entries } if name == RUN_META => {
+                let meta = RunMeta::from_entries(entries).map_err(|e| e.to_string())?;
+                self.site = Some(
+                    serde_json::from_str(&meta.site_json)
+                        .map_err(|e| format!("the run metadata's site: {e}"))?,
+                );
+                // A batch's unit sits on its slot's mount.
+                let mount = meta.unit().and_then(|u| u.mount);
+                self.geometry = Some(logged_bench(&meta).map(|b| b.geometry_with(mount)));
+            }
+            Item::Message { topic, data, .. } if topic == topics::TABLE => {
+                self.table = Some(
+                    serde_json::from_slice::<TableState>(data)
+                        .map_err(|e| format!("{topic}: {e}"))?,
+                );
+            }
+            Item::Message { topic, data, .. } if topic == topics::RATE_1HZ => {
+                self.interval(topic, data)?;
+            }
+            _ => {}
+        }
+        Ok(())
+    }
+
+    /// Take a 1 Hz interval (on `topic`): a recorded one is kept with the
+    /// table state before it.
+    fn interval(&mut self, topic: &str, data: &[u8]) -> Result<(), String> {
+        let r: Rate1Hz = serde_json::from_slice(data).map_err(|e| format!("{topic}: {e}"))?;
+        let Some(t) = &self.table else {
+            return Err("a 1 Hz interval before any table state".into());
+        };
+        let Some(record) = r.record.clone() else {
+            return Ok(());
+        };
+        self.samples.push(ReadSample {
+            sample: Sample {
+                iv: r.interval(),
+                orientation: Orientation::new(t.azimuth_deg, t.elevation_deg, t.roll_deg),
+                record,
+                step: t.step.clone(),
+                table_rate_body_dph: Vector3::zeros(),
+            },
+            angles: t
+                .outer_deg
+                .zip(t.inner_deg)
+                .map(|(outer_deg, inner_deg)| TableAngles {
+                    outer_deg,
+                    inner_deg,
+                }),
+            rates: TableAngles {
+                outer_deg: t.outer_rate_dps,
+                inner_deg: t.inner_rate_dps,
+            },
+            lead_s: t.t_s - r.t_s,
+        });
+        Ok(())
+    }
 }
 
 #[cfg(test)]

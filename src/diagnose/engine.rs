@@ -516,60 +516,15 @@ pub fn score(data: &Data<'_>, model: &[Term]) -> Scored {
     let design = Design::new(data, model);
     let (q, p, scales) = (design.q, design.p, &design.scales);
     let n = data.y.len();
-    // Per fold: Gram matrix, right-hand side, and the 60 s block means.
-    let mut grams = Vec::with_capacity(data.folds.len());
-    let mut blocks = Vec::with_capacity(data.folds.len());
-    let mut g_all = DMatrix::zeros(p, p);
-    let mut h_all = DVector::zeros(p);
-    let mut x = DVector::zeros(p);
-    for f in &data.folds {
-        let mut g = DMatrix::zeros(p, p);
-        let mut h = DVector::zeros(p);
-        let mut means: Vec<(DVector<f64>, f64)> = Vec::new();
-        let mut acc = (DVector::zeros(p), 0.0, 0usize);
-        for i in f.start..f.end {
-            design.row_into(i, &mut x);
-            g.syger(1.0, &x, &x, 1.0);
-            h.axpy(data.y[i], &x, 1.0);
-            acc.0 += &x;
-            acc.1 += data.y[i];
-            acc.2 += 1;
-            if acc.2 == AVERAGING_S {
-                let k = AVERAGING_S as f64;
-                means.push((&acc.0 / k, acc.1 / k));
-                acc = (DVector::zeros(p), 0.0, 0);
-            }
-        }
-        g.fill_upper_triangle_with_lower_triangle();
-        g_all += &g;
-        h_all += &h;
-        grams.push((g, h));
-        blocks.push(means);
-    }
+    let FoldSums {
+        grams,
+        blocks,
+        g_all,
+        h_all,
+    } = fold_sums(data, &design);
     let beta_all = solve(&g_all, &h_all);
-    // Runs with a single fold: their offset cannot come from other folds;
-    // the held-out residual then has its own mean removed (a nuisance).
-    let folds_of_run = |r: usize| data.folds.iter().filter(|f| f.run == r).count();
-    let mut fold_sse = Vec::with_capacity(data.folds.len());
-    let mut fold_blocks = Vec::with_capacity(data.folds.len());
-    let mut held_out = vec![0.0; n];
-    for (k, f) in data.folds.iter().enumerate() {
-        let beta = solve(&(&g_all - &grams[k].0), &(&h_all - &grams[k].1));
-        let alone = folds_of_run(f.run) < 2;
-        let mut r: Vec<f64> = blocks[k].iter().map(|(x, y)| y - x.dot(&beta)).collect();
-        let mut rows: Vec<f64> = (f.start..f.end)
-            .map(|i| data.y[i] - design.predict(i, &beta))
-            .collect();
-        if alone {
-            let m = rows.iter().sum::<f64>() / rows.len().max(1) as f64;
-            rows.iter_mut().for_each(|v| *v -= m);
-            let mb = r.iter().sum::<f64>() / r.len().max(1) as f64;
-            r.iter_mut().for_each(|v| *v -= mb);
-        }
-        held_out[f.start..f.end].copy_from_slice(&rows);
-        fold_sse.push(r.iter().map(|v| v * v).sum());
-        fold_blocks.push(r.len());
-    }
+    let (fold_sse, fold_blocks, held_out) =
+        held_out_by_fold(data, &design, &grams, &blocks, &g_all, &h_all);
     let residual: Vec<f64> = (0..n)
         .map(|i| data.y[i] - design.predict(i, &beta_all))
         .collect();
@@ -617,6 +572,96 @@ pub fn score(data: &Data<'_>, model: &[Term]) -> Scored {
         between_spent,
         fold_record,
     }
+}
+
+/// A design's sums fold by fold ([`fold_sums`]).
+struct FoldSums {
+    /// Per fold: the Gram matrix and the right-hand side.
+    grams: Vec<(DMatrix<f64>, DVector<f64>)>,
+    /// Per fold: the 60 s block means of the regressor rows and the data.
+    blocks: Vec<Vec<(DVector<f64>, f64)>>,
+    /// The Gram matrix over every fold.
+    g_all: DMatrix<f64>,
+    /// The right-hand side over every fold.
+    h_all: DVector<f64>,
+}
+
+/// Per fold: Gram matrix, right-hand side, and the 60 s block means of
+/// `design`; and their sums over the folds.
+fn fold_sums(data: &Data<'_>, design: &Design<'_>) -> FoldSums {
+    let p = design.p;
+    let mut grams = Vec::with_capacity(data.folds.len());
+    let mut blocks = Vec::with_capacity(data.folds.len());
+    let mut g_all = DMatrix::zeros(p, p);
+    let mut h_all = DVector::zeros(p);
+    let mut x = DVector::zeros(p);
+    for f in &data.folds {
+        let mut g = DMatrix::zeros(p, p);
+        let mut h = DVector::zeros(p);
+        let mut means: Vec<(DVector<f64>, f64)> = Vec::new();
+        let mut acc = (DVector::zeros(p), 0.0, 0usize);
+        for i in f.start..f.end {
+            design.row_into(i, &mut x);
+            g.syger(1.0, &x, &x, 1.0);
+            h.axpy(data.y[i], &x, 1.0);
+            acc.0 += &x;
+            acc.1 += data.y[i];
+            acc.2 += 1;
+            if acc.2 == AVERAGING_S {
+                let k = AVERAGING_S as f64;
+                means.push((&acc.0 / k, acc.1 / k));
+                acc = (DVector::zeros(p), 0.0, 0);
+            }
+        }
+        g.fill_upper_triangle_with_lower_triangle();
+        g_all += &g;
+        h_all += &h;
+        grams.push((g, h));
+        blocks.push(means);
+    }
+    FoldSums {
+        grams,
+        blocks,
+        g_all,
+        h_all,
+    }
+}
+
+/// Each fold predicted by the fit on the other folds (their sums, the
+/// whole less the fold's): per fold, the sum of squares of its 60 s block
+/// residuals and their count; and every row's held-out residual. Runs
+/// with a single fold: their offset cannot come from other folds; the
+/// held-out residual then has its own mean removed (a nuisance).
+fn held_out_by_fold(
+    data: &Data<'_>,
+    design: &Design<'_>,
+    grams: &[(DMatrix<f64>, DVector<f64>)],
+    blocks: &[Vec<(DVector<f64>, f64)>],
+    g_all: &DMatrix<f64>,
+    h_all: &DVector<f64>,
+) -> (Vec<f64>, Vec<usize>, Vec<f64>) {
+    let folds_of_run = |r: usize| data.folds.iter().filter(|f| f.run == r).count();
+    let mut fold_sse = Vec::with_capacity(data.folds.len());
+    let mut fold_blocks = Vec::with_capacity(data.folds.len());
+    let mut held_out = vec![0.0; data.y.len()];
+    for (k, f) in data.folds.iter().enumerate() {
+        let beta = solve(&(g_all - &grams[k].0), &(h_all - &grams[k].1));
+        let alone = folds_of_run(f.run) < 2;
+        let mut r: Vec<f64> = blocks[k].iter().map(|(x, y)| y - x.dot(&beta)).collect();
+        let mut rows: Vec<f64> = (f.start..f.end)
+            .map(|i| data.y[i] - design.predict(i, &beta))
+            .collect();
+        if alone {
+            let m = rows.iter().sum::<f64>() / rows.len().max(1) as f64;
+            rows.iter_mut().for_each(|v| *v -= m);
+            let mb = r.iter().sum::<f64>() / r.len().max(1) as f64;
+            r.iter_mut().for_each(|v| *v -= mb);
+        }
+        held_out[f.start..f.end].copy_from_slice(&rows);
+        fold_sse.push(r.iter().map(|v| v * v).sum());
+        fold_blocks.push(r.len());
+    }
+    (fold_sse, fold_blocks, held_out)
 }
 
 /// Record of each fold (folds cut from one record share it).

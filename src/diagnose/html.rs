@@ -3,8 +3,8 @@
 //! (segments marked on the rate's), the residual per position, and the
 //! residual's Allan deviation against the noise floor.
 
-use super::Diagnosis;
 use super::engine::AVERAGING_S;
+use super::{Diagnosis, Inconclusive};
 use crate::analysis::allan::{oadev, octave_factors};
 use crate::view::chart::Rule;
 use crate::view::{Chart, Marker, Series, Stroke, esc, p_value, page};
@@ -470,93 +470,9 @@ fn named_sentence(d: &Diagnosis, noise: Option<f64>) -> String {
 
 /// The page.
 pub fn render(d: &Diagnosis) -> String {
-    let mut effects = String::new();
-    for e in &d.effects {
-        let params: Vec<String> = e
-            .parameters
-            .iter()
-            .map(|(k, v)| match e.uncertainties.get(k) {
-                Some(u) if u.is_finite() => format!("{k} = {v:.4e} &plusmn; {u:.1e}"),
-                _ => format!("{k} = {v:.4}"),
-            })
-            .chain(
-                e.temperature
-                    .iter()
-                    .map(|t| format!("on the {t} temperature")),
-            )
-            .collect();
-        effects.push_str(&format!(
-            "<tr><td>{}</td><td class=num>{:.5}</td><td class=num>{:.5}</td><td class=num>{:.0} %</td><td class=num>{}</td><td>{}</td></tr>\n",
-            esc(&e.name),
-            e.held_out_gap_before_dph,
-            e.held_out_gap_after_dph,
-            100.0 * e.shrink,
-            p_value(e.p_value),
-            params.join("<br>")
-        ));
-    }
-    if effects.is_empty() {
-        effects = "<tr><td colspan=6>no effect is significant</td></tr>".into();
-    }
-    let mut where_ = String::new();
-    for s in d.r#where.iter().take(12) {
-        where_.push_str(&format!(
-            "<tr><td>{}</td><td>{}</td><td>{}</td><td class=num>{:.0}..{:.0}</td><td>{}</td><td class=num>{:.1}</td><td class=num>{:.0}/{:.0}/{:.0}</td><td class=num>{:.5}</td><td class=num>{:.0} %</td></tr>\n",
-            esc(&s.run), esc(&s.record), esc(&s.step), s.start_s, s.end_s, s.regime, s.temperature_c,
-            s.orientation_deg[0].round() + 0.0, s.orientation_deg[1].round() + 0.0, s.orientation_deg[2].round() + 0.0, s.rms_dph, 100.0 * s.share
-        ));
-    }
-    let confounded_items: String = d
-        .confounded
-        .iter()
-        .map(|c| {
-            format!(
-                "<li>{} and {}: separate with {}</li>",
-                esc(&c.effects[0]),
-                esc(&c.effects[1]),
-                esc(&c.separate_with)
-            )
-        })
-        .collect();
-    // A heading only over something.
-    let mut confounded = if confounded_items.is_empty() {
-        String::new()
-    } else {
-        format!("<h2>Confounded</h2><ul>{confounded_items}</ul>\n")
-    };
-    if let Some(i) = &d.inconclusive {
-        let rows: String = i
-            .candidates
-            .iter()
-            .map(|c| {
-                format!(
-                    "<tr><td>{}</td><td class=num>{:.5} deg/h</td><td class=num>{:.0} %</td><td class=num>{:.4}</td><td class=num>{:.4}</td></tr>",
-                    esc(&c.name),
-                    c.held_out_gap_dph,
-                    100.0 * c.improvement,
-                    c.p_value,
-                    c.level
-                )
-            })
-            .collect();
-        let r = &i.deciding_run;
-        let decide = if r.passes > 0 {
-            format!(
-                "The run that would decide for {}: {} ({:.1} h of device time; {}, if the effect is as large as fitted), written as <code>{}</code>, ready for <code>gyrobench run</code>.",
-                esc(&r.effect),
-                esc(&r.what),
-                r.device_time_h,
-                esc(&r.power_phrase()),
-                esc(&r.file)
-            )
-        } else {
-            format!("For {}: {}.", esc(&r.effect), esc(&r.what))
-        };
-        confounded.push_str(&format!(
-            "<h2>Inconclusive</h2><p>These improve the held-out gap but miss a bar: an effect must remove {:.0} % of the held-out sum of squares and its p-value be under the bar. {decide}</p>\n<table><tr><th>candidate</th><th>held-out gap with it</th><th>removes</th><th>p</th><th>bar</th></tr>{rows}</table>\n",
-            100.0 * super::THRESHOLDS.min_gain
-        ));
-    }
+    let effects = effect_rows(d);
+    let where_ = where_rows(d);
+    let confounded = confounded_and_inconclusive(d);
     let candidates: String = d
         .candidates
         .iter()
@@ -610,4 +526,116 @@ pub fn render(d: &Diagnosis) -> String {
             .collect::<String>(),
     );
     page("Sim-to-real diagnosis", "", &body)
+}
+
+/// The accepted effects' table rows: gaps before and after, shrink,
+/// p-value and parameters (a row saying none is significant when there
+/// are none).
+fn effect_rows(d: &Diagnosis) -> String {
+    let mut effects = String::new();
+    for e in &d.effects {
+        let params: Vec<String> = e
+            .parameters
+            .iter()
+            .map(|(k, v)| match e.uncertainties.get(k) {
+                Some(u) if u.is_finite() => format!("{k} = {v:.4e} &plusmn; {u:.1e}"),
+                _ => format!("{k} = {v:.4}"),
+            })
+            .chain(
+                e.temperature
+                    .iter()
+                    .map(|t| format!("on the {t} temperature")),
+            )
+            .collect();
+        effects.push_str(&format!(
+            "<tr><td>{}</td><td class=num>{:.5}</td><td class=num>{:.5}</td><td class=num>{:.0} %</td><td class=num>{}</td><td>{}</td></tr>\n",
+            esc(&e.name),
+            e.held_out_gap_before_dph,
+            e.held_out_gap_after_dph,
+            100.0 * e.shrink,
+            p_value(e.p_value),
+            params.join("<br>")
+        ));
+    }
+    if effects.is_empty() {
+        effects = "<tr><td colspan=6>no effect is significant</td></tr>".into();
+    }
+    effects
+}
+
+/// The table rows of where the gap lies under the reference simulator
+/// (the first 12 stretches).
+fn where_rows(d: &Diagnosis) -> String {
+    let mut where_ = String::new();
+    for s in d.r#where.iter().take(12) {
+        where_.push_str(&format!(
+            "<tr><td>{}</td><td>{}</td><td>{}</td><td class=num>{:.0}..{:.0}</td><td>{}</td><td class=num>{:.1}</td><td class=num>{:.0}/{:.0}/{:.0}</td><td class=num>{:.5}</td><td class=num>{:.0} %</td></tr>\n",
+            esc(&s.run), esc(&s.record), esc(&s.step), s.start_s, s.end_s, s.regime, s.temperature_c,
+            s.orientation_deg[0].round() + 0.0, s.orientation_deg[1].round() + 0.0, s.orientation_deg[2].round() + 0.0, s.rms_dph, 100.0 * s.share
+        ));
+    }
+    where_
+}
+
+/// The Confounded and Inconclusive sections, each only when it has
+/// something to show.
+fn confounded_and_inconclusive(d: &Diagnosis) -> String {
+    let confounded_items: String = d
+        .confounded
+        .iter()
+        .map(|c| {
+            format!(
+                "<li>{} and {}: separate with {}</li>",
+                esc(&c.effects[0]),
+                esc(&c.effects[1]),
+                esc(&c.separate_with)
+            )
+        })
+        .collect();
+    // A heading only over something.
+    let mut confounded = if confounded_items.is_empty() {
+        String::new()
+    } else {
+        format!("<h2>Confounded</h2><ul>{confounded_items}</ul>\n")
+    };
+    if let Some(i) = &d.inconclusive {
+        confounded.push_str(&inconclusive_section(i));
+    }
+    confounded
+}
+
+/// The Inconclusive section: the candidates that miss a bar, and the run
+/// that would decide.
+fn inconclusive_section(i: &Inconclusive) -> String {
+    let rows: String = i
+        .candidates
+        .iter()
+        .map(|c| {
+            format!(
+                "<tr><td>{}</td><td class=num>{:.5} deg/h</td><td class=num>{:.0} %</td><td class=num>{:.4}</td><td class=num>{:.4}</td></tr>",
+                esc(&c.name),
+                c.held_out_gap_dph,
+                100.0 * c.improvement,
+                c.p_value,
+                c.level
+            )
+        })
+        .collect();
+    let r = &i.deciding_run;
+    let decide = if r.passes > 0 {
+        format!(
+            "The run that would decide for {}: {} ({:.1} h of device time; {}, if the effect is as large as fitted), written as <code>{}</code>, ready for <code>gyrobench run</code>.",
+            esc(&r.effect),
+            esc(&r.what),
+            r.device_time_h,
+            esc(&r.power_phrase()),
+            esc(&r.file)
+        )
+    } else {
+        format!("For {}: {}.", esc(&r.effect), esc(&r.what))
+    };
+    format!(
+        "<h2>Inconclusive</h2><p>These improve the held-out gap but miss a bar: an effect must remove {:.0} % of the held-out sum of squares and its p-value be under the bar. {decide}</p>\n<table><tr><th>candidate</th><th>held-out gap with it</th><th>removes</th><th>p</th><th>bar</th></tr>{rows}</table>\n",
+        100.0 * super::THRESHOLDS.min_gain
+    )
 }

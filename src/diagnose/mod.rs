@@ -806,8 +806,54 @@ const STEP_APART_ROWS: usize = 1800;
 /// the model, as a candidate is.
 fn outside_rival(data: &Data<'_>, current: &Scored, free: &[Effect]) -> Option<Tried> {
     let e = &current.residual;
+    let (jumps, drifts) = jumps_and_drifts(data, e);
+    // A drift goes through every run (a slow change of the unit, not of one
+    // run): one slope per run. So does a periodic disturbance (the lab's,
+    // not the unit's: the same period, its phase free in each run that
+    // holds a whole cycle of it).
+    let cycles = periodic_terms(data, e);
+    let peaks = jump_peaks(data, jumps);
+    let step = peaks
+        .iter()
+        .map(|&k| {
+            let mut model = current.model.clone();
+            model.push(Term::new(Effect::BiasStep, Param::Row(k)));
+            (engine::in_sample_sse(data, &model), k)
+        })
+        .min_by(|a, b| a.0.total_cmp(&b.0));
+    let rivals = step
+        .map(|(_, k)| vec![Term::new(Effect::BiasStep, Param::Row(k))])
+        .into_iter()
+        .chain((!drifts.is_empty()).then(|| {
+            drifts
+                .iter()
+                .map(|&r| Term::new(Effect::BiasDrift, Param::Run(r)))
+                .collect()
+        }))
+        .chain((!cycles.is_empty()).then_some(cycles));
+    rivals
+        .map(|terms| {
+            let mut model = current.model.clone();
+            model.extend(&terms);
+            let s = score(data, &engine::refit_free(data, &model, free));
+            let (gain, p) = improvement(current, &s);
+            Tried {
+                effect: terms[0].effect,
+                scored: s,
+                gain,
+                p,
+            }
+        })
+        .max_by(|a, b| a.gain.total_cmp(&b.gain))
+}
+
+/// Every admissible bias jump in residual `e` with its cumulative-sum gain
+/// (with its row), and the runs long enough for a drift. A jump is
+/// admissible [`STEP_SIDE_ROWS`] from its run's ends, on a whole
+/// [`engine::AVERAGING_S`] block from the run's end, and
+/// [`STEP_CLEAR_ROWS`] clear of a record's ends.
+fn jumps_and_drifts(data: &Data<'_>, e: &[f64]) -> (Vec<(f64, usize)>, Vec<usize>) {
     let n = e.len();
-    // Every admissible jump with its cumulative-sum gain on the residual.
     let mut jumps: Vec<(f64, usize)> = Vec::new();
     let mut drifts: Vec<usize> = Vec::new();
     let mut start = 0;
@@ -846,12 +892,14 @@ fn outside_rival(data: &Data<'_>, current: &Scored, free: &[Effect]) -> Option<T
         }
         start = end;
     }
-    // A drift goes through every run (a slow change of the unit, not of one
-    // run): one slope per run. So does a periodic disturbance (the lab's,
-    // not the unit's: the same period, its phase free in each run that
-    // holds a whole cycle of it).
+    (jumps, drifts)
+}
+
+/// A periodic disturbance's terms for residual `e`: at its period (when
+/// it has one), a phase free in each run that spans a whole cycle.
+fn periodic_terms(data: &Data<'_>, e: &[f64]) -> Vec<Term> {
     let period = periodicity(data, e).0;
-    let cycles: Vec<Term> = period
+    period
         .into_iter()
         .flat_map(|period| {
             data.runs.iter().enumerate().filter_map(move |(r, run)| {
@@ -867,11 +915,15 @@ fn outside_rival(data: &Data<'_>, current: &Scored, free: &[Effect]) -> Option<T
                 })
             })
         })
-        .collect();
-    // The residual is what the model left once its terms bent towards a
-    // jump (a ramp's temperature term takes part of a jump in it), so its
-    // cumulative sum can peak away from the jump: the best few peaks, half
-    // an hour apart, are refitted with the model and the best kept.
+        .collect()
+}
+
+/// The rows of the best [`STEP_PEAKS`] jumps, [`STEP_APART_ROWS`] apart
+/// within a run. The residual is what the model left once its terms bent
+/// towards a jump (a ramp's temperature term takes part of a jump in it),
+/// so its cumulative sum can peak away from the jump: the best few peaks
+/// are refitted with the model and the best kept.
+fn jump_peaks(data: &Data<'_>, mut jumps: Vec<(f64, usize)>) -> Vec<usize> {
     jumps.sort_by(|a, b| b.0.total_cmp(&a.0));
     let mut peaks: Vec<usize> = Vec::new();
     for &(_, k) in &jumps {
@@ -885,38 +937,7 @@ fn outside_rival(data: &Data<'_>, current: &Scored, free: &[Effect]) -> Option<T
             peaks.push(k);
         }
     }
-    let step = peaks
-        .iter()
-        .map(|&k| {
-            let mut model = current.model.clone();
-            model.push(Term::new(Effect::BiasStep, Param::Row(k)));
-            (engine::in_sample_sse(data, &model), k)
-        })
-        .min_by(|a, b| a.0.total_cmp(&b.0));
-    let rivals = step
-        .map(|(_, k)| vec![Term::new(Effect::BiasStep, Param::Row(k))])
-        .into_iter()
-        .chain((!drifts.is_empty()).then(|| {
-            drifts
-                .iter()
-                .map(|&r| Term::new(Effect::BiasDrift, Param::Run(r)))
-                .collect()
-        }))
-        .chain((!cycles.is_empty()).then_some(cycles));
-    rivals
-        .map(|terms| {
-            let mut model = current.model.clone();
-            model.extend(&terms);
-            let s = score(data, &engine::refit_free(data, &model, free));
-            let (gain, p) = improvement(current, &s);
-            Tried {
-                effect: terms[0].effect,
-                scored: s,
-                gain,
-                p,
-            }
-        })
-        .max_by(|a, b| a.gain.total_cmp(&b.gain))
+    peaks
 }
 
 /// The reports of an outside disturbance held in `s` (its terms from the
@@ -1033,13 +1054,7 @@ pub(crate) fn diagnose_rate(runs: &[RunData], opts: &Options) -> Diagnosis {
     let spec = reference(opts.twin.as_ref());
     let base_model = build(&data, &spec);
     let base = score(&data, &base_model);
-    // The reference's parameters chosen from the data are refitted with
-    // every candidate; a twin's stay.
-    let free: Vec<Effect> = spec
-        .iter()
-        .filter(|(e, p)| p.is_none() && e.grid().len() > 1)
-        .map(|x| x.0)
-        .collect();
+    let free = free_parameters(&spec);
     let in_base: Vec<Effect> = base_model.iter().map(|m| m.effect).collect();
     let (remaining, not_identifiable): (Vec<Effect>, Vec<Effect>) = LIBRARY
         .iter()
@@ -1049,27 +1064,8 @@ pub(crate) fn diagnose_rate(runs: &[RunData], opts: &Options) -> Diagnosis {
 
     // First step: every candidate against the reference.
     let first = each_against(&data, &remaining, &base, &free);
-    let candidates = first
-        .iter()
-        .map(|t| CandidateScore {
-            name: t.effect.name().into(),
-            held_out_gap_dph: t.scored.gap(),
-            p_value: t.p,
-        })
-        .collect();
-    let mut sel = Selection {
-        data: &data,
-        free,
-        remaining,
-        current: base.clone(),
-        effects: Vec::new(),
-        accepted: Vec::new(),
-        confounded: Vec::new(),
-        tied_better: Vec::new(),
-        step_scores: first,
-        outside: Vec::new(),
-        held_outside: 0,
-    };
+    let candidates = candidate_scores(&first);
+    let mut sel = Selection::new(&data, free, remaining, base.clone(), first);
     while sel.effects.len() < THRESHOLDS.max_effects && !sel.remaining.is_empty() && sel.step() {}
     sel.hold_what_is_left();
     sel.settle_confounds();
@@ -1098,11 +1094,7 @@ pub(crate) fn diagnose_rate(runs: &[RunData], opts: &Options) -> Diagnosis {
     Diagnosis {
         runs: runs.iter().map(|r| r.name.clone()).collect(),
         mixed_units: Vec::new(),
-        protocol: format!(
-            "blocked cross-validation, one fold per block of a record of at most 15 min ({} folds over {} run(s)); scores on 60 s means; a per-run offset is a nuisance fitted on the other folds of the run",
-            data.folds.len(),
-            runs.len()
-        ),
+        protocol: protocol(&data, runs),
         thresholds: THRESHOLDS,
         layers: Layers {
             thermal: ThermalLayer::default(),
@@ -1135,6 +1127,37 @@ pub(crate) fn diagnose_rate(runs: &[RunData], opts: &Options) -> Diagnosis {
         data: Some(rows(runs, &data)),
         fits: Some((base, current)),
     }
+}
+
+/// The reference's parameters chosen from the data (`spec`'s effects with
+/// no parameter given and more than one on their grid): refitted with
+/// every candidate; a twin's stay.
+fn free_parameters(spec: &[(Effect, Option<Param>)]) -> Vec<Effect> {
+    spec.iter()
+        .filter(|(e, p)| p.is_none() && e.grid().len() > 1)
+        .map(|x| x.0)
+        .collect()
+}
+
+/// Every candidate's held-out gap and p-value against the reference.
+fn candidate_scores(first: &[Tried]) -> Vec<CandidateScore> {
+    first
+        .iter()
+        .map(|t| CandidateScore {
+            name: t.effect.name().into(),
+            held_out_gap_dph: t.scored.gap(),
+            p_value: t.p,
+        })
+        .collect()
+}
+
+/// How the diagnosis of `runs` scored, in words.
+fn protocol(data: &Data<'_>, runs: &[RunData]) -> String {
+    format!(
+        "blocked cross-validation, one fold per block of a record of at most 15 min ({} folds over {} run(s)); scores on 60 s means; a per-run offset is a nuisance fitted on the other folds of the run",
+        data.folds.len(),
+        runs.len()
+    )
 }
 
 /// The diagnosed rows: each sample's run, time and orientation.
@@ -1179,6 +1202,32 @@ struct Selection<'d, 'a> {
     /// Disturbances outside the library held, with their reports.
     outside: Vec<OutsideFound>,
     held_outside: usize,
+}
+
+impl<'d, 'a> Selection<'d, 'a> {
+    /// The selection's start: nothing named over the reference `base`,
+    /// `step_scores` every candidate of `remaining` tried over it.
+    fn new(
+        data: &'d Data<'a>,
+        free: Vec<Effect>,
+        remaining: Vec<Effect>,
+        base: Scored,
+        step_scores: Vec<Tried>,
+    ) -> Self {
+        Self {
+            data,
+            free,
+            remaining,
+            current: base,
+            effects: Vec::new(),
+            accepted: Vec::new(),
+            confounded: Vec::new(),
+            tied_better: Vec::new(),
+            step_scores,
+            outside: Vec::new(),
+            held_outside: 0,
+        }
+    }
 }
 
 impl Selection<'_, '_> {

@@ -418,52 +418,13 @@ fn trial(seed: u64, case: &Case, go_on_to_separate: bool) -> Result<UnitTrial, S
     };
     let noise = diagnose_rate(&null_runs, &opts).layers.rate.gap_dph;
     let form = draw_form(seed);
-    let coefficient = |e: Effect, amp: f64| {
-        // The library form nearest the drawn one: its temperature, and the
-        // cascade's mean delay for a lag (a smooth loop's mean width is
-        // its width), so the amplitude is in noise units near enough.
-        let p = match e {
-            Effect::Hysteresis => Param::Memory {
-                on: form.temperature,
-                value: form.width_c,
-            },
-            Effect::ThermalLag => Param::Memory {
-                on: form.temperature,
-                value: form.tau_s * f64::from(form.order),
-            },
-            _ => Param::None,
-        };
-        let gap = visible_gap(&null_runs, &opts, &contribution(&null_runs, e, p));
-        if gap > 0.0 { amp * noise / gap } else { 0.0 }
+    let scale = Scale {
+        null_runs: &null_runs,
+        opts: &opts,
+        form: &form,
+        noise,
     };
-    let with = |data: &TwinConfig, e: Effect, amp: f64| {
-        let mut d = inject(data, e, coefficient(e, amp)).0;
-        form.apply(&mut d);
-        d
-    };
-    let mut data = unit.clone();
-    let mut outside = None;
-    match case {
-        Case::Null => {}
-        Case::Effect { effect, amplitude } => {
-            if let Some(e) = Effect::from_name(effect) {
-                data = with(&data, e, *amplitude);
-            }
-        }
-        Case::Pair { effects } => {
-            for name in effects {
-                if let Some(e) = Effect::from_name(name) {
-                    data = with(&data, e, PAIR_AMPLITUDE);
-                }
-            }
-        }
-        Case::Outside { disturbance } => {
-            outside = Some(*disturbance);
-            if *disturbance == Outside::Periodic {
-                data.effects.periodic = None;
-            }
-        }
-    }
+    let (data, outside) = withheld(&unit, case, &scale);
     let mut runs = if data == unit {
         null_runs
     } else {
@@ -494,41 +455,8 @@ fn trial(seed: u64, case: &Case, go_on_to_separate: bool) -> Result<UnitTrial, S
             .inconclusive
             .as_ref()
             .and_then(|i| i.candidates.first().map(|c| c.name.clone())),
-        form: {
-            let names: Vec<&str> = match case {
-                Case::Effect { effect, .. } => vec![effect.as_str()],
-                Case::Pair { effects } => effects.iter().map(String::as_str).collect(),
-                _ => Vec::new(),
-            };
-            let mut parts = Vec::new();
-            if names.contains(&"hysteresis") {
-                parts.push(format!(
-                    "hysteresis on the {} temperature, {:?} loop, width {:.2} degC",
-                    form.temperature.name(),
-                    form.shape,
-                    form.width_c
-                ));
-            }
-            if names.contains(&"thermal_lag") {
-                parts.push(format!(
-                    "thermal_lag on the {} temperature, {} filter(s) of {:.0} s",
-                    form.temperature.name(),
-                    form.order,
-                    form.tau_s
-                ));
-            }
-            (!parts.is_empty()).then(|| parts.join("; "))
-        },
-        outside: {
-            let mut kinds: Vec<String> = d
-                .unexplained
-                .outside
-                .iter()
-                .map(|o| o.kind.clone())
-                .collect();
-            kinds.dedup();
-            kinds
-        },
+        form: form_text(case, &form),
+        outside: outside_kinds(&d),
         confounded: d.confounded.iter().map(|c| c.effects.clone()).collect(),
         with_separating_run,
         gap_before_dph: before,
@@ -537,6 +465,128 @@ fn trial(seed: u64, case: &Case, go_on_to_separate: bool) -> Result<UnitTrial, S
         thermal_gap_c: d.layers.thermal.gap_c,
         network_fits: d.layers.thermal.form_misfit.is_none(),
     })
+}
+
+/// What a trial's withheld effects are sized by: the unit's null runs and
+/// their noise (the held-out gap of 60 s means, deg/h), the options they
+/// were diagnosed with, and the drawn form of the memory effects.
+struct Scale<'a> {
+    null_runs: &'a [RunData],
+    opts: &'a Options,
+    form: &'a Form,
+    noise: f64,
+}
+
+impl Scale<'_> {
+    /// The coefficient of `e` whose visible gap on the null runs is `amp`
+    /// times their noise (0 when `e` shows no gap there).
+    fn coefficient(&self, e: Effect, amp: f64) -> f64 {
+        let form = self.form;
+        // The library form nearest the drawn one: its temperature, and the
+        // cascade's mean delay for a lag (a smooth loop's mean width is
+        // its width), so the amplitude is in noise units near enough.
+        let p = match e {
+            Effect::Hysteresis => Param::Memory {
+                on: form.temperature,
+                value: form.width_c,
+            },
+            Effect::ThermalLag => Param::Memory {
+                on: form.temperature,
+                value: form.tau_s * f64::from(form.order),
+            },
+            _ => Param::None,
+        };
+        let gap = visible_gap(
+            self.null_runs,
+            self.opts,
+            &contribution(self.null_runs, e, p),
+        );
+        if gap > 0.0 {
+            amp * self.noise / gap
+        } else {
+            0.0
+        }
+    }
+
+    /// `data` with `e` injected at `amp` noise units, its memory effects
+    /// in the drawn form.
+    fn with(&self, data: &TwinConfig, e: Effect, amp: f64) -> TwinConfig {
+        let mut d = inject(data, e, self.coefficient(e, amp)).0;
+        self.form.apply(&mut d);
+        d
+    }
+}
+
+/// The unit's twin with what `case` withholds (an effect, a pair at
+/// [`PAIR_AMPLITUDE`], or for a disturbance outside the library the
+/// unit's own periodic effect taken away when that is the disturbance),
+/// and the outside disturbance to put on its runs.
+fn withheld(unit: &TwinConfig, case: &Case, scale: &Scale<'_>) -> (TwinConfig, Option<Outside>) {
+    let mut data = unit.clone();
+    let mut outside = None;
+    match case {
+        Case::Null => {}
+        Case::Effect { effect, amplitude } => {
+            if let Some(e) = Effect::from_name(effect) {
+                data = scale.with(&data, e, *amplitude);
+            }
+        }
+        Case::Pair { effects } => {
+            for name in effects {
+                if let Some(e) = Effect::from_name(name) {
+                    data = scale.with(&data, e, PAIR_AMPLITUDE);
+                }
+            }
+        }
+        Case::Outside { disturbance } => {
+            outside = Some(*disturbance);
+            if *disturbance == Outside::Periodic {
+                data.effects.periodic = None;
+            }
+        }
+    }
+    (data, outside)
+}
+
+/// The drawn form of the memory effects `case` withholds, in words (none
+/// when it withholds neither hysteresis nor a thermal lag).
+fn form_text(case: &Case, form: &Form) -> Option<String> {
+    let names: Vec<&str> = match case {
+        Case::Effect { effect, .. } => vec![effect.as_str()],
+        Case::Pair { effects } => effects.iter().map(String::as_str).collect(),
+        _ => Vec::new(),
+    };
+    let mut parts = Vec::new();
+    if names.contains(&"hysteresis") {
+        parts.push(format!(
+            "hysteresis on the {} temperature, {:?} loop, width {:.2} degC",
+            form.temperature.name(),
+            form.shape,
+            form.width_c
+        ));
+    }
+    if names.contains(&"thermal_lag") {
+        parts.push(format!(
+            "thermal_lag on the {} temperature, {} filter(s) of {:.0} s",
+            form.temperature.name(),
+            form.order,
+            form.tau_s
+        ));
+    }
+    (!parts.is_empty()).then(|| parts.join("; "))
+}
+
+/// The kinds of the disturbances outside the library the diagnosis held,
+/// repeats in a row once.
+fn outside_kinds(d: &super::Diagnosis) -> Vec<String> {
+    let mut kinds: Vec<String> = d
+        .unexplained
+        .outside
+        .iter()
+        .map(|o| o.kind.clone())
+        .collect();
+    kinds.dedup();
+    kinds
 }
 
 /// What the engineer does next when the diagnosis reports a pair confounded

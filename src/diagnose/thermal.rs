@@ -1352,6 +1352,19 @@ fn held_out(runs: &[RunData], data: &[Vec<Block>], fold_res: &[Vec<Vec<[f64; 3]>
     }
 }
 
+/// A fit [`fitted_network`] runs: the network's, or the modal model's on
+/// a convection axis; on all the runs (`None`) or with fold k held out.
+enum FitJob {
+    Network(Option<usize>),
+    Modal(Option<usize>, usize),
+}
+
+/// A [`FitJob`]'s result: the network's shape, or the modal time constants.
+enum FitOut {
+    Network(Shape),
+    Modal([f64; MODES]),
+}
+
 /// Both thermal models fitted to the runs, each scored held out (each
 /// stretch predicted by a model identified on the others, from the same
 /// starts: nothing the held-out stretch decided carries over):
@@ -1367,126 +1380,34 @@ pub fn fitted_network(runs: &[RunData], base: &ThermalConfig, prior: bool) -> Fi
     let axis = Vector3::from(base.sensor_axis_body).normalize();
     let data = blocks(runs, axis);
     let prior = prior.then(|| shape_of(base));
-    enum Job {
-        Network(Option<usize>),
-        Modal(Option<usize>, usize),
-    }
-    enum Out {
-        Network(Shape),
-        Modal([f64; MODES]),
-    }
-    // The modal model's convection input first along the twin's sensor
-    // axis: its fits run alongside the network's.
-    let base_axis = (0..CONV_INPUTS)
-        .max_by(|&a, &b| {
-            base.sensor_axis_body[a]
-                .abs()
-                .total_cmp(&base.sensor_axis_body[b].abs())
-        })
-        .unwrap_or(1);
-    // The fits on all the runs first, searched from the grids; each fold's
-    // fit then starts from them ([`warm`]). Two threads each time.
+    let base_axis = twin_convection_axis(base);
     let prior = prior.as_ref();
-    let run = |j: &Job| match *j {
-        Job::Network(k) => Out::Network(identify(&data, k, prior)),
-        Job::Modal(k, axis) => Out::Modal(identify_modes(&data, k, axis)),
-    };
-    let firsts = on_two_threads(&[Job::Network(None), Job::Modal(None, base_axis)], run);
-    let (all_shape, all_modes) = match firsts.as_slice() {
-        [Out::Network(q), Out::Modal(t)] => (*q, *t),
-        _ => (shape_of(base), [600.0; MODES]),
-    };
-    let full_prior = prior.is_some_and(is_full);
-    let fold_jobs: Vec<Job> = (0..FOLDS)
-        .flat_map(|k| [Job::Network(Some(k)), Job::Modal(Some(k), base_axis)])
-        .collect();
-    let fold_fit = |j: &Job| match *j {
-        Job::Network(k) => Out::Network(warm_shape(&data, k, full_prior, &all_shape)),
-        Job::Modal(k, axis) => Out::Modal(warm_modes(&data, k, axis, &all_modes)),
-    };
-    let outs: Vec<Out> = firsts
-        .into_iter()
-        .chain(on_two_threads(&fold_jobs, fold_fit))
-        .collect();
+    let (outs, all_modes) = fits_on_all_and_folds(&data, base, prior, base_axis);
     let mut modes: Vec<[f64; MODES]> = outs
         .iter()
         .filter_map(|o| match o {
-            Out::Modal(t) => Some(*t),
-            Out::Network(_) => None,
+            FitOut::Modal(t) => Some(*t),
+            FitOut::Network(_) => None,
         })
         .collect();
-    // A unit's convection may follow another body axis (the sensitive
-    // axis, say): the axis whose model predicts the held-out quarters
-    // best at the time constants found on all the runs (a cheap stand-in
-    // for fitting every fold with every axis) is taken, its modes
-    // searched again when it is not the first. By the in-sample fit, an
-    // axis that changes once in the orientation run (the sensitive axis,
-    // vertical then horizontal) took the warm-up's tail and lost 0.05 degC
-    // held out on units with no convection at all.
-    let axis = (0..CONV_INPUTS)
-        .map(|a| {
-            let held: f64 = (0..FOLDS)
-                .map(|k| {
-                    let res = ModalCost {
-                        runs: &data,
-                        held_out: Some(k),
-                        axis: a,
-                    }
-                    .fit_at(&all_modes);
-                    held_out_sse(&data, &res, k)
-                })
-                .sum();
-            (a, held)
-        })
-        .min_by(|x, y| x.1.total_cmp(&y.1))
-        .map_or(base_axis, |x| x.0);
+    let axis = convection_axis(&data, &all_modes, base_axis);
     if axis != base_axis {
-        let all = identify_modes(&data, None, axis);
-        let folds: Vec<usize> = (0..FOLDS).collect();
-        modes = std::iter::once(all)
-            .chain(on_two_threads(&folds, |&k| {
-                warm_modes(&data, Some(k), axis, &all)
-            }))
-            .collect();
+        modes = modes_on_axis(&data, axis);
     }
     let shapes: Vec<Shape> = outs
         .iter()
         .filter_map(|o| match o {
-            Out::Network(q) => Some(*q),
-            Out::Modal(_) => None,
+            FitOut::Network(q) => Some(*q),
+            FitOut::Modal(_) => None,
         })
         .collect();
     let shapes = cross_started(&data, shapes, prior.is_some_and(is_full));
-    let mut net = network_held_out(runs, &data, &shapes, shape_of(base));
-    // A network that misses may have a heat sink on the case or blocks
-    // of unequal capacity: the full form takes both, searched only then
-    // (the simpler network is kept when it follows; the full one is kept
-    // when it predicts the held-out quarters better).
-    let gap = |n: &NetworkHeldOut| quadratic_mean(&n.held.per_sensor_c);
-    let missed = gap(&net).is_nan() || gap(&net) > FORM_MISFIT_C;
-    if missed && !is_full(&net.all) {
-        let full = network_held_out(runs, &data, &in_full_form(&data, &shapes), net.all);
-        if gap(&full) < gap(&net) || gap(&net).is_nan() {
-            net = full;
-        }
-    }
     let NetworkHeldOut {
         all,
         all_lin,
         held: net,
-    } = net;
-    let modal_res: Vec<_> = (0..FOLDS)
-        .map(|k| {
-            let tau = modes.get(k + 1).copied().unwrap_or([600.0; MODES]);
-            ModalCost {
-                runs: &data,
-                held_out: Some(k),
-                axis,
-            }
-            .fit_at(&tau)
-        })
-        .collect();
-    let modal = held_out(runs, &data, &modal_res);
+    } = network_in_its_form(runs, &data, &shapes, base);
+    let modal = modal_held_out(runs, &data, &modes, axis);
     let network = to_config(base, &all, &all_lin);
     let net_gap = quadratic_mean(&net.per_sensor_c);
     let modal_gap = quadratic_mean(&modal.per_sensor_c);
@@ -1505,6 +1426,144 @@ pub fn fitted_network(runs: &[RunData], base: &ThermalConfig, prior: bool) -> Fi
         network_series: net.series,
         misfit,
     }
+}
+
+/// The modal model's convection input taken first: the body axis the
+/// twin's sensor axis lies most along (its fits run alongside the
+/// network's).
+fn twin_convection_axis(base: &ThermalConfig) -> usize {
+    (0..CONV_INPUTS)
+        .max_by(|&a, &b| {
+            base.sensor_axis_body[a]
+                .abs()
+                .total_cmp(&base.sensor_axis_body[b].abs())
+        })
+        .unwrap_or(1)
+}
+
+/// Both models' fits, the network's and the modal one's on `base_axis`:
+/// on all the runs first, searched from the grids (with `prior` one more
+/// network start), then each fold's, started from them ([`warm_shape`],
+/// [`warm_modes`]); two threads each time. The results in job order (all
+/// the runs, then fold by fold, network before modal), and the modes on
+/// all the runs.
+fn fits_on_all_and_folds(
+    data: &[Vec<Block>],
+    base: &ThermalConfig,
+    prior: Option<&Shape>,
+    base_axis: usize,
+) -> (Vec<FitOut>, [f64; MODES]) {
+    let run = |j: &FitJob| match *j {
+        FitJob::Network(k) => FitOut::Network(identify(data, k, prior)),
+        FitJob::Modal(k, axis) => FitOut::Modal(identify_modes(data, k, axis)),
+    };
+    let firsts = on_two_threads(
+        &[FitJob::Network(None), FitJob::Modal(None, base_axis)],
+        run,
+    );
+    let (all_shape, all_modes) = match firsts.as_slice() {
+        [FitOut::Network(q), FitOut::Modal(t)] => (*q, *t),
+        _ => (shape_of(base), [600.0; MODES]),
+    };
+    let full_prior = prior.is_some_and(is_full);
+    let fold_jobs: Vec<FitJob> = (0..FOLDS)
+        .flat_map(|k| [FitJob::Network(Some(k)), FitJob::Modal(Some(k), base_axis)])
+        .collect();
+    let fold_fit = |j: &FitJob| match *j {
+        FitJob::Network(k) => FitOut::Network(warm_shape(data, k, full_prior, &all_shape)),
+        FitJob::Modal(k, axis) => FitOut::Modal(warm_modes(data, k, axis, &all_modes)),
+    };
+    let outs = firsts
+        .into_iter()
+        .chain(on_two_threads(&fold_jobs, fold_fit))
+        .collect();
+    (outs, all_modes)
+}
+
+/// The body axis the unit's convection follows. A unit's convection may
+/// follow another body axis (the sensitive axis, say): the axis whose
+/// model predicts the held-out quarters best at the time constants found
+/// on all the runs (`all_modes`; a cheap stand-in for fitting every fold
+/// with every axis) is taken. By the in-sample fit, an axis that changes
+/// once in the orientation run (the sensitive axis, vertical then
+/// horizontal) took the warm-up's tail and lost 0.05 degC held out on
+/// units with no convection at all.
+fn convection_axis(data: &[Vec<Block>], all_modes: &[f64; MODES], base_axis: usize) -> usize {
+    (0..CONV_INPUTS)
+        .map(|a| {
+            let held: f64 = (0..FOLDS)
+                .map(|k| {
+                    let res = ModalCost {
+                        runs: data,
+                        held_out: Some(k),
+                        axis: a,
+                    }
+                    .fit_at(all_modes);
+                    held_out_sse(data, &res, k)
+                })
+                .sum();
+            (a, held)
+        })
+        .min_by(|x, y| x.1.total_cmp(&y.1))
+        .map_or(base_axis, |x| x.0)
+}
+
+/// The modes searched again on convection axis `axis` (when it is not the
+/// first one tried): on all the runs, then each fold's started from them.
+fn modes_on_axis(data: &[Vec<Block>], axis: usize) -> Vec<[f64; MODES]> {
+    let all = identify_modes(data, None, axis);
+    let folds: Vec<usize> = (0..FOLDS).collect();
+    std::iter::once(all)
+        .chain(on_two_threads(&folds, |&k| {
+            warm_modes(data, Some(k), axis, &all)
+        }))
+        .collect()
+}
+
+/// The network fits (`shapes`, as [`network_held_out`] takes them) scored
+/// held out, in the full form when the simple one misses. A network that
+/// misses may have a heat sink on the case or blocks of unequal capacity:
+/// the full form takes both, searched only then (the simpler network is
+/// kept when it follows; the full one is kept when it predicts the
+/// held-out quarters better).
+fn network_in_its_form(
+    runs: &[RunData],
+    data: &[Vec<Block>],
+    shapes: &[Shape],
+    base: &ThermalConfig,
+) -> NetworkHeldOut {
+    let mut net = network_held_out(runs, data, shapes, shape_of(base));
+    let gap = |n: &NetworkHeldOut| quadratic_mean(&n.held.per_sensor_c);
+    let missed = gap(&net).is_nan() || gap(&net) > FORM_MISFIT_C;
+    if missed && !is_full(&net.all) {
+        let full = network_held_out(runs, data, &in_full_form(data, shapes), net.all);
+        if gap(&full) < gap(&net) || gap(&net).is_nan() {
+            net = full;
+        }
+    }
+    net
+}
+
+/// The modal model scored held out on convection axis `axis`, fold k at
+/// `modes[k + 1]` (600 s each where missing).
+fn modal_held_out(
+    runs: &[RunData],
+    data: &[Vec<Block>],
+    modes: &[[f64; MODES]],
+    axis: usize,
+) -> HeldOut {
+    let modal_res: Vec<_> = (0..FOLDS)
+        .map(|k| {
+            let tau = modes.get(k + 1).copied().unwrap_or([600.0; MODES]);
+            ModalCost {
+                runs: data,
+                held_out: Some(k),
+                axis,
+            }
+            .fit_at(&tau)
+        })
+        .collect();
+    held_out(runs, data, &modal_res)
 }
 
 /// The network fitted on all the runs, its linear quantities, and its
