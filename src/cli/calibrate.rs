@@ -57,28 +57,7 @@ pub fn run(args: CalibrateArgs) -> Result<Outcome> {
         .iter()
         .map(|p| load_unit(p, args.unit.as_deref()).map_err(anyhow::Error::from))
         .collect::<Result<Vec<_>>>()?;
-    // One run given twice (or a copy of it) would validate the fit on its
-    // own data: held-out figures would be a lie.
-    for (i, a) in runs.iter().enumerate() {
-        for b in &runs[..i] {
-            let same_file =
-                std::fs::canonicalize(&a.name).ok() == std::fs::canonicalize(&b.name).ok();
-            let same_run = !a.run_id.is_empty() && a.run_id == b.run_id;
-            if same_file || same_run {
-                return Err(Usage(format!(
-                    "{} and {} are the same run{}; give each run once (held-out validation needs different runs)",
-                    b.name,
-                    a.name,
-                    if same_run {
-                        format!(" (run id {})", a.run_id)
-                    } else {
-                        String::new()
-                    }
-                ))
-                .into());
-            }
-        }
-    }
+    refuse_repeats(&runs)?;
     let mixed = mixed_serials(&runs);
     if !mixed.is_empty() && !args.allow_mixed_serials {
         anyhow::bail!(
@@ -103,29 +82,7 @@ pub fn run(args: CalibrateArgs) -> Result<Outcome> {
         .as_ref()
         .map_or_else(CoefficientSet::default, Calibration::coefficient_set);
     set.scale_factor = sf;
-    set.unit = match (mixed.is_empty(), runs.first()) {
-        (true, Some(first)) => Some(UnitSection {
-            serial: first.serial.clone(),
-            dut_type: first.dut_type.clone(),
-        }),
-        _ => None,
-    };
-    set.set = Some(SetSection {
-        version: None,
-        created_utc: crate::clock::utc_now().to_rfc3339(),
-        software: crate::version::software(),
-        models: [
-            ("model4", set.model4.is_some()),
-            ("model3", set.model3.is_some()),
-            ("model1", set.model1.is_some()),
-            ("scale_factor", set.scale_factor.is_some()),
-        ]
-        .iter()
-        .filter(|(_, has)| *has)
-        .map(|(m, _)| (*m).to_owned())
-        .collect(),
-        fitted_on: fitted_on(&args.runs, &runs)?,
-    });
+    describe_set(&mut set, &args.runs, &runs, mixed.is_empty())?;
     // The store gives the set its version before the file is written, so
     // the file and the store hold the same text.
     let text = match (&set.unit, &cal) {
@@ -165,6 +122,66 @@ pub fn run(args: CalibrateArgs) -> Result<Outcome> {
         html_path.display()
     );
     Ok(Outcome::Success)
+}
+
+/// Each run once: one run given twice (or a copy of it) would validate the
+/// fit on its own data, and held-out figures would be a lie.
+fn refuse_repeats(runs: &[crate::calibrate::RunSeries]) -> Result<()> {
+    for (i, a) in runs.iter().enumerate() {
+        for b in &runs[..i] {
+            let same_file =
+                std::fs::canonicalize(&a.name).ok() == std::fs::canonicalize(&b.name).ok();
+            let same_run = !a.run_id.is_empty() && a.run_id == b.run_id;
+            if same_file || same_run {
+                return Err(Usage(format!(
+                    "{} and {} are the same run{}; give each run once (held-out validation needs different runs)",
+                    b.name,
+                    a.name,
+                    if same_run {
+                        format!(" (run id {})", a.run_id)
+                    } else {
+                        String::new()
+                    }
+                ))
+                .into());
+            }
+        }
+    }
+    Ok(())
+}
+
+/// The set's unit (when the runs are of `one_unit`) and its provenance:
+/// when, by what software, which models, fitted on which runs (`paths`).
+fn describe_set(
+    set: &mut CoefficientSet,
+    paths: &[PathBuf],
+    runs: &[crate::calibrate::RunSeries],
+    one_unit: bool,
+) -> Result<()> {
+    set.unit = match (one_unit, runs.first()) {
+        (true, Some(first)) => Some(UnitSection {
+            serial: first.serial.clone(),
+            dut_type: first.dut_type.clone(),
+        }),
+        _ => None,
+    };
+    set.set = Some(SetSection {
+        version: None,
+        created_utc: crate::clock::utc_now().to_rfc3339(),
+        software: crate::version::software(),
+        models: [
+            ("model4", set.model4.is_some()),
+            ("model3", set.model3.is_some()),
+            ("model1", set.model1.is_some()),
+            ("scale_factor", set.scale_factor.is_some()),
+        ]
+        .iter()
+        .filter(|(_, has)| *has)
+        .map(|(m, _)| (*m).to_owned())
+        .collect(),
+        fitted_on: fitted_on(paths, runs)?,
+    });
+    Ok(())
 }
 
 /// Fit the compensation models on the thermal runs, refusing fits that

@@ -555,9 +555,9 @@ async fn frame_until(
 /// The named faults of `run --inject`, played by the served simulators at
 /// a device time and met by the real drivers as the embedded bench's
 /// drivers meet them: alarm 9, the interlock, a stuck output, a unit that
-/// draws three times its current until the protection trips, and a
-/// batch's last unit whose line goes silent while the first goes on. The
-/// controller's own faults are refused by name.
+/// draws three times its current until the protection trips. The
+/// controller's own faults are refused by name, and so is `unit-lost` on
+/// a bench of one unit.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_named_faults_play_on_the_wire_at_their_device_time() {
     use crate::sim::Fault;
@@ -625,7 +625,14 @@ async fn the_named_faults_play_on_the_wire_at_their_device_time() {
     }
     assert!(can_play(&one, Fault::UnitLost).is_err());
     assert!(served.bench.play(Fault::UnitLost).is_err());
+}
 
+/// `unit-lost` on a served batch: the last unit's line goes silent for
+/// good while the first goes on.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_served_batch_loses_its_last_unit_by_name() {
+    use crate::sim::Fault;
+    use crate::sim::serve::can_play;
     let quad = Serve::load(Some(std::path::Path::new(concat!(
         env!("CARGO_MANIFEST_DIR"),
         "/fixtures/sim/quad.toml"

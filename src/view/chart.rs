@@ -525,15 +525,42 @@ impl Chart {
             mesh.y_labels(0);
         }
         mesh.draw()?;
+        self.log_grid(&mut c, area, (xr.start, xr.end), (yr.start, yr.end))?;
+        self.limits(&mut c, (xr.start, xr.end), (yr.start, yr.end))?;
+        for s in &self.series {
+            draw_series(&mut c, s)?;
+        }
+        for (x, y, text) in &self.notes {
+            c.draw_series(std::iter::once(
+                EmptyElement::at((*x, *y)) + Text::new(text.clone(), (6, -18), (FONT, TICK_PX)),
+            ))?;
+        }
+        targets.extend(self.links.iter().map(|l| c.backend_coord(&(l.x, l.y))));
+        Ok(())
+    }
+    /// The grid lines and labels of a log axis, every 1..9 x 10^k, the
+    /// decades labelled (plotters starts its key points at the first whole
+    /// decade, so a range within one would go unlabelled).
+    fn log_grid<X, Y>(
+        &self,
+        c: &mut ChartContext<'_, SVGBackend<'_>, Cartesian2d<X, Y>>,
+        area: &DrawingArea<SVGBackend<'_>, Shift>,
+        xr: (f64, f64),
+        yr: (f64, f64),
+    ) -> Drawn
+    where
+        X: Ranged<ValueType = f64>,
+        Y: Ranged<ValueType = f64>,
+    {
         let label = TextStyle::from((FONT, TICK_PX).into_font());
         if self.y.log {
-            for (v, major) in log_ticks(yr.start, yr.end) {
+            for (v, major) in log_ticks(yr.0, yr.1) {
                 c.draw_series(std::iter::once(PathElement::new(
-                    vec![(xr.start, v), (xr.end, v)],
+                    vec![(xr.0, v), (xr.1, v)],
                     grey(major).stroke_width(1),
                 )))?;
                 if major {
-                    let (px, py) = c.backend_coord(&(xr.start, v));
+                    let (px, py) = c.backend_coord(&(xr.0, v));
                     area.draw(&Text::new(
                         tick(v),
                         (px - 6, py),
@@ -543,13 +570,13 @@ impl Chart {
             }
         }
         if self.x.log {
-            for (v, major) in log_ticks(xr.start, xr.end) {
+            for (v, major) in log_ticks(xr.0, xr.1) {
                 c.draw_series(std::iter::once(PathElement::new(
-                    vec![(v, yr.start), (v, yr.end)],
+                    vec![(v, yr.0), (v, yr.1)],
                     grey(major).stroke_width(1),
                 )))?;
                 if major {
-                    let (px, py) = c.backend_coord(&(v, yr.start));
+                    let (px, py) = c.backend_coord(&(v, yr.0));
                     area.draw(&Text::new(
                         tick(v),
                         (px, py + 6),
@@ -558,8 +585,23 @@ impl Chart {
                 }
             }
         }
+        Ok(())
+    }
+
+    /// The limits: shaded bands with dashed edges, then dashed rules with
+    /// their labels.
+    fn limits<X, Y>(
+        &self,
+        c: &mut ChartContext<'_, SVGBackend<'_>, Cartesian2d<X, Y>>,
+        xr: (f64, f64),
+        yr: (f64, f64),
+    ) -> Drawn
+    where
+        X: Ranged<ValueType = f64>,
+        Y: Ranged<ValueType = f64>,
+    {
         for b in &self.bands {
-            let (bx0, bx1) = b.x.unwrap_or((xr.start, xr.end));
+            let (bx0, bx1) = b.x.unwrap_or(xr);
             c.draw_series(std::iter::once(Rectangle::new(
                 [(bx0, b.y.0), (bx1, b.y.1)],
                 LIMIT.mix(0.10).filled(),
@@ -575,26 +617,17 @@ impl Chart {
         }
         for r in &self.rules {
             let (a, b) = if r.vertical {
-                ((r.at, yr.start), (r.at, yr.end))
+                ((r.at, yr.0), (r.at, yr.1))
             } else {
-                ((xr.start, r.at), (xr.end, r.at))
+                ((xr.0, r.at), (xr.1, r.at))
             };
             c.draw_series(DashedLineSeries::new([a, b], 8, 5, LIMIT.stroke_width(2)))?;
-            let at = if r.vertical { b } else { (xr.start, r.at) };
+            let at = if r.vertical { b } else { (xr.0, r.at) };
             let offset = if r.vertical { (6, 4) } else { (6, -20) };
             c.draw_series(std::iter::once(
                 EmptyElement::at(at) + Text::new(r.label.clone(), offset, (FONT, TICK_PX)),
             ))?;
         }
-        for s in &self.series {
-            draw_series(&mut c, s)?;
-        }
-        for (x, y, text) in &self.notes {
-            c.draw_series(std::iter::once(
-                EmptyElement::at((*x, *y)) + Text::new(text.clone(), (6, -18), (FONT, TICK_PX)),
-            ))?;
-        }
-        targets.extend(self.links.iter().map(|l| c.backend_coord(&(l.x, l.y))));
         Ok(())
     }
 }

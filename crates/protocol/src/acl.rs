@@ -180,31 +180,7 @@ fn parse_one(cmd: &str, branch: &mut Option<&'static str>) -> Result<Command, Sc
         _ => {}
     }
     let query = upper.ends_with('?');
-    let path = upper.trim_end_matches('?');
-    let (absolute, path) = match path.strip_prefix(':') {
-        Some(p) => (true, p),
-        None => (false, path),
-    };
-    let parts: Vec<&str> = path.split(':').collect();
-    let (root, leaf) = match (parts.as_slice(), absolute, *branch) {
-        ([r, l], _, _) => {
-            let t = r.to_ascii_uppercase();
-            let root = TREE
-                .iter()
-                .find(|(n, _)| !t.is_empty() && n.starts_with(t.as_str()))
-                .ok_or(ScpiError::UNDEFINED_HEADER)?;
-            (root, *l)
-        }
-        ([l], false, Some(b)) => (
-            TREE.iter()
-                .find(|(n, _)| *n == b)
-                .ok_or(ScpiError::UNDEFINED_HEADER)?,
-            *l,
-        ),
-        _ => return Err(ScpiError::UNDEFINED_HEADER),
-    };
-    let node = resolve(leaf, root.1).ok_or(ScpiError::UNDEFINED_HEADER)?;
-    *branch = Some(root.0);
+    let (root, node) = header_node(upper.trim_end_matches('?'), branch)?;
 
     let nums: Vec<&str> = if args.is_empty() {
         Vec::new()
@@ -228,7 +204,7 @@ fn parse_one(cmd: &str, branch: &mut Option<&'static str>) -> Result<Command, Sc
             Err(ScpiError::UNDEFINED_HEADER)
         }
     };
-    match (root.0, node) {
+    match (root, node) {
         ("MODE", m) => {
             expect_query(false)?;
             let mode = match m {
@@ -271,6 +247,41 @@ fn parse_one(cmd: &str, branch: &mut Option<&'static str>) -> Result<Command, Sc
         }
         _ => Err(ScpiError::UNDEFINED_HEADER),
     }
+}
+
+/// The subsystem and node a header's `path` names (its query mark taken
+/// off): `:ROOT:LEAF` or `ROOT:LEAF` from the tree's top, a lone `LEAF` in
+/// the `branch` the message's last command left (SCPI's compound rule),
+/// each in short or long form. The branch moves to the root found.
+fn header_node(
+    path: &str,
+    branch: &mut Option<&'static str>,
+) -> Result<(&'static str, &'static str), ScpiError> {
+    let (absolute, path) = match path.strip_prefix(':') {
+        Some(p) => (true, p),
+        None => (false, path),
+    };
+    let parts: Vec<&str> = path.split(':').collect();
+    let (root, leaf) = match (parts.as_slice(), absolute, *branch) {
+        ([r, l], _, _) => {
+            let t = r.to_ascii_uppercase();
+            let root = TREE
+                .iter()
+                .find(|(n, _)| !t.is_empty() && n.starts_with(t.as_str()))
+                .ok_or(ScpiError::UNDEFINED_HEADER)?;
+            (root, *l)
+        }
+        ([l], false, Some(b)) => (
+            TREE.iter()
+                .find(|(n, _)| *n == b)
+                .ok_or(ScpiError::UNDEFINED_HEADER)?,
+            *l,
+        ),
+        _ => return Err(ScpiError::UNDEFINED_HEADER),
+    };
+    let node = resolve(leaf, root.1).ok_or(ScpiError::UNDEFINED_HEADER)?;
+    *branch = Some(root.0);
+    Ok((root.0, node))
 }
 
 /// Split a compound reply (`a;b;c`) into numbers.
