@@ -17,7 +17,7 @@ use crate::clock::Pacing;
 use crate::config::{ConfigError, Source};
 use crate::geometry::{Orientation, TableAngles, TableGeometry};
 use crate::procedure::Procedure;
-use crate::sequencer::{self, BenchState, Quiet, RunError, Sink, Tick};
+use crate::sequencer::{self, BenchState, Event, Observer, Quiet, RunError, Tick};
 use crate::twin::TwinConfig;
 use nalgebra::Vector3;
 
@@ -98,8 +98,9 @@ impl Collect {
     }
 }
 
-impl Sink for Collect {
-    fn tick(&mut self, tick: &Tick, _: Option<&str>, step: &str) -> std::io::Result<()> {
+impl Collect {
+    /// A tick: the pose and table rate its interval is read in.
+    fn tick(&mut self, tick: &Tick, step: &str) {
         self.orientation = tick.state.as_ref().map(|s: &BenchState| s.orientation);
         if let Some(s) = &tick.state {
             self.table_rate_body_dph = self
@@ -112,10 +113,10 @@ impl Sink for Collect {
             ));
         }
         step.clone_into(&mut self.step);
-        Ok(())
     }
 
-    fn interval(&mut self, iv: &Interval, record: Option<&str>) -> std::io::Result<()> {
+    /// The first unit's interval in a record, with its pose.
+    fn interval(&mut self, iv: &Interval, record: Option<&str>) {
         // While the table turns, the pose at the interval's middle, which
         // its mean reads gravity and the field at (the state is its end's).
         let orientation = match self.turning {
@@ -137,18 +138,22 @@ impl Sink for Collect {
                 table_rate_body_dph: self.table_rate_body_dph,
             });
         }
-        Ok(())
     }
+}
 
-    fn event(&mut self, _: f64, _: crate::sequencer::Level, _: &str) -> std::io::Result<()> {
-        Ok(())
-    }
-
-    fn step(&mut self, _: &crate::sequencer::StepEvent) -> std::io::Result<()> {
-        Ok(())
-    }
-
-    fn link(&mut self, _: f64, _: &crate::protocol::frame::LinkStats) -> std::io::Result<()> {
+/// A study takes the first unit's intervals in records, with the pose of
+/// the ticks before them; the rest it lets go.
+impl Observer for Collect {
+    fn observe(&mut self, event: &Event<'_>) -> std::io::Result<()> {
+        match *event {
+            Event::Tick { tick, step, .. } => self.tick(tick, step),
+            Event::Interval {
+                slot: 0,
+                iv,
+                record,
+            } => self.interval(iv, record),
+            _ => {}
+        }
         Ok(())
     }
 }

@@ -9,13 +9,12 @@ use clap::Args;
 
 use super::check::load_bench;
 use super::{Outcome, Usage};
-use crate::analysis::series::Interval;
 use crate::clock::Pacing;
 use crate::coeffs::{Chosen, CoeffsSource};
 use crate::procedure::Procedure;
 use crate::runlog::live::{Live as LiveStream, LiveError};
 use crate::sequencer::embedded::Fault;
-use crate::sequencer::{self, BenchState, Interrupt, Progress};
+use crate::sequencer::{self, Event, Interrupt, Observer, Operator};
 use crate::session::rundir::RunDirError;
 use crate::session::{self, Place, Plan, SessionError};
 use crate::twin::TwinConfig;
@@ -99,6 +98,11 @@ pub struct RunArgs {
 struct Live {
     bar: super::progress::Bar,
     last_line_s: f64,
+    /// The tick going on: its device time and the chamber in words, then
+    /// the first unit's second in words (shown once the tick is told).
+    now_s: f64,
+    chamber: String,
+    rate: String,
 }
 
 impl Live {
@@ -109,32 +113,73 @@ impl Live {
                 "{bar:30} {pos}/{len} s device time  {msg}",
             ),
             last_line_s: 0.0,
+            now_s: 0.0,
+            chamber: String::new(),
+            rate: String::new(),
+        }
+    }
+
+    /// The tick's line: the bar on a terminal, else a line an hour.
+    fn show(&mut self) {
+        let msg = format!("{}{}", self.chamber, self.rate);
+        if self.bar.is_live() {
+            self.bar.set(self.now_s as u64, msg);
+        } else if self.now_s - self.last_line_s >= 3600.0 {
+            self.last_line_s = self.now_s;
+            errln!("  t = {:.2} h  {msg}", self.now_s / 3600.0);
         }
     }
 }
 
-impl Progress for Live {
-    fn begin(&mut self, dir: &std::path::Path, notes: &[String]) {
-        for n in notes {
-            self.bar.println(&format!("note: {n}"));
+impl Observer for Live {
+    fn observe(&mut self, event: &Event<'_>) -> std::io::Result<()> {
+        match *event {
+            Event::Begin { dir, notes } => {
+                for n in notes {
+                    self.bar.println(&format!("note: {n}"));
+                }
+                self.bar.println(&format!("logging to {}", dir.display()));
+            }
+            Event::Doing {
+                step,
+                index,
+                total,
+                restore,
+            } => {
+                let what = if restore { "restore " } else { "" };
+                self.bar.println(&format!(
+                    "[{what}{}/{total}] {}",
+                    index + 1,
+                    step.describe()
+                ));
+            }
+            Event::Warning(text) => self.bar.println(&format!("warning: {text}")),
+            Event::State(st) => {
+                self.now_s = st.t_s;
+                self.chamber = format!(
+                    "chamber {:+.2} degC (set {:+.1})",
+                    st.chamber.air_c, st.chamber.set_point_c
+                );
+                self.rate.clear();
+            }
+            Event::Interval { slot: 0, iv, .. } => {
+                self.rate = format!(
+                    "  rate {:+.3} deg/h  T1/T2/TK {:.2}/{:.2}/{:.2} degC",
+                    iv.bias_dph(),
+                    iv.t1_c,
+                    iv.t2_c,
+                    iv.tcase_c
+                );
+            }
+            // The first unit's link figures close every tick.
+            Event::Link { slot: 0, .. } => self.show(),
+            _ => {}
         }
-        self.bar.println(&format!("logging to {}", dir.display()));
+        Ok(())
     }
+}
 
-    fn step(&mut self, s: &crate::procedure::Step, i: usize, n: usize) {
-        self.bar
-            .println(&format!("[{}/{n}] {}", i + 1, s.describe()));
-    }
-
-    fn warn(&mut self, text: &str) {
-        self.bar.println(&format!("warning: {text}"));
-    }
-
-    fn restore(&mut self, s: &crate::procedure::Step, i: usize, n: usize) {
-        self.bar
-            .println(&format!("[restore {}/{n}] {}", i + 1, s.describe()));
-    }
-
+impl Operator for Live {
     fn prompt(&mut self, text: &str) {
         use std::io::IsTerminal;
         if !std::io::stdin().is_terminal() {
@@ -145,28 +190,6 @@ impl Progress for Live {
             .suspend(|| errln!("{text} -- press Enter to continue"));
         let mut line = String::new();
         let _ = std::io::stdin().read_line(&mut line);
-    }
-
-    fn tick(&mut self, st: &BenchState, iv: Option<&Interval>) {
-        let rate = iv.map_or(String::new(), |iv| {
-            format!(
-                "  rate {:+.3} deg/h  T1/T2/TK {:.2}/{:.2}/{:.2} degC",
-                iv.bias_dph(),
-                iv.t1_c,
-                iv.t2_c,
-                iv.tcase_c
-            )
-        });
-        let msg = format!(
-            "chamber {:+.2} degC (set {:+.1}){rate}",
-            st.chamber.air_c, st.chamber.set_point_c
-        );
-        if self.bar.is_live() {
-            self.bar.set(st.t_s as u64, msg);
-        } else if st.t_s - self.last_line_s >= 3600.0 {
-            self.last_line_s = st.t_s;
-            errln!("  t = {:.2} h  {msg}", st.t_s / 3600.0);
-        }
     }
 }
 

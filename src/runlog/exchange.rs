@@ -28,7 +28,7 @@ use crate::fsutil::{Pending, ensure_distinct};
 use crate::geometry::{Site, TableAngles, TableGeometry};
 use crate::procedure::{Procedure, Step, StepKind};
 use crate::sequencer::measure::{self, MeasureOutcome, Records};
-use crate::sequencer::{BenchState, Outcome, RunResult, Sink, Tick};
+use crate::sequencer::{BenchState, Outcome, RunResult, Tick};
 
 /// `SITE.toml`: the `[site]` of a bench file alone, and, when the run was
 /// made on a two-axis table whose geometry is known, its `[table.geometry]`

@@ -3,7 +3,7 @@
 //! - [`schema`]: topics, JSON Schemas and the message types shared by the
 //!   writer and every reader; attachment and metadata record names.
 //! - [`meta`]: the `run` and `result` metadata, typed.
-//! - [`writer`]: the [`Recorder`](writer::Recorder), a [`Sink`](crate::sequencer::Sink).
+//! - [`writer`]: the [`Recorder`](writer::Recorder), the run's log as an [`Observer`](crate::sequencer::Observer).
 //! - [`live`]: the same messages on a Foxglove WebSocket server, live.
 //! - [`reader`]: streaming, bounded reading in file order.
 //! - [`recover`]: a complete log from a killed run's file.

@@ -31,7 +31,7 @@ use super::schema::{
 };
 use crate::analysis::series::Interval;
 use crate::clock::Stopwatch;
-use crate::sequencer::{BenchState, FrameRecord, Sink, Tick};
+use crate::sequencer::{BenchState, Event, FrameRecord, Observer, Tick};
 
 /// Writes a run's MCAP file.
 pub struct Recorder {
@@ -54,6 +54,12 @@ pub struct Recorder {
     live: Option<Arc<Live>>,
     /// A batch's other units' topics (slots after the first).
     slots: Vec<SlotTopics>,
+    /// Device time the link figures were last written at, s (they are
+    /// written once a minute of device time).
+    last_link_s: f64,
+    /// Device time of the tick whose link figures are being written (a
+    /// batch's other units' follow the first unit's).
+    links_at: Option<f64>,
     /// Device time from which the disk is full (`--inject disk-full@T` on
     /// the simulated bench).
     full_from_s: Option<f64>,
@@ -220,6 +226,8 @@ impl Recorder {
             table_angles_known: true,
             live: None,
             slots,
+            last_link_s: 0.0,
+            links_at: None,
         })
     }
 
@@ -444,12 +452,60 @@ fn describe(e: &mcap::McapError) -> String {
     }
 }
 
-impl Sink for Recorder {
-    fn link(&mut self, t_s: f64, s: &crate::protocol::frame::LinkStats) -> std::io::Result<()> {
+/// The log keeps the run's data as it comes: ticks, intervals, steps,
+/// lines, and the link figures once a minute of device time.
+impl Observer for Recorder {
+    fn observe(&mut self, event: &Event<'_>) -> std::io::Result<()> {
+        match *event {
+            Event::Tick { tick, record, step } => self.tick(tick, record, step),
+            Event::Interval {
+                slot: 0,
+                iv,
+                record,
+            } => self.interval(iv, record),
+            Event::Interval { slot, iv, record } => self.slot_interval(slot, iv, record),
+            Event::Link {
+                slot: 0,
+                t_s,
+                stats,
+            } => {
+                if t_s - self.last_link_s < 60.0 {
+                    self.links_at = None;
+                    return Ok(());
+                }
+                self.last_link_s = t_s;
+                self.links_at = Some(t_s);
+                self.link(t_s, stats)
+            }
+            Event::Link { slot, t_s, stats } if self.links_at == Some(t_s) => {
+                self.slot_link(slot, t_s, stats)
+            }
+            Event::Line {
+                t_s,
+                level,
+                message,
+            } => self.event(t_s, level, message),
+            Event::Step(e) => self.step(e),
+            Event::Link { .. }
+            | Event::Begin { .. }
+            | Event::Doing { .. }
+            | Event::State(_)
+            | Event::Measured { .. }
+            | Event::Warning(_) => Ok(()),
+        }
+    }
+}
+
+/// What the log writes, one kind of message each (the run's observer
+/// above; an import writes through them too).
+impl Recorder {
+    /// The first unit's gyro link figures so far.
+    pub fn link(&mut self, t_s: f64, s: &crate::protocol::frame::LinkStats) -> std::io::Result<()> {
         self.write_json(topics::LINK, t_s, &LinkSample { t_s, stats: *s })
     }
 
-    fn tick(&mut self, tick: &Tick, _record: Option<&str>, step: &str) -> std::io::Result<()> {
+    /// A tick: every unit's frames, the chamber, table and supply states.
+    pub fn tick(&mut self, tick: &Tick, _record: Option<&str>, step: &str) -> std::io::Result<()> {
         self.write_frames(topics::FRAMES, tick.t0_s, &tick.frames)?;
         for k in 0..self.slots.len().min(tick.slots.len()) {
             let topic = self.slots[k].frames.clone();
@@ -476,7 +532,8 @@ impl Sink for Recorder {
         Ok(())
     }
 
-    fn slot_link(
+    /// Unit `slot`'s link figures (a batch's units after the first).
+    pub fn slot_link(
         &mut self,
         slot: usize,
         t_s: f64,
@@ -489,7 +546,8 @@ impl Sink for Recorder {
         self.write_json(&topic, t_s, &LinkSample { t_s, stats: *s })
     }
 
-    fn slot_interval(
+    /// Unit `slot`'s 1 Hz interval (a batch's units after the first).
+    pub fn slot_interval(
         &mut self,
         slot: usize,
         iv: &Interval,
@@ -502,11 +560,13 @@ impl Sink for Recorder {
         self.write_json(&topic, iv.time_s, &Rate1Hz::new(iv, record))
     }
 
-    fn interval(&mut self, iv: &Interval, record: Option<&str>) -> std::io::Result<()> {
+    /// The first unit's 1 Hz interval.
+    pub fn interval(&mut self, iv: &Interval, record: Option<&str>) -> std::io::Result<()> {
         self.write_json(topics::RATE_1HZ, iv.time_s, &Rate1Hz::new(iv, record))
     }
 
-    fn event(&mut self, t_s: f64, level: Level, message: &str) -> std::io::Result<()> {
+    /// A line for people.
+    pub fn event(&mut self, t_s: f64, level: Level, message: &str) -> std::io::Result<()> {
         let ns = self.ns(t_s);
         let line = LogLine {
             timestamp: Timestamp {
@@ -522,7 +582,8 @@ impl Sink for Recorder {
         self.write_json(topics::EVENTS, t_s, &line)
     }
 
-    fn step(&mut self, e: &StepEvent) -> std::io::Result<()> {
+    /// A step started, ended or was run to restore a resumed run.
+    pub fn step(&mut self, e: &StepEvent) -> std::io::Result<()> {
         self.write_json(topics::STEPS, e.t_s, e)
     }
 }

@@ -3,8 +3,9 @@
 //! Setup, main and cleanup as test sequencers have them: cleanup always
 //! runs once setup has started, also after a device failure or an
 //! interrupt. Time advances in one-second ticks of device time; every tick
-//! hands the frames and the device state to the [`Sink`] (the recorder)
-//! and to the record store that measure steps compute on.
+//! hands the frames and the device state to its [`Observer`]s (the
+//! recorder, the display) and to the record store that measure steps
+//! compute on.
 
 pub mod device;
 pub mod embedded;
@@ -201,43 +202,114 @@ pub struct Identities {
     pub supply: Option<Result<crate::driver::Identity, String>>,
 }
 
-/// Where the run's data goes (the recorder implements it).
-pub trait Sink {
-    /// Every tick, in order.
-    fn tick(&mut self, tick: &Tick, record: Option<&str>, step: &str) -> std::io::Result<()>;
-    /// A 1 Hz interval closed (for the quick-look channel).
-    fn interval(
-        &mut self,
-        iv: &crate::analysis::series::Interval,
-        record: Option<&str>,
-    ) -> std::io::Result<()>;
-    /// A 1 Hz interval of unit `slot` of a batch closed (slots after the
-    /// first; the first unit's go to [`Sink::interval`]).
-    fn slot_interval(
-        &mut self,
-        _slot: usize,
-        _iv: &crate::analysis::series::Interval,
-        _record: Option<&str>,
-    ) -> std::io::Result<()> {
-        Ok(())
-    }
-    /// Unit `slot`'s gyro link figures so far (a batch's units after the
-    /// first; the first unit's go to [`Sink::link`]).
-    fn slot_link(
-        &mut self,
-        _slot: usize,
-        _t_s: f64,
-        _stats: &crate::protocol::frame::LinkStats,
-    ) -> std::io::Result<()> {
-        Ok(())
-    }
+/// What a run says as it goes, in order: one shape for whoever watches it
+/// (the log, the progress display, the station, a study's collector). Each
+/// takes what it needs and lets the rest go.
+#[derive(Debug, Clone, Copy)]
+pub enum Event<'a> {
+    /// The run's directory and log are ready; the steps start next.
+    /// `notes` are what the operator should know first (a stale lock
+    /// taken over, an earlier run moved aside).
+    Begin {
+        /// The run's directory.
+        dir: &'a std::path::Path,
+        /// Said first.
+        notes: &'a [String],
+    },
+    /// Step `index` of `total` (setup, main and cleanup, from 0) is taken
+    /// up; `restore`: a resumed run restores the bench before going on,
+    /// and this is its restore step `index` of `total`.
+    Doing {
+        /// The step.
+        step: &'a Step,
+        /// Which.
+        index: usize,
+        /// Of how many.
+        total: usize,
+        /// A restore step of a resumed run.
+        restore: bool,
+    },
+    /// A step started, ended or was run to restore a resumed run, as the
+    /// log keeps it.
+    Step(&'a StepEvent),
     /// A line for people (note, measurement, error; step starts and ends
     /// in words at [`Level::Debug`]).
-    fn event(&mut self, t_s: f64, level: Level, message: &str) -> std::io::Result<()>;
-    /// A step started, ended or was run to restore a resumed run.
-    fn step(&mut self, event: &StepEvent) -> std::io::Result<()>;
-    /// The gyro link's figures so far (every minute of device time and at the end).
-    fn link(&mut self, t_s: f64, stats: &crate::protocol::frame::LinkStats) -> std::io::Result<()>;
+    Line {
+        /// Device time, s.
+        t_s: f64,
+        /// How much it matters.
+        level: Level,
+        /// The words.
+        message: &'a str,
+    },
+    /// A tick: every unit's frames and the bench's state, in order.
+    Tick {
+        /// The tick.
+        tick: &'a Tick,
+        /// The record being taken, if any.
+        record: Option<&'a str>,
+        /// The step's key.
+        step: &'a str,
+    },
+    /// The bench's state after a tick (before its units' intervals).
+    State(&'a BenchState),
+    /// A 1 Hz interval of unit `slot` closed (0: the first unit; a batch's
+    /// others after it, each after the tick's [`Event::State`]).
+    Interval {
+        /// The unit.
+        slot: usize,
+        /// Its mean second.
+        iv: &'a crate::analysis::series::Interval,
+        /// The record it belongs to, if any.
+        record: Option<&'a str>,
+    },
+    /// Unit `slot`'s gyro link figures so far, after every tick (the log
+    /// keeps them once a minute of device time).
+    Link {
+        /// The unit.
+        slot: usize,
+        /// Device time, s.
+        t_s: f64,
+        /// The figures.
+        stats: &'a crate::protocol::frame::LinkStats,
+    },
+    /// A measurement of unit `slot` was computed.
+    Measured {
+        /// The unit.
+        slot: usize,
+        /// The measurement.
+        m: &'a measure::Measurement,
+    },
+    /// Something the operator should know now, the run going on (a
+    /// batch's unit whose link failed).
+    Warning(&'a str),
+}
+
+/// Whoever watches a run: the log (whose failed write stops the run,
+/// except once cleanup has begun), the progress display, the station.
+pub trait Observer {
+    /// Take `event` (what the observer does not keep, it lets go).
+    fn observe(&mut self, event: &Event<'_>) -> std::io::Result<()>;
+}
+
+/// An observer that is the run's operator too: it may be asked to
+/// confirm a prompt.
+pub trait Operator: Observer {
+    /// Ask the operator to confirm `text`; returns when confirmed. The
+    /// default confirms at once (no operator).
+    fn prompt(&mut self, _text: &str) {}
+    /// Whether an operator answers prompts even on a simulated bench (a
+    /// station page); else a simulated run goes on without asking.
+    fn answers_prompts(&self) -> bool {
+        false
+    }
+}
+
+/// Tell the run's operator (a display: whatever fails there loses nothing)
+/// and then its log `e`; what the log's write came to.
+fn tell(log: &mut dyn Observer, watch: &mut dyn Operator, e: &Event<'_>) -> std::io::Result<()> {
+    let _ = watch.observe(e);
+    log.observe(e)
 }
 
 /// How a run ended.
@@ -421,50 +493,17 @@ pub struct BenchLeft {
     pub summary: String,
 }
 
-/// Progress callbacks for the operator.
-pub trait Progress {
-    /// The run's directory and log are ready; the steps start next.
-    /// `notes` are what the operator should know first (a stale lock
-    /// taken over, an earlier run moved aside).
-    fn begin(&mut self, _dir: &std::path::Path, _notes: &[String]) {}
-    /// A step starts: `index` of `total` (setup, main and cleanup, from 0).
-    fn step(&mut self, step: &Step, index: usize, total: usize);
-    /// A resumed run restores the bench before going on: restore step
-    /// `index` of `total` starts.
-    fn restore(&mut self, _step: &Step, _index: usize, _total: usize) {}
-    /// A tick passed; `interval` is its 1 Hz mean (rate, temperatures).
-    fn tick(&mut self, state: &BenchState, interval: Option<&crate::analysis::series::Interval>);
-    /// Ask the operator to confirm `text`; returns when confirmed. The
-    /// default confirms at once (no operator).
-    fn prompt(&mut self, _text: &str) {}
-    /// Whether an operator answers prompts even on a simulated bench (a
-    /// station page); else a simulated run goes on without asking.
-    fn answers_prompts(&self) -> bool {
-        false
-    }
-    /// A 1 Hz interval of unit `slot` of a batch closed (slots after the
-    /// first; the first unit's comes with [`Progress::tick`]).
-    fn slot_interval(&mut self, _slot: usize, _iv: &crate::analysis::series::Interval) {}
-    /// A measurement was computed.
-    fn measured(&mut self, _m: &measure::Measurement) {}
-    /// A measurement of unit `slot` of a batch was computed (slots after
-    /// the first; the first unit's go to [`Progress::measured`]).
-    fn slot_measured(&mut self, _slot: usize, _m: &measure::Measurement) {}
-    /// The gyro link's figures so far, once a second of device time.
-    fn link(&mut self, _stats: &crate::protocol::frame::LinkStats) {}
-    /// Something the operator should know now, the run going on (a
-    /// batch's unit whose link failed).
-    fn warn(&mut self, _text: &str) {}
-}
-
-/// No progress display.
+/// No display and no operator: a run nobody watches.
 #[derive(Debug)]
 pub struct Quiet;
 
-impl Progress for Quiet {
-    fn step(&mut self, _: &Step, _: usize, _: usize) {}
-    fn tick(&mut self, _: &BenchState, _: Option<&crate::analysis::series::Interval>) {}
+impl Observer for Quiet {
+    fn observe(&mut self, _: &Event<'_>) -> std::io::Result<()> {
+        Ok(())
+    }
 }
+
+impl Operator for Quiet {}
 
 /// Run options.
 #[derive(Debug, Clone)]
@@ -533,8 +572,8 @@ impl Stop {
 
 struct Run<'a> {
     bench: &'a mut dyn BenchIo,
-    sink: &'a mut dyn Sink,
-    progress: &'a mut dyn Progress,
+    log: &'a mut dyn Observer,
+    watch: &'a mut dyn Operator,
     opts: &'a Options,
     records: Records,
     tick: Tick,
@@ -543,7 +582,6 @@ struct Run<'a> {
     measurements: Vec<Measurement>,
     /// Cleanup is running: alarms were already acted on.
     cleaning_up: bool,
-    last_link_s: f64,
     /// The first log write that failed where the run could not stop for
     /// it (the safe state, cleanup): it still makes the run an error.
     log_failed: Option<String>,
@@ -649,8 +687,30 @@ impl Run<'_> {
     /// Write a line for people; a log that cannot be written stops the run
     /// (not its cleanup, [`Run::written`]).
     fn log(&mut self, level: Level, message: &str) -> Result<(), Stop> {
-        let r = self.sink.event(self.bench.now_s(), level, message);
+        let line = Event::Line {
+            t_s: self.bench.now_s(),
+            level,
+            message,
+        };
+        let r = tell(self.log, self.watch, &line);
         self.written(r)
+    }
+
+    /// Tell the display that step `index` of `total` is taken up (a
+    /// restore step of a resumed run when `restore`).
+    fn doing(&mut self, step: &Step, index: usize, total: usize, restore: bool) {
+        let e = Event::Doing {
+            step,
+            index,
+            total,
+            restore,
+        };
+        let _ = self.watch.observe(&e);
+    }
+
+    /// Tell the operator something now, the run going on.
+    fn warn(&mut self, text: &str) {
+        let _ = self.watch.observe(&Event::Warning(text));
     }
 
     /// Write a line where a failure must not stop what is being done
@@ -681,7 +741,7 @@ impl Run<'_> {
                     .collect();
             }
         }
-        let r = self.sink.step(&e);
+        let r = tell(self.log, self.watch, &Event::Step(&e));
         self.written(r)?;
         let words = match phase {
             StepPhase::Start => s.start_message(),
@@ -701,7 +761,7 @@ impl Run<'_> {
                 .get(k)
                 .map_or_else(|| format!("unit {}", k + 1), Clone::clone);
             let text = format!("{unit}: {why}; the batch goes on, its records say what it lost");
-            self.progress.warn(&text);
+            self.warn(&text);
             self.note(Level::Warning, &text);
         }
         self.say_spill_faults();
@@ -725,7 +785,7 @@ impl Run<'_> {
             };
             let text =
                 format!("{unit}{why}: the run goes on, its memory now grows with its length");
-            self.progress.warn(&text);
+            self.warn(&text);
             self.note(Level::Warning, &text);
         }
     }
@@ -742,7 +802,15 @@ impl Run<'_> {
             .map_err(Stop::Device)?;
         self.say_unit_faults();
         self.frames += self.tick.frames.len() as u64;
-        let r = self.sink.tick(&self.tick, record, step);
+        let r = tell(
+            self.log,
+            self.watch,
+            &Event::Tick {
+                tick: &self.tick,
+                record,
+                step,
+            },
+        );
         self.written(r)?;
         let dt = self.bench.frame_dt_s();
         let lsb = self.bench.lsb_arcsec();
@@ -789,6 +857,8 @@ impl Run<'_> {
                     self.opts.dut_max_c
                 )));
             }
+            let r = tell(self.log, self.watch, &Event::State(state));
+            written(&mut self.log_failed, self.cleaning_up, r)?;
             let iv = self
                 .records
                 .push_tick(&self.tick.frames, state, record, dt, lsb, tl);
@@ -797,8 +867,12 @@ impl Run<'_> {
                 lane.frames += frames.len() as u64;
                 let st = state.for_slot(k + 1, &self.tick);
                 if let Some(iv) = lane.records.push_tick(frames, &st, record, dt, lsb, tl) {
-                    self.progress.slot_interval(k + 1, &iv);
-                    let r = self.sink.slot_interval(k + 1, &iv, record);
+                    let e = Event::Interval {
+                        slot: k + 1,
+                        iv: &iv,
+                        record,
+                    };
+                    let r = tell(self.log, self.watch, &e);
                     written(&mut self.log_failed, self.cleaning_up, r)?;
                 }
             }
@@ -809,22 +883,28 @@ impl Run<'_> {
                     record.filter(|_| iv.is_some()),
                 );
             }
-            self.progress.tick(state, iv.as_ref());
             if let Some(iv) = iv {
-                self.progress.link(&self.bench.link_stats());
-                let r = self.sink.interval(&iv, record);
+                let e = Event::Interval {
+                    slot: 0,
+                    iv: &iv,
+                    record,
+                };
+                let r = tell(self.log, self.watch, &e);
                 written(&mut self.log_failed, self.cleaning_up, r)?;
             }
-            if state.t_s - self.last_link_s >= 60.0 {
-                self.last_link_s = state.t_s;
-                let stats = self.bench.link_stats();
-                let r = self.sink.link(state.t_s, &stats);
+            for slot in 0..self.bench.units() {
+                let stats = if slot == 0 {
+                    self.bench.link_stats()
+                } else {
+                    self.bench.slot_link_stats(slot)
+                };
+                let e = Event::Link {
+                    slot,
+                    t_s: state.t_s,
+                    stats: &stats,
+                };
+                let r = tell(self.log, self.watch, &e);
                 written(&mut self.log_failed, self.cleaning_up, r)?;
-                for k in 1..self.bench.units() {
-                    let stats = self.bench.slot_link_stats(k);
-                    let r = self.sink.slot_link(k, state.t_s, &stats);
-                    written(&mut self.log_failed, self.cleaning_up, r)?;
-                }
             }
             self.last = Some(state.clone());
         }
@@ -907,8 +987,8 @@ impl Run<'_> {
             StepKind::Prompt { text } => {
                 self.log(Level::Info, &format!("prompt: {text}"))?;
                 // Simulated benches have no operator to wait for.
-                if !self.bench.is_simulated() || self.progress.answers_prompts() {
-                    self.progress.prompt(text);
+                if !self.bench.is_simulated() || self.watch.answers_prompts() {
+                    self.watch.prompt(text);
                     self.log(Level::Info, "operator confirmed")?;
                 }
                 Ok(())
@@ -1168,7 +1248,7 @@ impl Run<'_> {
             Level::Warning
         };
         self.log(level, &msg)?;
-        self.progress.measured(&meas);
+        let _ = self.watch.observe(&Event::Measured { slot: 0, m: &meas });
         let mut unjudged = (meas.outcome == measure::MeasureOutcome::Error)
             .then(|| (0, format!("{} was {}", meas.name, meas.note)));
         self.measurements.push(meas);
@@ -1176,7 +1256,10 @@ impl Run<'_> {
             // Each unit is judged on its own records; coefficients are the
             // first unit's alone (a batch fits each unit's on its run).
             let meas = measure::compute(m, &lane.records, None, key);
-            self.progress.slot_measured(k + 1, &meas);
+            let _ = self.watch.observe(&Event::Measured {
+                slot: k + 1,
+                m: &meas,
+            });
             if meas.outcome == measure::MeasureOutcome::Error && unjudged.is_none() {
                 unjudged = Some((k + 1, format!("{} was {}", meas.name, meas.note)));
             }
@@ -1213,18 +1296,18 @@ fn slope_per_min(pts: &std::collections::VecDeque<(f64, f64)>) -> f64 {
     }
 }
 
-/// Run `p` on `bench`, logging to `sink`.
+/// Run `p` on `bench`, logging to `log`, watched by `watch`.
 pub async fn run(
     p: &Procedure,
     bench: &mut dyn BenchIo,
-    sink: &mut dyn Sink,
-    progress: &mut dyn Progress,
+    log: &mut dyn Observer,
+    watch: &mut dyn Operator,
     opts: &Options,
 ) -> RunResult {
     let mut r = Run {
         bench,
-        sink,
-        progress,
+        log,
+        watch,
         opts,
         records: Records::default(),
         tick: Tick::default(),
@@ -1232,7 +1315,6 @@ pub async fn run(
         frames: 0,
         measurements: Vec::new(),
         cleaning_up: false,
-        last_link_s: 0.0,
         log_failed: None,
         record_link: None,
         expected: finish::Expected {
@@ -1258,7 +1340,7 @@ pub async fn run(
         if stop.is_some() {
             break;
         }
-        r.progress.step(s, i, total);
+        r.doing(s, i, total, false);
         let done = async {
             r.log_step(StepPhase::Start, i, s)?;
             r.step(s).await?;
@@ -1344,7 +1426,7 @@ impl Run<'_> {
         let first_cleanup = p.setup.len() + p.main.len();
         for (i, s) in p.cleanup.iter().enumerate() {
             let index = first_cleanup + i;
-            self.progress.step(s, index, total);
+            self.doing(s, index, total, false);
             let needs = match s.kind {
                 StepKind::Chamber { .. } | StepKind::Soak { .. } => Some("chamber"),
                 StepKind::Move { .. } => Some("table"),
@@ -1522,7 +1604,7 @@ async fn restore(r: &mut Run<'_>, p: &Procedure, res: &Resume) -> Result<(), (St
     )
     .map_err(at)?;
     for (k, (index, s)) in restore.iter().enumerate() {
-        r.progress.restore(s, k, restore.len());
+        r.doing(s, k, restore.len(), true);
         r.log_step(StepPhase::Restore, *index, s).map_err(at)?;
         r.step(s).await.map_err(|e| (e, s.key.clone()))?;
     }

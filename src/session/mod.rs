@@ -25,7 +25,9 @@ use crate::runlog::writer::{FrameScales, Recorder};
 use crate::sequencer::device::DeviceBench;
 use crate::sequencer::embedded::{EmbeddedBench, Fault};
 use crate::sequencer::guard::Guarded;
-use crate::sequencer::{self, BenchIo, Interrupt, Options, Progress, Resume, RunResult};
+use crate::sequencer::{
+    self, BenchIo, Event, Interrupt, Observer, Operator, Options, Resume, RunResult,
+};
 use crate::twin::TwinConfig;
 use rundir::{RunDir, RunDirError};
 
@@ -644,7 +646,7 @@ pub struct Finished {
     /// Things the operator should know (a stale lock taken over, a run
     /// moved aside, an incomplete log).
     pub notes: Vec<String>,
-    /// How many of `notes` were given to [`Progress::begin`] already.
+    /// How many of `notes` were given with [`Event::Begin`] already.
     pub notes_at_begin: usize,
     /// A batch's units, each with its report (empty: one unit, `report`).
     pub units: Vec<FinishedUnit>,
@@ -755,7 +757,7 @@ pub fn execute(
     plan: Plan,
     place: Place,
     rt: &tokio::runtime::Runtime,
-    progress: &mut dyn Progress,
+    progress: &mut dyn Operator,
     interrupt: Arc<Interrupt>,
 ) -> Result<Finished, SessionError> {
     let today = utc_now().date_naive();
@@ -778,7 +780,10 @@ pub fn execute(
     )?;
 
     let mut store = StoreLink::open(&plan.store, &meta, &log, &mut notes);
-    progress.begin(&dir.path, &notes);
+    let _ = progress.observe(&Event::Begin {
+        dir: &dir.path,
+        notes: &notes,
+    });
     let notes_at_begin = notes.len();
     let mut opts = options(
         &plan.bench_cfg,
@@ -887,7 +892,7 @@ fn run_guarded(
     rt: &tokio::runtime::Runtime,
     bench: &mut dyn BenchIo,
     recorder: &mut Recorder,
-    progress: &mut dyn Progress,
+    progress: &mut dyn Operator,
     opts: &sequencer::Options,
 ) -> RunResult {
     let ran = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
@@ -951,7 +956,6 @@ fn close_log(
     (end_s, part_link, slot_links): (f64, &LinkStats, &[LinkStats]),
     notes: &mut Vec<String>,
 ) -> (RunResult, Vec<Report>) {
-    use crate::sequencer::Sink;
     let reports_of = |result: &RunResult| {
         (0..result.units())
             .map(|k| report_of(result, k))
@@ -1342,7 +1346,7 @@ fn panic_text(p: &(dyn std::any::Any + Send)) -> String {
 /// back, the failure logged; the result says what is known.
 async fn after_panic(
     bench: &mut dyn BenchIo,
-    log: &mut dyn sequencer::Sink,
+    log: &mut dyn Observer,
     what: &str,
     in_position_deg: f64,
     supply_safe_on: bool,
@@ -1368,7 +1372,11 @@ async fn after_panic(
         (Level::Info, &format!("bench left: {}", left.summary)),
     ] {
         // The log may be what failed; the report still says it all.
-        let _logged = log.event(now, level, text);
+        let _logged = log.observe(&Event::Line {
+            t_s: now,
+            level,
+            message: text,
+        });
     }
     RunResult {
         outcome: sequencer::Outcome::Error,

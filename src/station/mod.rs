@@ -460,6 +460,7 @@ impl Station {
             interrupt: interrupt.clone(),
             started: std::time::Instant::now(),
             prompts: 0,
+            tick: None,
         };
         let finished = tokio::runtime::Builder::new_multi_thread()
             .worker_threads(2)

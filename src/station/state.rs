@@ -9,7 +9,7 @@ use serde::Serialize;
 use crate::analysis::series::Interval;
 use crate::procedure::Step;
 use crate::sequencer::measure::Measurement;
-use crate::sequencer::{BenchState, Progress};
+use crate::sequencer::{BenchState, Event, Observer, Operator};
 
 /// One step of the plan.
 #[derive(Debug, Clone, Serialize)]
@@ -223,6 +223,9 @@ pub struct Reporter {
     pub started: std::time::Instant,
     /// Prompts asked so far.
     pub prompts: u64,
+    /// The state of the tick going on, until its first unit's interval
+    /// (a chart point takes the table's angles from it).
+    pub tick: Option<BenchState>,
 }
 
 impl std::fmt::Debug for Reporter {
@@ -233,7 +236,37 @@ impl std::fmt::Debug for Reporter {
     }
 }
 
-impl Progress for Reporter {
+/// The board shows the run as it goes: its steps, warnings, the bench's
+/// state, each unit's latest second and measurements, the link figures.
+impl Observer for Reporter {
+    fn observe(&mut self, event: &Event<'_>) -> std::io::Result<()> {
+        match *event {
+            Event::Begin { dir, notes } => self.begin(dir, notes),
+            Event::Warning(text) => self.warn(text),
+            Event::Doing {
+                step,
+                index,
+                restore: false,
+                ..
+            } => self.step(step, index),
+            Event::Doing {
+                step,
+                index,
+                total,
+                restore: true,
+            } => self.restore(step, index, total),
+            Event::State(st) => self.state(st),
+            Event::Interval { slot, iv, .. } => self.interval(slot, iv),
+            Event::Link { slot: 0, stats, .. } => self.link(stats),
+            Event::Measured { slot: 0, m } => self.measured(m),
+            Event::Measured { slot, m } => self.slot_measured(slot, m),
+            Event::Link { .. } | Event::Step(_) | Event::Line { .. } | Event::Tick { .. } => {}
+        }
+        Ok(())
+    }
+}
+
+impl Reporter {
     fn begin(&mut self, dir: &std::path::Path, notes: &[String]) {
         let dir = dir.display().to_string();
         self.shared.update(|b| {
@@ -254,7 +287,7 @@ impl Progress for Reporter {
         });
     }
 
-    fn step(&mut self, step: &Step, index: usize, _total: usize) {
+    fn step(&mut self, step: &Step, index: usize) {
         let line = step.start_message();
         let wall = self.started.elapsed().as_secs_f64();
         self.shared.update(|b| {
@@ -279,28 +312,14 @@ impl Progress for Reporter {
         });
     }
 
-    fn tick(&mut self, st: &BenchState, iv: Option<&Interval>) {
+    /// The bench's state after a tick: device time, the supply's reading.
+    fn state(&mut self, st: &BenchState) {
         let wall = self.started.elapsed().as_secs_f64();
-        let sample = iv.map(|i| {
-            [
-                i.time_s / 3600.0,
-                i.bias_dph(),
-                i.chamber_c,
-                i.tcase_c,
-                i.t1_c,
-                i.t2_c,
-                st.table.angles.outer_deg,
-                st.table.angles.inner_deg,
-            ]
-        });
+        self.tick = Some(st.clone());
         self.shared.update(|b| {
             if let Some(run) = &mut b.run {
                 run.device_s = st.t_s;
                 run.elapsed_wall_s = wall;
-                if let (Some(u), Some(i)) = (run.units.first_mut(), iv) {
-                    u.bias_dph = Some(i.bias_dph());
-                    u.tcase_c = Some(i.tcase_c);
-                }
                 if let Some(p) = st.power {
                     run.supply = Some(SupplyView {
                         v: p.v,
@@ -311,49 +330,31 @@ impl Progress for Reporter {
                     });
                 }
             }
-            if let Some(s) = sample {
-                b.samples.push(s);
-                b.sample_unix_ms = crate::clock::utc_now().timestamp_millis();
-            }
         });
     }
 
-    fn slot_interval(&mut self, slot: usize, iv: &Interval) {
+    /// Unit `slot`'s latest second; the first unit's is a chart point too.
+    fn interval(&mut self, slot: usize, iv: &Interval) {
+        let sample = (slot == 0).then_some(()).and(self.tick.as_ref()).map(|st| {
+            [
+                iv.time_s / 3600.0,
+                iv.bias_dph(),
+                iv.chamber_c,
+                iv.tcase_c,
+                iv.t1_c,
+                iv.t2_c,
+                st.table.angles.outer_deg,
+                st.table.angles.inner_deg,
+            ]
+        });
         self.shared.update(|b| {
             if let Some(u) = b.run.as_mut().and_then(|r| r.units.get_mut(slot)) {
                 u.bias_dph = Some(iv.bias_dph());
                 u.tcase_c = Some(iv.tcase_c);
             }
-        });
-    }
-
-    fn answers_prompts(&self) -> bool {
-        true
-    }
-
-    fn prompt(&mut self, text: &str) {
-        self.prompts += 1;
-        let id = self.prompts;
-        let text = text.to_owned();
-        self.shared.update(|b| {
-            if let Some(run) = &mut b.run {
-                run.prompt = Some(PromptView { id, text });
-            }
-        });
-        // The run waits here until the page answers, or an abort.
-        let mut b = self.shared.lock();
-        while b.answered < id && !self.interrupt.is_requested() {
-            b = self
-                .shared
-                .answer
-                .wait_timeout(b, std::time::Duration::from_millis(200))
-                .unwrap_or_else(PoisonError::into_inner)
-                .0;
-        }
-        drop(b);
-        self.shared.update(|b| {
-            if let Some(run) = &mut b.run {
-                run.prompt = None;
+            if let Some(s) = sample {
+                b.samples.push(s);
+                b.sample_unix_ms = crate::clock::utc_now().timestamp_millis();
             }
         });
     }
@@ -391,6 +392,40 @@ impl Progress for Reporter {
         self.shared.update(|b| {
             if let Some(u) = b.run.as_mut().and_then(|r| r.units.get_mut(slot)) {
                 u.failed += usize::from(failed);
+            }
+        });
+    }
+}
+
+/// The station's operator answers prompts on the page.
+impl Operator for Reporter {
+    fn answers_prompts(&self) -> bool {
+        true
+    }
+
+    fn prompt(&mut self, text: &str) {
+        self.prompts += 1;
+        let id = self.prompts;
+        let text = text.to_owned();
+        self.shared.update(|b| {
+            if let Some(run) = &mut b.run {
+                run.prompt = Some(PromptView { id, text });
+            }
+        });
+        // The run waits here until the page answers, or an abort.
+        let mut b = self.shared.lock();
+        while b.answered < id && !self.interrupt.is_requested() {
+            b = self
+                .shared
+                .answer
+                .wait_timeout(b, std::time::Duration::from_millis(200))
+                .unwrap_or_else(PoisonError::into_inner)
+                .0;
+        }
+        drop(b);
+        self.shared.update(|b| {
+            if let Some(run) = &mut b.run {
+                run.prompt = None;
             }
         });
     }
