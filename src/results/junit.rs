@@ -24,18 +24,6 @@ pub fn junit(runs: &[(RunRow, Vec<MeasurementRow>)]) -> std::io::Result<String> 
     let runs = &safe_rows(runs);
     let mut w = Writer::new_with_indent(Vec::new(), b' ', 2);
     w.write_event(Event::Decl(BytesDecl::new("1.0", Some("UTF-8"), None)))?;
-    let failures = |ms: &[MeasurementRow]| {
-        ms.iter()
-            .filter(|m| m.outcome == MeasureOutcome::Fail)
-            .count()
-    };
-    let errors = |r: &RunRow, ms: &[MeasurementRow]| {
-        ms.iter()
-            .filter(|m| m.outcome == MeasureOutcome::Error)
-            .count()
-            + usize::from(run_error(r).is_some())
-    };
-    let tests = |r: &RunRow, ms: &[MeasurementRow]| ms.len() + usize::from(run_error(r).is_some());
     let total_tests: usize = runs.iter().map(|(r, ms)| tests(r, ms)).sum();
     let total_failures: usize = runs.iter().map(|(_, ms)| failures(ms)).sum();
     let total_errors: usize = runs.iter().map(|(r, ms)| errors(r, ms)).sum();
@@ -48,114 +36,165 @@ pub fn junit(runs: &[(RunRow, Vec<MeasurementRow>)]) -> std::io::Result<String> 
         ])
         .write_inner_content(|w| {
             for (run, ms) in runs {
-                let name = format!(
-                    "{} {} {} ({})",
-                    run.procedure, run.dut_type, run.serial, run.id
-                );
-                let time = format!("{:.3}", run.device_time_s.unwrap_or(0.0));
-                w.create_element("testsuite")
-                    .with_attributes([
-                        ("name", name.as_str()),
-                        ("tests", tests(run, ms).to_string().as_str()),
-                        ("failures", failures(ms).to_string().as_str()),
-                        ("errors", errors(run, ms).to_string().as_str()),
-                        ("skipped", "0"),
-                        ("timestamp", timestamp(&run.started_utc).as_str()),
-                        ("hostname", run.station.as_str()),
-                        ("time", time.as_str()),
-                    ])
-                    .write_inner_content(|w| {
-                        w.create_element("properties").write_inner_content(|w| {
-                            for (k, v) in [
-                                ("run", run.id.as_str()),
-                                ("serial", run.serial.as_str()),
-                                ("dut_type", run.dut_type.as_str()),
-                                ("procedure", run.procedure.as_str()),
-                                ("bench", run.bench.as_str()),
-                                ("operator", run.operator.as_str()),
-                                ("outcome", run.outcome.as_str()),
-                            ] {
-                                w.create_element("property")
-                                    .with_attributes([("name", k), ("value", v)])
-                                    .write_empty()?;
-                            }
-                            Ok(())
-                        })?;
-                        let class = format!("{}.{}", run.procedure, run.serial);
-                        for m in ms {
-                            let el = w.create_element("testcase").with_attributes([
-                                ("name", m.name.as_str()),
-                                ("classname", class.as_str()),
-                                ("time", "0"),
-                            ]);
-                            let text = format!(
-                                "{} = {} {} (limits {}, step {}){}",
-                                m.name,
-                                num(m.value),
-                                m.unit,
-                                limits(m),
-                                m.step,
-                                if m.note.is_empty() {
-                                    String::new()
-                                } else {
-                                    format!("; {}", m.note)
-                                }
-                            );
-                            match m.outcome {
-                                MeasureOutcome::Pass => {
-                                    el.write_empty()?;
-                                }
-                                outcome => {
-                                    let (tag, kind) = if outcome == MeasureOutcome::Error {
-                                        ("error", "not judged")
-                                    } else {
-                                        ("failure", "outside limits")
-                                    };
-                                    let message = if outcome == MeasureOutcome::Error {
-                                        format!("{} not judged: {}", m.name, m.note)
-                                    } else {
-                                        format!(
-                                            "{} {} {} outside {}",
-                                            m.name,
-                                            num(m.value),
-                                            m.unit,
-                                            limits(m)
-                                        )
-                                    };
-                                    el.write_inner_content(|w| {
-                                        w.create_element(tag)
-                                            .with_attributes([
-                                                ("message", message.as_str()),
-                                                ("type", kind),
-                                            ])
-                                            .write_text_content(BytesText::new(&text))?;
-                                        Ok(())
-                                    })?;
-                                }
-                            }
-                        }
-                        if let Some(e) = run_error(run) {
-                            w.create_element("testcase")
-                                .with_attributes([("name", "run"), ("classname", class.as_str())])
-                                .write_inner_content(|w| {
-                                    w.create_element("error")
-                                        .with_attributes([
-                                            ("message", e.as_str()),
-                                            ("type", run.outcome.as_str()),
-                                        ])
-                                        .write_text_content(BytesText::new(&e))?;
-                                    Ok(())
-                                })?;
-                        }
-                        Ok(())
-                    })?;
+                write_suite(w, run, ms)?;
             }
             Ok(())
         })?;
     String::from_utf8(w.into_inner()).map_err(std::io::Error::other)
 }
 
-/// What ended a run that neither passed nor failed.
+/// A run's failed measurements.
+fn failures(ms: &[MeasurementRow]) -> usize {
+    ms.iter()
+        .filter(|m| m.outcome == MeasureOutcome::Fail)
+        .count()
+}
+
+/// A run's measurements in error, and the run itself when it ended
+/// neither passed nor failed.
+fn errors(r: &RunRow, ms: &[MeasurementRow]) -> usize {
+    ms.iter()
+        .filter(|m| m.outcome == MeasureOutcome::Error)
+        .count()
+        + usize::from(run_error(r).is_some())
+}
+
+/// A run's test cases: its measurements, and the run itself when it ended
+/// neither passed nor failed.
+fn tests(r: &RunRow, ms: &[MeasurementRow]) -> usize {
+    ms.len() + usize::from(run_error(r).is_some())
+}
+
+/// One run as a `testsuite`: its properties, a `testcase` per measurement,
+/// and one for the run when it ended neither passed nor failed.
+fn write_suite(
+    w: &mut Writer<Vec<u8>>,
+    run: &RunRow,
+    ms: &[MeasurementRow],
+) -> std::io::Result<()> {
+    let name = format!(
+        "{} {} {} ({})",
+        run.procedure, run.dut_type, run.serial, run.id
+    );
+    let time = format!("{:.3}", run.device_time_s.unwrap_or(0.0));
+    w.create_element("testsuite")
+        .with_attributes([
+            ("name", name.as_str()),
+            ("tests", tests(run, ms).to_string().as_str()),
+            ("failures", failures(ms).to_string().as_str()),
+            ("errors", errors(run, ms).to_string().as_str()),
+            ("skipped", "0"),
+            ("timestamp", timestamp(&run.started_utc).as_str()),
+            ("hostname", run.station.as_str()),
+            ("time", time.as_str()),
+        ])
+        .write_inner_content(|w| {
+            write_properties(w, run)?;
+            let class = format!("{}.{}", run.procedure, run.serial);
+            for m in ms {
+                write_testcase(w, m, &class)?;
+            }
+            if let Some(e) = run_error(run) {
+                write_run_error(w, run, &class, &e)?;
+            }
+            Ok(())
+        })?;
+    Ok(())
+}
+
+/// The run's identity as the suite's `properties`.
+fn write_properties(w: &mut Writer<Vec<u8>>, run: &RunRow) -> std::io::Result<()> {
+    w.create_element("properties").write_inner_content(|w| {
+        for (k, v) in [
+            ("run", run.id.as_str()),
+            ("serial", run.serial.as_str()),
+            ("dut_type", run.dut_type.as_str()),
+            ("procedure", run.procedure.as_str()),
+            ("bench", run.bench.as_str()),
+            ("operator", run.operator.as_str()),
+            ("outcome", run.outcome.as_str()),
+        ] {
+            w.create_element("property")
+                .with_attributes([("name", k), ("value", v)])
+                .write_empty()?;
+        }
+        Ok(())
+    })?;
+    Ok(())
+}
+
+/// One measurement as a `testcase`: empty when it passed, else with a
+/// `failure` (outside its limits) or an `error` (not judged).
+fn write_testcase(w: &mut Writer<Vec<u8>>, m: &MeasurementRow, class: &str) -> std::io::Result<()> {
+    let el = w.create_element("testcase").with_attributes([
+        ("name", m.name.as_str()),
+        ("classname", class),
+        ("time", "0"),
+    ]);
+    let text = format!(
+        "{} = {} {} (limits {}, step {}){}",
+        m.name,
+        num(m.value),
+        m.unit,
+        limits(m),
+        m.step,
+        if m.note.is_empty() {
+            String::new()
+        } else {
+            format!("; {}", m.note)
+        }
+    );
+    match m.outcome {
+        MeasureOutcome::Pass => {
+            el.write_empty()?;
+        }
+        outcome => {
+            let (tag, kind) = if outcome == MeasureOutcome::Error {
+                ("error", "not judged")
+            } else {
+                ("failure", "outside limits")
+            };
+            let message = if outcome == MeasureOutcome::Error {
+                format!("{} not judged: {}", m.name, m.note)
+            } else {
+                format!(
+                    "{} {} {} outside {}",
+                    m.name,
+                    num(m.value),
+                    m.unit,
+                    limits(m)
+                )
+            };
+            el.write_inner_content(|w| {
+                w.create_element(tag)
+                    .with_attributes([("message", message.as_str()), ("type", kind)])
+                    .write_text_content(BytesText::new(&text))?;
+                Ok(())
+            })?;
+        }
+    }
+    Ok(())
+}
+
+/// The `testcase` of a run that ended neither passed nor failed: an
+/// `error` with what ended it (`e`).
+fn write_run_error(
+    w: &mut Writer<Vec<u8>>,
+    run: &RunRow,
+    class: &str,
+    e: &str,
+) -> std::io::Result<()> {
+    w.create_element("testcase")
+        .with_attributes([("name", "run"), ("classname", class)])
+        .write_inner_content(|w| {
+            w.create_element("error")
+                .with_attributes([("message", e), ("type", run.outcome.as_str())])
+                .write_text_content(BytesText::new(e))?;
+            Ok(())
+        })?;
+    Ok(())
+}
+
 /// Every text of the rows as XML 1.0 can hold it ([`crate::view::printable`]).
 fn safe_rows(runs: &[(RunRow, Vec<MeasurementRow>)]) -> Vec<(RunRow, Vec<MeasurementRow>)> {
     let p = |s: &str| crate::view::printable(s).into_owned();
@@ -193,6 +232,7 @@ fn safe_rows(runs: &[(RunRow, Vec<MeasurementRow>)]) -> Vec<(RunRow, Vec<Measure
         .collect()
 }
 
+/// What ended a run that neither passed nor failed.
 fn run_error(r: &RunRow) -> Option<String> {
     (!r.outcome.judged()).then(|| {
         r.error

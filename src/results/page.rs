@@ -36,6 +36,30 @@ pub fn trend_page(
     points: &[TrendPoint],
     link: &dyn Fn(&TrendPoint) -> Option<String>,
 ) -> String {
+    let mut c = values_chart(t, points);
+    let mut rows = String::new();
+    for (i, p) in points.iter().enumerate() {
+        let href = link(p);
+        c = c.link(Link {
+            x: (i + 1) as f64,
+            y: p.value,
+            title: point_title(t, i, p),
+            href: href.clone(),
+        });
+        rows.push_str(&table_row(i, p, href));
+    }
+    let chart = c.render();
+    let body = page_body(t, points.len(), &chart, &rows);
+    page(
+        &format!("{}: trend", t.name),
+        "td.nw{white-space:nowrap}",
+        &body,
+    )
+}
+
+/// The chart of the values in run order, passes and the rest apart, with
+/// the limits as rules (the points' links are added by the caller).
+fn values_chart(t: &Trend, points: &[TrendPoint]) -> Chart {
     let at = |pass: bool| -> Vec<(f64, f64)> {
         points
             .iter()
@@ -79,41 +103,46 @@ pub fn trend_page(
             });
         }
     }
-    let mut rows = String::new();
-    for (i, p) in points.iter().enumerate() {
-        let href = link(p);
-        c = c.link(Link {
-            x: (i + 1) as f64,
-            y: p.value,
-            title: format!(
-                "#{} {} run {} ({}): {} {} {}",
-                i + 1,
-                p.serial,
-                short(&p.run),
-                day(&p.started_utc),
-                crate::view::num(Some(p.value), 4),
-                t.unit,
-                outcome_word(p)
-            ),
-            href: href.clone(),
-        });
-        let report = href.map_or("-".into(), |h| {
-            format!("<a href=\"{}\">report</a>", esc(&h))
-        });
-        rows.push_str(&format!(
-            "<tr class={o}><td class=num>{n}</td><td class=nw>{serial}</td><td><code>{run}</code></td><td class=nw>{start}</td><td class=num>{v}</td><td class=\"outcome {o}\">{word}</td><td>{report}</td></tr>\n",
-            n = i + 1,
-            serial = esc(&p.serial),
-            run = esc(&p.run),
-            start = esc(&crate::view::utc_seconds(&p.started_utc)),
-            v = crate::view::num(Some(p.value), 4),
-            o = p.outcome.as_str(),
-            word = esc(&outcome_word(p)),
-        ));
-    }
-    let chart = c.render();
+    c
+}
+
+/// What a point (the `i`th, from 0) says when the pointer is over it.
+fn point_title(t: &Trend, i: usize, p: &TrendPoint) -> String {
+    format!(
+        "#{} {} run {} ({}): {} {} {}",
+        i + 1,
+        p.serial,
+        short(&p.run),
+        day(&p.started_utc),
+        crate::view::num(Some(p.value), 4),
+        t.unit,
+        outcome_word(p)
+    )
+}
+
+/// The row of the values table for the `i`th point (from 0), with a link
+/// to its report when `href` has one.
+fn table_row(i: usize, p: &TrendPoint, href: Option<String>) -> String {
+    let report = href.map_or("-".into(), |h| {
+        format!("<a href=\"{}\">report</a>", esc(&h))
+    });
+    format!(
+        "<tr class={o}><td class=num>{n}</td><td class=nw>{serial}</td><td><code>{run}</code></td><td class=nw>{start}</td><td class=num>{v}</td><td class=\"outcome {o}\">{word}</td><td>{report}</td></tr>\n",
+        n = i + 1,
+        serial = esc(&p.serial),
+        run = esc(&p.run),
+        start = esc(&crate::view::utc_seconds(&p.started_utc)),
+        v = crate::view::num(Some(p.value), 4),
+        o = p.outcome.as_str(),
+        word = esc(&outcome_word(p)),
+    )
+}
+
+/// The page's body: the summary and capability tables, the chart, and the
+/// values table (`rows`) of the `shown` points.
+fn page_body(t: &Trend, shown: usize, chart: &str, rows: &str) -> String {
     let f = |v: Option<f64>, d: usize| v.map_or("-".into(), |v| format!("{v:.d$}"));
-    let body = format!(
+    format!(
         r#"<h1>{name}</h1>
 <table><tr><th>values</th><th>judged</th><th>mean</th><th>sigma</th><th>min</th><th>max</th><th>limits</th><th>yield</th></tr>
 <tr><td class=num>{count}</td><td class=num>{judged}</td><td class=num>{mean}</td><td class=num>{sigma}</td><td class=num>{min}</td><td class=num>{max}</td><td class=num>{lo}..{hi}</td><td class=num>{yield_}</td></tr></table>
@@ -147,12 +176,6 @@ pub fn trend_page(
         ppu = f(t.overall.upper, 2),
         ppl = f(t.overall.lower, 2),
         ppk = f(t.overall.k, 2),
-        shown = points.len(),
-    );
-    page(
-        &format!("{}: trend", t.name),
-        "td.nw{white-space:nowrap}",
-        &body,
     )
 }
 

@@ -431,6 +431,43 @@ impl Store {
 
     /// One run part by its key or an unambiguous start of it.
     pub fn show(&mut self, id: &str) -> Result<RunDetail, StoreError> {
+        let run = self.part_named(id)?;
+        let fields = self.detail_fields(&run.id)?;
+        let measurements = self
+            .sql()
+            .query(
+                &format!("SELECT {MEASUREMENT_COLUMNS} FROM measurements m WHERE m.run = $1 ORDER BY m.seq"),
+                &[run.id.clone().into()],
+            )?
+            .iter()
+            .map(measurement_row)
+            .collect();
+        let run_id = run_id_of(&run.id).to_owned();
+        let parts = self
+            .sql()
+            .query(
+                &format!(
+                    "SELECT {} FROM runs r JOIN run_units ru ON ru.run = r.id JOIN units u ON u.id = ru.unit_id \
+                     WHERE r.run_id = $1 ORDER BY r.part",
+                    run_columns()
+                ),
+                &[run_id.into()],
+            )?
+            .iter()
+            .map(run_row)
+            .collect();
+        Ok(RunDetail {
+            run,
+            fields,
+            measurements,
+            parts,
+        })
+    }
+
+    /// The run part `id` names: its key, or an unambiguous start of one
+    /// (several parts of one run: the latest). None, or several runs, is
+    /// an error saying so.
+    fn part_named(&mut self, id: &str) -> Result<RunRow, StoreError> {
         let store = self.name.clone();
         let rows = self.sql().query(
             &format!(
@@ -440,7 +477,7 @@ impl Store {
             ),
             &[id.into(), format!("{}%", id.replace(['%', '_'], "")).into()],
         )?;
-        let run = match rows.as_slice() {
+        Ok(match rows.as_slice() {
             [] => {
                 return Err(StoreError::NotFound {
                     store,
@@ -471,7 +508,12 @@ impl Store {
                     ),
                 });
             }
-        };
+        })
+    }
+
+    /// Everything else the store keeps of the part `key`, by column name
+    /// (empty when the part has no row).
+    fn detail_fields(&mut self, key: &str) -> Result<Vec<(String, String)>, StoreError> {
         let names = [
             "procedure_path",
             "procedure_sha256",
@@ -501,8 +543,8 @@ impl Store {
             "recorded_utc",
         ];
         let sql = format!("SELECT {} FROM runs WHERE id = $1", names.join(", "));
-        let row = self.sql().query(&sql, &[run.id.clone().into()])?;
-        let fields = names
+        let row = self.sql().query(&sql, &[key.into()])?;
+        Ok(names
             .iter()
             .map(|n| {
                 (
@@ -510,36 +552,7 @@ impl Store {
                     row.first().map_or(String::new(), |r| r.text(n)),
                 )
             })
-            .collect();
-        let measurements = self
-            .sql()
-            .query(
-                &format!("SELECT {MEASUREMENT_COLUMNS} FROM measurements m WHERE m.run = $1 ORDER BY m.seq"),
-                &[run.id.clone().into()],
-            )?
-            .iter()
-            .map(measurement_row)
-            .collect();
-        let run_id = run_id_of(&run.id).to_owned();
-        let parts = self
-            .sql()
-            .query(
-                &format!(
-                    "SELECT {} FROM runs r JOIN run_units ru ON ru.run = r.id JOIN units u ON u.id = ru.unit_id \
-                     WHERE r.run_id = $1 ORDER BY r.part",
-                    run_columns()
-                ),
-                &[run_id.into()],
-            )?
-            .iter()
-            .map(run_row)
-            .collect();
-        Ok(RunDetail {
-            run,
-            fields,
-            measurements,
-            parts,
-        })
+            .collect())
     }
 
     /// Every run of the unit `serial` (its latest parts) with every

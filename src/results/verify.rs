@@ -175,94 +175,113 @@ impl Store {
                 continue;
             }
             v.checked += 1;
-            let mut find = |problem, detail: String| {
-                v.findings.push(Finding {
-                    problem,
-                    run: Some(run.clone()),
-                    log: log.clone(),
-                    detail,
-                });
-            };
-            let path = Path::new(&log);
-            if !path.is_file() {
-                find(Problem::Missing, "the log is not there".into());
-                continue;
-            }
-            if outcome == "running" {
-                find(
-                    Problem::Incomplete,
-                    "the store never saw this part end; `gyrobench results sync` on its directory completes it".into(),
-                );
-                continue;
-            }
-            match crate::fsutil::sha256_file(path) {
-                Ok(now) if now == sha => {}
-                Ok(now) => {
-                    find(
-                        Problem::Changed,
-                        format!(
-                            "its SHA-256 is {} now, {} when the part ended",
-                            &now[..16],
-                            sha.get(..16).unwrap_or("(none stored)")
-                        ),
-                    );
-                    continue;
-                }
-                Err(e) => {
-                    find(Problem::Unreadable, e.to_string());
-                    continue;
-                }
-            }
-            let stored = self.stored_figures(&run)?;
-            match log_figures(path, replay) {
-                Ok(figures) => match first_difference(&stored, &figures) {
-                    Some(d) => {
-                        v.findings.push(Finding {
-                            problem: Problem::FiguresDiffer,
-                            run: Some(run.clone()),
-                            log: log.clone(),
-                            detail: d,
-                        });
-                    }
-                    None => v.agree += 1,
-                },
-                Err(e) => v.findings.push(Finding {
-                    problem: Problem::Unreadable,
-                    run: Some(run.clone()),
-                    log: log.clone(),
-                    detail: e,
-                }),
-            }
+            self.check_part(&mut v, &run, &log, &sha, &outcome, replay)?;
         }
         if let Some(dir) = dir {
-            for run_dir in super::record::run_dirs(dir) {
-                for log in super::record::parts(&run_dir) {
-                    v.logs_found += 1;
-                    let abs = std::path::absolute(&log).unwrap_or_else(|_| log.clone());
-                    if stored_logs.contains(&abs.display().to_string()) {
-                        continue;
-                    }
-                    // Stored under another path (a directory moved, a
-                    // copy): known by its key.
-                    let known = match super::record::part_key_of_log(&log) {
-                        Some(k) => !self
-                            .sql()
-                            .query("SELECT id FROM runs WHERE id = $1", &[k.into()])?
-                            .is_empty(),
-                        None => false,
-                    };
-                    if !known {
-                        v.findings.push(Finding {
-                            problem: Problem::NotIndexed,
-                            run: None,
-                            log: abs.display().to_string(),
-                            detail: "the store has no record of this log; `gyrobench results sync` indexes it".into(),
-                        });
-                    }
+            self.find_unindexed(&mut v, dir, &stored_logs)?;
+        }
+        Ok(v)
+    }
+
+    /// Check one stored part (`run`, its `log`, the `sha` stored when it
+    /// ended, its `outcome`) against its log, in order: the log is there,
+    /// the part ended, the log is unchanged, its figures are the stored
+    /// ones. The first thing wrong becomes a finding; a part with none
+    /// counts as agreeing.
+    fn check_part(
+        &mut self,
+        v: &mut Verification,
+        run: &str,
+        log: &str,
+        sha: &str,
+        outcome: &str,
+        replay: bool,
+    ) -> Result<(), StoreError> {
+        let mut find = |problem, detail: String| {
+            v.findings.push(Finding {
+                problem,
+                run: Some(run.to_owned()),
+                log: log.to_owned(),
+                detail,
+            });
+        };
+        let path = Path::new(log);
+        if !path.is_file() {
+            find(Problem::Missing, "the log is not there".into());
+            return Ok(());
+        }
+        if outcome == "running" {
+            find(
+                Problem::Incomplete,
+                "the store never saw this part end; `gyrobench results sync` on its directory completes it".into(),
+            );
+            return Ok(());
+        }
+        match crate::fsutil::sha256_file(path) {
+            Ok(now) if now == sha => {}
+            Ok(now) => {
+                find(
+                    Problem::Changed,
+                    format!(
+                        "its SHA-256 is {} now, {} when the part ended",
+                        &now[..16],
+                        sha.get(..16).unwrap_or("(none stored)")
+                    ),
+                );
+                return Ok(());
+            }
+            Err(e) => {
+                find(Problem::Unreadable, e.to_string());
+                return Ok(());
+            }
+        }
+        let stored = self.stored_figures(run)?;
+        match log_figures(path, replay) {
+            Ok(figures) => match first_difference(&stored, &figures) {
+                Some(d) => find(Problem::FiguresDiffer, d),
+                None => v.agree += 1,
+            },
+            Err(e) => find(Problem::Unreadable, e),
+        }
+        Ok(())
+    }
+
+    /// Count the logs below `dir` and list those the store lacks: neither
+    /// among the `stored_logs` nor, stored under another path, known by
+    /// their part's key.
+    fn find_unindexed(
+        &mut self,
+        v: &mut Verification,
+        dir: &Path,
+        stored_logs: &std::collections::HashSet<String>,
+    ) -> Result<(), StoreError> {
+        for run_dir in super::record::run_dirs(dir) {
+            for log in super::record::parts(&run_dir) {
+                v.logs_found += 1;
+                let abs = std::path::absolute(&log).unwrap_or_else(|_| log.clone());
+                if stored_logs.contains(&abs.display().to_string()) {
+                    continue;
+                }
+                // Stored under another path (a directory moved, a
+                // copy): known by its key.
+                let known = match super::record::part_key_of_log(&log) {
+                    Some(k) => !self
+                        .sql()
+                        .query("SELECT id FROM runs WHERE id = $1", &[k.into()])?
+                        .is_empty(),
+                    None => false,
+                };
+                if !known {
+                    v.findings.push(Finding {
+                        problem: Problem::NotIndexed,
+                        run: None,
+                        log: abs.display().to_string(),
+                        detail: "the store has no record of this log; `gyrobench results sync` indexes it".into(),
+                    });
                 }
             }
         }
-        Ok(v)
+        Ok(())
     }
 
     fn stored_figures(&mut self, run: &str) -> Result<Vec<ResultMeasurement>, StoreError> {
