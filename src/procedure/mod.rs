@@ -24,27 +24,8 @@ pub const MAX_STEP_S: f64 = 7.0 * 86_400.0;
 /// a constant set point in all but name.
 pub const MIN_RAMP_C_PER_MIN: f64 = 0.01;
 
-/// Which group a step belongs to.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, serde::Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Group {
-    /// Brings the bench to its starting state.
-    Setup,
-    /// The measurement.
-    Main,
-    /// Always runs once setup has started.
-    Cleanup,
-}
-
-impl Group {
-    fn key(self) -> &'static str {
-        match self {
-            Self::Setup => "setup",
-            Self::Main => "main",
-            Self::Cleanup => "cleanup",
-        }
-    }
-}
+/// Which group a step belongs to (the log's word for it).
+pub use gyrobench_log::schema::Group;
 
 /// Figures a `measure` step can compute (`docs/figures.md`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]

@@ -18,7 +18,7 @@ use serde::Deserialize;
 use super::interchange::{self, CsvError, Row};
 use super::meta::{ResultMeta, RunMeta};
 use super::reader::{self, Item, ReadSummary};
-use super::schema::{FORMAT, Level, RUN_META, Rate1Hz, StepEvent, StepPhase, TableState, topics};
+use super::schema::{FORMAT, Level, RUN_META, Rate1Hz, StepPhase, TableState, topics};
 use super::writer::{FrameScales, Recorder};
 use crate::analysis::series::Interval;
 use crate::bench::BenchConfig;
@@ -452,8 +452,13 @@ fn write_log(
         let index = setup + step_at;
         step_at += 1;
         let t0 = rows[*a].time_s - 0.5;
-        rec.step(&StepEvent::new(t0, StepPhase::Start, index, step))
-            .map_err(io)?;
+        rec.step(&crate::sequencer::events::step_event(
+            t0,
+            StepPhase::Start,
+            index,
+            step,
+        ))
+        .map_err(io)?;
         rec.event(t0, Level::Debug, &step.start_message())
             .map_err(io)?;
         records.start(label);
@@ -461,8 +466,13 @@ fn write_log(
             write_row(&mut rec, &mut records, (label, &step.key), r, *known, &site).map_err(io)?;
         }
         let t1 = rows[b - 1].time_s + 0.5;
-        rec.step(&StepEvent::new(t1, StepPhase::End, index, step))
-            .map_err(io)?;
+        rec.step(&crate::sequencer::events::step_event(
+            t1,
+            StepPhase::End,
+            index,
+            step,
+        ))
+        .map_err(io)?;
         rec.event(t1, Level::Debug, &format!("end of step {}", step.key))
             .map_err(io)?;
     }
@@ -562,7 +572,12 @@ fn write_measures(
     for (i, step) in steps.iter().enumerate() {
         if let StepKind::Measure(m) = &step.kind {
             let index = first + i;
-            rec.step(&StepEvent::new(end_s, StepPhase::Start, index, step))?;
+            rec.step(&crate::sequencer::events::step_event(
+                end_s,
+                StepPhase::Start,
+                index,
+                step,
+            ))?;
             rec.event(end_s, Level::Debug, &step.start_message())?;
             let meas = measure::compute(m, records, None, &step.key);
             rec.event(
@@ -578,7 +593,12 @@ fn write_measures(
                     meas.value.map_or("n/a".into(), |v| format!("{v:.4}"))
                 ),
             )?;
-            rec.step(&StepEvent::new(end_s, StepPhase::End, index, step))?;
+            rec.step(&crate::sequencer::events::step_event(
+                end_s,
+                StepPhase::End,
+                index,
+                step,
+            ))?;
             rec.event(end_s, Level::Debug, &format!("end of step {}", step.key))?;
             measurements.push(meas);
         }

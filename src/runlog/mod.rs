@@ -1,7 +1,8 @@
 //! The run log: one MCAP file per part of a run (`docs/report.md`).
 //!
 //! - [`schema`]: topics, JSON Schemas and the message types shared by the
-//!   writer and every reader; attachment and metadata record names.
+//!   writer and every reader; attachment and metadata record names (the
+//!   `gyrobench-log` crate's, with [`reader`]: the file format alone).
 //! - [`meta`]: the `run` and `result` metadata, typed.
 //! - [`writer`]: the [`Recorder`](writer::Recorder), the run's log as an [`Observer`](crate::sequencer::Observer).
 //! - [`live`]: the same messages on a Foxglove WebSocket server, live.
@@ -18,11 +19,9 @@ pub mod import_map;
 pub mod interchange;
 pub mod live;
 pub mod meta;
-pub mod reader;
 pub mod recover;
 pub mod replay;
-pub mod schema;
 pub mod view;
 pub mod writer;
 
-pub use reader::{Item, ReadError, ReadSummary, read};
+pub use gyrobench_log::{Item, ReadError, ReadSummary, read, reader, schema};

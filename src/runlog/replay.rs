@@ -648,7 +648,7 @@ mod format1 {
         let p = p?;
         let ev = |phase, index: usize| {
             let s = p.steps().nth(index)?;
-            Some(StepEvent::new(0.0, phase, index, s))
+            Some(crate::sequencer::events::step_event(0.0, phase, index, s))
         };
         if let Some(key) = m.message.strip_prefix("end of step ") {
             let index = cursor.checked_sub(1)?;

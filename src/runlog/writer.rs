@@ -445,6 +445,20 @@ fn mcap_err(e: mcap::McapError) -> std::io::Error {
 
 /// The cause of a writer error in words: the I/O error itself when there
 /// is one (`No space left on device`), not the writer's wrapper.
+/// The `/supply/state` message of a reading at `t_s`.
+fn supply_state(t_s: f64, r: &crate::driver::SupplyReading) -> SupplyState {
+    SupplyState {
+        t_s,
+        v: r.v,
+        a: r.a,
+        w: r.v * r.a,
+        set_v: r.set_v,
+        limit_a: r.limit_a,
+        on: r.on,
+        tripped: r.tripped,
+    }
+}
+
 fn describe(e: &mcap::McapError) -> String {
     match e {
         mcap::McapError::Io(io) => io.to_string(),
@@ -526,7 +540,7 @@ impl Recorder {
                 self.write_table(&topic, &s.for_slot(k + 1, tick), step)?;
             }
             if let Some(p) = &s.power {
-                self.write_json(topics::SUPPLY, s.t_s, &SupplyState::new(s.t_s, p))?;
+                self.write_json(topics::SUPPLY, s.t_s, &supply_state(s.t_s, p))?;
             }
         }
         Ok(())

@@ -730,7 +730,7 @@ impl Run<'_> {
 
     /// Write a step event (and its line in words).
     fn log_step(&mut self, phase: StepPhase, index: usize, s: &Step) -> Result<(), Stop> {
-        let mut e = StepEvent::new(self.bench.now_s(), phase, index, s);
+        let mut e = crate::sequencer::events::step_event(self.bench.now_s(), phase, index, s);
         if phase == StepPhase::End {
             e.link = self.record_link.take();
             if e.link.is_some() {
@@ -790,6 +790,52 @@ impl Run<'_> {
         }
     }
 
+    /// What a tick's state stops the run for (not once cleanup has
+    /// begun, for an alarm or a trip): a chamber alarm, the supply's
+    /// over-current trip, a unit hotter than the bench allows (frames'
+    /// temperatures at `tl` degC a count).
+    fn judge_state(&self, state: &BenchState, tl: f64) -> Result<(), Stop> {
+        if !state.chamber.alarms.is_empty() && !self.cleaning_up {
+            return Err(Stop::Device(DeviceError::Alarm {
+                device: "chamber".into(),
+                codes: state.chamber.alarms.clone(),
+            }));
+        }
+        if let Some(p) = &state.power
+            && p.tripped
+            && !self.cleaning_up
+        {
+            return Err(Stop::Device(DeviceError::Overcurrent {
+                device: "supply".into(),
+                limit_a: p.limit_a,
+            }));
+        }
+        let units = self.bench.units();
+        let (unit, hot) = (0..units)
+            .map(|k| {
+                let hottest = self
+                    .tick
+                    .slot_frames(k)
+                    .iter()
+                    .flat_map(|f| f.temps_raw)
+                    .map(|r| f64::from(r) * tl)
+                    .fold(f64::NEG_INFINITY, f64::max);
+                (k, hottest)
+            })
+            .fold((0, f64::NEG_INFINITY), |a, b| if b.1 > a.1 { b } else { a });
+        if hot > self.opts.dut_max_c {
+            let which = match self.opts.units.get(unit).filter(|_| units > 1) {
+                Some(name) => format!(" of {name}"),
+                None => String::new(),
+            };
+            return Err(Stop::Data(format!(
+                "the gyro{which} reads {hot:.2} degC, above the bench limit dut_max_c = {} degC",
+                self.opts.dut_max_c
+            )));
+        }
+        Ok(())
+    }
+
     /// Advance one tick (at most 1 s, never past `until_s`).
     async fn tick(&mut self, until_s: f64, record: Option<&str>, step: &str) -> Result<(), Stop> {
         if self.opts.interrupt.is_requested() {
@@ -819,44 +865,7 @@ impl Run<'_> {
             // The tick's state is the truth whatever it says (an alarm, a
             // hot unit): what follows the run's end judges from it.
             self.last = Some(state.clone());
-            if !state.chamber.alarms.is_empty() && !self.cleaning_up {
-                return Err(Stop::Device(DeviceError::Alarm {
-                    device: "chamber".into(),
-                    codes: state.chamber.alarms.clone(),
-                }));
-            }
-            if let Some(p) = &state.power
-                && p.tripped
-                && !self.cleaning_up
-            {
-                return Err(Stop::Device(DeviceError::Overcurrent {
-                    device: "supply".into(),
-                    limit_a: p.limit_a,
-                }));
-            }
-            let units = self.bench.units();
-            let (unit, hot) = (0..units)
-                .map(|k| {
-                    let hottest = self
-                        .tick
-                        .slot_frames(k)
-                        .iter()
-                        .flat_map(|f| f.temps_raw)
-                        .map(|r| f64::from(r) * tl)
-                        .fold(f64::NEG_INFINITY, f64::max);
-                    (k, hottest)
-                })
-                .fold((0, f64::NEG_INFINITY), |a, b| if b.1 > a.1 { b } else { a });
-            if hot > self.opts.dut_max_c {
-                let which = match self.opts.units.get(unit).filter(|_| units > 1) {
-                    Some(name) => format!(" of {name}"),
-                    None => String::new(),
-                };
-                return Err(Stop::Data(format!(
-                    "the gyro{which} reads {hot:.2} degC, above the bench limit dut_max_c = {} degC",
-                    self.opts.dut_max_c
-                )));
-            }
+            self.judge_state(state, tl)?;
             let r = tell(self.log, self.watch, &Event::State(state));
             written(&mut self.log_failed, self.cleaning_up, r)?;
             let iv = self

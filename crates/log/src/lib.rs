@@ -1,0 +1,31 @@
+//! The gyrobench run log's file format, for any tool that reads the logs:
+//! one MCAP file per part of a run, every message JSON with a JSON Schema
+//! (`docs/report.md` of the gyrobench repository has the layout).
+//!
+//! - [`schema`]: the topics, their JSON Schemas and the message types the
+//!   writer serializes and every reader deserializes; attachment and
+//!   metadata record names.
+//! - [`reader`]: streaming, bounded reading in file order; a file cut short
+//!   or damaged is read as far as it is whole, and the summary says what
+//!   was lost.
+//!
+//! ```no_run
+//! use gyrobench_log::{Item, read, schema::topics};
+//!
+//! let mut intervals = 0;
+//! let summary = read(std::path::Path::new("run.mcap"), |item| {
+//!     if let Item::Message { topic, .. } = item
+//!         && topic == topics::RATE_1HZ
+//!     {
+//!         intervals += 1;
+//!     }
+//!     Ok(())
+//! })?;
+//! println!("{intervals} seconds, complete: {}", summary.complete);
+//! # Ok::<(), gyrobench_log::ReadError>(())
+//! ```
+
+pub mod reader;
+pub mod schema;
+
+pub use reader::{Item, ReadError, ReadSummary, read};
