@@ -783,8 +783,9 @@ impl Run<'_> {
                 _ if !self.others.is_empty() => format!("unit {}: ", k + 1),
                 _ => String::new(),
             };
-            let text =
-                format!("{unit}{why}: the run goes on, its memory now grows with its length");
+            let text = format!(
+                "{unit}{why}: the run goes on, its memory now grows with its length (free space where TMPDIR points, or point TMPDIR at a disk with room, before the next run)"
+            );
             self.warn(&text);
             self.note(Level::Warning, &text);
         }
