@@ -617,6 +617,24 @@ async fn the_named_faults_play_on_the_wire_at_their_device_time() {
     let tripped = supply_until(&mut p, |r| r.tripped).await;
     assert!(!tripped.on, "{tripped:?}");
 
+    // Played again, a fault changes nothing; saturated stays saturated
+    // when stuck is played after it, as on the embedded bench.
+    let steady = served.bench.lock().supply.load.0.steady_a;
+    for f in [
+        Fault::ChamberAlarm,
+        Fault::SupplyOvercurrent,
+        Fault::GyroSaturated,
+        Fault::GyroStuck,
+    ] {
+        served.bench.play(f).expect("played again");
+    }
+    assert_eq!(c.read().await.expect("reading").alarms, vec![9]);
+    assert_eq!(served.bench.lock().supply.load.0.steady_a, steady);
+    assert_eq!(
+        served.bench.lock().forced_counts,
+        Some(crate::sim::faults::SATURATED_COUNTS)
+    );
+
     let one = Serve::load(None).expect("defaults");
     for f in [Fault::ProcessKill, Fault::DiskFull, Fault::Panic] {
         let e = can_play(&one, f).expect_err("the controller's own");

@@ -251,7 +251,7 @@ impl EmbeddedBench {
                 set_point_c: target,
                 mode: self.mode,
                 alarms: if self.active(Fault::ChamberAlarm) {
-                    vec![9]
+                    vec![crate::sim::alarm::INJECTED]
                 } else {
                     Vec::new()
                 },
@@ -456,13 +456,13 @@ impl BenchIo for EmbeddedBench {
             self.twin.table_rates(),
         );
         self.run_to(t_s, |g| {
-            if corrupt && g.index % 50 == 0 {
+            if corrupt && g.index % u64::from(crate::sim::faults::CORRUPT_EVERY_FRAMES) == 0 {
                 crc_errors += 1;
                 return;
             }
             let counts = match (stuck, saturated) {
-                (_, true) => i32::MAX,
-                (true, _) => 3,
+                (_, true) => crate::sim::faults::SATURATED_COUNTS,
+                (true, _) => crate::sim::faults::STUCK_COUNTS,
                 _ => g.delta_counts,
             };
             frames.push(frame_of(g, counts));

@@ -21,8 +21,9 @@ pub enum Fault {
     TableInterlock,
     /// The gyro stops sending.
     GyroSilent,
-    /// The gyro link corrupts every 50th frame (dropped, counted as a CRC
-    /// error; served: one bit flipped in every 50 frames' bytes).
+    /// The gyro link corrupts every [`CORRUPT_EVERY_FRAMES`]th frame
+    /// (dropped, counted as a CRC error; served: one bit flipped in every
+    /// 50 frames' bytes).
     GyroCorrupt,
     /// The gyro's output sticks at one value ([`STUCK_COUNTS`]).
     GyroStuck,

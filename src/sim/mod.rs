@@ -130,6 +130,9 @@ pub struct SimBench {
     /// own: a stuck or saturated output ([`faults::Fault::GyroStuck`],
     /// [`faults::Fault::GyroSaturated`]).
     pub forced_counts: Option<i32>,
+    /// The unit shorted: it draws three times its current
+    /// ([`faults::Fault::SupplyOvercurrent`]).
+    pub shorted: bool,
 }
 
 /// One more unit of a simulated batch: its own twin (its parameters, its
@@ -179,6 +182,7 @@ impl SimBench {
             out: Vec::new(),
             units: Vec::new(),
             forced_counts: None,
+            shorted: false,
         }
     }
 
@@ -374,19 +378,24 @@ impl SharedBench {
     /// frame in 50, sticks or saturates, a batch's last unit's line goes
     /// silent for good, the unit draws three times its current. A fault
     /// of the controller itself ([`Fault::device`] `None`) is refused, as
-    /// is `unit-lost` on a bench of one unit.
+    /// is `unit-lost` on a bench of one unit. A fault played again changes
+    /// nothing (one alarm 9, one short); a saturated output stays
+    /// saturated when a stuck one is played too, as on the embedded bench.
     pub fn play(&self, fault: Fault) -> Result<(), String> {
         use std::sync::atomic::Ordering::Relaxed;
         let mut b = self.lock();
         match fault {
+            Fault::ChamberAlarm if b.chamber.injected_alarms.contains(&alarm::INJECTED) => {}
             Fault::ChamberAlarm => b.raise_chamber_alarm(alarm::INJECTED),
             Fault::ChamberSilent => self.faults.chamber.silent.store(true, Relaxed),
             Fault::TableInterlock => b.trip_interlock(),
             Fault::GyroSilent => self.faults.gyro.silent.store(true, Relaxed),
             Fault::GyroCorrupt => {
-                let every = faults::CORRUPT_EVERY_FRAMES.saturating_mul(b.layout.len() as u32);
+                let frame = u32::try_from(b.layout.len()).unwrap_or(u32::MAX);
+                let every = faults::CORRUPT_EVERY_FRAMES.saturating_mul(frame);
                 self.faults.gyro.corrupt_every.store(every, Relaxed);
             }
+            Fault::GyroStuck if b.forced_counts == Some(faults::SATURATED_COUNTS) => {}
             Fault::GyroStuck => b.forced_counts = Some(faults::STUCK_COUNTS),
             Fault::GyroSaturated => b.forced_counts = Some(faults::SATURATED_COUNTS),
             Fault::UnitLost if b.units.is_empty() => {
@@ -396,7 +405,11 @@ impl SharedBench {
                 );
             }
             Fault::UnitLost => self.faults.gyro.lost_line.store(b.units.len(), Relaxed),
-            Fault::SupplyOvercurrent => b.supply.load.0.steady_a *= 3.0,
+            Fault::SupplyOvercurrent if b.shorted => {}
+            Fault::SupplyOvercurrent => {
+                b.shorted = true;
+                b.supply.load.0.steady_a *= 3.0;
+            }
             Fault::ProcessKill | Fault::Panic | Fault::DiskFull | Fault::Hangup | Fault::Quit => {
                 return Err(format!(
                     "{} is a fault of the controller (its process or its log), not of a device: `gyrobench run --inject` plays it on the embedded bench",

@@ -223,8 +223,8 @@ pub struct Reporter {
     pub started: std::time::Instant,
     /// Prompts asked so far.
     pub prompts: u64,
-    /// The state of the tick going on, until its first unit's interval
-    /// (a chart point takes the table's angles from it).
+    /// The state of the latest tick (the first unit's interval after it
+    /// takes the table's angles from it for its chart point).
     pub tick: Option<BenchState>,
 }
 
