@@ -30,11 +30,14 @@ pub mod clock;
 pub mod coeffs;
 /// The study's compensation models as data (in `gyrobench-analysis`).
 pub use gyrobench_analysis::compensation;
-pub mod config;
+/// TOML loading and checking (in `gyrobench-twin`, `crates/twin`).
+pub use gyrobench_twin::config;
 pub mod diagnose;
 pub mod driver;
 pub mod fsutil;
-pub mod geometry;
+/// Frames, orientation, Earth rate, the table's geometry (in
+/// `gyrobench-twin`).
+pub use gyrobench_twin::geometry;
 pub mod procedure;
 /// The wire protocols, sans-IO: the `gyrobench-protocol` crate
 /// (`crates/protocol`), which drivers and simulators share.
@@ -48,7 +51,9 @@ pub mod sim;
 pub mod station;
 pub mod study;
 pub mod transport;
-pub mod twin;
+/// The digital twin of the RL-16 on its bench: the `gyrobench-twin`
+/// crate (`crates/twin`).
+pub use gyrobench_twin::twin;
 pub mod unit;
 pub mod view;
 

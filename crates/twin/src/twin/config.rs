@@ -8,12 +8,12 @@ use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
-use crate::compensation::{Model4, Model4Terms};
+use gyrobench_analysis::compensation::{Model4, Model4Terms};
 use crate::config::{Checker, ConfigError, Source};
 use crate::geometry::{Site, TableAngles, TableGeometry};
 
 /// The default twin configuration, embedded so the tool runs without files.
-pub const DEFAULT_TWIN_TOML: &str = include_str!("../../fixtures/twin/rl16.toml");
+pub const DEFAULT_TWIN_TOML: &str = include_str!("../../../../fixtures/twin/rl16.toml");
 
 /// Complete configuration of the simulated gyro and its bench.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

@@ -179,7 +179,7 @@ fn effect_deltas(enable: impl Fn(&mut TwinConfig)) -> Vec<f64> {
 }
 
 fn spread(x: &[f64]) -> f64 {
-    crate::analysis::figures::peak_to_peak(x)
+    gyrobench_analysis::figures::peak_to_peak(x)
 }
 
 #[test]
@@ -299,7 +299,7 @@ fn thermal_lag_trails_the_case_temperature() {
 
 /// Non-overlapping Allan deviation of a 1 Hz series at `m` samples.
 fn adev(x: &[f64], m: usize) -> f64 {
-    let means = crate::analysis::figures::block_means(x, m);
+    let means = gyrobench_analysis::figures::block_means(x, m);
     let d: Vec<f64> = means.windows(2).map(|w| w[1] - w[0]).collect();
     (0.5 * d.iter().map(|v| v * v).sum::<f64>() / d.len() as f64).sqrt()
 }

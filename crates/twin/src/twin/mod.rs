@@ -21,7 +21,7 @@ pub use config::TwinConfig;
 pub use table::{Axis, AxisDemand};
 pub use thermal::ChamberLimit;
 
-use crate::compensation::Model4Inputs;
+use gyrobench_analysis::compensation::Model4Inputs;
 use crate::geometry::{DPS_TO_DPH, Orientation, TableAngles, gravity_ned_g};
 use effects::{EffectInputs, Effects};
 use noise::Noise;
