@@ -8,9 +8,9 @@ use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
-use gyrobench_analysis::compensation::{Model4, Model4Terms};
 use crate::config::{Checker, ConfigError, Source};
 use crate::geometry::{Site, TableAngles, TableGeometry};
+use gyrobench_analysis::compensation::{Model4, Model4Terms};
 
 /// The default twin configuration, embedded so the tool runs without files.
 pub const DEFAULT_TWIN_TOML: &str = include_str!("../../../../fixtures/twin/rl16.toml");

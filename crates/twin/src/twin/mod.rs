@@ -21,9 +21,9 @@ pub use config::TwinConfig;
 pub use table::{Axis, AxisDemand};
 pub use thermal::ChamberLimit;
 
-use gyrobench_analysis::compensation::Model4Inputs;
 use crate::geometry::{DPS_TO_DPH, Orientation, TableAngles, gravity_ned_g};
 use effects::{EffectInputs, Effects};
+use gyrobench_analysis::compensation::Model4Inputs;
 use noise::Noise;
 use thermal::{ChamberAir, ThermalNetwork};
 
