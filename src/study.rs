@@ -21,18 +21,12 @@ use crate::sequencer::{self, BenchState, Event, Observer, Quiet, RunError, Tick}
 use crate::twin::TwinConfig;
 use nalgebra::Vector3;
 
-/// The study's thermal cycle, as shipped.
-pub const THERMAL_CYCLE_TOML: &str = include_str!("../procedures/thermal_cycle.toml");
-/// The study's orientation run, as shipped.
-pub const ORIENTATION_TOML: &str = include_str!("../procedures/orientation.toml");
-/// The study's thermal cycle with the axis horizontal north, for a lab
-/// near the equator ([`crate::geometry::TableGeometry::north`]), as shipped.
-pub const THERMAL_CYCLE_NORTH_TOML: &str = include_str!("../procedures/thermal_cycle_north.toml");
-/// The orientation run with its rolls and tilt about north, as shipped.
-pub const ORIENTATION_NORTH_TOML: &str = include_str!("../procedures/orientation_north.toml");
-/// The run that separates what those two cannot (thermal lag,
-/// scale-factor drift), as shipped.
-pub const SEPARATING_TOML: &str = include_str!("../procedures/separating.toml");
+/// The study's procedures the diagnosis repeats as a deciding run, as
+/// shipped (kept in `gyrobench-twin` so the diagnosis crate has them).
+pub use gyrobench_twin::procedures::{
+    ORIENTATION_NORTH_TOML, ORIENTATION_TOML, SEPARATING_TOML, THERMAL_CYCLE_NORTH_TOML,
+    THERMAL_CYCLE_TOML,
+};
 /// The run that separates an axis misalignment from g- and magnetic
 /// sensitivity (the outer axis turning both ways), as shipped.
 pub const MISALIGNMENT_TOML: &str = include_str!("../procedures/misalignment.toml");

@@ -1060,11 +1060,9 @@ impl Validator<'_> {
     }
 }
 
-/// Whether `key` is the step key of the record of a `rate` step (taken
-/// while the table turns): `KEY.record`.
-pub fn is_rate_record_key(key: &str) -> bool {
-    key.ends_with(".record")
-}
+/// Whether `key` is the step key of the record of a `rate` step (in
+/// `gyrobench-twin`, which the diagnosis reads it from).
+pub use gyrobench_twin::procedures::is_rate_record_key;
 
 /// What a label or measurement name must be: it is shown in reports,
 /// stored in the results store and written in logs.

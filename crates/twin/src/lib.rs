@@ -6,4 +6,5 @@
 
 pub mod config;
 pub mod geometry;
+pub mod procedures;
 pub mod twin;

@@ -1826,7 +1826,7 @@ mod tests {
 
     use super::*;
     use crate::analysis::series::Interval;
-    use crate::diagnose::data::Sample;
+    use crate::data::Sample;
     use crate::geometry::Orientation;
     use crate::twin::thermal::ThermalNetwork;
     use nalgebra::DMatrix;
@@ -2365,22 +2365,6 @@ mod tests {
             gaps[gaps.len() / 2],
             gaps.len()
         );
-    }
-
-    /// A unit of the randomised self-check (seed 22) whose network is the
-    /// twin's own form: the fit with the first quarter of the first run
-    /// held out ended 600 times worse than the network found on all the
-    /// runs, and the layer said `form_misfit` (3.2 degC held out). Started
-    /// again from the other fits' optima, the network follows it.
-    #[test]
-    fn a_fold_fit_lost_in_a_far_basin_starts_again_from_the_others() {
-        let unit = crate::diagnose::randomized::draw_unit(22);
-        let runs = crate::diagnose::selfcheck::runs_of(&unit, 22, false).expect("runs");
-        let layer = layer(&runs, None, true);
-        assert!(layer.form_misfit.is_none(), "{:?}", layer.form_misfit);
-        let gap = layer.fitted_gap_c.expect("fitted");
-        assert!(gap < FORM_MISFIT_C, "network held out {gap}");
-        assert!(layer.gap_c < FORM_MISFIT_C, "layer {}", layer.gap_c);
     }
 
     /// The floor the sensors leave: white noise of sigma at 1 Hz leaves

@@ -140,7 +140,7 @@ impl<'a> Data<'a> {
                 y.push(s.iv.bias_dph());
                 run_of.push(r);
                 reference.push(s.iv.reference_dph);
-                turning_of.push(if crate::procedure::is_rate_record_key(&s.step) {
+                turning_of.push(if crate::study::is_rate_record_key(&s.step) {
                     if turning_runs.last() != Some(&r) {
                         turning_runs.push(r);
                     }
@@ -1076,6 +1076,73 @@ mod tests {
             .sum()
     }
 
+    /// Three runs a thermal cycle, positions and a rate record would give,
+    /// made up: temperatures that swing and lag, the axis in five poses,
+    /// and in the last run a record taken while the table turns (its step
+    /// `KEY.record`, its reference the table's rate).
+    fn synthetic_runs() -> Vec<RunData> {
+        use super::super::data::Sample;
+        use crate::analysis::series::Interval;
+        use crate::geometry::Orientation;
+        let site = crate::twin::TwinConfig::default_rl16().site;
+        let poses = [
+            (0.0, 90.0, 0.0),
+            (90.0, 0.0, 0.0),
+            (270.0, 0.0, 0.0),
+            (0.0, -90.0, 0.0),
+            (90.0, 0.0, 90.0),
+        ];
+        (0..3_u32)
+            .map(|r| {
+                let samples = (0..3000_u32)
+                    .map(|k| {
+                        let t = f64::from(k);
+                        let phase = f64::from(r);
+                        let tcase = 20.0 + 15.0 * (t / 700.0 + phase).sin();
+                        let t1 = tcase + 0.5 + 0.3 * (t / 300.0).sin();
+                        let (az, el, roll) = poses[(k as usize / 300 + r as usize) % poses.len()];
+                        let orientation = Orientation::new(az, el, roll);
+                        let turning = r == 2 && (1000..1600).contains(&k);
+                        let reference_dph = if turning {
+                            3600.0
+                        } else {
+                            orientation.earth_rate_dph(&site)
+                        };
+                        Sample {
+                            iv: Interval {
+                                time_s: t,
+                                rate_dph: reference_dph + 0.01 * (t / 50.0).sin() + 0.002 * tcase,
+                                reference_dph,
+                                t1_c: t1,
+                                t2_c: t1 - 0.2,
+                                tcase_c: tcase,
+                                chamber_c: tcase - 1.0,
+                                frames: 400,
+                            },
+                            orientation,
+                            record: format!("r{}", k / 300),
+                            step: if turning {
+                                "main.2.record".into()
+                            } else {
+                                format!("main.{}", k / 300)
+                            },
+                            table_rate_body_dph: if turning {
+                                nalgebra::Vector3::new(3600.0, 0.0, 0.0)
+                            } else {
+                                nalgebra::Vector3::zeros()
+                            },
+                        }
+                    })
+                    .collect();
+                RunData {
+                    name: format!("synthetic {r}"),
+                    site,
+                    samples,
+                }
+            })
+            .collect()
+    }
+
     /// The sums kept per column and pair give the sum of squares the rows
     /// give, for models of thermal, orientation and rate terms (a rate run
     /// brings its scale factor), asked for in any order, on the runs' data
@@ -1083,8 +1150,7 @@ mod tests {
     #[test]
     fn the_in_sample_fit_from_kept_sums_is_the_fit_from_the_rows() {
         use super::super::library::{LIBRARY, MODEL4};
-        let twin = crate::twin::TwinConfig::default_rl16();
-        let runs = super::super::selfcheck::runs_of(&twin, 3, true).expect("runs");
+        let runs = synthetic_runs();
         let data = Data::new(&runs);
         assert!(!data.turning_runs.is_empty());
         let signal: Vec<f64> = (0..data.y.len()).map(|i| (i as f64 * 1e-3).sin()).collect();
