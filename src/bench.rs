@@ -59,6 +59,10 @@ pub struct BenchConfig {
     /// with slots runs a batch: one procedure, every unit.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub slots: Vec<Slot>,
+    /// The bench's own Type B contributions to its figures' uncertainty,
+    /// each with its source (`[uncertainty]`, `docs/bench.md`).
+    #[serde(default, skip_serializing_if = "crate::typeb::TypeB::is_empty")]
+    pub uncertainty: crate::typeb::TypeB,
 }
 
 /// `on_unit_error`: a batch goes on without a unit that cannot be judged,
@@ -543,6 +547,7 @@ impl BenchConfig {
         self.table.geometry.validate(&c, "table.geometry")?;
         self.validate_slots(&c)?;
         self.validate_devices(&c, src)?;
+        self.uncertainty.validate(&c)?;
         self.validate_limits(&c)
     }
 

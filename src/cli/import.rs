@@ -148,6 +148,8 @@ pub fn render_import(r: &crate::runlog::exchange::Imported, out: &std::path::Pat
             (MeasureOutcome::Fail, Some(_)) => "beyond",
             (MeasureOutcome::Fail, None) => "not computable",
             (MeasureOutcome::Error, _) => "not judged (unsound data)",
+            (MeasureOutcome::ConditionalPass, _) => "within, by less than its uncertainty",
+            (MeasureOutcome::ConditionalFail, _) => "beyond, by less than its uncertainty",
         };
         s.push_str(&format!(
             "  {:<32} {:>10} {:<6} [{}]  {against}\n",

@@ -75,9 +75,10 @@ pub fn run(args: ReplayArgs) -> Result<Outcome> {
     // The log's exit code is its worst unit's.
     let rank = |o: &Outcome| match o {
         Outcome::Success => 0,
-        Outcome::Fail => 1,
-        Outcome::Error => 2,
-        _ => 3,
+        Outcome::ConditionalPass => 1,
+        Outcome::Fail => 2,
+        Outcome::Error => 3,
+        _ => 4,
     };
     let mut worst = Outcome::Success;
     for serial in &serials {
@@ -173,10 +174,5 @@ fn replay_one(
     }
     outf!("{}", report.render_text())?;
     errln!("report in {}", out.display());
-    Ok(match r.result.outcome {
-        sequencer::Outcome::Pass => Outcome::Success,
-        sequencer::Outcome::Fail => Outcome::Fail,
-        sequencer::Outcome::Error => Outcome::Error,
-        sequencer::Outcome::Aborted => Outcome::Interrupted(130),
-    })
+    Ok(Outcome::of_run(r.result.outcome, 130))
 }

@@ -571,10 +571,7 @@ pub fn run(args: RunArgs) -> Result<Outcome> {
     // A batch ends as its worst unit.
     Ok(match finished.result.worst() {
         _ if finished.report_error.is_some() => Outcome::Error,
-        sequencer::Outcome::Pass => Outcome::Success,
-        sequencer::Outcome::Fail => Outcome::Fail,
-        sequencer::Outcome::Error => Outcome::Error,
-        sequencer::Outcome::Aborted => Outcome::Interrupted(exit_code.load(Ordering::Relaxed)),
+        worst => Outcome::of_run(worst, exit_code.load(Ordering::Relaxed)),
     })
 }
 

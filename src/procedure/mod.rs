@@ -5,6 +5,9 @@
 
 pub mod estimate;
 pub mod raw;
+pub mod rule;
+
+pub use rule::{DecisionRule, Statement};
 
 use std::collections::HashSet;
 use std::path::Path;
@@ -35,8 +38,13 @@ pub enum Metric {
     BiasStability,
     /// Peak-to-peak of the Earth-removed rate smoothed over `averaging_s`.
     DriftPp,
-    /// The same after model-4 compensation.
+    /// The same after model-4 compensation by coefficients that did not
+    /// see the judged records: the unit's set (`--coeffs`), else model 4
+    /// fitted held out within the run (blocked cross-validation).
     CompensatedDriftPp,
+    /// The same on the residual of model 4 fitted to the very records it
+    /// is taken on: the fit's residual, informative.
+    CompensatedDriftFitResidualPp,
     /// Self-heating transient over the first half hour after power-on.
     SelfHeating,
     /// Mean Earth-removed rate.
@@ -98,6 +106,7 @@ impl Metric {
             "bias_stability" => Self::BiasStability,
             "drift_pp" => Self::DriftPp,
             "compensated_drift_pp" => Self::CompensatedDriftPp,
+            "compensated_drift_fit_residual_pp" => Self::CompensatedDriftFitResidualPp,
             "self_heating" => Self::SelfHeating,
             "mean_bias" => Self::MeanBias,
             "temperature_sensitivity" => Self::TemperatureSensitivity,
@@ -120,7 +129,11 @@ impl Metric {
     fn needs_averaging(self) -> bool {
         matches!(
             self,
-            Self::BiasStability | Self::DriftPp | Self::CompensatedDriftPp | Self::WarmUpTime
+            Self::BiasStability
+                | Self::DriftPp
+                | Self::CompensatedDriftPp
+                | Self::CompensatedDriftFitResidualPp
+                | Self::WarmUpTime
         )
     }
 }
@@ -345,6 +358,11 @@ pub struct Meta {
     pub dut_type: String,
     /// Spec judged against.
     pub spec: String,
+    /// The decision rule its figures are judged by.
+    pub decision_rule: DecisionRule,
+    /// Whether the file names its rule (a log of an earlier format that
+    /// names none was judged by simple acceptance, and is replayed so).
+    pub rule_named: bool,
 }
 
 /// A validated procedure.
@@ -391,6 +409,18 @@ impl Procedure {
             description: raw.procedure.description.clone(),
             dut_type: raw.procedure.dut_type.clone(),
             spec: raw.procedure.spec.clone(),
+            decision_rule: match &raw.procedure.decision_rule {
+                Some(rule) => DecisionRule::parse(rule, raw.procedure.guard_band_u)
+                    .map_err(|e| src.invalid("procedure.decision_rule", e))?,
+                None if raw.procedure.guard_band_u.is_some() => {
+                    return Err(src.invalid(
+                        "procedure.guard_band_u",
+                        "goes with decision_rule = \"guarded\"",
+                    ));
+                }
+                None => DecisionRule::default(),
+            },
+            rule_named: raw.procedure.decision_rule.is_some(),
         };
         v.c.ensure(
             is_path_safe_name(&meta.name),
@@ -721,7 +751,7 @@ impl Validator<'_> {
                 &k("metric"),
                 format!(
                     "{metric:?} is not a metric; expected bias_stability, drift_pp, \
-                     compensated_drift_pp, self_heating, mean_bias, \
+                     compensated_drift_pp, compensated_drift_fit_residual_pp, self_heating, mean_bias, \
                      temperature_sensitivity, temperature_rate_sensitivity, \
                      scale_factor, scale_factor_nonlinearity, scale_factor_asymmetry, \
                      scale_factor_temperature, dead_band, threshold, axis_misalignment, \

@@ -35,6 +35,14 @@ pub struct RawMeta {
     /// The specification it judges against, e.g. `0.05 deg/h bias stability`.
     #[serde(default)]
     pub spec: String,
+    /// How its figures are judged: `simple`, `guarded` (the default) or
+    /// `non_binary` (`procedure::rule`).
+    #[serde(default)]
+    pub decision_rule: Option<String>,
+    /// A guarded rule's guard band, as a multiple of the expanded
+    /// uncertainty (default 1).
+    #[serde(default)]
+    pub guard_band_u: Option<f64>,
 }
 
 /// A position of a `repeat` step.

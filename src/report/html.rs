@@ -918,6 +918,26 @@ fn headline(r: &Report) -> String {
         Outcome::Aborted => {
             "The run was interrupted before its end; what was measured is below.".to_owned()
         }
+        Outcome::ConditionalPass => format!(
+            "No measurement outside its limits, but {} within its expanded uncertainty of one \
+             (non-binary rule): a conditional pass.{key}",
+            r.measurements
+                .iter()
+                .filter(|m| m.outcome == MeasureOutcome::ConditionalPass)
+                .map(|m| m.name.as_str())
+                .collect::<Vec<_>>()
+                .join(", ")
+        ),
+        Outcome::ConditionalFail => format!(
+            "No measurement beyond its limits by more than its uncertainty, but {} outside one \
+             (non-binary rule): a conditional fail.{key}",
+            r.measurements
+                .iter()
+                .filter(|m| m.outcome == MeasureOutcome::ConditionalFail)
+                .map(|m| m.name.as_str())
+                .collect::<Vec<_>>()
+                .join(", ")
+        ),
     };
     esc(&s)
 }
@@ -1000,12 +1020,13 @@ fn overdue_box(r: &Report) -> String {
 /// The whole page.
 pub fn render_html(r: &Report, records: &Records) -> String {
     let faults_before = records.read_faults();
-    let (colour, word) = match r.outcome {
-        Outcome::Pass => ("var(--pass)", "PASS"),
-        Outcome::Fail => ("var(--fail)", "FAIL"),
-        Outcome::Error => ("var(--error)", "ERROR"),
-        Outcome::Aborted => ("var(--aborted)", "ABORTED"),
+    let colour = match r.outcome {
+        Outcome::Pass => "var(--pass)",
+        Outcome::Fail | Outcome::ConditionalFail => "var(--fail)",
+        Outcome::Error => "var(--error)",
+        Outcome::Aborted | Outcome::ConditionalPass => "var(--aborted)",
     };
+    let word = super::outcome_word(r.outcome);
     let rows = measurement_rows(r);
     let error = stopped_box(r);
     let bench_left = bench_left_line(r);

@@ -18,6 +18,18 @@ use crate::sequencer::{BenchLeft, Outcome, RunError, RunResult};
 
 pub use html::render_html;
 
+/// A run's outcome in the report's capitals.
+pub fn outcome_word(o: Outcome) -> &'static str {
+    match o {
+        Outcome::Pass => "PASS",
+        Outcome::Fail => "FAIL",
+        Outcome::Error => "ERROR",
+        Outcome::Aborted => "ABORTED",
+        Outcome::ConditionalPass => "CONDITIONAL PASS",
+        Outcome::ConditionalFail => "CONDITIONAL FAIL",
+    }
+}
+
 /// The unit under test.
 #[derive(Debug, Clone, Serialize)]
 pub struct Dut {
@@ -410,13 +422,8 @@ impl Report {
         s
     }
 
-    /// PASS, FAIL, ERROR or ABORTED.
+    /// PASS, FAIL, ERROR, ABORTED, CONDITIONAL PASS or CONDITIONAL FAIL.
     pub fn outcome_word(&self) -> &'static str {
-        match self.outcome {
-            Outcome::Pass => "PASS",
-            Outcome::Fail => "FAIL",
-            Outcome::Error => "ERROR",
-            Outcome::Aborted => "ABORTED",
-        }
+        outcome_word(self.outcome)
     }
 }

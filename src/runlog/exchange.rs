@@ -354,6 +354,8 @@ fn import_rows(
     let angles = table_angles(&rows, geometry.as_ref(), &name)?;
     let parts = stretches(&rows);
     let mut bench = BenchConfig::embedded();
+    // Another lab's bench: its own uncertainties are not known here.
+    bench.uncertainty = crate::typeb::TypeB::default();
     let site = site.site;
     bench.site = site;
     if let Some(g) = geometry {
@@ -477,12 +479,18 @@ fn write_log(
             .map_err(io)?;
     }
     let end_s = rows.last().map_or(0.0, |r| r.time_s + 0.5);
+    // Judged as its replay judges it: the procedure's rule, no declared
+    // uncertainties of the bench it came from.
+    let judging = measure::Judging {
+        rule: procedure.meta.decision_rule,
+        ..measure::Judging::default()
+    };
     let measurements = write_measures(
         &mut rec,
         &steps[step_at..],
         setup + step_at,
         &records,
-        end_s,
+        (end_s, &judging),
     )
     .map_err(io)?;
     let failed = measurements
@@ -566,7 +574,7 @@ fn write_measures(
     steps: &[&Step],
     first: usize,
     records: &Records,
-    end_s: f64,
+    (end_s, judging): (f64, &measure::Judging),
 ) -> std::io::Result<Vec<measure::Measurement>> {
     let mut measurements = Vec::new();
     for (i, step) in steps.iter().enumerate() {
@@ -579,7 +587,7 @@ fn write_measures(
                 step,
             ))?;
             rec.event(end_s, Level::Debug, &step.start_message())?;
-            let meas = measure::compute(m, records, None, &step.key);
+            let meas = measure::compute(m, records, None, &step.key, judging);
             rec.event(
                 end_s,
                 if meas.outcome == MeasureOutcome::Pass {

@@ -172,6 +172,8 @@ struct State<'a> {
     poses: Vec<(String, Orientation, Option<TableAngles>)>,
     /// How far a record's ends may fall off its frames on the logged bench.
     record_edge_s: f64,
+    /// What the run's figures were judged by.
+    judging: measure::Judging,
     link: LinkStats,
     frames: u64,
     last_step: Option<String>,
@@ -311,6 +313,7 @@ impl<'a> State<'a> {
                                 }),
                         });
                 self.record_edge_s = l.bench.record_edge_s();
+                self.judging = measure::Judging::new(&l.procedure, &l.bench, meta.format);
                 self.procedure = Some(l.procedure);
                 if let Some(prev) = &meta.previous_part {
                     if prev.contains('/') || prev.contains('\\') || prev.starts_with('.') {
@@ -370,6 +373,7 @@ impl<'a> State<'a> {
             meta: None,
             result_meta: None,
             procedure: None,
+            judging: measure::Judging::default(),
             coeffs: None,
             records: Records::default(),
             measurements: Vec::new(),
@@ -405,7 +409,10 @@ impl<'a> State<'a> {
                 let (outcome, error) = match r.outcome {
                     Outcome::Error | Outcome::Aborted => (r.outcome, r.error),
                     // pass or fail: the verdict is the recomputed one.
-                    Outcome::Pass | Outcome::Fail => (verdict, verdict_error),
+                    Outcome::Pass
+                    | Outcome::Fail
+                    | Outcome::ConditionalPass
+                    | Outcome::ConditionalFail => (verdict, verdict_error),
                 };
                 (
                     outcome,
@@ -614,8 +621,13 @@ impl<'a> State<'a> {
                     StepKind::Record { label, .. } => self.records.start(label),
                     StepKind::Measure(m) => {
                         let coeffs = self.coeffs_override.or(self.coeffs.as_ref());
-                        self.measurements
-                            .push(measure::compute(m, &self.records, coeffs, &e.key));
+                        self.measurements.push(measure::compute(
+                            m,
+                            &self.records,
+                            coeffs,
+                            &e.key,
+                            &self.judging,
+                        ));
                     }
                     _ => {}
                 }

@@ -8,12 +8,16 @@ use serde::Serialize;
 use super::BenchState;
 use super::health::{RecordHealth, Runs};
 use super::spill::{Row, Spill, bytes_at, f64_at};
+use super::compensated::{Residual, compensated_drift};
+use super::uncertainty::Known;
 use crate::analysis::figures::{DriftTrace, bias_stability, drift_trace, mean};
 use crate::analysis::model::{self, ModelKind};
 use crate::analysis::rate::{self, Figure, RatePoint};
 use crate::analysis::series::Interval;
-use crate::analysis::study::{self_heating_dph, temperature_sensitivity_parts};
-use crate::procedure::{Measure, Metric};
+use crate::analysis::study::{self_heating_dph, sensitivity_fit};
+use crate::analysis::uncertainty::{Contribution, Uncertainty};
+use crate::procedure::{DecisionRule, Measure, Metric, Statement};
+use crate::typeb::TypeB;
 
 /// 1 Hz intervals of the whole run, and by record label.
 ///
@@ -479,30 +483,100 @@ impl TickSums {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum MeasureOutcome {
-    /// Within limits.
+    /// Within limits, as the decision rule judges.
     Pass,
     /// Outside limits, or not computable.
     Fail,
     /// Not judged: the data it would be computed on are unsound (a link
     /// that lost frames, a stuck or saturated output).
     Error,
+    /// Within its limits but within its expanded uncertainty of one (the
+    /// non-binary rule's conditional pass).
+    ConditionalPass,
+    /// Outside its limits but within its expanded uncertainty of one (the
+    /// non-binary rule's conditional fail).
+    ConditionalFail,
 }
 
 impl MeasureOutcome {
-    /// `pass`, `fail` or `error`.
+    /// Every outcome.
+    pub const ALL: [Self; 5] = [
+        Self::Pass,
+        Self::Fail,
+        Self::Error,
+        Self::ConditionalPass,
+        Self::ConditionalFail,
+    ];
+
+    /// `pass`, `fail`, `error`, `conditional_pass` or `conditional_fail`.
     pub fn as_str(self) -> &'static str {
         match self {
             Self::Pass => "pass",
             Self::Fail => "fail",
             Self::Error => "error",
+            Self::ConditionalPass => "conditional_pass",
+            Self::ConditionalFail => "conditional_fail",
         }
     }
 
-    /// The outcome a word names (`pass`, `fail`, `error`).
+    /// In the report's capitals (`PASS`, `COND. PASS`, ...).
+    pub fn word(self) -> &'static str {
+        match self {
+            Self::Pass => "PASS",
+            Self::Fail => "FAIL",
+            Self::Error => "ERROR",
+            Self::ConditionalPass => "COND. PASS",
+            Self::ConditionalFail => "COND. FAIL",
+        }
+    }
+
+    /// The outcome a word names.
     pub fn parse(word: &str) -> Option<Self> {
-        [Self::Pass, Self::Fail, Self::Error]
-            .into_iter()
-            .find(|o| o.as_str() == word)
+        Self::ALL.into_iter().find(|o| o.as_str() == word)
+    }
+
+    /// The statement of a decision rule as a measurement's outcome.
+    pub fn of(s: Statement) -> Self {
+        match s {
+            Statement::Pass => Self::Pass,
+            Statement::ConditionalPass => Self::ConditionalPass,
+            Statement::ConditionalFail => Self::ConditionalFail,
+            Statement::Fail => Self::Fail,
+        }
+    }
+}
+
+/// What a run's figures are judged by: the procedure's decision rule and
+/// the bench's declared Type B contributions.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Judging {
+    /// The decision rule.
+    pub rule: DecisionRule,
+    /// The bench's own contributions (`[uncertainty]`).
+    pub typeb: TypeB,
+    /// A log of a format before decision rules (2 or older), replayed as it
+    /// was judged: by its limits alone, the compensated drift on model 4
+    /// fitted to its own records.
+    pub legacy: bool,
+}
+
+impl Judging {
+    /// The judging of `p` on `bench`, for a log of `format`.
+    pub fn new(
+        p: &crate::procedure::Procedure,
+        bench: &crate::bench::BenchConfig,
+        format: u32,
+    ) -> Self {
+        let legacy = format < crate::runlog::schema::FORMAT_JUDGED;
+        Self {
+            rule: if legacy && !p.meta.rule_named {
+                DecisionRule::Simple
+            } else {
+                p.meta.decision_rule
+            },
+            typeb: bench.uncertainty.clone(),
+            legacy,
+        }
     }
 }
 
@@ -536,6 +610,28 @@ pub struct Measurement {
     /// rate-table figures).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub std_error: Option<f64>,
+    /// Its uncertainty: `{u, U, k, dof, budget}` (`docs/figures.md` gives
+    /// each figure's budget), or null beside `uncertainty_reason`.
+    pub uncertainty: Option<Uncertainty>,
+    /// Why it has no uncertainty.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub uncertainty_reason: Option<String>,
+    /// The guard band the decision rule moved the limits by, in the
+    /// figure's unit (none: simple acceptance, no limits, or no
+    /// uncertainty).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub guard_band: Option<f64>,
+    /// Distance to the nearer limit, in the figure's unit (negative
+    /// outside it; none without limits).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub margin: Option<f64>,
+    /// The margin in expanded uncertainties.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub margin_u: Option<f64>,
+    /// For a compensated drift: what a perfectly compensated unit with the
+    /// run's own noise would read (`docs/figures.md`), deg/h.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub noise_floor: Option<f64>,
     /// For a drift: the smoothed series its peak-to-peak was taken on (for
     /// the report's charts; not part of `report.json`).
     #[serde(skip)]
@@ -554,7 +650,8 @@ impl Measurement {
     }
 }
 
-/// Compute a measure on the records; `coeffs` compensate when given.
+/// Compute a measure on the records; `coeffs` compensate when given; the
+/// value judged as `judging` says, with its uncertainty.
 ///
 /// Figures over records of several parts of a resumed run (several
 /// power-ons) give each part its own constant, as each has its own
@@ -566,6 +663,7 @@ pub fn compute(
     records: &Records,
     coeffs: Option<&crate::coeffs::Compensation>,
     step: &str,
+    judging: &Judging,
 ) -> Measurement {
     let faults_before = records.read_faults();
     // The parts are slices of the one series (one copy in memory).
@@ -596,19 +694,45 @@ pub fn compute(
         Metric::WarmUpTime => warm_up(m, &series, &bias),
         Metric::PowerSteady | Metric::PowerPeak => power(m, records),
         Metric::SelfHeating => Computed::value(self_heating_dph(&series).map(f64::abs)),
-        Metric::TemperatureSensitivity => {
-            Computed::value(temperature_sensitivity_parts(&part_refs).map(|(a, _)| a))
+        Metric::TemperatureSensitivity | Metric::TemperatureRateSensitivity => {
+            sensitivity(m.metric, &part_refs)
         }
-        Metric::TemperatureRateSensitivity => {
-            Computed::value(temperature_sensitivity_parts(&part_refs).map(|(_, b)| b))
+        Metric::CompensatedDriftPp if judging.legacy => {
+            let mut c = drift_of(compensated_drift(
+                coeffs,
+                &part_refs,
+                window,
+                if coeffs.is_some() {
+                    Residual::HeldOut
+                } else {
+                    Residual::InSample
+                },
+            ));
+            if coeffs.is_none() {
+                "model 4 fitted on these records (no --coeffs given)".clone_into(&mut c.note);
+            }
+            c
         }
-        Metric::CompensatedDriftPp => compensated_drift(coeffs, &part_refs, bias.len(), window),
+        Metric::CompensatedDriftPp => drift_of(compensated_drift(
+            coeffs,
+            &part_refs,
+            window,
+            Residual::HeldOut,
+        )),
+        Metric::CompensatedDriftFitResidualPp => drift_of(compensated_drift(
+            None,
+            &part_refs,
+            window,
+            Residual::InSample,
+        )),
     };
     let Computed {
         value,
         mut note,
         std_error,
         trace,
+        known,
+        noise_floor,
     } = c;
     let value = value.filter(|v| v.is_finite());
     if value.is_none() && note.is_empty() {
@@ -618,8 +742,22 @@ pub fn compute(
             m.averaging_s
         );
     }
-    let within =
-        value.is_some_and(|v| m.low.is_none_or(|lo| v >= lo) && m.high.is_none_or(|hi| v <= hi));
+    let uncertainty = match value {
+        Some(v) => super::uncertainty::of(
+            m.metric,
+            v,
+            &series,
+            m.averaging_s,
+            &known,
+            &judging.typeb,
+        ),
+        None => Err("the figure has no value".to_owned()),
+    };
+    let (uncertainty, uncertainty_reason) = match uncertainty {
+        Ok(u) => (Some(u), None),
+        Err(why) => (None, Some(why)),
+    };
+    let judged = judge(m, value, uncertainty.as_ref(), judging, &mut note, uncertainty_reason.as_deref());
     // Rows this measure's reads could not get back: its data are not whole.
     let unread = records.read_faults().since(&faults_before);
     let outcome = match unread.or_else(|| records.problem(&m.records)) {
@@ -627,8 +765,7 @@ pub fn compute(
             note = format!("not judged: {p}");
             MeasureOutcome::Error
         }
-        None if within => MeasureOutcome::Pass,
-        None => MeasureOutcome::Fail,
+        None => judged.outcome,
     };
     Measurement {
         name: m.name.clone(),
@@ -643,8 +780,110 @@ pub fn compute(
         records: m.records.clone(),
         note,
         std_error,
+        uncertainty,
+        uncertainty_reason,
+        guard_band: judged.guard_band,
+        margin: judged.margin,
+        margin_u: judged.margin_u,
+        noise_floor,
         trace,
         band: m.band,
+    }
+}
+
+/// A value judged: its outcome, the guard band applied, its margin.
+struct Judged {
+    outcome: MeasureOutcome,
+    guard_band: Option<f64>,
+    margin: Option<f64>,
+    margin_u: Option<f64>,
+}
+
+/// Judge `value` against `m`'s limits by `judging`'s rule; a figure with
+/// limits but no uncertainty is judged by its limits alone, and `note`
+/// says so.
+fn judge(
+    m: &Measure,
+    value: Option<f64>,
+    u: Option<&Uncertainty>,
+    judging: &Judging,
+    note: &mut String,
+    no_u: Option<&str>,
+) -> Judged {
+    let limited = m.low.is_some() || m.high.is_some();
+    let expanded = u.map(|u| u.expanded);
+    let Some(v) = value else {
+        return Judged {
+            outcome: MeasureOutcome::Fail,
+            guard_band: None,
+            margin: None,
+            margin_u: None,
+        };
+    };
+    if limited && expanded.is_none() && judging.rule != DecisionRule::Simple {
+        let why = no_u.unwrap_or("its uncertainty could not be formed");
+        let said = format!("judged by its limits alone (no guard band): {why}");
+        if note.is_empty() {
+            *note = said;
+        } else {
+            note.push_str("; ");
+            note.push_str(&said);
+        }
+    }
+    let margin = limited.then(|| {
+        let lo = m.low.map_or(f64::INFINITY, |lo| v - lo);
+        let hi = m.high.map_or(f64::INFINITY, |hi| hi - v);
+        lo.min(hi)
+    });
+    Judged {
+        outcome: MeasureOutcome::of(judging.rule.judge(v, m.low, m.high, expanded)),
+        guard_band: expanded
+            .filter(|_| limited)
+            .and_then(|u| judging.rule.guard_band(u)),
+        margin,
+        margin_u: margin.zip(expanded.filter(|u| *u > 0.0)).map(|(m, u)| m / u),
+    }
+}
+
+/// A compensated drift as a computed figure.
+fn drift_of(d: super::compensated::Drift) -> Computed {
+    Computed {
+        value: d.value,
+        note: d.note,
+        std_error: None,
+        trace: d.trace,
+        known: Known {
+            noise_series: Some(d.residual),
+            ..Known::default()
+        },
+        noise_floor: d.noise_floor,
+    }
+}
+
+/// The temperature or temperature-rate sensitivity, with its fit's
+/// standard error.
+fn sensitivity(metric: Metric, parts: &[&[Interval]]) -> Computed {
+    let Some(f) = sensitivity_fit(parts) else {
+        return Computed::default();
+    };
+    let (value, se) = if metric == Metric::TemperatureSensitivity {
+        (f.a, f.se_a)
+    } else {
+        (f.b, f.se_b)
+    };
+    Computed {
+        value: Some(value),
+        known: Known {
+            type_a: vec![Contribution::type_a(
+                "fit: the coefficient's standard error",
+                se,
+                f.dof,
+                "least squares with one constant per power-on; sigma^2 (X'X)^-1, \
+                 inflated for the residual's lag-1 autocorrelation",
+            )],
+            ..Known::default()
+        },
+        ..Computed::default()
     }
 }
 
@@ -656,6 +895,10 @@ struct Computed {
     note: String,
     std_error: Option<f64>,
     trace: Option<DriftTrace>,
+    /// What its uncertainty budget needs from the computation.
+    known: Known,
+    /// A compensated drift's noise floor, deg/h.
+    noise_floor: Option<f64>,
 }
 
 impl Computed {
@@ -666,12 +909,28 @@ impl Computed {
         }
     }
 
-    /// A figure with its standard error, or why there is none.
-    fn figure(f: Option<Figure>, what: &str) -> Self {
+    /// A figure with its standard error (from `points` records, fitted
+    /// with three coefficients or fewer), or why there is none.
+    fn figure(f: Option<Figure>, what: &str, points: usize) -> Self {
         match f {
             Some(f) => Self {
                 value: Some(f.value),
                 std_error: f.std_error,
+                known: Known {
+                    type_a: f
+                        .std_error
+                        .map(|se| {
+                            Contribution::type_a(
+                                "fit: the figure's standard error",
+                                se,
+                                points.saturating_sub(3).max(1) as f64,
+                                format!("{points} records, the fit's covariance"),
+                            )
+                        })
+                        .into_iter()
+                        .collect(),
+                    ..Known::default()
+                },
                 ..Self::default()
             },
             None => Self {
@@ -684,47 +943,53 @@ impl Computed {
 
 /// The rate-table figures, on the named records' rate points.
 fn rate_figure(m: &Measure, records: &Records) -> Computed {
-    let points = || -> Vec<RatePoint> {
-        m.records
-            .iter()
-            .filter_map(|l| records.get(l))
-            .filter_map(|ivs| RatePoint::of(&ivs))
-            .collect()
-    };
+    let points: Vec<RatePoint> = m
+        .records
+        .iter()
+        .filter_map(|l| records.get(l))
+        .filter_map(|ivs| RatePoint::of(&ivs))
+        .collect();
+    let n = points.len();
     const RATES: &str =
         "needs rate records at three or more input rates (four when they turn both ways)";
     const SMALL: &str = "needs four or more records at small input rates";
     match m.metric {
-        Metric::ScaleFactor => Computed::figure(rate::scale_factor_ppm(&points()), RATES),
+        Metric::ScaleFactor => Computed::figure(rate::scale_factor_ppm(&points), RATES, n),
         Metric::ScaleFactorNonlinearity => {
-            Computed::figure(rate::nonlinearity_ppm(&points()), RATES)
+            Computed::figure(rate::nonlinearity_ppm(&points), RATES, n)
         }
         Metric::ScaleFactorAsymmetry => Computed::figure(
-            rate::asymmetry_ppm(&points()),
+            rate::asymmetry_ppm(&points),
             "needs rate records in both directions, four or more",
+            n,
         ),
         Metric::ScaleFactorTemperature => Computed::figure(
-            rate::temperature_coefficient_ppm_per_c(&points()),
+            rate::temperature_coefficient_ppm_per_c(&points),
             "needs rate records at block temperatures at least 1 degC apart",
+            n,
         ),
         Metric::DeadBand => {
-            Computed::figure(rate::band_dph(&points(), rate::DEAD_BAND_SHARE), SMALL)
+            Computed::figure(rate::band_dph(&points, rate::DEAD_BAND_SHARE), SMALL, n)
         }
         Metric::Threshold => {
-            Computed::figure(rate::band_dph(&points(), rate::THRESHOLD_SHARE), SMALL)
+            Computed::figure(rate::band_dph(&points, rate::THRESHOLD_SHARE), SMALL, n)
         }
-        _ => Computed::figure(
-            rate::misalignment_arcsec(
-                &m.records
-                    .iter()
-                    .filter_map(|l| {
-                        let p = RatePoint::of(&records.get(l)?)?;
-                        Some((records.turn_rate_dps(l)? * 3600.0, p))
-                    })
-                    .collect::<Vec<_>>(),
-            ),
-            "needs three or more records of frames with a table axis turning both ways",
-        ),
+        _ => {
+            let turning: Vec<(f64, RatePoint)> = m
+                .records
+                .iter()
+                .filter_map(|l| {
+                    let p = RatePoint::of(&records.get(l)?)?;
+                    Some((records.turn_rate_dps(l)? * 3600.0, p))
+                })
+                .collect();
+            let n = turning.len();
+            Computed::figure(
+                rate::misalignment_arcsec(&turning),
+                "needs three or more records of frames with a table axis turning both ways",
+                n,
+            )
+        }
     }
 }
 
@@ -764,8 +1029,8 @@ fn drift(parts: &[&[Interval]], window: usize) -> Computed {
                     "{} parts (power-ons) of a resumed run; turn-on offsets from the model-4 fit removed",
                     parts.len()
                 ),
-                std_error: None,
                 trace,
+                ..Computed::default()
             }
         }
         Err(e) => Computed {
@@ -790,25 +1055,59 @@ fn repeatability(m: &Measure, records: &Records) -> Computed {
             std_error: Some(e),
         }),
         "needs two or more records with data, one after each turn-on",
+        means.len(),
     );
     if c.value.is_some() {
         c.note = format!("{} turn-ons", means.len());
+        // A standard deviation of n turn-ons: n - 1 degrees of freedom.
+        for line in &mut c.known.type_a {
+            line.source = "the spread of the turn-ons' biases".into();
+            line.dof = Some(means.len().saturating_sub(1).max(1) as f64);
+            line.basis = format!("{} turn-ons: s / sqrt(2 (n - 1)) (GUM E.4.3)", means.len());
+        }
     }
     c
 }
 
-/// Warm-up time over a record made from turn-on.
+/// Warm-up time over a record made from turn-on: its uncertainty is the
+/// noise of an averaging window's mean over the transient's slope where
+/// it settles (how far the crossing moves for one standard deviation of
+/// the mean), plus the 1 s reading.
 fn warm_up(m: &Measure, series: &[Interval], bias: &[f64]) -> Computed {
     let dt = match series {
         [a, b, ..] => b.time_s - a.time_s,
         _ => 1.0,
     };
-    let t = crate::analysis::figures::warm_up_time(
-        bias,
-        dt,
-        (m.averaging_s / dt).round().max(1.0) as usize,
-        m.band.unwrap_or(0.0),
-    );
+    let window = (m.averaging_s / dt).round().max(1.0) as usize;
+    let t = crate::analysis::figures::warm_up_time(bias, dt, window, m.band.unwrap_or(0.0));
+    let mut type_a = Vec::new();
+    if let (Some(t), Some((sigma, edf))) = (t, super::uncertainty::noise_of_means(bias, window)) {
+        let smooth = crate::analysis::figures::moving_average(bias, window);
+        // The moving mean ending at t: index t/dt - window.
+        let at = ((t / dt).round() as usize).saturating_sub(window);
+        let slope = match (smooth.get(at.saturating_sub(window / 2)), smooth.get(at + window / 2)) {
+            (Some(a), Some(b)) if window > 1 => (b - a) / (window as f64 * dt),
+            _ => f64::NAN,
+        };
+        if slope.is_finite() && slope != 0.0 {
+            type_a.push(Contribution::type_a(
+                "noise of the mean where it settles, over the transient's slope",
+                sigma / slope.abs(),
+                edf,
+                format!(
+                    "{sigma:.5} deg/h ({} s means) / {:.3e} deg/h per s",
+                    m.averaging_s,
+                    slope.abs()
+                ),
+            ));
+        }
+        type_a.push(Contribution::type_a(
+            "the 1 s reading",
+            dt / 12f64.sqrt(),
+            1e9,
+            "a 1 s interval: 1/sqrt(12) s",
+        ));
+    }
     Computed {
         value: t,
         note: if t.is_none() {
@@ -821,6 +1120,10 @@ fn warm_up(m: &Measure, series: &[Interval], bias: &[f64]) -> Computed {
         } else {
             String::new()
         },
+        known: Known {
+            type_a,
+            ..Known::default()
+        },
         ..Computed::default()
     }
 }
@@ -828,7 +1131,7 @@ fn warm_up(m: &Measure, series: &[Interval], bias: &[f64]) -> Computed {
 /// Steady power (the mean of the readings during the records) or peak
 /// power (the highest from each record's turn-on to its end).
 fn power(m: &Measure, records: &Records) -> Computed {
-    let readings: Vec<f64> = m
+    let readings: Vec<PowerSample> = m
         .records
         .iter()
         .flat_map(|l| {
@@ -839,78 +1142,46 @@ fn power(m: &Measure, records: &Records) -> Computed {
             }
         })
         .filter(|p| p.on)
-        .map(|p| p.w())
         .collect();
+    let watts: Vec<f64> = readings.iter().map(PowerSample::w).collect();
+    let n = watts.len();
+    let mut known = Known::default();
     let (value, note) = if readings.is_empty() {
         (
             None,
             "not computable: no supply readings with the output on during the records (a bench with [devices.supply])".to_owned(),
         )
     } else if m.metric == Metric::PowerPeak {
+        let peak = readings
+            .iter()
+            .copied()
+            .max_by(|a, b| a.w().total_cmp(&b.w()))
+            .unwrap_or(readings[0]);
+        known.supply = Some((peak.v, peak.a));
         (
-            Some(readings.iter().copied().fold(f64::NEG_INFINITY, f64::max)),
-            format!("highest of {} supply readings from turn-on", readings.len()),
+            Some(peak.w()),
+            format!("highest of {n} supply readings from turn-on"),
         )
     } else {
-        (
-            Some(mean(&readings)),
-            format!("mean of {} supply readings", readings.len()),
-        )
+        known.supply = Some((
+            mean(&readings.iter().map(|p| p.v).collect::<Vec<_>>()),
+            mean(&readings.iter().map(|p| p.a).collect::<Vec<_>>()),
+        ));
+        if n >= 2 {
+            known.type_a.push(Contribution::type_a(
+                "the scatter of the readings",
+                crate::analysis::figures::std_dev(&watts) / (n as f64).sqrt(),
+                (n - 1) as f64,
+                format!("{n} readings: s / sqrt(n)"),
+            ));
+        }
+        (Some(mean(&watts)), format!("mean of {n} supply readings"))
     };
     Computed {
         value,
         note,
+        known,
         ..Computed::default()
-    }
-}
-
-/// Peak-to-peak of the model-4 residual, smoothed: with the given
-/// coefficients, else model 4 fitted on the same records; over several
-/// parts each part's own constant removed.
-fn compensated_drift(
-    coeffs: Option<&crate::coeffs::Compensation>,
-    part_refs: &[&[Interval]],
-    samples: usize,
-    window: usize,
-) -> Computed {
-    let (fit, note) = match coeffs {
-        Some(c) => (
-            Ok(c.fit.clone()),
-            format!("model 4 with {}", c.used.describe()),
-        ),
-        None => (
-            model::fit_runs(ModelKind::Model4, part_refs).map(|m| m.fit),
-            "model 4 fitted on these records (no --coeffs given)".to_owned(),
-        ),
-    };
-    match fit {
-        Ok(f) if samples >= window => {
-            // A p-p does not see a constant within one part.
-            let several = part_refs.len() > 1;
-            let residuals: Vec<(Vec<f64>, Vec<f64>)> = part_refs
-                .iter()
-                .map(|p| {
-                    let r = f.residual(p);
-                    let c = if several { mean(&r) } else { 0.0 };
-                    (times(p), r.iter().map(|v| v - c).collect())
-                })
-                .collect();
-            let trace = drift_trace(&residuals, window);
-            Computed {
-                value: trace.as_ref().map(DriftTrace::pp),
-                note,
-                std_error: None,
-                trace,
-            }
-        }
-        Ok(_) => Computed {
-            note,
-            ..Computed::default()
-        },
-        Err(e) => Computed {
-            note: format!("cannot compensate: {e}"),
-            ..Computed::default()
-        },
     }
 }
 

@@ -7,6 +7,7 @@
 //! recorder, the display) and to the record store that measure steps
 //! compute on.
 
+pub mod compensated;
 pub mod device;
 pub mod embedded;
 pub mod events;
@@ -17,6 +18,7 @@ pub mod interrupt;
 pub mod measure;
 pub mod resume;
 pub mod spill;
+pub mod uncertainty;
 
 use std::sync::Arc;
 
@@ -316,32 +318,56 @@ fn tell(log: &mut dyn Observer, watch: &mut dyn Operator, e: &Event<'_>) -> std:
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Outcome {
-    /// Every measurement within its limits.
+    /// Every measurement passed by the procedure's decision rule.
     Pass,
-    /// A measurement outside its limits.
+    /// A measurement outside its limits (or, guarded, inside its guard
+    /// band).
     Fail,
     /// A device or data failure ended the run.
     Error,
     /// The operator interrupted the run.
     Aborted,
+    /// Non-binary rule: none failed, and at least one passed only
+    /// conditionally (within its limits by less than its uncertainty).
+    ConditionalPass,
+    /// Non-binary rule: none failed outright, and at least one failed
+    /// conditionally (beyond its limits by less than its uncertainty).
+    ConditionalFail,
 }
 
 impl Outcome {
-    /// `pass`, `fail`, `error` or `aborted`.
+    /// Every outcome.
+    pub const ALL: [Self; 6] = [
+        Self::Pass,
+        Self::Fail,
+        Self::Error,
+        Self::Aborted,
+        Self::ConditionalPass,
+        Self::ConditionalFail,
+    ];
+
+    /// `pass`, `fail`, `error`, `aborted`, `conditional_pass` or
+    /// `conditional_fail`.
     pub fn as_str(self) -> &'static str {
         match self {
             Self::Pass => "pass",
             Self::Fail => "fail",
             Self::Error => "error",
             Self::Aborted => "aborted",
+            Self::ConditionalPass => "conditional_pass",
+            Self::ConditionalFail => "conditional_fail",
         }
     }
 
     /// The outcome named by [`Outcome::as_str`].
     pub fn parse(s: &str) -> Option<Self> {
-        [Self::Pass, Self::Fail, Self::Error, Self::Aborted]
-            .into_iter()
-            .find(|o| o.as_str() == s)
+        Self::ALL.into_iter().find(|o| o.as_str() == s)
+    }
+
+    /// A verdict a run that went to its end gives (not an error or an
+    /// abort).
+    pub fn is_verdict(self) -> bool {
+        !matches!(self, Self::Error | Self::Aborted)
     }
 }
 
@@ -420,9 +446,11 @@ impl RunResult {
     pub fn worst_unit(&self) -> usize {
         let rank = |o: Outcome| match o {
             Outcome::Pass => 0,
-            Outcome::Fail => 1,
-            Outcome::Error => 2,
-            Outcome::Aborted => 3,
+            Outcome::ConditionalPass => 1,
+            Outcome::ConditionalFail => 2,
+            Outcome::Fail => 3,
+            Outcome::Error => 4,
+            Outcome::Aborted => 5,
         };
         let outcome = |k: usize| match k.checked_sub(1).and_then(|i| self.others.get(i)) {
             Some(u) => u.outcome.unwrap_or(self.outcome),
@@ -529,6 +557,9 @@ pub struct Options {
     /// A batch stops when one of its units cannot be judged (the bench's
     /// `on_unit_error = "stop"`); else that unit ends in error alone.
     pub stop_on_unit_error: bool,
+    /// What the figures are judged by (the procedure's decision rule, the
+    /// bench's declared uncertainties).
+    pub judging: measure::Judging,
 }
 
 /// How long past its expected end the bench may take to settle at the end
@@ -1243,7 +1274,13 @@ impl Run<'_> {
 
     /// Compute a figure on the records so far and judge it.
     fn measure_step(&mut self, key: &str, m: &crate::procedure::Measure) -> Result<(), Stop> {
-        let meas = measure::compute(m, &self.records, self.opts.coeffs.as_ref(), key);
+        let meas = measure::compute(
+            m,
+            &self.records,
+            self.opts.coeffs.as_ref(),
+            key,
+            &self.opts.judging,
+        );
         let msg = format!(
             "{} = {} {} [{}] ({})",
             meas.name,
@@ -1265,7 +1302,7 @@ impl Run<'_> {
         for (k, lane) in self.others.iter_mut().enumerate() {
             // Each unit is judged on its own records; coefficients are the
             // first unit's alone (a batch fits each unit's on its run).
-            let meas = measure::compute(m, &lane.records, None, key);
+            let meas = measure::compute(m, &lane.records, None, key, &self.opts.judging);
             let _ = self.watch.observe(&Event::Measured {
                 slot: k + 1,
                 m: &meas,
@@ -1655,10 +1692,17 @@ pub fn verdict(measurements: &[Measurement]) -> (Outcome, Option<RunError>) {
             }),
         );
     }
-    let failed = measurements
-        .iter()
-        .any(|m| m.outcome != MeasureOutcome::Pass);
-    (if failed { Outcome::Fail } else { Outcome::Pass }, None)
+    let any = |o: MeasureOutcome| measurements.iter().any(|m| m.outcome == o);
+    let outcome = if any(MeasureOutcome::Fail) {
+        Outcome::Fail
+    } else if any(MeasureOutcome::ConditionalFail) {
+        Outcome::ConditionalFail
+    } else if any(MeasureOutcome::ConditionalPass) {
+        Outcome::ConditionalPass
+    } else {
+        Outcome::Pass
+    };
+    (outcome, None)
 }
 
 fn device_of(e: &DeviceError) -> Option<String> {

@@ -670,12 +670,18 @@ pub const MOVE_TIMEOUT_S: f64 = 600.0;
 
 /// The sequencer's options for a run on `bench`.
 pub fn options(
+    procedure: &Procedure,
     bench: &BenchConfig,
     coeffs: Option<crate::coeffs::Compensation>,
     interrupt: Arc<Interrupt>,
     resume: Option<Resume>,
 ) -> Options {
     Options {
+        judging: crate::sequencer::measure::Judging::new(
+            procedure,
+            bench,
+            crate::runlog::schema::FORMAT,
+        ),
         coeffs,
         interrupt,
         dut_max_c: bench.limits.dut_max_c,
@@ -786,6 +792,7 @@ pub fn execute(
     });
     let notes_at_begin = notes.len();
     let mut opts = options(
+        &plan.procedure,
         &plan.bench_cfg,
         plan.coeffs.as_ref().and_then(Chosen::compensation),
         interrupt,

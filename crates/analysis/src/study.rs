@@ -107,6 +107,33 @@ pub fn temperature_sensitivity(series: &[Interval]) -> Option<(f64, f64)> {
 /// constant per part (each power-on has its own turn-on bias), the
 /// temperature rate differentiated within each part, never across a break.
 pub fn temperature_sensitivity_parts(parts: &[&[Interval]]) -> Option<(f64, f64)> {
+    sensitivity_fit(parts).map(|f| (f.a, f.b))
+}
+
+/// The temperature and temperature-rate sensitivities with their standard
+/// errors.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SensitivityFit {
+    /// deg/h per degC.
+    pub a: f64,
+    /// deg/h per degC/min.
+    pub b: f64,
+    /// Standard error of `a`.
+    pub se_a: f64,
+    /// Standard error of `b`.
+    pub se_b: f64,
+    /// Degrees of freedom of the errors: the samples' effective number
+    /// (their lag-1 autocorrelation taken into account) less the
+    /// coefficients.
+    pub dof: f64,
+}
+
+/// [`temperature_sensitivity_parts`] with the coefficients' standard
+/// errors: `sigma^2 (X'X)^-1`, the residual variance inflated by
+/// `(1 + r1) / (1 - r1)` for the lag-1 autocorrelation `r1` of the 1 Hz
+/// residual (it is far from independent), the degrees of freedom the
+/// sample count shrunk the same way less the coefficients.
+pub fn sensitivity_fit(parts: &[&[Interval]]) -> Option<SensitivityFit> {
     let n: usize = parts.iter().map(|p| p.len()).sum();
     if n < 10 {
         return None;
@@ -139,8 +166,28 @@ pub fn temperature_sensitivity_parts(parts: &[&[Interval]]) -> Option<(f64, f64)
     }
     let y: Vec<f64> = rows.iter().map(|r| r.3).collect();
     let b = nalgebra::DVector::from_column_slice(&y);
-    let beta = x.svd(true, true).solve(&b, 1e-12).ok()?;
-    (beta[np].is_finite() && beta[np + 1].is_finite()).then(|| (beta[np], beta[np + 1]))
+    let beta = x.clone().svd(true, true).solve(&b, 1e-12).ok()?;
+    if !(beta[np].is_finite() && beta[np + 1].is_finite()) {
+        return None;
+    }
+    let resid = &b - &x * &beta;
+    let rss = resid.norm_squared();
+    let r1 = {
+        let num: f64 = resid.as_slice().windows(2).map(|w| w[0] * w[1]).sum();
+        (num / rss.max(f64::MIN_POSITIVE)).clamp(0.0, 0.99)
+    };
+    let p = np + 2;
+    let n_eff = n as f64 * (1.0 - r1) / (1.0 + r1);
+    let dof = (n_eff - p as f64).max(1.0);
+    let sigma2 = rss / (n - p).max(1) as f64 * (1.0 + r1) / (1.0 - r1);
+    let cov = (x.transpose() * &x).try_inverse()?;
+    Some(SensitivityFit {
+        a: beta[np],
+        b: beta[np + 1],
+        se_a: (sigma2 * cov[(np, np)]).sqrt(),
+        se_b: (sigma2 * cov[(np + 1, np + 1)]).sqrt(),
+        dof,
+    })
 }
 
 #[cfg(test)]

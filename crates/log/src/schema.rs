@@ -147,8 +147,16 @@ pub fn slot_topic(slot: &str, topic: &str) -> String {
 }
 
 /// Version of the log layout this build writes. Format 1 logs (no
-/// `/steps`, no attachments) still replay.
-pub const FORMAT: u32 = 2;
+/// `/steps`, no attachments) still replay; format 3 judges by a decision
+/// rule (`FORMAT_JUDGED`).
+pub const FORMAT: u32 = 3;
+
+/// The first format whose runs were judged by a decision rule with each
+/// figure's uncertainty, a procedure naming none judged guarded, and the
+/// compensated drift on coefficients fitted held out. A log of an earlier
+/// format is replayed as it was judged: by its limits alone, the drift
+/// compensated in sample.
+pub const FORMAT_JUDGED: u32 = 3;
 
 /// Name of the metadata record with the run's configuration.
 pub const RUN_META: &str = "run";
