@@ -14,6 +14,7 @@ pub mod finish;
 pub mod guard;
 pub mod health;
 pub mod interrupt;
+mod links;
 pub mod measure;
 pub mod resume;
 pub mod spill;
@@ -189,6 +190,11 @@ pub trait BenchIo: Send {
     /// Ask the chamber and the table what they are, each as it reports
     /// itself (or why it did not).
     async fn identify(&mut self) -> Identities;
+    /// What the bench's links say as they drop, come back or are lost
+    /// (none: a bench without links, the embedded one).
+    fn link_watch(&self) -> Option<std::sync::Arc<crate::driver::LinkWatch>> {
+        None
+    }
 }
 
 /// The identities a bench's instruments reported.
@@ -767,6 +773,15 @@ impl Run<'_> {
         self.say_spill_faults();
     }
 
+    /// Tell what the bench's links said since last asked (a drop, a
+    /// return, a loss).
+    fn say_links(&mut self) {
+        if let Some(links) = self.bench.link_watch() {
+            let t_s = self.bench.now_s();
+            links::say(&links, t_s, self.log, self.watch, &mut self.log_failed);
+        }
+    }
+
     /// Say once per unit that its record store's temporary file failed
     /// (its rows stay in memory: nothing is lost).
     fn say_spill_faults(&mut self) {
@@ -842,11 +857,35 @@ impl Run<'_> {
         if self.opts.interrupt.is_requested() {
             return Err(Stop::Interrupted);
         }
-        let t = (self.bench.now_s() + 1.0).min(until_s);
-        self.bench
-            .advance(t, &mut self.tick)
-            .await
-            .map_err(Stop::Device)?;
+        let t0 = self.bench.now_s();
+        let t = (t0 + 1.0).min(until_s);
+        let links = self.bench.link_watch();
+        let advanced = links::telling(
+            self.bench.advance(t, &mut self.tick),
+            links.as_deref(),
+            t0,
+            self.log,
+            self.watch,
+            &mut self.log_failed,
+        )
+        .await;
+        if let Err(e) = advanced {
+            // A wait on a dropped link that an interrupt ended: the run
+            // stops as interrupted, the link's state said.
+            if matches!(e, DeviceError::GaveUp { .. }) && !self.cleaning_up {
+                if self.opts.interrupt.cause().is_some() {
+                    self.note(Level::Warning, &e.to_string());
+                    return Err(Stop::Interrupted);
+                }
+                // Found down after another link was lost: the run stops
+                // for the first loss.
+                if let Some(lost) = links.as_deref().and_then(|l| l.first_loss()) {
+                    self.note(Level::Warning, &e.to_string());
+                    return Err(Stop::Device(lost));
+                }
+            }
+            return Err(Stop::Device(e));
+        }
         self.say_unit_faults();
         self.frames += self.tick.frames.len() as u64;
         let r = tell(
@@ -1338,6 +1377,12 @@ pub async fn run(
     };
     r.others
         .resize_with(r.bench.units().saturating_sub(1), Lane::default);
+    // An interrupt ends every wait on a dropped link: the run stops now,
+    // and a link found down from then on is tried once.
+    if let Some(links) = r.bench.link_watch() {
+        opts.interrupt
+            .on_request(move |cause| links.stop_waiting(&format!("{cause} asked to stop")));
+    }
     let total = p.steps().count();
     let mut stop: Option<(Stop, String)> = None;
     let start_at = opts.resume.as_ref().map_or(0, |res| res.start_at);
@@ -1673,6 +1718,7 @@ fn device_of(e: &DeviceError) -> Option<String> {
         | DeviceError::Interlock { device }
         | DeviceError::Overcurrent { device, .. }
         | DeviceError::Unreachable { device, .. }
+        | DeviceError::GaveUp { device, .. }
         | DeviceError::Silent { device, .. } => Some(device.clone()),
     }
 }
