@@ -25,7 +25,8 @@ use crate::unit::{SIMULATED_SERIAL, check_operator, check_serial};
     "gyrobench run procedures/smoke.toml --out runs/smoke",
     "0 the unit passed, 3 it failed its limits, 1 error (bad input, I/O, a device, data that could \
      not be judged, a bench not left in a known state), 2 usage (bad arguments, a run directory \
-     that holds a run or is in use), 130 Ctrl-C, 143 SIGTERM, 129 SIGHUP, 131 SIGQUIT"
+     that holds a run or is in use, a bench another run is using), 130 Ctrl-C, 143 SIGTERM, \
+     129 SIGHUP, 131 SIGQUIT"
 ))]
 pub struct RunArgs {
     /// Procedure file (TOML), e.g. procedures/acceptance.toml.
@@ -537,7 +538,10 @@ pub fn run(args: RunArgs) -> Result<Outcome> {
                 | RunDirError::Locked { .. }
                 | RunDirError::Suspicious { .. },
             )
-            | SessionError::CalibrationOverdue { .. }),
+            | SessionError::CalibrationOverdue { .. }
+            | SessionError::BenchLock(crate::session::benchlock::BenchLockError::InUse {
+                ..
+            })),
         ) => {
             return Err(Usage(e.to_string()).into());
         }
