@@ -85,9 +85,16 @@ pub struct RunArgs {
     /// (chamber-alarm, chamber-silent, table-interlock, gyro-silent,
     /// gyro-corrupt, gyro-stuck, gyro-saturated, process-kill, panic,
     /// supply-overcurrent, disk-full, sighup, sigquit; unit-lost: a
-    /// batch's last unit's link lost for good, the others go on).
+    /// batch's last unit's link lost for good, the others go on;
+    /// supply-ignores-off: the supply leaves its output on when told off).
     #[arg(long, value_name = "FAULT@SECONDS")]
     inject: Vec<String>,
+    /// Nobody watches the run: the procedure's prompts (unit mounted,
+    /// chamber door closed, ...) count as confirmed by --operator before
+    /// it starts, and the log says so at each one. Without it, a run on
+    /// real devices whose procedure asks something needs a terminal.
+    #[arg(long)]
+    unattended: bool,
     /// Publish the run's channels live on a Foxglove WebSocket server
     /// (loopback only; default 127.0.0.1:8765, port 0 picks a free one):
     /// Foxglove or Lichtblick shows the run as it goes.

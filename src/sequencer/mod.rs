@@ -1488,6 +1488,27 @@ impl Run<'_> {
                 StepKind::Power { .. } => Some("supply"),
                 _ => None,
             };
+            // A run that stopped leaves the unit as the safe state left it:
+            // a cleanup that powers it again (a turn-on procedure's) is for
+            // a run that went to its end, unless the bench's safe state
+            // itself keeps the unit powered.
+            if stop.is_some()
+                && matches!(s.kind, StepKind::Power { on: true, .. })
+                && !self.opts.supply_safe_on
+            {
+                cleanup_completed = false;
+                if !self.expected.skipped.iter().any(|x| x == "supply") {
+                    self.expected.skipped.push("supply".to_owned());
+                }
+                self.note(
+                    Level::Warning,
+                    &format!(
+                        "cleanup step {} skipped: the run stopped, so the unit stays unpowered as the safe state left it (a bench whose devices.supply.safe_state is \"on\" powers it again)",
+                        s.key
+                    ),
+                );
+                continue;
+            }
             if let (Some(d), Some(f)) = (needs, faulted)
                 && d == f
             {
