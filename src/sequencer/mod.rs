@@ -301,14 +301,28 @@ pub trait Observer {
 /// An observer that is the run's operator too: it may be asked to
 /// confirm a prompt.
 pub trait Operator: Observer {
-    /// Ask the operator to confirm `text`; returns when confirmed. The
-    /// default confirms at once (no operator).
-    fn prompt(&mut self, _text: &str) {}
+    /// Ask the operator to confirm `text`; returns how it was confirmed,
+    /// or why it cannot be (the run then stops at the prompt). The
+    /// default has no operator to ask: on a real bench a prompt it meets
+    /// stops the run (a simulated one never asks it).
+    fn prompt(&mut self, _text: &str) -> Result<Confirmed, String> {
+        Err("nobody watches this run to answer it".into())
+    }
     /// Whether an operator answers prompts even on a simulated bench (a
     /// station page); else a simulated run goes on without asking.
     fn answers_prompts(&self) -> bool {
         false
     }
+}
+
+/// How an operator confirmed a prompt.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Confirmed {
+    /// Answered when asked (the terminal, the station's page).
+    Now,
+    /// Confirmed before the run started, for a run nobody watches
+    /// (`run --unattended --operator NAME`).
+    Beforehand,
 }
 
 /// Tell the run's operator (a display: whatever fails there loses nothing)
@@ -760,6 +774,7 @@ impl Run<'_> {
     /// Say which of a batch's links failed since the last tick: the batch
     /// goes on without those units.
     fn say_unit_faults(&mut self) {
+        self.say_links();
         for (k, why) in self.bench.take_unit_faults() {
             let unit = self
                 .opts
@@ -1037,8 +1052,22 @@ impl Run<'_> {
                 self.log(Level::Info, &format!("prompt: {text}"))?;
                 // Simulated benches have no operator to wait for.
                 if !self.bench.is_simulated() || self.watch.answers_prompts() {
-                    self.watch.prompt(text);
-                    self.log(Level::Info, "operator confirmed")?;
+                    match self.watch.prompt(text) {
+                        Ok(Confirmed::Now) => self.log(Level::Info, "operator confirmed")?,
+                        Ok(Confirmed::Beforehand) => self.log(
+                            Level::Info,
+                            "confirmed beforehand by the operator (run --unattended)",
+                        )?,
+                        Err(_) if self.opts.interrupt.is_requested() => {
+                            return Err(Stop::Interrupted);
+                        }
+                        Err(why) => {
+                            return Err(Stop::Data(format!(
+                                "the prompt of step {key} (line {}) needs an operator's answer before the run may go on: {why}",
+                                s.line
+                            )));
+                        }
+                    }
                 }
                 Ok(())
             }
