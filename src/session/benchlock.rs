@@ -313,7 +313,7 @@ fn holder_words(text: &str) -> String {
         return "a run that is starting".into();
     };
     let mut words = match field("procedure") {
-        Some(p) => format!("{p}"),
+        Some(p) => p.to_owned(),
         None => "a run".to_owned(),
     };
     if let Some(u) = field("units") {
