@@ -25,7 +25,8 @@ use crate::unit::{SIMULATED_SERIAL, check_operator, check_serial};
     "gyrobench run procedures/smoke.toml --out runs/smoke",
     "0 the unit passed, 3 it failed its limits, 1 error (bad input, I/O, a device, data that could \
      not be judged, a bench not left in a known state), 2 usage (bad arguments, a run directory \
-     that holds a run or is in use), 130 Ctrl-C, 143 SIGTERM, 129 SIGHUP, 131 SIGQUIT"
+     that holds a run or is in use, a bench another run is using), 130 Ctrl-C, 143 SIGTERM, \
+     129 SIGHUP, 131 SIGQUIT"
 ))]
 pub struct RunArgs {
     /// Procedure file (TOML), e.g. procedures/acceptance.toml.
@@ -84,9 +85,16 @@ pub struct RunArgs {
     /// (chamber-alarm, chamber-silent, table-interlock, gyro-silent,
     /// gyro-corrupt, gyro-stuck, gyro-saturated, process-kill, panic,
     /// supply-overcurrent, disk-full, sighup, sigquit; unit-lost: a
-    /// batch's last unit's link lost for good, the others go on).
+    /// batch's last unit's link lost for good, the others go on;
+    /// supply-ignores-off: the supply leaves its output on when told off).
     #[arg(long, value_name = "FAULT@SECONDS")]
     inject: Vec<String>,
+    /// Nobody watches the run: the procedure's prompts (unit mounted,
+    /// chamber door closed, ...) count as confirmed by --operator before
+    /// it starts, and the log says so at each one. Without it, a run on
+    /// real devices whose procedure asks something needs a terminal.
+    #[arg(long)]
+    unattended: bool,
     /// Publish the run's channels live on a Foxglove WebSocket server
     /// (loopback only; default 127.0.0.1:8765, port 0 picks a free one):
     /// Foxglove or Lichtblick shows the run as it goes.
@@ -103,10 +111,13 @@ struct Live {
     now_s: f64,
     chamber: String,
     rate: String,
+    /// The operator confirmed the procedure's prompts before the run
+    /// (`--unattended`).
+    unattended: bool,
 }
 
 impl Live {
-    fn new(total_s: f64) -> Self {
+    fn new(total_s: f64, unattended: bool) -> Self {
         Self {
             bar: super::progress::Bar::new(
                 total_s.max(1.0) as u64,
@@ -116,6 +127,7 @@ impl Live {
             now_s: 0.0,
             chamber: String::new(),
             rate: String::new(),
+            unattended,
         }
     }
 
@@ -180,16 +192,65 @@ impl Observer for Live {
 }
 
 impl Operator for Live {
-    fn prompt(&mut self, text: &str) {
+    fn prompt(&mut self, text: &str) -> Result<sequencer::Confirmed, String> {
         use std::io::IsTerminal;
+        if self.unattended {
+            self.bar.println(&format!(
+                "prompt (confirmed beforehand, --unattended): {text}"
+            ));
+            return Ok(sequencer::Confirmed::Beforehand);
+        }
         if !std::io::stdin().is_terminal() {
-            errln!("prompt (no terminal, going on): {text}");
-            return;
+            return Err(NO_TERMINAL.into());
         }
         self.bar
             .suspend(|| errln!("{text} -- press Enter to continue"));
         let mut line = String::new();
-        let _ = std::io::stdin().read_line(&mut line);
+        match std::io::stdin().read_line(&mut line) {
+            Ok(0) => Err("the terminal closed before it was answered".into()),
+            Ok(_) => Ok(sequencer::Confirmed::Now),
+            Err(e) => Err(format!("the terminal could not be read ({e})")),
+        }
+    }
+}
+
+/// Why a prompt cannot be asked on the terminal.
+const NO_TERMINAL: &str = "there is no terminal to answer it on; run it from a terminal or the \
+     station, or confirm the procedure's prompts beforehand with --unattended --operator NAME";
+
+/// A run on real devices whose procedure asks the operator something
+/// needs someone to answer: a terminal, or `--unattended` (whose prompts
+/// the named operator confirmed before starting). Said before anything
+/// moves, naming the first prompt.
+fn check_prompts(plan: &Plan, unattended: bool) -> Result<()> {
+    use std::io::IsTerminal;
+    if unattended && plan.operator.trim().is_empty() {
+        return Err(Usage(
+            "--unattended records the procedure's prompts as confirmed beforehand by the operator: \
+             name them with --operator NAME"
+                .into(),
+        )
+        .into());
+    }
+    if plan.bench_cfg.is_embedded() || unattended || std::io::stdin().is_terminal() {
+        return Ok(());
+    }
+    let p = &plan.procedure;
+    let first = p
+        .setup
+        .iter()
+        .chain(&p.main)
+        .chain(&p.cleanup)
+        .find(|s| matches!(s.kind, crate::procedure::StepKind::Prompt { .. }));
+    match first {
+        Some(s) => Err(Usage(format!(
+            "{} asks the operator at line {} ({}), and {NO_TERMINAL}",
+            plan.procedure_path,
+            s.line,
+            s.describe()
+        ))
+        .into()),
+        None => Ok(()),
     }
 }
 
@@ -506,6 +567,7 @@ pub fn run(args: RunArgs) -> Result<Outcome> {
         }
         (None, None) => return Err(Usage("give a procedure file or --resume DIR".into()).into()),
     };
+    check_prompts(&plan, args.unattended)?;
     let rt = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
         .enable_all()
@@ -526,7 +588,7 @@ pub fn run(args: RunArgs) -> Result<Outcome> {
         None => None,
     };
     let plan = plan.with_live(live.clone());
-    let mut progress = Live::new(session::estimated_s(&plan));
+    let mut progress = Live::new(session::estimated_s(&plan), args.unattended);
     errln!("running {}", plan.procedure.meta.name);
     let finished = match session::execute(plan, place, &rt, &mut progress, interrupt) {
         Ok(f) => f,
@@ -537,7 +599,10 @@ pub fn run(args: RunArgs) -> Result<Outcome> {
                 | RunDirError::Locked { .. }
                 | RunDirError::Suspicious { .. },
             )
-            | SessionError::CalibrationOverdue { .. }),
+            | SessionError::CalibrationOverdue { .. }
+            | SessionError::BenchLock(crate::session::benchlock::BenchLockError::InUse {
+                ..
+            })),
         ) => {
             return Err(Usage(e.to_string()).into());
         }

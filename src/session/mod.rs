@@ -4,6 +4,7 @@
 //! the end of the log and the report. `import` and `twin study` share the
 //! pieces they need (the run id, the embedded bench).
 
+pub mod benchlock;
 pub mod rundir;
 
 use std::path::{Path, PathBuf};
@@ -37,6 +38,9 @@ pub enum SessionError {
     /// The run directory cannot be used.
     #[error(transparent)]
     RunDir(#[from] RunDirError),
+    /// The bench is in use by another run (or cannot be locked).
+    #[error(transparent)]
+    BenchLock(#[from] benchlock::BenchLockError),
     /// The run to resume cannot be read.
     #[error("reading the run to resume")]
     Replay(#[from] ReplayError),
@@ -768,7 +772,11 @@ pub fn execute(
         .resume
         .as_ref()
         .map_or_else(|| start.to_rfc3339(), |r| r.start_time_utc.clone());
+    // The bench before its run directory: a run refused for a bench in
+    // use leaves nothing behind.
+    let mut bench_lock = lock_bench(&plan, &run_start)?;
     let (dir, mut notes) = open_run_dir(place, &plan.procedure.meta.name, &start)?;
+    bench_lock.set_run_dir(&dir.path);
 
     let mut bench = bench_for(&plan, part, rt)?;
     let (meta, log, mut recorder) = open_log(
@@ -1086,6 +1094,37 @@ fn open_run_dir(
     Ok((dir, notes))
 }
 
+/// Every device the plan drives, locked for the run's life (the embedded
+/// bench's, none).
+fn lock_bench(plan: &Plan, started: &str) -> Result<benchlock::BenchLock, SessionError> {
+    let units = if plan.batch.is_empty() {
+        plan.dut.clone()
+    } else {
+        plan.batch
+            .iter()
+            .map(|u| u.serial.as_str())
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    let holder = benchlock::Holder {
+        procedure: plan.procedure.meta.name.clone(),
+        units,
+        bench: plan.bench_label.clone(),
+        started_utc: started.to_owned(),
+    };
+    Ok(benchlock::BenchLock::acquire(&filled_slots(plan), &holder)?)
+}
+
+/// The bench file as the run opens it: a batch's filled slots alone (an
+/// empty slot's link is not opened: nothing may be behind it), in the
+/// run's order.
+fn filled_slots(plan: &Plan) -> BenchConfig {
+    let mut cfg = plan.bench_cfg.clone();
+    cfg.slots
+        .retain(|s| plan.batch.iter().any(|u| u.slot.name == s.name));
+    cfg
+}
+
 /// The bench the plan runs on: the embedded twin (seeded for the part),
 /// or the bench file's devices opened behind the bench's limits.
 fn bench_for(
@@ -1119,12 +1158,7 @@ fn bench_for(
             bench: plan.bench_label.clone(),
             source,
         };
-        // A batch's devices are its filled slots': an empty slot's link is
-        // not opened (nothing may be behind it), and the units keep the
-        // run's order.
-        let mut cfg = plan.bench_cfg.clone();
-        cfg.slots
-            .retain(|s| plan.batch.iter().any(|u| u.slot.name == s.name));
+        let cfg = filled_slots(plan);
         let open = rt.block_on(open_bench(&cfg)).map_err(bench_err)?;
         let device = rt
             .block_on(DeviceBench::start(&cfg, open))

@@ -145,6 +145,9 @@ pub struct Supply {
     pub powered_s: f64,
     /// Peak current drawn since the last power-on, A.
     pub peak_a: f64,
+    /// A faulty supply (`--inject supply-ignores-off`): `OUTP OFF` is
+    /// taken without an error and does nothing, its output stays on.
+    pub ignores_off: bool,
     /// Time of the state, s.
     t_s: f64,
 }
@@ -160,6 +163,7 @@ impl Supply {
             load: (UnitLoad::RL16, 1),
             powered_s: 0.0,
             peak_a: 0.0,
+            ignores_off: false,
             t_s: 0.0,
         }
     }
@@ -382,6 +386,9 @@ impl Supply {
             Command::Output(on) => {
                 if on && self.channels[ch].tripped {
                     return Err(ScpiError::SETTINGS_CONFLICT);
+                }
+                if !on && self.ignores_off {
+                    return Ok(None);
                 }
                 self.channels[ch].on = on;
                 None

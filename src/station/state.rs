@@ -403,7 +403,7 @@ impl Operator for Reporter {
         true
     }
 
-    fn prompt(&mut self, text: &str) {
+    fn prompt(&mut self, text: &str) -> Result<crate::sequencer::Confirmed, String> {
         self.prompts += 1;
         let id = self.prompts;
         let text = text.to_owned();
@@ -422,12 +422,18 @@ impl Operator for Reporter {
                 .unwrap_or_else(PoisonError::into_inner)
                 .0;
         }
+        let answered = b.answered >= id;
         drop(b);
         self.shared.update(|b| {
             if let Some(run) = &mut b.run {
                 run.prompt = None;
             }
         });
+        if answered {
+            Ok(crate::sequencer::Confirmed::Now)
+        } else {
+            Err("the run was aborted at the prompt".into())
+        }
     }
 }
 
