@@ -118,3 +118,59 @@ fn no_command_writes_into_another_runs_directory_without_force() {
     assert!(notes.is_file());
     std::fs::remove_dir_all(&dir).expect("cleanup");
 }
+
+/// A log put in a run directory under a part's name with `--force` (or by
+/// hand) is not indexed as that run's part: its own metadata say whose
+/// it is.
+#[test]
+fn results_sync_indexes_a_run_directorys_own_parts_only() {
+    let dir = temp_dir("outputs-sync");
+    let db = dir.join("results.sqlite");
+    let p = write(&dir, "tiny.toml", TINY);
+    let runs = dir.join("runs");
+    let run = runs.join("replay");
+    let o = gyrobench(&["run", s(&p), "--db", "none", "--out", s(&run)]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    // The run's own replay, in its place: never a run of its own.
+    let o = gyrobench(&["replay", s(&run.join("run.mcap"))]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let fixtures = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/import");
+    let foreign = run.join("run.part2.mcap");
+    let o = gyrobench(&[
+        "import",
+        s(&fixtures.join("lab-run.csv")),
+        "--site",
+        s(&fixtures.join("site.toml")),
+        "--db",
+        "none",
+        "--force",
+        "-o",
+        s(&foreign),
+    ]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let o = gyrobench(&["results", "--db", s(&db), "sync", s(&runs)]);
+    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains(&format!("{}: not indexed", foreign.display()))
+            && stderr(&o).contains("not part 2 of run"),
+        "{}",
+        stderr(&o)
+    );
+    // One run, one part: the run directory named `replay` is a run (only
+    // a run directory's own `replay` is passed over), the imported log is
+    // not its part.
+    let o = gyrobench(&[
+        "results",
+        "--db",
+        s(&db),
+        "list",
+        "--all-parts",
+        "--json",
+        "--include-reference",
+    ]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let rows: serde_json::Value = serde_json::from_slice(&o.stdout).expect("JSON");
+    let rows = rows.as_array().expect("rows");
+    assert_eq!(rows.len(), 1, "{rows:?}");
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
