@@ -174,3 +174,37 @@ fn results_sync_indexes_a_run_directorys_own_parts_only() {
     assert_eq!(rows.len(), 1, "{rows:?}");
     std::fs::remove_dir_all(&dir).expect("cleanup");
 }
+
+/// A batch writes `report-SERIAL.*` per unit: two serials that differ
+/// only in letter case would be one file on a case-insensitive share (one
+/// unit's report replacing the other's), so the batch is refused before
+/// it starts.
+#[test]
+fn batch_serials_that_differ_only_in_case_are_refused() {
+    let dir = temp_dir("outputs-serial-case");
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let out = dir.join("batch");
+    let o = gyrobench(&[
+        "run",
+        s(&root.join("procedures/smoke.toml")),
+        "--bench",
+        s(&root.join("fixtures/bench/quad.toml")),
+        "--dut",
+        "A=s1",
+        "--dut",
+        "B=S1",
+        "--db",
+        "none",
+        "--out",
+        s(&out),
+    ]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("--dut \"B=S1\": units s1 and S1 would share one report file")
+            && stderr(&o).contains("letter case"),
+        "{}",
+        stderr(&o)
+    );
+    assert!(!out.exists(), "refused before the run began");
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
