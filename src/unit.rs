@@ -126,6 +126,13 @@ pub fn report_name(serial: &str) -> String {
     format!("report-{}", file_safe(serial))
 }
 
+/// Whether two serials' report files would be one file: their
+/// [`report_name`]s are equal, or differ only in letter case (one file on
+/// a case-insensitive file system, a Windows or macOS share).
+pub fn same_report_file(a: &str, b: &str) -> bool {
+    report_name(a).eq_ignore_ascii_case(&report_name(b))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -162,6 +169,15 @@ mod tests {
             msg.contains("U+202E") && msg.contains("character 2"),
             "{msg}"
         );
+    }
+
+    #[test]
+    fn serials_that_differ_only_in_case_or_unsafe_characters_share_a_report_file() {
+        assert!(same_report_file("s1", "S1"));
+        assert!(same_report_file("RL16-0042a", "rl16-0042A"));
+        assert!(same_report_file("A/1", "a:1"), "both report-a_1");
+        assert!(!same_report_file("S1", "S2"));
+        assert!(!same_report_file("S-1", "S_1"));
     }
 
     #[test]

@@ -8,7 +8,7 @@ use anyhow::{Context, Result};
 use clap::Args;
 
 use super::{Outcome, Usage};
-use crate::fsutil::{ensure_distinct, ensure_not_a_record};
+use crate::fsutil::{OutputRule, check_output};
 use crate::runlog::exchange::{export_unit, import, import_mapped, load_site};
 
 #[derive(Debug, Args)]
@@ -18,7 +18,7 @@ use crate::runlog::exchange::{export_unit, import, import_mapped, load_site};
      --site fixtures/import/site.toml -o iso.mcap",
     "0 the log is written, whatever its figures (they are for reference: `replay` of the log \
      gives the verdict), 1 error (a bad row or site file, I/O), 2 usage (an output that is an \
-     input, or a run's log or run directory file without --force)"
+     input, or a run's log or in a run directory without --force)"
 ))]
 pub struct ImportArgs {
     /// Interchange CSV (docs/analysis.md, "Interchange CSV"), or a lab's
@@ -36,11 +36,11 @@ pub struct ImportArgs {
     /// its extension).
     #[arg(long)]
     dut: Option<String>,
-    /// The log to write (a new file: an existing log, or a file of a run
+    /// The log to write (an existing log, or a path inside a run
     /// directory, is refused without --force).
     #[arg(short, long)]
     out: PathBuf,
-    /// Write over an existing --out that is a run's log or a file of a run
+    /// Write the --out even if it is a run's log or inside a run
     /// directory.
     #[arg(long)]
     force: bool,
@@ -56,11 +56,11 @@ pub struct ImportArgs {
 pub struct ExportArgs {
     /// Any run log (live, simulated or imported).
     log: PathBuf,
-    /// The CSV to write (an existing log, or a file of a run directory,
-    /// is refused without --force).
+    /// The CSV to write (an existing log, or a path inside a run
+    /// directory, is refused without --force).
     #[arg(short, long)]
     out: PathBuf,
-    /// Write over an existing --out that is a run's log or a file of a run
+    /// Write the --out even if it is a run's log or inside a run
     /// directory.
     #[arg(long)]
     force: bool,
@@ -75,8 +75,14 @@ pub fn run_import(args: ImportArgs) -> Result<Outcome> {
     }
     let mut inputs = vec![args.csv.as_path(), args.site.as_path()];
     inputs.extend(args.map.as_deref());
-    ensure_distinct(&args.out, &inputs)?;
-    ensure_not_a_record(&args.out, args.force)?;
+    check_output(
+        &args.out,
+        OutputRule {
+            inputs: &inputs,
+            force: args.force,
+            own: None,
+        },
+    )?;
     let site = load_site(&args.site).context("reading the site file")?;
     let r = match &args.map {
         Some(m) => {
@@ -103,8 +109,14 @@ pub fn run_import(args: ImportArgs) -> Result<Outcome> {
 }
 
 pub fn run_export(args: ExportArgs) -> Result<Outcome> {
-    ensure_distinct(&args.out, &[&args.log])?;
-    ensure_not_a_record(&args.out, args.force)?;
+    check_output(
+        &args.out,
+        OutputRule {
+            inputs: &[&args.log],
+            force: args.force,
+            own: None,
+        },
+    )?;
     let done = export_unit(&args.log, &args.out, args.unit.as_deref())?;
     super::warn_incomplete(&args.log, &done.read, "exported what it holds");
     outln!(

@@ -400,7 +400,7 @@ impl Store {
             }
         };
         for run_dir in run_dirs(dir) {
-            for log in parts(&run_dir) {
+            for (n, log) in (1..).zip(parts(&run_dir)) {
                 let Ok(seen) = LogFile::of(&log) else {
                     done.failed
                         .push(format!("{}: cannot be read", log.display()));
@@ -408,6 +408,10 @@ impl Store {
                 };
                 if known.get(&seen.path) == Some(&seen) {
                     done.unchanged += 1;
+                    continue;
+                }
+                if let Some(why) = not_a_part(&run_dir, &log, n) {
+                    done.failed.push(why);
                     continue;
                 }
                 match self.index_log(&log) {
@@ -623,7 +627,8 @@ pub fn parts(run_dir: &Path) -> Vec<std::path::PathBuf> {
         } else {
             run_dir.join(format!("run.part{part}.mcap"))
         };
-        if !log.exists() {
+        // A regular file only: opening a FIFO put there would wait for ever.
+        if !log.is_file() {
             break;
         }
         out.push(log);
@@ -631,18 +636,52 @@ pub fn parts(run_dir: &Path) -> Vec<std::path::PathBuf> {
     out
 }
 
-/// Run directories at or below `dir`, sorted.
+/// Why `log`, found as part `n` of the run in `run_dir` (`run.partN.mcap`),
+/// is not that run's part: its own metadata name another run or another
+/// part (a file put there by hand or with `--force`). `None` when it is
+/// the run's, and for the first part (it names the run).
+pub fn not_a_part(run_dir: &Path, log: &Path, n: u32) -> Option<String> {
+    if n < 2 {
+        return None;
+    }
+    let first = run_dir.join("run.mcap");
+    let first_meta = crate::runlog::meta::read_run_meta(&first).ok()?;
+    let ours = run_id(&first_meta, &first).ok()?;
+    let why = match crate::runlog::meta::read_run_meta(log) {
+        Err(e) => format!("its run metadata cannot be read: {e}"),
+        Ok(m) => {
+            let theirs = run_id(&m, log).unwrap_or_default();
+            if theirs == ours && m.part == n {
+                return None;
+            }
+            format!(
+                "it is part {} of run {theirs}, not part {n} of run {ours}",
+                m.part
+            )
+        }
+    };
+    Some(format!(
+        "{}: not indexed: {why}; move it out of the run directory {}",
+        log.display(),
+        run_dir.display()
+    ))
+}
+
+/// Run directories at or below `dir`, sorted; a run directory's `replay`
+/// directory (`replay`'s own place) is not searched.
 pub fn run_dirs(dir: &Path) -> Vec<std::path::PathBuf> {
     let mut out = Vec::new();
     let mut stack = vec![dir.to_owned()];
     while let Some(d) = stack.pop() {
-        if d.join("run.mcap").is_file() {
+        let is_run = d.join("run.mcap").is_file();
+        if is_run {
             out.push(d.clone());
         }
         if let Ok(entries) = std::fs::read_dir(&d) {
             for e in entries.filter_map(Result::ok) {
                 let p = e.path();
-                if e.file_type().is_ok_and(|t| t.is_dir()) && !p.ends_with("replay") {
+                if e.file_type().is_ok_and(|t| t.is_dir()) && !(is_run && e.file_name() == "replay")
+                {
                     stack.push(p);
                 }
             }

@@ -256,12 +256,17 @@ impl Store {
         stored_logs: &std::collections::HashSet<String>,
     ) -> Result<(), StoreError> {
         for run_dir in super::record::run_dirs(dir) {
-            for log in super::record::parts(&run_dir) {
-                v.logs_found += 1;
+            for (n, log) in (1..).zip(super::record::parts(&run_dir)) {
                 let abs = std::path::absolute(&log).unwrap_or_else(|_| log.clone());
                 if stored_logs.contains(&abs.display().to_string()) {
+                    v.logs_found += 1;
                     continue;
                 }
+                // Not a part of the run it lies with: sync refuses it too.
+                if super::record::not_a_part(&run_dir, &log, n).is_some() {
+                    continue;
+                }
+                v.logs_found += 1;
                 // Stored under another path (a directory moved, a
                 // copy): known by its key.
                 let known = match super::record::part_key_of_log(&log) {

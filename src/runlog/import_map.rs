@@ -524,13 +524,9 @@ impl ImportMap {
     /// Read the lab's file at `path` through this map.
     pub fn read(&self, path: &Path) -> Result<Mapped, MapError> {
         let name = path.display().to_string();
-        let file = std::fs::File::open(path).map_err(|cause| {
-            MapError::Csv(CsvError::Io {
-                path: name.clone(),
-                cause,
-            })
-        })?;
-        self.parse(std::io::BufReader::new(file), &name)
+        let mut input = super::interchange::open_rows(path).map_err(MapError::Csv)?;
+        self.parse(std::io::BufReader::new(&mut input), &name)
+            .map_err(|e| super::interchange::overlong(&input, &name).map_or(e, MapError::Csv))
     }
 
     /// Read a lab's file from any reader; `name` labels errors.

@@ -166,6 +166,9 @@ pub enum CsvError {
         /// Cause.
         cause: std::io::Error,
     },
+    /// Not a regular file, or not readable (`config::open_file`).
+    #[error(transparent)]
+    File(#[from] crate::config::InputError),
     /// A bad header or row.
     #[error("{path}:{line}: {message}")]
     Row {
@@ -178,13 +181,37 @@ pub enum CsvError {
     },
 }
 
-/// Read and check a whole interchange CSV.
+/// The most one line of a CSV may hold, bytes: a row of a lab's file is
+/// a few hundred; a longer line is a file of another kind, and reading
+/// stops there rather than hold it.
+pub const MAX_LINE_BYTES: usize = 1 << 20;
+
+/// A CSV file opened for reading: a regular file (a FIFO or a device is
+/// refused by name, never waited on or read), its lines at most
+/// [`MAX_LINE_BYTES`] (the file itself may be of any length).
+pub fn open_rows(path: &Path) -> Result<crate::config::LinesOfAtMost<std::fs::File>, CsvError> {
+    let file = crate::config::open_file(path)?;
+    Ok(crate::config::LinesOfAtMost::new(file, MAX_LINE_BYTES))
+}
+
+/// The error of a read of `input` that stopped at a line longer than
+/// [`MAX_LINE_BYTES`], with its line; `name` labels it.
+pub fn overlong<R>(input: &crate::config::LinesOfAtMost<R>, name: &str) -> Option<CsvError> {
+    input.overlong().map(|e| CsvError::Row {
+        path: name.to_owned(),
+        line: e.line,
+        message: format!(
+            "the line is longer than {} bytes; a CSV row is far shorter: is it the right file?",
+            e.max
+        ),
+    })
+}
+
+/// Read and check a whole interchange CSV ([`open_rows`]).
 pub fn read(path: &Path) -> Result<Vec<Row>, CsvError> {
-    let file = std::fs::File::open(path).map_err(|cause| CsvError::Io {
-        path: path.display().to_string(),
-        cause,
-    })?;
-    parse(file, &path.display().to_string())
+    let name = path.display().to_string();
+    let mut input = open_rows(path)?;
+    parse(&mut input, &name).map_err(|e| overlong(&input, &name).unwrap_or(e))
 }
 
 /// Parse interchange CSV from any reader; `name` labels errors.

@@ -181,13 +181,14 @@ pub fn batch_units(
             return Err((at, format!("unit {serial} is given for two slots")));
         }
         // Each unit's report is named by its serial as a file name.
-        if let Some((_, g)) = taken.iter().find(|(_, g)| {
-            crate::unit::report_name(&given[*g].1) == crate::unit::report_name(serial)
-        }) {
+        if let Some((_, g)) = taken
+            .iter()
+            .find(|(_, g)| crate::unit::same_report_file(&given[*g].1, serial))
+        {
             return Err((
                 at,
                 format!(
-                    "units {} and {serial} would share one report file ({}.html): their serials differ only in characters a file name cannot hold",
+                    "units {} and {serial} would share one report file ({}.html): their serials differ only in letter case or in characters a file name cannot hold; give each unit its own serial",
                     given[*g].1,
                     crate::unit::report_name(serial)
                 ),

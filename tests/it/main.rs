@@ -18,6 +18,7 @@ mod http;
 mod import;
 mod integrity;
 mod messages;
+mod outputs;
 mod pages;
 mod power;
 mod rate;
