@@ -218,7 +218,8 @@ pub struct Boundary {
     pub label: String,
 }
 
-/// `[step]`: exactly one of its keys.
+/// `[step]`: exactly one of `column` or `boundaries`, and optionally
+/// `record`.
 #[derive(Debug, Clone, Default, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct StepMap {
@@ -228,6 +229,12 @@ pub struct StepMap {
     /// Boundaries by time, in increasing order.
     #[serde(default)]
     pub boundaries: Option<Vec<Boundary>>,
+    /// A column naming the record each row was recorded in (the interchange
+    /// CSV's `record`); an empty cell is a row taken outside any record (a
+    /// move, a wait, a soak). Without it, records are found as an import of
+    /// the interchange CSV without its `record` column finds them.
+    #[serde(default)]
+    pub record: Option<Column>,
 }
 
 /// `[table]`: the table axis angles, deg, where the file has them.
@@ -456,6 +463,7 @@ struct Resolved {
     temps: [usize; 4],
     orientation: Option<[usize; 3]>,
     step: Option<usize>,
+    record: Option<usize>,
     table: Option<[usize; 2]>,
 }
 
@@ -503,6 +511,9 @@ impl ImportMap {
         }
         if let Some(c) = &self.step.column {
             roles.push(("step.column", c));
+        }
+        if let Some(c) = &self.step.record {
+            roles.push(("step.record", c));
         }
         if let Some(t) = &self.table {
             roles.push(("table.outer", &t.outer));
@@ -570,6 +581,12 @@ impl ImportMap {
                 .column
                 .as_ref()
                 .map(|c| find(c, "step.column"))
+                .transpose()?,
+            record: self
+                .step
+                .record
+                .as_ref()
+                .map(|c| find(c, "step.record"))
                 .transpose()?,
             table: self
                 .table
@@ -797,6 +814,7 @@ impl ImportMap {
             step,
             outer_deg,
             inner_deg,
+            record: cols.record.map(|i| c.cell(i).to_owned()),
         })
     }
 
