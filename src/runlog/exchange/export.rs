@@ -145,7 +145,10 @@ pub fn export_unit(log: &Path, out: &Path, unit: Option<&str>) -> Result<Exporte
     w.flush().map_err(|e| fail(err(&e)))?;
     drop(w);
     // A CSV written to a pipe or a device has no place beside it.
-    let to_file = std::fs::metadata(out).map_or(true, |m| m.is_file());
+    let to_file = match std::fs::metadata(out) {
+        Ok(m) => m.is_file(),
+        Err(_) => true,
+    };
     let side = if to_file {
         meta.and_then(|m| side_text(&m, angles_known, out, log))
     } else {

@@ -361,8 +361,8 @@ mod tests {
             rows.push(row(t, -90.0, "main.1", None));
             t += 1.0;
         }
-        for (k, roll) in [-60.0, -30.0, 0.0, 0.0, 0.0].iter().enumerate() {
-            rows.push(row(t, *roll, if k < 4 { "up" } else { "up" }, None));
+        for roll in [-60.0, -30.0, 0.0, 0.0, 0.0] {
+            rows.push(row(t, roll, "up", None));
             t += 1.0;
         }
         for _ in 0..3 {
