@@ -11,6 +11,11 @@ pub const SERIAL_MAX_CHARS: usize = 64;
 /// hardware run can be filed under it by mistake.
 pub const SIMULATED_SERIAL: &str = "SIMULATED";
 
+/// The serial an imported run is recorded under when neither `--dut` nor
+/// the export's sidecar names its unit. It names no unit, as
+/// [`SIMULATED_SERIAL`] does: the file's name is not a serial.
+pub const UNNAMED_SERIAL: &str = "UNNAMED";
+
 /// Why a serial number is refused.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum SerialError {

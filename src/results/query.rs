@@ -395,6 +395,10 @@ pub struct TrendPoint {
     pub run: String,
     /// Its log (the report sits beside it).
     pub log_path: String,
+    /// The unit's slot on a batch's bench (empty: a run of one unit). A
+    /// batch unit's report is `report-SERIAL.html`, a single unit's
+    /// `report.html`.
+    pub slot: String,
     /// An imported run (judged for reference only).
     pub reference: bool,
 }
@@ -710,7 +714,7 @@ impl Store {
         all.push((max as i64).into());
         let rows = self.sql().query(
             &format!(
-                "SELECT r.started_utc, u.serial, m.value, m.outcome, r.id, r.log_path, ru.outcome AS run_outcome FROM measurements m \
+                "SELECT r.started_utc, u.serial, m.value, m.outcome, r.id, r.log_path, ru.slot, ru.outcome AS run_outcome FROM measurements m \
                  JOIN run_units ru ON ru.run = m.run AND ru.slot = m.slot \
                  JOIN runs r ON r.id = m.run JOIN units u ON u.id = ru.unit_id \
                  WHERE m.name = $1 AND r.latest = 1 AND m.value IS NOT NULL{reference}{clauses} \
@@ -730,6 +734,7 @@ impl Store {
                         .unwrap_or(MeasureOutcome::Error),
                     run: r.text("id"),
                     log_path: r.text("log_path"),
+                    slot: r.text("slot"),
                     reference: r.text("run_outcome") == "reference",
                 })
             })

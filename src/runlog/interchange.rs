@@ -33,6 +33,12 @@ pub const HEADER: [&str; 10] = [
 /// neither; an empty cell is a row whose angles are not known).
 pub const TABLE_COLUMNS: [&str; 2] = ["outer_deg", "inner_deg"];
 
+/// Optional column after the ten (and the table's): the label of the
+/// record the row was recorded in, empty for a row taken outside any
+/// record (a move, a wait, a soak). `export` writes it; without it,
+/// `import` finds the records from the step labels.
+pub const RECORD_COLUMN: &str = "record";
+
 /// Table angles a row may have, deg (ten turns either way, as a bench's
 /// table range).
 pub const TABLE_RANGE_DEG: (f64, f64) = (-3600.0, 3600.0);
@@ -76,6 +82,11 @@ pub struct Row {
     /// Inner table axis angle, deg, where known.
     #[serde(default)]
     pub inner_deg: Option<f64>,
+    /// The record the row was recorded in: `Some("")` for a row taken
+    /// outside any record, none when the file does not say (no `record`
+    /// column).
+    #[serde(default)]
+    pub record: Option<String>,
 }
 
 impl Row {
@@ -230,18 +241,7 @@ pub fn parse(input: impl std::io::Read, name: &str) -> Result<Vec<Row>, CsvError
         .map_err(|e| err(1, format!("unreadable header: {e}")))?
         .clone();
     let got: Vec<&str> = header.iter().collect();
-    let with_table: Vec<&str> = HEADER.iter().chain(&TABLE_COLUMNS).copied().collect();
-    if got != HEADER && got != with_table {
-        return Err(err(
-            1,
-            format!(
-                "the header must be `{}` (then `,{}` where the table angles are known); found `{}`",
-                HEADER.join(","),
-                TABLE_COLUMNS.join(","),
-                got.join(",")
-            ),
-        ));
-    }
+    let has_record = check_header(&got).map_err(|m| err(1, m))?;
     let mut rows: Vec<Row> = Vec::new();
     for rec in rdr.records() {
         let rec = rec.map_err(|e| {
@@ -262,6 +262,10 @@ pub fn parse(input: impl std::io::Read, name: &str) -> Result<Vec<Row>, CsvError
             };
             err(line, message)
         })?;
+        let mut row = row;
+        if has_record && row.record.is_none() {
+            row.record = Some(String::new());
+        }
         row.check(rows.last()).map_err(|m| err(line, m))?;
         rows.push(row);
     }
@@ -269,6 +273,33 @@ pub fn parse(input: impl std::io::Read, name: &str) -> Result<Vec<Row>, CsvError
         return Err(err(2, "no samples after the header".into()));
     }
     Ok(rows)
+}
+
+/// Check a header: the ten columns in order, then any of the optional
+/// ones (`outer_deg,inner_deg` together, `record`), each once. Whether it
+/// has the `record` column.
+fn check_header(got: &[&str]) -> Result<bool, String> {
+    let wrong = || {
+        format!(
+            "the header must be `{}`, then optionally `{}` (where the table angles are known) and `{RECORD_COLUMN}` (which rows were recorded); found `{}`",
+            HEADER.join(","),
+            TABLE_COLUMNS.join(","),
+            got.join(",")
+        )
+    };
+    if got.len() < HEADER.len() || got[..HEADER.len()] != HEADER {
+        return Err(wrong());
+    }
+    let rest = &got[HEADER.len()..];
+    let known = |c: &&str| TABLE_COLUMNS.contains(c) || *c == RECORD_COLUMN;
+    let once = rest
+        .iter()
+        .all(|c| rest.iter().filter(|d| *d == c).count() == 1);
+    let table = rest.iter().filter(|c| TABLE_COLUMNS.contains(c)).count();
+    if !rest.iter().all(known) || !once || table == 1 {
+        return Err(wrong());
+    }
+    Ok(rest.contains(&RECORD_COLUMN))
 }
 
 /// 1 s means built row by row: rows of one whole second of `time_s` and
@@ -286,7 +317,7 @@ impl OneHz {
     /// Take the next row (in time order).
     pub fn push(&mut self, r: Row) {
         if let Some((a, n)) = &mut self.acc {
-            if r.time_s.floor() == a.time_s.floor() && r.step == a.step {
+            if r.time_s.floor() == a.time_s.floor() && r.step == a.step && r.record == a.record {
                 a.rate_dph += r.rate_dph;
                 a.t1_c += r.t1_c;
                 a.t2_c += r.t2_c;

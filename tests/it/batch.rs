@@ -273,6 +273,24 @@ fn a_batch_is_recorded_in_the_store_unit_by_unit_and_verifies_against_its_log() 
         let o = results(args);
         assert_eq!(o.status.code(), Some(0), "{args:?}: {}", stderr(&o));
     }
+    // The trend page links each unit's own report, which the batch wrote.
+    let page = dir.join("trend.html");
+    let o = results(&["trend", "bias_dph:up", "--html", s(&page)]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let html = std::fs::read_to_string(&page).expect("page");
+    let links: Vec<&str> = html
+        .split("<a href=\"")
+        .skip(1)
+        .filter_map(|a| a.split('"').next())
+        .filter(|h| h.ends_with(".html"))
+        .collect();
+    for serial in ["S-1", "S-2", "S-4"] {
+        let want = format!("run/report-{serial}.html");
+        assert!(links.contains(&want.as_str()), "{want} in {links:?}");
+    }
+    for h in &links {
+        assert!(dir.join(h).is_file(), "{h} links no report");
+    }
 }
 
 #[test]
