@@ -517,6 +517,139 @@ fn a_flood_of_half_open_connections_leaves_the_page_reachable() {
     std::fs::remove_dir_all(&dir).expect("cleanup");
 }
 
+/// Everything `conn` receives until the station closes it (a guard of
+/// 60 s against a station that never would; not a measure of speed).
+fn answer_of(mut conn: &TcpStream) -> String {
+    conn.set_read_timeout(Some(std::time::Duration::from_secs(60)))
+        .expect("timeout");
+    let mut got = Vec::new();
+    let mut chunk = [0u8; 4096];
+    loop {
+        match conn.read(&mut chunk) {
+            Ok(0) => break,
+            Ok(n) => got.extend_from_slice(&chunk[..n]),
+            Err(e) => {
+                assert!(
+                    !matches!(
+                        e.kind(),
+                        std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
+                    ),
+                    "still open after 60 s; received {:?}",
+                    String::from_utf8_lossy(&got)
+                );
+                break;
+            }
+        }
+    }
+    String::from_utf8_lossy(&got).into_owned()
+}
+
+/// A request head and the start of a body of 1000 bytes, the rest never
+/// sent.
+fn half_sent(host: &str, method: &str, path: &str, token: Option<&str>) -> TcpStream {
+    let mut c = TcpStream::connect(host).expect("a connection");
+    let auth = token.map_or(String::new(), |t| format!("X-Gyrobench-Token: {t}\r\n"));
+    write!(
+        c,
+        "{method} {path} HTTP/1.1\r\nHost: {host}\r\n{auth}Content-Type: application/json\r\nContent-Length: 1000\r\n\r\n{{\"procedure\":"
+    )
+    .expect("a half-sent request");
+    c
+}
+
+/// A connection that asked for the page's head (no token), was answered
+/// and stays open.
+fn page_kept_open(host: &str) -> TcpStream {
+    let mut c = TcpStream::connect(host).expect("a connection");
+    write!(c, "HEAD / HTTP/1.1\r\nHost: {host}\r\n\r\n").expect("a request");
+    c.set_read_timeout(Some(std::time::Duration::from_secs(60)))
+        .expect("timeout");
+    let mut got = Vec::new();
+    let mut byte = [0u8; 1];
+    while !got.ends_with(b"\r\n\r\n") {
+        let n = c.read(&mut byte).expect("the page's head");
+        assert_eq!(n, 1, "closed: {:?}", String::from_utf8_lossy(&got));
+        got.push(byte[0]);
+    }
+    assert!(
+        got.starts_with(b"HTTP/1.1 200"),
+        "{:?}",
+        String::from_utf8_lossy(&got)
+    );
+    c
+}
+
+/// 600 connections sending a request head without the token and a body
+/// they never finish, held open: the token holder is still answered (the
+/// page, the state, Abort). Sent to the API, each is refused on its head
+/// (403, the connection closed) without its body being waited for. 600
+/// connections kept open after asking for the page (which needs no
+/// token) never take the last slots: the oldest of them make room. SIGTERM then stops the
+/// station with the flood still open, and closes a token holder's own
+/// half-sent request rather than wait for its body's deadline.
+#[test]
+fn the_station_stays_reachable_for_its_token_holder_under_600_half_sent_requests() {
+    // Runs beside no wall-clock test (see `busy_turn`).
+    let _busy = crate::common::busy_turn();
+    let dir = temp_dir("station-half-sent");
+    let st = Served::start(&dir, &[]);
+    let host = st.base.trim_start_matches("http://").to_owned();
+    // One alone: refused on its head, its body never waited for.
+    let answer = answer_of(&half_sent(&host, "POST", "/api/start", None));
+    assert!(
+        answer.starts_with("HTTP/1.1 403") && answer.contains("token"),
+        "a half-sent request without the token: {answer:?}"
+    );
+    let paths = ["/api/start", "/api/abort", "/api/answer", "/api/resume"];
+    let flood: Vec<TcpStream> = (0..600)
+        .map(|i| half_sent(&host, "POST", paths[i % paths.len()], None))
+        .collect();
+    let (code, body) = st.request("GET", "/api/state", true, "");
+    assert_eq!(code, 200, "{body}");
+    let (code, body) = st.request("POST", "/api/abort", true, "{}");
+    assert_eq!(code, 400, "answered (nothing to abort): {body}");
+    assert!(body.contains("no run"), "{body}");
+    // Every one of them closed by the station: refused, or closed unread
+    // to make room when they came faster than their heads were read.
+    for (i, c) in flood.iter().enumerate() {
+        let answer = answer_of(c);
+        assert!(
+            answer.is_empty() || answer.starts_with("HTTP/1.1 403"),
+            "half-sent request {i} without the token: {answer:?}"
+        );
+    }
+    drop(flood);
+
+    // The page needs no token: connections that asked for it stay open
+    // (kept alive), but never in the token holder's slots.
+    let idle: Vec<TcpStream> = (0..600).map(|_| page_kept_open(&host)).collect();
+    let (code, page) = st.request("GET", &format!("/?token={}", st.token), false, "");
+    assert_eq!(code, 200);
+    assert!(page.contains("gyrobench station"));
+    let (code, body) = st.request("GET", "/api/state", true, "");
+    assert_eq!(code, 200, "{body}");
+    let evicted = answer_of(&idle[0]);
+    assert!(
+        evicted.is_empty(),
+        "the oldest is closed to make room: {evicted:?}"
+    );
+
+    // Stopped with all of it open.
+    let mine = half_sent(&host, "POST", "/api/start", Some(&st.token));
+    assert_eq!(
+        st.stop().code(),
+        Some(0),
+        "SIGTERM stops the station, the flood open"
+    );
+    let closed = answer_of(&mine);
+    assert!(
+        !closed.contains("408"),
+        "the stop waited for the body's deadline: {closed:?}"
+    );
+    drop(idle);
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
+
 /// A link planted in a run directory is never followed by the download
 /// route: only the run directory's own regular files are served.
 #[test]
