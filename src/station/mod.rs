@@ -283,6 +283,7 @@ impl Station {
     /// Start a run: refused when the serial is empty, the procedure does
     /// not pass `check`, or the bench is busy.
     pub fn start(self: &Arc<Self>, req: &Start) -> Result<u64, Refused> {
+        self.which_serials(req)?;
         let batch = self.batch(req)?;
         // A scanner's trailing newline or blank is not part of the serial.
         let serial = batch
@@ -335,6 +336,37 @@ impl Station {
             base: self.cfg.runs.clone(),
         };
         self.launch(plan, place, offer.device_s.unwrap_or(0.0), None)
+    }
+
+    /// The request names its units the way this bench takes them: `serial`
+    /// for a bench of one unit, `serials` by slot for a bench with slots;
+    /// never both (one would be ignored). A blank `serial` or an empty
+    /// `serials` is not given.
+    fn which_serials(&self, req: &Start) -> Result<(), Refused> {
+        let serial = !req.serial.trim().is_empty();
+        let serials = !req.serials.is_empty();
+        let slots = &self.cfg.bench.slots;
+        if serial && serials {
+            return Err(Refused::Bad(
+                "`serial` and `serials` given together: give `serial` for a bench of one unit, \
+                 or `serials` (each slot's unit) for a bench with slots, not both"
+                    .into(),
+            ));
+        }
+        if serials && slots.is_empty() {
+            return Err(Refused::Bad(
+                "this bench holds one unit: give its serial in `serial` (`serials` is for a bench with slots)"
+                    .into(),
+            ));
+        }
+        if serial && !slots.is_empty() {
+            let names: Vec<&str> = slots.iter().map(|s| s.name.as_str()).collect();
+            return Err(Refused::Bad(format!(
+                "this bench has slots ({}): give each unit's serial by slot in `serials`, not `serial`",
+                names.join(", ")
+            )));
+        }
+        Ok(())
     }
 
     /// A bench with slots: the batch the request's serials make (every

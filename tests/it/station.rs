@@ -140,6 +140,22 @@ fn the_station_runs_a_procedure_from_start_to_report_and_refuses_what_it_must() 
         r#"{"procedure":"../x.toml","serial":"A1"}"#,
     );
     assert_eq!(code, 404, "{body}");
+    // Both ways of naming the unit: refused, naming both, none ignored;
+    // slots on a bench of one unit: refused, naming `serial`.
+    for (req, says) in [
+        (
+            r#"{"procedure":"smoke.toml","serial":"A1","serials":{"A":"A2"}}"#,
+            ["`serial` and `serials`", "not both"],
+        ),
+        (
+            r#"{"procedure":"smoke.toml","serials":{"A":"A2"}}"#,
+            ["one unit", "`serial`"],
+        ),
+    ] {
+        let (code, body) = st.request("POST", "/api/start", true, req);
+        assert_eq!(code, 400, "{req}: {body}");
+        assert!(says.iter().all(|w| body.contains(w)), "{req}: {body}");
+    }
     let (code, body) = st.request("GET", "/api/procedures", false, "");
     assert_eq!(code, 403, "{body}");
     let (code, body) = st.request("GET", "/api/procedures", true, "");
@@ -286,7 +302,7 @@ fn the_station_runs_a_batch_with_a_tile_and_a_report_per_unit() {
         "the page is told the bench's slots"
     );
     // No serial in any slot: refused with its reason; a slot the bench
-    // lacks too.
+    // lacks, and `serial` beside or instead of `serials`, too.
     for (body, says) in [
         (
             r#"{"procedure":"smoke.toml","serials":{"A":" ","B":""}}"#,
@@ -295,6 +311,14 @@ fn the_station_runs_a_batch_with_a_tile_and_a_report_per_unit() {
         (
             r#"{"procedure":"smoke.toml","serials":{"E":"RL16-1"}}"#,
             "its slots: A, B, C, D",
+        ),
+        (
+            r#"{"procedure":"smoke.toml","serial":"RL16-1","serials":{"A":"RL16-2"}}"#,
+            "`serial` and `serials` given together",
+        ),
+        (
+            r#"{"procedure":"smoke.toml","serial":"RL16-1"}"#,
+            "slots (A, B, C, D): give each unit's serial by slot in `serials`",
         ),
     ] {
         let (code, text) = st.request("POST", "/api/start", true, body);
