@@ -516,13 +516,7 @@ impl Station {
 
     /// The run, on its own thread and runtime, as `run` does it.
     fn execute(self: Arc<Self>, plan: Plan, place: Place, interrupt: Arc<Interrupt>) {
-        let mut reporter = Reporter {
-            shared: self.shared.clone(),
-            interrupt: interrupt.clone(),
-            started: std::time::Instant::now(),
-            prompts: 0,
-            tick: None,
-        };
+        let mut reporter = Reporter::new(self.shared.clone(), interrupt.clone());
         let finished = tokio::runtime::Builder::new_multi_thread()
             .worker_threads(2)
             .enable_all()

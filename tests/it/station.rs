@@ -22,6 +22,15 @@ impl Served {
     /// `extra` arguments after the usual ones (the embedded bench at full
     /// speed, a live stream on a free loopback port).
     fn start(dir: &Path, extra: &[&str]) -> Self {
+        Self::offering(
+            dir,
+            concat!(env!("CARGO_MANIFEST_DIR"), "/procedures"),
+            extra,
+        )
+    }
+
+    /// As [`Served::start`], offering the procedures of `procedures`.
+    fn offering(dir: &Path, procedures: &str, extra: &[&str]) -> Self {
         let mut child = command()
             .args([
                 "station",
@@ -30,7 +39,7 @@ impl Served {
                 "--live",
                 "127.0.0.1:0",
                 "--procedures",
-                concat!(env!("CARGO_MANIFEST_DIR"), "/procedures"),
+                procedures,
                 "--runs",
                 s(&dir.join("runs")),
                 "--db",
@@ -352,6 +361,11 @@ fn the_station_runs_a_batch_with_a_tile_and_a_report_per_unit() {
         .map(|u| u["bias_dph"].as_f64().expect("a live rate"))
         .collect();
     assert_ne!(rates[0], rates[1], "each tile has its own unit's rate");
+    // And its drift over a named minute of its last record.
+    for u in done["run"]["units"].as_array().expect("units") {
+        assert_eq!(u["drift"]["seconds"], 60, "{u}");
+        assert_eq!(u["drift"]["record"], "east", "{u}");
+    }
     let run = &done["run"];
     assert_eq!(run["outcome"], "pass", "{run}");
     for (u, serial) in run["units"]
@@ -402,6 +416,105 @@ fn the_station_runs_a_batch_with_a_tile_and_a_report_per_unit() {
         }
         crate::common::conformance(&python, "station_browser.py", &args);
     }
+    assert!(st.stop().success());
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
+
+/// Two records with the inner axis turned half a turn between them: the
+/// 1 s rate of the turn reads hundreds of deg/h, which on a chart of every
+/// second flattens the drift to a line. The drift chart's series (sample
+/// columns 8 and 9) hold the records' seconds alone, the read-out gives
+/// the bench and the unit in numbers, the drift named by its window.
+#[test]
+fn the_drift_chart_and_read_out_leave_the_slews_out() {
+    let _busy = crate::common::busy_turn();
+    let dir = temp_dir("station-drift");
+    let procedures = dir.join("procedures");
+    std::fs::create_dir_all(&procedures).expect("procedures");
+    crate::common::write(
+        &procedures,
+        "turn.toml",
+        r#"[procedure]
+name = "turn"
+description = "Two short records, the inner axis turned half a turn between them."
+dut_type = "RL-16"
+
+[[main]]
+action = "move"
+table = { outer_deg = 90.0, inner_deg = 0.0 }
+
+[[main]]
+action = "record"
+label = "before"
+duration_s = 90.0
+
+[[main]]
+action = "move"
+table = { outer_deg = 90.0, inner_deg = 180.0 }
+
+[[main]]
+action = "record"
+label = "after"
+duration_s = 90.0
+"#,
+    );
+    let st = Served::offering(&dir, s(&procedures), &[]);
+    let (code, body) = st.request(
+        "POST",
+        "/api/start",
+        true,
+        r#"{"procedure":"turn.toml","serial":"RL16-0042"}"#,
+    );
+    assert_eq!(code, 200, "{body}");
+    let done = st.until("the verdict", |s| s["run"]["phase"] == "finished");
+    let samples = done["samples"].as_array().expect("samples");
+    assert!(
+        samples
+            .iter()
+            .all(|s| s.as_array().map(Vec::len) == Some(10)),
+        "ten columns: {:?}",
+        samples.first()
+    );
+    let column = |k: usize| -> Vec<f64> { samples.iter().filter_map(|s| s[k].as_f64()).collect() };
+    let widest = |v: &[f64]| v.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+    assert!(
+        widest(&column(1)) > 100.0,
+        "the turn in the 1 s rate: {}",
+        widest(&column(1))
+    );
+    let (drift, means) = (column(8), column(9));
+    assert!(
+        (170..=182).contains(&drift.len()),
+        "the records' seconds: {}",
+        drift.len()
+    );
+    assert!(widest(&drift) < 5.0, "the turn in the drift: {drift:?}");
+    assert!(
+        (50..=64).contains(&means.len()) && widest(&means) < 2.0,
+        "a mean once each record has lasted a minute: {means:?}"
+    );
+    let now = &done["run"]["now"];
+    assert!(
+        (now["chamber_c"].as_f64().expect("chamber") - 20.0).abs() < 0.5,
+        "{now}"
+    );
+    assert_eq!(
+        now["inner_deg"].as_f64().map(f64::round),
+        Some(180.0),
+        "{now}"
+    );
+    for sensor in ["tcase_c", "t1_c", "t2_c"] {
+        assert!(now[sensor].as_f64().is_some_and(|t| t > 15.0), "{now}");
+    }
+    assert_eq!(now["drift"]["seconds"], 60, "{now}");
+    assert_eq!(
+        now["drift"]["window"], "mean of the last 60 s of record after (ended)",
+        "{now}"
+    );
+    assert!(
+        now["drift"]["mean_dph"].as_f64().expect("drift").abs() < 2.0,
+        "{now}"
+    );
     assert!(st.stop().success());
     std::fs::remove_dir_all(&dir).expect("cleanup");
 }
