@@ -114,6 +114,8 @@ struct Live {
     /// The operator confirmed the procedure's prompts before the run
     /// (`--unattended`).
     unattended: bool,
+    /// The first unit's drift: the last minute of its record.
+    drift: crate::view::live::DriftWindow,
 }
 
 impl Live {
@@ -128,6 +130,7 @@ impl Live {
             chamber: String::new(),
             rate: String::new(),
             unattended,
+            drift: crate::view::live::DriftWindow::default(),
         }
     }
 
@@ -174,14 +177,13 @@ impl Observer for Live {
                 );
                 self.rate.clear();
             }
-            Event::Interval { slot: 0, iv, .. } => {
-                self.rate = format!(
-                    "  rate {:+.3} deg/h  T1/T2/TK {:.2}/{:.2}/{:.2} degC",
-                    iv.bias_dph(),
-                    iv.t1_c,
-                    iv.t2_c,
-                    iv.tcase_c
-                );
+            Event::Interval {
+                slot: 0,
+                iv,
+                record,
+            } => {
+                self.drift.push(iv.time_s, iv.bias_dph(), record);
+                self.rate = render_unit(iv, self.drift.drift().as_ref());
             }
             // The first unit's link figures close every tick.
             Event::Link { slot: 0, .. } => self.show(),
@@ -189,6 +191,23 @@ impl Observer for Live {
         }
         Ok(())
     }
+}
+
+/// The first unit on the progress line: its drift (the mean Earth-removed
+/// rate over the last minute of its record, the window named), never one
+/// 1 s sample, then its temperatures.
+fn render_unit(
+    iv: &crate::analysis::series::Interval,
+    drift: Option<&crate::view::live::Drift>,
+) -> String {
+    let drift = drift.map_or_else(
+        || "drift - (no record yet)".to_owned(),
+        |d| format!("drift {}", d.render()),
+    );
+    format!(
+        "  {drift}  T1/T2/TK {:.2}/{:.2}/{:.2} degC",
+        iv.t1_c, iv.t2_c, iv.tcase_c
+    )
 }
 
 impl Operator for Live {
@@ -701,4 +720,59 @@ fn watch_signals(interrupt: Arc<Interrupt>, exit_code: Arc<AtomicU8>) -> Result<
         });
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::analysis::series::Interval;
+
+    /// The progress line shows the record's mean over its last minute,
+    /// named, and neither the 1 s sample nor a slew's second.
+    #[test]
+    fn the_progress_line_shows_the_drift_over_a_named_window() {
+        let mut live = Live::new(3600.0, false);
+        let second = |t: f64, rate: f64| Interval {
+            time_s: t,
+            rate_dph: rate,
+            t1_c: 26.28,
+            t2_c: 25.33,
+            tcase_c: 21.17,
+            ..Interval::default()
+        };
+        let before = second(0.5, 4477.9);
+        let _ok = live.observe(&Event::Interval {
+            slot: 0,
+            iv: &before,
+            record: None,
+        });
+        assert_eq!(
+            live.rate,
+            "  drift - (no record yet)  T1/T2/TK 26.28/25.33/21.17 degC"
+        );
+        for k in 0..90 {
+            let r = if k % 2 == 0 { 0.152 } else { 0.652 };
+            let iv = second(1.5 + f64::from(k), r);
+            let _ok = live.observe(&Event::Interval {
+                slot: 0,
+                iv: &iv,
+                record: Some("up"),
+            });
+        }
+        assert_eq!(
+            live.rate,
+            "  drift +0.402 deg/h, mean of the last 60 s of record up  T1/T2/TK 26.28/25.33/21.17 degC"
+        );
+        let slew = second(95.5, -4701.8);
+        let _ok = live.observe(&Event::Interval {
+            slot: 0,
+            iv: &slew,
+            record: None,
+        });
+        assert!(
+            live.rate.contains("+0.402 deg/h") && live.rate.contains("(ended)"),
+            "{}",
+            live.rate
+        );
+    }
 }
