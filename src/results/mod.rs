@@ -11,6 +11,7 @@
 //! rebuilt from the logs at any time (`results sync`). A store that cannot
 //! be reached never stops a run: the run is queued and written later.
 
+pub mod facts;
 pub mod junit;
 pub mod page;
 pub mod pg;
