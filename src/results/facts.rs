@@ -76,12 +76,19 @@ fn coeffs_source(s: crate::coeffs::CoeffsSource) -> &'static str {
 
 /// The `run_units` columns of the coefficients a unit used.
 pub fn coefficients(c: &CoeffsUsed) -> Vec<Column> {
+    let id = c.identity.as_ref();
     vec![
         ("coeffs_source", coeffs_source(c.source).into()),
         ("coeffs_serial", c.serial.clone().into()),
         ("coeffs_version", c.version.into()),
         ("coeffs_sha256", c.sha256.clone().into()),
         ("coeffs_override_reason", c.override_reason.clone().into()),
+        ("coeffs_identity", id.map(|i| i.status.as_str()).into()),
+        (
+            "coeffs_claimed_version",
+            id.and_then(|i| i.claimed_version).into(),
+        ),
+        ("coeffs_identity_note", id.map(|i| i.note.clone()).into()),
     ]
 }
 

@@ -17,6 +17,7 @@ pub mod page;
 pub mod pg;
 pub mod query;
 pub mod record;
+pub mod sets;
 pub mod sql;
 pub mod sqlite;
 pub mod verify;
