@@ -289,10 +289,16 @@ impl Store {
         if before.is_none() {
             self.begin_part(&r.meta, log)?;
         }
-        let ended = std::fs::metadata(log)
-            .and_then(|m| m.modified())
-            .map(|t| chrono::DateTime::<chrono::Utc>::from(t).to_rfc3339())
-            .unwrap_or_default();
+        // When the part ended, as its log states it (a log without its end
+        // record, or of an earlier gyrobench: when the file was last
+        // written).
+        let ended = match &r.end_time_utc {
+            Some(t) => t.clone(),
+            None => std::fs::metadata(log)
+                .and_then(|m| m.modified())
+                .map(|t| chrono::DateTime::<chrono::Utc>::from(t).to_rfc3339())
+                .unwrap_or_default(),
+        };
         self.finish_part(
             &key,
             log,
