@@ -1,14 +1,16 @@
-//! What a part's log says its stored rows hold: the `runs` columns its
+//! What a part's log says its stored rows hold. The `runs` columns its
 //! `run` metadata gives (written when the part begins), those its end
-//! gives (written when it ends), and each unit's `run_units` columns. The
-//! store writes its rows from these lists, one place for each column.
+//! gives (written when it ends), each unit's `run_units` columns, and its
+//! figures. The store writes its rows from these lists and `results
+//! verify` compares the rows against them, so what is written and what is
+//! checked cannot drift apart.
 
 use std::path::Path;
 
 use super::sql::Value;
 use crate::coeffs::CoeffsUsed;
 use crate::protocol::frame::LinkStats;
-use crate::runlog::meta::RunMeta;
+use crate::runlog::meta::{ResultMeasurement, ResultMeta, RunMeta};
 use crate::runlog::replay::{Replayed, replay, replay_unit};
 use crate::sequencer::{RunResult, UnitResult};
 
@@ -148,4 +150,182 @@ pub fn replay_all(log: &Path) -> Result<Replayed, String> {
         });
     }
     Ok(r)
+}
+
+/// Every unit's figures of `r` with its slot, in unit order.
+fn figures_of(meta: &RunMeta, r: &RunResult) -> Vec<(String, ResultMeasurement)> {
+    (0..r.units())
+        .flat_map(|k| {
+            let slot = meta.units.get(k).map_or(String::new(), |u| u.slot.clone());
+            r.unit(k)
+                .measurements
+                .iter()
+                .map(|m| (slot.clone(), ResultMeasurement::new(m)))
+                .collect::<Vec<_>>()
+        })
+        .collect()
+}
+
+/// What a part's log holds that its stored rows must say.
+#[derive(Debug)]
+pub struct LogFacts {
+    /// Its `run` metadata.
+    pub meta: RunMeta,
+    /// How it ended: the run's verdict, error, device time, frames,
+    /// cleanup and bench left, each unit's (its figures are `figures`).
+    pub result: RunResult,
+    /// The first unit's link figures over the run (the report's), when the
+    /// log holds them.
+    pub link: Option<LinkStats>,
+    /// When the part ended, when the log states it.
+    pub ended_utc: Option<String>,
+    /// Every unit's figures with its slot, in unit order.
+    pub figures: Vec<(String, ResultMeasurement)>,
+}
+
+impl LogFacts {
+    /// Read them from `log`: its `result` records (a batch's other units'
+    /// `result/NAME`), or, for a log without one (a killed run, as a sync
+    /// completed it) or with `replay`, its figures and ending recomputed
+    /// from its frames.
+    pub fn read(log: &Path, replay: bool) -> Result<Self, String> {
+        let read = Records::read(log)?;
+        let Some(meta) = read.meta else {
+            return Err("the log holds no `run` metadata".into());
+        };
+        match read.result {
+            Some(first) if !replay => {
+                let (result, figures) = from_records(&meta, &first, &read.others)?;
+                Ok(Self {
+                    meta,
+                    result,
+                    link: read.link,
+                    ended_utc: first.end_time_utc,
+                    figures,
+                })
+            }
+            _ => {
+                let r = replay_all(log)?;
+                Ok(Self {
+                    figures: figures_of(&meta, &r.result),
+                    link: read.link.or(Some(r.link)),
+                    ended_utc: r.end_time_utc,
+                    result: r.result,
+                    meta,
+                })
+            }
+        }
+    }
+}
+
+/// The metadata and report a log holds, read in one pass.
+#[derive(Default)]
+struct Records {
+    meta: Option<RunMeta>,
+    result: Option<ResultMeta>,
+    /// A batch's other units' `result/NAME`, by slot name.
+    others: Vec<(String, ResultMeta)>,
+    link: Option<LinkStats>,
+}
+
+impl Records {
+    fn read(log: &Path) -> Result<Self, String> {
+        use crate::runlog::schema::{REPORT_ATTACHMENT, RESULT_META, RUN_META};
+        let mut out = Self::default();
+        // A record that does not parse is said, never skipped.
+        let mut bad: Option<String> = None;
+        let mut keep = |what: Result<ResultMeta, crate::runlog::meta::MetaError>| match what {
+            Ok(r) => Some(r),
+            Err(e) => {
+                bad.get_or_insert(e.to_string());
+                None
+            }
+        };
+        let mut meta_error = None;
+        crate::runlog::read(log, |item| {
+            match item {
+                crate::runlog::Item::Meta { name, entries }
+                    if name == RUN_META && out.meta.is_none() =>
+                {
+                    match RunMeta::from_entries(entries) {
+                        Ok(m) => out.meta = Some(m),
+                        Err(e) => meta_error = Some(e.to_string()),
+                    }
+                }
+                crate::runlog::Item::Meta { name, entries } if name == RESULT_META => {
+                    out.result = keep(ResultMeta::from_entries(entries));
+                }
+                crate::runlog::Item::Meta { name, entries } => {
+                    if let Some(slot) = name
+                        .strip_prefix(RESULT_META)
+                        .and_then(|r| r.strip_prefix('/'))
+                        && let Some(r) = keep(ResultMeta::from_entries(entries))
+                    {
+                        out.others.push((slot.to_owned(), r));
+                    }
+                }
+                crate::runlog::Item::Attachment { name, data, .. } if name == REPORT_ATTACHMENT => {
+                    out.link = serde_json::from_slice::<serde_json::Value>(data)
+                        .ok()
+                        .and_then(|j| serde_json::from_value(j.get("link")?.clone()).ok());
+                }
+                _ => {}
+            }
+            Ok(())
+        })
+        .map_err(|e| e.to_string())?;
+        if let Some(e) = meta_error {
+            return Err(e);
+        }
+        match bad {
+            Some(e) => Err(e),
+            None => Ok(out),
+        }
+    }
+}
+
+/// The run's ending and figures as its `result` records give them (the
+/// first unit's, then a batch's others' by slot).
+fn from_records(
+    meta: &RunMeta,
+    first: &ResultMeta,
+    others: &[(String, ResultMeta)],
+) -> Result<(RunResult, Vec<(String, ResultMeasurement)>), String> {
+    let slot0 = meta.units.first().map_or(String::new(), |u| u.slot.clone());
+    let mut figures: Vec<(String, ResultMeasurement)> = first
+        .measurements
+        .iter()
+        .map(|m| (slot0.clone(), m.clone()))
+        .collect();
+    let mut units = Vec::new();
+    for u in meta.units.iter().skip(1) {
+        let Some((_, r)) = others.iter().find(|(slot, _)| *slot == u.slot) else {
+            return Err(format!(
+                "the log holds no `result/{}` record for unit {} of its batch",
+                u.slot, u.serial
+            ));
+        };
+        figures.extend(r.measurements.iter().map(|m| (u.slot.clone(), m.clone())));
+        units.push(UnitResult {
+            outcome: Some(r.outcome),
+            measurements: Vec::new(),
+            error: r.error.clone(),
+            frames: r.frames,
+            records: Default::default(),
+        });
+    }
+    let result = RunResult {
+        outcome: first.outcome,
+        measurements: Vec::new(),
+        error: first.error.clone(),
+        cleanup_completed: first.cleanup_completed,
+        // A result record of the first format states none: not a number,
+        // which the store keeps as null.
+        device_time_s: first.device_time_s.unwrap_or(f64::NAN),
+        frames: first.frames,
+        records: Default::default(),
+        bench_left: first.bench_left.clone(),
+        others: units,
+    };
+    Ok((result, figures))
 }
