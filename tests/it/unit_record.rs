@@ -654,3 +654,247 @@ fn diagnose_refuses_runs_of_two_units_unless_asked_and_then_says_so() {
     assert_eq!(d["mixed_units"].as_array().map(Vec::len), Some(2));
     std::fs::remove_dir_all(&dir).expect("cleanup");
 }
+
+/// `gyrobench run TINY --dut SERIAL --coeffs SET --out DIR` with more
+/// arguments, against the store `db`.
+fn run_with_set(
+    db: &Path,
+    tiny: &Path,
+    serial: &str,
+    set: &Path,
+    out: &Path,
+    more: &[&str],
+) -> Output {
+    let mut args = vec![
+        "run",
+        s(tiny),
+        "--dut",
+        serial,
+        "--coeffs",
+        s(set),
+        "--out",
+        s(out),
+    ];
+    args.extend(more);
+    with(db, &args)
+}
+
+/// The set a run's report names: (its version, its identity's status,
+/// the version its text claimed).
+fn recorded_as(run: &Path) -> (Option<i64>, String, Option<i64>) {
+    let c = json(&run.join("report.json"))["coefficients"].clone();
+    (
+        c["version"].as_i64(),
+        c["identity"]["status"]
+            .as_str()
+            .unwrap_or("none")
+            .to_owned(),
+        c["identity"]["claimed_version"].as_i64(),
+    )
+}
+
+#[test]
+fn an_edited_coefficient_set_is_never_recorded_as_the_stored_set() {
+    let dir = temp_dir("unit-forged-set");
+    let db = dir.join("results.sqlite");
+    let tiny = write(&dir, "tiny.toml", crate::common::TINY);
+    let mini = write(&dir, "mini.toml", MINI);
+    let fitted = dir.join("fitted");
+    judged(
+        &db,
+        &["run", s(&mini), "--dut", "RL16-0042", "--out", s(&fitted)],
+    );
+    let set = dir.join("unit.toml");
+    let o = with(
+        &db,
+        &["calibrate", s(&fitted.join("run.mcap")), "-o", s(&set)],
+    );
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let text = std::fs::read_to_string(&set).expect("set");
+    assert!(text.contains("version = 1"), "{text}");
+    let variant = |name: &str, edit: &dyn Fn(&str) -> String| write(&dir, name, &edit(&text));
+
+    // The set as calibrate wrote it: the store holds it, set 1.
+    let run = dir.join("registered");
+    judged(
+        &db,
+        &[
+            "run",
+            s(&tiny),
+            "--dut",
+            "RL16-0042",
+            "--coeffs",
+            s(&set),
+            "--out",
+            s(&run),
+        ],
+    );
+    assert_eq!(recorded_as(&run), (Some(1), "registered".into(), Some(1)));
+
+    // Its serial edited to another unit's: the store knows it as
+    // RL16-0042's set 1, so RL16-0099 refuses it, naming both.
+    let forged = variant("forged.toml", &|t| t.replace("RL16-0042", "RL16-0099"));
+    let run = dir.join("forged");
+    let o = run_with_set(&db, &tiny, "RL16-0099", &forged, &run, &[]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("claims set 1 of RL-16 RL16-0099, but the results store")
+            && stderr(&o).contains("holds it as set 1 of RL-16 RL16-0042"),
+        "{}",
+        stderr(&o)
+    );
+    assert!(!run.exists(), "nothing ran");
+    // Its provenance edited as well: the runs it was fitted on are still
+    // RL16-0042's in the store.
+    let renamed = |t: &str| t.replacen("created_utc = \"", "created_utc = \"1", 1);
+    let forged = variant("forged2.toml", &|t| {
+        renamed(&t.replace("RL16-0042", "RL16-0099"))
+    });
+    let o = run_with_set(&db, &tiny, "RL16-0099", &forged, &run, &[]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("is a run of RL-16 RL16-0042"),
+        "{}",
+        stderr(&o)
+    );
+    // With a reason it is used, and recorded as the edited copy of
+    // RL16-0042's set it is.
+    let run = dir.join("forged-override");
+    judged(
+        &db,
+        &[
+            "run",
+            s(&tiny),
+            "--dut",
+            "RL16-0099",
+            "--coeffs",
+            s(&dir.join("forged.toml")),
+            "--coeffs-override",
+            "bench trial",
+            "--out",
+            s(&run),
+        ],
+    );
+    assert_eq!(recorded_as(&run), (None, "edited".into(), Some(1)));
+    let c = json(&run.join("report.json"))["coefficients"].clone();
+    assert_eq!(c["serial"], "RL16-0042", "{c}");
+
+    // A coefficient edited on its own unit: used, recorded as an edited
+    // copy of set 1 (never as set 1), in the report, the log and the store.
+    let edited = variant("edited.toml", &|t| {
+        t.replacen("warmup_tau_s = ", "warmup_tau_s = 1", 1)
+    });
+    let run = dir.join("edited");
+    let o = run_with_set(&db, &tiny, "RL16-0042", &edited, &run, &[]);
+    assert!(matches!(o.status.code(), Some(0 | 3)), "{}", stderr(&o));
+    assert!(stderr(&o).contains("warning: "), "{}", stderr(&o));
+    assert_eq!(recorded_as(&run), (None, "edited".into(), Some(1)));
+    let replayed = with(
+        &db,
+        &[
+            "replay",
+            s(&run.join("run.mcap")),
+            "--out",
+            s(&dir.join("edited-replay")),
+        ],
+    );
+    assert!(
+        matches!(replayed.status.code(), Some(0 | 3)),
+        "{}",
+        stderr(&replayed)
+    );
+    assert_eq!(
+        recorded_as(&dir.join("edited-replay")),
+        (None, "edited".into(), Some(1))
+    );
+    // A set number the unit has not got, with a provenance of its own.
+    let unknown = variant("unknown.toml", &|t| {
+        renamed(&t.replace("version = 1", "version = 999"))
+    });
+    let run = dir.join("unknown");
+    judged(
+        &db,
+        &[
+            "run",
+            s(&tiny),
+            "--dut",
+            "RL16-0042",
+            "--coeffs",
+            s(&unknown),
+            "--out",
+            s(&run),
+        ],
+    );
+    assert_eq!(recorded_as(&run), (None, "unregistered".into(), Some(999)));
+    let h = with(&db, &["results", "unit", "RL16-0042", "--json"]);
+    let h: serde_json::Value = serde_json::from_slice(&h.stdout).expect("JSON");
+    let stored: Vec<(String, Option<i64>, Option<i64>)> = h["runs"]
+        .as_array()
+        .expect("runs")
+        .iter()
+        .map(|r| &r["coefficients"])
+        .filter(|c| c["source"] == "file")
+        .map(|c| {
+            (
+                c["identity"].as_str().unwrap_or("none").to_owned(),
+                c["version"].as_i64(),
+                c["claimed_version"].as_i64(),
+            )
+        })
+        .collect();
+    assert_eq!(
+        stored,
+        [
+            ("registered".into(), Some(1), Some(1)),
+            ("edited".into(), None, Some(1)),
+            ("unregistered".into(), None, Some(999)),
+        ]
+    );
+
+    // No store to ask, or one that cannot be reached: the run goes on, and
+    // its record says the set could not be checked.
+    let run = dir.join("no-store");
+    judged(
+        &db,
+        &[
+            "run",
+            s(&tiny),
+            "--dut",
+            "RL16-0042",
+            "--coeffs",
+            s(&set),
+            "--db",
+            "none",
+            "--out",
+            s(&run),
+        ],
+    );
+    assert_eq!(recorded_as(&run), (None, "unchecked".into(), Some(1)));
+    let broken = write(&dir, "broken.sqlite", &"not a database ".repeat(400));
+    let run = dir.join("unreachable");
+    let o = command()
+        .env("XDG_DATA_HOME", dir.join("home"))
+        .args([
+            "run",
+            s(&tiny),
+            "--dut",
+            "RL16-0042",
+            "--coeffs",
+            s(&set),
+            "--db",
+            s(&broken),
+            "--out",
+            s(&run),
+        ])
+        .output()
+        .expect("runs");
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    assert_eq!(recorded_as(&run), (None, "unchecked".into(), Some(1)));
+    let note = json(&run.join("report.json"))["coefficients"]["identity"]["note"].clone();
+    assert!(
+        note.as_str()
+            .is_some_and(|n| n.contains("could not be checked") && n.contains("not a database")),
+        "{note}"
+    );
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
