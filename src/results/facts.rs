@@ -189,31 +189,36 @@ impl LogFacts {
     /// completed it) or with `replay`, its figures and ending recomputed
     /// from its frames.
     pub fn read(log: &Path, replay: bool) -> Result<Self, String> {
+        if replay {
+            return Ok(Self::replayed(replay_all(log)?));
+        }
         let read = Records::read(log)?;
         let Some(meta) = read.meta else {
             return Err("the log holds no `run` metadata".into());
         };
-        match read.result {
-            Some(first) if !replay => {
-                let (result, figures) = from_records(&meta, &first, &read.others)?;
-                Ok(Self {
-                    meta,
-                    result,
-                    link: read.link,
-                    ended_utc: first.end_time_utc,
-                    figures,
-                })
-            }
-            _ => {
-                let r = replay_all(log)?;
-                Ok(Self {
-                    figures: figures_of(&meta, &r.result),
-                    link: read.link.or(Some(r.link)),
-                    ended_utc: r.end_time_utc,
-                    result: r.result,
-                    meta,
-                })
-            }
+        let Some(first) = read.result else {
+            // A killed run's log: what a sync made of it.
+            return Ok(Self::replayed(replay_all(log)?));
+        };
+        let (result, figures) = from_records(&meta, &first, &read.others)?;
+        Ok(Self {
+            meta,
+            result,
+            link: read.link,
+            ended_utc: first.end_time_utc,
+            figures,
+        })
+    }
+
+    /// The facts of a replay (the figures, the verdict and the link
+    /// figures recomputed from the frames, as a sync stores them).
+    fn replayed(r: Replayed) -> Self {
+        Self {
+            figures: figures_of(&r.meta, &r.result),
+            link: Some(r.link),
+            ended_utc: r.end_time_utc,
+            result: r.result,
+            meta: r.meta,
         }
     }
 }
