@@ -605,65 +605,64 @@ fn set_of(serial: &str) -> String {
     )
 }
 
-/// A run of one unit (with a coefficient set and an operator) and a batch
-/// of two, stored in `db`; verify agrees with them. Then their rows are
-/// edited as the attacker did, and each edit is named by field
-/// with the store's value and the log's.
-fn verify_names_every_field_edited(db: &str, tag: &str) {
-    let dir = temp_dir(&format!("results-verify-fields-{tag}"));
-    let runs = dir.join("runs");
-    let p = write(&dir, "tiny.toml", TINY);
+/// A run of unit `TAG-A` (with a coefficient set and an operator) and a
+/// batch of two in `runs`, stored in `db`; verify agrees with them (and
+/// with --replay). Their parts' keys, the single run's first.
+fn stored_runs(db: &str, dir: &Path, runs: &Path, tag: &str) -> (String, String) {
+    let p = write(dir, "tiny.toml", TINY);
     let unit = format!("{tag}-A");
-    let set = write(&dir, "set.toml", &set_of(&unit));
-    let r = with_db(
-        db,
-        &[
-            "run",
-            s(&p),
-            "--dut",
-            &unit,
-            "--operator",
-            "ana",
-            "--coeffs",
-            s(&set),
-            "--out",
-            s(&runs.join("one")),
-        ],
-    );
+    let set = write(dir, "set.toml", &set_of(&unit));
+    let one = runs.join("one");
+    let mut args = vec!["run", s(&p), "--dut", &unit, "--operator", "ana"];
+    args.extend(["--coeffs", s(&set), "--out", s(&one)]);
+    let r = with_db(db, &args);
     assert_eq!(r.status.code(), Some(0), "{}", stderr(&r));
-    let quad = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/bench/quad.toml");
-    let (a, c) = (format!("{tag}-Q1"), format!("{tag}-Q3"));
-    let r = with_db(
-        db,
-        &[
-            "run",
-            s(&p),
-            "--bench",
-            s(&quad),
-            "--dut",
-            &format!("A={a}"),
-            "--dut",
-            &format!("C={c}"),
-            "--out",
-            s(&runs.join("batch")),
-        ],
-    );
+    let quad = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/bench/quad.toml");
+    let (a, c) = (format!("A={tag}-Q1"), format!("C={tag}-Q3"));
+    let batch = runs.join("batch");
+    let mut args = vec!["run", s(&p), "--bench", s(&quad), "--dut", &a, "--dut", &c];
+    args.extend(["--out", s(&batch)]);
+    let r = with_db(db, &args);
     assert_eq!(r.status.code(), Some(0), "{}", stderr(&r));
-    for replay in [false, true] {
-        let mut args = vec!["results", "verify", s(&runs)];
-        if replay {
-            args.push("--replay");
-        }
+    for more in [&[][..], &["--replay"][..]] {
+        let mut args = vec!["results", "verify", s(runs)];
+        args.extend(more);
         let v = with_db(db, &args);
         assert_eq!(v.status.code(), Some(0), "{}", stdout(&v));
     }
-
     let key = |report: std::path::PathBuf| {
         let id = json(&report)["run_id"].clone();
         format!("{}.1", id.as_str().expect("run id"))
     };
-    let one = key(runs.join("one/report.json"));
-    let batch = key(runs.join(format!("batch/report-{a}.json")));
+    (
+        key(one.join("report.json")),
+        key(batch.join(format!("report-{tag}-Q1.json"))),
+    )
+}
+
+/// The record differences verify's JSON `v` names for the part `run`:
+/// (field, the store's value, the log's).
+fn named(v: &serde_json::Value, run: &str) -> Vec<(String, serde_json::Value, serde_json::Value)> {
+    v["findings"]
+        .as_array()
+        .expect("findings")
+        .iter()
+        .filter(|f| f["run"] == run && f["problem"] == "record_differs")
+        .flat_map(|f| f["differences"].as_array().cloned().unwrap_or_default())
+        .map(|d| {
+            let field = d["field"].as_str().unwrap_or("").to_owned();
+            (field, d["store"].clone(), d["log"].clone())
+        })
+        .collect()
+}
+
+/// Runs stored in `db` ([`stored_runs`]), then their rows edited as the
+/// issue's attacker did: each edit is named by field with the store's
+/// value and the log's.
+fn verify_names_every_field_edited(db: &str, tag: &str) {
+    let dir = temp_dir(&format!("results-verify-fields-{tag}"));
+    let runs = dir.join("runs");
+    let (one, batch) = stored_runs(db, &dir, &runs, tag);
     let log = json(&runs.join("one/report.json"));
     let moved = format!("{tag}-MOVED");
     edit_store(
@@ -681,26 +680,11 @@ fn verify_names_every_field_edited(db: &str, tag: &str) {
     let v = with_db(db, &["results", "verify", s(&runs), "--json"]);
     assert_eq!(v.status.code(), Some(3), "{}", stdout(&v));
     let v: serde_json::Value = serde_json::from_slice(&v.stdout).expect("JSON");
-    let named = |run: &str| -> Vec<(String, serde_json::Value, serde_json::Value)> {
-        v["findings"]
-            .as_array()
-            .expect("findings")
-            .iter()
-            .filter(|f| f["run"] == run && f["problem"] == "record_differs")
-            .flat_map(|f| f["differences"].as_array().cloned().unwrap_or_default())
-            .map(|d| {
-                (
-                    d["field"].as_str().unwrap_or("").to_owned(),
-                    d["store"].clone(),
-                    d["log"].clone(),
-                )
-            })
-            .collect()
-    };
     let j = serde_json::Value::from;
-    let sha = log["coefficients"]["sha256"].clone();
+    let unit = format!("{tag}-A");
+    let (moved, unit) = (j(moved.as_str()), j(unit.as_str()));
     assert_eq!(
-        named(&one),
+        named(&v, &one),
         [
             ("operator".into(), j("mallory"), j("ana")),
             (
@@ -714,15 +698,19 @@ fn verify_names_every_field_edited(db: &str, tag: &str) {
                 j("deadbeef"),
                 log["software_revision"].clone()
             ),
-            ("serial".into(), j(moved.as_str()), j(unit.as_str())),
+            ("serial".into(), moved.clone(), unit.clone()),
             ("outcome".into(), j("fail"), j("pass")),
-            ("unit.serial".into(), j(moved.as_str()), j(unit.as_str())),
+            ("unit.serial".into(), moved, unit),
             ("unit.outcome".into(), j("fail"), j("pass")),
-            ("unit.coeffs_sha256".into(), j("00ff"), sha),
+            (
+                "unit.coeffs_sha256".into(),
+                j("00ff"),
+                log["coefficients"]["sha256"].clone()
+            ),
         ]
     );
     assert_eq!(
-        named(&batch),
+        named(&v, &batch),
         [("unit[C].outcome".into(), j("fail"), j("pass"))]
     );
     // The terminal says the same, one line per field.
