@@ -222,9 +222,12 @@ impl SetIdentity {
                     "a set the results store does not hold (its text claims {})",
                     self.claim()
                 ),
-                None => format!(
-                    "a set the results store does not hold, {}",
-                    claim_text(self.claimed_unit.as_ref(), None).replacen("a set ", "", 1)
+                // The words runs have always used for a set without a
+                // version.
+                None => claim_text(self.claimed_unit.as_ref(), None).replacen(
+                    "a set",
+                    "a set not in a store",
+                    1,
                 ),
             },
             _ => format!("{} as its text claims", self.claim()),
@@ -322,10 +325,7 @@ mod tests {
             "a set the results store does not hold (its text claims set 999 of RL-16 RL16-0042)"
         );
         id.claimed_version = None;
-        assert_eq!(
-            id.head(),
-            "a set the results store does not hold, of RL-16 RL16-0042"
-        );
+        assert_eq!(id.head(), "a set not in a store of RL-16 RL16-0042");
         let mut id = identity(SetStatus::Edited, "RL16-0042", Some(1));
         id.stored = Some(stored("RL16-0042", 1));
         assert_eq!(id.head(), "an edited copy of set 1 of RL-16 RL16-0042");

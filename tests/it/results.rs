@@ -595,10 +595,10 @@ fn edit_store(db: &str, sql: &str) {
     }
 }
 
-/// A coefficient set of unit `serial` that no store holds.
+/// A coefficient set of unit `serial` (type RL-16V) that no store holds.
 fn set_of(serial: &str) -> String {
     format!(
-        "[unit]\nserial = \"{serial}\"\ntype = \"RL-16\"\n\n[set]\ncreated_utc = \"2026-12-03T10:00:00+00:00\"\n\
+        "[unit]\nserial = \"{serial}\"\ntype = \"RL-16V\"\n\n[set]\ncreated_utc = \"2026-12-03T10:00:00+00:00\"\n\
          software = \"gyrobench 0.1.0\"\nmodels = [\"model4\"]\n\n[model4]\nk1_dph_per_c = -0.12\n\
          k2_dph_per_c2 = -0.01\nk3_dph_per_c_per_s = 20.0\nk4_dph_per_c = -0.007\nk5_dph = 0.36\n\
          warmup_tau_s = 600.0\noffset_dph = 0.0\n"
@@ -609,7 +609,13 @@ fn set_of(serial: &str) -> String {
 /// batch of two in `runs`, stored in `db`; verify agrees with them (and
 /// with --replay). Their parts' keys, the single run's first.
 fn stored_runs(db: &str, dir: &Path, runs: &Path, tag: &str) -> (String, String) {
-    let p = write(dir, "tiny.toml", TINY);
+    // A type of their own: the lab questions of `lifecycle`, asked of the
+    // same server, are about RL-16s.
+    let p = write(
+        dir,
+        "tiny.toml",
+        &TINY.replace("dut_type = \"RL-16\"", "dut_type = \"RL-16V\""),
+    );
     let unit = format!("{tag}-A");
     let set = write(dir, "set.toml", &set_of(&unit));
     let one = runs.join("one");
@@ -668,7 +674,7 @@ fn verify_names_every_field_edited(db: &str, tag: &str) {
     edit_store(
         db,
         &format!(
-            "INSERT INTO units (dut_type, serial) VALUES ('RL-16', '{moved}');
+            "INSERT INTO units (dut_type, serial) VALUES ('RL-16V', '{moved}');
              UPDATE runs SET outcome = 'fail', operator = 'mallory', started_utc = '2020-01-01T00:00:00+00:00',
                bench_id = 'bench-9', software_revision = 'deadbeef',
                unit_id = (SELECT id FROM units WHERE serial = '{moved}') WHERE id = '{one}';
