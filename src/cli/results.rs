@@ -176,9 +176,12 @@ pub enum ResultsCommand {
         force: bool,
     },
     /// Whether the store tells the truth: every stored run checked against
-    /// its log (there, the same SHA-256, the same figures; recomputed from
-    /// the frames with --replay), and the logs below RUNS_DIR the store
-    /// lacks.
+    /// its log (there, the same SHA-256; every field of its record the log
+    /// gives: unit, each unit's outcome and coefficients, operator, times,
+    /// bench, host, software, procedure, instruments, each difference
+    /// named with the store's value and the log's; the same figures,
+    /// recomputed from the frames with --replay), and the logs below
+    /// RUNS_DIR the store lacks.
     #[command(after_help = after_help!(
         "gyrobench results verify runs/ --replay",
         "0 the store and the logs agree, 3 they do not (each finding printed), 1 error (a store \
@@ -516,7 +519,7 @@ pub fn render_unit(h: &UnitHistory) -> String {
                 p(&r.bench_id)
             },
             r.software,
-            r.coefficients.describe(),
+            p(&r.coefficients.describe()),
             r.calibration_overdue
                 .as_deref()
                 .map_or(String::new(), |o| format!("; {o} calibration OVERDUE"))

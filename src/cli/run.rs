@@ -10,7 +10,7 @@ use clap::Args;
 use super::check::load_bench;
 use super::{Outcome, Usage};
 use crate::clock::Pacing;
-use crate::coeffs::{Chosen, CoeffsSource};
+use crate::coeffs::{Chosen, CoeffsSource, SetIdentity, SetStatus};
 use crate::procedure::Procedure;
 use crate::runlog::live::{Live as LiveStream, LiveError};
 use crate::sequencer::embedded::Fault;
@@ -56,8 +56,11 @@ pub struct RunArgs {
     seed: u64,
     /// The unit's coefficient set to compensate with: a file `calibrate`
     /// wrote, or `latest` for the unit's newest set in the results store
-    /// (default: model 4 fitted on the run's own records). A set of
-    /// another unit is refused.
+    /// (default: model 4 fitted on the run's own records). The set is
+    /// checked against the results store: a set it holds is recorded with
+    /// its version, an edited or unknown one as such (never as the set it
+    /// claims to be), and without a store as not checked. A set of another
+    /// unit (as it names itself, or as the store knows it) is refused.
     #[arg(long, value_name = "FILE|latest")]
     coeffs: Option<String>,
     /// Use the --coeffs set although it is another unit's or names no
@@ -482,8 +485,9 @@ fn serial(dut: Option<&str>, embedded: bool) -> Result<String> {
 }
 
 /// The coefficient set `--coeffs` names (a file, or `latest` from the
-/// store), checked against the unit: another unit's set, or one naming
-/// none, needs `--coeffs-override REASON`.
+/// store), its identity checked against the results store, then checked
+/// against the unit: another unit's set, one the store knows as another
+/// unit's, or one naming none, needs `--coeffs-override REASON`.
 fn choose_coeffs(
     choice: &str,
     override_reason: Option<&str>,
@@ -494,17 +498,16 @@ fn choose_coeffs(
     let mut chosen = if choice == "latest" {
         latest_set(store, dut_type, serial)?
     } else {
-        Chosen::from_file(std::path::Path::new(choice)).context("loading the coefficient set")?
+        let chosen = Chosen::from_file(std::path::Path::new(choice))
+            .context("loading the coefficient set")?;
+        identified(chosen, store)
     };
     let from = chosen
         .used
         .from
         .clone()
         .unwrap_or_else(|| choice.to_owned());
-    match (
-        chosen.set.check_unit(&from, dut_type, serial),
-        override_reason,
-    ) {
+    match (chosen.check_unit(&from, dut_type, serial), override_reason) {
         (Ok(()), None) => {}
         (Ok(()), Some(_)) => {
             return Err(Usage(format!(
@@ -529,10 +532,43 @@ fn choose_coeffs(
             chosen.used.override_reason = Some(reason.to_owned());
         }
     }
+    if let Some(id) = chosen
+        .used
+        .identity
+        .as_ref()
+        .filter(|i| i.status != SetStatus::Registered)
+    {
+        errln!(
+            "warning: {from}: {}; the run records it as {}",
+            id.note,
+            id.head()
+        );
+    }
     Ok(chosen)
 }
 
-/// The unit's newest coefficient set in the results store.
+/// The set of `chosen` with its identity as the results store `store`
+/// knows it. A store that is not given or cannot be reached never stops
+/// the run: the set is recorded as not checked, saying why.
+fn identified(chosen: Chosen, store: &crate::results::Location) -> Chosen {
+    let sha = chosen.used.sha256.clone().unwrap_or_default();
+    let identity = match crate::results::Store::open(store) {
+        Ok(Some(mut s)) => match s.identify_set(&chosen.set, &sha) {
+            Ok(id) => id,
+            Err(e) => SetIdentity::unchecked(&chosen.set, Some(s.name()), &e.to_string()),
+        },
+        Ok(None) => SetIdentity::unchecked(
+            &chosen.set,
+            None,
+            "no results store (--db none) to check it against",
+        ),
+        Err(e) => SetIdentity::unchecked(&chosen.set, Some(&store.describe()), &e.to_string()),
+    };
+    chosen.identified(identity)
+}
+
+/// The unit's newest coefficient set in the results store, its text
+/// checked against what the store recorded of it.
 fn latest_set(store: &crate::results::Location, dut_type: &str, serial: &str) -> Result<Chosen> {
     let Some(mut s) = crate::results::Store::open(store)
         .context("opening the results store for --coeffs latest")?
@@ -554,7 +590,10 @@ fn latest_set(store: &crate::results::Location, dut_type: &str, serial: &str) ->
         &format!("coefficient set {version} of {serial} in {}", s.name()),
         &text,
     );
-    Ok(Chosen::from_source(&src, CoeffsSource::Store, s.name())?)
+    let chosen = Chosen::from_source(&src, CoeffsSource::Store, s.name())?;
+    let sha = chosen.used.sha256.clone().unwrap_or_default();
+    let identity = s.identify_set(&chosen.set, &sha)?;
+    Ok(chosen.identified(identity))
 }
 
 pub fn run(args: RunArgs) -> Result<Outcome> {

@@ -116,43 +116,7 @@ pub struct RunRow {
     pub coefficients: StoredCoeffs,
 }
 
-/// The coefficients a run's unit used, as the store keeps them.
-#[derive(Debug, Clone, Default, PartialEq, Serialize)]
-pub struct StoredCoeffs {
-    /// `fitted`, `file` or `store` (none for runs stored before schema 3).
-    pub source: Option<String>,
-    /// The set's unit.
-    pub serial: Option<String>,
-    /// The set's version.
-    pub version: Option<i64>,
-    /// SHA-256 of the set's text.
-    pub sha256: Option<String>,
-    /// Why another unit's set was used.
-    pub override_reason: Option<String>,
-}
-
-impl StoredCoeffs {
-    /// In words.
-    pub fn describe(&self) -> String {
-        let set = match (self.version, &self.serial) {
-            (Some(v), Some(s)) => format!("set {v} of {s}"),
-            (None, Some(s)) => format!("a set of {s} not in a store"),
-            _ => "a set naming no unit".into(),
-        };
-        let sha = self.sha256.as_deref().map_or(String::new(), |h| {
-            format!(" (sha256 {})", h.get(..12).unwrap_or(h))
-        });
-        let why = self
-            .override_reason
-            .as_deref()
-            .map_or(String::new(), |r| format!(", used for another unit: {r}"));
-        match self.source.as_deref() {
-            None => "not recorded".into(),
-            Some("fitted") => "fitted on the run's records".into(),
-            Some(_) => format!("{set}{sha}{why}"),
-        }
-    }
-}
+pub use super::sets::StoredCoeffs;
 
 /// The columns of a run's row, each read back by its name.
 const RUN_COLUMNS: &[(&str, &str)] = &[
@@ -179,6 +143,9 @@ const RUN_COLUMNS: &[(&str, &str)] = &[
     ("ru.coeffs_version", "coeffs_version"),
     ("ru.coeffs_sha256", "coeffs_sha256"),
     ("ru.coeffs_override_reason", "coeffs_override_reason"),
+    ("ru.coeffs_identity", "coeffs_identity"),
+    ("ru.coeffs_claimed_version", "coeffs_claimed_version"),
+    ("ru.coeffs_identity_note", "coeffs_identity_note"),
 ];
 
 /// The select list of [`RUN_COLUMNS`].
@@ -216,13 +183,7 @@ fn run_row(r: &Row) -> RunRow {
             format!("{version} ({revision})")
         },
         calibration_overdue: r.opt_text("calibration_overdue"),
-        coefficients: StoredCoeffs {
-            source: r.opt_text("coeffs_source"),
-            serial: r.opt_text("coeffs_serial"),
-            version: r.int("coeffs_version"),
-            sha256: r.opt_text("coeffs_sha256"),
-            override_reason: r.opt_text("coeffs_override_reason"),
-        },
+        coefficients: StoredCoeffs::of_row(r),
     }
 }
 

@@ -814,13 +814,15 @@ pub fn execute(
         Report::new(&plan.procedure, &result.unit(k), &meta.for_unit(k), link)
     };
     let end_s = bench.now_s();
+    // One end time, stated in the log and recorded in the store alike.
+    let ended_utc = utc_now().to_rfc3339();
     let (result, reports) = close_log(
         recorder,
         &log,
         result,
         &meta,
         finish,
-        (end_s, &part_link, &part_slot_links),
+        (end_s, &ended_utc, &part_link, &part_slot_links),
         &mut notes,
     );
     let (report_error, units) = write_reports(&dir.path, &meta, &result, &reports);
@@ -828,7 +830,7 @@ pub fn execute(
         .into_iter()
         .next()
         .unwrap_or_else(|| finish(&result, 0));
-    store.finish(&log, &result, link, &mut notes);
+    store.finish(&log, &result, link, &ended_utc, &mut notes);
     Ok(Finished {
         dir: dir.path.clone(),
         log,
@@ -962,7 +964,7 @@ fn close_log(
     mut result: RunResult,
     meta: &RunMeta,
     report_of: impl Fn(&RunResult, usize) -> Report,
-    (end_s, part_link, slot_links): (f64, &LinkStats, &[LinkStats]),
+    (end_s, ended_utc, part_link, slot_links): (f64, &str, &LinkStats, &[LinkStats]),
     notes: &mut Vec<String>,
 ) -> (RunResult, Vec<Report>) {
     let reports_of = |result: &RunResult| {
@@ -990,7 +992,7 @@ fn close_log(
                     recorder.unit_result(
                         &u.slot,
                         &u.serial,
-                        &ResultMeta::new(&result.unit(k)),
+                        &ResultMeta::new(&result.unit(k)).ended_at(ended_utc),
                         &r.to_json(),
                         end_s,
                     )
@@ -998,7 +1000,11 @@ fn close_log(
         })
         .and_then(|()| {
             let first = reports.first().map(Report::to_json);
-            recorder.finish_run(&ResultMeta::new(&result), first.as_deref(), end_s)
+            recorder.finish_run(
+                &ResultMeta::new(&result).ended_at(ended_utc),
+                first.as_deref(),
+                end_s,
+            )
         });
     let Err(e) = log_end else {
         return (result, reports);
@@ -1325,7 +1331,14 @@ impl StoreLink {
         link
     }
 
-    fn finish(&mut self, log: &Path, result: &RunResult, link: LinkStats, notes: &mut Vec<String>) {
+    fn finish(
+        &mut self,
+        log: &Path,
+        result: &RunResult,
+        link: LinkStats,
+        ended_utc: &str,
+        notes: &mut Vec<String>,
+    ) {
         if self.location == crate::results::Location::Off {
             return;
         }
@@ -1337,7 +1350,7 @@ impl StoreLink {
                     &crate::results::record::PartEnd {
                         result,
                         link,
-                        ended_utc: utc_now().to_rfc3339(),
+                        ended_utc: ended_utc.to_owned(),
                         slots: self.slots.clone(),
                     },
                 )

@@ -28,6 +28,7 @@ mod results;
 mod resume;
 mod run;
 mod safety;
+mod set_identity;
 mod station;
 mod sweep;
 mod unit_record;
