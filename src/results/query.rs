@@ -719,9 +719,10 @@ impl Store {
                 .sql()
                 .query(
                     &format!(
-                        "SELECT {MEASUREMENT_COLUMNS} FROM measurements m WHERE m.run = $1 ORDER BY m.seq"
+                        "SELECT {MEASUREMENT_COLUMNS} FROM measurements m WHERE m.run = $1 AND m.slot = $2 ORDER BY m.seq"
                     ),
-                    &[r.id.clone().into()],
+                    // A batch's row is one unit's: its own slot's figures.
+                    &[r.id.clone().into(), r.slot.clone().into()],
                 )?
                 .iter()
                 .map(measurement_row)
