@@ -245,11 +245,12 @@ pub fn main() -> ExitCode {
         Ok(outcome) => ExitCode::from(outcome.code()),
         Err(e) => {
             errln!("error: {e:#}");
-            // An output that is one of the inputs is a bad pair of arguments.
+            // An output that is one of the inputs, or in a run directory,
+            // is a bad pair of arguments.
             let usage = e.chain().any(|c| {
                 c.is::<Usage>()
                     || c.is::<crate::fsutil::SamePath>()
-                    || c.is::<crate::fsutil::OverRecord>()
+                    || c.is::<crate::fsutil::OutputRefused>()
             });
             ExitCode::from(if usage { EXIT_USAGE } else { EXIT_ERROR })
         }

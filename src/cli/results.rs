@@ -143,9 +143,14 @@ pub enum ResultsCommand {
         measurement: String,
         #[command(flatten)]
         filter: FilterArgs,
-        /// Also write a chart page (values against time, limits).
+        /// Also write a chart page (values against time, limits); not a
+        /// run's log, nor inside a run directory, without --force.
         #[arg(long, value_name = "FILE")]
         html: Option<PathBuf>,
+        /// Write the --html page even if it is a run's log or inside a
+        /// run directory.
+        #[arg(long, requires = "html")]
+        force: bool,
         /// As JSON.
         #[arg(long)]
         json: bool,
@@ -158,17 +163,25 @@ pub enum ResultsCommand {
     Export {
         #[command(flatten)]
         filter: FilterArgs,
-        /// JUnit XML file to write.
+        /// JUnit XML file to write (not a run's log, nor inside a run
+        /// directory, without --force).
         #[arg(long, value_name = "FILE", required_unless_present = "csv")]
         junit: Option<PathBuf>,
-        /// CSV file to write.
+        /// CSV file to write (as --junit).
         #[arg(long, value_name = "FILE")]
         csv: Option<PathBuf>,
+        /// Write the files even if one is a run's log or inside a run
+        /// directory.
+        #[arg(long)]
+        force: bool,
     },
     /// Whether the store tells the truth: every stored run checked against
-    /// its log (there, the same SHA-256, the same figures; recomputed from
-    /// the frames with --replay), and the logs below RUNS_DIR the store
-    /// lacks.
+    /// its log (there, the same SHA-256; every field of its record the log
+    /// gives: unit, each unit's outcome and coefficients, operator, times,
+    /// bench, host, software, procedure, instruments, each difference
+    /// named with the store's value and the log's; the same figures,
+    /// recomputed from the frames with --replay), and the logs below
+    /// RUNS_DIR the store lacks.
     #[command(after_help = after_help!(
         "gyrobench results verify runs/ --replay",
         "0 the store and the logs agree, 3 they do not (each finding printed), 1 error (a store \
@@ -257,8 +270,10 @@ pub fn run(args: ResultsArgs) -> Result<Outcome> {
             measurement,
             filter,
             html,
+            force,
             json,
         } => {
+            check_outputs(html.iter(), force)?;
             let f = filter.filter(true, None)?;
             let t = store.trend(&measurement, &f)?;
             if let Some(path) = &html {
@@ -271,7 +286,13 @@ pub fn run(args: ResultsArgs) -> Result<Outcome> {
                 outf!("{}", render_trend(&t))?;
             }
         }
-        ResultsCommand::Export { filter, junit, csv } => {
+        ResultsCommand::Export {
+            filter,
+            junit,
+            csv,
+            force,
+        } => {
+            check_outputs(junit.iter().chain(&csv), force)?;
             let rows = store.export_rows(&filter.filter(true, None)?)?;
             if let Some(path) = &junit {
                 let xml = crate::results::junit::junit(&rows).context("writing JUnit XML")?;
@@ -309,6 +330,21 @@ pub fn run(args: ResultsArgs) -> Result<Outcome> {
         ResultsCommand::Sync { dirs } => return sync(&mut store, &dirs),
     }
     Ok(Outcome::Success)
+}
+
+/// The files a command will write, each checked before anything is done
+/// (`fsutil::check_output`).
+fn check_outputs<'a>(paths: impl Iterator<Item = &'a PathBuf>, force: bool) -> Result<()> {
+    for p in paths {
+        crate::fsutil::check_output(
+            p,
+            crate::fsutil::OutputRule {
+                force,
+                ..Default::default()
+            },
+        )?;
+    }
+    Ok(())
 }
 
 /// The trend's chart page at `path`, each point linked to its report.
@@ -483,7 +519,7 @@ pub fn render_unit(h: &UnitHistory) -> String {
                 p(&r.bench_id)
             },
             r.software,
-            r.coefficients.describe(),
+            p(&r.coefficients.describe()),
             r.calibration_overdue
                 .as_deref()
                 .map_or(String::new(), |o| format!("; {o} calibration OVERDUE"))

@@ -11,11 +11,13 @@
 //! rebuilt from the logs at any time (`results sync`). A store that cannot
 //! be reached never stops a run: the run is queued and written later.
 
+pub mod facts;
 pub mod junit;
 pub mod page;
 pub mod pg;
 pub mod query;
 pub mod record;
+pub mod sets;
 pub mod sql;
 pub mod sqlite;
 pub mod verify;

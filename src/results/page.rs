@@ -12,8 +12,17 @@ use crate::view::{Chart, Marker, Series, esc, page};
 
 /// The report of the run a point came from, as a link from a page in
 /// `page_dir`: relative when the report sits below it, else a file URL.
+/// A batch's unit has its own report beside the log, named as the batch
+/// names it (`report-SERIAL.html`); a single unit's is `report.html`.
 pub fn report_link(p: &TrendPoint, page_dir: &Path) -> Option<String> {
-    let report = Path::new(&p.log_path).parent()?.join("report.html");
+    let name = if p.slot.is_empty() {
+        "report".to_owned()
+    } else {
+        crate::unit::report_name(&p.serial)
+    };
+    let report = Path::new(&p.log_path)
+        .parent()?
+        .join(format!("{name}.html"));
     let abs_page = std::path::absolute(page_dir).ok()?;
     Some(match report.strip_prefix(&abs_page) {
         Ok(rel) => rel.display().to_string(),

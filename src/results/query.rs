@@ -116,43 +116,7 @@ pub struct RunRow {
     pub coefficients: StoredCoeffs,
 }
 
-/// The coefficients a run's unit used, as the store keeps them.
-#[derive(Debug, Clone, Default, PartialEq, Serialize)]
-pub struct StoredCoeffs {
-    /// `fitted`, `file` or `store` (none for runs stored before schema 3).
-    pub source: Option<String>,
-    /// The set's unit.
-    pub serial: Option<String>,
-    /// The set's version.
-    pub version: Option<i64>,
-    /// SHA-256 of the set's text.
-    pub sha256: Option<String>,
-    /// Why another unit's set was used.
-    pub override_reason: Option<String>,
-}
-
-impl StoredCoeffs {
-    /// In words.
-    pub fn describe(&self) -> String {
-        let set = match (self.version, &self.serial) {
-            (Some(v), Some(s)) => format!("set {v} of {s}"),
-            (None, Some(s)) => format!("a set of {s} not in a store"),
-            _ => "a set naming no unit".into(),
-        };
-        let sha = self.sha256.as_deref().map_or(String::new(), |h| {
-            format!(" (sha256 {})", h.get(..12).unwrap_or(h))
-        });
-        let why = self
-            .override_reason
-            .as_deref()
-            .map_or(String::new(), |r| format!(", used for another unit: {r}"));
-        match self.source.as_deref() {
-            None => "not recorded".into(),
-            Some("fitted") => "fitted on the run's records".into(),
-            Some(_) => format!("{set}{sha}{why}"),
-        }
-    }
-}
+pub use super::sets::StoredCoeffs;
 
 /// The columns of a run's row, each read back by its name.
 const RUN_COLUMNS: &[(&str, &str)] = &[
@@ -179,6 +143,9 @@ const RUN_COLUMNS: &[(&str, &str)] = &[
     ("ru.coeffs_version", "coeffs_version"),
     ("ru.coeffs_sha256", "coeffs_sha256"),
     ("ru.coeffs_override_reason", "coeffs_override_reason"),
+    ("ru.coeffs_identity", "coeffs_identity"),
+    ("ru.coeffs_claimed_version", "coeffs_claimed_version"),
+    ("ru.coeffs_identity_note", "coeffs_identity_note"),
 ];
 
 /// The select list of [`RUN_COLUMNS`].
@@ -216,13 +183,7 @@ fn run_row(r: &Row) -> RunRow {
             format!("{version} ({revision})")
         },
         calibration_overdue: r.opt_text("calibration_overdue"),
-        coefficients: StoredCoeffs {
-            source: r.opt_text("coeffs_source"),
-            serial: r.opt_text("coeffs_serial"),
-            version: r.int("coeffs_version"),
-            sha256: r.opt_text("coeffs_sha256"),
-            override_reason: r.opt_text("coeffs_override_reason"),
-        },
+        coefficients: StoredCoeffs::of_row(r),
     }
 }
 
@@ -395,6 +356,10 @@ pub struct TrendPoint {
     pub run: String,
     /// Its log (the report sits beside it).
     pub log_path: String,
+    /// The unit's slot on a batch's bench (empty: a run of one unit). A
+    /// batch unit's report is `report-SERIAL.html`, a single unit's
+    /// `report.html`.
+    pub slot: String,
     /// An imported run (judged for reference only).
     pub reference: bool,
 }
@@ -710,7 +675,7 @@ impl Store {
         all.push((max as i64).into());
         let rows = self.sql().query(
             &format!(
-                "SELECT r.started_utc, u.serial, m.value, m.outcome, r.id, r.log_path, ru.outcome AS run_outcome FROM measurements m \
+                "SELECT r.started_utc, u.serial, m.value, m.outcome, r.id, r.log_path, ru.slot, ru.outcome AS run_outcome FROM measurements m \
                  JOIN run_units ru ON ru.run = m.run AND ru.slot = m.slot \
                  JOIN runs r ON r.id = m.run JOIN units u ON u.id = ru.unit_id \
                  WHERE m.name = $1 AND r.latest = 1 AND m.value IS NOT NULL{reference}{clauses} \
@@ -730,6 +695,7 @@ impl Store {
                         .unwrap_or(MeasureOutcome::Error),
                     run: r.text("id"),
                     log_path: r.text("log_path"),
+                    slot: r.text("slot"),
                     reference: r.text("run_outcome") == "reference",
                 })
             })
@@ -753,9 +719,10 @@ impl Store {
                 .sql()
                 .query(
                     &format!(
-                        "SELECT {MEASUREMENT_COLUMNS} FROM measurements m WHERE m.run = $1 ORDER BY m.seq"
+                        "SELECT {MEASUREMENT_COLUMNS} FROM measurements m WHERE m.run = $1 AND m.slot = $2 ORDER BY m.seq"
                     ),
-                    &[r.id.clone().into()],
+                    // A batch's row is one unit's: its own slot's figures.
+                    &[r.id.clone().into(), r.slot.clone().into()],
                 )?
                 .iter()
                 .map(measurement_row)

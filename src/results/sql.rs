@@ -171,6 +171,11 @@ pub fn migrations(engine: Engine) -> &'static [(i64, &'static str, &'static str)
                 "unit record",
                 include_str!("migrations/sqlite/0003_unit_record.sql"),
             ),
+            (
+                4,
+                "set identity",
+                include_str!("migrations/sqlite/0004_set_identity.sql"),
+            ),
         ],
         Engine::Postgres => &[
             (1, "init", include_str!("migrations/postgres/0001_init.sql")),
@@ -183,6 +188,11 @@ pub fn migrations(engine: Engine) -> &'static [(i64, &'static str, &'static str)
                 3,
                 "unit record",
                 include_str!("migrations/postgres/0003_unit_record.sql"),
+            ),
+            (
+                4,
+                "set identity",
+                include_str!("migrations/postgres/0004_set_identity.sql"),
             ),
         ],
     }

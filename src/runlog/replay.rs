@@ -59,6 +59,9 @@ pub struct Replayed {
     /// Whether the log holds its end record (the run's own outcome); a
     /// log without one was cut short (a kill, a full disk).
     pub ended: bool,
+    /// When the part ended, as its end record states (none: a log without
+    /// one, or written before the key).
+    pub end_time_utc: Option<String>,
     /// The pose each record of an imported run was taken in, as logged
     /// (label, orientation, table angles where known), in run order; a
     /// live run's poses are its procedure's moves.
@@ -730,6 +733,7 @@ pub fn replay_unit(
     };
     let last_state_s = st.table.map_or(0.0, |t| t.t_s);
     let ended = st.result_meta.is_some();
+    let end_time_utc = st.result_meta.as_ref().and_then(|r| r.end_time_utc.clone());
     let end = st.ending(&read, last_state_s);
     // Damaged parts skipped: what the log still holds is replayed, but the
     // run cannot be judged on a log with holes.
@@ -761,6 +765,7 @@ pub fn replay_unit(
         completed_steps: st.completed,
         part,
         ended,
+        end_time_utc,
         poses: st.poses,
     })
 }

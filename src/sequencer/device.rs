@@ -81,6 +81,8 @@ pub struct DeviceBench {
     quiet: Arc<Mutex<Quiet>>,
     /// The table as the last tick ended (device time, angles, rates).
     last_pose: Option<(f64, (TableAngles, TableAngles))>,
+    /// What the links say as they drop, come back or are lost.
+    watch: Arc<crate::driver::LinkWatch>,
 }
 
 /// Longest time between two table reads over which the reference is
@@ -104,6 +106,7 @@ impl DeviceBench {
             gyro,
             others,
             supply,
+            watch,
         } = open;
         table.servo_on().await?;
         // The unit is powered as the bench file says before anything else:
@@ -178,6 +181,7 @@ impl DeviceBench {
             supply,
             quiet,
             last_pose: None,
+            watch,
         })
     }
 
@@ -502,6 +506,10 @@ impl BenchIo for DeviceBench {
         let chamber = self.chamber.read().await?;
         let table = self.table.read().await?;
         Ok((chamber, table))
+    }
+
+    fn link_watch(&self) -> Option<Arc<crate::driver::LinkWatch>> {
+        Some(self.watch.clone())
     }
 
     async fn identify(&mut self) -> super::Identities {

@@ -161,6 +161,10 @@ impl EmbeddedBench {
                 p.shorted = true;
                 p.sim.load.0.steady_a *= 3.0;
             }
+            p.sim.ignores_off |= self
+                .faults
+                .iter()
+                .any(|(t, f)| *f == Fault::SupplyIgnoresOff && self.twin.time_s() >= *t);
             self.twin.set_powered(p.sim.unit_powered());
             while let Some(t_change) = p.sim.advance_until_change(t_s) {
                 self.twin.run_until(t_change, |_, g| on_frame(g));

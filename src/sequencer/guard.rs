@@ -214,6 +214,10 @@ impl<B: BenchIo> BenchIo for Guarded<B> {
     async fn identify(&mut self) -> super::Identities {
         self.inner.identify().await
     }
+
+    fn link_watch(&self) -> Option<std::sync::Arc<crate::driver::LinkWatch>> {
+        self.inner.link_watch()
+    }
 }
 
 #[cfg(test)]

@@ -15,6 +15,7 @@ pub mod finish;
 pub mod guard;
 pub mod health;
 pub mod interrupt;
+mod links;
 pub mod measure;
 pub mod resume;
 pub mod spill;
@@ -191,6 +192,11 @@ pub trait BenchIo: Send {
     /// Ask the chamber and the table what they are, each as it reports
     /// itself (or why it did not).
     async fn identify(&mut self) -> Identities;
+    /// What the bench's links say as they drop, come back or are lost
+    /// (none: a bench without links, the embedded one).
+    fn link_watch(&self) -> Option<std::sync::Arc<crate::driver::LinkWatch>> {
+        None
+    }
 }
 
 /// The identities a bench's instruments reported.
@@ -297,14 +303,28 @@ pub trait Observer {
 /// An observer that is the run's operator too: it may be asked to
 /// confirm a prompt.
 pub trait Operator: Observer {
-    /// Ask the operator to confirm `text`; returns when confirmed. The
-    /// default confirms at once (no operator).
-    fn prompt(&mut self, _text: &str) {}
+    /// Ask the operator to confirm `text`; returns how it was confirmed,
+    /// or why it cannot be (the run then stops at the prompt). The
+    /// default has no operator to ask: on a real bench a prompt it meets
+    /// stops the run (a simulated one never asks it).
+    fn prompt(&mut self, _text: &str) -> Result<Confirmed, String> {
+        Err("nobody watches this run to answer it".into())
+    }
     /// Whether an operator answers prompts even on a simulated bench (a
     /// station page); else a simulated run goes on without asking.
     fn answers_prompts(&self) -> bool {
         false
     }
+}
+
+/// How an operator confirmed a prompt.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Confirmed {
+    /// Answered when asked (the terminal, the station's page).
+    Now,
+    /// Confirmed before the run started, for a run nobody watches
+    /// (`run --unattended --operator NAME`).
+    Beforehand,
 }
 
 /// Tell the run's operator (a display: whatever fails there loses nothing)
@@ -785,6 +805,7 @@ impl Run<'_> {
     /// Say which of a batch's links failed since the last tick: the batch
     /// goes on without those units.
     fn say_unit_faults(&mut self) {
+        self.say_links();
         for (k, why) in self.bench.take_unit_faults() {
             let unit = self
                 .opts
@@ -796,6 +817,15 @@ impl Run<'_> {
             self.note(Level::Warning, &text);
         }
         self.say_spill_faults();
+    }
+
+    /// Tell what the bench's links said since last asked (a drop, a
+    /// return, a loss).
+    fn say_links(&mut self) {
+        if let Some(links) = self.bench.link_watch() {
+            let t_s = self.bench.now_s();
+            links::say(&links, t_s, self.log, self.watch, &mut self.log_failed);
+        }
     }
 
     /// Say once per unit that its record store's temporary file failed
@@ -873,11 +903,35 @@ impl Run<'_> {
         if self.opts.interrupt.is_requested() {
             return Err(Stop::Interrupted);
         }
-        let t = (self.bench.now_s() + 1.0).min(until_s);
-        self.bench
-            .advance(t, &mut self.tick)
-            .await
-            .map_err(Stop::Device)?;
+        let t0 = self.bench.now_s();
+        let t = (t0 + 1.0).min(until_s);
+        let links = self.bench.link_watch();
+        let advanced = links::telling(
+            self.bench.advance(t, &mut self.tick),
+            links.as_deref(),
+            t0,
+            self.log,
+            self.watch,
+            &mut self.log_failed,
+        )
+        .await;
+        if let Err(e) = advanced {
+            // A wait on a dropped link that an interrupt ended: the run
+            // stops as interrupted, the link's state said.
+            if matches!(e, DeviceError::GaveUp { .. }) && !self.cleaning_up {
+                if self.opts.interrupt.cause().is_some() {
+                    self.note(Level::Warning, &e.to_string());
+                    return Err(Stop::Interrupted);
+                }
+                // Found down after another link was lost: the run stops
+                // for the first loss.
+                if let Some(lost) = links.as_deref().and_then(|l| l.first_loss()) {
+                    self.note(Level::Warning, &e.to_string());
+                    return Err(Stop::Device(lost));
+                }
+            }
+            return Err(Stop::Device(e));
+        }
         self.say_unit_faults();
         self.frames += self.tick.frames.len() as u64;
         let r = tell(
@@ -1029,8 +1083,22 @@ impl Run<'_> {
                 self.log(Level::Info, &format!("prompt: {text}"))?;
                 // Simulated benches have no operator to wait for.
                 if !self.bench.is_simulated() || self.watch.answers_prompts() {
-                    self.watch.prompt(text);
-                    self.log(Level::Info, "operator confirmed")?;
+                    match self.watch.prompt(text) {
+                        Ok(Confirmed::Now) => self.log(Level::Info, "operator confirmed")?,
+                        Ok(Confirmed::Beforehand) => self.log(
+                            Level::Info,
+                            "confirmed beforehand by the operator (run --unattended)",
+                        )?,
+                        Err(_) if self.opts.interrupt.is_requested() => {
+                            return Err(Stop::Interrupted);
+                        }
+                        Err(why) => {
+                            return Err(Stop::Data(format!(
+                                "the prompt of step {key} (line {}) needs an operator's answer before the run may go on: {why}",
+                                s.line
+                            )));
+                        }
+                    }
                 }
                 Ok(())
             }
@@ -1375,6 +1443,12 @@ pub async fn run(
     };
     r.others
         .resize_with(r.bench.units().saturating_sub(1), Lane::default);
+    // An interrupt ends every wait on a dropped link: the run stops now,
+    // and a link found down from then on is tried once.
+    if let Some(links) = r.bench.link_watch() {
+        opts.interrupt
+            .on_request(move |cause| links.stop_waiting(&format!("{cause} asked to stop")));
+    }
     let total = p.steps().count();
     let mut stop: Option<(Stop, String)> = None;
     let start_at = opts.resume.as_ref().map_or(0, |res| res.start_at);
@@ -1480,6 +1554,27 @@ impl Run<'_> {
                 StepKind::Power { .. } => Some("supply"),
                 _ => None,
             };
+            // A run that stopped leaves the unit as the safe state left it:
+            // a cleanup that powers it again (a turn-on procedure's) is for
+            // a run that went to its end, unless the bench's safe state
+            // itself keeps the unit powered.
+            if stop.is_some()
+                && matches!(s.kind, StepKind::Power { on: true, .. })
+                && !self.opts.supply_safe_on
+            {
+                cleanup_completed = false;
+                if !self.expected.skipped.iter().any(|x| x == "supply") {
+                    self.expected.skipped.push("supply".to_owned());
+                }
+                self.note(
+                    Level::Warning,
+                    &format!(
+                        "cleanup step {} skipped: the run stopped, so the unit stays unpowered as the safe state left it (a bench whose devices.supply.safe_state is \"on\" powers it again)",
+                        s.key
+                    ),
+                );
+                continue;
+            }
             if let (Some(d), Some(f)) = (needs, faulted)
                 && d == f
             {
@@ -1717,6 +1812,7 @@ fn device_of(e: &DeviceError) -> Option<String> {
         | DeviceError::Interlock { device }
         | DeviceError::Overcurrent { device, .. }
         | DeviceError::Unreachable { device, .. }
+        | DeviceError::GaveUp { device, .. }
         | DeviceError::Silent { device, .. } => Some(device.clone()),
     }
 }

@@ -410,6 +410,7 @@ impl SharedBench {
                 b.shorted = true;
                 b.supply.load.0.steady_a *= 3.0;
             }
+            Fault::SupplyIgnoresOff => b.supply.ignores_off = true,
             Fault::ProcessKill | Fault::Panic | Fault::DiskFull | Fault::Hangup | Fault::Quit => {
                 return Err(format!(
                     "{} is a fault of the controller (its process or its log), not of a device: `gyrobench run --inject` plays it on the embedded bench",

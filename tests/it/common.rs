@@ -357,6 +357,38 @@ impl Watched {
         }
     }
 
+    /// Wait at most `limit` for the process to end (killed and failed
+    /// past it, with every line it printed): its exit status and stderr.
+    pub fn finish_within(
+        mut self,
+        limit: std::time::Duration,
+    ) -> (std::process::ExitStatus, String) {
+        let deadline = std::time::Instant::now() + limit;
+        loop {
+            if let Some(status) = self.child.try_wait().expect("waitable") {
+                self.seen.extend(self.lines.iter());
+                return (status, self.seen.join("\n"));
+            }
+            if std::time::Instant::now() > deadline {
+                let _killed = self.child.kill();
+                let _reaped = self.child.wait();
+                self.seen.extend(self.lines.try_iter());
+                panic!("still running {} s on: {:#?}", limit.as_secs(), self.seen);
+            }
+            match self
+                .lines
+                .recv_timeout(std::time::Duration::from_millis(100))
+            {
+                Ok(line) => self.seen.push(line),
+                Err(std::sync::mpsc::RecvTimeoutError::Timeout) => {}
+                // stderr closed: the process is ending.
+                Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => {
+                    std::thread::sleep(std::time::Duration::from_millis(20));
+                }
+            }
+        }
+    }
+
     /// Wait for the process to end: its exit status and all it printed on
     /// stderr.
     pub fn finish(mut self) -> (std::process::ExitStatus, String) {
