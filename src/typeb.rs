@@ -284,9 +284,18 @@ mod tests {
                 "table_rate_ppm = { expanded = 2.0, source = \"x\" }",
                 "needs its k",
             ),
-            ("table_rate_ppm = { u = -1.0, source = \"x\" }", "table_rate_ppm.u"),
-            ("table_rate_ppm = { u = 1.0, source = \"\" }", "where the value comes from"),
-            ("table_rate_pmm = { u = 1.0, source = \"x\" }", "unknown field"),
+            (
+                "table_rate_ppm = { u = -1.0, source = \"x\" }",
+                "table_rate_ppm.u",
+            ),
+            (
+                "table_rate_ppm = { u = 1.0, source = \"\" }",
+                "where the value comes from",
+            ),
+            (
+                "table_rate_pmm = { u = 1.0, source = \"x\" }",
+                "unknown field",
+            ),
         ] {
             let e = parse(&format!("[uncertainty]\n{text}\n")).expect_err(text);
             assert!(e.to_string().contains(says), "{text}: {e}");

@@ -844,11 +844,22 @@ impl Validator<'_> {
         if let (Some(lo), Some(hi)) = (low, high) {
             c.ensure(lo <= hi, &k("low"), "must not be above high")?;
         }
-        c.ensure(
-            low.is_some() || high.is_some(),
-            key,
-            "needs a limit: low, high or both",
-        )?;
+        // The fit's own residual is informative, never judged: it takes
+        // no limit; every other figure needs one.
+        if metric == Metric::CompensatedDriftFitResidualPp {
+            c.ensure(
+                low.is_none() && high.is_none(),
+                key,
+                "compensated_drift_fit_residual_pp is informative (the fit's own residual): \
+                 it takes no limit; judge compensated_drift_pp",
+            )?;
+        } else {
+            c.ensure(
+                low.is_some() || high.is_some(),
+                key,
+                "needs a limit: low, high or both",
+            )?;
+        }
         c.ensure(
             !unit.trim().is_empty(),
             &k("unit"),
@@ -1107,6 +1118,23 @@ fn is_plain_text(s: &str) -> bool {
 pub fn raw_name(text: &str) -> Option<String> {
     let t: toml::Table = toml::from_str(text).ok()?;
     t.get("procedure")?.get("name")?.as_str().map(str::to_owned)
+}
+
+/// The decision rule a run of the procedure text `text` was judged by, in
+/// a log of `format`: the rule it names, else the default (guarded), or
+/// simple acceptance for a log written before decision rules (none: the
+/// text is not a procedure, or names a rule this build does not know).
+pub fn raw_rule(text: &str, format: u32) -> Option<DecisionRule> {
+    let t: toml::Table = toml::from_str(text).ok()?;
+    let p = t.get("procedure")?;
+    let band = p
+        .get("guard_band_u")
+        .and_then(|v| v.as_float().or_else(|| v.as_integer().map(|i| i as f64)));
+    match p.get("decision_rule") {
+        Some(rule) => DecisionRule::parse(rule.as_str()?, band).ok(),
+        None if format < crate::runlog::schema::FORMAT_JUDGED => Some(DecisionRule::Simple),
+        None => Some(DecisionRule::default()),
+    }
 }
 
 /// A name that is safe as one path component: no separator, no `..`, no

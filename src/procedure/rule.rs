@@ -135,9 +135,8 @@ impl DecisionRule {
         high: Option<f64>,
         expanded: Option<f64>,
     ) -> Statement {
-        let within = |w: f64| {
-            low.is_none_or(|lo| value >= lo + w) && high.is_none_or(|hi| value <= hi - w)
-        };
+        let within =
+            |w: f64| low.is_none_or(|lo| value >= lo + w) && high.is_none_or(|hi| value <= hi - w);
         let Some(u) = expanded.filter(|u| u.is_finite()) else {
             return if within(0.0) {
                 Statement::Pass
@@ -190,7 +189,10 @@ mod tests {
         let guarded = DecisionRule::default();
         let (v, u) = (0.045, Some(0.01));
         assert_eq!(guarded.judge(v, None, HIGH, u), Statement::Fail);
-        assert_eq!(DecisionRule::Simple.judge(v, None, HIGH, u), Statement::Pass);
+        assert_eq!(
+            DecisionRule::Simple.judge(v, None, HIGH, u),
+            Statement::Pass
+        );
         assert_eq!(guarded.judge(0.039, None, HIGH, u), Statement::Pass);
         // No uncertainty: the limits alone.
         assert_eq!(guarded.judge(v, None, HIGH, None), Statement::Pass);
@@ -217,7 +219,10 @@ mod tests {
             DecisionRule::parse("guarded", Some(2.0)),
             Ok(DecisionRule::Guarded { guard_band_u: 2.0 })
         );
-        assert_eq!(DecisionRule::parse("guarded", None), Ok(DecisionRule::default()));
+        assert_eq!(
+            DecisionRule::parse("guarded", None),
+            Ok(DecisionRule::default())
+        );
         assert!(DecisionRule::parse("simple", Some(1.0)).is_err());
         assert!(DecisionRule::parse("guarded", Some(f64::NAN)).is_err());
         assert!(

@@ -942,24 +942,103 @@ fn headline(r: &Report) -> String {
     esc(&s)
 }
 
+/// The first page's statement of how the unit was judged and by whom:
+/// the unit, the operator, the decision rule in words, and the lines the
+/// record is signed on.
+fn judgement(r: &Report) -> String {
+    let or_dash = |s: &str| {
+        if s.is_empty() { "-".to_owned() } else { esc(s) }
+    };
+    format!(
+        "<table class=record>\n<tr><th>unit</th><td>{} {}</td></tr>\n<tr><th>tested by</th><td>{} <span class=note>(operator), {}</span></td></tr>\n<tr><th>decision rule</th><td><b>{}</b>{}: {}</td></tr>\n<tr><th>reviewed by</th><td class=sign></td></tr>\n<tr><th>approved by</th><td class=sign></td></tr>\n</table>\n",
+        esc(&r.dut.kind),
+        esc(&r.dut.serial),
+        or_dash(&r.operator),
+        esc(&utc_seconds(&r.start_time_utc)),
+        esc(&r.decision_rule.short()),
+        if r.decision_rule.named {
+            " (named by the procedure)"
+        } else {
+            " (the default)"
+        },
+        esc(&r.decision_rule.statement),
+    )
+}
+
+/// A figure's expanded uncertainty with its coverage factor, its standard
+/// error where it has no budget, or a dash (its reason on hover).
+fn uncertainty_cell(m: &Measurement) -> String {
+    match (&m.uncertainty, m.std_error) {
+        _ if m.value.is_none() => "-".to_owned(),
+        (Some(u), _) => format!(
+            "{} <span class=note>(k={:.2})</span>",
+            num(Some(u.expanded), 4),
+            u.k
+        ),
+        (None, Some(se)) => format!("{} <span class=note>(1 s.e.)</span>", num(Some(se), 4)),
+        (None, None) => format!(
+            "<span title=\"{}\">-</span>",
+            esc(m.uncertainty_reason.as_deref().unwrap_or("not formed"))
+        ),
+    }
+}
+
+/// The distance to the nearer limit, and in expanded uncertainties.
+fn margin_cell(m: &Measurement) -> String {
+    match (m.margin, m.margin_u) {
+        (Some(d), Some(k)) => format!("{} <span class=note>({k:.1} U)</span>", num(Some(d), 4)),
+        (Some(d), None) => num(Some(d), 4),
+        _ => "-".to_owned(),
+    }
+}
+
+/// The row under a figure with its note and noise floor, across the
+/// table (none when it has neither).
+fn note_row(m: &Measurement, class: &str) -> String {
+    let floor = m.noise_floor.map(|f| {
+        format!(
+            "noise floor {} {} (a perfectly compensated unit with this run's noise)",
+            num(Some(f), 4),
+            esc(&m.unit)
+        )
+    });
+    let text: Vec<String> = (!m.note.is_empty())
+        .then(|| esc(&m.note))
+        .into_iter()
+        .chain(floor)
+        .collect();
+    if text.is_empty() {
+        String::new()
+    } else {
+        format!(
+            "<tr class={class}><td></td><td colspan=8 class=note>{}</td></tr>\n",
+            text.join("; ")
+        )
+    }
+}
+
 /// The measurements table's rows.
 fn measurement_rows(r: &Report) -> String {
     let mut rows = String::new();
     for m in &r.measurements {
         let class = m.outcome.as_str();
+        let informative = m.low.is_none() && m.high.is_none();
         rows.push_str(&format!(
-            "<tr class={class}><td>{}</td><td class=num>{}</td><td>{}</td><td class=num>{}</td><td class=num>{}</td><td class=\"outcome {class}\">{}</td><td>{}</td><td>{}</td></tr>\n",
-            esc(&m.name),
-            match m.std_error {
-                Some(se) if m.value.is_some() => format!("{} ± {}", num(m.value, 4), num(Some(se), 4)),
-                _ => num(m.value, 4),
-            },
+            "<tr class={class}><td>{}</td><td class=num>{}</td><td class=num>{}</td><td>{}</td><td class=num>{}</td><td class=num>{}</td><td class=num>{}</td><td class=num>{}</td><td class=\"outcome {class}\">{}</td></tr>\n{}",
+            format!("{}<br><span class=note>step {}</span>", esc(&m.name), esc(&m.step)),
+            num(m.value, 4),
+            uncertainty_cell(m),
             esc(&m.unit),
             limit(m.low),
             limit(m.high),
-            m.outcome.as_str().to_uppercase(),
-            esc(&m.step),
-            esc(&m.note),
+            m.guard_band.map_or("-".to_owned(), |w| num(Some(w), 4)),
+            margin_cell(m),
+            if informative {
+                "informative".to_owned()
+            } else {
+                m.outcome.word().to_owned()
+            },
+            note_row(m, class),
         ));
     }
     rows
@@ -1046,11 +1125,12 @@ pub fn render_html(r: &Report, records: &Records) -> String {
         r#"<div class=verdict style="background:{colour}">{word}</div>{overdue_tag}
 <h1>{proc} &mdash; {dut_type} {serial}</h1>
 <p class=headline>{headline}</p>
-{overdue}{error}{bench_left}<p class=note>Spec: {spec}<br>Started {start} &middot; {hours:.2} h of device time &middot; {frames} frames &middot; bench {bench}{seed} &middot; gyrobench {version}</p>
+{judgement}{overdue}{error}{bench_left}<p class=note>Spec: {spec}<br>Started {start} &middot; {hours:.2} h of device time &middot; {frames} frames &middot; bench {bench}{seed} &middot; gyrobench {version}</p>
 {headline_chart}
 <h2>Measurements</h2>
-<table><tr><th>name</th><th>value</th><th>unit</th><th>low</th><th>high</th><th>outcome</th><th>step</th><th>note</th></tr>
+<table><tr><th>name</th><th>value</th><th>U</th><th>unit</th><th>low</th><th>high</th><th>guard band</th><th>margin</th><th>outcome</th></tr>
 {rows}</table>
+<p class=note>U: the expanded uncertainty (coverage factor k for 95 % from the budget's degrees of freedom; docs/figures.md gives each figure's budget). Guard band: how far the decision rule moved the limits inward. Margin: the distance to the nearer limit (negative outside it), and in units of U.</p>
 <p class=note>Definitions: bias stability = 1-sigma of the averages over the averaging time of the Earth-removed rate; drift = peak-to-peak of the Earth-removed rate smoothed by a centred moving average of the averaging time; compensated = the same after the study's model 4; self-heating = mean of the first 120 s after power-on minus the mean of 1680..1800 s; scale factor, nonlinearity and asymmetry = the fit of output against input rate with one slope per direction; dead band and threshold = the inputs giving 10 % and 50 % of the expected output in a lock-in fit; axis misalignment = the slope of the Earth-removed rate against the rate of a table axis turning across the input axis, as an angle (&plusmn; one standard error). See docs/figures.md.</p>
 {record}{positions}{rate_table}{turn_ons}{noise}{allan}
 <h2>Traces</h2>
@@ -1059,6 +1139,7 @@ pub fn render_html(r: &Report, records: &Records) -> String {
 <p>{lf} frames, {lost} lost, {crc} CRC errors, {res} resyncs, {dup} duplicates.</p>
 "#,
         headline = headline(r),
+        judgement = judgement(r),
         positions = positions(r),
         rate_table = rate_table_charts(r, records),
         turn_ons = turn_on_section(r, records),

@@ -71,6 +71,8 @@ pub struct Report {
     pub calibration_overdue: Vec<String>,
     /// The coefficients the compensated figures use.
     pub coefficients: CoeffsUsed,
+    /// The decision rule every figure was judged by, stated.
+    pub decision_rule: RuleStated,
     /// Every measurement.
     pub measurements: Vec<Measurement>,
     /// What ended the run, when it did not finish.
@@ -102,6 +104,44 @@ pub struct Report {
     /// Where each record a measurement uses was taken (the table pose of
     /// the move before it), in run order.
     pub positions: Vec<Position>,
+}
+
+/// The decision rule as `report.json` states it.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct RuleStated {
+    /// `simple`, `guarded` or `non_binary`.
+    pub rule: &'static str,
+    /// The guard band as a multiple of U (`guarded` only).
+    pub guard_band_u: Option<f64>,
+    /// Whether the procedure names it (else the default, or, in a log
+    /// written before decision rules, simple acceptance as it was judged).
+    pub named: bool,
+    /// The rule in a sentence, as the report's first page prints it.
+    pub statement: String,
+}
+
+impl RuleStated {
+    /// The rule `p`'s run logged in `format` was judged by.
+    pub fn of(p: &Procedure, format: u32) -> Self {
+        let rule = crate::sequencer::measure::Judging::rule_for(p, format);
+        Self {
+            rule: rule.name(),
+            guard_band_u: match rule {
+                crate::procedure::DecisionRule::Guarded { guard_band_u } => Some(guard_band_u),
+                _ => None,
+            },
+            named: p.meta.rule_named,
+            statement: rule.statement(),
+        }
+    }
+
+    /// The rule in a few words: `guarded, w = 1 U`.
+    pub fn short(&self) -> String {
+        match self.guard_band_u {
+            Some(w) => format!("{}, w = {w} U", self.rule),
+            None => self.rule.replace('_', "-"),
+        }
+    }
 }
 
 /// The pose of the unit while a record was taken.
@@ -319,6 +359,7 @@ impl Report {
                 .map(|i| i.role.clone())
                 .collect(),
             coefficients: unit.map_or_else(CoeffsUsed::fitted, |u| u.coefficients.clone()),
+            decision_rule: RuleStated::of(p, meta.format),
             measurements: r.measurements.clone(),
             error: r.error.clone(),
             cleanup_completed: r.cleanup_completed,
@@ -369,18 +410,36 @@ impl Report {
             self.device_time_s / 3600.0,
             self.frames
         );
+        s.push_str(&format!(
+            "  decision rule: {}{}\n",
+            self.decision_rule.short(),
+            if self.decision_rule.named {
+                ""
+            } else {
+                " (the default)"
+            }
+        ));
         for m in &self.measurements {
             s.push_str(&format!(
-                "  {:<32} {:>10} {:<6} [{}]  {}\n",
+                "  {:<38} {:>10} {:<6} {:<18} {}  {}\n",
                 m.name,
-                match (m.value, m.std_error) {
-                    (Some(v), Some(se)) => format!("{v:.4} ± {se:.4}"),
-                    (Some(v), None) => format!("{v:.4}"),
-                    (None, _) => "n/a".to_owned(),
-                },
+                m.value.map_or("n/a".to_owned(), |v| format!("{v:.4}")),
                 m.unit,
-                m.limits_text(),
-                m.outcome.as_str().to_uppercase()
+                match (&m.uncertainty, m.std_error) {
+                    (Some(u), _) => format!("± {:.4} (k={:.2})", u.expanded, u.k),
+                    (None, Some(se)) => format!("± {se:.4} (1 s.e.)"),
+                    (None, None) => String::new(),
+                },
+                if m.low.is_none() && m.high.is_none() {
+                    "(informative)".to_owned()
+                } else {
+                    format!("[{}]", m.limits_text())
+                },
+                if m.low.is_none() && m.high.is_none() {
+                    ""
+                } else {
+                    m.outcome.word()
+                }
             ));
         }
         if let Some(e) = &self.error {

@@ -27,6 +27,11 @@ pub fn begun(meta: &RunMeta, key: &str, run: &str) -> Vec<Column> {
         .filter(|i| i.calibration_overdue)
         .map(|i| i.role.as_str())
         .collect();
+    // The rule the run was judged by, from the procedure it logged; none
+    // for a log written before decision rules (judged by its limits).
+    let rule = (meta.format >= crate::runlog::schema::FORMAT_JUDGED)
+        .then(|| crate::procedure::raw_rule(&meta.procedure_toml, meta.format))
+        .flatten();
     vec![
         ("id", key.into()),
         ("run_id", run.into()),
@@ -63,6 +68,17 @@ pub fn begun(meta: &RunMeta, key: &str, run: &str) -> Vec<Column> {
         (
             "calibration_overdue",
             (!overdue.is_empty()).then(|| overdue.join(",")).into(),
+        ),
+        ("decision_rule", rule.map(|r| r.name().to_owned()).into()),
+        (
+            "guard_band_u",
+            match rule {
+                Some(crate::procedure::DecisionRule::Guarded { guard_band_u }) => {
+                    Some(guard_band_u)
+                }
+                _ => None,
+            }
+            .into(),
         ),
     ]
 }

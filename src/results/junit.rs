@@ -335,6 +335,8 @@ mod tests {
                 outcome: MeasureOutcome::Fail,
                 step: "main.1".into(),
                 note: "<&>".into(),
+                uncertainty: None,
+                guard_band: None,
             },
         };
         let xml = junit(&[(run, vec![m])]).expect("xml");

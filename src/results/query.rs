@@ -198,8 +198,7 @@ pub struct MeasurementRow {
     pub measurement: ResultMeasurement,
 }
 
-const MEASUREMENT_COLUMNS: &str =
-    "m.run, m.name, m.value, m.unit, m.low, m.high, m.outcome, m.step, m.note";
+const MEASUREMENT_COLUMNS: &str = "m.run, m.name, m.value, m.unit, m.low, m.high, m.outcome, m.step, m.note, m.u, m.expanded_u, m.k, m.guard_band";
 
 impl std::ops::Deref for MeasurementRow {
     type Target = ResultMeasurement;
@@ -227,6 +226,13 @@ pub(super) fn measurement_of(r: &Row) -> ResultMeasurement {
         outcome: MeasureOutcome::parse(&r.text("outcome")).unwrap_or(MeasureOutcome::Error),
         step: r.text("step"),
         note: r.text("note"),
+        uncertainty: match (r.real("u"), r.real("expanded_u"), r.real("k")) {
+            (Some(u), Some(expanded), Some(k)) => {
+                Some(crate::analysis::uncertainty::Expanded { u, expanded, k })
+            }
+            _ => None,
+        },
+        guard_band: r.real("guard_band"),
     }
 }
 

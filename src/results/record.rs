@@ -642,27 +642,16 @@ fn insert_measurements(
     key: &str,
     all: &[(&str, &Measurement)],
 ) -> Result<(), StoreError> {
+    const COLUMNS: usize = 15;
     // One statement for every measurement (a round trip each would
     // cost a lab's server more than the rest of the run's record).
     for (chunk_at, chunk) in all.chunks(100).enumerate() {
         let mut values = Vec::with_capacity(chunk.len());
-        let mut params: Vec<Value> = Vec::with_capacity(11 * chunk.len());
+        let mut params: Vec<Value> = Vec::with_capacity(COLUMNS * chunk.len());
         for (i, (slot, m)) in chunk.iter().enumerate() {
             let b = params.len();
-            values.push(format!(
-                "(${}, ${}, ${}, ${}, ${}, ${}, ${}, ${}, ${}, ${}, ${})",
-                b + 1,
-                b + 2,
-                b + 3,
-                b + 4,
-                b + 5,
-                b + 6,
-                b + 7,
-                b + 8,
-                b + 9,
-                b + 10,
-                b + 11
-            ));
+            let marks: Vec<String> = (1..=COLUMNS).map(|c| format!("${}", b + c)).collect();
+            values.push(format!("({})", marks.join(", ")));
             params.extend([
                 key.into(),
                 ((chunk_at * 100 + i) as i64).into(),
@@ -675,11 +664,16 @@ fn insert_measurements(
                 m.step.clone().into(),
                 m.note.clone().into(),
                 (*slot).into(),
+                m.uncertainty.as_ref().map(|u| u.u).into(),
+                m.uncertainty.as_ref().map(|u| u.expanded).into(),
+                m.uncertainty.as_ref().map(|u| u.k).into(),
+                m.guard_band.into(),
             ]);
         }
         sql.execute(
             &format!(
-                "INSERT INTO measurements (run, seq, name, value, unit, low, high, outcome, step, note, slot) VALUES {}",
+                "INSERT INTO measurements (run, seq, name, value, unit, low, high, outcome, step, note, slot, \
+                 u, expanded_u, k, guard_band) VALUES {}",
                 values.join(", ")
             ),
             &params,

@@ -176,6 +176,11 @@ pub fn migrations(engine: Engine) -> &'static [(i64, &'static str, &'static str)
                 "set identity",
                 include_str!("migrations/sqlite/0004_set_identity.sql"),
             ),
+            (
+                5,
+                "judged",
+                include_str!("migrations/sqlite/0005_judged.sql"),
+            ),
         ],
         Engine::Postgres => &[
             (1, "init", include_str!("migrations/postgres/0001_init.sql")),
@@ -193,6 +198,11 @@ pub fn migrations(engine: Engine) -> &'static [(i64, &'static str, &'static str)
                 4,
                 "set identity",
                 include_str!("migrations/postgres/0004_set_identity.sql"),
+            ),
+            (
+                5,
+                "judged",
+                include_str!("migrations/postgres/0005_judged.sql"),
             ),
         ],
     }

@@ -465,7 +465,7 @@ impl Store {
         Ok(self
             .sql()
             .query(
-                "SELECT name, value, unit, low, high, outcome, step, note, slot FROM measurements \
+                "SELECT name, value, unit, low, high, outcome, step, note, u, expanded_u, k, guard_band, slot FROM measurements \
                  WHERE run = $1 ORDER BY seq",
                 &[run.into()],
             )?
@@ -565,6 +565,8 @@ mod tests {
                 outcome: MeasureOutcome::parse(outcome).expect("a word of the three"),
                 step: "main.1".into(),
                 note: String::new(),
+                uncertainty: None,
+                guard_band: None,
             },
         )
     }

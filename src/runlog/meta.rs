@@ -370,6 +370,14 @@ pub struct ResultMeasurement {
     pub step: String,
     /// How it was obtained, or why it could not be.
     pub note: String,
+    /// Its uncertainty `{u, U, k}` (none: it could not be formed, or a log
+    /// written before format 3).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub uncertainty: Option<crate::analysis::uncertainty::Expanded>,
+    /// The guard band the decision rule moved its limits by (none: simple
+    /// acceptance, no limit or no uncertainty).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub guard_band: Option<f64>,
 }
 
 impl ResultMeasurement {
@@ -384,6 +392,8 @@ impl ResultMeasurement {
             outcome: m.outcome,
             step: m.step.clone(),
             note: m.note.clone(),
+            uncertainty: m.uncertainty.as_ref().map(|u| u.brief()),
+            guard_band: m.guard_band,
         }
     }
 }

@@ -114,7 +114,10 @@ pub fn compensated_drift(
         })
         .collect();
     let trace = drift_trace(&shifted, window);
-    let residual: Vec<f64> = shifted.iter().flat_map(|(_, r)| r.iter().copied()).collect();
+    let residual: Vec<f64> = shifted
+        .iter()
+        .flat_map(|(_, r)| r.iter().copied())
+        .collect();
     let floor = noise_of_means(&residual, window).map(|(s, _)| noise_floor(s, samples, window));
     Drift {
         value: trace.as_ref().map(DriftTrace::pp),

@@ -6,9 +6,9 @@ use std::ops::Range;
 use serde::Serialize;
 
 use super::BenchState;
+use super::compensated::{Residual, compensated_drift};
 use super::health::{RecordHealth, Runs};
 use super::spill::{Row, Spill, bytes_at, f64_at};
-use super::compensated::{Residual, compensated_drift};
 use super::uncertainty::Known;
 use crate::analysis::figures::{DriftTrace, bias_stability, drift_trace, mean};
 use crate::analysis::model::{self, ModelKind};
@@ -567,15 +567,21 @@ impl Judging {
         bench: &crate::bench::BenchConfig,
         format: u32,
     ) -> Self {
-        let legacy = format < crate::runlog::schema::FORMAT_JUDGED;
         Self {
-            rule: if legacy && !p.meta.rule_named {
-                DecisionRule::Simple
-            } else {
-                p.meta.decision_rule
-            },
+            rule: Self::rule_for(p, format),
             typeb: bench.uncertainty.clone(),
-            legacy,
+            legacy: format < crate::runlog::schema::FORMAT_JUDGED,
+        }
+    }
+
+    /// The rule a run of `p` logged in `format` is judged by: the one it
+    /// names, else the default; simple acceptance for a log written before
+    /// decision rules, as it was judged then.
+    pub fn rule_for(p: &crate::procedure::Procedure, format: u32) -> DecisionRule {
+        if format < crate::runlog::schema::FORMAT_JUDGED && !p.meta.rule_named {
+            DecisionRule::Simple
+        } else {
+            p.meta.decision_rule
         }
     }
 }
@@ -743,21 +749,23 @@ pub fn compute(
         );
     }
     let uncertainty = match value {
-        Some(v) => super::uncertainty::of(
-            m.metric,
-            v,
-            &series,
-            m.averaging_s,
-            &known,
-            &judging.typeb,
-        ),
+        Some(v) => {
+            super::uncertainty::of(m.metric, v, &series, m.averaging_s, &known, &judging.typeb)
+        }
         None => Err("the figure has no value".to_owned()),
     };
     let (uncertainty, uncertainty_reason) = match uncertainty {
         Ok(u) => (Some(u), None),
         Err(why) => (None, Some(why)),
     };
-    let judged = judge(m, value, uncertainty.as_ref(), judging, &mut note, uncertainty_reason.as_deref());
+    let judged = judge(
+        m,
+        value,
+        uncertainty.as_ref(),
+        judging,
+        &mut note,
+        uncertainty_reason.as_deref(),
+    );
     // Rows this measure's reads could not get back: its data are not whole.
     let unread = records.read_faults().since(&faults_before);
     let outcome = match unread.or_else(|| records.problem(&m.records)) {
@@ -841,7 +849,9 @@ fn judge(
             .filter(|_| limited)
             .and_then(|u| judging.rule.guard_band(u)),
         margin,
-        margin_u: margin.zip(expanded.filter(|u| *u > 0.0)).map(|(m, u)| m / u),
+        margin_u: margin
+            .zip(expanded.filter(|u| *u > 0.0))
+            .map(|(m, u)| m / u),
     }
 }
 
@@ -1085,7 +1095,10 @@ fn warm_up(m: &Measure, series: &[Interval], bias: &[f64]) -> Computed {
         let smooth = crate::analysis::figures::moving_average(bias, window);
         // The moving mean ending at t: index t/dt - window.
         let at = ((t / dt).round() as usize).saturating_sub(window);
-        let slope = match (smooth.get(at.saturating_sub(window / 2)), smooth.get(at + window / 2)) {
+        let slope = match (
+            smooth.get(at.saturating_sub(window / 2)),
+            smooth.get(at + window / 2),
+        ) {
             (Some(a), Some(b)) if window > 1 => (b - a) / (window as f64 * dt),
             _ => f64::NAN,
         };

@@ -126,7 +126,13 @@ fn type_b(
             let r = mean(&series.iter().map(|i| i.reference_dph).collect::<Vec<_>>());
             if r.abs() <= EARTH_RATE_DPH * 1.001 {
                 let c = EARTH_RATE_DPH * (1.0 - (r / EARTH_RATE_DPH).powi(2)).max(0.0).sqrt();
-                declared(b, Source::NorthAlignment, c / ARCSEC_PER_RAD, &mut out, &mut missing);
+                declared(
+                    b,
+                    Source::NorthAlignment,
+                    c / ARCSEC_PER_RAD,
+                    &mut out,
+                    &mut missing,
+                );
                 declared(b, Source::Level, c / ARCSEC_PER_RAD, &mut out, &mut missing);
                 declared(b, Source::Latitude, c.to_radians(), &mut out, &mut missing);
             }
@@ -142,7 +148,13 @@ fn type_b(
             declared(b, Source::UnitClock, per_ppm(value), &mut out, &mut missing);
         }
         Metric::WarmUpTime => {
-            declared(b, Source::BenchClock, per_ppm(value), &mut out, &mut missing);
+            declared(
+                b,
+                Source::BenchClock,
+                per_ppm(value),
+                &mut out,
+                &mut missing,
+            );
         }
         Metric::PowerSteady | Metric::PowerPeak => {
             if let Some((v, a)) = known.supply {
@@ -204,7 +216,10 @@ fn type_a(
                 _ => window,
             };
             let (sigma, edf) = noise_of_means(x, tau).ok_or_else(|| {
-                format!("{} s of data: the noise of {tau} s means needs three times that", x.len())
+                format!(
+                    "{} s of data: the noise of {tau} s means needs three times that",
+                    x.len()
+                )
             })?;
             Ok(vec![Contribution::type_a(
                 "noise of the means at either end",
@@ -276,7 +291,10 @@ mod tests {
         let x = white(36_000, 0.12, 1);
         let (sigma, edf) = noise_of_means(&x, 600).expect("long enough");
         // 0.12 / sqrt(600) = 0.0049.
-        assert!((sigma / (0.12 / 600f64.sqrt()) - 1.0).abs() < 0.2, "{sigma}");
+        assert!(
+            (sigma / (0.12 / 600f64.sqrt()) - 1.0).abs() < 0.2,
+            "{sigma}"
+        );
         assert!(edf > 20.0, "{edf}");
         assert!(noise_of_means(&x[..1000], 600).is_none());
     }
@@ -307,11 +325,30 @@ mod tests {
     fn a_bias_stability_of_twelve_blocks_is_known_to_22_percent_plus_the_clock() {
         let s = steady(1200, 10.0, 10.0);
         let b = TypeB::default();
-        let u = of(Metric::BiasStability, 0.01, &s, 100.0, &Known::default(), &b).expect("formed");
+        let u = of(
+            Metric::BiasStability,
+            0.01,
+            &s,
+            100.0,
+            &Known::default(),
+            &b,
+        )
+        .expect("formed");
         assert!((u.u - 0.01 * 0.2132).abs() < 1e-4, "{}", u.u);
         assert_eq!(u.dof, Some(11.0));
-        assert!(u.budget.iter().any(|c| c.source.contains("unit_clock_ppm (not declared)")));
-        let too_short = of(Metric::BiasStability, 0.01, &s[..150], 100.0, &Known::default(), &b);
+        assert!(
+            u.budget
+                .iter()
+                .any(|c| c.source.contains("unit_clock_ppm (not declared)"))
+        );
+        let too_short = of(
+            Metric::BiasStability,
+            0.01,
+            &s[..150],
+            100.0,
+            &Known::default(),
+            &b,
+        );
         assert!(too_short.is_err_and(|e| e.contains("1 blocks of 100 s")));
     }
 
@@ -327,8 +364,15 @@ mod tests {
         let w: W = toml::from_str(text).expect("toml");
         let north = |r: f64| {
             let s = steady(1200, r, r);
-            let u = of(Metric::MeanBias, 0.0, &s, 100.0, &Known::default(), &w.uncertainty)
-                .expect("formed");
+            let u = of(
+                Metric::MeanBias,
+                0.0,
+                &s,
+                100.0,
+                &Known::default(),
+                &w.uncertainty,
+            )
+            .expect("formed");
             u.budget
                 .iter()
                 .find(|c| c.source == "north alignment of the table")

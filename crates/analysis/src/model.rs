@@ -573,7 +573,10 @@ mod tests {
         // A rate the model cannot hold, in one block only: held out, that
         // block keeps it whole; in sample, the fit spreads it thinner.
         let mut odd = s.clone();
-        for iv in odd.iter_mut().filter(|iv| (1200.0..1800.0).contains(&iv.time_s)) {
+        for iv in odd
+            .iter_mut()
+            .filter(|iv| (1200.0..1800.0).contains(&iv.time_s))
+        {
             iv.rate_dph += 0.05;
         }
         let runs: [&[Interval]; 1] = [&odd];
@@ -588,7 +591,12 @@ mod tests {
                 .collect();
             v.iter().sum::<f64>() / v.len() as f64
         };
-        assert!(at(&held[0]) > at(&within), "{} vs {}", at(&held[0]), at(&within));
+        assert!(
+            at(&held[0]) > at(&within),
+            "{} vs {}",
+            at(&held[0]),
+            at(&within)
+        );
     }
 
     #[test]

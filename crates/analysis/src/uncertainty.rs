@@ -82,7 +82,29 @@ pub struct Uncertainty {
     pub budget: Vec<Contribution>,
 }
 
+/// An uncertainty as a record keeps it: `u`, `U` and `k`, without the
+/// budget (the log's measurement and the results store).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Expanded {
+    /// Combined standard uncertainty.
+    pub u: f64,
+    /// Expanded uncertainty `k u`.
+    #[serde(rename = "U")]
+    pub expanded: f64,
+    /// Coverage factor.
+    pub k: f64,
+}
+
 impl Uncertainty {
+    /// `u`, `U` and `k`.
+    pub fn brief(&self) -> Expanded {
+        Expanded {
+            u: self.u,
+            expanded: self.expanded,
+            k: self.k,
+        }
+    }
+
     /// Combine `budget` (root sum of squares) and expand it to 95.45 %
     /// coverage; none when nothing contributes or a contribution is not
     /// finite.
