@@ -256,7 +256,7 @@ impl CoeffsUsed {
     /// In words, for the report and the measurement notes.
     pub fn describe(&self) -> String {
         if self.source == CoeffsSource::Fitted {
-            return "fitted on these records (no --coeffs given)".into();
+            return "fitted within the run (no --coeffs given)".into();
         }
         if self.sha256.is_none() && self.from.is_none() {
             // A log written before coefficient sets were named.
@@ -657,7 +657,7 @@ mod tests {
         );
         assert_eq!(
             CoeffsUsed::fitted().describe(),
-            "fitted on these records (no --coeffs given)"
+            "fitted within the run (no --coeffs given)"
         );
     }
 }

@@ -1256,11 +1256,29 @@ mod tests {
             high: Some(100.0),
             unit: "W".into(),
         };
-        let steady = compute(&m(Metric::PowerSteady, &["b"]), &r, None, "s");
+        let steady = compute(
+            &m(Metric::PowerSteady, &["b"]),
+            &r,
+            None,
+            "s",
+            &Judging::default(),
+        );
         assert_eq!(steady.value, Some(7.5));
-        let peak = compute(&m(Metric::PowerPeak, &["a", "b"]), &r, None, "s");
+        let peak = compute(
+            &m(Metric::PowerPeak, &["a", "b"]),
+            &r,
+            None,
+            "s",
+            &Judging::default(),
+        );
         assert_eq!(peak.value, Some(15.0));
-        let none = compute(&m(Metric::PowerPeak, &["c"]), &r, None, "s");
+        let none = compute(
+            &m(Metric::PowerPeak, &["c"]),
+            &r,
+            None,
+            "s",
+            &Judging::default(),
+        );
         assert_eq!((none.value, none.outcome), (None, MeasureOutcome::Fail));
     }
 
@@ -1399,11 +1417,11 @@ mod tests {
             unit: "deg/h".into(),
         };
         assert_eq!(
-            compute(&m("long"), &r, None, "s").outcome,
+            compute(&m("long"), &r, None, "s", &Judging::default()).outcome,
             MeasureOutcome::Pass
         );
         r.all.lose_file();
-        let lost = compute(&m("long"), &r, None, "s");
+        let lost = compute(&m("long"), &r, None, "s", &Judging::default());
         assert_eq!(lost.outcome, MeasureOutcome::Error, "{}", lost.note);
         assert!(
             lost.note.contains("could not be read back"),
@@ -1411,7 +1429,7 @@ mod tests {
             lost.note
         );
         // The short record sits in the memory tail: still judged.
-        let short = compute(&m("short"), &r, None, "s");
+        let short = compute(&m("short"), &r, None, "s", &Judging::default());
         assert_eq!(short.outcome, MeasureOutcome::Pass, "{}", short.note);
     }
 }
