@@ -46,6 +46,14 @@ pub struct FilterArgs {
     /// trends, yields and exports too.
     #[arg(long)]
     include_reference: bool,
+    /// Count the simulated bench's unnamed unit (SIMULATED) in trends and
+    /// yields too.
+    #[arg(long)]
+    include_simulated: bool,
+    /// Only units whose compensated figures came from this source:
+    /// fitted (within the run), file or store (the unit's set).
+    #[arg(long, value_parser = ["fitted", "file", "store"])]
+    coeffs_source: Option<String>,
 }
 
 impl FilterArgs {
@@ -80,6 +88,9 @@ impl FilterArgs {
             until: self.until.clone(),
             latest_only,
             include_reference: self.include_reference || outcome == Some(RunState::Reference),
+            include_simulated: self.include_simulated
+                || self.serial.as_deref() == Some(crate::unit::SIMULATED_SERIAL),
+            coeffs_source: self.coeffs_source.clone(),
             limit,
         })
     }
@@ -581,7 +592,7 @@ pub fn render_trend(t: &Trend) -> String {
         idx(t.overall.upper),
         idx(t.overall.lower),
         idx(t.overall.k),
-    )
+    ) + &t.caveat()
 }
 
 #[cfg(test)]

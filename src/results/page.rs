@@ -158,7 +158,7 @@ fn page_body(t: &Trend, shown: usize, chart: &str, rows: &str) -> String {
 <table><tr><th></th><th>upper</th><th>lower</th><th>index</th><th>sigma</th></tr>
 <tr><td>capability (run to run)</td><td class=num>Cpu {cpu}</td><td class=num>Cpl {cpl}</td><td class=num>Cpk {cpk}</td><td class=num>{sw} (moving ranges / 1.128)</td></tr>
 <tr><td>performance (all data)</td><td class=num>Ppu {ppu}</td><td class=num>Ppl {ppl}</td><td class=num>Ppk {ppk}</td><td class=num>{sigma} (sample)</td></tr></table>
-<p class=note>A figure with one limit is judged on that side alone: Cpk is then Cpu (or Cpl), Ppk is Ppu (or Ppl). Definitions in docs/results.md.</p>
+<p class=note>{caveat}A figure with one limit is judged on that side alone: Cpk is then Cpu (or Cpl), Ppk is Ppu (or Ppl). Definitions in docs/results.md.</p>
 {chart}
 <p class=note>{shown} value(s) shown (at most the 5,000 newest), each run's latest part; units: {unit}. Point over a dot to see its unit and run; click it for the run's report.</p>
 <h2>Values</h2>
@@ -185,6 +185,7 @@ fn page_body(t: &Trend, shown: usize, chart: &str, rows: &str) -> String {
         ppu = f(t.overall.upper, 2),
         ppl = f(t.overall.lower, 2),
         ppk = f(t.overall.k, 2),
+        caveat = esc(&t.caveat()).replace('\n', "<br>"),
     )
 }
 

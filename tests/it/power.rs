@@ -191,8 +191,15 @@ fn a_power_step_on_a_bench_without_a_supply_is_refused_at_its_line() {
     let out = gyrobench(&["check", PROCEDURE, "--bench", s(&bench)]);
     assert_eq!(out.status.code(), Some(1), "{}", stderr(&out));
     let err = stderr(&out);
+    // The first power step's line, as the file has it.
+    let line = std::fs::read_to_string(PROCEDURE)
+        .expect("procedure")
+        .lines()
+        .position(|l| l.trim() == "action = \"power\"")
+        .expect("a power step")
+        + 1;
     assert!(
-        err.contains("bias_repeatability.toml:34:")
+        err.contains(&format!("bias_repeatability.toml:{line}:"))
             && err.contains("a power step needs a supply, and the bench file names none"),
         "{err}"
     );
@@ -351,7 +358,13 @@ fn a_turn_on_cut_short_is_retaken_cold_on_resume() {
         stderr(&killed)
     );
     let resumed = gyrobench(&["run", "--resume", s(&out_dir), "--db", "none"]);
-    assert_eq!(resumed.status.code(), Some(0), "{}", stderr(&resumed));
+    // Six turn-ons know their repeatability to about 30 %: the procedure's
+    // non-binary rule may call a sound unit a conditional pass (exit 4).
+    assert!(
+        matches!(resumed.status.code(), Some(0 | 4)),
+        "{}",
+        stderr(&resumed)
+    );
     let err = stderr(&resumed);
     assert!(
         err.contains("going on at step") && err.contains("(power the unit off)"),
@@ -368,7 +381,7 @@ fn a_turn_on_cut_short_is_retaken_cold_on_resume() {
         "--out",
         s(&replay),
     ]);
-    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    assert_eq!(out.status.code(), resumed.status.code(), "{}", stderr(&out));
     for f in ["report.json", "report.html"] {
         assert_eq!(
             std::fs::read(out_dir.join(f)).expect("live"),

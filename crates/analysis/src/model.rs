@@ -314,7 +314,9 @@ pub const HELD_OUT_BLOCK_S: f64 = 600.0;
 /// cycle, so no held-out block is an extrapolation).
 pub const HELD_OUT_FOLDS: usize = 5;
 
-/// The first seconds after power-on that every fold trains on and none
+/// The first seconds of each run (each power-on: a resumed run's part
+/// that switched the unit on again is a run of its own) that every fold
+/// trains on and none
 /// holds out (ours): a warm-up transient happens once per power-on, so no
 /// other stretch of the run tells the warm-up term; held out, its first
 /// minutes would be an extrapolation of an exponential, not a prediction.
@@ -341,7 +343,7 @@ pub fn held_out_residual(
             let t0 = r.first().map_or(0.0, |s| s.time_s);
             r.iter()
                 .map(|s| {
-                    if s.time_s < HELD_OUT_PINNED_S {
+                    if s.time_s - t0 < HELD_OUT_PINNED_S {
                         usize::MAX
                     } else {
                         ((s.time_s - t0) / block_s).floor().max(0.0) as usize % folds
@@ -567,9 +569,10 @@ mod tests {
         assert_eq!(held[0].len(), s.len());
         assert!(held[0].iter().all(|v| v.is_finite()));
         // Noise-free data of the model's own form: held out, it is still
-        // explained (to the fit's precision).
+        // explained (to the precision of the warm-up time constant's
+        // search, which each fold makes anew: 2e-5 deg/h here).
         let worst = held[0].iter().fold(0.0f64, |a, v| a.max(v.abs()));
-        assert!(worst < 1e-6, "{worst}");
+        assert!(worst < 1e-4, "{worst}");
         // A rate the model cannot hold, in one block only: held out, that
         // block keeps it whole; in sample, the fit spreads it thinner.
         let mut odd = s.clone();

@@ -220,6 +220,16 @@ pub(crate) fn procedure_text(name: &str, dut_type: &str, parts: &[Part], rows: &
             Some(600.0),
             "high = 0.05",
         );
+        // The fit's own residual beside the judged, held-out figure:
+        // informative, as the shipped thermal procedures show it.
+        measure(
+            &mut t,
+            "compensated_drift_fit_residual_pp_dph",
+            "compensated_drift_fit_residual_pp",
+            &all,
+            Some(600.0),
+            "",
+        );
     }
     // Bias stability where it means something: records after the warm-up
     // with the chamber steady (within 1 degC), as the acceptance's positions.
