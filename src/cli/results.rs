@@ -128,7 +128,8 @@ pub enum ResultsCommand {
     /// One run whole: its record, measurements and parts.
     #[command(after_help = after_help!("gyrobench results show 3f2a9c", store))]
     Show {
-        /// The run's id (or its start), as `results list` shows it.
+        /// The run's id (or its start), as `results list` shows it, or its
+        /// run directory.
         run: String,
         /// As JSON.
         #[arg(long)]
@@ -210,6 +211,29 @@ pub enum ResultsCommand {
         #[arg(long)]
         json: bool,
     },
+    /// Sign a stored run: reviewed, then approved by another person. The
+    /// signature binds the log's SHA-256 and the stored verdict and
+    /// figures; `results verify` names a signed run that changed since.
+    #[command(after_help = after_help!(
+        "gyrobench results sign 0968c2e6 --role reviewed --by \"A. Quality\"",
+        "0 signed, 2 refused (not ended, imported, approved before a review or by the \
+         reviewer, signed twice), 1 error"
+    ))]
+    Sign {
+        /// The run's id (or its start), as `results list` shows it, or its
+        /// run directory.
+        run: String,
+        /// What the signature says: reviewed, or approved (after a review,
+        /// by someone else).
+        #[arg(long, value_parser = ["reviewed", "approved"])]
+        role: String,
+        /// Who signs.
+        #[arg(long)]
+        by: String,
+        /// A remark kept with the signature.
+        #[arg(long, default_value = "")]
+        note: String,
+    },
     /// Index run directories from their logs (idempotent: what the store
     /// has is left alone; a run left running is completed).
     #[command(after_help = after_help!("gyrobench results sync runs/", store))]
@@ -259,6 +283,7 @@ pub fn run(args: ResultsArgs) -> Result<Outcome> {
             }
         }
         ResultsCommand::Show { run, json } => {
+            let run = run_id_of_dir(&run).unwrap_or(run);
             let d = store.show(&run)?;
             if json {
                 outln!("{}", serde_json::to_string_pretty(&d)?)?;
@@ -267,6 +292,34 @@ pub fn run(args: ResultsArgs) -> Result<Outcome> {
                     "{}",
                     render_run(&d.run, &d.fields, &d.measurements, &d.parts)
                 )?;
+                outf!("{}", render_signatures(&d.signatures))?;
+            }
+        }
+        ResultsCommand::Sign {
+            run,
+            role,
+            by,
+            note,
+        } => {
+            let role = match role.as_str() {
+                "approved" => crate::results::sign::Role::Approved,
+                _ => crate::results::sign::Role::Reviewed,
+            };
+            let run = run_id_of_dir(&run).unwrap_or(run);
+            match store.sign(&run, role, &by, &note) {
+                Ok(s) => errln!(
+                    "{}: {} by {} at {} (log sha256 {}, figures {})",
+                    s.run,
+                    s.role,
+                    crate::view::printable(&s.by),
+                    s.signed_utc,
+                    s.log_sha256.get(..12).unwrap_or(&s.log_sha256),
+                    s.figures_sha256.get(..12).unwrap_or(&s.figures_sha256)
+                ),
+                Err(crate::results::StoreError::Refused { why }) => {
+                    return Err(Usage(why).into());
+                }
+                Err(e) => return Err(e.into()),
             }
         }
         ResultsCommand::Unit { serial, json } => {
@@ -444,13 +497,65 @@ fn render_measurements(ms: &[MeasurementRow]) -> String {
     let mut s = String::new();
     for m in ms {
         s.push_str(&format!(
-            "  {:<32} {:>12} {:<10} [{}..{}]  {}\n",
+            "  {:<32} {:>12} {:<10} {:<18} [{}..{}]  {}\n",
             m.name,
             opt(m.value, 4),
             m.unit,
+            m.uncertainty.map_or(String::new(), |u| format!(
+                "± {:.4} (k={:.2})",
+                u.expanded, u.k
+            )),
             lim(m.low),
             lim(m.high),
             m.outcome.as_str().to_uppercase()
+        ));
+    }
+    s
+}
+
+/// The run id of run directory `arg` (its report's), when it is one.
+fn run_id_of_dir(arg: &str) -> Option<String> {
+    let dir = std::path::Path::new(arg);
+    if !dir.is_dir() {
+        return None;
+    }
+    let report = std::fs::read_dir(dir)
+        .ok()?
+        .filter_map(Result::ok)
+        .map(|e| e.path())
+        .filter(|p| {
+            p.file_name()
+                .and_then(|n| n.to_str())
+                .is_some_and(|n| n.starts_with("report") && n.ends_with(".json"))
+        })
+        .min()?;
+    let bytes = crate::config::read_at_most(&report, 64 << 20).ok()?;
+    let v: serde_json::Value = serde_json::from_slice(&bytes).ok()?;
+    v["run_id"]
+        .as_str()
+        .filter(|s| !s.is_empty())
+        .map(str::to_owned)
+}
+
+/// A run's signatures for the terminal (or that it has none).
+fn render_signatures(signed: &[crate::results::sign::Signature]) -> String {
+    let p = crate::view::printable;
+    if signed.is_empty() {
+        return "signatures: none (results sign RUN --role reviewed|approved --by NAME)\n".into();
+    }
+    let mut s = String::from("signatures:\n");
+    for g in signed {
+        s.push_str(&format!(
+            "  {:<9} by {} at {} (log sha256 {}){}\n",
+            g.role,
+            p(&g.by),
+            g.signed_utc,
+            g.log_sha256.get(..12).unwrap_or(&g.log_sha256),
+            if g.note.is_empty() {
+                String::new()
+            } else {
+                format!(": {}", p(&g.note))
+            }
         ));
     }
     s

@@ -1024,8 +1024,9 @@ fn measurement_rows(r: &Report) -> String {
         let class = m.outcome.as_str();
         let informative = m.low.is_none() && m.high.is_none();
         rows.push_str(&format!(
-            "<tr class={class}><td>{}</td><td class=num>{}</td><td class=num>{}</td><td>{}</td><td class=num>{}</td><td class=num>{}</td><td class=num>{}</td><td class=num>{}</td><td class=\"outcome {class}\">{}</td></tr>\n{}",
-            format!("{}<br><span class=note>step {}</span>", esc(&m.name), esc(&m.step)),
+            "<tr class={class}><td>{}<br><span class=note>step {}</span></td><td class=num>{}</td><td class=num>{}</td><td>{}</td><td class=num>{}</td><td class=num>{}</td><td class=num>{}</td><td class=num>{}</td><td class=\"outcome {class}\">{}</td></tr>\n{}",
+            esc(&m.name),
+            esc(&m.step),
             num(m.value, 4),
             uncertainty_cell(m),
             esc(&m.unit),

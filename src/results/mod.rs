@@ -18,6 +18,7 @@ pub mod pg;
 pub mod query;
 pub mod record;
 pub mod sets;
+pub mod sign;
 pub mod sql;
 pub mod sqlite;
 pub mod verify;
@@ -135,6 +136,12 @@ pub enum StoreError {
         store: String,
         /// What is missing.
         what: String,
+    },
+    /// A request the store's rules refuse (a signature out of turn).
+    #[error("{why}")]
+    Refused {
+        /// Why, naming the run.
+        why: String,
     },
     /// A log or run directory could not be indexed.
     #[error("{path}: {message}")]

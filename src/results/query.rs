@@ -262,6 +262,8 @@ pub struct RunDetail {
     pub measurements: Vec<MeasurementRow>,
     /// The other parts of the same run.
     pub parts: Vec<RunRow>,
+    /// Who reviewed and approved it (`results sign`).
+    pub signatures: Vec<super::sign::Signature>,
 }
 
 /// A unit's history.
@@ -499,18 +501,20 @@ impl Store {
             .iter()
             .map(run_row)
             .collect();
+        let signatures = self.signatures(&run.id)?;
         Ok(RunDetail {
             run,
             fields,
             measurements,
             parts,
+            signatures,
         })
     }
 
     /// The run part `id` names: its key, or an unambiguous start of one
     /// (several parts of one run: the latest). None, or several runs, is
     /// an error saying so.
-    fn part_named(&mut self, id: &str) -> Result<RunRow, StoreError> {
+    pub(super) fn part_named(&mut self, id: &str) -> Result<RunRow, StoreError> {
         let store = self.name.clone();
         let rows = self.sql().query(
             &format!(

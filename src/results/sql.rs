@@ -181,6 +181,11 @@ pub fn migrations(engine: Engine) -> &'static [(i64, &'static str, &'static str)
                 "judged",
                 include_str!("migrations/sqlite/0005_judged.sql"),
             ),
+            (
+                6,
+                "signatures",
+                include_str!("migrations/sqlite/0006_signatures.sql"),
+            ),
         ],
         Engine::Postgres => &[
             (1, "init", include_str!("migrations/postgres/0001_init.sql")),
@@ -203,6 +208,11 @@ pub fn migrations(engine: Engine) -> &'static [(i64, &'static str, &'static str)
                 5,
                 "judged",
                 include_str!("migrations/postgres/0005_judged.sql"),
+            ),
+            (
+                6,
+                "signatures",
+                include_str!("migrations/postgres/0006_signatures.sql"),
             ),
         ],
     }

@@ -38,6 +38,9 @@ pub enum Problem {
     Unreadable,
     /// A log below the runs directory that the store lacks.
     NotIndexed,
+    /// A signed part whose log or stored figures are no longer what was
+    /// signed.
+    SignatureBroken,
 }
 
 /// One finding.
@@ -325,6 +328,15 @@ impl Store {
         let run = row.text("id");
         let log = row.text("log_path");
         let sha = row.text("log_sha256");
+        for why in self.broken_signatures(&run)? {
+            v.findings.push(Finding {
+                problem: Problem::SignatureBroken,
+                run: Some(run.clone()),
+                log: log.clone(),
+                detail: why,
+                differences: Vec::new(),
+            });
+        }
         let mut find = |problem, detail: String, differences: Vec<Difference>| {
             v.findings.push(Finding {
                 problem,
@@ -509,6 +521,7 @@ impl Verification {
                 Problem::Incomplete => "INCOMPLETE",
                 Problem::Unreadable => "UNREADABLE",
                 Problem::NotIndexed => "NOT INDEXED",
+                Problem::SignatureBroken => "SIGNATURE BROKEN",
             };
             s.push_str(&format!(
                 "{what:<15} {} {}\n                {}\n",

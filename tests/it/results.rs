@@ -742,3 +742,111 @@ fn postgres_verify_names_every_field_edited_away_from_the_log() {
         verify_names_every_field_edited(&url, &format!("pg{}", std::process::id()));
     }
 }
+
+/// A run reviewed, then approved by someone else, in store `db`; each sign
+/// out of turn refused; `show` lists both; an edited figure breaks them.
+fn signing(db: &str, tag: &str) {
+    let dir = temp_dir(&format!("results-sign-{tag}"));
+    let p = write(
+        &dir,
+        "tiny.toml",
+        &TINY.replace("dut_type = \"RL-16\"", "dut_type = \"RL-16S\""),
+    );
+    let unit = format!("{tag}-S1");
+    let out = dir.join("run");
+    let r = with_db(db, &["run", s(&p), "--dut", &unit, "--out", s(&out)]);
+    assert_eq!(r.status.code(), Some(0), "{}", stderr(&r));
+    let run = json(&out.join("report.json"))["run_id"]
+        .as_str()
+        .expect("run id")
+        .to_owned();
+    let sign =
+        |role: &str, by: &str| with_db(db, &["results", "sign", &run, "--role", role, "--by", by]);
+    let refused = sign("approved", "Bo");
+    assert_eq!(refused.status.code(), Some(2), "{}", stderr(&refused));
+    assert!(
+        stderr(&refused).contains("not reviewed yet"),
+        "{}",
+        stderr(&refused)
+    );
+    let r = sign("reviewed", "Al");
+    assert_eq!(r.status.code(), Some(0), "{}", stderr(&r));
+    let again = sign("reviewed", "Al");
+    assert_eq!(again.status.code(), Some(2), "{}", stderr(&again));
+    let own = sign("approved", "Al");
+    assert_eq!(own.status.code(), Some(2), "{}", stderr(&own));
+    assert!(
+        stderr(&own).contains("another person approves it"),
+        "{}",
+        stderr(&own)
+    );
+    let r = sign("approved", "Bo");
+    assert_eq!(r.status.code(), Some(0), "{}", stderr(&r));
+
+    let shown = with_db(db, &["results", "show", &run, "--json"]);
+    assert_eq!(shown.status.code(), Some(0), "{}", stderr(&shown));
+    let d: serde_json::Value = serde_json::from_slice(&shown.stdout).expect("JSON");
+    let signed: Vec<(String, String)> = d["signatures"]
+        .as_array()
+        .expect("signatures")
+        .iter()
+        .map(|g| {
+            (
+                g["role"].as_str().unwrap_or("").to_owned(),
+                g["by"].as_str().unwrap_or("").to_owned(),
+            )
+        })
+        .collect();
+    assert_eq!(
+        signed,
+        [
+            ("reviewed".into(), "Al".into()),
+            ("approved".into(), "Bo".into())
+        ]
+    );
+    let text = stdout(&with_db(db, &["results", "show", &run]));
+    assert!(
+        text.contains("reviewed  by Al") && text.contains("approved  by Bo"),
+        "{text}"
+    );
+
+    let v = with_db(db, &["results", "verify", s(&dir)]);
+    assert_eq!(v.status.code(), Some(0), "{}", stdout(&v));
+    // A figure edited in the store: both signatures no longer hold.
+    edit_store(
+        db,
+        &format!("UPDATE measurements SET value = value + 1 WHERE run = '{run}.1' AND seq = 0"),
+    );
+    let v = with_db(db, &["results", "verify", s(&dir), "--json"]);
+    assert_eq!(v.status.code(), Some(3), "{}", stdout(&v));
+    let j: serde_json::Value = serde_json::from_slice(&v.stdout).expect("JSON");
+    let broken: Vec<&str> = j["findings"]
+        .as_array()
+        .expect("findings")
+        .iter()
+        .filter(|f| f["problem"] == "signature_broken")
+        .filter_map(|f| f["detail"].as_str())
+        .collect();
+    assert_eq!(broken.len(), 2, "{j}");
+    assert!(
+        broken
+            .iter()
+            .all(|d| d.contains("stored verdict or figures")),
+        "{broken:?}"
+    );
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
+
+#[test]
+fn sqlite_signing_reviews_then_approves_and_verify_names_an_edit_since() {
+    let dir = temp_dir("results-sqlite-sign");
+    signing(s(&dir.join("results.sqlite")), "sqlite");
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
+
+#[test]
+fn postgres_signing_reviews_then_approves_and_verify_names_an_edit_since() {
+    if let Some(url) = postgres() {
+        signing(&url, &format!("pg{}", std::process::id()));
+    }
+}
