@@ -216,8 +216,8 @@ pub enum ResultsCommand {
     /// figures; `results verify` names a signed run that changed since.
     #[command(after_help = after_help!(
         "gyrobench results sign 0968c2e6 --role reviewed --by \"A. Quality\"",
-        "0 signed, 2 refused (not ended, imported, approved before a review or by the \
-         reviewer, signed twice), 1 error"
+        "0 signed, 1 error (a store that cannot be reached, no such run), 2 usage (refused: \
+         a run not ended or imported, approved before a review or by the reviewer, signed twice)"
     ))]
     Sign {
         /// The run's id (or its start), as `results list` shows it, or its
