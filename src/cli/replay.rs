@@ -34,7 +34,8 @@ pub struct ReplayArgs {
     /// Write into an --out inside a run directory.
     #[arg(long)]
     force: bool,
-    /// Also index the run in the results store (idempotent).
+    /// Also index the run in the results store (idempotent), and show in
+    /// the report who reviewed and approved it there (`results sign`).
     #[arg(long)]
     store: bool,
     /// The results store (with --store): a SQLite file, a postgres:// URL
@@ -175,6 +176,12 @@ fn replay_one(
     }
     if let Some(c) = &coeffs {
         report.coefficients = c.used.clone();
+    }
+    if args.store {
+        let loc = crate::results::Location::resolve(args.db.as_deref(), None);
+        if let Some(mut s) = crate::results::Store::open(&loc)? {
+            report.signatures = s.signatures(&format!("{}.{}", r.meta.run_id, r.meta.part))?;
+        }
     }
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     let name = match serial.filter(|_| batch) {

@@ -950,7 +950,7 @@ fn judgement(r: &Report) -> String {
         if s.is_empty() { "-".to_owned() } else { esc(s) }
     };
     format!(
-        "<table class=record>\n<tr><th>unit</th><td>{} {}</td></tr>\n<tr><th>tested by</th><td>{} <span class=note>(operator), {}</span></td></tr>\n<tr><th>decision rule</th><td><b>{}</b>{}: {}</td></tr>\n<tr><th>reviewed by</th><td class=sign></td></tr>\n<tr><th>approved by</th><td class=sign></td></tr>\n</table>\n",
+        "<table class=record>\n<tr><th>unit</th><td>{} {}</td></tr>\n<tr><th>tested by</th><td>{} <span class=note>(operator), {}</span></td></tr>\n<tr><th>decision rule</th><td><b>{}</b>{}: {}</td></tr>\n<tr><th>reviewed by</th><td class=sign>{}</td></tr>\n<tr><th>approved by</th><td class=sign>{}</td></tr>\n</table>\n",
         esc(&r.dut.kind),
         esc(&r.dut.serial),
         or_dash(&r.operator),
@@ -962,7 +962,31 @@ fn judgement(r: &Report) -> String {
             " (the default)"
         },
         esc(&r.decision_rule.statement),
+        signed(r, "reviewed"),
+        signed(r, "approved"),
     )
+}
+
+/// The signatures of `role` in words (blank for a pen on a printed copy).
+fn signed(r: &Report, role: &str) -> String {
+    r.signatures
+        .iter()
+        .filter(|s| s.role == role)
+        .map(|s| {
+            format!(
+                "{} <span class=note>{} (log sha256 {}){}</span>",
+                esc(&s.by),
+                esc(&s.signed_utc),
+                esc(s.log_sha256.get(..12).unwrap_or(&s.log_sha256)),
+                if s.note.is_empty() {
+                    String::new()
+                } else {
+                    format!(": {}", esc(&s.note))
+                }
+            )
+        })
+        .collect::<Vec<_>>()
+        .join("<br>")
 }
 
 /// A figure's expanded uncertainty with its coverage factor, its standard

@@ -104,6 +104,10 @@ pub struct Report {
     /// Where each record a measurement uses was taken (the table pose of
     /// the move before it), in run order.
     pub positions: Vec<Position>,
+    /// Who reviewed and approved the run, as the results store holds it
+    /// (`results sign`): empty in the report a run writes; a replay with
+    /// `--store` fills it.
+    pub signatures: Vec<crate::results::sign::Signature>,
 }
 
 /// The decision rule as `report.json` states it.
@@ -377,6 +381,7 @@ impl Report {
                 .into_iter()
                 .map(|q| q.on(unit_geometry(meta)))
                 .collect(),
+            signatures: Vec::new(),
         }
     }
 

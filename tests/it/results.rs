@@ -810,6 +810,32 @@ fn signing(db: &str, tag: &str) {
         "{text}"
     );
 
+    // The report rendered again from the log with the store shows them.
+    let again = dir.join("again");
+    let r = with_db(
+        db,
+        &[
+            "replay",
+            s(&out.join("run.mcap")),
+            "--store",
+            "--out",
+            s(&again),
+        ],
+    );
+    assert_eq!(r.status.code(), Some(0), "{}", stderr(&r));
+    let html = std::fs::read_to_string(again.join("report.html")).expect("page");
+    for (role, by) in [("reviewed by", "Al"), ("approved by", "Bo")] {
+        let row = html.split(&format!("<th>{role}</th>")).nth(1).unwrap_or("");
+        let cell = row.split("</td>").next().unwrap_or("");
+        assert!(cell.contains(by), "{role}: {cell}");
+    }
+    assert_eq!(
+        json(&again.join("report.json"))["signatures"]
+            .as_array()
+            .map(Vec::len),
+        Some(2)
+    );
+
     let v = with_db(db, &["results", "verify", s(&dir)]);
     assert_eq!(v.status.code(), Some(0), "{}", stdout(&v));
     // A figure edited in the store: both signatures no longer hold.
