@@ -107,7 +107,27 @@ pub struct Report {
     /// Who reviewed and approved the run, as the results store holds it
     /// (`results sign`): empty in the report a run writes; a replay with
     /// `--store` fills it.
-    pub signatures: Vec<crate::results::sign::Signature>,
+    pub signatures: Vec<Signature>,
+}
+
+/// One signature of the run (`results sign`), as the results store keeps
+/// it and a replayed report shows it.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+pub struct Signature {
+    /// The part signed (`RUN_ID.PART`, the run's latest when signed).
+    pub run: String,
+    /// `reviewed` or `approved`.
+    pub role: String,
+    /// Who signed.
+    pub by: String,
+    /// When, UTC, RFC 3339.
+    pub signed_utc: String,
+    /// The log's SHA-256 the store held when it was signed.
+    pub log_sha256: String,
+    /// The digest of the part's stored verdict and figures when signed.
+    pub figures_sha256: String,
+    /// A remark (may be empty).
+    pub note: String,
 }
 
 /// The decision rule as `report.json` states it.

@@ -6,8 +6,6 @@
 //! figures. `results verify` names a signed run whose log or figures are
 //! no longer what was signed (`docs/results.md`, "Signing").
 
-use serde::Serialize;
-
 use super::query::measurement_of;
 use super::sql::Value;
 use super::{RunState, Store, StoreError};
@@ -31,24 +29,9 @@ impl Role {
     }
 }
 
-/// One signature as the store keeps it.
-#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
-pub struct Signature {
-    /// The part signed (`RUN_ID.PART`, the run's latest when signed).
-    pub run: String,
-    /// `reviewed` or `approved`.
-    pub role: String,
-    /// Who signed.
-    pub by: String,
-    /// When, UTC, RFC 3339.
-    pub signed_utc: String,
-    /// The log's SHA-256 the store held when it was signed.
-    pub log_sha256: String,
-    /// The digest of the part's stored verdict and figures when signed.
-    pub figures_sha256: String,
-    /// A remark (may be empty).
-    pub note: String,
-}
+/// One signature as the store keeps it (the report's type: a replay
+/// shows them).
+pub use crate::report::Signature;
 
 /// The longest name or note a signature keeps.
 const MAX_TEXT: usize = 200;
