@@ -193,6 +193,68 @@ fn solve(
     })
 }
 
+/// The residual sum of squares of a least-squares fit with fixed columns
+/// and one more column `exp(-t/tau)`, as a function of tau: the fixed
+/// columns' span is found once (an SVD), and each tau costs one
+/// projection of its column instead of a whole solve.
+struct Profile {
+    /// Orthonormal basis of the fixed columns' span (n x r).
+    basis: DMatrix<f64>,
+    /// `y` less its projection on that span.
+    ry: DVector<f64>,
+    /// Its squared norm.
+    ryy: f64,
+}
+
+impl Profile {
+    fn new(cols: &[Vec<f64>], y: &[f64], run_of: &[usize], runs: usize) -> Self {
+        let n = y.len();
+        let x = DMatrix::from_fn(n, cols.len() + runs, |i, j| {
+            if j < cols.len() {
+                cols[j][i]
+            } else if run_of[i] == j - cols.len() {
+                1.0
+            } else {
+                0.0
+            }
+        });
+        // Column scaling does not change the span; the rank cut does.
+        let norms: Vec<f64> = x
+            .column_iter()
+            .map(|c| {
+                let r = c.norm();
+                if r > 0.0 && r.is_finite() { r } else { 1.0 }
+            })
+            .collect();
+        let x = DMatrix::from_fn(n, norms.len(), |i, j| x[(i, j)] / norms[j]);
+        let svd = x.svd(true, false);
+        let smax = svd.singular_values.max();
+        let keep: Vec<usize> = (0..svd.singular_values.len())
+            .filter(|&k| svd.singular_values[k] > 1e-12 * smax)
+            .collect();
+        let basis = match &svd.u {
+            Some(u) => u.select_columns(&keep),
+            None => DMatrix::zeros(n, 0),
+        };
+        let b = DVector::from_column_slice(y);
+        let ry = &b - &basis * (basis.transpose() * &b);
+        let ryy = ry.norm_squared();
+        Self { basis, ry, ryy }
+    }
+
+    /// The residual sum of squares with `exp(-t/tau)` added to the fit.
+    fn rss(&self, times: &[f64], tau: f64) -> f64 {
+        let e = DVector::from_iterator(times.len(), times.iter().map(|t| (-t / tau).exp()));
+        let re = &e - &self.basis * (self.basis.transpose() * &e);
+        let ee = re.norm_squared();
+        if ee <= 1e-24 * e.norm_squared() {
+            return self.ryy;
+        }
+        let a = re.dot(&self.ry);
+        (self.ryy - a * a / ee).max(0.0)
+    }
+}
+
 /// A fit over several runs: shared coefficients, one offset per run.
 #[derive(Debug, Clone, PartialEq)]
 pub struct MultiFit {
@@ -277,13 +339,34 @@ pub fn fit_runs_where(
     if kind != ModelKind::Model4 {
         return Ok(finish(eval(0.0)?, None));
     }
-    // tau_w: coarse log grid, then golden-section refinement in log tau.
+    // tau_w: coarse log grid, then golden-section refinement in log tau,
+    // on the residual sum of squares profiled over the linear terms (a
+    // projection; the full solve runs once, at the tau found).
+    let fixed = design_all(1.0);
+    let times: Vec<f64> = runs
+        .iter()
+        .zip(&rows)
+        .flat_map(|(r, rows)| rows.iter().map(|&i| r[i].time_s))
+        .collect();
+    let profile = Profile::new(&fixed[..fixed.len() - 1], &y, &run_of, runs.len());
+    let eval_rss = |log_tau: f64| -> Result<f64, FitError> {
+        let tau = log_tau.exp();
+        let rss = profile.rss(&times, tau);
+        if rss.is_finite() {
+            Ok(rss)
+        } else {
+            Err(FitError::Solve {
+                kind,
+                reason: "non-finite residual (NaN in the data?)".into(),
+            })
+        }
+    };
     let grid: Vec<f64> = (0..=40)
         .map(|i| (30f64).ln() + f64::from(i) / 40.0 * ((30_000f64).ln() - (30f64).ln()))
         .collect();
     let mut best = (grid[0], f64::INFINITY);
     for &g in &grid {
-        let rss = eval(g)?.rss;
+        let rss = eval_rss(g)?;
         if rss < best.1 {
             best = (g, rss);
         }
@@ -294,7 +377,7 @@ pub fn fit_runs_where(
     for _ in 0..40 {
         let c = b - phi * (b - a);
         let d = a + phi * (b - a);
-        if eval(c)?.rss < eval(d)?.rss {
+        if eval_rss(c)? < eval_rss(d)? {
             b = d;
         } else {
             a = c;
