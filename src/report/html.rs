@@ -818,7 +818,7 @@ fn noise_table(r: &Report) -> String {
         judged = esc(&n.judged),
         avg = n.bias_stability_averaging_s,
         bs = num(n.bias_stability_dph, 4),
-        b = num(Some(n.ieee_b_dph), 4),
+        b = num(n.ieee_b_dph, 4),
         min = num(Some(n.adev_min_dph), 4),
         tmin = n.adev_min_tau_s,
         arw = resolved(n.arw_deg_per_rt_h, 5, "deg/sqrt(h)"),
@@ -826,13 +826,11 @@ fn noise_table(r: &Report) -> String {
     )
 }
 
-/// A fitted noise coefficient, or that the record does not resolve it (the
-/// fit leaves it at zero: its slope never shows in this curve).
-fn resolved(v: f64, digits: usize, unit: &str) -> String {
-    if v.is_finite() && v > 0.0 {
-        format!("{v:.digits$} {unit}")
-    } else {
-        "not resolved by this record".into()
+/// A fitted noise coefficient, or that the record does not resolve it.
+fn resolved(v: Option<f64>, digits: usize, unit: &str) -> String {
+    match v {
+        Some(v) if v.is_finite() => format!("{v:.digits$} {unit}"),
+        _ => "not resolved by this record".into(),
     }
 }
 

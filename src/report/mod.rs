@@ -279,16 +279,20 @@ pub struct NoiseFigures {
     pub bias_stability_dph: Option<f64>,
     /// Its averaging time, s.
     pub bias_stability_averaging_s: f64,
-    /// IEEE Std 952 coefficient B = ADEV floor / 0.664 (noise fit), deg/h.
-    pub ieee_b_dph: f64,
+    /// IEEE Std 952 coefficient B = ADEV floor / 0.664 (noise fit), deg/h;
+    /// `None` when the curve does not resolve it (`not_resolved` says why).
+    pub ieee_b_dph: Option<f64>,
     /// Raw minimum of the ADEV, deg/h.
     pub adev_min_dph: f64,
     /// Where it lies, s.
     pub adev_min_tau_s: f64,
-    /// Angle random walk from the fit, deg/sqrt(h).
-    pub arw_deg_per_rt_h: f64,
-    /// Rate random walk from the fit, deg/h/sqrt(h).
-    pub rate_random_walk_dph_per_rt_h: f64,
+    /// Angle random walk from the fit, deg/sqrt(h); `None` when unresolved.
+    pub arw_deg_per_rt_h: Option<f64>,
+    /// Rate random walk from the fit, deg/h/sqrt(h); `None` when unresolved.
+    pub rate_random_walk_dph_per_rt_h: Option<f64>,
+    /// Each term above the curve does not resolve: why, in words (the
+    /// keys of [`crate::analysis::allan::TERM_KEYS`], `ieee_b_dph` for B).
+    pub not_resolved: std::collections::BTreeMap<&'static str, String>,
     /// Averaging times, s.
     pub tau_s: Vec<f64>,
     /// Overlapping ADEV, deg/h.
@@ -327,6 +331,8 @@ impl NoiseFigures {
         let judged = measurements
             .iter()
             .find(|m| m.metric == Metric::BiasStability && m.records.contains(label))?;
+        // A term the curve does not resolve is no figure (as `allan` says).
+        let shown = |i: usize, v: f64| a.noise.resolved[i].is_resolved().then_some(v);
         Some(Self {
             record: label.clone(),
             judged: format!(
@@ -335,11 +341,19 @@ impl NoiseFigures {
             ),
             bias_stability_dph: judged.value,
             bias_stability_averaging_s: judged.averaging_s,
-            ieee_b_dph: a.bias_instability.ieee_b_dph,
+            ieee_b_dph: shown(2, a.bias_instability.ieee_b_dph),
             adev_min_dph: a.bias_instability.adev_min_dph,
             adev_min_tau_s: a.bias_instability.adev_min_tau_s,
-            arw_deg_per_rt_h: a.noise.arw_deg_per_rt_h,
-            rate_random_walk_dph_per_rt_h: a.noise.rate_random_walk_dph_per_rt_h,
+            arw_deg_per_rt_h: shown(1, a.noise.arw_deg_per_rt_h),
+            rate_random_walk_dph_per_rt_h: shown(3, a.noise.rate_random_walk_dph_per_rt_h),
+            not_resolved: [
+                (1, "arw_deg_per_rt_h"),
+                (2, "ieee_b_dph"),
+                (3, "rate_random_walk_dph_per_rt_h"),
+            ]
+            .into_iter()
+            .filter_map(|(i, key)| Some((key, a.noise.resolved[i].reason()?)))
+            .collect(),
             tau_s: a.points.iter().map(|p| p.tau_s).collect(),
             adev_dph: a.points.iter().map(|p| p.adev).collect(),
             lo_dph: a.points.iter().map(|p| p.lo).collect(),

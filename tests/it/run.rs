@@ -82,6 +82,24 @@ fn smoke_passes_with_the_report_contract_and_a_complete_log() {
         assert!(m["value"].as_f64().expect("value") < m["high"].as_f64().expect("high"));
     }
     assert!(dir.join("report.html").exists());
+    // A noise term the curve does not resolve is null with its reason,
+    // never a number (3 min records resolve no rate random walk).
+    let noise = &r["noise"];
+    for k in [
+        "arw_deg_per_rt_h",
+        "ieee_b_dph",
+        "rate_random_walk_dph_per_rt_h",
+    ] {
+        let why = noise["not_resolved"][k].as_str();
+        match noise[k].as_f64() {
+            Some(v) => assert!(v > 0.0 && why.is_none(), "noise.{k}: {noise}"),
+            None => assert!(
+                noise[k].is_null() && why.is_some_and(|w| !w.is_empty()),
+                "noise.{k}: {noise}"
+            ),
+        }
+    }
+    assert!(noise["rate_random_walk_dph_per_rt_h"].is_null(), "{noise}");
     let msgs = messages(&dir.join("run.mcap"));
     assert_eq!(
         frames_logged(&msgs),
