@@ -119,9 +119,14 @@ fn rate_transfer_figures_agree_with_the_twin_at_two_settings() {
 #[test]
 fn dead_band_and_threshold_agree_with_the_twin_at_two_settings() {
     let dir = temp_dir("dead-band");
-    for (i, lock_in) in [3.0, 8.0].into_iter().enumerate() {
+    // Dithered (one count rms of stripping residual), and undithered: a
+    // clean locked output, zero counts frame after frame inside the
+    // lock-in, which is a measurement (exit 3, beyond the limit), not a
+    // stuck gyro (exit 1).
+    for (i, (lock_in, residual)) in [(3.0, 1.0), (8.0, 1.0), (3.0, 0.0)].into_iter().enumerate() {
         let response = RateResponseConfig {
             lock_in_dph: lock_in,
+            dither_residual_counts: residual,
             ..RateResponseConfig::default()
         };
         let twin = twin_with(&dir, &format!("twin{i}.toml"), &response);
@@ -129,15 +134,17 @@ fn dead_band_and_threshold_agree_with_the_twin_at_two_settings() {
         let o = run("dead_band.toml", &twin, &out);
         assert_eq!(o.status.code(), Some(3), "beyond 2 deg/h: {}", stderr(&o));
         let report = json(&out.join("report.json"));
+        let lock_in = format!("lock-in {lock_in}, residual {residual} counts");
+        let lock_in_dph = response.lock_in_dph;
         assert_within_3_se(
-            &format!("lock-in {lock_in} dead band"),
+            &format!("{lock_in} dead band"),
             figure(&report, "dead_band_dph"),
-            input_for_share(lock_in, DEAD_BAND_SHARE),
+            input_for_share(lock_in_dph, DEAD_BAND_SHARE),
         );
         assert_within_3_se(
-            &format!("lock-in {lock_in} threshold"),
+            &format!("{lock_in} threshold"),
             figure(&report, "threshold_dph"),
-            input_for_share(lock_in, THRESHOLD_SHARE),
+            input_for_share(lock_in_dph, THRESHOLD_SHARE),
         );
     }
     std::fs::remove_dir_all(&dir).expect("cleanup");

@@ -44,7 +44,7 @@ pub struct TwinConfig {
 
 /// The output's response to the input rate (`docs/twin.md`, "Rate
 /// response"). Every term is zero by default: the output is the input.
-#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct RateResponseConfig {
     /// Scale factor error against the nominal count (`gyro.lsb_arcsec`), ppm.
@@ -68,6 +68,26 @@ pub struct RateResponseConfig {
     /// Random walk the dither adds to the angle output, deg/sqrt(h)
     /// (beyond `noise.arw_deg_per_rt_h`).
     pub dither_random_walk_deg_per_rt_h: f64,
+    /// The dither-stripping residual of a locking gyro: white angle jitter
+    /// of this many counts rms on its frames (default 1, a dithered
+    /// unit's). 0: no dither at all, a clean locked output: inside the
+    /// lock-in the beams lock and the unit sends no counts, not even its
+    /// noise's.
+    pub dither_residual_counts: f64,
+}
+
+impl Default for RateResponseConfig {
+    fn default() -> Self {
+        Self {
+            scale_factor_error_ppm: 0.0,
+            nonlinearity_ppm: 0.0,
+            full_scale_dps: 0.0,
+            asymmetry_ppm: 0.0,
+            lock_in_dph: 0.0,
+            dither_random_walk_deg_per_rt_h: 0.0,
+            dither_residual_counts: 1.0,
+        }
+    }
 }
 
 impl RateResponseConfig {
@@ -85,6 +105,9 @@ impl RateResponseConfig {
                 + 1e-6 * self.nonlinearity_ppm * input_dph.abs() / (self.full_scale_dps * 3600.0);
         }
         let x = k * input_dph + bias_dph;
+        if self.locked(x) {
+            return 0.0;
+        }
         if self.lock_in_dph > 0.0 {
             let l = self.lock_in_dph;
             if x.abs() <= l {
@@ -95,6 +118,18 @@ impl RateResponseConfig {
         } else {
             x
         }
+    }
+
+    /// Whether an input of `x` deg/h (scaled, bias added) lies inside the
+    /// lock-in: the beams lock and the output is zero.
+    pub fn locked(&self, x: f64) -> bool {
+        self.lock_in_dph > 0.0 && x.abs() <= self.lock_in_dph
+    }
+
+    /// Whether the unit, undithered, sends no counts at all while locked
+    /// (its noise included): `dither_residual_counts = 0`.
+    pub fn locks_clean(&self) -> bool {
+        self.lock_in_dph > 0.0 && self.dither_residual_counts == 0.0
     }
 
     fn validate(&self, c: &Checker<'_>) -> Result<(), ConfigError> {
@@ -128,6 +163,12 @@ impl RateResponseConfig {
             0.0,
             1.0,
             "rate_response.dither_random_walk_deg_per_rt_h",
+        )?;
+        c.within(
+            self.dither_residual_counts,
+            0.0,
+            100.0,
+            "rate_response.dither_residual_counts",
         )?;
         Ok(())
     }

@@ -170,7 +170,12 @@ impl Twin {
             magnetic_body_ut: Vector3::zeros(),
             sensor_c: [cfg.chamber.initial_c; 3],
             residual_arcsec: 0.0,
-            jitter: (cfg.rate_response.lock_in_dph > 0.0).then_some((cfg.gyro.lsb_arcsec, 0.0)),
+            jitter: (cfg.rate_response.lock_in_dph > 0.0
+                && cfg.rate_response.dither_residual_counts > 0.0)
+                .then_some((
+                    cfg.rate_response.dither_residual_counts * cfg.gyro.lsb_arcsec,
+                    0.0,
+                )),
             true_angle_arcsec: 0.0,
             true_angle_comp: 0.0,
             cfg,
@@ -344,7 +349,14 @@ impl Twin {
             None => self.scale_factor * self.kinematic_dph + self.bias_dph,
             Some(r) => r.output_dph(self.kinematic_dph, self.scale_factor, self.bias_dph),
         };
-        let d_angle = rate_dph * self.frame_dt_s + self.noise.frame_angle_arcsec(&mut self.rng);
+        // An undithered unit inside its lock-in sends nothing: its beams
+        // are locked, and its noise with them.
+        let locked = rate_dph == 0.0 && self.response.as_ref().is_some_and(|r| r.locks_clean());
+        let d_angle = if locked {
+            0.0
+        } else {
+            rate_dph * self.frame_dt_s + self.noise.frame_angle_arcsec(&mut self.rng)
+        };
         // Kahan sum: the reference angle must stay exact over 1e7+ frames.
         let y = d_angle - self.true_angle_comp;
         let t = self.true_angle_arcsec + y;
