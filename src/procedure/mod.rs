@@ -200,6 +200,9 @@ pub enum StepKind {
         volts: f64,
         /// Current limit when on, A.
         limit_a: f64,
+        /// Switching on a unit found powered: switched off and rested
+        /// this long first, s (none: the run refuses to go on).
+        rest_if_on_s: Option<f64>,
     },
     /// Let time pass.
     Wait {
@@ -320,6 +323,7 @@ impl Step {
                 on: true,
                 volts,
                 limit_a,
+                ..
             } => {
                 format!("power the unit on at {volts} V (limit {limit_a} A)")
             }
@@ -639,7 +643,12 @@ impl Validator<'_> {
                     orientation,
                 }
             }
-            RawStep::Power { on, volts, limit_a } => {
+            RawStep::Power {
+                on,
+                volts,
+                limit_a,
+                rest_if_on_s,
+            } => {
                 let Some(p) = &self.bench.devices.supply else {
                     return Err(self.src.invalid(
                         &k("action"),
@@ -666,10 +675,19 @@ impl Validator<'_> {
                         p.max_limit_a()
                     ),
                 )?;
+                if let Some(rest) = rest_if_on_s {
+                    c.ensure(
+                        *on,
+                        &k("rest_if_on_s"),
+                        "is for a step that switches the unit on (on = true)",
+                    )?;
+                    self.duration(*rest, &k("rest_if_on_s"))?;
+                }
                 StepKind::Power {
                     on: *on,
                     volts,
                     limit_a,
+                    rest_if_on_s: *rest_if_on_s,
                 }
             }
             RawStep::Wait { duration_s } => StepKind::Wait {

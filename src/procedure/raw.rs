@@ -94,6 +94,10 @@ pub enum RawStep {
         volts: Option<f64>,
         /// Current limit, A (default: the bench's `devices.supply.limit_a`).
         limit_a: Option<f64>,
+        /// A switch-on that finds the unit already powered switches it
+        /// off and lets it rest this long first, s (absent: the run
+        /// refuses to go on, since the figures after it count from it).
+        rest_if_on_s: Option<f64>,
     },
     /// Let time pass.
     Wait {

@@ -104,6 +104,12 @@ pub struct Report {
     /// Where each record a measurement uses was taken (the table pose of
     /// the move before it), in run order.
     pub positions: Vec<Position>,
+    /// When the unit was switched on: the run's first power-on, the one
+    /// the figures that count from power-on rest on (self-heating, model
+    /// 4's warm-up), and how the run knows it.
+    pub power_on: PowerOnStated,
+    /// Every power-on of the run, in order (a turn-on procedure's several).
+    pub power_ons: Vec<PowerOnStated>,
     /// Who reviewed and approved the run, as the results store holds it
     /// (`results sign`): empty in the report a run writes; a replay with
     /// `--store` fills it.
@@ -362,6 +368,66 @@ impl NoiseFigures {
     }
 }
 
+/// A power-on as the report states it (`power_on` in report.json).
+#[derive(Debug, Clone, Serialize)]
+pub struct PowerOnStated {
+    /// Device time of the power-on, s since its part of the run started.
+    pub device_time_s: f64,
+    /// The same moment in UTC.
+    pub utc: String,
+    /// How the run knows it: `switched` (the run switched the supply on,
+    /// from off), `operator` (an operator switched it on and confirmed
+    /// it), `assumed` (not known: the start of the run is taken).
+    pub source: crate::sequencer::PowerOnSource,
+    /// The part of the run it was in (1 unless resumed).
+    pub part: u32,
+    /// The same in words.
+    pub words: String,
+}
+
+impl PowerOnStated {
+    /// The statement of power-on `on` in `part`.
+    pub fn of(part: u32, on: &crate::sequencer::PowerOn) -> Self {
+        Self {
+            device_time_s: on.t_s,
+            utc: on.utc.clone(),
+            source: on.source,
+            part,
+            words: format!(
+                "at {:.1} s of device time{}{}, {}",
+                on.t_s,
+                if part > 1 {
+                    format!(" of part {part}")
+                } else {
+                    String::new()
+                },
+                if on.utc.is_empty() {
+                    String::new()
+                } else {
+                    format!(" ({})", on.utc)
+                },
+                on.source.describe()
+            ),
+        }
+    }
+
+    /// The run's first power-on, or the run's start taken for it.
+    fn first(records: &Records, start_utc: &str) -> Self {
+        records.power_ons().first().map_or_else(
+            || Self {
+                device_time_s: 0.0,
+                utc: start_utc.to_owned(),
+                source: crate::sequencer::PowerOnSource::Assumed,
+                part: 1,
+                words: "not recorded: the figures that count from power-on take the start of \
+                        the run"
+                    .to_owned(),
+            },
+            |(part, on)| Self::of(*part, on),
+        )
+    }
+}
+
 /// The table's geometry with a batch's unit on its slot's mount (none: the
 /// run's one unit, on the bench's mount as the procedure was checked).
 fn unit_geometry(meta: &RunMeta) -> Option<crate::geometry::TableGeometry> {
@@ -415,6 +481,13 @@ impl Report {
                 .into_iter()
                 .map(|q| q.on(unit_geometry(meta)))
                 .collect(),
+            power_on: PowerOnStated::first(&r.records, &meta.start_time_utc),
+            power_ons: r
+                .records
+                .power_ons()
+                .iter()
+                .map(|(part, on)| PowerOnStated::of(*part, on))
+                .collect(),
             signatures: Vec::new(),
         }
     }
@@ -449,6 +522,7 @@ impl Report {
             self.device_time_s / 3600.0,
             self.frames
         );
+        s.push_str(&format!("  power-on: {}\n", self.power_on.words));
         s.push_str(&format!(
             "  decision rule: {}{}\n",
             self.decision_rule.short(),

@@ -585,6 +585,10 @@ impl<'a> State<'a> {
     /// A step started or ended; a measure step is computed at its start,
     /// on the records so far, as in the live run.
     fn step_event(&mut self, e: &StepEvent) -> Result<(), String> {
+        // A power-on, as the live run recorded it (a step's or the run's own).
+        if let Some(on) = &e.power_on {
+            self.records.power_on(on.clone());
+        }
         if e.phase == StepPhase::Restore {
             return Ok(());
         }

@@ -109,26 +109,25 @@ impl DeviceBench {
             watch,
         } = open;
         table.servo_on().await?;
-        // The unit is powered as the bench file says before anything else:
-        // an output already on at that voltage stays as it is.
-        let mut booting = false;
+        // The supply is set as the bench file says, its output left as
+        // found: the run switches the unit on itself, and records when
+        // (`Run::power_at_start`, a procedure's `power` step). A unit
+        // found off is silent until then.
+        let mut off = false;
         let supply = match (supply, &cfg.devices.supply) {
             (Some(mut p), Some(c)) => {
-                p.configure(c.channel, c.volts, c.limit_a, c.protection)
-                    .await?;
-                p.output(c.channel, true).await?;
-                // A unit that was off (a safe state's) boots first.
-                booting = true;
+                let found = p.read(c.channel).await?;
+                if !found.on {
+                    p.configure(c.channel, c.volts, c.limit_a, c.protection)
+                        .await?;
+                }
+                off = !found.on;
                 Some((p, c.clone()))
             }
             _ => None,
         };
         let reading = chamber.read().await?;
-        let quiet = Arc::new(Mutex::new(if booting {
-            Quiet::Booting(std::time::Instant::now() + Duration::from_secs_f64(BOOT_S))
-        } else {
-            Quiet::No
-        }));
+        let quiet = Arc::new(Mutex::new(if off { Quiet::Off } else { Quiet::No }));
         let batch = !cfg.slots.is_empty();
         let (tx, rx) = mpsc::channel(1 << 16);
         let stats: Vec<_> = std::iter::once(gyro)

@@ -128,9 +128,10 @@ impl EmbeddedBench {
     }
 
     /// Power the unit from a simulated supply as the bench file describes
-    /// it: on at its voltage and limit from the start, settled.
+    /// it: wired at its voltage and limit, the output off until the run
+    /// switches it on (the unit off, as on a bench before its run).
     pub fn with_supply(mut self, cfg: &SupplyDevice) -> Self {
-        let sim = Supply::powering(
+        let sim = Supply::wired(
             cfg.protocol,
             cfg.channel,
             cfg.volts,

@@ -7,6 +7,7 @@ use serde::Serialize;
 
 use super::BenchState;
 use super::compensated::{Residual, compensated_drift};
+use super::events::{PowerOn, PowerOnSource};
 use super::health::{RecordHealth, Runs};
 use super::spill::{Row, Spill, bytes_at, f64_at};
 use super::uncertainty::Known;
@@ -14,7 +15,7 @@ use crate::analysis::figures::{DriftTrace, bias_stability, drift_trace, mean};
 use crate::analysis::model::{self, ModelKind};
 use crate::analysis::rate::{self, Figure, RatePoint};
 use crate::analysis::series::Interval;
-use crate::analysis::study::{self_heating_dph, sensitivity_fit};
+use crate::analysis::study::{self_heating, sensitivity_fit};
 use crate::analysis::uncertainty::{Contribution, Uncertainty};
 use crate::procedure::{DecisionRule, Measure, Metric, Statement};
 use crate::typeb::TypeB;
@@ -50,6 +51,35 @@ pub struct Records {
     /// For each record: the index in `power` of the first reading after
     /// the turn-on before it, and of the record's first and last readings.
     power_of: BTreeMap<String, (u64, u64, u64)>,
+    /// Every power-on the run knows of, with the part it was in.
+    power_ons: Vec<(u32, PowerOn)>,
+}
+
+/// What the time since power-on of a figure's records rests on.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PowerBasis {
+    /// Device time of the power-on the first of the records follows, s
+    /// since its part started (0 when none is known).
+    pub t_s: f64,
+    /// How it is known.
+    pub source: PowerOnSource,
+}
+
+impl PowerBasis {
+    /// In words, for a figure's note.
+    pub fn describe(&self) -> String {
+        match self.source {
+            PowerOnSource::Assumed => {
+                "time since power-on taken from the start of the run: no power-on was recorded"
+                    .to_owned()
+            }
+            s => format!(
+                "time since the power-on at {:.1} s of device time ({})",
+                self.t_s,
+                s.describe()
+            ),
+        }
+    }
 }
 
 impl Row for (bool, Interval) {
@@ -198,6 +228,69 @@ impl Records {
             }
         }
         (series, lens)
+    }
+
+    /// The unit was switched on (in the part records start in now).
+    pub fn power_on(&mut self, on: PowerOn) {
+        self.power_ons.push((self.part.max(1), on));
+    }
+
+    /// Every power-on recorded, with its part.
+    pub fn power_ons(&self) -> &[(u32, PowerOn)] {
+        &self.power_ons
+    }
+
+    /// [`Records::by_part`] with each interval's time counted from the
+    /// power-on before it in its part (from the part's start when none
+    /// was recorded), and what the first part's time rests on: the
+    /// figures that count from power-on (self-heating, model 4's warm-up).
+    pub fn by_part_since_power_on(
+        &self,
+        labels: &[String],
+    ) -> (Vec<Interval>, Vec<usize>, PowerBasis) {
+        let mut parts: BTreeMap<u32, Vec<&Range<u64>>> = BTreeMap::new();
+        for l in labels {
+            if let Some(ranges) = self.by_label.get(l) {
+                let part = self.part_of.get(l).copied().unwrap_or(1);
+                parts.entry(part).or_default().extend(ranges);
+            }
+        }
+        let mut series = Vec::new();
+        let mut lens = Vec::new();
+        let mut basis = None;
+        for (&part, ranges) in &parts {
+            let ons: Vec<(f64, PowerOnSource)> = self
+                .power_ons
+                .iter()
+                .filter(|(p, _)| *p == part)
+                .map(|(_, on)| (on.t_s, on.source))
+                .collect();
+            let before = series.len();
+            for r in ranges {
+                self.all.for_each((*r).clone(), |(_, mut iv)| {
+                    let on = ons
+                        .iter()
+                        .rev()
+                        .find(|(t, _)| *t <= iv.time_s)
+                        .copied()
+                        .unwrap_or((0.0, PowerOnSource::Assumed));
+                    basis.get_or_insert(PowerBasis {
+                        t_s: on.0,
+                        source: on.1,
+                    });
+                    iv.time_s -= on.0;
+                    series.push(iv);
+                });
+            }
+            if series.len() > before {
+                lens.push(series.len() - before);
+            }
+        }
+        let basis = basis.unwrap_or(PowerBasis {
+            t_s: 0.0,
+            source: PowerOnSource::Assumed,
+        });
+        (series, lens, basis)
     }
 
     /// A record of frames starts: its health is watched from here; its
@@ -673,7 +766,19 @@ pub fn compute(
 ) -> Measurement {
     let faults_before = records.read_faults();
     // The parts are slices of the one series (one copy in memory).
-    let (series, lens) = records.by_part(&m.records);
+    // The figures that count from power-on take each interval's time
+    // since the power-on before it; the rest, device time.
+    let since_on = matches!(
+        m.metric,
+        Metric::SelfHeating | Metric::CompensatedDriftPp | Metric::CompensatedDriftFitResidualPp
+    );
+    let (series, lens, basis) = if since_on {
+        let (s, l, b) = records.by_part_since_power_on(&m.records);
+        (s, l, Some(b))
+    } else {
+        let (s, l) = records.by_part(&m.records);
+        (s, l, None)
+    };
     let mut rest = series.as_slice();
     let part_refs: Vec<&[Interval]> = lens
         .iter()
@@ -699,7 +804,13 @@ pub fn compute(
         Metric::BiasRepeatability => repeatability(m, records),
         Metric::WarmUpTime => warm_up(m, &series, &bias),
         Metric::PowerSteady | Metric::PowerPeak => power(m, records),
-        Metric::SelfHeating => Computed::value(self_heating_dph(&series).map(f64::abs)),
+        Metric::SelfHeating => match self_heating(&series) {
+            Ok(v) => Computed::value(Some(v.abs())),
+            Err(why) => Computed {
+                note: format!("not computable: {why}"),
+                ..Computed::default()
+            },
+        },
         Metric::TemperatureSensitivity | Metric::TemperatureRateSensitivity => {
             sensitivity(m.metric, &part_refs)
         }
@@ -741,6 +852,16 @@ pub fn compute(
         noise_floor,
     } = c;
     let value = value.filter(|v| v.is_finite());
+    // A figure that counts from power-on says from which.
+    if let Some(b) = basis
+        && (value.is_some() || b.source == PowerOnSource::Assumed)
+    {
+        note = if note.is_empty() {
+            b.describe()
+        } else {
+            format!("{note}; {}", b.describe())
+        };
+    }
     if value.is_none() && note.is_empty() {
         note = format!(
             "not computable: {} s of data for an averaging of {} s",

@@ -29,7 +29,7 @@ use serde::Serialize;
 use crate::driver::{ChamberReading, DeviceError, InPosition, TableReading};
 use crate::geometry::{Orientation, TableAngles};
 use crate::procedure::{POWER_TIMEOUT_S, Procedure, Step, StepKind};
-pub use events::{Level, StepEvent, StepPhase};
+pub use events::{Level, PowerOn, PowerOnSource, StepEvent, StepPhase};
 pub use interrupt::Interrupt;
 use measure::{Measurement, Records};
 pub use resume::{Resume, resume_plan};
@@ -571,6 +571,13 @@ pub struct Options {
     /// The bench's safe state leaves the supply's output on
     /// (`devices.supply.safe_state = "on"`).
     pub supply_safe_on: bool,
+    /// The bench's supply voltage and current limit (none: the bench has
+    /// no supply): a run whose procedure does not switch the unit on
+    /// itself switches it on at its start with them.
+    pub supply: Option<(f64, f64)>,
+    /// Wall time of this part's device time zero (the log's start): the
+    /// UTC of a power-on.
+    pub part_start_utc: Option<chrono::DateTime<chrono::Utc>>,
     /// A batch's units as the operator knows them (`slot A (RL16-0101)`),
     /// in order (empty: one unit).
     pub units: Vec<String>,
@@ -585,6 +592,10 @@ pub struct Options {
 /// How long past its expected end the bench may take to settle at the end
 /// of a run, s.
 pub const SETTLE_MARGIN_S: f64 = 120.0;
+
+/// The step key of the run's own switch-on at its start (a procedure
+/// that does not switch the unit on itself): its rows and events say so.
+pub const RUN_POWER_ON: &str = "power-on";
 
 /// How long after switching the unit on the `power` step reads the bench
 /// fast, s (ours: an RLG's turn-on inrush, the discharge igniting, is over
@@ -646,6 +657,8 @@ struct Run<'a> {
     /// The units (0: the first) whose record store's temporary file
     /// failed, and that was said.
     spill_said: Vec<usize>,
+    /// The power-on a step just made (for its end event).
+    pending_power_on: Option<PowerOn>,
 }
 
 /// One more unit of a batch as the run keeps it: the first unit's are the
@@ -782,6 +795,9 @@ impl Run<'_> {
     /// Write a step event (and its line in words).
     fn log_step(&mut self, phase: StepPhase, index: usize, s: &Step) -> Result<(), Stop> {
         let mut e = crate::sequencer::events::step_event(self.bench.now_s(), phase, index, s);
+        if phase != StepPhase::Start {
+            e.power_on = self.pending_power_on.take();
+        }
         if phase == StepPhase::End {
             e.link = self.record_link.take();
             if e.link.is_some() {
@@ -797,7 +813,14 @@ impl Run<'_> {
         let words = match phase {
             StepPhase::Start => s.start_message(),
             StepPhase::End => format!("end of step {}", s.key),
-            StepPhase::Restore => format!("restore {} (line {}): {}", s.key, s.line, s.describe()),
+            StepPhase::Restore => match &e.power_on {
+                Some(on) => format!(
+                    "power-on at {:.3} s of device time ({})",
+                    on.t_s,
+                    on.source.describe()
+                ),
+                None => format!("restore {} (line {}): {}", s.key, s.line, s.describe()),
+            },
         };
         self.log(Level::Debug, &words)
     }
@@ -1052,9 +1075,18 @@ impl Run<'_> {
                 self.turn_step(key, *inner, *rate_dps, *settle_s, *acc_dps2)
                     .await
             }
-            StepKind::Power { on, volts, limit_a } => {
-                self.power_step(key, *on, *volts, *limit_a).await
-            }
+            StepKind::Power {
+                on: true,
+                volts,
+                limit_a,
+                rest_if_on_s,
+            } => self.switch_on(s, *volts, *limit_a, *rest_if_on_s).await,
+            StepKind::Power {
+                on: false,
+                volts,
+                limit_a,
+                ..
+            } => self.power_step(key, false, *volts, *limit_a).await,
             StepKind::Wait { duration_s } => self.run_for(*duration_s, None, key).await,
             StepKind::Record { label, duration_s } => {
                 self.records
@@ -1264,6 +1296,121 @@ impl Run<'_> {
         self.run_for(settle_s, None, key).await
     }
 
+    /// A `power` step's switch-on: from off (a unit found powered is
+    /// switched off and rested first when the step says how long, else
+    /// the run refuses to go on), the moment recorded as the power-on
+    /// the figures after it count from.
+    async fn switch_on(
+        &mut self,
+        s: &Step,
+        volts: f64,
+        limit_a: f64,
+        rest_if_on_s: Option<f64>,
+    ) -> Result<(), Stop> {
+        let key = s.key.as_str();
+        let found_on = self
+            .bench
+            .read_power()
+            .await
+            .map_err(Stop::Device)?
+            .is_some_and(|r| r.on);
+        if found_on {
+            let Some(rest) = rest_if_on_s else {
+                return Err(Stop::Data(format!(
+                    "the unit is already powered at step {key} (line {}), which switches it on: \
+                     the figures after it count from that moment, and a warm unit would be judged \
+                     as if cold; switch the unit off and let it cool before the run, or give the \
+                     step rest_if_on_s",
+                    s.line
+                )));
+            };
+            let text = format!(
+                "the unit was found powered at step {key} (line {}): switched off for a {rest:.0} s \
+                 rest before its power-on, so that a warm unit is not judged as if cold",
+                s.line
+            );
+            self.warn(&text);
+            self.log(Level::Warning, &text)?;
+            self.power_step(key, false, volts, limit_a).await?;
+            self.run_for(rest, None, key).await?;
+        }
+        let t_on = self.bench.now_s();
+        self.power_step(key, true, volts, limit_a).await?;
+        self.powered_on(t_on, PowerOnSource::Switched);
+        Ok(())
+    }
+
+    /// Record a power-on at device time `t_on` (for the figures, and for
+    /// the end event of the step that made it).
+    fn powered_on(&mut self, t_on: f64, source: PowerOnSource) {
+        let utc = self
+            .opts
+            .part_start_utc
+            .map(|start| {
+                (start + chrono::Duration::microseconds((t_on * 1e6).round() as i64))
+                    .to_rfc3339_opts(chrono::SecondsFormat::Millis, true)
+            })
+            .unwrap_or_default();
+        let on = PowerOn {
+            t_s: t_on,
+            utc,
+            source,
+        };
+        self.records.power_on(on.clone());
+        self.pending_power_on = Some(on);
+    }
+
+    /// At the start of a part: a bench with a supply whose procedure does
+    /// not switch the unit on itself before anything else (its first
+    /// `power` step is not a switch-on) has the unit switched on here,
+    /// from off, the moment recorded. A unit found powered is left so,
+    /// its power-on not known. `restoring`: a resumed part whose restore
+    /// sets the power itself.
+    async fn power_at_start(&mut self, p: &Procedure, restoring: bool) -> Result<(), Stop> {
+        let Some((volts, limit_a)) = self.opts.supply else {
+            return Ok(());
+        };
+        let first = p.setup.iter().chain(&p.main).find_map(|s| match s.kind {
+            StepKind::Power { on, .. } => Some(on),
+            _ => None,
+        });
+        let Some(reading) = self.bench.read_power().await.map_err(Stop::Device)? else {
+            return Ok(());
+        };
+        self.expected.power_on = Some(reading.on);
+        if first == Some(true) || restoring {
+            return Ok(());
+        }
+        if reading.on {
+            return self.log(
+                Level::Info,
+                "the unit was found powered at the start of the run and is left on: its \
+                 power-on time is not known, so the figures that count from power-on take the \
+                 run's start",
+            );
+        }
+        let step = Step {
+            group: crate::procedure::Group::Setup,
+            key: RUN_POWER_ON.into(),
+            line: 0,
+            kind: StepKind::Power {
+                on: true,
+                volts,
+                limit_a,
+                rest_if_on_s: None,
+            },
+        };
+        self.log(
+            Level::Info,
+            "the run switches the unit on at its start (its procedure has no power step before \
+             its records)",
+        )?;
+        let t_on = self.bench.now_s();
+        self.power_step(&step.key, true, volts, limit_a).await?;
+        self.powered_on(t_on, PowerOnSource::Switched);
+        self.log_step(StepPhase::Restore, 0, &step)
+    }
+
     /// Switch the unit's supply and wait until it reads so.
     async fn power_step(
         &mut self,
@@ -1434,12 +1581,13 @@ pub async fn run(
         record_link: None,
         expected: finish::Expected {
             supply_safe_on: opts.supply_safe_on,
-            // A bench's supply starts the unit powered.
-            power_on: Some(true),
+            // Read at the start ([`Run::power_at_start`]).
+            power_on: None,
             ..finish::Expected::default()
         },
         others: Vec::new(),
         spill_said: Vec::new(),
+        pending_power_on: None,
     };
     r.others
         .resize_with(r.bench.units().saturating_sub(1), Lane::default);
@@ -1454,6 +1602,19 @@ pub async fn run(
     let start_at = opts.resume.as_ref().map_or(0, |res| res.start_at);
     if let Some(res) = &opts.resume {
         r.carry_on_from(res);
+    }
+    let restoring = opts.resume.as_ref().is_some_and(|res| {
+        resume_plan(p, res.completed)
+            .1
+            .iter()
+            .any(|(_, s)| matches!(s.kind, StepKind::Power { .. }))
+    });
+    if let Err(e) = r.power_at_start(p, restoring).await {
+        stop = Some((e, "power-on".to_owned()));
+    }
+    if stop.is_none()
+        && let Some(res) = &opts.resume
+    {
         stop = restore(&mut r, p, res).await.err();
     }
     let run_order = p.setup.iter().chain(&p.main).enumerate();
@@ -1749,6 +1910,10 @@ async fn restore(r: &mut Run<'_>, p: &Procedure, res: &Resume) -> Result<(), (St
         r.doing(s, k, restore.len(), true);
         r.log_step(StepPhase::Restore, *index, s).map_err(at)?;
         r.step(s).await.map_err(|e| (e, s.key.clone()))?;
+        // A restored switch-on is a power-on: said in a restore event.
+        if r.pending_power_on.is_some() {
+            r.log_step(StepPhase::Restore, *index, s).map_err(at)?;
+        }
     }
     Ok(())
 }

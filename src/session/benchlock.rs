@@ -379,7 +379,7 @@ mod tests {
         let cfg = served();
         let mut first = BenchLock::acquire_in(dir.path(), &cfg, &holder("acceptance"))
             .expect("the first run takes the bench");
-        assert_eq!(first.devices(), 3, "chamber, table and gyro");
+        assert_eq!(first.devices(), 4, "chamber, table, gyro and supply");
         first.set_run_dir(Path::new("runs/a"));
         let e = BenchLock::acquire_in(dir.path(), &cfg, &holder("smoke"))
             .expect_err("the bench is taken");

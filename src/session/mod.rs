@@ -703,6 +703,8 @@ pub fn options(
             .is_some_and(|p| p.safe_state == crate::bench::SupplySafe::On),
         units: Vec::new(),
         stop_on_unit_error: bench.on_unit_error == crate::bench::OnUnitError::Stop,
+        supply: bench.devices.supply.as_ref().map(|p| (p.volts, p.limit_a)),
+        part_start_utc: None,
     }
 }
 
@@ -807,6 +809,7 @@ pub fn execute(
         interrupt,
         plan.resume.as_ref().map(|r| r.state.clone()),
     );
+    opts.part_start_utc = Some(start);
     opts.units = plan
         .batch
         .iter()

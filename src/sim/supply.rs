@@ -228,6 +228,35 @@ impl Supply {
         s
     }
 
+    /// The unit wired to `channel` (1-based) with the output set to
+    /// `volts` and `limit_a` and switched off: a bench before its run
+    /// switches the unit on (`OUTP ON` powers it at the bench's voltage).
+    pub fn wired(
+        dialect: Dialect,
+        channel: u8,
+        volts: f64,
+        limit_a: f64,
+        protection: bool,
+    ) -> Self {
+        let mut s = Self::powering(dialect, channel, volts, limit_a, protection);
+        let c = &mut s.channels[s.load.1];
+        c.on = false;
+        c.source_v = 0.0;
+        c.out_v = 0.0;
+        c.out_a = 0.0;
+        s.powered_s = 0.0;
+        s.peak_a = 0.0;
+        s
+    }
+
+    /// A supply of `dialect`'s model with the unit wired to channel 2 at
+    /// its nominal voltage, output off (`sim serve` starts so: the unit
+    /// is off until a run switches it on).
+    pub fn unit_off(dialect: Dialect) -> Self {
+        let limit = ratings(dialect)[1].max_a;
+        Self::wired(dialect, 2, UnitLoad::RL16.nominal_v, limit, false)
+    }
+
     /// Move the outputs to time `t_s`: fine steps while anything changes,
     /// one step once everything is steady.
     pub fn advance_to(&mut self, t_s: f64) {

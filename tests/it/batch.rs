@@ -650,8 +650,10 @@ impl ServedQuad {
     fn start(name: &str) -> Self {
         let dir = temp_dir(name);
         let turn = crate::common::wall_clock_turn();
+        // The units powered from the start, as by hand: a bench with
+        // slots names no supply.
         let text = format!(
-            "speed = {}\nseed = 1\n\
+            "speed = {}\nseed = 1\nunit_powered = true\n\
              [[slots]]\nname = \"A\"\n[[slots]]\nname = \"B\"\n[[slots]]\nname = \"C\"\n\
              [[slots]]\nname = \"D\"\nmount = {Y_MOUNT}\n",
             Self::SPEED

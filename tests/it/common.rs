@@ -286,6 +286,10 @@ impl SimServe {
             .replace(
                 "tcp://127.0.0.1:5004",
                 &self.addr("gyro", "rlg-frame", scheme),
+            )
+            .replace(
+                "tcp://127.0.0.1:5025",
+                &self.addr("supply", "keysight-e36300", scheme),
             );
         write(
             dir,

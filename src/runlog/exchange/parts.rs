@@ -62,9 +62,10 @@ const END_OF_RUN: &str = "end of run";
 
 /// True for a label gyrobench gives rows outside records: a step's key
 /// (`setup.0`, `main.3`, `main.2.positions.0`, `main.2.steps.1`,
-/// `main.5.turn`, `cleanup.0`), or `end of run`.
+/// `main.5.turn`, `cleanup.0`), `end of run`, or the run's own switch-on
+/// at its start ([`crate::sequencer::RUN_POWER_ON`]).
 pub(crate) fn is_step_key(label: &str) -> bool {
-    if label == END_OF_RUN {
+    if label == END_OF_RUN || label == crate::sequencer::RUN_POWER_ON {
         return true;
     }
     let mut it = label.split('.');
