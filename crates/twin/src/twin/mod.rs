@@ -132,6 +132,9 @@ pub struct Twin {
     /// A second frame that ended within the last period (a fast frame
     /// clock), handed over after the first.
     extra: Option<GyroSample>,
+    /// With a frame clock off nominal: the table's angles at the end of
+    /// the last frame, and the period it ended in.
+    frame_latch: Option<(u64, TableAngles)>,
 }
 
 /// The unit's frame oscillator off nominal: its frames end every
@@ -197,6 +200,7 @@ impl Twin {
                 phase: 0.0,
             }),
             extra: None,
+            frame_latch: None,
             cfg,
         };
         twin.axis_body = twin.effects.sensitive_axis_body();
@@ -327,6 +331,17 @@ impl Twin {
         }
     }
 
+    /// Table angles at the end of the gyro's last frame, as a bench whose
+    /// encoder is latched by the unit's frame strobe reads them: the
+    /// angles now when the frames end with the periods (no frame-clock
+    /// error), or when the gyro sent no frame in the last two periods.
+    pub fn frame_table_angles(&self) -> TableAngles {
+        match self.frame_latch {
+            Some((period, angles)) if self.is_powered() && period + 1 >= self.tick => angles,
+            _ => self.table_angles(),
+        }
+    }
+
     /// True while either axis moves.
     pub fn table_moving(&self) -> bool {
         self.outer.is_moving() || self.inner.is_moving()
@@ -364,6 +379,9 @@ impl Twin {
     fn step(&mut self) -> Option<GyroSample> {
         self.tick += 1;
         let moving = self.outer.is_moving() || self.inner.is_moving();
+        // Where the table was at the period's start, for the frames that
+        // end within it (a frame clock off nominal).
+        let from = (moving && self.frame_clock.is_some()).then(|| self.table_angles());
         if moving {
             self.outer.step(self.frame_dt_s);
             self.inner.step(self.frame_dt_s);
@@ -390,7 +408,7 @@ impl Twin {
                 self.residual_arcsec += d_angle;
                 Some(self.frame(self.time_s()))
             }
-            Some(clock) => self.clocked_frames(clock, d_angle),
+            Some(clock) => self.clocked_frames(clock, d_angle, from),
         }
     }
 
@@ -398,9 +416,19 @@ impl Twin {
     /// the period just stepped, which brought `d_angle_arcsec`: at most
     /// two (`|error| <= 1000 ppm`), each quantizing the angle up to its
     /// own end (the angle taken as even over the period), the rest carried
-    /// to the next. The first is returned, a second left in `extra`.
-    fn clocked_frames(&mut self, clock: FrameClock, d_angle_arcsec: f64) -> Option<GyroSample> {
+    /// to the next. The first is returned, a second left in `extra`. The
+    /// table's angles at each frame's end are latched, between `from`
+    /// (the period's start; none: the table did not move) and now.
+    fn clocked_frames(
+        &mut self,
+        clock: FrameClock,
+        d_angle_arcsec: f64,
+        from: Option<TableAngles>,
+    ) -> Option<GyroSample> {
         let start_s = self.time_s() - self.frame_dt_s;
+        let now = self.table_angles();
+        // A turning axis reads within one turn: its step is under a degree.
+        let step = |a: f64, b: f64| (b - a + 180.0).rem_euclid(360.0) - 180.0;
         let end_phase = clock.phase + clock.ratio;
         let mut given = 0.0;
         let mut first = None;
@@ -410,6 +438,11 @@ impl Twin {
             self.residual_arcsec += (at - given) * d_angle_arcsec;
             given = at;
             let sample = self.frame(start_s + at * self.frame_dt_s);
+            let angles = from.map_or(now, |a| TableAngles {
+                outer_deg: a.outer_deg + at * step(a.outer_deg, now.outer_deg),
+                inner_deg: a.inner_deg + at * step(a.inner_deg, now.inner_deg),
+            });
+            self.frame_latch = Some((self.tick, angles));
             if first.is_none() {
                 first = Some(sample);
             } else {
