@@ -522,13 +522,24 @@ fn position_chart<'a>(
     c.render()
 }
 
-/// The points of a rate measurement's records, in input order.
+/// The points of a rate measurement's records, in input order: those of
+/// a scale-factor figure as it took them (in the angle domain), the
+/// others' from their 1 Hz means.
 fn rate_points(m: &Measurement, records: &Records) -> Vec<RatePoint> {
+    let angle_domain = matches!(
+        m.metric,
+        Metric::ScaleFactor | Metric::ScaleFactorNonlinearity | Metric::ScaleFactorAsymmetry
+    );
     let mut pts: Vec<RatePoint> = m
         .records
         .iter()
-        .filter_map(|l| records.get(l))
-        .filter_map(|ivs| RatePoint::of(&ivs))
+        .filter_map(|l| {
+            if angle_domain {
+                records.rate_point(l).map(|(p, _)| p)
+            } else {
+                RatePoint::of(&records.get(l)?)
+            }
+        })
         .collect();
     pts.sort_by(|a, b| a.input_dph.total_cmp(&b.input_dph));
     pts

@@ -567,6 +567,7 @@ impl<'a> State<'a> {
             reference_dph: table.earth_rate_dph,
             chamber_c: self.chamber_c,
             table_rates_dps: table.rates_dps,
+            table_angles: table.angles,
         };
         self.records.push_sums(
             &sums,

@@ -247,7 +247,11 @@ impl EmbeddedBench {
 
     fn state(&self) -> BenchState {
         let (air, target, _) = self.twin.chamber_state();
-        let angles = self.twin.table_angles();
+        // The table's encoder latched by the unit's frame strobe: its
+        // angles where the tick's last frame ended (the tick's end itself
+        // when the frames end with the periods), so that a record's
+        // counts and its table angles end together.
+        let angles = self.twin.frame_table_angles();
         let rates = self.twin.table_rates();
         BenchState {
             t_s: self.twin.time_s(),
@@ -457,7 +461,7 @@ impl BenchIo for EmbeddedBench {
         let mut crc_errors = 0;
         let from = (
             self.twin.time_s(),
-            self.twin.table_angles(),
+            self.twin.frame_table_angles(),
             self.twin.table_rates(),
         );
         self.run_to(t_s, |g| {

@@ -13,6 +13,7 @@ use super::spill::{Row, Spill, bytes_at, f64_at};
 use super::uncertainty::Known;
 use crate::analysis::figures::{DriftTrace, bias_stability, drift_trace, mean};
 use crate::analysis::model::{self, ModelKind};
+use crate::analysis::rate::angle::{Revolutions, TablePose};
 use crate::analysis::rate::{self, Figure, RatePoint};
 use crate::analysis::series::Interval;
 use crate::analysis::study::{self_heating, sensitivity_fit};
@@ -43,6 +44,12 @@ pub struct Records {
     /// Sums of the table's axis rates (outer, inner, deg/s) over each
     /// record's intervals, and their number.
     turning: BTreeMap<String, (f64, f64, u64)>,
+    /// Each record's ticks over the table's revolutions (the angle
+    /// domain), with the LSB of its counts, arcsec.
+    revolutions: BTreeMap<String, (Revolutions, f64)>,
+    /// The table at the end of the last tick that made an interval (none
+    /// when its angles were not known).
+    last_pose: Option<TablePose>,
     /// Every reading of the unit's supply, in the order the bench took
     /// them (benches with a supply).
     power: Spill<PowerSample>,
@@ -308,6 +315,7 @@ impl Records {
         }
         self.health.remove(label);
         self.turning.remove(label);
+        self.revolutions.remove(label);
         self.power_of.remove(label);
     }
 
@@ -442,6 +450,7 @@ impl Records {
             reference_dph: state.reference_dph,
             chamber_c: state.chamber.air_c,
             table_rates_dps: (state.table.rates.outer_deg, state.table.rates.inner_deg),
+            table_angles: Some(state.table.angles),
         };
         self.push_sums(&sums, &at, record, frame_dt_s, lsb_arcsec, temp_lsb_c)
     }
@@ -469,8 +478,80 @@ impl Records {
             t.1 += at.table_rates_dps.1;
             t.2 += 1;
         }
+        self.count_revolutions(sums, at, record, frame_dt_s, lsb_arcsec);
         self.push(iv, record);
         Some(iv)
+    }
+
+    /// Add a tick that made an interval to its record's revolutions. A
+    /// record starts from the table at the end of the tick before its
+    /// first, when that tick made an interval too (its end is this one's
+    /// start: the time between them is what this tick's frames span, to
+    /// half of it); else from its first tick's end. The live run and
+    /// replay file the same ticks with the same logged poses here, so the
+    /// two agree bit for bit.
+    fn count_revolutions(
+        &mut self,
+        sums: &TickSums,
+        at: &IntervalState,
+        record: Option<&str>,
+        frame_dt_s: f64,
+        lsb_arcsec: f64,
+    ) {
+        let pose = at.table_angles.map(|a| TablePose {
+            t_s: at.t_s,
+            angles_deg: [a.outer_deg, a.inner_deg],
+            rates_dps: [at.table_rates_dps.0, at.table_rates_dps.1],
+        });
+        let before = self.last_pose.take();
+        self.last_pose = pose;
+        let (Some(label), Some(pose)) = (record, pose) else {
+            return;
+        };
+        match self.revolutions.get_mut(label) {
+            Some((r, _)) => r.add(pose, sums.counts, at.reference_dph),
+            None => {
+                let spans = sums.n as f64 * frame_dt_s;
+                let start = before.filter(|b| {
+                    let gap = pose.t_s - b.t_s;
+                    gap > 0.0 && gap <= 1.5 * spans
+                });
+                let r = match start {
+                    Some(b) => {
+                        let mut r = Revolutions::new(b);
+                        r.add(pose, sums.counts, at.reference_dph);
+                        r
+                    }
+                    None => Revolutions::new(pose),
+                };
+                self.revolutions.insert(label.to_owned(), (r, lsb_arcsec));
+            }
+        }
+    }
+
+    /// A record's point of the rate transfer and how it was taken: in
+    /// the angle domain, over the record's whole revolutions of the table
+    /// ([`Revolutions`], `docs/figures.md`), when it holds one and the
+    /// bench latches its table's angles on the unit's frames (its frames
+    /// are made on the run's own clock: a record's `edge_s` of 0, the
+    /// embedded bench); else its 1 Hz means as they are (counts over
+    /// frames at the nominal frame period). None for a record without
+    /// intervals.
+    pub fn rate_point(&self, label: &str) -> Option<(RatePoint, Taken)> {
+        let p = RatePoint::of(&self.get(label)?)?;
+        if self.health.get(label).is_some_and(|h| h.edge_s > 0.0) {
+            return Some((p, Taken::NotLatched));
+        }
+        Some(
+            match self
+                .revolutions
+                .get(label)
+                .and_then(|(r, lsb)| r.span(*lsb))
+            {
+                Some(span) => (p.over_revolutions(&span), Taken::Revolutions(span.turns)),
+                None => (p, Taken::NoWholeTurn),
+            },
+        )
     }
 
     /// Mean rate of the table axis that turned during a record, deg/s
@@ -501,6 +582,19 @@ impl Records {
     }
 }
 
+/// How a record's point of the rate transfer was taken
+/// ([`Records::rate_point`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Taken {
+    /// In the angle domain, over this many whole revolutions.
+    Revolutions(u32),
+    /// Over time: the record holds no whole revolution of the table.
+    NoWholeTurn,
+    /// Over time: the bench's table angles are read on the host's clock,
+    /// not latched on the unit's frames.
+    NotLatched,
+}
+
 /// Integer sums of one tick's frames (exact, in any order).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct TickSums {
@@ -527,6 +621,8 @@ pub struct IntervalState {
     pub chamber_c: f64,
     /// Table axis rates (outer, inner), deg/s.
     pub table_rates_dps: (f64, f64),
+    /// Table axis angles, deg (none when the log does not know them).
+    pub table_angles: Option<crate::geometry::TableAngles>,
 }
 
 impl TickSums {
@@ -1072,8 +1168,19 @@ impl Computed {
     }
 }
 
-/// The rate-table figures, on the named records' rate points.
+/// The rate-table figures, on the named records' rate points: the
+/// scale-factor figures on each record's point in the angle domain
+/// ([`Records::rate_point`]), the others on its 1 Hz means.
 fn rate_figure(m: &Measure, records: &Records) -> Computed {
+    if matches!(
+        m.metric,
+        Metric::ScaleFactor
+            | Metric::ScaleFactorNonlinearity
+            | Metric::ScaleFactorAsymmetry
+            | Metric::ScaleFactorTemperature
+    ) {
+        return scale_factor_figure(m, records);
+    }
     let points: Vec<RatePoint> = m
         .records
         .iter()
@@ -1081,24 +1188,8 @@ fn rate_figure(m: &Measure, records: &Records) -> Computed {
         .filter_map(|ivs| RatePoint::of(&ivs))
         .collect();
     let n = points.len();
-    const RATES: &str =
-        "needs rate records at three or more input rates (four when they turn both ways)";
     const SMALL: &str = "needs four or more records at small input rates";
     match m.metric {
-        Metric::ScaleFactor => Computed::figure(rate::scale_factor_ppm(&points), RATES, n),
-        Metric::ScaleFactorNonlinearity => {
-            Computed::figure(rate::nonlinearity_ppm(&points), RATES, n)
-        }
-        Metric::ScaleFactorAsymmetry => Computed::figure(
-            rate::asymmetry_ppm(&points),
-            "needs rate records in both directions, four or more",
-            n,
-        ),
-        Metric::ScaleFactorTemperature => Computed::figure(
-            rate::temperature_coefficient_ppm_per_c(&points),
-            "needs rate records at block temperatures at least 1 degC apart",
-            n,
-        ),
         Metric::DeadBand => {
             Computed::figure(rate::band_dph(&points, rate::DEAD_BAND_SHARE), SMALL, n)
         }
@@ -1122,6 +1213,65 @@ fn rate_figure(m: &Measure, records: &Records) -> Computed {
             )
         }
     }
+}
+
+/// The scale factor, its nonlinearity, asymmetry and temperature
+/// coefficient on the records' points in the angle domain. A record that
+/// holds no whole revolution of the table (a slow rate over a short
+/// record) gives its 1 Hz means instead, and the note says how many did:
+/// its point carries the unit's frame clock, and the budget then takes
+/// the declared clock as before (`docs/figures.md`).
+fn scale_factor_figure(m: &Measure, records: &Records) -> Computed {
+    let taken: Vec<(RatePoint, Taken)> = m
+        .records
+        .iter()
+        .filter_map(|l| records.rate_point(l))
+        .collect();
+    let points: Vec<RatePoint> = taken.iter().map(|(p, _)| *p).collect();
+    let n = points.len();
+    const RATES: &str =
+        "needs rate records at three or more input rates (four when they turn both ways)";
+    let mut c = match m.metric {
+        Metric::ScaleFactorNonlinearity => {
+            Computed::figure(rate::nonlinearity_ppm(&points), RATES, n)
+        }
+        Metric::ScaleFactorAsymmetry => Computed::figure(
+            rate::asymmetry_ppm(&points),
+            "needs rate records in both directions, four or more",
+            n,
+        ),
+        Metric::ScaleFactorTemperature => Computed::figure(
+            rate::temperature_coefficient_ppm_per_c(&points),
+            "needs rate records at block temperatures at least 1 degC apart",
+            n,
+        ),
+        _ => Computed::figure(rate::scale_factor_ppm(&points), RATES, n),
+    };
+    let count = |t: Taken| taken.iter().filter(|(_, k)| *k == t).count();
+    let (short, polled) = (count(Taken::NoWholeTurn), count(Taken::NotLatched));
+    const OVER_TIME: &str = "their 1 Hz means (counts over frames at the nominal frame period)";
+    if c.value.is_some() {
+        c.note = match (short, polled) {
+            (0, 0) => String::new(),
+            (0, _) => format!(
+                "the bench reads its table on its own clock, not latched on the unit's frames: \
+                 the points of the {n} records are {OVER_TIME}"
+            ),
+            (k, _) => format!(
+                "{k} of {n} records held no whole revolution of the table: their points are {OVER_TIME}"
+            ),
+        };
+    }
+    let turns = |(_, k): &(RatePoint, Taken)| match k {
+        Taken::Revolutions(n) => Some(*n),
+        _ => None,
+    };
+    c.known.revolutions = if short + polled == 0 {
+        taken.iter().filter_map(turns).min()
+    } else {
+        None
+    };
+    c
 }
 
 /// Peak-to-peak of the smoothed Earth-removed rate. The turn-on bias

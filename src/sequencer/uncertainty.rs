@@ -28,6 +28,10 @@ pub struct Known {
     pub noise_series: Option<Vec<f64>>,
     /// Mean supply voltage and current over the figure's readings, V, A.
     pub supply: Option<(f64, f64)>,
+    /// The fewest whole table revolutions a record of the figure was
+    /// taken over, when every record was taken in the angle domain (none:
+    /// some were taken over time, or the figure is not a rate figure).
+    pub revolutions: Option<u32>,
 }
 
 /// The standard deviation of `tau`-sample means of `x` as its overlapping
@@ -85,12 +89,24 @@ fn type_b(
     let mut missing = Vec::new();
     let per_ppm = |v: f64| v.abs() * 1e-6;
     match metric {
-        Metric::ScaleFactor => {
-            // The table's rate is the input the scale factor is against;
-            // the unit's clock turns counts into a rate (1 ppm per ppm).
-            declared(b, Source::TableRate, 1.0, &mut out, &mut missing);
-            declared(b, Source::UnitClock, 1.0, &mut out, &mut missing);
-        }
+        Metric::ScaleFactor => match known.revolutions {
+            // Counts per angle: the table's encoder latched at both ends
+            // of the shortest span (each end's error, over its turns) is
+            // the input; neither clock is in it beyond the Earth and bias
+            // terms' share, parts in 1e7 (`docs/figures.md`).
+            Some(turns) => {
+                let per_arcsec =
+                    std::f64::consts::SQRT_2 / (f64::from(turns.max(1)) * 360.0 * 3600.0) * 1e6;
+                declared(b, Source::TableAngle, per_arcsec, &mut out, &mut missing);
+            }
+            // Over time: the table's rate is the input the scale factor
+            // is against; the unit's clock turns counts into a rate (1 ppm
+            // per ppm).
+            None => {
+                declared(b, Source::TableRate, 1.0, &mut out, &mut missing);
+                declared(b, Source::UnitClock, 1.0, &mut out, &mut missing);
+            }
+        },
         Metric::AxisMisalignment | Metric::DeadBand | Metric::Threshold => {
             declared(b, Source::TableRate, per_ppm(value), &mut out, &mut missing);
             declared(b, Source::UnitClock, per_ppm(value), &mut out, &mut missing);

@@ -482,6 +482,66 @@ fn the_scale_factor_temperature_coefficient_comes_from_rate_runs() {
     std::fs::remove_dir_all(&dir).expect("cleanup");
 }
 
+/// The scale factor is counts per angle: a unit whose frame clock is 50
+/// ppm fast (its frames read every rate 50 ppm low over time) gives the
+/// scale factor of the same unit at 0 ppm to within 1 ppm, the figures
+/// over whole revolutions of the table; the log replays to the same
+/// report.
+#[test]
+fn a_frame_clock_error_does_not_reach_the_scale_factor() {
+    let dir = temp_dir("rate-frame-clock");
+    let mut figures = Vec::new();
+    for ppm in [0.0, 50.0] {
+        let mut twin = TwinConfig::default_rl16();
+        twin.gyro.frame_clock_error_ppm = ppm;
+        let twin = write(
+            &dir,
+            &format!("twin{ppm}.toml"),
+            &twin.to_toml().expect("twin TOML"),
+        );
+        let out = dir.join(format!("run{ppm}"));
+        let o = run("rate_transfer.toml", &twin, &out);
+        assert_eq!(o.status.code(), Some(0), "{ppm} ppm: {}", stderr(&o));
+        let report = json(&out.join("report.json"));
+        let sf = report["measurements"]
+            .as_array()
+            .expect("measurements")
+            .iter()
+            .find(|m| m["name"] == "scale_factor_ppm")
+            .expect("scale factor");
+        assert_eq!(sf["note"], "", "every record over whole turns: {sf}");
+        figures.push(figure(&report, "scale_factor_ppm").0);
+        // Over time (counts over frames at the nominal period) the same
+        // records read the clock's error.
+        let log = out.join("run.mcap");
+        let replayed = replay(&log, None).expect("the log replays");
+        let records = &replayed.result.records;
+        let by_time: Vec<RatePoint> = records
+            .order
+            .iter()
+            .filter(|l| l.starts_with("rate_"))
+            .filter_map(|l| RatePoint::of(&records.get(l)?))
+            .collect();
+        let over_time = rate::scale_factor_ppm(&by_time).expect("fit").value;
+        assert!(
+            (over_time - figures[0] + ppm).abs() < 1.0,
+            "{ppm} ppm over time: {over_time}"
+        );
+        let again = dir.join(format!("replayed{ppm}"));
+        let r = gyrobench(&["replay", s(&log), "--out", s(&again)]);
+        assert_eq!(r.status.code(), Some(0), "{}", stderr(&r));
+        assert_eq!(
+            std::fs::read_to_string(out.join("report.json")).expect("live"),
+            std::fs::read_to_string(again.join("report.json")).expect("replayed"),
+        );
+    }
+    assert!(
+        (figures[1] - figures[0]).abs() < 1.0,
+        "50 ppm of frame clock moved the scale factor: {figures:?}"
+    );
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
+
 /// A rate run killed mid-record resumes with that record's turn: the
 /// table is turned again before the record is retaken, and the run ends
 /// with its figures.

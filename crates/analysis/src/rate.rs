@@ -4,7 +4,10 @@
 //! and threshold near zero input. Each record of a rate procedure is one
 //! point: its mean input rate (Earth and table rate on the sensitive axis,
 //! from the table's angles and rates), its mean output rate and the
-//! standard error of that mean.
+//! standard error of that mean. For the scale-factor figures a record
+//! over whole revolutions is taken in the angle domain ([`angle`]).
+
+pub mod angle;
 
 use nalgebra::{DMatrix, DVector};
 
@@ -51,6 +54,17 @@ impl RatePoint {
             se_dph: (var / nf).sqrt(),
             block_c: mean(&|i| 0.5 * (i.t1_c + i.t2_c)),
         })
+    }
+
+    /// The point in the angle domain: its input and output over the
+    /// record's whole revolutions ([`angle::AngleSpan`]), its standard
+    /// error and block temperature from its 1 Hz means as before.
+    pub fn over_revolutions(self, span: &angle::AngleSpan) -> Self {
+        Self {
+            input_dph: span.input_dph,
+            output_dph: span.output_dph(),
+            ..self
+        }
     }
 }
 

@@ -262,7 +262,23 @@ pub struct GyroConfig {
     pub lsb_arcsec: f64,
     /// Resolution of the temperature fields, degC.
     pub temp_lsb_c: f64,
+    /// Error of the unit's frame oscillator, ppm: its frames come at
+    /// `(1 + e 1e-6)` times `frame_rate_hz` of true time, each covering
+    /// that much less of it, while the bench still takes them to be
+    /// `frame_rate_hz` apart. 0 (the default, left out of the file): the
+    /// frames come at `frame_rate_hz` exactly.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub frame_clock_error_ppm: f64,
 }
+
+fn is_zero(v: &f64) -> bool {
+    *v == 0.0
+}
+
+/// Largest frame-clock error the twin takes, ppm (a crystal oscillator is
+/// off by tens of ppm; a thousand is a broken one). Within it a frame
+/// period holds at most two frame ends.
+pub const MAX_FRAME_CLOCK_ERROR_PPM: f64 = 1000.0;
 
 /// Model-4 thermal bias `K1 dT + K2 dT^2 + K3 d(dT)/dt + K4 T_K + K5 F(tau)`
 /// with `dT = T1 - T2`, `F(tau) = exp(-tau/tau_w)`, plus a fixed bias (the
@@ -625,6 +641,12 @@ impl TwinConfig {
         c.within(g.frame_rate_hz, 1.0, 100_000.0, "gyro.frame_rate_hz")?;
         c.within(g.lsb_arcsec, 1e-6, 100.0, "gyro.lsb_arcsec")?;
         c.within(g.temp_lsb_c, 1e-6, 1.0, "gyro.temp_lsb_c")?;
+        c.within(
+            g.frame_clock_error_ppm,
+            -MAX_FRAME_CLOCK_ERROR_PPM,
+            MAX_FRAME_CLOCK_ERROR_PPM,
+            "gyro.frame_clock_error_ppm",
+        )?;
 
         c.non_negative(self.bias.turn_on_sigma_dph, "bias.turn_on_sigma_dph")?;
         c.model4(&self.bias.model4, "bias")?;
@@ -888,6 +910,38 @@ mod tests {
             "{err}"
         );
         assert_eq!(err.line(), Some(line_of("latitude_deg")));
+    }
+
+    #[test]
+    fn a_frame_clock_error_beyond_a_thousand_ppm_is_refused_with_its_key() {
+        let line = DEFAULT_TWIN_TOML
+            .lines()
+            .find(|l| l.starts_with("temp_lsb_c"))
+            .expect("fixture has temp_lsb_c");
+        let ok = with(line, &format!("{line}\nframe_clock_error_ppm = -50.0")).expect("50 ppm");
+        assert_eq!(ok.gyro.frame_clock_error_ppm, -50.0);
+        let err = with(line, &format!("{line}\nframe_clock_error_ppm = 1500.0"))
+            .expect_err("beyond 1000 ppm");
+        let msg = err.to_string();
+        assert!(
+            msg.contains("`gyro.frame_clock_error_ppm` must be between -1000 and 1000, got 1500"),
+            "{msg}"
+        );
+        assert_eq!(err.line(), Some(line_of("temp_lsb_c") + 1));
+        // Written back when set; at 0 it stays out of the file the twin
+        // writes (the logs of runs without it are as before).
+        assert!(
+            ok.to_toml()
+                .expect("renders")
+                .contains("frame_clock_error_ppm = -50.0")
+        );
+        let nominal = with(line, line).expect("as shipped");
+        assert!(
+            !nominal
+                .to_toml()
+                .expect("renders")
+                .contains("frame_clock_error_ppm")
+        );
     }
 
     #[test]

@@ -100,6 +100,60 @@ fn no_angle_is_lost_to_quantization_over_ten_million_frames() {
     assert!((out - fed).abs() < 1.7, "counts {out} vs fed {fed} arcsec");
 }
 
+/// A frame clock off nominal: more (or fewer) frames in the same device
+/// time, each covering that much less (more) of it, and the same angle
+/// in all of them; the frames' own clock reads the rate off by the error.
+#[test]
+fn a_frame_clock_error_changes_the_frames_not_the_angle() {
+    let frames = |ppm: f64| {
+        let mut c = TwinConfig::default_rl16();
+        c.gyro.frame_clock_error_ppm = ppm;
+        let mut twin = Twin::new(c, 5);
+        twin.demand_table(None, Some(AxisDemand::Rate(50.0)));
+        let mut v = Vec::new();
+        twin.run_until(1000.0, |_, g| v.push(*g));
+        (v, twin.truth().angle_arcsec)
+    };
+    let counts = |v: &[GyroSample]| v.iter().map(|g| i64::from(g.delta_counts)).sum::<i64>();
+    let (nominal, fed) = frames(0.0);
+    assert_eq!(nominal.len(), 400_000);
+    for ppm in [50.0, -50.0, 1000.0, -1000.0] {
+        let (v, fed_here) = frames(ppm);
+        // 400 000 (1 + e) frames, one either way for where the last fell.
+        let want = 400_000.0 * (1.0 + ppm * 1e-6);
+        assert!(
+            (v.len() as f64 - want).abs() <= 1.0,
+            "{ppm} ppm: {} frames",
+            v.len()
+        );
+        // Numbered without a gap, each later than the one before.
+        assert!(
+            v.windows(2).all(|w| w[1].index == w[0].index + 1),
+            "{ppm} ppm"
+        );
+        assert!(v.windows(2).all(|w| w[1].time_s > w[0].time_s), "{ppm} ppm");
+        // The same physics (seed, noise) fed the same angle; the counts
+        // hold it to within the part of a frame not yet sent.
+        assert_eq!(fed_here, fed, "{ppm} ppm");
+        let lsb = 0.25;
+        let per_frame = 50.0 * 3600.0 / 400.0;
+        let lag = fed - counts(&v) as f64 * lsb;
+        assert!(
+            lag > -lsb && lag < per_frame + lsb,
+            "{ppm} ppm: {lag} arcsec behind"
+        );
+        // Counts over frames taken at the nominal period read the rate
+        // off by the error: -e for a fast clock.
+        let naive = counts(&v) as f64 * lsb / (v.len() as f64 / 400.0);
+        let truth = counts(&nominal) as f64 * lsb / 1000.0;
+        let err_ppm = (naive / truth - 1.0) * 1e6;
+        assert!(
+            (err_ppm + ppm).abs() < 0.5 + 1e-3 * ppm.abs(),
+            "{ppm} ppm reads {err_ppm}"
+        );
+    }
+}
+
 #[test]
 fn same_seed_same_frames_other_seed_other_frames() {
     let frames = |seed| {
