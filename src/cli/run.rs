@@ -254,16 +254,41 @@ fn check_prompts(plan: &Plan, unattended: bool) -> Result<()> {
         )
         .into());
     }
+    let p = &plan.procedure;
+    // On a bench without a supply the operator switches the unit, and the
+    // moment they confirm is its power-on: never confirmed beforehand.
+    let by_hand = |s: &&crate::procedure::Step| {
+        plan.bench_cfg.devices.supply.is_none()
+            && matches!(s.kind, crate::procedure::StepKind::Power { .. })
+    };
+    if unattended
+        && !plan.bench_cfg.is_embedded()
+        && let Some(s) = p
+            .setup
+            .iter()
+            .chain(&p.main)
+            .chain(&p.cleanup)
+            .find(by_hand)
+    {
+        return Err(Usage(format!(
+            "{} has the operator switch the unit at line {} ({}): the bench has no supply, and \
+             --unattended cannot confirm when a unit was switched; run it with an operator at \
+             the bench, or on a bench with [devices.supply]",
+            plan.procedure_path,
+            s.line,
+            s.describe()
+        ))
+        .into());
+    }
     if plan.bench_cfg.is_embedded() || unattended || std::io::stdin().is_terminal() {
         return Ok(());
     }
-    let p = &plan.procedure;
     let first = p
         .setup
         .iter()
         .chain(&p.main)
         .chain(&p.cleanup)
-        .find(|s| matches!(s.kind, crate::procedure::StepKind::Prompt { .. }));
+        .find(|s| matches!(s.kind, crate::procedure::StepKind::Prompt { .. }) || by_hand(s));
     match first {
         Some(s) => Err(Usage(format!(
             "{} asks the operator at line {} ({}), and {NO_TERMINAL}",

@@ -90,6 +90,15 @@ pub enum Metric {
     /// turn-on each record was made after to the record's end (the
     /// readings are taken fast for the first second after a turn-on).
     PowerPeak,
+    /// Bias sensitivity to gravity along the sensitive axis, deg/h/g: the
+    /// slope of the records' mean Earth-removed rates against the gravity
+    /// on the axis in each (minus the sine of the axis's elevation: -1 g
+    /// axis up), by least squares, with its standard error (IEEE Std 647's
+    /// g-sensitive drift).
+    GSensitivity,
+    /// Spread of the bias between positions, deg/h: the largest minus the
+    /// smallest of the records' mean Earth-removed rates.
+    BiasSpread,
 }
 
 /// `s` with `{label}` replaced by a repeat's position label.
@@ -122,6 +131,8 @@ impl Metric {
             "warm_up_time" => Self::WarmUpTime,
             "power_steady" => Self::PowerSteady,
             "power_peak" => Self::PowerPeak,
+            "g_sensitivity" => Self::GSensitivity,
+            "bias_spread" => Self::BiasSpread,
             _ => return None,
         })
     }
@@ -324,10 +335,14 @@ impl Step {
                 volts,
                 limit_a,
                 ..
-            } => {
+            } if *volts > 0.0 => {
                 format!("power the unit on at {volts} V (limit {limit_a} A)")
             }
-            StepKind::Power { on: false, .. } => "power the unit off".to_owned(),
+            StepKind::Power { on: true, .. } => "the operator switches the unit on".to_owned(),
+            StepKind::Power {
+                on: false, volts, ..
+            } if *volts > 0.0 => "power the unit off".to_owned(),
+            StepKind::Power { on: false, .. } => "the operator switches the unit off".to_owned(),
             StepKind::Wait { duration_s } => format!("wait {duration_s:.0} s"),
             StepKind::Record { label, duration_s } => {
                 format!("record {label} for {duration_s:.0} s")
@@ -649,32 +664,6 @@ impl Validator<'_> {
                 limit_a,
                 rest_if_on_s,
             } => {
-                let Some(p) = &self.bench.devices.supply else {
-                    return Err(self.src.invalid(
-                        &k("action"),
-                        "a power step needs a supply, and the bench file names none ([devices.supply] in docs/bench.md)".to_owned(),
-                    ));
-                };
-                let volts = volts.unwrap_or(p.volts);
-                let limit_a = limit_a.unwrap_or(p.limit_a);
-                c.ensure(
-                    volts.is_finite() && volts > 0.0 && volts <= p.max_volts(),
-                    &k("volts"),
-                    &format!(
-                        "{} V is beyond the bench's supply limit 0..{} V (devices.supply.max_volts)",
-                        crate::config::num(volts),
-                        p.max_volts()
-                    ),
-                )?;
-                c.ensure(
-                    limit_a.is_finite() && limit_a > 0.0 && limit_a <= p.max_limit_a(),
-                    &k("limit_a"),
-                    &format!(
-                        "{} A is beyond the bench's supply limit 0..{} A (devices.supply.max_limit_a)",
-                        crate::config::num(limit_a),
-                        p.max_limit_a()
-                    ),
-                )?;
                 if let Some(rest) = rest_if_on_s {
                     c.ensure(
                         *on,
@@ -683,6 +672,42 @@ impl Validator<'_> {
                     )?;
                     self.duration(*rest, &k("rest_if_on_s"))?;
                 }
+                // A bench without a supply: the operator switches the
+                // unit by hand and confirms it (docs/procedures.md,
+                // "Power-on"); the voltage is theirs to set (0 here).
+                let (volts, limit_a) = match &self.bench.devices.supply {
+                    None => {
+                        c.ensure(
+                            volts.is_none() && limit_a.is_none(),
+                            &k("volts"),
+                            "a bench without a supply ([devices.supply]) has the unit switched by hand: its voltage and current limit are not the run's to set",
+                        )?;
+                        (0.0, 0.0)
+                    }
+                    Some(p) => {
+                        let volts = volts.unwrap_or(p.volts);
+                        let limit_a = limit_a.unwrap_or(p.limit_a);
+                        c.ensure(
+                            volts.is_finite() && volts > 0.0 && volts <= p.max_volts(),
+                            &k("volts"),
+                            &format!(
+                                "{} V is beyond the bench's supply limit 0..{} V (devices.supply.max_volts)",
+                                crate::config::num(volts),
+                                p.max_volts()
+                            ),
+                        )?;
+                        c.ensure(
+                            limit_a.is_finite() && limit_a > 0.0 && limit_a <= p.max_limit_a(),
+                            &k("limit_a"),
+                            &format!(
+                                "{} A is beyond the bench's supply limit 0..{} A (devices.supply.max_limit_a)",
+                                crate::config::num(limit_a),
+                                p.max_limit_a()
+                            ),
+                        )?;
+                        (volts, limit_a)
+                    }
+                };
                 StepKind::Power {
                     on: *on,
                     volts,

@@ -568,6 +568,7 @@ impl<'a> State<'a> {
             chamber_c: self.chamber_c,
             table_rates_dps: table.rates_dps,
             table_angles: table.angles,
+            axis_gravity_g: -table.orientation.elevation_deg.to_radians().sin(),
         };
         self.records.push_sums(
             &sums,

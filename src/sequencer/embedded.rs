@@ -291,6 +291,13 @@ impl BenchIo for EmbeddedBench {
         true
     }
 
+    fn power_by_hand(&mut self, on: bool) {
+        // A bench with a supply powers its units through it alone.
+        if self.supply.is_none() {
+            self.twins().for_each(|t| t.set_powered(on));
+        }
+    }
+
     fn frame_dt_s(&self) -> f64 {
         self.twin.frame_dt_s()
     }

@@ -64,6 +64,10 @@ impl<B: BenchIo> BenchIo for Guarded<B> {
         self.inner.is_simulated()
     }
 
+    fn power_by_hand(&mut self, on: bool) {
+        self.inner.power_by_hand(on);
+    }
+
     fn frame_dt_s(&self) -> f64 {
         self.inner.frame_dt_s()
     }

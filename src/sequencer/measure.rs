@@ -11,7 +11,7 @@ use super::events::{PowerOn, PowerOnSource};
 use super::health::{RecordHealth, Runs};
 use super::spill::{Row, Spill, bytes_at, f64_at};
 use super::uncertainty::Known;
-use crate::analysis::figures::{DriftTrace, bias_stability, drift_trace, mean};
+use crate::analysis::figures::{DriftTrace, bias_stability, drift_trace, mean, std_dev};
 use crate::analysis::model::{self, ModelKind};
 use crate::analysis::rate::angle::{Revolutions, TablePose};
 use crate::analysis::rate::{self, Figure, RatePoint};
@@ -60,6 +60,9 @@ pub struct Records {
     power_of: BTreeMap<String, (u64, u64, u64)>,
     /// Every power-on the run knows of, with the part it was in.
     power_ons: Vec<(u32, PowerOn)>,
+    /// Sums of the gravity along the axis (g) over each record's
+    /// intervals, and their number.
+    axis_gravity: BTreeMap<String, (f64, u64)>,
 }
 
 /// What the time since power-on of a figure's records rests on.
@@ -451,6 +454,7 @@ impl Records {
             chamber_c: state.chamber.air_c,
             table_rates_dps: (state.table.rates.outer_deg, state.table.rates.inner_deg),
             table_angles: Some(state.table.angles),
+            axis_gravity_g: -state.orientation.elevation_deg.to_radians().sin(),
         };
         self.push_sums(&sums, &at, record, frame_dt_s, lsb_arcsec, temp_lsb_c)
     }
@@ -477,6 +481,9 @@ impl Records {
             t.0 += at.table_rates_dps.0;
             t.1 += at.table_rates_dps.1;
             t.2 += 1;
+            let g = self.axis_gravity.entry(label.to_owned()).or_default();
+            g.0 += at.axis_gravity_g;
+            g.1 += 1;
         }
         self.count_revolutions(sums, at, record, frame_dt_s, lsb_arcsec);
         self.push(iv, record);
@@ -554,6 +561,13 @@ impl Records {
         )
     }
 
+    /// Mean gravity along the sensitive axis during a record, g (none for
+    /// a record without frames).
+    pub fn axis_gravity_g(&self, label: &str) -> Option<f64> {
+        let &(sum, n) = self.axis_gravity.get(label)?;
+        (n > 0).then(|| sum / n as f64)
+    }
+
     /// Mean rate of the table axis that turned during a record, deg/s
     /// (the faster of the two; none for a record without frames).
     pub fn turn_rate_dps(&self, label: &str) -> Option<f64> {
@@ -623,6 +637,10 @@ pub struct IntervalState {
     pub table_rates_dps: (f64, f64),
     /// Table axis angles, deg (none when the log does not know them).
     pub table_angles: Option<crate::geometry::TableAngles>,
+    /// Gravity along the sensitive axis, g (minus the sine of its
+    /// elevation: -1 axis up, 0 horizontal, 1 axis down; the twin's
+    /// `g_sensitivity` convention).
+    pub axis_gravity_g: f64,
 }
 
 impl TickSums {
@@ -900,6 +918,7 @@ pub fn compute(
         Metric::BiasRepeatability => repeatability(m, records),
         Metric::WarmUpTime => warm_up(m, &series, &bias),
         Metric::PowerSteady | Metric::PowerPeak => power(m, records),
+        Metric::GSensitivity | Metric::BiasSpread => positions(m, records),
         Metric::SelfHeating => match self_heating(&series) {
             Ok(v) => Computed::value(Some(v.abs())),
             Err(why) => Computed {
@@ -1412,6 +1431,92 @@ fn warm_up(m: &Measure, series: &[Interval], bias: &[f64]) -> Computed {
     }
 }
 
+/// The positions' figures: each record's mean Earth-removed rate, with
+/// its standard error (100 s block means), against the gravity along the
+/// axis in it; the g-sensitivity is their least-squares slope,
+/// the spread their range.
+fn positions(m: &Measure, records: &Records) -> Computed {
+    let mut pts: Vec<(String, f64, f64, f64, usize)> = Vec::new();
+    for label in &m.records {
+        let (Some(series), Some(g)) = (records.get(label), records.axis_gravity_g(label)) else {
+            continue;
+        };
+        let bias: Vec<f64> = series.iter().map(Interval::bias_dph).collect();
+        let blocks: Vec<f64> = bias.chunks_exact(100).map(mean).collect();
+        if blocks.len() < 2 {
+            continue;
+        }
+        let se = std_dev(&blocks) / (blocks.len() as f64).sqrt();
+        pts.push((label.clone(), g, mean(&bias), se, blocks.len()));
+    }
+    let n = pts.len();
+    if m.metric == Metric::GSensitivity {
+        let gs: Vec<f64> = pts.iter().map(|p| p.1).collect();
+        let gm = mean(&gs);
+        let sxx: f64 = gs.iter().map(|g| (g - gm).powi(2)).sum();
+        if n < 3 || sxx < 0.1 {
+            return Computed {
+                note: format!(
+                    "not computable: needs three or more records of 200 s or more in positions \
+                     whose axis sees different gravity (up, horizontal, tilted); {n} usable, \
+                     the force on the axis spread {sxx:.2} g^2 about its mean"
+                ),
+                ..Computed::default()
+            };
+        }
+        let bm = mean(&pts.iter().map(|p| p.2).collect::<Vec<_>>());
+        let slope = pts.iter().map(|p| (p.1 - gm) * (p.2 - bm)).sum::<f64>() / sxx;
+        let rss: f64 = pts
+            .iter()
+            .map(|p| (p.2 - bm - slope * (p.1 - gm)).powi(2))
+            .sum();
+        let se = (rss / (n - 2) as f64 / sxx).sqrt();
+        return Computed {
+            value: Some(slope),
+            std_error: Some(se),
+            known: Known {
+                type_a: vec![Contribution::type_a(
+                    "fit: the slope's standard error",
+                    se,
+                    (n - 2) as f64,
+                    format!("{n} positions, the scatter about the line"),
+                )],
+                ..Known::default()
+            },
+            ..Computed::default()
+        };
+    }
+    let lo = pts.iter().min_by(|a, b| a.2.total_cmp(&b.2));
+    let hi = pts.iter().max_by(|a, b| a.2.total_cmp(&b.2));
+    let (Some(lo), Some(hi)) = (lo, hi) else {
+        return Computed {
+            note: "not computable: needs two or more records of 200 s or more".to_owned(),
+            ..Computed::default()
+        };
+    };
+    if n < 2 {
+        return Computed {
+            note: format!("not computable: needs two or more records of 200 s or more; {n} usable"),
+            ..Computed::default()
+        };
+    }
+    let se = lo.3.hypot(hi.3);
+    Computed {
+        value: Some(hi.2 - lo.2),
+        std_error: Some(se),
+        note: format!("highest {}, lowest {}", hi.0, lo.0),
+        known: Known {
+            type_a: vec![Contribution::type_a(
+                "noise of the two extreme positions' means",
+                se,
+                (lo.4.min(hi.4) as f64 - 1.0).max(1.0),
+                "100 s block means of each: s / sqrt(n), in quadrature",
+            )],
+            ..Known::default()
+        },
+        ..Computed::default()
+    }
+}
 /// Steady power (the mean of the readings during the records) or peak
 /// power (the highest from each record's turn-on to its end).
 fn power(m: &Measure, records: &Records) -> Computed {

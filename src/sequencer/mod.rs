@@ -125,6 +125,10 @@ pub trait BenchIo: Send {
     fn now_s(&self) -> f64;
     /// True when the devices are simulated (prompts answer themselves).
     fn is_simulated(&self) -> bool;
+    /// A simulated bench without a supply: its operator switches the unit
+    /// on or off by hand, now (a device bench's operator does it on the
+    /// bench; nothing to do here).
+    fn power_by_hand(&mut self, _on: bool) {}
     /// Frame period, s.
     fn frame_dt_s(&self) -> f64;
     /// Device time by which a record's ends may fall off its frames', s:
@@ -1075,6 +1079,7 @@ impl Run<'_> {
                 self.turn_step(key, *inner, *rate_dps, *settle_s, *acc_dps2)
                     .await
             }
+            StepKind::Power { on, .. } if self.opts.supply.is_none() => self.by_hand(s, *on),
             StepKind::Power {
                 on: true,
                 volts,
@@ -1340,6 +1345,52 @@ impl Run<'_> {
         Ok(())
     }
 
+    /// A `power` step on a bench without a supply: the operator switches
+    /// the unit and confirms it, and a switch-on's moment is the
+    /// confirmation's (source `operator`). A power-on confirmed before the
+    /// run (`--unattended`) says nothing of when it happened: refused.
+    fn by_hand(&mut self, s: &Step, on: bool) -> Result<(), Stop> {
+        let what = if on { "on" } else { "off" };
+        let text = format!(
+            "switch the unit {what} now and confirm when it is {what} (step {}, line {}: the bench \
+             has no supply{})",
+            s.key,
+            s.line,
+            if on {
+                "; the figures that count from power-on count from your confirmation"
+            } else {
+                ""
+            }
+        );
+        self.log(Level::Info, &format!("prompt: {text}"))?;
+        if !self.bench.is_simulated() || self.watch.answers_prompts() {
+            match self.watch.prompt(&text) {
+                Ok(Confirmed::Now) => self.log(Level::Info, "operator confirmed")?,
+                Ok(Confirmed::Beforehand) => {
+                    return Err(Stop::Data(format!(
+                        "step {} (line {}) needs an operator at the bench to switch the unit {what}: \
+                         a power-on confirmed beforehand (run --unattended) says nothing of when it \
+                         happened",
+                        s.key, s.line
+                    )));
+                }
+                Err(_) if self.opts.interrupt.is_requested() => return Err(Stop::Interrupted),
+                Err(why) => {
+                    return Err(Stop::Data(format!(
+                        "step {} (line {}) needs an operator's answer before the run may go on: {why}",
+                        s.key, s.line
+                    )));
+                }
+            }
+        }
+        // The simulated bench's operator switches its units at once.
+        self.bench.power_by_hand(on);
+        if on {
+            self.powered_on(self.bench.now_s(), PowerOnSource::Operator);
+        }
+        Ok(())
+    }
+
     /// Record a power-on at device time `t_on` (for the figures, and for
     /// the end event of the step that made it).
     fn powered_on(&mut self, t_on: f64, source: PowerOnSource) {
@@ -1367,13 +1418,18 @@ impl Run<'_> {
     /// its power-on not known. `restoring`: a resumed part whose restore
     /// sets the power itself.
     async fn power_at_start(&mut self, p: &Procedure, restoring: bool) -> Result<(), Stop> {
-        let Some((volts, limit_a)) = self.opts.supply else {
-            return Ok(());
-        };
         let first = p.setup.iter().chain(&p.main).find_map(|s| match s.kind {
             StepKind::Power { on, .. } => Some(on),
             _ => None,
         });
+        let Some((volts, limit_a)) = self.opts.supply else {
+            // A simulated bench without a supply whose procedure has its
+            // operator switch the unit on: off until then.
+            if first == Some(true) && !restoring && self.bench.is_simulated() {
+                self.bench.power_by_hand(false);
+            }
+            return Ok(());
+        };
         let Some(reading) = self.bench.read_power().await.map_err(Stop::Device)? else {
             return Ok(());
         };

@@ -163,6 +163,21 @@ fn type_b(
         | Metric::BiasRepeatability => {
             declared(b, Source::UnitClock, per_ppm(value), &mut out, &mut missing);
         }
+        Metric::GSensitivity | Metric::BiasSpread => {
+            // Each position's Earth rate taken out moves with the table's
+            // north and level errors, up to W per radian: two positions'
+            // differ by up to sqrt(2) of it (over the 1 g between axis up
+            // and horizontal, for the slope).
+            let c = std::f64::consts::SQRT_2 * EARTH_RATE_DPH;
+            declared(
+                b,
+                Source::NorthAlignment,
+                c / ARCSEC_PER_RAD,
+                &mut out,
+                &mut missing,
+            );
+            declared(b, Source::Level, c / ARCSEC_PER_RAD, &mut out, &mut missing);
+        }
         Metric::WarmUpTime => {
             declared(
                 b,
@@ -258,7 +273,9 @@ fn type_a(
         | Metric::AxisMisalignment
         | Metric::BiasRepeatability
         | Metric::TemperatureSensitivity
-        | Metric::TemperatureRateSensitivity => Ok(known.type_a.clone()),
+        | Metric::TemperatureRateSensitivity
+        | Metric::GSensitivity
+        | Metric::BiasSpread => Ok(known.type_a.clone()),
     }
 }
 

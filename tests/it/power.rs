@@ -172,10 +172,12 @@ fn an_overcurrent_trip_ends_the_run_with_the_unit_unpowered() {
     std::fs::remove_dir_all(&dir).expect("cleanup");
 }
 
-/// A procedure whose supply the bench lacks is refused at `check`, naming
-/// the step.
+/// On a bench without a supply the operator switches the unit by hand:
+/// the procedure checks; a voltage it cannot set is refused at its line;
+/// and `--unattended` is refused before anything moves, since a power-on
+/// confirmed beforehand says nothing of when it happened.
 #[test]
-fn a_power_step_on_a_bench_without_a_supply_is_refused_at_its_line() {
+fn a_power_step_on_a_bench_without_a_supply_is_the_operators() {
     let dir = temp_dir("power-nobench");
     let bench = std::fs::read_to_string(concat!(
         env!("CARGO_MANIFEST_DIR"),
@@ -194,20 +196,49 @@ fn a_power_step_on_a_bench_without_a_supply_is_refused_at_its_line() {
     assert!(parsed["devices"].get("supply").is_none(), "{bench}");
     let bench = write(&dir, "bench.toml", &bench);
     let out = gyrobench(&["check", PROCEDURE, "--bench", s(&bench)]);
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    // A voltage the run cannot set, at its line.
+    let text = std::fs::read_to_string(PROCEDURE).expect("procedure");
+    let with_volts = text.replacen(
+        "action = \"power\"\non = false",
+        "action = \"power\"\non = false\nvolts = 15.0",
+        1,
+    );
+    assert_ne!(with_volts, text, "the shipped procedure switches off first");
+    let line = with_volts
+        .lines()
+        .position(|l| l == "volts = 15.0")
+        .expect("the voltage")
+        + 1;
+    let volts = write(&dir, "volts.toml", &with_volts);
+    let out = gyrobench(&["check", s(&volts), "--bench", s(&bench)]);
     assert_eq!(out.status.code(), Some(1), "{}", stderr(&out));
     let err = stderr(&out);
-    // The first power step's line, as the file has it.
-    let line = std::fs::read_to_string(PROCEDURE)
-        .expect("procedure")
-        .lines()
-        .position(|l| l.trim() == "action = \"power\"")
-        .expect("a power step")
-        + 1;
     assert!(
-        err.contains(&format!("bias_repeatability.toml:{line}:"))
-            && err.contains("a power step needs a supply, and the bench file names none"),
+        err.contains(&format!("volts.toml:{line}:")) && err.contains("switched by hand"),
         "{err}"
     );
+    // Nobody at the bench to switch it: refused before the run starts.
+    let out = gyrobench(&[
+        "run",
+        PROCEDURE,
+        "--bench",
+        s(&bench),
+        "--dut",
+        "RL16-0042",
+        "--unattended",
+        "--operator",
+        "Ann",
+        "--out",
+        s(&dir.join("run")),
+    ]);
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+    assert!(
+        stderr(&out).contains("--unattended cannot confirm when a unit was switched"),
+        "{}",
+        stderr(&out)
+    );
+    assert!(!dir.join("run").join("run.mcap").exists());
     std::fs::remove_dir_all(&dir).expect("cleanup");
 }
 

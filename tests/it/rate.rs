@@ -628,3 +628,93 @@ fn the_misalignment_run_measures_the_twins_axis_tilts() {
     }
     std::fs::remove_dir_all(&dir).expect("cleanup");
 }
+
+/// Three positions (axis up, horizontal east, tilted 35 deg) on a twin
+/// whose bias moves 0.2 deg/h per g of gravity along its axis: the
+/// g-sensitivity figure finds it, and the spread of the bias between the
+/// positions shows it; with the effect off both read near zero.
+#[test]
+fn the_g_sensitivity_and_the_positions_spread_find_the_twins_gravity_term() {
+    let dir = temp_dir("g-sensitivity");
+    let procedure = write(
+        &dir,
+        "g.toml",
+        r#"[procedure]
+name = "g_sensitivity"
+dut_type = "RL-16"
+decision_rule = "simple"
+
+[[main]]
+action = "wait"
+duration_s = 1800.0
+
+[[main]]
+action = "repeat"
+positions = [
+  { label = "up", orientation = { azimuth_deg = 90.0, elevation_deg = 90.0, roll_deg = 0.0 } },
+  { label = "east", orientation = { azimuth_deg = 90.0, elevation_deg = 0.0, roll_deg = 0.0 } },
+  { label = "tilt", orientation = { azimuth_deg = 90.0, elevation_deg = 35.0, roll_deg = 0.0 } },
+]
+
+[[main.steps]]
+action = "wait"
+duration_s = 300.0
+
+[[main.steps]]
+action = "record"
+label = "{label}"
+duration_s = 1200.0
+
+[[main]]
+action = "measure"
+name = "g_sensitivity_dph_per_g"
+metric = "g_sensitivity"
+records = ["up", "east", "tilt"]
+low = -1.0
+high = 1.0
+unit = "deg/h/g"
+
+[[main]]
+action = "measure"
+name = "bias_spread_dph"
+metric = "bias_spread"
+records = ["up", "east", "tilt"]
+high = 1.0
+unit = "deg/h"
+"#,
+    );
+    for (k, want) in [(0.2, 0.2), (0.0, 0.0)] {
+        let mut twin = TwinConfig::default_rl16();
+        twin.effects.g_sensitivity = Some(gyrobench::twin::config::GSensitivity {
+            enabled: k != 0.0,
+            coeff_dph_per_g: [k, 0.0, 0.0],
+        });
+        let file = write(
+            &dir,
+            &format!("twin-{k}.toml"),
+            &twin.to_toml().expect("TOML"),
+        );
+        let out = dir.join(format!("run-{k}"));
+        let o = gyrobench(&[
+            "run",
+            s(&procedure),
+            "--twin",
+            s(&file),
+            "--db",
+            "none",
+            "--out",
+            s(&out),
+        ]);
+        assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+        let report = json(&out.join("report.json"));
+        assert_within_3_se(
+            &format!("g-sensitivity {k}"),
+            figure(&report, "g_sensitivity_dph_per_g"),
+            want,
+        );
+        // Up to down the axis sees 1 g: the spread is the coefficient.
+        let (spread, _) = figure(&report, "bias_spread_dph");
+        assert!((spread - k).abs() < 0.05, "spread {spread} for {k}");
+    }
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
