@@ -99,6 +99,15 @@ pub enum Metric {
     /// Spread of the bias between positions, deg/h: the largest minus the
     /// smallest of the records' mean Earth-removed rates.
     BiasSpread,
+    /// Angle random walk N, deg/sqrt(h), from the Allan deviation of the
+    /// records' Earth-removed rate (IEEE Std 952 Annex C); its upper bound
+    /// from the curve where the curve does not resolve it.
+    Arw,
+    /// Bias instability B (the deviation's flicker floor / 0.664), deg/h,
+    /// the same way.
+    BiasInstability,
+    /// Rate random walk K, deg/h/sqrt(h), the same way.
+    RateRandomWalk,
 }
 
 /// `s` with `{label}` replaced by a repeat's position label.
@@ -133,6 +142,9 @@ impl Metric {
             "power_peak" => Self::PowerPeak,
             "g_sensitivity" => Self::GSensitivity,
             "bias_spread" => Self::BiasSpread,
+            "arw" => Self::Arw,
+            "bias_instability" => Self::BiasInstability,
+            "rate_random_walk" => Self::RateRandomWalk,
             _ => return None,
         })
     }

@@ -919,6 +919,7 @@ pub fn compute(
         Metric::WarmUpTime => warm_up(m, &series, &bias),
         Metric::PowerSteady | Metric::PowerPeak => power(m, records),
         Metric::GSensitivity | Metric::BiasSpread => positions(m, records),
+        Metric::Arw | Metric::BiasInstability | Metric::RateRandomWalk => noise_term(m, &bias),
         Metric::SelfHeating => match self_heating(&series) {
             Ok(v) => Computed::value(Some(v.abs())),
             Err(why) => Computed {
@@ -1431,6 +1432,96 @@ fn warm_up(m: &Measure, series: &[Interval], bias: &[f64]) -> Computed {
     }
 }
 
+/// A noise term of the Allan deviation of the records' Earth-removed rate
+/// (IEEE Std 952 Annex C): the fitted term where the curve resolves it,
+/// with its standard error (half the relative error of its coefficient);
+/// where it does not, the term's upper bound from the curve itself (at no
+/// averaging time may the term alone exceed the one-sigma upper bound of
+/// the deviation there), said in the note: a figure judged on its bound
+/// passes only when even the bound is inside the limit.
+fn noise_term(m: &Measure, bias: &[f64]) -> Computed {
+    use crate::analysis::allan::{Resolved, Taus, analyse, floor_per_b};
+    let a = analyse(bias, 1.0, Taus::Octave);
+    if a.points.len() < 3 {
+        return Computed {
+            note: format!(
+                "not computable: {} s of data give {} averaging times; the noise terms need three or more",
+                bias.len(),
+                a.points.len()
+            ),
+            ..Computed::default()
+        };
+    }
+    let (i, name) = match m.metric {
+        Metric::Arw => (1, "angle random walk"),
+        Metric::BiasInstability => (2, "bias instability"),
+        _ => (3, "rate random walk"),
+    };
+    // The deviation one unit of the term gives at tau (s).
+    let shape = |tau: f64| match i {
+        1 => 60.0 / tau.sqrt(),
+        2 => floor_per_b(),
+        _ => (tau / (3.0 * 3600.0)).sqrt(),
+    };
+    let fitted = [
+        a.noise.quantization_arcsec,
+        a.noise.arw_deg_per_rt_h,
+        a.noise.bias_instability_dph,
+        a.noise.rate_random_walk_dph_per_rt_h,
+    ][i];
+    let dof = a.points.len().saturating_sub(4).max(1) as f64;
+    match a.noise.resolved[i] {
+        Resolved::Yes { z } if z > 0.0 => {
+            let se = fitted / (2.0 * z);
+            Computed {
+                value: Some(fitted),
+                std_error: Some(se),
+                note: format!(
+                    "{name} resolved by the Allan deviation, {z:.1} standard errors from zero"
+                ),
+                known: Known {
+                    type_a: vec![Contribution::type_a(
+                        "fit: the term's standard error",
+                        se,
+                        dof,
+                        format!(
+                            "{} averaging times, the weighted fit's covariance (IEEE Std 952 C)",
+                            a.points.len()
+                        ),
+                    )],
+                    ..Known::default()
+                },
+                ..Computed::default()
+            }
+        }
+        r => {
+            let (bound, tau) = a
+                .points
+                .iter()
+                .map(|p| (p.hi / shape(p.tau_s), p.tau_s))
+                .min_by(|x, y| x.0.total_cmp(&y.0))
+                .unwrap_or((f64::NAN, 0.0));
+            Computed {
+                value: Some(bound),
+                note: format!(
+                    "{name} not resolved by this record ({}): judged on its upper bound, the one-sigma \
+                     upper bound of the Allan deviation at {tau:.0} s taken as this term alone",
+                    r.reason().unwrap_or_default()
+                ),
+                known: Known {
+                    type_a: vec![Contribution::type_a(
+                        "bound: the deviation's one-sigma upper bound already in the value",
+                        0.0,
+                        dof,
+                        "an upper bound, not an estimate".to_owned(),
+                    )],
+                    ..Known::default()
+                },
+                ..Computed::default()
+            }
+        }
+    }
+}
 /// The positions' figures: each record's mean Earth-removed rate, with
 /// its standard error (100 s block means), against the gravity along the
 /// axis in it; the g-sensitivity is their least-squares slope,

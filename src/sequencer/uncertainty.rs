@@ -178,6 +178,9 @@ fn type_b(
             );
             declared(b, Source::Level, c / ARCSEC_PER_RAD, &mut out, &mut missing);
         }
+        Metric::Arw | Metric::BiasInstability | Metric::RateRandomWalk => {
+            declared(b, Source::UnitClock, per_ppm(value), &mut out, &mut missing);
+        }
         Metric::WarmUpTime => {
             declared(
                 b,
@@ -275,7 +278,10 @@ fn type_a(
         | Metric::TemperatureSensitivity
         | Metric::TemperatureRateSensitivity
         | Metric::GSensitivity
-        | Metric::BiasSpread => Ok(known.type_a.clone()),
+        | Metric::BiasSpread
+        | Metric::Arw
+        | Metric::BiasInstability
+        | Metric::RateRandomWalk => Ok(known.type_a.clone()),
     }
 }
 

@@ -718,3 +718,56 @@ unit = "deg/h"
     }
     std::fs::remove_dir_all(&dir).expect("cleanup");
 }
+
+/// `procedures/noise.toml` judges the twin's noise terms: its angle random
+/// walk found within three standard errors, a bias instability and rate
+/// random walk the record does not resolve judged on their bounds (at or
+/// above the truth); a unit four times noisier fails on its ARW.
+#[test]
+fn the_noise_procedure_judges_the_twins_noise_terms() {
+    let dir = temp_dir("noise");
+    for (arw, exit) in [(0.002, 0), (0.008, 3)] {
+        let mut twin = TwinConfig::default_rl16();
+        twin.noise.arw_deg_per_rt_h = arw;
+        let file = write(
+            &dir,
+            &format!("twin-{arw}.toml"),
+            &twin.to_toml().expect("TOML"),
+        );
+        let out = dir.join(format!("run-{arw}"));
+        let o = run("noise.toml", &file, &out);
+        assert_eq!(o.status.code(), Some(exit), "{}", stderr(&o));
+        let report = json(&out.join("report.json"));
+        assert_within_3_se(
+            &format!("ARW {arw}"),
+            figure(&report, "arw_deg_per_rt_h"),
+            arw,
+        );
+        let m = |name: &str| {
+            report["measurements"]
+                .as_array()
+                .expect("measurements")
+                .iter()
+                .find(|m| m["name"] == name)
+                .cloned()
+                .expect(name)
+        };
+        let b = m("bias_instability_dph");
+        let bound = b["value"].as_f64().expect("a bound");
+        let resolved = !b["note"]
+            .as_str()
+            .is_some_and(|n| n.contains("upper bound"));
+        assert!(
+            resolved || bound >= twin.noise.bias_instability_dph,
+            "a bound at or above the truth: {b}"
+        );
+        let k = m("rate_random_walk_dph_per_rt_h");
+        assert!(
+            k["note"]
+                .as_str()
+                .is_some_and(|n| n.contains("upper bound")),
+            "the twin has no rate random walk: {k}"
+        );
+    }
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
