@@ -303,7 +303,7 @@ mod tests {
         // says so in words.
         let late = self_heating(&transient(75.0, 1.0)).expect_err("late");
         assert!(
-            late.contains("first window") && late.contains("75 s"),
+            late.contains("first window") && late.contains("runs from 76 s"),
             "{late}"
         );
     }
