@@ -903,7 +903,10 @@ pub fn compute(
         })
         .collect();
     let bias: Vec<f64> = series.iter().map(Interval::bias_dph).collect();
-    let window = m.averaging_s.round().max(1.0) as usize;
+    // Averages over device time: as many intervals as span it (1 s each
+    // at a 1 Hz tick; longer where the host polls slower).
+    let cadence = crate::analysis::study::cadence_s(&series);
+    let window = crate::analysis::study::intervals_for(m.averaging_s, cadence);
     let c = match m.metric {
         Metric::ScaleFactor
         | Metric::ScaleFactorNonlinearity
@@ -919,7 +922,9 @@ pub fn compute(
         Metric::WarmUpTime => warm_up(m, &series, &bias),
         Metric::PowerSteady | Metric::PowerPeak => power(m, records),
         Metric::GSensitivity | Metric::BiasSpread => positions(m, records),
-        Metric::Arw | Metric::BiasInstability | Metric::RateRandomWalk => noise_term(m, &bias),
+        Metric::Arw | Metric::BiasInstability | Metric::RateRandomWalk => {
+            noise_term(m, &bias, cadence)
+        }
         Metric::SelfHeating => match self_heating(&series) {
             Ok(v) => Computed::value(Some(v.abs())),
             Err(why) => Computed {
@@ -980,9 +985,13 @@ pub fn compute(
     }
     if value.is_none() && note.is_empty() {
         note = format!(
-            "not computable: {} s of data for an averaging of {} s",
-            series.len(),
-            m.averaging_s
+            "not computable: the records hold {:.0} s of data, too little for this figure{}",
+            crate::analysis::study::covered_s(&series.iter().map(|i| i.time_s).collect::<Vec<_>>()),
+            if m.averaging_s > 0.0 {
+                format!(" over {} s averages", m.averaging_s)
+            } else {
+                String::new()
+            }
         );
     }
     let uncertainty = match value {
@@ -1439,14 +1448,14 @@ fn warm_up(m: &Measure, series: &[Interval], bias: &[f64]) -> Computed {
 /// averaging time may the term alone exceed the one-sigma upper bound of
 /// the deviation there), said in the note: a figure judged on its bound
 /// passes only when even the bound is inside the limit.
-fn noise_term(m: &Measure, bias: &[f64]) -> Computed {
+fn noise_term(m: &Measure, bias: &[f64], cadence_s: f64) -> Computed {
     use crate::analysis::allan::{Resolved, Taus, analyse, floor_per_b};
-    let a = analyse(bias, 1.0, Taus::Octave);
+    let a = analyse(bias, cadence_s, Taus::Octave);
     if a.points.len() < 3 {
         return Computed {
             note: format!(
-                "not computable: {} s of data give {} averaging times; the noise terms need three or more",
-                bias.len(),
+                "not computable: {:.0} s of data give {} averaging times; the noise terms need three or more",
+                bias.len() as f64 * cadence_s,
                 a.points.len()
             ),
             ..Computed::default()
@@ -1533,7 +1542,11 @@ fn positions(m: &Measure, records: &Records) -> Computed {
             continue;
         };
         let bias: Vec<f64> = series.iter().map(Interval::bias_dph).collect();
-        let blocks: Vec<f64> = bias.chunks_exact(100).map(mean).collect();
+        let block = crate::analysis::study::intervals_for(
+            100.0,
+            crate::analysis::study::cadence_s(&series),
+        );
+        let blocks: Vec<f64> = bias.chunks_exact(block).map(mean).collect();
         if blocks.len() < 2 {
             continue;
         }

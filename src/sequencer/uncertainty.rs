@@ -210,34 +210,46 @@ fn type_a(
     known: &Known,
 ) -> Result<Vec<Contribution>, String> {
     let bias: Vec<f64> = series.iter().map(Interval::bias_dph).collect();
-    let window = averaging_s.round().max(1.0) as usize;
+    // Seconds as intervals: 1 s each at a 1 Hz tick, longer where the
+    // host polls slower; the words say seconds.
+    let cadence = crate::analysis::study::cadence_s(series);
+    let window = crate::analysis::study::intervals_for(averaging_s, cadence);
+    let secs = |n: usize| (n as f64 * cadence).round();
     match metric {
         Metric::BiasStability => {
             let n = bias.len() / window;
-            let (rel, dof) = of_std_dev(n)
-                .ok_or_else(|| format!("{n} blocks of {window} s: a spread needs two or more"))?;
+            let (rel, dof) = of_std_dev(n).ok_or_else(|| {
+                format!(
+                    "{n} blocks of {} s: a spread needs two or more",
+                    secs(window)
+                )
+            })?;
             Ok(vec![Contribution::type_a(
                 "noise: the spread of the block means",
                 value * rel,
                 dof,
-                format!("{n} blocks of {window} s: s / sqrt(2 (n - 1)) (GUM E.4.3)"),
+                format!(
+                    "{n} blocks of {} s: s / sqrt(2 (n - 1)) (GUM E.4.3)",
+                    secs(window)
+                ),
             )])
         }
         Metric::MeanBias => {
-            let blocks = block_means(&bias, window.max(100));
+            let block = window.max(crate::analysis::study::intervals_for(100.0, cadence));
+            let blocks = block_means(&bias, block);
             let n = blocks.len();
             if n < 2 {
                 return Err(format!(
                     "{} s recorded: the mean's noise needs two blocks of {} s or more",
-                    bias.len(),
-                    window.max(100)
+                    secs(bias.len()),
+                    secs(block)
                 ));
             }
             Ok(vec![Contribution::type_a(
                 "noise: the scatter of the block means",
                 std_dev(&blocks) / (n as f64).sqrt(),
                 (n - 1) as f64,
-                format!("{n} blocks of {} s: s / sqrt(n)", window.max(100)),
+                format!("{n} blocks of {} s: s / sqrt(n)", secs(block)),
             )])
         }
         Metric::DriftPp
@@ -246,13 +258,17 @@ fn type_a(
         | Metric::SelfHeating => {
             let x = known.noise_series.as_deref().unwrap_or(&bias);
             let tau = match metric {
-                Metric::SelfHeating => crate::analysis::study::SELF_HEATING_WINDOW_S as usize,
+                Metric::SelfHeating => crate::analysis::study::intervals_for(
+                    crate::analysis::study::SELF_HEATING_WINDOW_S,
+                    cadence,
+                ),
                 _ => window,
             };
             let (sigma, edf) = noise_of_means(x, tau).ok_or_else(|| {
                 format!(
-                    "{} s of data: the noise of {tau} s means needs three times that",
-                    x.len()
+                    "{} s of data: the noise of {} s means needs three times that",
+                    secs(x.len()),
+                    secs(tau)
                 )
             })?;
             Ok(vec![Contribution::type_a(
@@ -260,7 +276,8 @@ fn type_a(
                 std::f64::consts::SQRT_2 * sigma,
                 edf,
                 format!(
-                    "Allan deviation at {tau} s ({sigma:.5}), two means: sqrt(2) x it; Greenhall EDF"
+                    "Allan deviation at {} s ({sigma:.5}), two means: sqrt(2) x it; Greenhall EDF",
+                    secs(tau)
                 ),
             )])
         }

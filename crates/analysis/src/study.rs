@@ -69,6 +69,28 @@ pub fn self_heating(series: &[Interval]) -> Result<f64, String> {
     Ok(first - last)
 }
 
+/// The device time one interval of `series` spans, s: the median spacing
+/// of neighbours (1 s on a bench that ticks at 1 Hz; a host that polls
+/// slower makes longer intervals). 1 s for fewer than two intervals. The
+/// figures that average over seconds take that many seconds' intervals.
+pub fn cadence_s(series: &[Interval]) -> f64 {
+    let mut gaps: Vec<f64> = series
+        .windows(2)
+        .map(|w| w[1].time_s - w[0].time_s)
+        .filter(|g| *g > 0.0)
+        .collect();
+    if gaps.is_empty() {
+        return 1.0;
+    }
+    gaps.sort_by(f64::total_cmp);
+    gaps[gaps.len() / 2]
+}
+
+/// The number of intervals of `cadence_s` that span `seconds` (at least 1).
+pub fn intervals_for(seconds: f64, cadence_s: f64) -> usize {
+    (seconds / cadence_s.max(1e-9)).round().max(1.0) as usize
+}
+
 /// Device time a run of interval centres covers, s: the spacings between
 /// neighbours, a gap longer than twice the median spacing counted as one
 /// spacing (the data it lacks), plus one spacing for the ends. A single
