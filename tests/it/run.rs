@@ -100,6 +100,16 @@ fn smoke_passes_with_the_report_contract_and_a_complete_log() {
         }
     }
     assert!(noise["rate_random_walk_dph_per_rt_h"].is_null(), "{noise}");
+    // The embedded bench's supply starts off: the run switched the unit on
+    // at its start, and the report says when, on its first page too.
+    assert_eq!(r["power_on"]["source"], "switched", "{}", r["power_on"]);
+    assert_eq!(r["power_ons"].as_array().map(Vec::len), Some(1));
+    let html = std::fs::read_to_string(dir.join("report.html")).expect("report.html");
+    assert!(
+        html.contains("<th>power-on</th><td>at 0.0 s of device time")
+            && html.contains("switched on by the run, from off"),
+        "the first page states the power-on"
+    );
     let msgs = messages(&dir.join("run.mcap"));
     assert_eq!(
         frames_logged(&msgs),
