@@ -1407,6 +1407,10 @@ impl Run<'_> {
             utc,
             source,
         };
+        // A batch's units share the one supply (or the operator's hand).
+        for lane in &mut self.others {
+            lane.records.power_on(on.clone());
+        }
         self.records.power_on(on.clone());
         self.pending_power_on = Some(on);
     }
