@@ -445,10 +445,27 @@ impl Sweep {
                     r["bench_left"]
                 ));
             }
+            // A resume that switched the unit on again inside the thermal
+            // cycle (a power-on in a later part) puts a second warm-up in
+            // the records: the temperature-rate fit, one constant per
+            // power-on and no warm-up term, reads part of it as a rate
+            // sensitivity (seen: -0.065 against the references'
+            // -0.060..-0.052 for a break at the end of the cold soak,
+            // whose segment is retaken after an hour at +50 degC from a
+            // fresh switch-on). That figure is then another experiment's:
+            // still judged against its limits, not against uninterrupted
+            // runs' spread.
+            let powered_again = r["power_ons"].as_array().is_some_and(|ons| {
+                ons.iter()
+                    .any(|o| o["part"].as_u64().is_some_and(|p| p > 1))
+            });
             for m in r["measurements"].as_array().into_iter().flatten() {
                 let (Some(name), Some(v)) = (m["name"].as_str(), m["value"].as_f64()) else {
                     continue;
                 };
+                if powered_again && m["metric"] == "temperature_rate_sensitivity" {
+                    continue;
+                }
                 let Some(sp) = spread.get(name) else { continue };
                 let z = (v - sp.mean).abs() / sp.sd.max(1e-12);
                 if z > worst.1 {
