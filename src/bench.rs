@@ -964,6 +964,28 @@ impl BenchConfig {
     pub fn frame_layout(&self) -> FrameLayout {
         self.devices.gyro.frame.clone().unwrap_or_default()
     }
+
+    /// What the status word of each unit's frames means, in unit order
+    /// (the slots', or the one unit's).
+    pub fn status_bits(&self) -> Vec<crate::protocol::frame::StatusBits> {
+        if self.slots.is_empty() {
+            return vec![self.frame_layout().status_bits];
+        }
+        self.slots
+            .iter()
+            .map(|s| self.slot_frame_layout(s).status_bits)
+            .collect()
+    }
+
+    /// What the status word of the unit in slot `name` means (the one
+    /// unit's for an empty name or a bench without slots).
+    pub fn unit_status_bits(&self, name: &str) -> crate::protocol::frame::StatusBits {
+        self.slots
+            .iter()
+            .find(|s| s.name == name)
+            .map_or_else(|| self.frame_layout(), |s| self.slot_frame_layout(s))
+            .status_bits
+    }
 }
 
 fn connector(spec: DeviceSpec, timeout: Duration) -> Connector {

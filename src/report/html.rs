@@ -959,12 +959,13 @@ fn judgement(r: &Report) -> String {
         if s.is_empty() { "-".to_owned() } else { esc(s) }
     };
     format!(
-        "<table class=record>\n<tr><th>unit</th><td>{} {}</td></tr>\n<tr><th>tested by</th><td>{} <span class=note>(operator), {}</span></td></tr>\n<tr><th>power-on</th><td>{}</td></tr>\n<tr><th>decision rule</th><td><b>{}</b>{}: {}</td></tr>\n<tr><th>reviewed by</th><td class=sign>{}</td></tr>\n<tr><th>approved by</th><td class=sign>{}</td></tr>\n</table>\n",
+        "<table class=record>\n<tr><th>unit</th><td>{} {}</td></tr>\n<tr><th>tested by</th><td>{} <span class=note>(operator), {}</span></td></tr>\n<tr><th>power-on</th><td>{}</td></tr>\n<tr><th>gyro status</th><td>{}</td></tr>\n<tr><th>decision rule</th><td><b>{}</b>{}: {}</td></tr>\n<tr><th>reviewed by</th><td class=sign>{}</td></tr>\n<tr><th>approved by</th><td class=sign>{}</td></tr>\n</table>\n",
         esc(&r.dut.kind),
         esc(&r.dut.serial),
         or_dash(&r.operator),
         esc(&utc_seconds(&r.start_time_utc)),
         esc(&r.power_on.words),
+        esc(&r.gyro_status.words),
         esc(&r.decision_rule.short()),
         if r.decision_rule.named {
             " (named by the procedure)"

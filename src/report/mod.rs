@@ -110,6 +110,9 @@ pub struct Report {
     pub power_on: PowerOnStated,
     /// Every power-on of the run, in order (a turn-on procedure's several).
     pub power_ons: Vec<PowerOnStated>,
+    /// What the unit's status bits took from the run's records, and its
+    /// mode hops.
+    pub gyro_status: GyroStatus,
     /// Who reviewed and approved the run, as the results store holds it
     /// (`results sign`): empty in the report a run writes; a replay with
     /// `--store` fills it.
@@ -368,6 +371,97 @@ impl NoiseFigures {
     }
 }
 
+/// What the unit's status bits took from the records (`gyro_status` in
+/// report.json; `docs/figures.md`, "Status bits").
+#[derive(Debug, Clone, Serialize)]
+pub struct GyroStatus {
+    /// Device time of the records' intervals left out because a frame of
+    /// theirs said the unit was not fit (not lasing, dither off,
+    /// path-length control out of lock), s.
+    pub dropped_s: f64,
+    /// Those intervals.
+    pub dropped_intervals: u64,
+    /// Resets of the path-length control (mode hops) the frames showed,
+    /// over the whole run.
+    pub mode_hops: usize,
+    /// Device time of each, s since its part of the run started.
+    pub mode_hop_times_s: Vec<f64>,
+    /// Each record the status bits touched.
+    pub records: Vec<RecordStatus>,
+    /// The same in words.
+    pub words: String,
+}
+
+/// One record's share of [`GyroStatus`].
+#[derive(Debug, Clone, Serialize)]
+pub struct RecordStatus {
+    /// The record's label.
+    pub record: String,
+    /// Device time left out, s.
+    pub dropped_s: f64,
+    /// Why: the fitness bits its left-out frames lacked, in words.
+    pub why: Vec<String>,
+    /// Mode hops during it.
+    pub mode_hops: usize,
+}
+
+impl GyroStatus {
+    /// What `records`' status bits took from them.
+    pub fn of(records: &Records) -> Self {
+        let bits = records.status_bits();
+        let hops = records.hops();
+        let mut by_record: Vec<RecordStatus> = Vec::new();
+        for label in &records.order {
+            if by_record.iter().any(|r| &r.record == label) {
+                continue;
+            }
+            let d = records.dropped().get(label).copied().unwrap_or_default();
+            let n = hops
+                .iter()
+                .filter(|(_, r)| r.as_ref() == Some(label))
+                .count();
+            if d.intervals > 0 || n > 0 {
+                by_record.push(RecordStatus {
+                    record: label.clone(),
+                    dropped_s: d.s,
+                    why: bits.unfit_words(!d.missing),
+                    mode_hops: n,
+                });
+            }
+        }
+        let dropped_s = by_record.iter().map(|r| r.dropped_s).sum::<f64>();
+        let dropped_intervals = records.dropped().values().map(|d| d.intervals).sum();
+        let words = match (dropped_intervals, hops.len()) {
+            (0, 0) => "every frame of the records fit to use; no mode hop".to_owned(),
+            (d, h) => {
+                let mut w = Vec::new();
+                if d > 0 {
+                    w.push(format!(
+                        "{dropped_s:.0} s of records left out, the unit not fit ({} of {} records)",
+                        by_record.iter().filter(|r| r.dropped_s > 0.0).count(),
+                        records.order.len()
+                    ));
+                }
+                if h > 0 {
+                    w.push(format!(
+                        "{h} mode hop{} (path-length control reset)",
+                        if h == 1 { "" } else { "s" }
+                    ));
+                }
+                w.join("; ")
+            }
+        };
+        Self {
+            dropped_s,
+            dropped_intervals,
+            mode_hops: hops.len(),
+            mode_hop_times_s: hops.iter().map(|(t, _)| *t).collect(),
+            records: by_record,
+            words,
+        }
+    }
+}
+
 /// A power-on as the report states it (`power_on` in report.json).
 #[derive(Debug, Clone, Serialize)]
 pub struct PowerOnStated {
@@ -488,6 +582,7 @@ impl Report {
                 .iter()
                 .map(|(part, on)| PowerOnStated::of(*part, on))
                 .collect(),
+            gyro_status: GyroStatus::of(&r.records),
             signatures: Vec::new(),
         }
     }
@@ -523,6 +618,9 @@ impl Report {
             self.frames
         );
         s.push_str(&format!("  power-on: {}\n", self.power_on.words));
+        if self.gyro_status.dropped_intervals > 0 || self.gyro_status.mode_hops > 0 {
+            s.push_str(&format!("  gyro status: {}\n", self.gyro_status.words));
+        }
         s.push_str(&format!(
             "  decision rule: {}{}\n",
             self.decision_rule.short(),

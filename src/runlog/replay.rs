@@ -132,8 +132,7 @@ struct FramesMsg {
     t1_raw: Sum,
     t2_raw: Sum,
     tcase_raw: Sum,
-    #[serde(rename = "status")]
-    _status: IgnoredAny,
+    status: Vec<u16>,
 }
 
 /// Scale factors of the frames seen so far.
@@ -354,6 +353,10 @@ impl<'a> State<'a> {
                     self.completed = r.start_at;
                     self.earlier = Some(Box::new(earlier));
                 }
+                self.records.set_status_bits(
+                    l.bench
+                        .unit_status_bits(meta.unit().map_or("", |u| u.slot.as_str())),
+                );
                 self.meta = Some(meta);
             }
             RESULT_META => {
@@ -512,13 +515,21 @@ impl<'a> State<'a> {
         }
         self.frames += m.counts.n;
         let clamp = |v: i64| i32::try_from(v).unwrap_or(if v < 0 { i32::MIN } else { i32::MAX });
-        let sums = TickSums {
+        if m.status.len() as u64 != m.counts.n {
+            return Err(self.log_err("a /gyro/frames message has arrays of unequal length"));
+        }
+        let mut sums = TickSums {
             n: m.counts.n,
             counts: m.counts.sum,
             temps: [m.t1_raw.sum, m.t2_raw.sum, m.tcase_raw.sum],
             extremes: m.counts.extremes.map(|(lo, hi)| (clamp(lo), clamp(hi))),
             runs: m.counts.runs,
+            ..TickSums::default()
         };
+        let bits = self.records.status_bits();
+        for &s in &m.status {
+            sums.add_status(s, &bits);
+        }
         let scales = Scales {
             dt_s: m.dt_s,
             lsb_arcsec: m.lsb_arcsec,

@@ -75,6 +75,8 @@ pub struct DeviceBench {
     record_edge_s: f64,
     lsb_arcsec: f64,
     temp_lsb_c: f64,
+    /// What each unit's status word means.
+    status_bits: Vec<crate::protocol::frame::StatusBits>,
     supply: Option<(ScpiSupply, SupplyDevice)>,
     /// Whether the gyro's silence is expected now: while the run has the
     /// unit's power off, and for a while after switching it on.
@@ -177,6 +179,7 @@ impl DeviceBench {
             record_edge_s: cfg.record_edge_s(),
             lsb_arcsec: cfg.devices.gyro.lsb_arcsec,
             temp_lsb_c: layout.temp_lsb_c,
+            status_bits: cfg.status_bits(),
             supply,
             quiet,
             last_pose: None,
@@ -459,6 +462,10 @@ impl BenchIo for DeviceBench {
 
     fn units(&self) -> usize {
         self.stats.len()
+    }
+
+    fn status_bits(&self, slot: usize) -> crate::protocol::frame::StatusBits {
+        self.status_bits.get(slot).copied().unwrap_or_default()
     }
 
     fn slot_link_stats(&self, slot: usize) -> LinkStats {

@@ -190,6 +190,10 @@ impl<B: BenchIo> BenchIo for Guarded<B> {
         self.inner.units()
     }
 
+    fn status_bits(&self, slot: usize) -> crate::protocol::frame::StatusBits {
+        self.inner.status_bits(slot)
+    }
+
     fn slot_link_stats(&self, slot: usize) -> LinkStats {
         self.inner.slot_link_stats(slot)
     }

@@ -19,6 +19,7 @@ use crate::analysis::series::Interval;
 use crate::analysis::study::{self_heating, sensitivity_fit};
 use crate::analysis::uncertainty::{Contribution, Uncertainty};
 use crate::procedure::{DecisionRule, Measure, Metric, Statement};
+use crate::protocol::frame::StatusBits;
 use crate::typeb::TypeB;
 
 /// 1 Hz intervals of the whole run, and by record label.
@@ -63,6 +64,30 @@ pub struct Records {
     /// Sums of the gravity along the axis (g) over each record's
     /// intervals, and their number.
     axis_gravity: BTreeMap<String, (f64, u64)>,
+    /// What the unit's status word means ([`StatusBits`]).
+    status_bits: StatusBits,
+    /// Whether the path-length control was in lock at the last frame
+    /// that said (none after a tick without frames: the unit off or
+    /// silent, whose next lock is an acquisition, not a reset).
+    lock_last: Option<bool>,
+    /// The intervals of each record dropped because their frames' status
+    /// said the unit was not fit.
+    dropped: BTreeMap<String, Dropped>,
+    /// Every reset of the path-length control (a mode hop): the device
+    /// time of the tick it fell in, and the record then under way.
+    hops: Vec<(f64, Option<String>)>,
+}
+
+/// A record's intervals left out of its figures because a frame of each
+/// said the unit was not fit (`docs/figures.md`, "Status bits").
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Dropped {
+    /// Intervals dropped.
+    pub intervals: u64,
+    /// Device time they span, s.
+    pub s: f64,
+    /// The fitness bits their frames lacked (OR of all).
+    pub missing: u16,
 }
 
 /// What the time since power-on of a figure's records rests on.
@@ -320,6 +345,63 @@ impl Records {
         self.turning.remove(label);
         self.revolutions.remove(label);
         self.power_of.remove(label);
+        self.dropped.remove(label);
+        self.hops.retain(|(_, r)| r.as_deref() != Some(label));
+    }
+
+    /// What the unit's status word means: the bench's frame layout's
+    /// [`StatusBits`] (the documented frame's until set).
+    pub fn set_status_bits(&mut self, bits: StatusBits) {
+        self.status_bits = bits;
+    }
+
+    /// What the unit's status word means.
+    pub fn status_bits(&self) -> StatusBits {
+        self.status_bits
+    }
+
+    /// The intervals dropped from each record (the unit not fit), by label.
+    pub fn dropped(&self) -> &BTreeMap<String, Dropped> {
+        &self.dropped
+    }
+
+    /// Every reset of the path-length control the frames showed (mode
+    /// hops): device time, and the record under way.
+    pub fn hops(&self) -> &[(f64, Option<String>)] {
+        &self.hops
+    }
+
+    /// What the status bits took from `labels`, in words for a figure's
+    /// note (none when they took nothing and saw no mode hop).
+    pub fn status_note(&self, labels: &[String]) -> Option<String> {
+        let mut d = Dropped::default();
+        for l in labels {
+            if let Some(x) = self.dropped.get(l) {
+                d.intervals += x.intervals;
+                d.s += x.s;
+                d.missing |= x.missing;
+            }
+        }
+        let hops = self
+            .hops
+            .iter()
+            .filter(|(_, r)| r.as_ref().is_some_and(|r| labels.contains(r)))
+            .count();
+        let mut said = Vec::new();
+        if d.intervals > 0 {
+            said.push(format!(
+                "{:.0} s of its records left out, the unit not fit ({})",
+                d.s,
+                self.status_bits.unfit_words(!d.missing).join(", ")
+            ));
+        }
+        if hops > 0 {
+            said.push(format!(
+                "{hops} mode hop{} (path-length control reset) during its records",
+                if hops == 1 { "" } else { "s" }
+            ));
+        }
+        (!said.is_empty()).then(|| said.join("; "))
     }
 
     /// File a reading of the supply; `record` is the record whose
@@ -447,6 +529,7 @@ impl Records {
         let mut sums = TickSums::default();
         for f in frames {
             sums.add(f.counts, f.temps_raw);
+            sums.add_status(f.status, &self.status_bits);
         }
         let at = IntervalState {
             t_s: state.t_s,
@@ -475,8 +558,25 @@ impl Records {
         {
             h.add(sums.n, extremes, &sums.runs, frame_dt_s, lsb_arcsec);
         }
+        self.count_hops(sums, at.t_s, record);
         let iv = sums.interval(at, frame_dt_s, lsb_arcsec, temp_lsb_c)?;
-        if let Some(label) = record {
+        // A frame the unit said it was not fit for spoils its interval:
+        // the interval is kept in the run's series but not in its record.
+        let filed = if sums.unfit > 0 {
+            if let Some(label) = record {
+                let d = self.dropped.entry(label.to_owned()).or_default();
+                d.intervals += 1;
+                d.s += sums.n as f64 * frame_dt_s;
+                d.missing |= sums.unfit_missing;
+                // Its counts are not the angle turned: the record's
+                // revolutions start again after it.
+                self.revolutions.remove(label);
+            }
+            None
+        } else {
+            record
+        };
+        if let Some(label) = filed {
             let t = self.turning.entry(label.to_owned()).or_default();
             t.0 += at.table_rates_dps.0;
             t.1 += at.table_rates_dps.1;
@@ -485,9 +585,26 @@ impl Records {
             g.0 += at.axis_gravity_g;
             g.1 += 1;
         }
-        self.count_revolutions(sums, at, record, frame_dt_s, lsb_arcsec);
-        self.push(iv, record);
+        self.count_revolutions(sums, at, filed, frame_dt_s, lsb_arcsec);
+        self.push(iv, filed);
         Some(iv)
+    }
+
+    /// Count the path-length control's resets among a tick's frames: each
+    /// fall from in lock to out of it, across ticks too, but not across a
+    /// tick without frames (the unit off: its next lock is an acquisition).
+    fn count_hops(&mut self, sums: &TickSums, t_s: f64, record: Option<&str>) {
+        if sums.n == 0 {
+            self.lock_last = None;
+            return;
+        }
+        let across = self.lock_last == Some(true) && sums.lock_first == Some(false);
+        for _ in 0..sums.lock_falls + u32::from(across) {
+            self.hops.push((t_s, record.map(str::to_owned)));
+        }
+        if sums.lock_last.is_some() {
+            self.lock_last = sums.lock_last;
+        }
     }
 
     /// Add a tick that made an interval to its record's revolutions. A
@@ -622,6 +739,17 @@ pub struct TickSums {
     pub extremes: Option<(i32, i32)>,
     /// Runs of identical consecutive counts.
     pub runs: Runs,
+    /// Frames whose status said the unit was not fit.
+    pub unfit: u64,
+    /// The fitness bits those frames lacked (OR of all).
+    pub unfit_missing: u16,
+    /// Whether the path-length control was in lock at the tick's first
+    /// and last frames (none: the unit does not report it).
+    pub lock_first: Option<bool>,
+    /// See `lock_first`.
+    pub lock_last: Option<bool>,
+    /// Falls of the lock between the tick's frames.
+    pub lock_falls: u32,
 }
 
 /// The bench state an interval is stamped with.
@@ -654,6 +782,21 @@ impl TickSums {
         }));
         for (acc, r) in self.temps.iter_mut().zip(temps_raw) {
             *acc += i64::from(r);
+        }
+    }
+
+    /// Add one frame's status word, read by `bits`.
+    pub fn add_status(&mut self, status: u16, bits: &StatusBits) {
+        if !bits.fit(status) {
+            self.unfit += 1;
+            self.unfit_missing |= bits.fit_mask & !status;
+        }
+        if let Some(locked) = bits.path_length_locked(status) {
+            if self.lock_last == Some(true) && !locked {
+                self.lock_falls += 1;
+            }
+            self.lock_first.get_or_insert(locked);
+            self.lock_last = Some(locked);
         }
     }
 
@@ -993,6 +1136,14 @@ pub fn compute(
                 String::new()
             }
         );
+    }
+    // A figure whose records lost intervals to the status bits says so.
+    if let Some(s) = records.status_note(&m.records) {
+        note = if note.is_empty() {
+            s
+        } else {
+            format!("{note}; {s}")
+        };
     }
     let uncertainty = match value {
         Some(v) => {
@@ -1810,6 +1961,82 @@ mod tests {
         assert_eq!(r.len_of("up"), Some(1));
         assert!(r.push_tick(&[], &state, None, 0.0025, 0.1, 0.01).is_none());
         assert_eq!(r.all.len(), 1);
+    }
+
+    /// A tick with a frame the unit said it was not fit for is kept in the
+    /// run but not in its record; the path-length control's falls are
+    /// counted within and across ticks, not across a tick without frames
+    /// (the unit off: its next lock is an acquisition).
+    #[test]
+    fn unfit_ticks_are_left_out_and_lock_falls_counted() {
+        let tick = |statuses: &[u16]| -> Vec<FrameRecord> {
+            statuses
+                .iter()
+                .map(|&status| FrameRecord {
+                    counts: 4,
+                    status,
+                    ..FrameRecord::default()
+                })
+                .collect()
+        };
+        let state = |t_s: f64| BenchState {
+            t_s,
+            chamber: ChamberReading {
+                air_c: 20.0,
+                set_point_c: 20.0,
+                mode: ChamberMode::Constant,
+                alarms: Vec::new(),
+            },
+            table: TableReading {
+                angles: TableAngles::default(),
+                rates: TableAngles::default(),
+            },
+            commanded: TableAngles::default(),
+            orientation: Orientation::new(0.0, 90.0, 0.0),
+            reference_dph: 10.0,
+            in_position: true,
+            power: None,
+        };
+        let (ok, unlocked, dark) = (0x000F, 0x000B, 0x000E);
+        let mut r = Records::default();
+        r.start("soak");
+        let push = |r: &mut Records, t: f64, f: &[u16]| {
+            r.push_tick(&tick(f), &state(t), Some("soak"), 0.25, 0.1, 0.01)
+        };
+        push(&mut r, 1.0, &[ok, ok, ok, ok]);
+        // A fall within the tick, and the tick left out.
+        push(&mut r, 2.0, &[ok, unlocked, unlocked, ok]);
+        // A fall across ticks: the last frame locked, the next not.
+        push(&mut r, 3.0, &[ok, ok, ok, ok]);
+        push(&mut r, 4.0, &[unlocked, ok, ok, ok]);
+        // Not lasing: left out, no fall.
+        push(&mut r, 5.0, &[dark, ok, ok, ok]);
+        // The unit off (a tick without frames), then acquiring its lock.
+        push(&mut r, 6.0, &[]);
+        push(&mut r, 7.0, &[unlocked, unlocked, ok, ok]);
+        push(&mut r, 8.0, &[ok, ok, ok, ok]);
+        assert_eq!(r.len_of("soak"), Some(3), "only the fit ticks are filed");
+        assert_eq!(r.intervals(), 7, "the run keeps every tick with frames");
+        let d = r.dropped()["soak"];
+        assert_eq!(d.intervals, 4);
+        assert!((d.s - 4.0).abs() < 1e-12, "{d:?}");
+        assert_eq!(r.hops().len(), 2, "{:?}", r.hops());
+        let note = r.status_note(&["soak".into()]).expect("a note");
+        assert!(
+            note.contains("4 s") && note.contains("out of lock") && note.contains("not lasing"),
+            "{note}"
+        );
+        assert!(note.contains("2 mode hops"), "{note}");
+        // A unit whose status word says nothing: every tick is used.
+        let mut quiet = Records::default();
+        quiet.set_status_bits(crate::protocol::frame::StatusBits {
+            fit_mask: 0,
+            path_length_lock_bit: None,
+        });
+        quiet.start("soak");
+        push(&mut quiet, 1.0, &[0, 0, 0, 0]);
+        assert_eq!(quiet.len_of("soak"), Some(1));
+        assert!(quiet.status_note(&["soak".into()]).is_none());
     }
 
     /// A record longer than the store keeps in memory, a resumed run's

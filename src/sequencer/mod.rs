@@ -165,6 +165,11 @@ pub trait BenchIo: Send {
     fn units(&self) -> usize {
         1
     }
+    /// What the status word of unit `slot`'s frames means (0: the first
+    /// unit's; default: the documented frame's).
+    fn status_bits(&self, _slot: usize) -> crate::protocol::frame::StatusBits {
+        crate::protocol::frame::StatusBits::default()
+    }
     /// Link figures of unit `slot`'s gyro so far (0: the first unit's,
     /// [`BenchIo::link_stats`]).
     fn slot_link_stats(&self, slot: usize) -> crate::protocol::frame::LinkStats {
@@ -1651,6 +1656,10 @@ pub async fn run(
     };
     r.others
         .resize_with(r.bench.units().saturating_sub(1), Lane::default);
+    r.records.set_status_bits(r.bench.status_bits(0));
+    for (k, lane) in r.others.iter_mut().enumerate() {
+        lane.records.set_status_bits(r.bench.status_bits(k + 1));
+    }
     // An interrupt ends every wait on a dropped link: the run stops now,
     // and a link found down from then on is tried once.
     if let Some(links) = r.bench.link_watch() {

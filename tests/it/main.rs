@@ -30,5 +30,6 @@ mod run;
 mod safety;
 mod set_identity;
 mod station;
+mod status;
 mod sweep;
 mod unit_record;

@@ -40,6 +40,74 @@ pub struct TwinConfig {
     /// asymmetry, lock-in); nominal unless set.
     #[serde(default)]
     pub rate_response: RateResponseConfig,
+    /// The path-length control's resets (mode hops); none unless set,
+    /// and left out of a file that has none.
+    #[serde(default, skip_serializing_if = "PathLengthControlConfig::is_off")]
+    pub path_length_control: PathLengthControlConfig,
+}
+
+/// The path-length control (`docs/twin.md`, "Path-length control"): it
+/// holds the cavity on its lasing mode by moving a mirror, and its
+/// transducer's travel covers only so much of the block's expansion;
+/// past it the control resets to the next mode. While it relocks the
+/// status word's lock bit is clear and the output is not fit to use; the
+/// new mode has its own bias. Off by default (`reset_span_c = 0`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct PathLengthControlConfig {
+    /// Change of the block's mean temperature, from the last reset (or
+    /// the power-on), that the control follows before it resets, degC
+    /// (0: never resets).
+    pub reset_span_c: f64,
+    /// How long a reset keeps the control out of lock, s.
+    pub relock_s: f64,
+    /// Bias of the second mode against the first, deg/h: the unit steps
+    /// by it at one reset and back at the next.
+    pub mode_bias_dph: f64,
+    /// Rate error of the output while out of lock, deg/h (its sign drawn
+    /// at each reset): what a record would take in if it kept those frames.
+    pub relock_error_dph: f64,
+}
+
+impl Default for PathLengthControlConfig {
+    fn default() -> Self {
+        Self {
+            reset_span_c: 0.0,
+            relock_s: 0.5,
+            mode_bias_dph: 0.0,
+            relock_error_dph: 0.0,
+        }
+    }
+}
+
+impl PathLengthControlConfig {
+    /// True when the control never resets.
+    pub fn is_off(&self) -> bool {
+        self.reset_span_c == 0.0
+    }
+
+    fn validate(&self, c: &Checker<'_>) -> Result<(), ConfigError> {
+        c.within(
+            self.reset_span_c,
+            0.0,
+            1000.0,
+            "path_length_control.reset_span_c",
+        )?;
+        c.within(self.relock_s, 0.0, 60.0, "path_length_control.relock_s")?;
+        c.within(
+            self.mode_bias_dph,
+            -100.0,
+            100.0,
+            "path_length_control.mode_bias_dph",
+        )?;
+        c.within(
+            self.relock_error_dph,
+            0.0,
+            1e6,
+            "path_length_control.relock_error_dph",
+        )?;
+        Ok(())
+    }
 }
 
 /// The output's response to the input rate (`docs/twin.md`, "Rate
@@ -679,6 +747,7 @@ impl TwinConfig {
         )?;
 
         self.rate_response.validate(c)?;
+        self.path_length_control.validate(c)?;
         self.effects.validate(c)
     }
 }

@@ -135,6 +135,25 @@ pub struct Twin {
     /// With a frame clock off nominal: the table's angles at the end of
     /// the last frame, and the period it ended in.
     frame_latch: Option<(u64, TableAngles)>,
+    /// The path-length control, when it resets.
+    plc: Option<Plc>,
+    /// The status word of the frames now.
+    status: u16,
+}
+
+/// The path-length control of a unit whose control resets
+/// (`config::PathLengthControlConfig`).
+#[derive(Debug, Clone, PartialEq)]
+struct Plc {
+    cfg: config::PathLengthControlConfig,
+    /// The blocks' mean temperature at the last reset (or power-on), degC.
+    from_c: f64,
+    /// The period until which the control is out of lock.
+    relock_until: u64,
+    /// On the second mode (its bias added).
+    second_mode: bool,
+    /// Rate error while out of lock now, deg/h.
+    error_dph: f64,
 }
 
 /// The unit's frame oscillator off nominal: its frames end every
@@ -206,6 +225,14 @@ impl Twin {
             }),
             extra: None,
             frame_latch: None,
+            plc: (!cfg.path_length_control.is_off()).then(|| Plc {
+                cfg: cfg.path_length_control.clone(),
+                from_c: cfg.chamber.initial_c,
+                relock_until: 0,
+                second_mode: false,
+                error_dph: 0.0,
+            }),
+            status: status::NOMINAL,
             cfg,
         };
         twin.axis_body = twin.effects.sensitive_axis_body();
@@ -234,7 +261,42 @@ impl Twin {
             c.phase = 0.0;
         }
         self.extra = None;
+        let block_c = self.thermal.block_c();
+        let relock = self.relock_periods();
+        if let Some(p) = &mut self.plc {
+            // The control acquires its lock as the laser lights (its
+            // first frame is the next period's).
+            p.from_c = block_c;
+            p.relock_until = self.tick + 1 + relock;
+            p.second_mode = false;
+            p.error_dph = 0.0;
+        }
         self.refresh_bias();
+    }
+
+    /// Periods a reset of the path-length control keeps it out of lock.
+    fn relock_periods(&self) -> u64 {
+        self.plc
+            .as_ref()
+            .map_or(0, |p| (p.cfg.relock_s / self.frame_dt_s).round() as u64)
+    }
+
+    /// Reset the path-length control when the blocks have moved its
+    /// transducer to the end of its travel: out of lock for `relock_s`,
+    /// onto the other mode.
+    fn path_length_control(&mut self) {
+        let block_c = self.thermal.block_c();
+        let relock = self.relock_periods();
+        let Some(p) = &mut self.plc else {
+            return;
+        };
+        if (block_c - p.from_c).abs() >= p.cfg.reset_span_c {
+            p.from_c = block_c;
+            p.relock_until = self.tick + relock;
+            p.second_mode = !p.second_mode;
+            let sign = if self.rng.random::<bool>() { 1.0 } else { -1.0 };
+            p.error_dph = sign * p.cfg.relock_error_dph;
+        }
     }
 
     /// Switch the gyro off (no frames; the unit cools towards the case).
@@ -396,6 +458,16 @@ impl Twin {
             self.slow_step();
         }
         self.power_on_tick?;
+        let relock_dph = match &self.plc {
+            Some(p) if self.tick < p.relock_until => {
+                self.status = status::NOMINAL & !status::PATH_LENGTH_LOCK;
+                p.error_dph
+            }
+            _ => {
+                self.status = status::NOMINAL;
+                0.0
+            }
+        };
 
         let rate_dph = match &self.response {
             None => self.scale_factor * self.kinematic_dph + self.bias_dph,
@@ -407,7 +479,7 @@ impl Twin {
         let d_angle = if locked {
             0.0
         } else {
-            rate_dph * self.frame_dt_s + self.noise.frame_angle_arcsec(&mut self.rng)
+            (rate_dph + relock_dph) * self.frame_dt_s + self.noise.frame_angle_arcsec(&mut self.rng)
         };
         // Kahan sum: the reference angle must stay exact over 1e7+ frames.
         let y = d_angle - self.true_angle_comp;
@@ -490,7 +562,7 @@ impl Twin {
             t1_c: self.sensor_c[0],
             t2_c: self.sensor_c[1],
             tcase_c: self.sensor_c[2],
-            status: status::NOMINAL,
+            status: self.status,
         }
     }
 
@@ -543,6 +615,9 @@ impl Twin {
             magnetic_body_ut: self.magnetic_body_ut,
         });
         self.noise_dph = self.noise.step_bias_dph(&mut self.rng);
+        if powered {
+            self.path_length_control();
+        }
         self.refresh_bias();
         self.read_sensors();
     }
@@ -554,7 +629,12 @@ impl Twin {
             + b.model4
                 .thermal_bias_dph(&model4_inputs(&self.thermal, self.tau_s()), b.terms)
             + self.effect_dph
-            + self.noise_dph;
+            + self.noise_dph
+            + self
+                .plc
+                .as_ref()
+                .filter(|p| p.second_mode)
+                .map_or(0.0, |p| p.cfg.mode_bias_dph);
     }
 
     fn read_sensors(&mut self) {

@@ -399,3 +399,49 @@ fn bias_instability_sets_the_allan_floor() {
         assert!((got / (0.664 * b) - 1.0).abs() < 0.25, "tau {tau}: {got}");
     }
 }
+
+/// The path-length control resets each time the blocks have moved
+/// `reset_span_c` since the last reset: out of lock for `relock_s` (the
+/// status word's lock bit clear, the other bits set), and the bias steps
+/// by `mode_bias_dph` onto the other mode and back at the next reset.
+#[test]
+fn the_path_length_control_resets_on_the_blocks_span_and_hops_mode() {
+    let mut c = quiet();
+    c.path_length_control.reset_span_c = 10.0;
+    c.path_length_control.relock_s = 0.5;
+    c.path_length_control.mode_bias_dph = 0.2;
+    let mut twin = Twin::new(c, 3);
+    twin.set_chamber(50.0, 3.0).expect("within the chamber");
+    let mut resets: Vec<(f64, f64)> = Vec::new();
+    let mut out_of_lock = 0u64;
+    // Before the first frame: no lock to lose (the acquisition is not a reset).
+    let mut last = 0;
+    let mut bias = Vec::new();
+    twin.run_until(4.0 * 3600.0, |t, g| {
+        let lost = g.status & status::PATH_LENGTH_LOCK == 0;
+        if lost {
+            out_of_lock += 1;
+            assert_eq!(g.status, status::NOMINAL & !status::PATH_LENGTH_LOCK);
+        }
+        if lost && last & status::PATH_LENGTH_LOCK != 0 {
+            let tr = t.truth();
+            resets.push((g.time_s, 0.5 * (tr.t1_c + tr.t2_c)));
+            bias.push(tr.bias_dph);
+        }
+        last = g.status;
+    });
+    // From about +20 to +50 degC: three resets 10 degC apart.
+    assert_eq!(resets.len(), 3, "{resets:?}");
+    for w in resets.windows(2) {
+        assert!((w[1].1 - w[0].1 - 10.0).abs() < 0.05, "{resets:?}");
+    }
+    // The acquisition at power-on and each reset, 0.5 s at 400 Hz.
+    assert_eq!(out_of_lock, 4 * 200);
+    // The bias alternates between the two modes (the rest of it is the
+    // quiet twin's zero).
+    assert!(
+        (bias[0] - 0.2).abs() < 1e-9 && bias[1].abs() < 1e-9,
+        "{bias:?}"
+    );
+    assert!((bias[2] - 0.2).abs() < 1e-9, "{bias:?}");
+}
