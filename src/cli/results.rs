@@ -54,6 +54,11 @@ pub struct FilterArgs {
     /// fitted (within the run), file or store (the unit's set).
     #[arg(long, value_parser = ["fitted", "file", "store"])]
     coeffs_source: Option<String>,
+    /// Only runs on this kind of bench: embedded (the simulated bench
+    /// inside gyrobench), simulated (devices that identified themselves
+    /// as gyrobench's simulators, `sim serve`), hardware, or imported.
+    #[arg(long, value_enum)]
+    bench_kind: Option<crate::results::facts::BenchKind>,
 }
 
 impl FilterArgs {
@@ -87,10 +92,13 @@ impl FilterArgs {
             since: self.since.clone(),
             until: self.until.clone(),
             latest_only,
-            include_reference: self.include_reference || outcome == Some(RunState::Reference),
+            include_reference: self.include_reference
+                || outcome == Some(RunState::Reference)
+                || self.bench_kind == Some(crate::results::facts::BenchKind::Imported),
             include_simulated: self.include_simulated
                 || self.serial.as_deref() == Some(crate::unit::SIMULATED_SERIAL),
             coeffs_source: self.coeffs_source.clone(),
+            bench_kind: self.bench_kind,
             limit,
         })
     }
@@ -155,6 +163,11 @@ pub enum ResultsCommand {
         measurement: String,
         #[command(flatten)]
         filter: FilterArgs,
+        /// Fewest values a capability index is shown for (default 25:
+        /// below it an index says little; lower it to look anyway, with
+        /// the index's interval and a warning).
+        #[arg(long, default_value_t = crate::results::query::MIN_CAPABILITY_N, value_name = "N")]
+        min_values: usize,
         /// Also write a chart page (values against time, limits); not a
         /// run's log, nor inside a run directory, without --force.
         #[arg(long, value_name = "FILE")]
@@ -333,13 +346,14 @@ pub fn run(args: ResultsArgs) -> Result<Outcome> {
         ResultsCommand::Trend {
             measurement,
             filter,
+            min_values,
             html,
             force,
             json,
         } => {
             check_outputs(html.iter(), force)?;
             let f = filter.filter(true, None)?;
-            let t = store.trend(&measurement, &f)?;
+            let t = store.trend(&measurement, &f, min_values)?;
             if let Some(path) = &html {
                 let points = store.trend_points(&measurement, &f, 5000)?;
                 write_trend_page(path, &t, &points)?;
@@ -697,7 +711,22 @@ pub fn render_trend(t: &Trend) -> String {
         idx(t.overall.upper),
         idx(t.overall.lower),
         idx(t.overall.k),
-    ) + &t.caveat()
+    ) + &t.percentile.map_or(String::new(), |p| {
+        format!(
+            "  Ppu {}  Ppl {}  Ppk {}  (percentiles of a {} fit, ISO 22514-2: X50 {}  X99.865 {}){}\n",
+            idx(p.upper),
+            idx(p.lower),
+            idx(p.k),
+            p.model,
+            opt(Some(p.x_50), 4),
+            opt(Some(p.x_99865), 4),
+            if p.preferred {
+                "\n    a non-negative figure with an upper limit: read its performance here, not on the normal Ppk"
+            } else {
+                ""
+            }
+        )
+    }) + &t.caveat()
 }
 
 #[cfg(test)]

@@ -14,6 +14,52 @@ use crate::runlog::meta::{ResultMeasurement, ResultMeta, RunMeta};
 use crate::runlog::replay::{Replayed, replay, replay_unit};
 use crate::sequencer::{RunResult, UnitResult};
 
+/// The kind of bench a run ran on (`runs.bench_kind`; `results trend
+/// --bench-kind`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum BenchKind {
+    /// The simulated bench inside gyrobench.
+    Embedded,
+    /// A bench of devices that identified themselves as gyrobench's
+    /// simulators (`sim serve`).
+    Simulated,
+    /// Any other bench of devices.
+    Hardware,
+    /// Another lab's file, imported.
+    Imported,
+}
+
+impl BenchKind {
+    /// The kind of the bench `meta`'s run ran on: the instruments'
+    /// identities as they answered tell a served simulator from hardware.
+    pub fn of(meta: &RunMeta) -> Self {
+        if meta.imported_from.is_some() {
+            Self::Imported
+        } else if meta.is_embedded() {
+            Self::Embedded
+        } else if meta
+            .instruments
+            .iter()
+            .filter_map(|i| i.identity.as_ref())
+            .any(crate::sim::identity::is_simulator)
+        {
+            Self::Simulated
+        } else {
+            Self::Hardware
+        }
+    }
+
+    /// As stored.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Embedded => "embedded",
+            Self::Simulated => "simulated",
+            Self::Hardware => "hardware",
+            Self::Imported => "imported",
+        }
+    }
+}
+
 /// A column and its value.
 pub type Column = (&'static str, Value);
 
@@ -49,6 +95,7 @@ pub fn begun(meta: &RunMeta, key: &str, run: &str) -> Vec<Column> {
         ),
         ("procedure_path", meta.procedure_path.clone().into()),
         ("bench", meta.bench.clone().into()),
+        ("bench_kind", BenchKind::of(meta).as_str().into()),
         ("station", meta.station.clone().into()),
         ("operator", meta.operator.clone().into()),
         ("seed", meta.seed.and_then(|s| i64::try_from(s).ok()).into()),
@@ -349,4 +396,52 @@ fn from_records(
         others: units,
     };
     Ok((result, figures))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::bench::Instrument;
+
+    fn table(reply: &str) -> Instrument {
+        Instrument {
+            role: "table".into(),
+            spec: "tcp://127.0.0.1:5003".into(),
+            identity: Some(crate::protocol::acl::parse_identity(reply)),
+            identity_error: None,
+            calibration_due: None,
+            calibration_overdue: false,
+        }
+    }
+
+    /// The bench's kind from what the run logged: its name, an import,
+    /// and its instruments' answers (a served simulator names itself).
+    #[test]
+    fn a_bench_is_classed_by_its_name_its_import_and_its_instruments() {
+        let embedded = RunMeta {
+            bench: "embedded".into(),
+            ..RunMeta::default()
+        };
+        assert_eq!(BenchKind::of(&embedded), BenchKind::Embedded);
+        let mut served = RunMeta {
+            bench: "fixtures/bench/sim-serve.toml".into(),
+            ..RunMeta::default()
+        };
+        served.instruments = vec![table(crate::sim::identity::ACL_IDN)];
+        assert_eq!(BenchKind::of(&served), BenchKind::Simulated);
+        let mut real = served.clone();
+        real.instruments = vec![table("ACUTRONIC,AC2247,10234,4.2.1")];
+        assert_eq!(BenchKind::of(&real), BenchKind::Hardware);
+        real.instruments.clear();
+        assert_eq!(
+            BenchKind::of(&real),
+            BenchKind::Hardware,
+            "silent: not ours"
+        );
+        let imported = RunMeta {
+            imported_from: Some("lab.csv".into()),
+            ..served
+        };
+        assert_eq!(BenchKind::of(&imported), BenchKind::Imported);
+    }
 }

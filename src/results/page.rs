@@ -157,7 +157,8 @@ fn page_body(t: &Trend, shown: usize, chart: &str, rows: &str) -> String {
 <tr><td class=num>{count}</td><td class=num>{judged}</td><td class=num>{mean}</td><td class=num>{sigma}</td><td class=num>{min}</td><td class=num>{max}</td><td class=num>{lo}..{hi}</td><td class=num>{yield_}</td></tr></table>
 <table><tr><th></th><th>upper</th><th>lower</th><th>index</th><th>sigma</th></tr>
 <tr><td>capability (run to run)</td><td class=num>Cpu {cpu}</td><td class=num>Cpl {cpl}</td><td class=num>Cpk {cpk}</td><td class=num>{sw} (moving ranges / 1.128)</td></tr>
-<tr><td>performance (all data)</td><td class=num>Ppu {ppu}</td><td class=num>Ppl {ppl}</td><td class=num>Ppk {ppk}</td><td class=num>{sigma} (sample)</td></tr></table>
+<tr><td>performance (all data)</td><td class=num>Ppu {ppu}</td><td class=num>Ppl {ppl}</td><td class=num>Ppk {ppk}</td><td class=num>{sigma} (sample)</td></tr>
+{percentile}</table>
 <p class=note>{caveat}A figure with one limit is judged on that side alone: Cpk is then Cpu (or Cpl), Ppk is Ppu (or Ppl). Definitions in docs/results.md.</p>
 {chart}
 <p class=note>{shown} value(s) shown (at most the 5,000 newest), each run's latest part; units: {unit}. Point over a dot to see its unit and run; click it for the run's report.</p>
@@ -186,6 +187,16 @@ fn page_body(t: &Trend, shown: usize, chart: &str, rows: &str) -> String {
         ppl = f(t.overall.lower, 2),
         ppk = f(t.overall.k, 2),
         caveat = esc(&t.caveat()).replace('\n', "<br>"),
+        percentile = t.percentile.map_or(String::new(), |p| format!(
+            "<tr><td>performance by percentiles ({}, ISO 22514-2){}</td><td class=num>Ppu {}</td><td class=num>Ppl {}</td><td class=num>Ppk {}</td><td class=num>X50 {} X99.865 {}</td></tr>",
+            p.model,
+            if p.preferred { ": <b>the one to read</b>" } else { "" },
+            f(p.upper, 2),
+            f(p.lower, 2),
+            f(p.k, 2),
+            f(Some(p.x_50), 4),
+            f(Some(p.x_99865), 4),
+        )),
     )
 }
 

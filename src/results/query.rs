@@ -41,6 +41,8 @@ pub struct Filter {
     /// (`fitted`, `file`, `store`): a drift compensated within the run and
     /// one compensated by the unit's delivered set are not one measurand.
     pub coeffs_source: Option<String>,
+    /// Only runs on this kind of bench.
+    pub bench_kind: Option<super::facts::BenchKind>,
 }
 
 impl Filter {
@@ -83,6 +85,11 @@ impl Filter {
         add("r.started_utc >= $?", &self.since, &mut params);
         add("r.started_utc < $?", &self.until, &mut params);
         add("ru.coeffs_source = $?", &self.coeffs_source, &mut params);
+        add(
+            "r.bench_kind = $?",
+            &self.bench_kind.map(|k| k.as_str().to_owned()),
+            &mut params,
+        );
         if self.latest_only {
             sql.push_str(" AND r.latest = 1");
         }
@@ -330,6 +337,75 @@ pub struct Trend {
     pub within: Capability,
     /// Performance on the overall `sigma` (Ppu, Ppl, Ppk).
     pub overall: Capability,
+    /// Performance by ISO 22514-2's percentile method on a lognormal fit,
+    /// for a figure whose values are all above zero (none otherwise).
+    pub percentile: Option<Percentile>,
+    /// Values below which no index is shown (`--min-values`, default
+    /// [`MIN_CAPABILITY_N`]).
+    pub min_values: usize,
+}
+
+/// Performance by the percentile method (ISO 22514-2): `Ppu = (USL -
+/// X50) / (X99.865 - X50)`, `Ppl = (X50 - LSL) / (X50 - X0.135)`, the
+/// percentiles those of a lognormal fitted to the values (the mean and
+/// standard deviation of their logarithms). For a non-negative, skewed
+/// figure (a peak-to-peak, a stability, a noise term) the normal indices
+/// put the process's tail where it is not; these put it where the values'
+/// own shape does.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Percentile {
+    /// The distribution the percentiles come from.
+    pub model: &'static str,
+    /// The 0.135 % percentile.
+    pub x_0135: f64,
+    /// The median.
+    pub x_50: f64,
+    /// The 99.865 % percentile.
+    pub x_99865: f64,
+    /// Against the upper limit.
+    pub upper: Option<f64>,
+    /// Against the lower limit.
+    pub lower: Option<f64>,
+    /// The smaller (Ppk by percentiles).
+    pub k: Option<f64>,
+    /// The figure is one to read on these rather than on the normal
+    /// indices: every value above zero and an upper limit alone (ours:
+    /// a magnitude bounded below by zero is skewed by its nature).
+    pub preferred: bool,
+}
+
+impl Percentile {
+    /// The percentile indices of `values` against `(low, high)`; none
+    /// unless every value is above zero and their logarithms vary.
+    fn of(values: &[f64], (low, high): (Option<f64>, Option<f64>)) -> Option<Self> {
+        if values.len() < 2 || values.iter().any(|v| !(*v > 0.0 && v.is_finite())) {
+            return None;
+        }
+        let logs: Vec<f64> = values.iter().map(|v| v.ln()).collect();
+        let n = logs.len() as f64;
+        let mu = logs.iter().sum::<f64>() / n;
+        let s = (logs.iter().map(|l| (l - mu) * (l - mu)).sum::<f64>() / (n - 1.0)).sqrt();
+        if !(s > 0.0) {
+            return None;
+        }
+        let (x_0135, x_50, x_99865) = ((mu - 3.0 * s).exp(), mu.exp(), (mu + 3.0 * s).exp());
+        let upper = high.map(|h| (h - x_50) / (x_99865 - x_50));
+        let lower = low.map(|l| (x_50 - l) / (x_50 - x_0135));
+        let k = match (upper, lower) {
+            (Some(u), Some(l)) => Some(u.min(l)),
+            (u, l) => u.or(l),
+        };
+        Some(Self {
+            model: "lognormal",
+            x_0135,
+            x_50,
+            x_99865,
+            upper,
+            lower,
+            k,
+            preferred: high.is_some() && low.is_none_or(|l| l <= 0.0),
+        })
+    }
 }
 
 impl Trend {
@@ -356,6 +432,9 @@ impl Trend {
                 MIN_CAPABILITY_N
             ));
         }
+        if let Some(why) = &t.within.withheld {
+            s.push_str(&format!("  indices not shown: {why}\n"));
+        }
         s
     }
 }
@@ -367,7 +446,7 @@ pub const D2_MOVING_RANGE: f64 = 1.128;
 /// `upper = (USL - mean) / 3 sigma`, `lower = (mean - LSL) / 3 sigma`,
 /// `k` the smaller of those that exist (a figure with one limit is judged
 /// on that one).
-#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
+#[derive(Debug, Clone, Default, PartialEq, Serialize)]
 pub struct Capability {
     /// Against the upper limit (Cpu, Ppu).
     pub upper: Option<f64>,
@@ -379,9 +458,12 @@ pub struct Capability {
     /// (Bissell: k +- 1.96 sqrt(1 / 9n + k^2 / 2(n - 1))).
     pub k_interval: Option<[f64; 2]>,
     /// Whether enough values stand behind it (`MIN_CAPABILITY_N`); with
-    /// fewer the index is shown with its interval and a warning, never as
-    /// a capability.
+    /// fewer, and `--min-values` lowered to show it, the index is shown
+    /// with its interval and a warning, never as a capability.
     pub enough: bool,
+    /// Why the indices are not shown: fewer values than `--min-values`
+    /// (none: shown).
+    pub withheld: Option<String>,
 }
 
 /// Values below which a capability index is not a statement about the
@@ -396,10 +478,17 @@ impl Capability {
         sigma: Option<f64>,
         (low, high): (Option<f64>, Option<f64>),
         n: usize,
+        min_values: usize,
     ) -> Self {
         let (Some(m), Some(s)) = (mean, sigma.filter(|s| *s > 0.0)) else {
             return Self::default();
         };
+        if n < min_values {
+            return Self {
+                withheld: Some(withheld(n, min_values)),
+                ..Self::default()
+            };
+        }
         let upper = high.map(|h| (h - m) / (3.0 * s));
         let lower = low.map(|l| (m - l) / (3.0 * s));
         let k = match (upper, lower) {
@@ -417,8 +506,17 @@ impl Capability {
             k,
             k_interval,
             enough: n >= MIN_CAPABILITY_N,
+            withheld: None,
         }
     }
+}
+
+/// Why a capability index is not shown for `n` values.
+fn withheld(n: usize, min_values: usize) -> String {
+    format!(
+        "{n} value(s), fewer than {min_values}: a capability index from so few says little \
+         (--min-values lowers the floor)"
+    )
 }
 
 /// A value of a trend, with the run it came from.
@@ -581,6 +679,7 @@ impl Store {
             "log_path",
             "log_sha256",
             "imported_from",
+            "bench_kind",
             "bench_id",
             "host",
             "software_revision",
@@ -684,7 +783,12 @@ impl Store {
     /// (their latest parts): one pass over the values in run order, the
     /// figures computed here (the mean first, then the squares about it,
     /// which do not cancel as the mean of the squares would).
-    pub fn trend(&mut self, name: &str, f: &Filter) -> Result<Trend, StoreError> {
+    pub fn trend(
+        &mut self,
+        name: &str,
+        f: &Filter,
+        min_values: usize,
+    ) -> Result<Trend, StoreError> {
         let (clauses, params) = f.clauses(2);
         let reference = f.reference_clause();
         let mut all = vec![Value::from(name)];
@@ -723,7 +827,9 @@ impl Store {
             let mr: f64 = values.windows(2).map(|w| (w[1] - w[0]).abs()).sum();
             mr / (n - 1.0) / D2_MOVING_RANGE
         });
-        let index = |spread: Option<f64>| Capability::of(mean, spread, (low, high), count);
+        let index =
+            |spread: Option<f64>| Capability::of(mean, spread, (low, high), count, min_values);
+        let percentile = Percentile::of(&values, (low, high)).filter(|_| count >= min_values);
         Ok(Trend {
             name: name.to_owned(),
             unit,
@@ -739,6 +845,8 @@ impl Store {
             sigma_within,
             within: index(sigma_within),
             overall: index(sigma),
+            percentile,
+            min_values,
         })
     }
 

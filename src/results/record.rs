@@ -737,8 +737,22 @@ mod tests {
         );
         let h = store.unit("RL16-0042").expect("history");
         assert_eq!(h.measurements.len(), 1, "measurements keep their unit");
+        // Schema 7 classes the old parts' benches from what they kept.
+        let mut kind = |k| {
+            let f = super::super::query::Filter {
+                bench_kind: Some(k),
+                include_reference: true,
+                ..Default::default()
+            };
+            let rows = store.list(&f).expect("list");
+            rows.into_iter().map(|r| r.id).collect::<Vec<_>>()
+        };
+        use super::super::facts::BenchKind;
+        assert_eq!(kind(BenchKind::Embedded), ["r1.1"]);
+        assert_eq!(kind(BenchKind::Imported), ["r2.1"]);
+        assert!(kind(BenchKind::Hardware).is_empty());
         let t = store
-            .trend("compensated_drift_pp_dph", &Default::default())
+            .trend("compensated_drift_pp_dph", &Default::default(), 0)
             .expect("trend");
         assert_eq!(t.judged, 1, "the reference is left out");
     }

@@ -186,6 +186,11 @@ pub fn migrations(engine: Engine) -> &'static [(i64, &'static str, &'static str)
                 "signatures",
                 include_str!("migrations/sqlite/0006_signatures.sql"),
             ),
+            (
+                7,
+                "bench kind",
+                include_str!("migrations/sqlite/0007_bench_kind.sql"),
+            ),
         ],
         Engine::Postgres => &[
             (1, "init", include_str!("migrations/postgres/0001_init.sql")),
@@ -213,6 +218,11 @@ pub fn migrations(engine: Engine) -> &'static [(i64, &'static str, &'static str)
                 6,
                 "signatures",
                 include_str!("migrations/postgres/0006_signatures.sql"),
+            ),
+            (
+                7,
+                "bench kind",
+                include_str!("migrations/postgres/0007_bench_kind.sql"),
             ),
         ],
     }

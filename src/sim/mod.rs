@@ -51,6 +51,17 @@ pub mod identity {
     /// Watlow F4T part number.
     pub const WATLOW_PART_NUMBER: &str = "F4T1L1AA1A1SIMA";
 
+    /// True when `id` is one of these simulators' answers (a run's
+    /// instruments that say so ran on `sim serve`, not on hardware).
+    pub fn is_simulator(id: &Identity) -> bool {
+        [ESPEC_ROM, "SIM-TABLE", WATLOW_PART_NUMBER]
+            .iter()
+            .any(|mark| {
+                let mark = mark.split(',').next().unwrap_or(mark);
+                id.raw.contains(mark)
+            })
+    }
+
     /// The simulated chamber's identity over `protocol`.
     pub fn chamber(protocol: crate::bench::ChamberProtocol) -> Identity {
         match protocol {

@@ -166,6 +166,34 @@ fn lifecycle(db: &str, tag: &str) {
     );
     assert_eq!(trend.status.code(), Some(0), "{}", stderr(&trend));
     let t: serde_json::Value = serde_json::from_slice(&trend.stdout).expect("JSON");
+    // Below 25 values no index is shown, and the trend says why.
+    assert!(
+        t["within"]["k"].is_null() && t["overall"]["k"].is_null(),
+        "{t}"
+    );
+    assert!(
+        t["within"]["withheld"]
+            .as_str()
+            .is_some_and(|w| w.contains("fewer than 25")),
+        "{t}"
+    );
+    let trend = with_db(
+        db,
+        &[
+            "results",
+            "trend",
+            "bias_dph:up",
+            "--type",
+            "RL-16",
+            "--since",
+            "2000-01-01",
+            "--min-values",
+            "3",
+            "--json",
+        ],
+    );
+    assert_eq!(trend.status.code(), Some(0), "{}", stderr(&trend));
+    let t: serde_json::Value = serde_json::from_slice(&trend.stdout).expect("JSON");
     assert!(t["count"].as_i64().expect("count") >= 3, "{t}");
     assert_eq!(t["low"], -5.0);
     assert!(
