@@ -1036,15 +1036,7 @@ pub fn compute(
         let (s, l) = records.by_part(&m.records);
         (s, l, None)
     };
-    let mut rest = series.as_slice();
-    let part_refs: Vec<&[Interval]> = lens
-        .iter()
-        .map(|&n| {
-            let (part, after) = rest.split_at(n.min(rest.len()));
-            rest = after;
-            part
-        })
-        .collect();
+    let part_refs = split_parts(&series, &lens);
     let bias: Vec<f64> = series.iter().map(Interval::bias_dph).collect();
     // Averages over device time: as many intervals as span it (1 s each
     // at a 1 Hz tick; longer where the host polls slower).
@@ -1109,42 +1101,14 @@ pub fn compute(
     };
     let Computed {
         value,
-        mut note,
+        note,
         std_error,
         trace,
         known,
         noise_floor,
     } = c;
     let value = value.filter(|v| v.is_finite());
-    // A figure that counts from power-on says from which.
-    if let Some(b) = basis
-        && (value.is_some() || b.source == PowerOnSource::Assumed)
-    {
-        note = if note.is_empty() {
-            b.describe()
-        } else {
-            format!("{note}; {}", b.describe())
-        };
-    }
-    if value.is_none() && note.is_empty() {
-        note = format!(
-            "not computable: the records hold {:.0} s of data, too little for this figure{}",
-            crate::analysis::study::covered_s(&series.iter().map(|i| i.time_s).collect::<Vec<_>>()),
-            if m.averaging_s > 0.0 {
-                format!(" over {} s averages", m.averaging_s)
-            } else {
-                String::new()
-            }
-        );
-    }
-    // A figure whose records lost intervals to the status bits says so.
-    if let Some(s) = records.status_note(&m.records) {
-        note = if note.is_empty() {
-            s
-        } else {
-            format!("{note}; {s}")
-        };
-    }
+    let mut note = said_of(note, value, m, &series, basis, records);
     let uncertainty = match value {
         Some(v) => {
             super::uncertainty::of(m.metric, v, &series, m.averaging_s, &known, &judging.typeb)
@@ -1194,6 +1158,52 @@ pub fn compute(
         trace,
         band: m.band,
     }
+}
+
+/// `series` cut into consecutive parts of `lens` intervals (slices of
+/// the one series: one copy in memory).
+fn split_parts<'a>(series: &'a [Interval], lens: &[usize]) -> Vec<&'a [Interval]> {
+    let mut rest = series;
+    lens.iter()
+        .map(|&n| {
+            let (part, after) = rest.split_at(n.min(rest.len()));
+            rest = after;
+            part
+        })
+        .collect()
+}
+
+/// A figure's note with what else it rests on said: the power-on its
+/// time counts from (a figure that counts from power-on), why it has no
+/// value when its computation said nothing, and what the unit's status
+/// bits took from its records.
+fn said_of(
+    note: String,
+    value: Option<f64>,
+    m: &Measure,
+    series: &[Interval],
+    basis: Option<PowerBasis>,
+    records: &Records,
+) -> String {
+    let mut said: Vec<String> = Some(note).filter(|n| !n.is_empty()).into_iter().collect();
+    if let Some(b) = basis
+        && (value.is_some() || b.source == PowerOnSource::Assumed)
+    {
+        said.push(b.describe());
+    }
+    if value.is_none() && said.is_empty() {
+        said.push(format!(
+            "not computable: the records hold {:.0} s of data, too little for this figure{}",
+            crate::analysis::study::covered_s(&series.iter().map(|i| i.time_s).collect::<Vec<_>>()),
+            if m.averaging_s > 0.0 {
+                format!(" over {} s averages", m.averaging_s)
+            } else {
+                String::new()
+            }
+        ));
+    }
+    said.extend(records.status_note(&m.records));
+    said.join("; ")
 }
 
 /// A value judged: its outcome, the guard band applied, its margin.
