@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # The pages as a person sees them, in headless Chromium: report.html of a
 # PASS and of a FAIL, the FAIL printed to A4 (page 1), diagnosis.html, the
-# calibration page, a rate-transfer report and the station (one unit, and a batch). Writes docs/img/*.png from a fresh build; run from
+# calibration page, a rate-transfer report and the station (one unit, a batch, and a run signed). Writes docs/img/*.png from a fresh build; run from
 # the repository root:
 #
 #   docs/screenshots.sh
@@ -107,6 +107,33 @@ d.save_screenshot(sys.argv[2]); d.quit()
 PY
     kill -TERM "$station"; wait "$station" || true
     echo "$img/station-batch.png"
+
+    # A finished run signed: reviewed through the API, then approved from
+    # the page's form under the unit's history (station_browser.py --sign).
+    $gb station --listen 127.0.0.1:0 --live 127.0.0.1:0 --db "$work/sign.sqlite" \
+        --runs "$work/station-sign" >"$work/station-sign.out" 2>/dev/null &
+    station=$!
+    sleep 1.5
+    url=$(head -1 "$work/station-sign.out" | cut -d' ' -f2)
+    .venv/bin/python - "$url" <<'PY'
+import json, sys, time, urllib.request
+base, token = sys.argv[1].split("/?token=")
+def call(method, path, body=None):
+    data = None if body is None else json.dumps(body).encode()
+    headers = {"X-Gyrobench-Token": token, "Content-Type": "application/json"}
+    return json.load(urllib.request.urlopen(urllib.request.Request(base + path, data, headers, method=method)))
+call("POST", "/api/start", {"procedure": "smoke.toml", "serial": "RL16-0042", "operator": "ann"})
+while not (call("GET", "/api/state")["run"] or {}).get("prompt"):
+    time.sleep(0.2)
+call("POST", "/api/answer", {"id": call("GET", "/api/state")["run"]["prompt"]["id"]})
+while call("GET", "/api/state")["run"]["phase"] != "finished":
+    time.sleep(0.2)
+run = call("GET", "/api/history?serial=RL16-0042")["runs"][-1]["id"]
+call("POST", "/api/sign", {"run": run, "role": "reviewed", "by": "A. Quality", "note": "QP-12 rev C"})
+PY
+    .venv/bin/python tests/conformance/station_browser.py --sign "$url" "$(command -v chromedriver)" "$img/station-sign.png" >/dev/null
+    kill -TERM "$station"; wait "$station" || true
+    echo "$img/station-sign.png"
 else
     echo "screenshots: no .venv with selenium: the station was not shot" >&2
 fi

@@ -314,10 +314,8 @@ pub fn run(args: ResultsArgs) -> Result<Outcome> {
             by,
             note,
         } => {
-            let role = match role.as_str() {
-                "approved" => crate::results::sign::Role::Approved,
-                _ => crate::results::sign::Role::Reviewed,
-            };
+            let role = crate::results::sign::Role::parse(&role)
+                .ok_or_else(|| Usage(format!("--role {role:?}: reviewed or approved")))?;
             let run = run_id_of_dir(&run).unwrap_or(run);
             match store.sign(&run, role, &by, &note) {
                 Ok(s) => errln!(

@@ -611,16 +611,23 @@ impl Store {
 
     /// The run part `id` names: its key, or an unambiguous start of one
     /// (several parts of one run: the latest). None, or several runs, is
-    /// an error saying so.
+    /// an error saying so, as is an empty id (the start of every run).
     pub(super) fn part_named(&mut self, id: &str) -> Result<RunRow, StoreError> {
         let store = self.name.clone();
+        let start = id.replace(['%', '_'], "");
+        if start.trim().is_empty() {
+            return Err(StoreError::NotFound {
+                store,
+                what: format!("{id:?} names no run; `gyrobench results list` shows the runs"),
+            });
+        }
         let rows = self.sql().query(
             &format!(
                 "SELECT {} FROM runs r JOIN run_units ru ON ru.run = r.id JOIN units u ON u.id = ru.unit_id \
                  WHERE r.id = $1 OR r.id LIKE $2 ORDER BY r.id LIMIT 50",
                 run_columns()
             ),
-            &[id.into(), format!("{}%", id.replace(['%', '_'], "")).into()],
+            &[id.into(), format!("{start}%").into()],
         )?;
         Ok(match rows.as_slice() {
             [] => {

@@ -20,6 +20,14 @@ pub enum Role {
 }
 
 impl Role {
+    /// Every role, in the order a signature comes.
+    pub const ALL: [Self; 2] = [Self::Reviewed, Self::Approved];
+
+    /// The role a word names (`reviewed`, `approved`).
+    pub fn parse(word: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|r| r.as_str() == word)
+    }
+
     /// `reviewed` or `approved`.
     pub fn as_str(self) -> &'static str {
         match self {

@@ -12,9 +12,11 @@
 mod gate;
 pub mod listener;
 mod routes;
+mod sign;
 mod state;
 
 pub use routes::router;
+pub use sign::SignRequest;
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -138,6 +140,15 @@ pub enum Refused {
     /// Nothing of that name.
     #[error("{0}")]
     NotFound(String),
+    /// A request for the results store on a station that keeps none.
+    #[error(
+        "this station keeps no results store (--db none): start it with --db STORE to sign \
+         runs here, or sign with `gyrobench results sign`"
+    )]
+    NoStore,
+    /// The results store could not be opened or failed.
+    #[error("{0}")]
+    Store(String),
 }
 
 impl IntoResponse for Refused {
@@ -147,6 +158,8 @@ impl IntoResponse for Refused {
             Self::Busy(_) => StatusCode::CONFLICT,
             Self::Bad(_) | Self::Body { .. } => StatusCode::BAD_REQUEST,
             Self::NotFound(_) => StatusCode::NOT_FOUND,
+            Self::NoStore => StatusCode::CONFLICT,
+            Self::Store(_) => StatusCode::SERVICE_UNAVAILABLE,
             Self::SlowBody { .. } => StatusCode::REQUEST_TIMEOUT,
             Self::TooLarge { .. } => StatusCode::PAYLOAD_TOO_LARGE,
         };

@@ -15,7 +15,7 @@ use axum::routing::{get, post};
 use serde::{Deserialize, Serialize};
 
 use super::state::{self, RunView};
-use super::{Refused, Start, Station, gate};
+use super::{Refused, SignRequest, Start, Station, gate};
 
 /// A prompt's answer.
 #[derive(Debug, Deserialize)]
@@ -54,6 +54,7 @@ pub fn router(station: Arc<Station>) -> Router {
         .route("/api/abort", post(abort))
         .route("/api/answer", post(answer))
         .route("/api/resume", post(resume))
+        .route("/api/sign", post(sign))
         .route("/runs/{number}/{file}", get(run_file))
         .layer(axum::middleware::from_fn_with_state(
             station.clone(),
@@ -165,15 +166,35 @@ async fn events(State(s): St) -> Response {
         .into_response()
 }
 
+/// A unit's history as the page shows it: `results unit`'s JSON, and each
+/// run's signatures by its id (the page's signing form lists them).
+#[derive(Debug, Serialize)]
+struct History {
+    #[serde(flatten)]
+    unit: crate::results::query::UnitHistory,
+    signatures: std::collections::BTreeMap<String, Vec<crate::results::sign::Signature>>,
+}
+
 async fn history(State(s): St, Query(q): Query<HistoryQuery>) -> Response {
     let store = s.cfg.store.clone();
     let serial = q.serial;
     let found = tokio::task::spawn_blocking(move || -> Result<serde_json::Value, String> {
         let Some(mut st) = crate::results::Store::open(&store).map_err(|e| e.to_string())? else {
-            return Ok(serde_json::json!({ "runs": [], "note": "no results store (--db none)" }));
+            return Ok(serde_json::json!({
+                "runs": [],
+                "signatures": {},
+                "note": "no results store (--db none)"
+            }));
         };
-        let h = st.unit(&serial).map_err(|e| e.to_string())?;
-        serde_json::to_value(&h).map_err(|e| e.to_string())
+        let unit = st.unit(&serial).map_err(|e| e.to_string())?;
+        let mut signatures = std::collections::BTreeMap::new();
+        for run in &unit.runs {
+            signatures.insert(
+                run.id.clone(),
+                st.signatures(&run.id).map_err(|e| e.to_string())?,
+            );
+        }
+        serde_json::to_value(History { unit, signatures }).map_err(|e| e.to_string())
     })
     .await;
     match found {
@@ -262,6 +283,14 @@ async fn answer(State(s): St, axum::Json(a): axum::Json<Answer>) -> Response {
         axum::Json(serde_json::json!({ "answered": a.id })).into_response()
     } else {
         Refused::Bad(format!("prompt {} is not waiting", a.id)).into_response()
+    }
+}
+
+async fn sign(State(s): St, axum::Json(req): axum::Json<SignRequest>) -> Response {
+    match tokio::task::spawn_blocking(move || s.sign(&req)).await {
+        Ok(Ok(signature)) => axum::Json(signature).into_response(),
+        Ok(Err(e)) => e.into_response(),
+        Err(e) => Refused::Bad(e.to_string()).into_response(),
     }
 }
 

@@ -3,6 +3,7 @@ driven over WebDriver (selenium, Debian's chromium-driver).
 
     station_browser.py URL [CHROMEDRIVER]
     station_browser.py --batch URL [CHROMEDRIVER] [SCREENSHOT.png]
+    station_browser.py --sign URL [CHROMEDRIVER] [SCREENSHOT.png]
 
 URL is the one `gyrobench station` prints (with its token). Runs the smoke
 procedure: types the serial and the operator (Enter, as a barcode scanner
@@ -22,6 +23,12 @@ two left empty, the form empty again after the start, one tile per unit
 with its drift (the mean of the last 60 s of its record, the window named),
 each tile's verdict PASS and its own report (the
 unit's serial on it); the page is saved as SCREENSHOT.png when asked.
+With --sign, against a station whose last run (RL16-0042) was reviewed by
+A. Quality: the unit's history marks the run reviewed and lists the
+signature (role, who, when); approving it as A. Quality is refused with the
+store's words under the form; approving it as B. Lead is accepted and the
+list and the history's mark update; the page is saved as SCREENSHOT.png
+when asked.
 Exits non-zero with the step that failed.
 """
 
@@ -37,9 +44,9 @@ from selenium.webdriver.support import expected_conditions as ec
 from selenium.webdriver.support.ui import WebDriverWait
 
 
-def browser(driver_path):
+def browser(driver_path, size="1400,1000"):
     opts = webdriver.ChromeOptions()
-    for a in ("--headless=new", "--no-sandbox", "--disable-gpu", "--window-size=1400,1000"):
+    for a in ("--headless=new", "--no-sandbox", "--disable-gpu", f"--window-size={size}"):
         opts.add_argument(a)
     service = Service(executable_path=driver_path) if driver_path else Service()
     return webdriver.Chrome(options=opts, service=service)
@@ -213,11 +220,56 @@ def batch(url, driver_path, shot):
         a.quit()
 
 
+def sign(url, driver_path, shot):
+    # Tall enough for the history's signing form beside the run (the
+    # screenshot); the charts take their width when first drawn.
+    a = browser(driver_path, "1280,1400")
+    try:
+        a.get(url)
+        # The finished run's unit: its history, the run chosen for signing.
+        wait(a, "the signing form under the unit's history", ec.visibility_of_element_located((By.ID, "signing")))
+        wait(a, "the review listed", lambda d: "reviewed by A. Quality" in text_of(d, "#signatures"))
+        listed = text_of(a, "#signatures li")
+        assert re.search(r"reviewed by A\. Quality, \d{4}-\d\d-\d\d \d\d:\d\d:\d\d UTC", listed), listed
+        assert "reviewed" in text_of(a, "#history tr.chosen td.pass"), text_of(a, "#history tr.chosen")
+        run = a.find_element(By.CSS_SELECTOR, "#history tr.chosen").get_attribute("data-run")
+        assert run and run in text_of(a, "#sign-run"), (run, text_of(a, "#sign-run"))
+
+        # The reviewer approves: refused, in the store's words.
+        a.find_element(By.CSS_SELECTOR, "#sign-role option[value='approved']").click()
+        a.find_element(By.ID, "sign-by").send_keys("A. Quality")
+        a.find_element(By.ID, "sign").click()
+        wait(a, "the reviewer's approval refused", lambda d: "another person approves it" in text_of(d, "#sign-refusal"))
+        assert len(a.find_elements(By.CSS_SELECTOR, "#signatures li")) == 1, text_of(a, "#signatures")
+
+        # Someone else approves: listed, the refusal gone, the row marked.
+        by = a.find_element(By.ID, "sign-by")
+        by.clear()
+        by.send_keys("B. Lead")
+        a.find_element(By.ID, "sign-note").send_keys("released")
+        a.find_element(By.ID, "sign").click()
+        wait(a, "the approval listed", lambda d: "approved by B. Lead" in text_of(d, "#signatures"))
+        items = [li.text for li in a.find_elements(By.CSS_SELECTOR, "#signatures li")]
+        assert len(items) == 2 and items[1].startswith("approved by B. Lead") and items[1].endswith("released"), items
+        assert text_of(a, "#sign-refusal") == "", text_of(a, "#sign-refusal")
+        assert "approved" in text_of(a, "#history tr.chosen td.pass"), text_of(a, "#history tr.chosen")
+        assert a.find_element(By.ID, "sign-note").get_attribute("value") == "", "the note stayed for the next signature"
+        if shot:
+            a.execute_script("window.scrollTo(0, 0)")
+            a.save_screenshot(shot)
+        print("station page, signing: the history marks the review and lists it, the reviewer's approval refused in words, another person's approval listed: ok")
+    finally:
+        a.quit()
+
+
 if __name__ == "__main__":
     t0 = time.time()
     if len(sys.argv) > 1 and sys.argv[1] == "--batch":
         args = sys.argv[2:] + [None, None]
         batch(args[0], args[1], args[2])
+    elif len(sys.argv) > 1 and sys.argv[1] == "--sign":
+        args = sys.argv[2:] + [None, None]
+        sign(args[0], args[1], args[2])
     else:
         main()
     print(f"in {time.time() - t0:.1f} s")

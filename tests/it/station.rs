@@ -31,6 +31,12 @@ impl Served {
 
     /// As [`Served::start`], offering the procedures of `procedures`.
     fn offering(dir: &Path, procedures: &str, extra: &[&str]) -> Self {
+        Self::serving(dir, procedures, s(&dir.join("results.sqlite")), extra)
+    }
+
+    /// As [`Served::offering`], keeping its results in `db` (`none`: no
+    /// store).
+    fn serving(dir: &Path, procedures: &str, db: &str, extra: &[&str]) -> Self {
         let mut child = command()
             .args([
                 "station",
@@ -43,7 +49,7 @@ impl Served {
                 "--runs",
                 s(&dir.join("runs")),
                 "--db",
-                s(&dir.join("results.sqlite")),
+                db,
             ])
             .args(extra)
             .stdout(Stdio::piped())
@@ -522,9 +528,15 @@ duration_s = 90.0
 /// `tests/conformance/station_browser.py` against the station: required
 /// in CI, skipped (said) elsewhere without selenium and chromedriver.
 fn browser_check(st: &Served) {
-    let Some(python) = crate::common::python("the station page driven in Chromium") else {
-        return;
-    };
+    if let Some((python, driver)) = chromium("the station page driven in Chromium") {
+        crate::common::conformance(&python, "station_browser.py", &[&st.url(), driver]);
+    }
+}
+
+/// The Python with selenium and the chromedriver that drive the page:
+/// required in CI, none (said) elsewhere without them.
+fn chromium(what: &str) -> Option<(String, &'static str)> {
+    let python = crate::common::python(what)?;
     let driver = ["/usr/bin/chromedriver", "/usr/lib/chromium/chromedriver"]
         .into_iter()
         .find(|p| Path::new(p).is_file());
@@ -533,10 +545,180 @@ fn browser_check(st: &Served) {
             std::env::var_os("CI").is_none(),
             "CI drives the station page in Chromium: install chromium-driver"
         );
-        eprintln!("skipped: the station page was not driven in a browser (no chromedriver)");
-        return;
+        eprintln!("skipped: {what} (no chromedriver)");
+        return None;
     };
-    crate::common::conformance(&python, "station_browser.py", &[&st.url(), driver]);
+    Some((python, driver))
+}
+
+/// A finished run of the station is signed from it, by the rules and in
+/// the words of `results sign` (the same code): reviewed through the API
+/// (the store, `results show` and the history list it), approved by the
+/// reviewer refused, each other refusal with its reason, nothing signed
+/// without the token; then approved by someone else from the page in
+/// Chromium (when CI has it), the list updated.
+#[test]
+fn a_run_is_signed_from_the_station_by_the_rules_of_results_sign() {
+    let _busy = crate::common::busy_turn();
+    let dir = temp_dir("station-sign");
+    let db = dir.join("results.sqlite");
+    let st = Served::start(&dir, &[]);
+    let (code, body) = st.request("POST", "/api/start", true, SMOKE);
+    assert_eq!(code, 200, "{body}");
+    let waiting = st.until("the prompt", |s| !s["run"]["prompt"].is_null());
+    let id = waiting["run"]["prompt"]["id"].as_u64().expect("prompt id");
+    let (code, body) = st.request("POST", "/api/answer", true, &format!(r#"{{"id":{id}}}"#));
+    assert_eq!(code, 200, "{body}");
+    let done = st.until("the verdict", |s| s["run"]["phase"] == "finished");
+    assert_eq!(done["run"]["outcome"], "pass", "{}", done["run"]);
+    let history = || {
+        let (code, body) = st.request("GET", "/api/history?serial=RL16-0042", true, "");
+        assert_eq!(code, 200, "{body}");
+        serde_json::from_str::<serde_json::Value>(&body).expect("history")
+    };
+    let h = history();
+    let run = h["runs"][0]["id"]
+        .as_str()
+        .expect("a stored run")
+        .to_owned();
+    assert_eq!(h["signatures"][&run], serde_json::json!([]), "{h}");
+    let sign = |token: bool, role: &str, by: &str| {
+        let body = serde_json::json!({ "run": run, "role": role, "by": by, "note": "QP-12 rev C" });
+        st.request("POST", "/api/sign", token, &body.to_string())
+    };
+    let signed = |run: &str| -> Vec<(String, String)> {
+        let shown = gyrobench(&["results", "--db", s(&db), "show", run, "--json"]);
+        assert!(
+            shown.status.success(),
+            "{}",
+            String::from_utf8_lossy(&shown.stderr)
+        );
+        let d: serde_json::Value = serde_json::from_slice(&shown.stdout).expect("JSON");
+        d["signatures"]
+            .as_array()
+            .expect("signatures")
+            .iter()
+            .map(|g| (s_of(&g["role"]), s_of(&g["by"])))
+            .collect()
+    };
+
+    // Refused, each with the words `results sign` says it in.
+    let (code, body) = sign(false, "reviewed", "A. Quality");
+    assert_eq!(code, 403, "no token: {body}");
+    assert!(body.contains("token"), "{body}");
+    for (role, by, want, says) in [
+        ("approved", "B. Lead", 400, "not reviewed yet"),
+        ("reviewer", "A. Quality", 400, "reviewed or approved"),
+        (
+            "reviewed",
+            " ",
+            400,
+            "a name of 1 to 200 printable characters",
+        ),
+    ] {
+        let (code, body) = sign(true, role, by);
+        assert_eq!(code, want, "{role} by {by:?}: {body}");
+        assert!(body.contains(says), "{role} by {by:?}: {body}");
+    }
+    for unknown in ["ffffffff", ""] {
+        let body = serde_json::json!({ "run": unknown, "role": "reviewed", "by": "A. Quality" });
+        let (code, body) = st.request("POST", "/api/sign", true, &body.to_string());
+        assert_eq!(code, 404, "run {unknown:?}: {body}");
+        assert!(body.contains("results list"), "{body}");
+    }
+    assert!(signed(&run).is_empty(), "a refusal signed something");
+
+    // Reviewed: the store and the history hold it.
+    let (code, body) = sign(true, "reviewed", "A. Quality");
+    assert_eq!(code, 200, "{body}");
+    let g: serde_json::Value = serde_json::from_str(&body).expect("signature");
+    assert_eq!(
+        (&g["run"], &g["role"], &g["by"]),
+        (
+            &run.as_str().into(),
+            &"reviewed".into(),
+            &"A. Quality".into()
+        )
+    );
+    assert!(
+        g["signed_utc"].as_str().is_some_and(|t| t.ends_with('Z')),
+        "{g}"
+    );
+    assert_eq!(
+        signed(&run),
+        [("reviewed".to_owned(), "A. Quality".to_owned())]
+    );
+    let shown = gyrobench(&["results", "--db", s(&db), "show", &run]);
+    let text = String::from_utf8_lossy(&shown.stdout);
+    assert!(
+        text.contains("reviewed  by A. Quality") && text.contains("QP-12 rev C"),
+        "{text}"
+    );
+    let h = history();
+    assert_eq!(h["signatures"][&run][0]["by"], "A. Quality", "{h}");
+    assert_eq!(
+        h["runs"][0]["id"],
+        run.as_str(),
+        "the history's keys stay: {h}"
+    );
+
+    // Approved by the reviewer: refused; nothing added.
+    let (code, body) = sign(true, "approved", "A. Quality");
+    assert_eq!(code, 400, "{body}");
+    assert!(
+        body.contains("A. Quality reviewed it; another person approves it"),
+        "{body}"
+    );
+    assert_eq!(signed(&run).len(), 1);
+
+    // From the page: the reviewer's approval refused in words, another
+    // person's accepted, the list updated.
+    if let Some((python, driver)) = chromium("the station page's signing form driven in Chromium") {
+        let shot = std::env::var("GYROBENCH_SIGN_SHOT").unwrap_or_default();
+        let url = st.url();
+        let mut args = vec!["--sign", url.as_str(), driver];
+        if !shot.is_empty() {
+            args.push(&shot);
+        }
+        crate::common::conformance(&python, "station_browser.py", &args);
+        assert_eq!(
+            signed(&run),
+            [
+                ("reviewed".to_owned(), "A. Quality".to_owned()),
+                ("approved".to_owned(), "B. Lead".to_owned())
+            ]
+        );
+    }
+    assert!(st.stop().success());
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
+
+fn s_of(v: &serde_json::Value) -> String {
+    v.as_str().unwrap_or_default().to_owned()
+}
+
+/// A station without a results store says so when asked to sign (and
+/// still asks for the token first).
+#[test]
+fn a_station_without_a_results_store_says_so_when_asked_to_sign() {
+    let dir = temp_dir("station-sign-none");
+    let st = Served::serving(
+        &dir,
+        concat!(env!("CARGO_MANIFEST_DIR"), "/procedures"),
+        "none",
+        &[],
+    );
+    let body = r#"{"run":"0968c2e6","role":"reviewed","by":"A. Quality"}"#;
+    let (code, text) = st.request("POST", "/api/sign", false, body);
+    assert_eq!(code, 403, "{text}");
+    let (code, text) = st.request("POST", "/api/sign", true, body);
+    assert_eq!(code, 409, "{text}");
+    assert!(
+        text.contains("no results store") && text.contains("--db"),
+        "{text}"
+    );
+    assert!(st.stop().success());
+    std::fs::remove_dir_all(&dir).expect("cleanup");
 }
 
 /// The live Foxglove stream, from `run --live` and from the station, to a
