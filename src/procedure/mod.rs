@@ -588,8 +588,112 @@ impl Validator<'_> {
         });
     }
 
-    // Over 100 lines: one arm per step kind, each a short run of checks
-    // that name their key; the two long kinds have methods of their own.
+    /// A `chamber` step: its set point within the bench's chamber limits,
+    /// its ramp within the chamber's capability.
+    fn chamber_step(
+        &self,
+        key: &str,
+        set_c: f64,
+        ramp_c_per_min: f64,
+    ) -> Result<StepKind, ConfigError> {
+        let c = &self.c;
+        let k = |field: &str| format!("{key}.{field}");
+        let l = &self.bench.limits;
+        c.within(set_c, l.chamber_min_c, l.chamber_max_c, &k("set_c"))
+            .map_err(|_| {
+                self.src.invalid(
+                    &k("set_c"),
+                    format!(
+                        "{} degC is beyond the bench's chamber limits {}..{} degC",
+                        crate::config::num(set_c),
+                        l.chamber_min_c,
+                        l.chamber_max_c
+                    ),
+                )
+            })?;
+        c.ensure(
+            ramp_c_per_min.is_finite()
+                && ramp_c_per_min >= MIN_RAMP_C_PER_MIN
+                && ramp_c_per_min <= l.chamber_max_ramp_c_per_min,
+            &k("ramp_c_per_min"),
+            &format!(
+                "{} degC/min is beyond the chamber's capability ({MIN_RAMP_C_PER_MIN} <= ramp <= {} degC/min)",
+                crate::config::num(ramp_c_per_min),
+                l.chamber_max_ramp_c_per_min
+            ),
+        )?;
+        Ok(StepKind::Chamber {
+            set_c,
+            ramp_c_per_min,
+        })
+    }
+
+    /// A `power` step: its rest only when switching on, its voltage and
+    /// current limit within the bench's supply (none without one).
+    fn power_step(
+        &self,
+        key: &str,
+        on: bool,
+        volts: Option<f64>,
+        limit_a: Option<f64>,
+        rest_if_on_s: Option<f64>,
+    ) -> Result<StepKind, ConfigError> {
+        let c = &self.c;
+        let k = |field: &str| format!("{key}.{field}");
+        if let Some(rest) = rest_if_on_s {
+            c.ensure(
+                on,
+                &k("rest_if_on_s"),
+                "is for a step that switches the unit on (on = true)",
+            )?;
+            self.duration(rest, &k("rest_if_on_s"))?;
+        }
+        // A bench without a supply: the operator switches the unit by
+        // hand and confirms it (docs/procedures.md, "Power-on"); the
+        // voltage is theirs to set (0 here).
+        let (volts, limit_a) = match &self.bench.devices.supply {
+            None => {
+                c.ensure(
+                    volts.is_none() && limit_a.is_none(),
+                    &k("volts"),
+                    "a bench without a supply ([devices.supply]) has the unit switched by hand: its voltage and current limit are not the run's to set",
+                )?;
+                (0.0, 0.0)
+            }
+            Some(p) => {
+                let volts = volts.unwrap_or(p.volts);
+                let limit_a = limit_a.unwrap_or(p.limit_a);
+                c.ensure(
+                    volts.is_finite() && volts > 0.0 && volts <= p.max_volts(),
+                    &k("volts"),
+                    &format!(
+                        "{} V is beyond the bench's supply limit 0..{} V (devices.supply.max_volts)",
+                        crate::config::num(volts),
+                        p.max_volts()
+                    ),
+                )?;
+                c.ensure(
+                    limit_a.is_finite() && limit_a > 0.0 && limit_a <= p.max_limit_a(),
+                    &k("limit_a"),
+                    &format!(
+                        "{} A is beyond the bench's supply limit 0..{} A (devices.supply.max_limit_a)",
+                        crate::config::num(limit_a),
+                        p.max_limit_a()
+                    ),
+                )?;
+                (volts, limit_a)
+            }
+        };
+        Ok(StepKind::Power {
+            on,
+            volts,
+            limit_a,
+            rest_if_on_s,
+        })
+    }
+
+    // One arm per step kind, each a short run of checks that name their
+    // key; the long kinds have methods of their own.
     fn step(
         &mut self,
         group: Group,
@@ -605,36 +709,7 @@ impl Validator<'_> {
             RawStep::Chamber {
                 set_c,
                 ramp_c_per_min,
-            } => {
-                let l = &self.bench.limits;
-                c.within(*set_c, l.chamber_min_c, l.chamber_max_c, &k("set_c"))
-                    .map_err(|_| {
-                        self.src.invalid(
-                            &k("set_c"),
-                            format!(
-                                "{} degC is beyond the bench's chamber limits {}..{} degC",
-                                crate::config::num(*set_c),
-                                l.chamber_min_c,
-                                l.chamber_max_c
-                            ),
-                        )
-                    })?;
-                c.ensure(
-                    ramp_c_per_min.is_finite()
-                        && *ramp_c_per_min >= MIN_RAMP_C_PER_MIN
-                        && *ramp_c_per_min <= l.chamber_max_ramp_c_per_min,
-                    &k("ramp_c_per_min"),
-                    &format!(
-                        "{} degC/min is beyond the chamber's capability ({MIN_RAMP_C_PER_MIN} <= ramp <= {} degC/min)",
-                        crate::config::num(*ramp_c_per_min),
-                        l.chamber_max_ramp_c_per_min
-                    ),
-                )?;
-                StepKind::Chamber {
-                    set_c: *set_c,
-                    ramp_c_per_min: *ramp_c_per_min,
-                }
-            }
+            } => self.chamber_step(key, *set_c, *ramp_c_per_min)?,
             RawStep::Soak {
                 band_c,
                 case_slope_c_per_min,
@@ -675,58 +750,7 @@ impl Validator<'_> {
                 volts,
                 limit_a,
                 rest_if_on_s,
-            } => {
-                if let Some(rest) = rest_if_on_s {
-                    c.ensure(
-                        *on,
-                        &k("rest_if_on_s"),
-                        "is for a step that switches the unit on (on = true)",
-                    )?;
-                    self.duration(*rest, &k("rest_if_on_s"))?;
-                }
-                // A bench without a supply: the operator switches the
-                // unit by hand and confirms it (docs/procedures.md,
-                // "Power-on"); the voltage is theirs to set (0 here).
-                let (volts, limit_a) = match &self.bench.devices.supply {
-                    None => {
-                        c.ensure(
-                            volts.is_none() && limit_a.is_none(),
-                            &k("volts"),
-                            "a bench without a supply ([devices.supply]) has the unit switched by hand: its voltage and current limit are not the run's to set",
-                        )?;
-                        (0.0, 0.0)
-                    }
-                    Some(p) => {
-                        let volts = volts.unwrap_or(p.volts);
-                        let limit_a = limit_a.unwrap_or(p.limit_a);
-                        c.ensure(
-                            volts.is_finite() && volts > 0.0 && volts <= p.max_volts(),
-                            &k("volts"),
-                            &format!(
-                                "{} V is beyond the bench's supply limit 0..{} V (devices.supply.max_volts)",
-                                crate::config::num(volts),
-                                p.max_volts()
-                            ),
-                        )?;
-                        c.ensure(
-                            limit_a.is_finite() && limit_a > 0.0 && limit_a <= p.max_limit_a(),
-                            &k("limit_a"),
-                            &format!(
-                                "{} A is beyond the bench's supply limit 0..{} A (devices.supply.max_limit_a)",
-                                crate::config::num(limit_a),
-                                p.max_limit_a()
-                            ),
-                        )?;
-                        (volts, limit_a)
-                    }
-                };
-                StepKind::Power {
-                    on: *on,
-                    volts,
-                    limit_a,
-                    rest_if_on_s: *rest_if_on_s,
-                }
-            }
+            } => self.power_step(key, *on, *volts, *limit_a, *rest_if_on_s)?,
             RawStep::Wait { duration_s } => StepKind::Wait {
                 duration_s: self.duration(*duration_s, &k("duration_s"))?,
             },
@@ -775,8 +799,53 @@ impl Validator<'_> {
         Ok(())
     }
 
+    /// A `measure` step's records: `PREFIX*` expanded to every earlier
+    /// record whose label starts so, each one made by an earlier step.
+    fn measured_records(
+        &self,
+        key: &str,
+        records: &[String],
+        label: Option<&str>,
+    ) -> Result<Vec<String>, ConfigError> {
+        let c = &self.c;
+        let k = |field: &str| format!("{key}.{field}");
+        let mut named: Vec<String> = Vec::new();
+        for r in records.iter().map(|r| with_label(r, label)) {
+            match r.strip_suffix('*') {
+                Some(prefix) => {
+                    let found: Vec<String> = self
+                        .records
+                        .order
+                        .iter()
+                        .filter(|l| l.starts_with(prefix))
+                        .cloned()
+                        .collect();
+                    c.ensure(
+                        !found.is_empty(),
+                        &k("records"),
+                        &format!("{r:?} matches no earlier record"),
+                    )?;
+                    named.extend(found);
+                }
+                None => named.push(r),
+            }
+        }
+        c.ensure(
+            !named.is_empty(),
+            &k("records"),
+            "must name at least one record",
+        )?;
+        for r in &named {
+            c.ensure(
+                self.records.set.contains(r),
+                &k("records"),
+                &format!("names record {r:?}, which no earlier record step makes"),
+            )?;
+        }
+        Ok(named)
+    }
+
     /// A `measure` step: the metric, its records (`PREFIX*` expanded), averaging, band and limits.
-    /// (Over 100 lines: one check after another, each naming its key.)
     fn measure_step(
         &mut self,
         key: &str,
@@ -820,41 +889,7 @@ impl Validator<'_> {
             &format!("measurement {name:?} is already used"),
         )?;
         self.measures.insert(name.clone());
-        // `PREFIX*` names every earlier record whose label starts so.
-        let mut named: Vec<String> = Vec::new();
-        for r in records.iter().map(|r| subst(r)) {
-            match r.strip_suffix('*') {
-                Some(prefix) => {
-                    let found: Vec<String> = self
-                        .records
-                        .order
-                        .iter()
-                        .filter(|l| l.starts_with(prefix))
-                        .cloned()
-                        .collect();
-                    c.ensure(
-                        !found.is_empty(),
-                        &k("records"),
-                        &format!("{r:?} matches no earlier record"),
-                    )?;
-                    named.extend(found);
-                }
-                None => named.push(r),
-            }
-        }
-        let records = named;
-        c.ensure(
-            !records.is_empty(),
-            &k("records"),
-            "must name at least one record",
-        )?;
-        for r in &records {
-            c.ensure(
-                self.records.set.contains(r),
-                &k("records"),
-                &format!("names record {r:?}, which no earlier record step makes"),
-            )?;
-        }
+        let records = self.measured_records(key, records, label)?;
         let averaging_s = match (metric.needs_averaging(), averaging_s) {
             (true, Some(a)) => c.within(*a, 0.01, MAX_STEP_S, &k("averaging_s"))?,
             (true, None) => {
@@ -932,8 +967,80 @@ impl Validator<'_> {
         }))
     }
 
+    /// A `rate` step's timing: its record's length (a duration, or whole
+    /// revolutions at the rate), its settling, and its ramps at the
+    /// acceleration given, all within the bench's limits and a step's
+    /// longest. Returns (record length, settling), s.
+    fn rate_timing(
+        &self,
+        key: &str,
+        rate_dps: f64,
+        duration_s: Option<f64>,
+        revolutions: Option<f64>,
+        settle_s: Option<f64>,
+        acc_dps2: Option<f64>,
+    ) -> Result<(f64, f64), ConfigError> {
+        let c = &self.c;
+        let k = |field: &str| format!("{key}.{field}");
+        let duration = match (duration_s, revolutions) {
+            (Some(d), None) => self.duration(d, &k("duration_s"))?,
+            (None, Some(n)) => {
+                c.ensure(
+                    n >= 1.0 && n.fract() == 0.0 && n <= 1e6,
+                    &k("revolutions"),
+                    "must be a whole number of revolutions, at least 1",
+                )?;
+                c.ensure(
+                    rate_dps != 0.0,
+                    &k("revolutions"),
+                    "a rate of 0 deg/s makes no revolutions; give duration_s",
+                )?;
+                self.duration(n * 360.0 / rate_dps.abs(), &k("revolutions"))?
+            }
+            _ => {
+                return Err(self
+                    .src
+                    .invalid(key, "needs exactly one of `duration_s` or `revolutions`"));
+            }
+        };
+        let settle = settle_s.unwrap_or(2.0);
+        c.within(settle, 0.0, 3600.0, &k("settle_s"))?;
+        let mut ramp_s = 0.0;
+        if let (Some(a), Some((_, max_acc))) = (acc_dps2, self.bench.limits.rate_mode()) {
+            c.ensure(
+                a.is_finite() && a > 0.0 && a <= max_acc,
+                &k("acc_dps2"),
+                &format!(
+                    "{} deg/s^2 is beyond the table's rate-mode acceleration (0 < acc <= {max_acc} deg/s^2, limits.table_rate_mode_max_acc_dps2)",
+                    crate::config::num(a)
+                ),
+            )?;
+            // Up to the rate (from rest or another rate, at most
+            // twice it) and back: bounded as a wait is.
+            ramp_s = 2.0 * rate_dps.abs() / a;
+            c.ensure(
+                ramp_s <= MAX_STEP_S,
+                &k("acc_dps2"),
+                &format!(
+                    "{} deg/s^2 ramps to {} deg/s in {} s, beyond {MAX_STEP_S} s (7 days); give a larger acceleration",
+                    crate::config::num(a),
+                    crate::config::num(rate_dps),
+                    crate::config::num(ramp_s / 2.0)
+                ),
+            )?;
+        }
+        c.ensure(
+            2.0 * ramp_s + settle + duration <= MAX_STEP_S,
+            key,
+            &format!(
+                "takes {} s with its ramps, settling and record, beyond {MAX_STEP_S} s (7 days)",
+                crate::config::num(2.0 * ramp_s + settle + duration)
+            ),
+        )?;
+        Ok((duration, settle))
+    }
+
     /// A `rate` step: the turn it starts, its settle and record, and the stop unless it keeps turning.
-    /// (Over 100 lines: its keys' checks, then the three to four steps it makes.)
     fn rate_step(
         &mut self,
         group: Group,
@@ -999,60 +1106,13 @@ impl Validator<'_> {
                 crate::config::num(*rate_dps)
             ),
         )?;
-        let duration = match (duration_s, revolutions) {
-            (Some(d), None) => self.duration(*d, &k("duration_s"))?,
-            (None, Some(n)) => {
-                c.ensure(
-                    *n >= 1.0 && n.fract() == 0.0 && *n <= 1e6,
-                    &k("revolutions"),
-                    "must be a whole number of revolutions, at least 1",
-                )?;
-                c.ensure(
-                    *rate_dps != 0.0,
-                    &k("revolutions"),
-                    "a rate of 0 deg/s makes no revolutions; give duration_s",
-                )?;
-                self.duration(n * 360.0 / rate_dps.abs(), &k("revolutions"))?
-            }
-            _ => {
-                return Err(self
-                    .src
-                    .invalid(key, "needs exactly one of `duration_s` or `revolutions`"));
-            }
-        };
-        let settle = settle_s.unwrap_or(2.0);
-        c.within(settle, 0.0, 3600.0, &k("settle_s"))?;
-        let mut ramp_s = 0.0;
-        if let (Some(a), Some((_, max_acc))) = (acc_dps2, self.bench.limits.rate_mode()) {
-            c.ensure(
-                a.is_finite() && *a > 0.0 && *a <= max_acc,
-                &k("acc_dps2"),
-                &format!(
-                    "{} deg/s^2 is beyond the table's rate-mode acceleration (0 < acc <= {max_acc} deg/s^2, limits.table_rate_mode_max_acc_dps2)",
-                    crate::config::num(*a)
-                ),
-            )?;
-            // Up to the rate (from rest or another rate, at most
-            // twice it) and back: bounded as a wait is.
-            ramp_s = 2.0 * rate_dps.abs() / a;
-            c.ensure(
-                ramp_s <= MAX_STEP_S,
-                &k("acc_dps2"),
-                &format!(
-                    "{} deg/s^2 ramps to {} deg/s in {} s, beyond {MAX_STEP_S} s (7 days); give a larger acceleration",
-                    crate::config::num(*a),
-                    crate::config::num(*rate_dps),
-                    crate::config::num(ramp_s / 2.0)
-                ),
-            )?;
-        }
-        c.ensure(
-            2.0 * ramp_s + settle + duration <= MAX_STEP_S,
+        let (duration, settle) = self.rate_timing(
             key,
-            &format!(
-                "takes {} s with its ramps, settling and record, beyond {MAX_STEP_S} s (7 days)",
-                crate::config::num(2.0 * ramp_s + settle + duration)
-            ),
+            *rate_dps,
+            *duration_s,
+            *revolutions,
+            *settle_s,
+            *acc_dps2,
         )?;
         // Turn, record, come to rest: three plain steps (a record is
         // a record wherever it is taken: replay, resume and health
