@@ -29,10 +29,9 @@ pub struct FilterArgs {
     /// Procedure name (e.g. acceptance).
     #[arg(long)]
     procedure: Option<String>,
-    /// Outcome: running, pass, fail, error, aborted or reference (an
-    /// imported run).
-    #[arg(long)]
-    outcome: Option<String>,
+    /// Outcome (reference: an imported run).
+    #[arg(long, value_enum)]
+    outcome: Option<RunState>,
     /// Bench (as the run named it) or station (host name).
     #[arg(long)]
     bench: Option<String>,
@@ -63,16 +62,7 @@ pub struct FilterArgs {
 
 impl FilterArgs {
     fn filter(&self, latest_only: bool, limit: Option<usize>) -> Result<Filter> {
-        let outcome = match self.outcome.as_deref() {
-            None => None,
-            Some(o) => Some(RunState::parse(o).ok_or_else(|| {
-                let words: Vec<&str> = RunState::ALL.iter().map(|s| s.as_str()).collect();
-                Usage(format!(
-                    "--outcome {o:?}: expected one of {}",
-                    words.join(", ")
-                ))
-            })?),
-        };
+        let outcome = self.outcome;
         for (flag, v) in [("--since", &self.since), ("--until", &self.until)] {
             if let Some(v) = v
                 && !looks_like_a_time(v)

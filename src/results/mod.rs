@@ -105,6 +105,18 @@ impl RunState {
     }
 }
 
+/// `--outcome` takes the store's words (`conditional_pass`, not clap's
+/// kebab case), and its help lists them.
+impl clap::ValueEnum for RunState {
+    fn value_variants<'a>() -> &'a [Self] {
+        &Self::ALL
+    }
+
+    fn to_possible_value(&self) -> Option<clap::builder::PossibleValue> {
+        Some(clap::builder::PossibleValue::new(self.as_str()))
+    }
+}
+
 /// What went wrong with the store.
 #[derive(Debug, thiserror::Error)]
 pub enum StoreError {
