@@ -244,7 +244,7 @@ pub fn main() -> ExitCode {
     match result {
         Ok(outcome) => ExitCode::from(outcome.code()),
         Err(e) => {
-            errln!("error: {e:#}");
+            errln!("error: {}", said(&e));
             // An output that is one of the inputs, or in a run directory,
             // is a bad pair of arguments.
             let usage = e.chain().any(|c| {
@@ -254,5 +254,45 @@ pub fn main() -> ExitCode {
             });
             ExitCode::from(if usage { EXIT_USAGE } else { EXIT_ERROR })
         }
+    }
+}
+
+/// An error as the operator reads it: its message and each cause after
+/// it, as anyhow's `{:#}` joins them, leaving out a cause whose words the
+/// text already holds (an error that says its system error in its message
+/// and keeps it as its source too).
+fn said(e: &anyhow::Error) -> String {
+    let mut text = String::new();
+    for cause in e.chain() {
+        let words = cause.to_string();
+        if text.is_empty() {
+            text = words;
+        } else if !text.contains(&words) {
+            text.push_str(": ");
+            text.push_str(&words);
+        }
+    }
+    text
+}
+
+#[cfg(test)]
+mod tests {
+    use super::said;
+
+    #[test]
+    fn an_error_says_each_cause_once() {
+        let io = std::io::Error::new(std::io::ErrorKind::ConnectionRefused, "refused by peer");
+        let e = anyhow::Error::from(crate::driver::DeviceError::Connect {
+            device: "chamber".into(),
+            cause: io,
+        })
+        .context("starting the run");
+        let text = said(&e);
+        assert!(
+            text.starts_with("starting the run: chamber: cannot open the link: refused by peer")
+        );
+        assert_eq!(text.matches("refused by peer").count(), 1, "{text}");
+        // The source is kept for whoever walks the chain.
+        assert!(e.chain().any(|c| c.is::<std::io::Error>()));
     }
 }

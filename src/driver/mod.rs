@@ -97,6 +97,7 @@ pub enum DeviceError {
         /// Its spec from the bench file (`tcp://...`, `serial://...`).
         spec: String,
         /// Why.
+        #[source]
         cause: std::io::Error,
     },
     /// The link could not be (re)opened.
@@ -107,6 +108,7 @@ pub enum DeviceError {
         /// Device name.
         device: String,
         /// Why.
+        #[source]
         cause: std::io::Error,
     },
     /// The chamber reports alarms.
@@ -141,6 +143,7 @@ pub enum DeviceError {
         /// Attempts made.
         attempts: u32,
         /// The last attempt's failure.
+        #[source]
         cause: std::io::Error,
     },
     /// The link was down when the run was already stopping (interrupted,
@@ -156,6 +159,7 @@ pub enum DeviceError {
         /// Why the run is stopping.
         why: String,
         /// The attempt's failure.
+        #[source]
         cause: std::io::Error,
     },
     /// The supply's over-current protection switched the unit's power off.

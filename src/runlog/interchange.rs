@@ -175,6 +175,7 @@ pub enum CsvError {
         /// File.
         path: String,
         /// Cause.
+        #[source]
         cause: std::io::Error,
     },
     /// Not a regular file, or not readable (`config::open_file`).

@@ -54,6 +54,7 @@ pub enum RecoverError {
         /// The output.
         path: String,
         /// Cause.
+        #[source]
         cause: std::io::Error,
     },
 }

@@ -69,6 +69,7 @@ pub enum RunDirError {
         /// The path.
         path: String,
         /// Cause.
+        #[source]
         cause: std::io::Error,
     },
 }

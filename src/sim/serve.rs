@@ -302,6 +302,7 @@ pub enum ServeError {
         /// The address asked for (port 0: any free one).
         addr: SocketAddr,
         /// Why.
+        #[source]
         cause: std::io::Error,
         /// What to do about it, naming the serve configuration's key of
         /// the port (`ports.espec`, `slots.0.port`, ...).
@@ -315,6 +316,7 @@ pub enum ServeError {
         /// The device it was for.
         device: String,
         /// Why.
+        #[source]
         cause: std::io::Error,
     },
     /// The system could not say where a listener is.
@@ -325,6 +327,7 @@ pub enum ServeError {
         /// Its protocol.
         protocol: &'static str,
         /// Why.
+        #[source]
         cause: std::io::Error,
     },
 }

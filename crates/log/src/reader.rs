@@ -184,6 +184,7 @@ pub enum ReadError {
         /// File.
         path: String,
         /// Cause.
+        #[source]
         cause: std::io::Error,
     },
     /// Not an MCAP file at all.

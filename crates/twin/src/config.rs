@@ -22,6 +22,7 @@ pub enum ConfigError {
     #[error("cannot read {path}: {cause}; check the path")]
     Read {
         path: PathBuf,
+        #[source]
         cause: std::io::Error,
     },
     /// The path names a FIFO, a device, a directory or a socket.

@@ -24,8 +24,9 @@ pub enum InputError {
     Io {
         /// The file.
         path: PathBuf,
-        /// What the system said (in the message, so not also a source:
-        /// an error chain would say it twice).
+        /// What the system said (in the message too: the CLI's error
+        /// chain leaves out a source its message already says).
+        #[source]
         cause: std::io::Error,
     },
     /// It is a FIFO, a device, a directory or a socket.
