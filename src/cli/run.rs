@@ -246,7 +246,7 @@ const NO_TERMINAL: &str = "there is no terminal to answer it on; run it from a t
 /// moves, naming the first prompt.
 fn check_prompts(plan: &Plan, unattended: bool) -> Result<()> {
     use std::io::IsTerminal;
-    if unattended && plan.operator.trim().is_empty() {
+    if unattended && plan.operator().trim().is_empty() {
         return Err(Usage(
             "--unattended records the procedure's prompts as confirmed beforehand by the operator: \
              name them with --operator NAME"
@@ -254,15 +254,15 @@ fn check_prompts(plan: &Plan, unattended: bool) -> Result<()> {
         )
         .into());
     }
-    let p = &plan.procedure;
+    let p = plan.procedure();
     // On a bench without a supply the operator switches the unit, and the
     // moment they confirm is its power-on: never confirmed beforehand.
     let by_hand = |s: &&crate::procedure::Step| {
-        plan.bench_cfg.devices.supply.is_none()
+        plan.bench().devices.supply.is_none()
             && matches!(s.kind, crate::procedure::StepKind::Power { .. })
     };
     if unattended
-        && !plan.bench_cfg.is_embedded()
+        && !plan.bench().is_embedded()
         && let Some(s) = p
             .setup
             .iter()
@@ -274,13 +274,13 @@ fn check_prompts(plan: &Plan, unattended: bool) -> Result<()> {
             "{} has the operator switch the unit at line {} ({}): the bench has no supply, and \
              --unattended cannot confirm when a unit was switched; run it with an operator at \
              the bench, or on a bench with [devices.supply]",
-            plan.procedure_path,
+            plan.procedure_path(),
             s.line,
             s.describe()
         ))
         .into());
     }
-    if plan.bench_cfg.is_embedded() || unattended || std::io::stdin().is_terminal() {
+    if plan.bench().is_embedded() || unattended || std::io::stdin().is_terminal() {
         return Ok(());
     }
     let first = p
@@ -292,7 +292,7 @@ fn check_prompts(plan: &Plan, unattended: bool) -> Result<()> {
     match first {
         Some(s) => Err(Usage(format!(
             "{} asks the operator at line {} ({}), and {NO_TERMINAL}",
-            plan.procedure_path,
+            plan.procedure_path(),
             s.line,
             s.describe()
         ))
@@ -435,21 +435,19 @@ fn fresh(args: &RunArgs, procedure_path: &std::path::Path, pacing: Pacing) -> Re
         .bench
         .as_ref()
         .map_or("embedded".into(), |p| p.display().to_string());
-    Ok(Plan::new(
-        procedure,
-        procedure_path.display().to_string(),
-        bench_cfg,
-        bench_label,
-        store,
-        dut,
-        args.operator.clone(),
+    Ok(
+        Plan::new(procedure, procedure_path.display().to_string(), bench_cfg)
+            .with_bench_label(bench_label)
+            .with_store(store)
+            .with_dut(dut)
+            .with_operator(args.operator.clone())
+            .with_twin(twin)
+            .with_coeffs(coeffs)
+            .with_seed(args.seed)
+            .with_speed(args.speed.clone(), pacing)
+            .with_faults(faults)
+            .with_batch(batch),
     )
-    .with_twin(twin)
-    .with_coeffs(coeffs)
-    .with_seed(args.seed)
-    .with_speed(args.speed.clone(), pacing)
-    .with_faults(faults)
-    .with_batch(batch))
 }
 
 /// A batch's units from `--dut SLOT=SERIAL` arguments, in the bench's slot
@@ -630,7 +628,7 @@ pub fn run(args: RunArgs) -> Result<Outcome> {
         (Some(dir), _) => {
             let locked = session::lock_for_resume(dir)?;
             let plan = session::plan_resume(dir, pacing, &args.speed, args.db.as_deref())?;
-            if let Some(r) = &plan.resume {
+            if let Some(r) = plan.resumed() {
                 errln!("{}", r.summary);
             }
             (plan, Place::Resume(locked))
@@ -672,7 +670,7 @@ pub fn run(args: RunArgs) -> Result<Outcome> {
     };
     let plan = plan.with_live(live.clone());
     let mut progress = Live::new(session::estimated_s(&plan), args.unattended);
-    errln!("running {}", plan.procedure.meta.name);
+    errln!("running {}", plan.procedure().meta.name);
     let finished = match session::execute(plan, place, &rt, &mut progress, interrupt) {
         Ok(f) => f,
         Err(

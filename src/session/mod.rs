@@ -78,6 +78,7 @@ pub enum SessionError {
         /// The file.
         path: String,
         /// Cause.
+        #[source]
         cause: std::io::Error,
     },
 }
@@ -92,43 +93,43 @@ pub fn new_run_id() -> String {
 #[derive(Debug)]
 pub struct Plan {
     /// The validated procedure.
-    pub procedure: Procedure,
+    procedure: Procedure,
     /// Where it was read from.
-    pub procedure_path: String,
+    procedure_path: String,
     /// The bench.
-    pub bench_cfg: BenchConfig,
+    bench_cfg: BenchConfig,
     /// The bench as named to the operator (`embedded` or the file).
-    pub bench_label: String,
+    bench_label: String,
     /// Twin of the embedded bench.
-    pub twin: TwinConfig,
+    twin: TwinConfig,
     /// Coefficients to compensate with (none: model 4 fitted on the run's
     /// own records).
-    pub coeffs: Option<Chosen>,
+    coeffs: Option<Chosen>,
     /// The run's seed; a resumed part seeds its twin with
     /// `seed + part - 1` (a new power-on, fresh noise).
-    pub seed: u64,
+    seed: u64,
     /// Serial number of the unit.
-    pub dut: String,
+    dut: String,
     /// Who runs it.
-    pub operator: String,
+    operator: String,
     /// The bench PC it runs on (its host name, or `[results] station`).
-    pub station: String,
+    station: String,
     /// Where its results are recorded.
-    pub store: crate::results::Location,
+    store: crate::results::Location,
     /// `max` or a factor (logged as given).
-    pub speed: String,
+    speed: String,
     /// Pacing of the embedded bench.
-    pub pacing: Pacing,
+    pacing: Pacing,
     /// Faults the embedded bench plays.
-    pub faults: Vec<(f64, Fault)>,
+    faults: Vec<(f64, Fault)>,
     /// The earlier parts, when this continues a run.
-    pub resume: Option<Resumed>,
+    resume: Option<Resumed>,
     /// Where the run's channels are also published live (`run --live`,
     /// the station).
-    pub live: Option<Arc<crate::runlog::live::Live>>,
+    live: Option<Arc<crate::runlog::live::Live>>,
     /// A batch's units, in the bench's slot order (empty: the one unit
     /// `dut` of a bench without slots). The first is `dut`.
-    pub batch: Vec<BatchUnit>,
+    batch: Vec<BatchUnit>,
 }
 
 /// One unit of a batch: the slot it sits in and its serial.
@@ -225,32 +226,29 @@ pub fn batch_units(
 
 impl Plan {
     /// A new run of `procedure` (read from `procedure_path`) on the bench
-    /// `bench_cfg` (named `bench_label` to the operator) for unit `dut`,
-    /// run by `operator`, its results recorded in `store`: on the embedded
-    /// twin, seed 1, no coefficients (model 4 fitted on the run's own
-    /// records), at full speed, no faults, not published live. The CLI and
-    /// the station both start here; the `with_` methods set the rest.
+    /// `bench_cfg`: named `embedded` to the operator, for the simulated
+    /// bench's unnamed unit, no operator, its results recorded nowhere, on
+    /// the embedded twin, seed 1, no coefficients (model 4 fitted on the
+    /// run's own records), at full speed, no faults, not published live.
+    /// The CLI and the station both start here; the `with_` methods set
+    /// the rest by name.
     pub fn new(
         procedure: Procedure,
         procedure_path: impl Into<String>,
         bench_cfg: BenchConfig,
-        bench_label: impl Into<String>,
-        store: crate::results::Location,
-        dut: impl Into<String>,
-        operator: impl Into<String>,
     ) -> Self {
         Self {
             station: station(&bench_cfg),
             procedure,
             procedure_path: procedure_path.into(),
             bench_cfg,
-            bench_label: bench_label.into(),
+            bench_label: "embedded".into(),
             twin: TwinConfig::default_rl16(),
             coeffs: None,
             seed: 1,
-            dut: dut.into(),
-            operator: operator.into(),
-            store,
+            dut: crate::unit::SIMULATED_SERIAL.into(),
+            operator: String::new(),
+            store: crate::results::Location::Off,
             speed: "max".into(),
             pacing: Pacing::Max,
             faults: Vec::new(),
@@ -258,6 +256,74 @@ impl Plan {
             live: None,
             batch: Vec::new(),
         }
+    }
+
+    /// The bench as named to the operator (`embedded`, or its file).
+    #[must_use]
+    pub fn with_bench_label(self, bench_label: impl Into<String>) -> Self {
+        Self {
+            bench_label: bench_label.into(),
+            ..self
+        }
+    }
+
+    /// Where its results are recorded.
+    #[must_use]
+    pub fn with_store(self, store: crate::results::Location) -> Self {
+        Self { store, ..self }
+    }
+
+    /// The unit's serial number (a batch: [`Plan::with_batch`]).
+    #[must_use]
+    pub fn with_dut(self, dut: impl Into<String>) -> Self {
+        Self {
+            dut: dut.into(),
+            ..self
+        }
+    }
+
+    /// Who runs it.
+    #[must_use]
+    pub fn with_operator(self, operator: impl Into<String>) -> Self {
+        Self {
+            operator: operator.into(),
+            ..self
+        }
+    }
+
+    /// The validated procedure.
+    pub fn procedure(&self) -> &Procedure {
+        &self.procedure
+    }
+
+    /// Where the procedure was read from.
+    pub fn procedure_path(&self) -> &str {
+        &self.procedure_path
+    }
+
+    /// The bench.
+    pub fn bench(&self) -> &BenchConfig {
+        &self.bench_cfg
+    }
+
+    /// The unit's serial (a batch: its first unit's).
+    pub fn dut(&self) -> &str {
+        &self.dut
+    }
+
+    /// Who runs it.
+    pub fn operator(&self) -> &str {
+        &self.operator
+    }
+
+    /// A batch's units, in the bench's slot order (empty: one unit).
+    pub fn batch(&self) -> &[BatchUnit] {
+        &self.batch
+    }
+
+    /// The earlier parts, when this continues a run.
+    pub fn resumed(&self) -> Option<&Resumed> {
+        self.resume.as_ref()
     }
 
     /// Run `units` as a batch (the first is the plan's `dut`).
@@ -476,11 +542,11 @@ pub fn plan_resume(
         prev.procedure.clone(),
         meta.procedure_path.clone(),
         config.bench,
-        meta.bench.clone(),
-        store,
-        meta.dut_serial.clone(),
-        meta.operator.clone(),
     )
+    .with_bench_label(meta.bench.clone())
+    .with_store(store)
+    .with_dut(meta.dut_serial.clone())
+    .with_operator(meta.operator.clone())
     .with_twin(config.twin.unwrap_or_else(TwinConfig::default_rl16))
     .with_coeffs(coeffs)
     .with_seed(seed)

@@ -336,11 +336,11 @@ impl Station {
             procedure,
             path.display().to_string(),
             self.cfg.bench.clone(),
-            self.cfg.bench_label.clone(),
-            self.cfg.store.clone(),
-            serial,
-            operator,
         )
+        .with_bench_label(self.cfg.bench_label.clone())
+        .with_store(self.cfg.store.clone())
+        .with_dut(serial)
+        .with_operator(operator)
         .with_seed(self.runs_started.load(std::sync::atomic::Ordering::Relaxed) + 1)
         .with_speed(self.cfg.speed.clone(), self.cfg.pacing)
         .with_live(self.cfg.live.clone())
@@ -440,7 +440,7 @@ impl Station {
         )
         .map_err(|e| Refused::Bad(e.to_string()))?;
         let plan = plan.with_live(self.cfg.live.clone());
-        let summary = plan.resume.as_ref().map(|r| r.summary.clone());
+        let summary = plan.resumed().map(|r| r.summary.clone());
         let estimate_s = session::estimated_s(&plan);
         self.launch(plan, Place::Resume(locked), estimate_s, summary)
     }
@@ -480,11 +480,11 @@ impl Station {
         let view = RunView {
             number,
             phase: RunPhase::Running,
-            procedure: plan.procedure.meta.name.clone(),
-            serial: plan.dut.clone(),
-            operator: plan.operator.clone(),
+            procedure: plan.procedure().meta.name.clone(),
+            serial: plan.dut().to_owned(),
+            operator: plan.operator().to_owned(),
             steps: plan
-                .procedure
+                .procedure()
                 .steps()
                 .map(|s| StepView {
                     key: s.key.clone(),
@@ -494,7 +494,7 @@ impl Station {
             estimate_s,
             events: note.into_iter().collect(),
             units: plan
-                .batch
+                .batch()
                 .iter()
                 .map(|u| state::UnitView {
                     slot: u.slot.name.clone(),
