@@ -19,13 +19,16 @@
 //! - **Simulate devices**: `sim` serves the chamber, table, gyro and supply
 //!   on their wire protocols; `protocol` (the `gyrobench-protocol` crate)
 //!   holds the codecs drivers and simulators share.
+//!
+//! The `gyrobench` binary (`src/main.rs`: the command line and the web
+//! station) is a crate of its own above this one and uses it through
+//! this door alone.
 
 /// Pure math on recorded series: the `gyrobench-analysis` crate
 /// (`crates/analysis`).
 pub use gyrobench_analysis as analysis;
 pub mod bench;
 pub mod calibrate;
-pub mod cli;
 pub mod clock;
 pub mod coeffs;
 /// The study's compensation models as data (in `gyrobench-analysis`).
@@ -48,7 +51,6 @@ pub mod runlog;
 pub mod sequencer;
 pub mod session;
 pub mod sim;
-pub mod station;
 pub mod study;
 pub mod transport;
 pub mod typeb;

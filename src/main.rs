@@ -1,7 +1,12 @@
-//! The `gyrobench` command line; see `gyrobench --help`.
+//! The `gyrobench` command line (`cli`) and the web station it serves
+//! (`station`): a crate of their own above the library, which is their
+//! door to everything else (`gyrobench::...`). See `gyrobench --help`.
 
 use std::process::ExitCode;
 
+mod cli;
+mod station;
+
 fn main() -> ExitCode {
-    gyrobench::cli::main()
+    cli::main()
 }

@@ -9,10 +9,10 @@ use clap::{Args, ValueEnum};
 use serde::Serialize;
 
 use super::Outcome;
-use crate::analysis::allan::{Allan, NoiseTerms, TERM_KEYS, Taus, analyse};
-use crate::analysis::figures::bias_stability;
-use crate::runlog::interchange;
-use crate::runlog::replay::record_rates_unit;
+use gyrobench::analysis::allan::{Allan, NoiseTerms, TERM_KEYS, Taus, analyse};
+use gyrobench::analysis::figures::bias_stability;
+use gyrobench::runlog::interchange;
+use gyrobench::runlog::replay::record_rates_unit;
 
 #[derive(Debug, Clone, Copy, ValueEnum)]
 enum TauSet {

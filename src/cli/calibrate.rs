@@ -9,11 +9,11 @@ use anyhow::{Context, Result};
 use clap::Args;
 
 use super::{Outcome, Usage};
-use crate::calibrate::{
+use gyrobench::calibrate::{
     ABSURD_OVER_RAW, Calibration, calibrate, load_unit, mixed_serials, scale_factor,
 };
-use crate::coeffs::{CoefficientSet, FittedOn, SetSection, UnitSection};
-use crate::fsutil::{OutputRule, check_output};
+use gyrobench::coeffs::{CoefficientSet, FittedOn, SetSection, UnitSection};
+use gyrobench::fsutil::{OutputRule, check_output};
 
 #[derive(Debug, Args)]
 #[command(after_help = after_help!(
@@ -81,7 +81,7 @@ pub fn run(args: CalibrateArgs) -> Result<Outcome> {
     }
     // Rate runs give the scale factor; thermal runs the compensation.
     let sf = scale_factor(&runs);
-    let thermal: Vec<crate::calibrate::RunSeries> = runs
+    let thermal: Vec<gyrobench::calibrate::RunSeries> = runs
         .iter()
         .filter(|r| !r.series.is_empty())
         .cloned()
@@ -106,7 +106,7 @@ pub fn run(args: CalibrateArgs) -> Result<Outcome> {
             .to_toml()
             .context("writing the coefficient set as TOML")?,
     };
-    crate::fsutil::write_output(&args.out, text.as_bytes())
+    gyrobench::fsutil::write_output(&args.out, text.as_bytes())
         .with_context(|| format!("writing {}", args.out.display()))?;
     let Some(cal) = cal.as_mut() else {
         if let Some(sf) = &sf {
@@ -120,9 +120,9 @@ pub fn run(args: CalibrateArgs) -> Result<Outcome> {
     };
     cal.unit = set.unit.clone();
     cal.set = set.set.clone();
-    crate::fsutil::write_output(&json_path, serde_json::to_string_pretty(&cal)?.as_bytes())
+    gyrobench::fsutil::write_output(&json_path, serde_json::to_string_pretty(&cal)?.as_bytes())
         .with_context(|| format!("writing {}", json_path.display()))?;
-    crate::fsutil::write_output(&html_path, cal.render_html().as_bytes())
+    gyrobench::fsutil::write_output(&html_path, cal.render_html().as_bytes())
         .with_context(|| format!("writing {}", html_path.display()))?;
     outf!("{}", cal.render_text())?;
     if let Some(sf) = &sf {
@@ -140,7 +140,7 @@ pub fn run(args: CalibrateArgs) -> Result<Outcome> {
 
 /// Each run once: one run given twice (or a copy of it) would validate the
 /// fit on its own data, and held-out figures would be a lie.
-fn refuse_repeats(runs: &[crate::calibrate::RunSeries]) -> Result<()> {
+fn refuse_repeats(runs: &[gyrobench::calibrate::RunSeries]) -> Result<()> {
     for (i, a) in runs.iter().enumerate() {
         for b in &runs[..i] {
             let same_file =
@@ -169,7 +169,7 @@ fn refuse_repeats(runs: &[crate::calibrate::RunSeries]) -> Result<()> {
 fn describe_set(
     set: &mut CoefficientSet,
     paths: &[PathBuf],
-    runs: &[crate::calibrate::RunSeries],
+    runs: &[gyrobench::calibrate::RunSeries],
     one_unit: bool,
 ) -> Result<()> {
     set.unit = match (one_unit, runs.first()) {
@@ -181,8 +181,8 @@ fn describe_set(
     };
     set.set = Some(SetSection {
         version: None,
-        created_utc: crate::clock::utc_now().to_rfc3339(),
-        software: crate::version::software(),
+        created_utc: gyrobench::clock::utc_now().to_rfc3339(),
+        software: gyrobench::version::software(),
         models: [
             ("model4", set.model4.is_some()),
             ("model3", set.model3.is_some()),
@@ -200,7 +200,7 @@ fn describe_set(
 
 /// Fit the compensation models on the thermal runs, refusing fits that
 /// cannot be scored or are not plausible.
-fn fit(runs: &[crate::calibrate::RunSeries]) -> Result<Calibration> {
+fn fit(runs: &[gyrobench::calibrate::RunSeries]) -> Result<Calibration> {
     let cal = calibrate(runs).context("fitting the compensation models")?;
     let scored = cal
         .table
@@ -213,7 +213,7 @@ fn fit(runs: &[crate::calibrate::RunSeries]) -> Result<Calibration> {
             "the runs are too short to score a drift: the longest holds {longest} s of recorded data, \
              and the drift is the p-p of the residual smoothed over {:.0} s; calibrate on thermal \
              runs (procedures/acceptance.toml); no coefficients written",
-            crate::analysis::study::DRIFT_SMOOTHING_S
+            gyrobench::analysis::study::DRIFT_SMOOTHING_S
         );
     }
     let absurd = cal.absurd();
@@ -227,14 +227,14 @@ fn fit(runs: &[crate::calibrate::RunSeries]) -> Result<Calibration> {
 }
 
 /// Each run the set is fitted on: its id and its log's SHA-256.
-fn fitted_on(paths: &[PathBuf], runs: &[crate::calibrate::RunSeries]) -> Result<Vec<FittedOn>> {
+fn fitted_on(paths: &[PathBuf], runs: &[gyrobench::calibrate::RunSeries]) -> Result<Vec<FittedOn>> {
     paths
         .iter()
         .zip(runs)
         .map(|(p, r)| {
             Ok(FittedOn {
                 run_id: r.run_id.clone(),
-                log_sha256: crate::results::record::sha256_file(p)
+                log_sha256: gyrobench::results::record::sha256_file(p)
                     .with_context(|| format!("reading {}", p.display()))?,
                 log: p.display().to_string(),
             })
@@ -266,7 +266,7 @@ fn store(
     validation: &str,
     held_out_drift_pp_dph: Option<f64>,
 ) -> Result<String> {
-    use crate::results::record::{SetRecord, part_key_of_log};
+    use gyrobench::results::record::{SetRecord, part_key_of_log};
     let sources = args
         .runs
         .iter()
@@ -278,13 +278,13 @@ fn store(
             )
         })
         .collect();
-    let loc = crate::results::Location::resolve(args.db.as_deref(), None);
+    let loc = gyrobench::results::Location::resolve(args.db.as_deref(), None);
     let rec = SetRecord {
         validation,
         held_out_drift_pp_dph,
         sources,
     };
-    match crate::results::Store::open(&loc).and_then(|s| match s {
+    match gyrobench::results::Store::open(&loc).and_then(|s| match s {
         Some(mut s) => s
             .record_coefficients(set, &rec)
             .map(|text| Some((text, s.name().to_owned()))),

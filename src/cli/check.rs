@@ -6,9 +6,9 @@ use anyhow::{Context, Result};
 use clap::Args;
 
 use super::Outcome;
-use crate::bench::BenchConfig;
-use crate::procedure::Procedure;
-use crate::procedure::estimate::{Estimate, estimate};
+use gyrobench::bench::BenchConfig;
+use gyrobench::procedure::Procedure;
+use gyrobench::procedure::estimate::{Estimate, estimate};
 
 #[derive(Debug, Args)]
 #[command(after_help = after_help!(
@@ -45,7 +45,7 @@ fn hms(s: f64) -> String {
 }
 
 /// The plan as text: one line per step with its device time, then totals.
-pub fn render_plan(p: &Procedure, est: &[(&crate::procedure::Step, Estimate)]) -> String {
+pub fn render_plan(p: &Procedure, est: &[(&gyrobench::procedure::Step, Estimate)]) -> String {
     let mut out = format!(
         "procedure {} ({}): {}\nspec: {}\n\n  {:<20} {:>4}  {:<17}  what\n",
         p.meta.name,

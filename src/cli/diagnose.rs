@@ -7,9 +7,9 @@ use anyhow::{Context, Result};
 use clap::{Args, Subcommand};
 
 use super::{Outcome, Usage};
-use crate::diagnose::library::Effect;
-use crate::diagnose::{self, Options, data, html, selfcheck};
-use crate::twin::TwinConfig;
+use gyrobench::diagnose::library::Effect;
+use gyrobench::diagnose::{self, Options, data, html, selfcheck};
+use gyrobench::twin::TwinConfig;
 
 #[derive(Debug, Args)]
 #[command(
@@ -113,7 +113,7 @@ fn units_of(paths: &[PathBuf]) -> Result<Vec<(PathBuf, String)>> {
     paths
         .iter()
         .map(|p| {
-            let m = crate::runlog::meta::read_run_meta(p).map_err(|e| {
+            let m = gyrobench::runlog::meta::read_run_meta(p).map_err(|e| {
                 if e.contains(&p.display().to_string()) {
                     anyhow::anyhow!(e)
                 } else {
@@ -130,7 +130,7 @@ fn units_of(paths: &[PathBuf]) -> Result<Vec<(PathBuf, String)>> {
 }
 
 fn write(path: &Path, text: &str) -> Result<()> {
-    crate::fsutil::write_atomic(path, text.as_bytes())
+    gyrobench::fsutil::write_atomic(path, text.as_bytes())
         .with_context(|| format!("writing {}", path.display()))
 }
 
@@ -227,7 +227,7 @@ fn print_summary(d: &diagnose::Diagnosis, out: &Path, fitted_twin: bool) -> Resu
             e.held_out_gap_before_dph,
             e.held_out_gap_after_dph,
             100.0 * e.shrink,
-            crate::view::p_phrase(e.p_value)
+            gyrobench::view::p_phrase(e.p_value)
         )?;
     }
     if let Some(i) = &d.inconclusive {
@@ -324,9 +324,9 @@ pub fn run(args: DiagnoseArgs) -> Result<Outcome> {
 
 /// An output directory, checked before the work (`fsutil::check_output`).
 fn check_out_dir(out: &Path, force: bool) -> Result<()> {
-    crate::fsutil::check_output(
+    gyrobench::fsutil::check_output(
         out,
-        crate::fsutil::OutputRule {
+        gyrobench::fsutil::OutputRule {
             force,
             ..Default::default()
         },
@@ -419,7 +419,7 @@ fn run_selfcheck(a: SelfcheckArgs) -> Result<Outcome> {
 }
 
 fn run_randomized(a: &SelfcheckArgs) -> Result<Outcome> {
-    use crate::diagnose::randomized;
+    use gyrobench::diagnose::randomized;
     if a.units == 0 {
         return Err(Usage("--units must be 1 or more".into()).into());
     }
@@ -557,7 +557,7 @@ fn render_trial(d: &selfcheck::TrialDone<'_>) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::diagnose::selfcheck::{Injected, Trial, TrialDone};
+    use gyrobench::diagnose::selfcheck::{Injected, Trial, TrialDone};
 
     fn trial(attributed: Option<&str>) -> Trial {
         Trial {

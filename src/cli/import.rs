@@ -8,8 +8,10 @@ use anyhow::{Context, Result};
 use clap::Args;
 
 use super::{Outcome, Usage};
-use crate::fsutil::{OutputRule, check_output};
-use crate::runlog::exchange::{ImportOptions, check_type, export_unit, import, load_site, sidecar};
+use gyrobench::fsutil::{OutputRule, check_output};
+use gyrobench::runlog::exchange::{
+    ImportOptions, check_type, export_unit, import, load_site, sidecar,
+};
 
 #[derive(Debug, Args)]
 #[command(after_help = after_help!(
@@ -86,7 +88,7 @@ pub struct ExportArgs {
 
 pub fn run_import(args: ImportArgs) -> Result<Outcome> {
     if let Some(d) = &args.dut {
-        crate::unit::check_serial(d).map_err(|e| Usage(format!("--dut {d:?}: {e}")))?;
+        gyrobench::unit::check_serial(d).map_err(|e| Usage(format!("--dut {d:?}: {e}")))?;
     }
     if let Some(t) = &args.dut_type {
         check_type(t).map_err(|e| Usage(format!("--type {t:?}: {e}")))?;
@@ -117,7 +119,7 @@ pub fn run_import(args: ImportArgs) -> Result<Outcome> {
         None => None,
     };
     let map = match &args.map {
-        Some(m) => Some(crate::runlog::import_map::load(m).context("reading the import map")?),
+        Some(m) => Some(gyrobench::runlog::import_map::load(m).context("reading the import map")?),
         None => None,
     };
     let opts = ImportOptions {
@@ -127,8 +129,8 @@ pub fn run_import(args: ImportArgs) -> Result<Outcome> {
         map: map.as_ref(),
     };
     let r = import(&args.csv, &opts, &args.out)?;
-    let loc = crate::results::Location::resolve(args.db.as_deref(), None);
-    match crate::results::Store::open(&loc).and_then(|s| match s {
+    let loc = gyrobench::results::Location::resolve(args.db.as_deref(), None);
+    match gyrobench::results::Store::open(&loc).and_then(|s| match s {
         Some(mut s) => s.index_log(&args.out).map(|_| Some(s.name().to_owned())),
         None => Ok(None),
     }) {
@@ -193,8 +195,8 @@ pub fn run_export(args: ExportArgs) -> Result<Outcome> {
 /// What `import` made, and the figures it could compute at the
 /// acceptance's limits: for reference, never a verdict (the run was not an
 /// acceptance; `replay` judges the log as a run).
-pub fn render_import(r: &crate::runlog::exchange::Imported, out: &std::path::Path) -> String {
-    use crate::sequencer::measure::MeasureOutcome;
+pub fn render_import(r: &gyrobench::runlog::exchange::Imported, out: &std::path::Path) -> String {
+    use gyrobench::sequencer::measure::MeasureOutcome;
     let mut s = format!(
         "imported {} s of 1 Hz data in {} record(s) into {}{}\n",
         r.intervals,
@@ -213,7 +215,7 @@ pub fn render_import(r: &crate::runlog::exchange::Imported, out: &std::path::Pat
         ),
         None => "judged by a procedure made from its rows\n".to_owned(),
     });
-    s.push_str(&if r.serial == crate::unit::UNNAMED_SERIAL {
+    s.push_str(&if r.serial == gyrobench::unit::UNNAMED_SERIAL {
         format!(
             "unit: {} {} (names no unit: give --dut SERIAL to file the run under its unit)\n",
             r.dut_type, r.serial

@@ -105,7 +105,7 @@ pub enum Outcome {
 
 /// On stderr: `file` was cut short (a run killed mid-way); `done` says
 /// what was made of what it holds.
-pub fn warn_incomplete(file: &std::path::Path, read: &crate::runlog::ReadSummary, done: &str) {
+pub fn warn_incomplete(file: &std::path::Path, read: &gyrobench::runlog::ReadSummary, done: &str) {
     if read.complete {
         return;
     }
@@ -136,8 +136,8 @@ pub const EXIT_CONDITIONAL_PASS: u8 = 4;
 impl Outcome {
     /// The exit of a run that ended `o`, interrupted by signal code
     /// `signal` when it was aborted.
-    pub fn of_run(o: crate::sequencer::Outcome, signal: u8) -> Self {
-        use crate::sequencer::Outcome as Run;
+    pub fn of_run(o: gyrobench::sequencer::Outcome, signal: u8) -> Self {
+        use gyrobench::sequencer::Outcome as Run;
         match o {
             Run::Pass => Self::Success,
             Run::Fail | Run::ConditionalFail => Self::Fail,
@@ -211,12 +211,6 @@ enum Command {
     Sim(sim::SimCommand),
 }
 
-/// The command tree, as `--help` shows it (the tests walk it to check every
-/// command's help).
-pub fn command() -> clap::Command {
-    <Cli as clap::CommandFactory>::command()
-}
-
 /// Parse arguments, run, print the error chain once, and map to an exit code.
 pub fn main() -> ExitCode {
     let cli = match Cli::try_parse() {
@@ -249,8 +243,8 @@ pub fn main() -> ExitCode {
             // is a bad pair of arguments.
             let usage = e.chain().any(|c| {
                 c.is::<Usage>()
-                    || c.is::<crate::fsutil::SamePath>()
-                    || c.is::<crate::fsutil::OutputRefused>()
+                    || c.is::<gyrobench::fsutil::SamePath>()
+                    || c.is::<gyrobench::fsutil::OutputRefused>()
             });
             ExitCode::from(if usage { EXIT_USAGE } else { EXIT_ERROR })
         }
@@ -282,7 +276,7 @@ mod tests {
     #[test]
     fn an_error_says_each_cause_once() {
         let io = std::io::Error::new(std::io::ErrorKind::ConnectionRefused, "refused by peer");
-        let e = anyhow::Error::from(crate::driver::DeviceError::Connect {
+        let e = anyhow::Error::from(gyrobench::driver::DeviceError::Connect {
             device: "chamber".into(),
             cause: io,
         })

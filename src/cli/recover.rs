@@ -7,8 +7,8 @@ use anyhow::{Context, Result};
 use clap::Args;
 
 use super::Outcome;
-use crate::fsutil::{OutputRule, check_output};
-use crate::runlog::recover::recover;
+use gyrobench::fsutil::{OutputRule, check_output};
+use gyrobench::runlog::recover::recover;
 
 #[derive(Debug, Args)]
 #[command(after_help = after_help!(

@@ -7,10 +7,10 @@ use anyhow::{Context, Result};
 use clap::Args;
 
 use super::{Outcome, Usage};
-use crate::clock::Stopwatch;
-use crate::coeffs::Chosen;
-use crate::report::{Report, render_html};
-use crate::runlog::replay::replay_unit;
+use gyrobench::clock::Stopwatch;
+use gyrobench::coeffs::Chosen;
+use gyrobench::report::{Report, render_html};
+use gyrobench::runlog::replay::replay_unit;
 
 #[derive(Debug, Args)]
 #[command(after_help = after_help!(
@@ -65,8 +65,8 @@ pub fn run(args: ReplayArgs) -> Result<Outcome> {
         None => None,
     };
     // A log that cannot be read says why in the replay itself.
-    let units = crate::runlog::view::log_units(&args.log).unwrap_or_default();
-    let batch = crate::runlog::view::is_batch(&units);
+    let units = gyrobench::runlog::view::log_units(&args.log).unwrap_or_default();
+    let batch = gyrobench::runlog::view::is_batch(&units);
     if batch && args.unit.is_none() && coeffs.is_some() {
         return Err(Usage(
             "--coeffs is one unit's set: give the batch's unit it is for with --unit SERIAL".into(),
@@ -94,8 +94,8 @@ pub fn run(args: ReplayArgs) -> Result<Outcome> {
         }
     }
     if args.store {
-        let loc = crate::results::Location::resolve(args.db.as_deref(), None);
-        if let Some(mut s) = crate::results::Store::open(&loc)? {
+        let loc = gyrobench::results::Location::resolve(args.db.as_deref(), None);
+        if let Some(mut s) = gyrobench::results::Store::open(&loc)? {
             let done = s.index_log(&args.log)?;
             errln!("{done:?} in the results store {}", s.name());
         }
@@ -112,7 +112,7 @@ fn out_dir(args: &ReplayArgs) -> Result<PathBuf> {
         .parent()
         .map_or_else(|| PathBuf::from("replay"), |d| d.join("replay"));
     let out = args.out.clone().unwrap_or_else(|| own.clone());
-    if crate::session::rundir::is_run_dir(&out) {
+    if gyrobench::session::rundir::is_run_dir(&out) {
         return Err(Usage(format!(
             "{} is a run directory (it holds run.mcap or run.lock): replay writes its report \
              elsewhere; choose another --out",
@@ -120,9 +120,9 @@ fn out_dir(args: &ReplayArgs) -> Result<PathBuf> {
         ))
         .into());
     }
-    crate::fsutil::check_output(
+    gyrobench::fsutil::check_output(
         &out,
-        crate::fsutil::OutputRule {
+        gyrobench::fsutil::OutputRule {
             inputs: &[],
             force: args.force,
             own: Some(&own),
@@ -137,7 +137,7 @@ fn out_dir(args: &ReplayArgs) -> Result<PathBuf> {
 fn replay_one(
     args: &ReplayArgs,
     out: &std::path::Path,
-    coeffs: Option<&crate::coeffs::Chosen>,
+    coeffs: Option<&gyrobench::coeffs::Chosen>,
     serial: Option<&str>,
     batch: bool,
 ) -> Result<Outcome> {
@@ -172,20 +172,20 @@ fn replay_one(
     if r.meta.imported_from.is_some() {
         // No moves in an imported run's procedure: its records' poses are
         // the orientations the file gave.
-        report.positions = crate::report::Position::logged(&r.procedure, &r.poses);
+        report.positions = gyrobench::report::Position::logged(&r.procedure, &r.poses);
     }
     if let Some(c) = &coeffs {
         report.coefficients = c.used.clone();
     }
     if args.store {
-        let loc = crate::results::Location::resolve(args.db.as_deref(), None);
-        if let Some(mut s) = crate::results::Store::open(&loc)? {
+        let loc = gyrobench::results::Location::resolve(args.db.as_deref(), None);
+        if let Some(mut s) = gyrobench::results::Store::open(&loc)? {
             report.signatures = s.signatures(&format!("{}.{}", r.meta.run_id, r.meta.part))?;
         }
     }
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     let name = match serial.filter(|_| batch) {
-        Some(s) => crate::unit::report_name(s),
+        Some(s) => gyrobench::unit::report_name(s),
         None => "report".to_owned(),
     };
     for (name, bytes) in [
@@ -196,7 +196,7 @@ fn replay_one(
         ),
     ] {
         let path = out.join(name);
-        crate::fsutil::write_atomic(&path, bytes.as_bytes())
+        gyrobench::fsutil::write_atomic(&path, bytes.as_bytes())
             .with_context(|| format!("writing {}", path.display()))?;
     }
     outf!("{}", report.render_text())?;

@@ -7,8 +7,8 @@ use anyhow::{Context, Result};
 use clap::{Args, Subcommand};
 
 use super::{Outcome, Usage};
-use crate::results::query::{Filter, MeasurementRow, RunRow, Trend, UnitHistory};
-use crate::results::{Location, RunState, Store};
+use gyrobench::results::query::{Filter, MeasurementRow, RunRow, Trend, UnitHistory};
+use gyrobench::results::{Location, RunState, Store};
 
 #[derive(Debug, Args)]
 pub struct StoreArgs {
@@ -57,7 +57,7 @@ pub struct FilterArgs {
     /// inside gyrobench), simulated (devices that identified themselves
     /// as gyrobench's simulators, `sim serve`), hardware, or imported.
     #[arg(long, value_enum)]
-    bench_kind: Option<crate::results::facts::BenchKind>,
+    bench_kind: Option<gyrobench::results::facts::BenchKind>,
 }
 
 impl FilterArgs {
@@ -84,9 +84,9 @@ impl FilterArgs {
             latest_only,
             include_reference: self.include_reference
                 || outcome == Some(RunState::Reference)
-                || self.bench_kind == Some(crate::results::facts::BenchKind::Imported),
+                || self.bench_kind == Some(gyrobench::results::facts::BenchKind::Imported),
             include_simulated: self.include_simulated
-                || self.serial.as_deref() == Some(crate::unit::SIMULATED_SERIAL),
+                || self.serial.as_deref() == Some(gyrobench::unit::SIMULATED_SERIAL),
             coeffs_source: self.coeffs_source.clone(),
             bench_kind: self.bench_kind,
             limit,
@@ -156,7 +156,7 @@ pub enum ResultsCommand {
         /// Fewest values a capability index is shown for (default 25:
         /// below it an index says little; lower it to look anyway, with
         /// the index's interval and a warning).
-        #[arg(long, default_value_t = crate::results::query::MIN_CAPABILITY_N, value_name = "N")]
+        #[arg(long, default_value_t = gyrobench::results::query::MIN_CAPABILITY_N, value_name = "N")]
         min_values: usize,
         /// Also write a chart page (values against time, limits); not a
         /// run's log, nor inside a run directory, without --force.
@@ -304,7 +304,7 @@ pub fn run(args: ResultsArgs) -> Result<Outcome> {
             by,
             note,
         } => {
-            let role = crate::results::sign::Role::parse(&role)
+            let role = gyrobench::results::sign::Role::parse(&role)
                 .ok_or_else(|| Usage(format!("--role {role:?}: reviewed or approved")))?;
             let run = run_id_of_dir(&run).unwrap_or(run);
             match store.sign(&run, role, &by, &note) {
@@ -312,12 +312,12 @@ pub fn run(args: ResultsArgs) -> Result<Outcome> {
                     "{}: {} by {} at {} (log sha256 {}, figures {})",
                     s.run,
                     s.role,
-                    crate::view::printable(&s.by),
+                    gyrobench::view::printable(&s.by),
                     s.signed_utc,
                     s.log_sha256.get(..12).unwrap_or(&s.log_sha256),
                     s.figures_sha256.get(..12).unwrap_or(&s.figures_sha256)
                 ),
-                Err(crate::results::StoreError::Refused { why }) => {
+                Err(gyrobench::results::StoreError::Refused { why }) => {
                     return Err(Usage(why).into());
                 }
                 Err(e) => return Err(e.into()),
@@ -361,14 +361,14 @@ pub fn run(args: ResultsArgs) -> Result<Outcome> {
             check_outputs(junit.iter().chain(&csv), force)?;
             let rows = store.export_rows(&filter.filter(true, None)?)?;
             if let Some(path) = &junit {
-                let xml = crate::results::junit::junit(&rows).context("writing JUnit XML")?;
-                crate::fsutil::write_output(path, xml.as_bytes())
+                let xml = gyrobench::results::junit::junit(&rows).context("writing JUnit XML")?;
+                gyrobench::fsutil::write_output(path, xml.as_bytes())
                     .with_context(|| format!("writing {}", path.display()))?;
                 errln!("{} run(s) as JUnit XML in {}", rows.len(), path.display());
             }
             if let Some(path) = &csv {
-                let text = crate::results::junit::csv(&rows).context("writing CSV")?;
-                crate::fsutil::write_output(path, text.as_bytes())
+                let text = gyrobench::results::junit::csv(&rows).context("writing CSV")?;
+                gyrobench::fsutil::write_output(path, text.as_bytes())
                     .with_context(|| format!("writing {}", path.display()))?;
                 errln!("{} run(s) as CSV in {}", rows.len(), path.display());
             }
@@ -402,9 +402,9 @@ pub fn run(args: ResultsArgs) -> Result<Outcome> {
 /// (`fsutil::check_output`).
 fn check_outputs<'a>(paths: impl Iterator<Item = &'a PathBuf>, force: bool) -> Result<()> {
     for p in paths {
-        crate::fsutil::check_output(
+        gyrobench::fsutil::check_output(
             p,
-            crate::fsutil::OutputRule {
+            gyrobench::fsutil::OutputRule {
                 force,
                 ..Default::default()
             },
@@ -417,18 +417,19 @@ fn check_outputs<'a>(paths: impl Iterator<Item = &'a PathBuf>, force: bool) -> R
 fn write_trend_page(
     path: &std::path::Path,
     t: &Trend,
-    points: &[crate::results::query::TrendPoint],
+    points: &[gyrobench::results::query::TrendPoint],
 ) -> Result<()> {
     let page_dir = path
         .parent()
         .filter(|d| !d.as_os_str().is_empty())
         .unwrap_or(std::path::Path::new("."))
         .to_owned();
-    let link =
-        |p: &crate::results::query::TrendPoint| crate::results::page::report_link(p, &page_dir);
-    crate::fsutil::write_output(
+    let link = |p: &gyrobench::results::query::TrendPoint| {
+        gyrobench::results::page::report_link(p, &page_dir)
+    };
+    gyrobench::fsutil::write_output(
         path,
-        crate::results::page::trend_page(t, points, &link).as_bytes(),
+        gyrobench::results::page::trend_page(t, points, &link).as_bytes(),
     )
     .with_context(|| format!("writing {}", path.display()))?;
     errln!("chart page in {}", path.display());
@@ -479,7 +480,7 @@ pub fn render_list(rows: &[RunRow]) -> String {
     );
     // Stored text is shown, never obeyed: a control character in it is
     // written as an escape, not sent to the terminal.
-    let p = crate::view::printable;
+    let p = gyrobench::view::printable;
     for r in rows {
         s.push_str(&format!(
             "{:<25} {:<36} {:<8} {:<14} {:<14} {:<12} {:<8}\n",
@@ -531,7 +532,7 @@ fn run_id_of_dir(arg: &str) -> Option<String> {
                 .is_some_and(|n| n.starts_with("report") && n.ends_with(".json"))
         })
         .min()?;
-    let bytes = crate::config::read_at_most(&report, 64 << 20).ok()?;
+    let bytes = gyrobench::config::read_at_most(&report, 64 << 20).ok()?;
     let v: serde_json::Value = serde_json::from_slice(&bytes).ok()?;
     v["run_id"]
         .as_str()
@@ -540,8 +541,8 @@ fn run_id_of_dir(arg: &str) -> Option<String> {
 }
 
 /// A run's signatures for the terminal (or that it has none).
-fn render_signatures(signed: &[crate::results::sign::Signature]) -> String {
-    let p = crate::view::printable;
+fn render_signatures(signed: &[gyrobench::results::sign::Signature]) -> String {
+    let p = gyrobench::view::printable;
     if signed.is_empty() {
         return "signatures: none (results sign RUN --role reviewed|approved --by NAME)\n".into();
     }
@@ -570,7 +571,7 @@ pub fn render_run(
     ms: &[MeasurementRow],
     parts: &[RunRow],
 ) -> String {
-    let p = crate::view::printable;
+    let p = gyrobench::view::printable;
     let mut s = format!(
         "{}: {} on {} {} (run {}, part {}{})\n",
         run.outcome.as_str().to_uppercase(),
@@ -616,7 +617,7 @@ pub fn render_run(
 
 /// A unit's history as text: one block per run, and the coefficients.
 pub fn render_unit(h: &UnitHistory) -> String {
-    let p = crate::view::printable;
+    let p = gyrobench::view::printable;
     let mut s = format!("unit {}: {} run(s)\n", p(&h.serial), h.runs.len());
     for r in &h.runs {
         s.push_str(&format!(
@@ -732,7 +733,7 @@ mod tests {
             bench: "embedded".into(),
             station: "pc".into(),
             operator: "J.\u{7}Doe".into(),
-            outcome: crate::results::RunState::Pass,
+            outcome: gyrobench::results::RunState::Pass,
             part: 1,
             latest: true,
             device_time_s: None,

@@ -9,16 +9,16 @@ use clap::Args;
 
 use super::check::load_bench;
 use super::{Outcome, Usage};
-use crate::clock::Pacing;
-use crate::coeffs::{Chosen, CoeffsSource, SetIdentity, SetStatus};
-use crate::procedure::Procedure;
-use crate::runlog::live::{Live as LiveStream, LiveError};
-use crate::sequencer::embedded::Fault;
-use crate::sequencer::{self, Event, Interrupt, Observer, Operator};
-use crate::session::rundir::RunDirError;
-use crate::session::{self, Place, Plan, SessionError};
-use crate::twin::TwinConfig;
-use crate::unit::{SIMULATED_SERIAL, check_operator, check_serial};
+use gyrobench::clock::Pacing;
+use gyrobench::coeffs::{Chosen, CoeffsSource, SetIdentity, SetStatus};
+use gyrobench::procedure::Procedure;
+use gyrobench::runlog::live::{Live as LiveStream, LiveError};
+use gyrobench::sequencer::embedded::Fault;
+use gyrobench::sequencer::{self, Event, Interrupt, Observer, Operator};
+use gyrobench::session::rundir::RunDirError;
+use gyrobench::session::{self, Place, Plan, SessionError};
+use gyrobench::twin::TwinConfig;
+use gyrobench::unit::{SIMULATED_SERIAL, check_operator, check_serial};
 
 #[derive(Debug, Args)]
 #[command(after_help = after_help!(
@@ -118,7 +118,7 @@ struct Live {
     /// (`--unattended`).
     unattended: bool,
     /// The first unit's drift: the last minute of its record.
-    drift: crate::view::live::DriftWindow,
+    drift: gyrobench::view::live::DriftWindow,
 }
 
 impl Live {
@@ -133,7 +133,7 @@ impl Live {
             chamber: String::new(),
             rate: String::new(),
             unattended,
-            drift: crate::view::live::DriftWindow::default(),
+            drift: gyrobench::view::live::DriftWindow::default(),
         }
     }
 
@@ -200,8 +200,8 @@ impl Observer for Live {
 /// rate over the last minute of its record, the window named), never one
 /// 1 s sample, then its temperatures.
 fn render_unit(
-    iv: &crate::analysis::series::Interval,
-    drift: Option<&crate::view::live::Drift>,
+    iv: &gyrobench::analysis::series::Interval,
+    drift: Option<&gyrobench::view::live::Drift>,
 ) -> String {
     let drift = drift.map_or_else(
         || "drift - (no record yet)".to_owned(),
@@ -257,9 +257,9 @@ fn check_prompts(plan: &Plan, unattended: bool) -> Result<()> {
     let p = plan.procedure();
     // On a bench without a supply the operator switches the unit, and the
     // moment they confirm is its power-on: never confirmed beforehand.
-    let by_hand = |s: &&crate::procedure::Step| {
+    let by_hand = |s: &&gyrobench::procedure::Step| {
         plan.bench().devices.supply.is_none()
-            && matches!(s.kind, crate::procedure::StepKind::Power { .. })
+            && matches!(s.kind, gyrobench::procedure::StepKind::Power { .. })
     };
     if unattended
         && !plan.bench().is_embedded()
@@ -283,12 +283,10 @@ fn check_prompts(plan: &Plan, unattended: bool) -> Result<()> {
     if plan.bench().is_embedded() || unattended || std::io::stdin().is_terminal() {
         return Ok(());
     }
-    let first = p
-        .setup
-        .iter()
-        .chain(&p.main)
-        .chain(&p.cleanup)
-        .find(|s| matches!(s.kind, crate::procedure::StepKind::Prompt { .. }) || by_hand(s));
+    let first =
+        p.setup.iter().chain(&p.main).chain(&p.cleanup).find(|s| {
+            matches!(s.kind, gyrobench::procedure::StepKind::Prompt { .. }) || by_hand(s)
+        });
     match first {
         Some(s) => Err(Usage(format!(
             "{} asks the operator at line {} ({}), and {NO_TERMINAL}",
@@ -330,7 +328,7 @@ pub(super) fn pacing(speed: &str) -> Result<Pacing> {
 /// (the run is that twin's world); with one, the two must agree, since the
 /// bench file is what the log and the analysis take as the truth.
 fn place_twin(
-    bench_cfg: &mut crate::bench::BenchConfig,
+    bench_cfg: &mut gyrobench::bench::BenchConfig,
     bench_given: bool,
     twin: &TwinConfig,
     twin_path: &std::path::Path,
@@ -411,7 +409,7 @@ fn fresh(args: &RunArgs, procedure_path: &std::path::Path, pacing: Pacing) -> Re
         .iter()
         .map(|s| parse_inject(s))
         .collect::<Result<_>>()?;
-    let store = crate::results::Location::resolve(
+    let store = gyrobench::results::Location::resolve(
         args.db.as_deref(),
         bench_cfg.results.as_ref().and_then(|r| r.db.as_deref()),
     );
@@ -455,7 +453,7 @@ fn fresh(args: &RunArgs, procedure_path: &std::path::Path, pacing: Pacing) -> Re
 /// stderr.
 fn batch_units(
     duts: &[String],
-    bench: &crate::bench::BenchConfig,
+    bench: &gyrobench::bench::BenchConfig,
     bench_path: Option<&std::path::Path>,
 ) -> Result<Vec<session::BatchUnit>> {
     let names = bench.slot_names();
@@ -514,7 +512,7 @@ fn serial(dut: Option<&str>, embedded: bool) -> Result<String> {
 fn choose_coeffs(
     choice: &str,
     override_reason: Option<&str>,
-    store: &crate::results::Location,
+    store: &gyrobench::results::Location,
     dut_type: &str,
     serial: &str,
 ) -> Result<Chosen> {
@@ -539,7 +537,7 @@ fn choose_coeffs(
             ))
             .into());
         }
-        (Err(e @ crate::coeffs::SetMismatch::NoModel4 { .. }), _) => {
+        (Err(e @ gyrobench::coeffs::SetMismatch::NoModel4 { .. }), _) => {
             return Err(Usage(e.to_string()).into());
         }
         (Err(e), None) => return Err(Usage(e.to_string()).into()),
@@ -573,9 +571,9 @@ fn choose_coeffs(
 /// The set of `chosen` with its identity as the results store `store`
 /// knows it. A store that is not given or cannot be reached never stops
 /// the run: the set is recorded as not checked, saying why.
-fn identified(chosen: Chosen, store: &crate::results::Location) -> Chosen {
+fn identified(chosen: Chosen, store: &gyrobench::results::Location) -> Chosen {
     let sha = chosen.used.sha256.clone().unwrap_or_default();
-    let identity = match crate::results::Store::open(store) {
+    let identity = match gyrobench::results::Store::open(store) {
         Ok(Some(mut s)) => match s.identify_set(&chosen.set, &sha) {
             Ok(id) => id,
             Err(e) => SetIdentity::unchecked(&chosen.set, Some(s.name()), &e.to_string()),
@@ -592,8 +590,12 @@ fn identified(chosen: Chosen, store: &crate::results::Location) -> Chosen {
 
 /// The unit's newest coefficient set in the results store, its text
 /// checked against what the store recorded of it.
-fn latest_set(store: &crate::results::Location, dut_type: &str, serial: &str) -> Result<Chosen> {
-    let Some(mut s) = crate::results::Store::open(store)
+fn latest_set(
+    store: &gyrobench::results::Location,
+    dut_type: &str,
+    serial: &str,
+) -> Result<Chosen> {
+    let Some(mut s) = gyrobench::results::Store::open(store)
         .context("opening the results store for --coeffs latest")?
     else {
         return Err(Usage(
@@ -609,7 +611,7 @@ fn latest_set(store: &crate::results::Location, dut_type: &str, serial: &str) ->
         ))
         .into());
     };
-    let src = crate::config::Source::from_text(
+    let src = gyrobench::config::Source::from_text(
         &format!("coefficient set {version} of {serial} in {}", s.name()),
         &text,
     );
@@ -681,7 +683,7 @@ pub fn run(args: RunArgs) -> Result<Outcome> {
                 | RunDirError::Suspicious { .. },
             )
             | SessionError::CalibrationOverdue { .. }
-            | SessionError::BenchLock(crate::session::benchlock::BenchLockError::InUse {
+            | SessionError::BenchLock(gyrobench::session::benchlock::BenchLockError::InUse {
                 ..
             })),
         ) => {
@@ -784,7 +786,7 @@ fn watch_signals(interrupt: Arc<Interrupt>, exit_code: Arc<AtomicU8>) -> Result<
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::analysis::series::Interval;
+    use gyrobench::analysis::series::Interval;
 
     /// The progress line shows the record's mean over its last minute,
     /// named, and neither the 1 s sample nor a slew's second.

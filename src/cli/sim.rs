@@ -6,8 +6,8 @@ use anyhow::{Context, Result};
 use clap::{Args, Subcommand};
 
 use super::{Outcome, Usage};
-use crate::sim::Fault;
-use crate::sim::serve::{Serve, can_play, schedule_faults, start};
+use gyrobench::sim::Fault;
+use gyrobench::sim::serve::{Serve, can_play, schedule_faults, start};
 
 #[derive(Debug, Subcommand)]
 pub enum SimCommand {
@@ -69,7 +69,11 @@ pub fn run(cmd: SimCommand) -> Result<Outcome> {
             if !(positive(args.rate_hz) && positive(args.seconds)) {
                 return Err(Usage("--rate-hz and --seconds must be positive".into()).into());
             }
-            let r = runtime()?.block_on(link_bench(&args))?;
+            let r = runtime()?.block_on(gyrobench::sim::link_bench::run(
+                args.rate_hz,
+                args.baud,
+                args.seconds,
+            ))?;
             outf!("{}", render_link_bench(&args, &r))?;
             Ok(Outcome::Success)
         }
@@ -130,59 +134,8 @@ async fn wait_for_stop([mut int, mut term]: [tokio::signal::unix::Signal; 2]) {
     }
 }
 
-/// What the link benchmark measured.
-#[derive(Debug)]
-pub struct LinkBenchResult {
-    /// Wall time measured, s.
-    pub elapsed_s: f64,
-    /// Frames decoded.
-    pub frames: u64,
-    /// Link figures from the decoder.
-    pub stats: crate::protocol::frame::LinkStats,
-}
-
-async fn link_bench(a: &LinkBenchArgs) -> Result<LinkBenchResult> {
-    use std::sync::Arc;
-    use std::time::Duration;
-
-    use crate::clock::{Clock, WallClock};
-    use crate::driver::gyro::GyroReader;
-    use crate::protocol::frame::FrameLayout;
-    use crate::sim::{SharedBench, SimBench, gyro::serve_gyro};
-    use crate::transport::{open_serial, pty_pair};
-    use crate::twin::TwinConfig;
-
-    let mut twin = TwinConfig::default_rl16();
-    twin.gyro.frame_rate_hz = a.rate_hz;
-    let clock: Arc<dyn Clock> = Arc::new(WallClock::start());
-    let bench = SharedBench::new(
-        SimBench::new(twin, 1, FrameLayout::default()),
-        clock.clone(),
-    );
-    let pty = pty_pair().context("creating a pty pair")?;
-    let port = open_serial(&pty.path, a.baud, false)
-        .with_context(|| format!("opening {} at {} baud", pty.path, a.baud))?;
-    let mut reader = GyroReader::new("gyro", port, FrameLayout::default(), Duration::from_secs(2));
-    let _ticker = bench.spawn_ticker(Duration::from_millis(5));
-    tokio::spawn(serve_gyro(pty.master, bench.clone()));
-    let start = clock.now_s();
-    let mut frames = 0u64;
-    while clock.now_s() - start < a.seconds {
-        if reader.next_frame().await?.is_none() {
-            anyhow::bail!("the pty closed during the benchmark");
-        }
-        frames += 1;
-    }
-    drop(pty.slave);
-    Ok(LinkBenchResult {
-        elapsed_s: clock.now_s() - start,
-        frames,
-        stats: reader.stats(),
-    })
-}
-
 /// The benchmark's figures as text.
-pub fn render_link_bench(a: &LinkBenchArgs, r: &LinkBenchResult) -> String {
+pub fn render_link_bench(a: &LinkBenchArgs, r: &gyrobench::sim::link_bench::LinkBench) -> String {
     let s = &r.stats;
     format!(
         "gyro link over a pty at {baud} baud, {rate} Hz frames, {secs:.0} s\n\

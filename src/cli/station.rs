@@ -9,9 +9,9 @@ use anyhow::{Context, Result};
 use clap::Args;
 
 use super::{Outcome, Usage};
-use crate::runlog::live::{Live, LiveError};
 use crate::station::listener::{Admission, Guarded};
 use crate::station::{Config, Station, new_token, router};
+use gyrobench::runlog::live::{Live, LiveError};
 
 #[derive(Debug, Args)]
 #[command(after_help = after_help!(
@@ -72,7 +72,7 @@ pub fn run(args: StationArgs) -> Result<Outcome> {
         Some(t) => t,
         None => new_token(),
     };
-    let store = crate::results::Location::resolve(
+    let store = gyrobench::results::Location::resolve(
         args.db.as_deref(),
         bench.results.as_ref().and_then(|r| r.db.as_deref()),
     );

@@ -6,9 +6,9 @@ use anyhow::{Context, Result};
 use clap::{Args, Subcommand};
 
 use super::{Outcome, Usage};
-use crate::clock::time_it;
-use crate::study::{StudyReport, interchange_csv, run_study};
-use crate::twin::{Twin, TwinConfig};
+use gyrobench::clock::time_it;
+use gyrobench::study::{StudyReport, interchange_csv, run_study};
+use gyrobench::twin::{Twin, TwinConfig};
 
 #[derive(Debug, Subcommand)]
 pub enum TwinCommand {
@@ -67,9 +67,9 @@ pub fn run(cmd: TwinCommand) -> Result<Outcome> {
             if let Some(path) = &args.csv {
                 let inputs: Vec<&std::path::Path> =
                     args.config.iter().map(PathBuf::as_path).collect();
-                crate::fsutil::check_output(
+                gyrobench::fsutil::check_output(
                     path,
-                    crate::fsutil::OutputRule {
+                    gyrobench::fsutil::OutputRule {
                         inputs: &inputs,
                         force: args.force,
                         own: None,
@@ -85,7 +85,7 @@ pub fn run(cmd: TwinCommand) -> Result<Outcome> {
             let (report, series) = report.context("running the study on the twin")?;
             if let Some(path) = &args.csv {
                 let text = interchange_csv(&series);
-                crate::fsutil::write_output(path, text.as_bytes())
+                gyrobench::fsutil::write_output(path, text.as_bytes())
                     .with_context(|| format!("writing {}", path.display()))?;
                 errln!("wrote {}", path.display());
             }
@@ -120,7 +120,7 @@ pub fn run(cmd: TwinCommand) -> Result<Outcome> {
             Ok(Outcome::Success)
         }
         TwinCommand::DefaultConfig => {
-            outf!("{}", crate::twin::config::DEFAULT_TWIN_TOML)?;
+            outf!("{}", gyrobench::twin::config::DEFAULT_TWIN_TOML)?;
             Ok(Outcome::Success)
         }
     }

@@ -12,6 +12,7 @@ pub mod espec;
 pub mod faults;
 pub mod gyro;
 mod lines;
+pub mod link_bench;
 pub mod serve;
 pub mod supply;
 pub mod watlow;

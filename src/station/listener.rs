@@ -178,11 +178,6 @@ impl Closer {
             s.waker.wake();
         }
     }
-
-    /// Connections open now (tests, and what the stop says).
-    pub fn open(&self) -> usize {
-        self.0.conns().len()
-    }
 }
 
 impl axum::serve::Listener for Guarded {

@@ -26,12 +26,12 @@ use axum::http::StatusCode;
 use axum::response::{IntoResponse, Response};
 use serde::{Deserialize, Serialize};
 
-use crate::bench::BenchConfig;
-use crate::procedure::Procedure;
-use crate::procedure::estimate::min_total_s;
-use crate::sequencer::Outcome;
-use crate::sequencer::interrupt::Interrupt;
-use crate::session::{self, Place, Plan};
+use gyrobench::bench::BenchConfig;
+use gyrobench::procedure::Procedure;
+use gyrobench::procedure::estimate::min_total_s;
+use gyrobench::sequencer::Outcome;
+use gyrobench::sequencer::interrupt::Interrupt;
+use gyrobench::session::{self, Place, Plan};
 use state::{Reporter, RunPhase, RunView, Shared, StepView};
 
 /// How the station runs its benches.
@@ -46,17 +46,17 @@ pub struct Config {
     /// Where run directories go.
     pub runs: PathBuf,
     /// The results store.
-    pub store: crate::results::Location,
+    pub store: gyrobench::results::Location,
     /// `max` or a factor (the embedded bench).
     pub speed: String,
     /// Pacing of the embedded bench.
-    pub pacing: crate::clock::Pacing,
+    pub pacing: gyrobench::clock::Pacing,
     /// Token every state change carries.
     pub token: String,
     /// The store as given (`--db`), for resumed runs.
     pub db: Option<String>,
     /// The live Foxglove stream every run publishes on, if any.
-    pub live: Option<Arc<crate::runlog::live::Live>>,
+    pub live: Option<Arc<gyrobench::runlog::live::Live>>,
 }
 
 /// The station: its configuration, the board and the run going on.
@@ -209,11 +209,6 @@ impl Station {
         })
     }
 
-    /// The board (tests and the event streams read it).
-    pub fn shared(&self) -> &Arc<Shared> {
-        &self.shared
-    }
-
     /// The procedure files of the directory, by name.
     fn procedure_files(&self) -> Vec<String> {
         let mut files: Vec<String> = std::fs::read_dir(&self.cfg.procedures)
@@ -263,7 +258,7 @@ impl Station {
                     prompts: proc_
                         .steps()
                         .filter_map(|s| match &s.kind {
-                            crate::procedure::StepKind::Prompt { text } => Some(text.clone()),
+                            gyrobench::procedure::StepKind::Prompt { text } => Some(text.clone()),
                             _ => None,
                         })
                         .collect(),
@@ -302,14 +297,14 @@ impl Station {
         let serial = batch
             .first()
             .map_or(req.serial.trim(), |u| u.serial.as_str());
-        crate::unit::check_serial(serial).map_err(|e| Refused::Bad(e.to_string()))?;
-        if serial == crate::unit::SIMULATED_SERIAL && !self.cfg.bench.is_embedded() {
+        gyrobench::unit::check_serial(serial).map_err(|e| Refused::Bad(e.to_string()))?;
+        if serial == gyrobench::unit::SIMULATED_SERIAL && !self.cfg.bench.is_embedded() {
             return Err(Refused::Bad(format!(
                 "{serial} names no unit; scan the serial of the unit on this bench"
             )));
         }
         let operator = req.operator.trim();
-        crate::unit::check_operator(operator)
+        gyrobench::unit::check_operator(operator)
             .map_err(|e| Refused::Bad(format!("operator: {e}")))?;
         // Only a file the directory lists (never a path given by the page).
         let file = self
@@ -328,7 +323,7 @@ impl Station {
         session::check_calibration(
             &self.cfg.bench,
             &self.cfg.bench_label,
-            crate::clock::utc_now().date_naive(),
+            gyrobench::clock::utc_now().date_naive(),
         )
         .map_err(|e| Refused::Bad(e.to_string()))?;
         let path = self.cfg.procedures.join(&offer.file);

@@ -171,15 +171,16 @@ async fn events(State(s): St) -> Response {
 #[derive(Debug, Serialize)]
 struct History {
     #[serde(flatten)]
-    unit: crate::results::query::UnitHistory,
-    signatures: std::collections::BTreeMap<String, Vec<crate::results::sign::Signature>>,
+    unit: gyrobench::results::query::UnitHistory,
+    signatures: std::collections::BTreeMap<String, Vec<gyrobench::results::sign::Signature>>,
 }
 
 async fn history(State(s): St, Query(q): Query<HistoryQuery>) -> Response {
     let store = s.cfg.store.clone();
     let serial = q.serial;
     let found = tokio::task::spawn_blocking(move || -> Result<serde_json::Value, String> {
-        let Some(mut st) = crate::results::Store::open(&store).map_err(|e| e.to_string())? else {
+        let Some(mut st) = gyrobench::results::Store::open(&store).map_err(|e| e.to_string())?
+        else {
             return Ok(serde_json::json!({
                 "runs": [],
                 "signatures": {},
@@ -221,7 +222,7 @@ async fn stored_report(State(s): St, Query(q): Query<ReportQuery>) -> Response {
     let runs = s.cfg.runs.clone();
     let found = tokio::task::spawn_blocking(move || -> Result<Vec<u8>, Refused> {
         let not_found = |why: String| Refused::NotFound(why);
-        let mut st = crate::results::Store::open(&store)
+        let mut st = gyrobench::results::Store::open(&store)
             .map_err(|e| not_found(e.to_string()))?
             .ok_or_else(|| not_found("no results store (--db none)".into()))?;
         let detail = st.show(&q.run).map_err(|e| not_found(e.to_string()))?;
@@ -234,7 +235,7 @@ async fn stored_report(State(s): St, Query(q): Query<ReportQuery>) -> Response {
         let page = q
             .unit
             .as_deref()
-            .map(|u| log.with_file_name(format!("{}.html", crate::unit::report_name(u))))
+            .map(|u| log.with_file_name(format!("{}.html", gyrobench::unit::report_name(u))))
             .filter(|p| p.is_file())
             .unwrap_or_else(|| log.with_file_name("report.html"));
         let inside = match (
@@ -314,7 +315,9 @@ async fn run_file(State(s): St, UrlPath((number, file)): UrlPath<(u64, String)>)
     let unit_report = |ext: &str| {
         file.strip_prefix("report-")
             .and_then(|f| f.strip_suffix(ext))
-            .is_some_and(|serial| !serial.is_empty() && crate::unit::file_safe(serial) == serial)
+            .is_some_and(|serial| {
+                !serial.is_empty() && gyrobench::unit::file_safe(serial) == serial
+            })
     };
     let (name, kind) = match file.as_str() {
         "report.html" => ("report.html", "text/html; charset=utf-8"),

@@ -6,8 +6,8 @@
 use serde::Deserialize;
 
 use super::{Refused, Station};
-use crate::results::StoreError;
-use crate::results::sign::{Role, Signature};
+use gyrobench::results::StoreError;
+use gyrobench::results::sign::{Role, Signature};
 
 /// A signature the page asks for. A field left out is empty, and refused
 /// with the reason the store gives for it.
@@ -32,7 +32,7 @@ impl Station {
     /// empty or too long, a run not ended, ...: `400`, in the store's
     /// words). A store that cannot be opened is `503`.
     pub fn sign(&self, req: &SignRequest) -> Result<Signature, Refused> {
-        let mut store = crate::results::Store::open(&self.cfg.store)
+        let mut store = gyrobench::results::Store::open(&self.cfg.store)
             .map_err(|e| Refused::Store(e.to_string()))?
             .ok_or(Refused::NoStore)?;
         let role = Role::parse(req.role.trim())

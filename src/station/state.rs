@@ -6,11 +6,11 @@ use std::sync::{Arc, Condvar, Mutex, MutexGuard, PoisonError};
 
 use serde::Serialize;
 
-use crate::analysis::series::Interval;
-use crate::procedure::Step;
-use crate::sequencer::measure::Measurement;
-use crate::sequencer::{BenchState, Event, Observer, Operator};
-use crate::view::live::{Drift, DriftWindow};
+use gyrobench::analysis::series::Interval;
+use gyrobench::procedure::Step;
+use gyrobench::sequencer::measure::Measurement;
+use gyrobench::sequencer::{BenchState, Event, Observer, Operator};
+use gyrobench::view::live::{Drift, DriftWindow};
 
 /// One step of the plan.
 #[derive(Debug, Clone, Serialize)]
@@ -35,7 +35,7 @@ pub struct MeasurementView {
     /// `low..high`.
     pub limits: String,
     /// The verdict (serialised `pass`, `fail` or `error`).
-    pub outcome: crate::sequencer::measure::MeasureOutcome,
+    pub outcome: gyrobench::sequencer::measure::MeasureOutcome,
 }
 
 /// A question the run waits on.
@@ -94,7 +94,7 @@ pub struct RunView {
     pub abort_requested: bool,
     /// How it ended, once finished (serialised `pass`, `fail`, `error`,
     /// `aborted`, as in the report).
-    pub outcome: Option<crate::sequencer::Outcome>,
+    pub outcome: Option<gyrobench::sequencer::Outcome>,
     /// The report's summary lines once finished.
     pub summary: Option<String>,
     /// How the bench was left, once finished.
@@ -102,7 +102,7 @@ pub struct RunView {
     /// Why the run could not start or finish, if so.
     pub error: Option<String>,
     /// The gyro link's figures so far (each second of device time).
-    pub link: Option<crate::protocol::frame::LinkStats>,
+    pub link: Option<gyrobench::protocol::frame::LinkStats>,
     /// The unit's supply output as last read (benches with a supply).
     pub supply: Option<SupplyView>,
     /// A batch's units, one tile each (empty: one unit, `serial`).
@@ -153,7 +153,7 @@ pub struct UnitView {
     /// Its case temperature, degC.
     pub tcase_c: Option<f64>,
     /// Its verdict once the run ended (as in its report).
-    pub outcome: Option<crate::sequencer::Outcome>,
+    pub outcome: Option<gyrobench::sequencer::Outcome>,
     /// Its measurements outside their limits so far.
     pub failed: usize,
     /// Its report's file in the run directory, once written
@@ -298,7 +298,7 @@ pub struct Reporter {
     /// Where it goes.
     pub shared: Arc<Shared>,
     /// Asked to stop (a prompt stops waiting then).
-    pub interrupt: Arc<crate::sequencer::interrupt::Interrupt>,
+    pub interrupt: Arc<gyrobench::sequencer::interrupt::Interrupt>,
     /// Wall clock of the start.
     pub started: std::time::Instant,
     /// Prompts asked so far.
@@ -315,7 +315,7 @@ impl Reporter {
     /// `interrupt` is asked.
     pub fn new(
         shared: Arc<Shared>,
-        interrupt: Arc<crate::sequencer::interrupt::Interrupt>,
+        interrupt: Arc<gyrobench::sequencer::interrupt::Interrupt>,
     ) -> Self {
         Self {
             shared,
@@ -479,12 +479,12 @@ impl Reporter {
             }
             if let Some(s) = sample {
                 b.samples.push(s);
-                b.sample_unix_ms = crate::clock::utc_now().timestamp_millis();
+                b.sample_unix_ms = gyrobench::clock::utc_now().timestamp_millis();
             }
         });
     }
 
-    fn link(&mut self, stats: &crate::protocol::frame::LinkStats) {
+    fn link(&mut self, stats: &gyrobench::protocol::frame::LinkStats) {
         self.shared.update(|b| {
             if let Some(run) = &mut b.run {
                 run.link = Some(*stats);
@@ -501,7 +501,7 @@ impl Reporter {
             limits: m.limits_text(),
             outcome: m.outcome,
         };
-        let failed = m.outcome != crate::sequencer::measure::MeasureOutcome::Pass;
+        let failed = m.outcome != gyrobench::sequencer::measure::MeasureOutcome::Pass;
         self.shared.update(|b| {
             if let Some(run) = &mut b.run {
                 run.measurements.push(view);
@@ -513,7 +513,7 @@ impl Reporter {
     }
 
     fn slot_measured(&mut self, slot: usize, m: &Measurement) {
-        let failed = m.outcome != crate::sequencer::measure::MeasureOutcome::Pass;
+        let failed = m.outcome != gyrobench::sequencer::measure::MeasureOutcome::Pass;
         self.shared.update(|b| {
             if let Some(u) = b.run.as_mut().and_then(|r| r.units.get_mut(slot)) {
                 u.failed += usize::from(failed);
@@ -528,7 +528,7 @@ impl Operator for Reporter {
         true
     }
 
-    fn prompt(&mut self, text: &str) -> Result<crate::sequencer::Confirmed, String> {
+    fn prompt(&mut self, text: &str) -> Result<gyrobench::sequencer::Confirmed, String> {
         self.prompts += 1;
         let id = self.prompts;
         let text = text.to_owned();
@@ -555,7 +555,7 @@ impl Operator for Reporter {
             }
         });
         if answered {
-            Ok(crate::sequencer::Confirmed::Now)
+            Ok(gyrobench::sequencer::Confirmed::Now)
         } else {
             Err("the run was aborted at the prompt".into())
         }
@@ -565,7 +565,7 @@ impl Operator for Reporter {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::sequencer::Outcome;
+    use gyrobench::sequencer::Outcome;
 
     /// The page reads `phase` and `outcome` by these words (and a resume
     /// is offered on `aborted` or `error`): the enums keep them.
