@@ -66,7 +66,7 @@ pub fn load_unit(path: &Path, unit: Option<&str>) -> Result<RunData, ReplayError
         message,
     };
     let mut reading = Reading::default();
-    let read = runlog::view::read_unit(path, unit, |item| reading.take(item))?;
+    let read = runlog::view::read_unit(path, unit, runlog::refusing(|item| reading.take(item)))?;
     let Reading {
         site,
         geometry,

@@ -339,7 +339,7 @@ impl Records {
                 }
                 _ => {}
             }
-            Ok(())
+            std::ops::ControlFlow::Continue(())
         })
         .map_err(|e| e.to_string())?;
         if let Some(e) = meta_error {

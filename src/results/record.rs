@@ -30,9 +30,9 @@ pub fn part_key_of_log(log: &Path) -> Option<String> {
             && name == crate::runlog::schema::RUN_META
         {
             meta = RunMeta::from_entries(entries).ok();
-            return Err("enough".into());
+            return std::ops::ControlFlow::Break(crate::runlog::Stop::Enough);
         }
-        Ok(())
+        std::ops::ControlFlow::Continue(())
     });
     part_key(&meta?, log).ok()
 }

@@ -339,9 +339,9 @@ pub fn read_run_meta(path: &std::path::Path) -> Result<RunMeta, String> {
             && name == crate::runlog::schema::RUN_META
         {
             meta = Some(RunMeta::from_entries(entries).map_err(|e| e.to_string()));
-            return Err("enough".into());
+            return std::ops::ControlFlow::Break(crate::runlog::Stop::Enough);
         }
-        Ok(())
+        std::ops::ControlFlow::Continue(())
     });
     match (meta, read) {
         (Some(m), _) => m,

@@ -24,4 +24,4 @@ pub mod replay;
 pub mod view;
 pub mod writer;
 
-pub use gyrobench_log::{Item, ReadError, ReadSummary, read, reader, schema};
+pub use gyrobench_log::{Item, ReadError, ReadSummary, Stop, read, reader, refusing, schema};

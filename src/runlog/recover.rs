@@ -121,53 +121,56 @@ pub fn recover(input: &Path, out: &Path) -> Result<Recovered, RecoverError> {
     // Channel id in the input -> channel id in the output.
     let mut ids: HashMap<u16, u16> = HashMap::new();
     let mut failure: Option<mcap::McapError> = None;
-    let read = reader::read(input, |item| {
-        let res = match item {
-            Item::Meta { name, entries } => {
-                if name == RUN_META {
-                    saw_run = true;
-                    start_ns = start_ns.or_else(|| part_start_ns(entries));
+    let read = reader::read(
+        input,
+        reader::refusing(|item| {
+            let res = match item {
+                Item::Meta { name, entries } => {
+                    if name == RUN_META {
+                        saw_run = true;
+                        start_ns = start_ns.or_else(|| part_start_ns(entries));
+                    }
+                    w.write_metadata(&mcap::records::Metadata {
+                        name: name.to_owned(),
+                        metadata: entries.clone(),
+                    })
                 }
-                w.write_metadata(&mcap::records::Metadata {
-                    name: name.to_owned(),
-                    metadata: entries.clone(),
-                })
-            }
-            Item::Attachment {
-                name,
-                media_type,
-                log_time_ns,
-                data,
-            } => w.attach(&mcap::Attachment {
-                log_time: log_time_ns,
-                create_time: log_time_ns,
-                name: name.to_owned(),
-                media_type: media_type.to_owned(),
-                data: std::borrow::Cow::Borrowed(data),
-            }),
-            Item::Message {
-                topic,
-                channel,
-                sequence,
-                log_time_ns,
-                publish_time_ns,
-                data,
-            } => {
-                let header = mcap::records::MessageHeader {
-                    channel_id: 0,
-                    sequence,
+                Item::Attachment {
+                    name,
+                    media_type,
+                    log_time_ns,
+                    data,
+                } => w.attach(&mcap::Attachment {
                     log_time: log_time_ns,
-                    publish_time: publish_time_ns,
-                };
-                copy_message(&mut w, &mut ids, &mut r, topic, channel, header, data)
-            }
-        };
-        res.map_err(|e| {
-            let text = e.to_string();
-            failure = Some(e);
-            text
-        })
-    })?;
+                    create_time: log_time_ns,
+                    name: name.to_owned(),
+                    media_type: media_type.to_owned(),
+                    data: std::borrow::Cow::Borrowed(data),
+                }),
+                Item::Message {
+                    topic,
+                    channel,
+                    sequence,
+                    log_time_ns,
+                    publish_time_ns,
+                    data,
+                } => {
+                    let header = mcap::records::MessageHeader {
+                        channel_id: 0,
+                        sequence,
+                        log_time: log_time_ns,
+                        publish_time: publish_time_ns,
+                    };
+                    copy_message(&mut w, &mut ids, &mut r, topic, channel, header, data)
+                }
+            };
+            res.map_err(|e| {
+                let text = e.to_string();
+                failure = Some(e);
+                text
+            })
+        }),
+    )?;
     if let Some(e) = failure {
         return Err(mcap_err(e));
     }

@@ -716,18 +716,22 @@ pub fn replay_unit(
     unit: Option<&str>,
 ) -> Result<Replayed, ReplayError> {
     let mut st = State::new(path, coeffs, unit);
-    let read = super::view::read_unit(path, unit, |item| match item {
-        Item::Meta { name, entries } => st.meta(name, entries),
-        Item::Message { topic, data, .. } => {
-            if st.procedure.is_none() && topic != topics::EVENTS {
-                return Err(
-                    st.log_err("messages before the run metadata; is this a gyrobench log?")
-                );
+    let read = super::view::read_unit(
+        path,
+        unit,
+        super::refusing(|item| match item {
+            Item::Meta { name, entries } => st.meta(name, entries),
+            Item::Message { topic, data, .. } => {
+                if st.procedure.is_none() && topic != topics::EVENTS {
+                    return Err(
+                        st.log_err("messages before the run metadata; is this a gyrobench log?")
+                    );
+                }
+                st.message(topic, data)
             }
-            st.message(topic, data)
-        }
-        Item::Attachment { .. } => Ok(()),
-    })?;
+            Item::Attachment { .. } => Ok(()),
+        }),
+    )?;
     if let Some(p) = st.pending_power.take() {
         st.records.push_power(p, None);
     }
@@ -886,64 +890,68 @@ pub fn record_rates_unit(
         read: ReadSummary::default(),
         start_ns: None,
     };
-    let read = super::view::read_unit(path, unit, |item| {
-        match item {
-            Item::Meta { name, entries } if name == RUN_META => {
-                out.start_ns = out
-                    .start_ns
-                    .or_else(|| super::recover::part_start_ns(entries));
-                // The procedure as logged, checked against the logged bench.
-                let meta = RunMeta::from_entries(entries).map_err(|e| e.to_string())?;
-                if let Ok(Logged { procedure: p, .. }) = logged(&meta) {
-                    let records = p.steps().filter_map(|s| match &s.kind {
-                        StepKind::Record { label, duration_s } => {
-                            Some((label.clone(), *duration_s))
+    let read = super::view::read_unit(
+        path,
+        unit,
+        super::refusing(|item| {
+            match item {
+                Item::Meta { name, entries } if name == RUN_META => {
+                    out.start_ns = out
+                        .start_ns
+                        .or_else(|| super::recover::part_start_ns(entries));
+                    // The procedure as logged, checked against the logged bench.
+                    let meta = RunMeta::from_entries(entries).map_err(|e| e.to_string())?;
+                    if let Ok(Logged { procedure: p, .. }) = logged(&meta) {
+                        let records = p.steps().filter_map(|s| match &s.kind {
+                            StepKind::Record { label, duration_s } => {
+                                Some((label.clone(), *duration_s))
+                            }
+                            _ => None,
+                        });
+                        let mut longest: Option<(String, f64)> = None;
+                        for (l, d) in records {
+                            labels.push(l.clone());
+                            if longest.as_ref().is_none_or(|(_, best)| d > *best) {
+                                longest = Some((l, d));
+                            }
                         }
-                        _ => None,
-                    });
-                    let mut longest: Option<(String, f64)> = None;
-                    for (l, d) in records {
-                        labels.push(l.clone());
-                        if longest.as_ref().is_none_or(|(_, best)| d > *best) {
-                            longest = Some((l, d));
+                        if want.is_none() {
+                            want = longest.map(|(l, _)| l);
                         }
-                    }
-                    if want.is_none() {
-                        want = longest.map(|(l, _)| l);
                     }
                 }
-            }
-            Item::Message { topic, data, .. } if topic == topics::FRAMES => {
-                pending = Some(
-                    serde_json::from_slice(data)
-                        .map_err(|e| format!("a {topic} message does not parse: {e}"))?,
-                );
-            }
-            Item::Message { topic, data, .. } if topic == topics::RATE_1HZ => {
-                let m: Rate1Hz = serde_json::from_slice(data)
-                    .map_err(|e| format!("a {topic} message does not parse: {e}"))?;
-                let mine = want
-                    .as_deref()
-                    .is_some_and(|w| m.record.as_deref() == Some(w));
-                match pending.take() {
-                    Some(f) if mine => {
-                        out.dt_s = f.dt_s;
-                        let k = f.lsb_arcsec / f.dt_s;
-                        out.rate_dph
-                            .extend(f.counts.iter().map(|&c| f64::from(c) * k));
-                    }
-                    // No frames (an imported run): the 1 Hz means.
-                    None if mine => {
-                        out.dt_s = 1.0;
-                        out.rate_dph.push(m.rate_dph);
-                    }
-                    _ => {}
+                Item::Message { topic, data, .. } if topic == topics::FRAMES => {
+                    pending = Some(
+                        serde_json::from_slice(data)
+                            .map_err(|e| format!("a {topic} message does not parse: {e}"))?,
+                    );
                 }
+                Item::Message { topic, data, .. } if topic == topics::RATE_1HZ => {
+                    let m: Rate1Hz = serde_json::from_slice(data)
+                        .map_err(|e| format!("a {topic} message does not parse: {e}"))?;
+                    let mine = want
+                        .as_deref()
+                        .is_some_and(|w| m.record.as_deref() == Some(w));
+                    match pending.take() {
+                        Some(f) if mine => {
+                            out.dt_s = f.dt_s;
+                            let k = f.lsb_arcsec / f.dt_s;
+                            out.rate_dph
+                                .extend(f.counts.iter().map(|&c| f64::from(c) * k));
+                        }
+                        // No frames (an imported run): the 1 Hz means.
+                        None if mine => {
+                            out.dt_s = 1.0;
+                            out.rate_dph.push(m.rate_dph);
+                        }
+                        _ => {}
+                    }
+                }
+                _ => {}
             }
-            _ => {}
-        }
-        Ok(())
-    })?;
+            Ok::<(), String>(())
+        }),
+    )?;
     if let Some(why) = read.stopped.as_ref().filter(|_| read.complete) {
         return Err(log_err(why.clone()));
     }

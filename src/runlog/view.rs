@@ -16,19 +16,21 @@ use std::collections::BTreeMap;
 use std::path::Path;
 
 use super::meta::RunMeta;
-use super::reader::{self, Item, ReadError, ReadSummary};
+use std::ops::ControlFlow;
+
+use super::reader::{self, Item, ReadError, ReadSummary, Stop};
 use super::schema::{
     REPORT_ATTACHMENT, RESULT_META, RUN_META, SLOT_TOPICS, StepEvent, slot_topic, topics,
 };
 
 /// Read `path` as the log of unit `serial` alone (none: every item as
 /// written), calling `f` for every item of the unit in file order. A log
-/// without that unit stops the read with a message naming the units it
-/// holds.
+/// without that unit stops the read, refused with a message naming the
+/// units it holds.
 pub fn read_unit(
     path: &Path,
     serial: Option<&str>,
-    mut f: impl FnMut(Item<'_>) -> Result<(), String>,
+    mut f: impl FnMut(Item<'_>) -> ControlFlow<Stop>,
 ) -> Result<ReadSummary, ReadError> {
     let Some(serial) = serial else {
         return reader::read(path, f);
@@ -36,13 +38,16 @@ pub fn read_unit(
     let mut unit: Option<Unit> = None;
     reader::read(path, |item| match item {
         Item::Meta { name, entries } if name == RUN_META => {
-            let meta = RunMeta::from_entries(entries).map_err(|e| e.to_string())?;
+            let meta = match RunMeta::from_entries(entries) {
+                Ok(m) => m,
+                Err(e) => return ControlFlow::Break(Stop::Refused(e.to_string())),
+            };
             let Some(k) = meta.units.iter().position(|u| u.serial == serial) else {
                 let held: Vec<&str> = meta.units.iter().map(|u| u.serial.as_str()).collect();
-                return Err(format!(
+                return ControlFlow::Break(Stop::Refused(format!(
                     "the log holds no unit {serial} (its units: {})",
                     held.join(", ")
-                ));
+                )));
             };
             let u = Unit::new(k, &meta.units[k].slot, serial);
             let entries = meta.for_unit(k).to_entries();
@@ -87,8 +92,8 @@ impl Unit {
     fn pass(
         &self,
         item: Item<'_>,
-        f: &mut impl FnMut(Item<'_>) -> Result<(), String>,
-    ) -> Result<(), String> {
+        f: &mut impl FnMut(Item<'_>) -> ControlFlow<Stop>,
+    ) -> ControlFlow<Stop> {
         let first = self.k == 0;
         match item {
             Item::Meta { name, entries } => {
@@ -98,7 +103,7 @@ impl Unit {
                         entries,
                     })
                 } else if name.starts_with(RESULT_META) {
-                    Ok(())
+                    ControlFlow::Continue(())
                 } else {
                     f(Item::Meta { name, entries })
                 }
@@ -122,7 +127,7 @@ impl Unit {
                         data,
                     })
                 } else {
-                    Ok(())
+                    ControlFlow::Continue(())
                 }
             }
             Item::Message {
@@ -142,13 +147,18 @@ impl Unit {
                     Some(t) => t,
                     // Another unit's, or (for a unit after the first) the
                     // first unit's.
-                    None if topic.starts_with("/slots/") => return Ok(()),
-                    None if !first && SLOT_TOPICS.contains(&topic) => return Ok(()),
+                    None if topic.starts_with("/slots/") => return ControlFlow::Continue(()),
+                    None if !first && SLOT_TOPICS.contains(&topic) => {
+                        return ControlFlow::Continue(());
+                    }
                     None => topic,
                 };
                 let steps;
                 let data = if !first && topic == topics::STEPS {
-                    steps = self.own_link(data)?;
+                    steps = match self.own_link(data) {
+                        Ok(s) => s,
+                        Err(why) => return ControlFlow::Break(Stop::Refused(why)),
+                    };
                     &steps[..]
                 } else {
                     data
@@ -192,9 +202,9 @@ pub fn log_units(path: &Path) -> Result<Vec<(String, String)>, ReadError> {
     reader::read(path, |item| match item {
         Item::Meta { name, entries } if name == RUN_META => {
             units = units_of(entries);
-            Err("read as far as the run record".into())
+            ControlFlow::Break(Stop::Enough)
         }
-        _ => Ok(()),
+        _ => ControlFlow::Continue(()),
     })?;
     Ok(units)
 }

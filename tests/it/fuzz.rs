@@ -141,14 +141,15 @@ fn mutate(log: &[u8], m: &Mutation) -> Vec<u8> {
 fn read_everything(dir: &Path, bytes: &[u8]) {
     let log = dir.join("fuzzed.mcap");
     std::fs::write(&log, bytes).expect("write the case");
-    let _ = gyrobench::runlog::read(&log, |_| Ok(()));
+    let _ = gyrobench::runlog::read(&log, |_| std::ops::ControlFlow::Continue(()));
     let _ = replay(&log, None);
     let _ = record_rates(&log, None);
     let out = dir.join("recovered.mcap");
     let _ = std::fs::remove_file(&out);
     if recover(&log, &out).is_ok() {
         // What recover writes must read back whole.
-        let r = gyrobench::runlog::read(&out, |_| Ok(())).expect("a recovered log reads");
+        let r = gyrobench::runlog::read(&out, |_| std::ops::ControlFlow::Continue(()))
+            .expect("a recovered log reads");
         assert!(r.complete, "a recovered log is complete");
         let _ = replay(&out, None);
     }

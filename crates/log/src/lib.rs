@@ -10,16 +10,22 @@
 //!   was lost.
 //!
 //! ```no_run
-//! use gyrobench_log::{Item, read, schema::topics};
+//! use std::ops::ControlFlow;
 //!
+//! use gyrobench_log::{Item, Stop, read, schema::topics};
+//!
+//! // The first hour of 1 Hz intervals; the rest of the file is not read.
 //! let mut intervals = 0;
 //! let summary = read(std::path::Path::new("run.mcap"), |item| {
 //!     if let Item::Message { topic, .. } = item
 //!         && topic == topics::RATE_1HZ
 //!     {
 //!         intervals += 1;
+//!         if intervals == 3600 {
+//!             return ControlFlow::Break(Stop::Enough);
+//!         }
 //!     }
-//!     Ok(())
+//!     ControlFlow::Continue(())
 //! })?;
 //! println!("{intervals} seconds, complete: {}", summary.complete);
 //! # Ok::<(), gyrobench_log::ReadError>(())
@@ -28,4 +34,4 @@
 pub mod reader;
 pub mod schema;
 
-pub use reader::{Item, ReadError, ReadSummary, read};
+pub use reader::{Item, ReadError, ReadSummary, Stop, read, refusing};

@@ -11,6 +11,7 @@
 use std::collections::{BTreeMap, HashMap};
 use std::fs::File;
 use std::io::{Read, Seek, SeekFrom};
+use std::ops::ControlFlow;
 use std::path::Path;
 
 use mcap::records::Record;
@@ -206,14 +207,52 @@ struct Reading {
     in_summary_section: bool,
     /// The damaged chunk the message indexes that follow it count for.
     counting: Option<usize>,
+    /// The sink said it had what it needed.
+    enough: bool,
 }
 
 /// What a record (or a chunk) came to.
 enum Flow {
     /// Go on.
     On,
-    /// The caller asked to stop.
+    /// The read ends here, for this reason (the sink refused the log, or
+    /// the file holds a record that cannot be read).
     Stop(String),
+    /// The sink has what it needs.
+    Enough,
+}
+
+impl From<ControlFlow<Stop>> for Flow {
+    fn from(c: ControlFlow<Stop>) -> Self {
+        match c {
+            ControlFlow::Continue(()) => Self::On,
+            ControlFlow::Break(Stop::Enough) => Self::Enough,
+            ControlFlow::Break(Stop::Refused(why)) => Self::Stop(why),
+        }
+    }
+}
+
+/// Why a sink (the function [`read`] hands each item to) ends the read
+/// early: it answers `ControlFlow::Continue(())` to go on, or breaks with
+/// this.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Stop {
+    /// It has what it needs: the rest of the file is left unread (the
+    /// summary says neither complete nor stopped, and counts nothing lost).
+    Enough,
+    /// It refuses the log, saying why ([`ReadSummary::stopped`]).
+    Refused(String),
+}
+
+/// A sink from a function that answers each item with a `Result`: on while
+/// it is `Ok`, refusing the log with the error's text at its first `Err`.
+pub fn refusing<E: std::fmt::Display>(
+    mut f: impl FnMut(Item<'_>) -> Result<(), E>,
+) -> impl FnMut(Item<'_>) -> ControlFlow<Stop> {
+    move |item| match f(item) {
+        Ok(()) => ControlFlow::Continue(()),
+        Err(e) => ControlFlow::Break(Stop::Refused(e.to_string())),
+    }
 }
 
 /// A chunk's records, decompressed and checked (its CRC and every record
@@ -290,7 +329,7 @@ impl Reading {
     fn record(
         &mut self,
         rec: Record<'_>,
-        f: &mut impl FnMut(Item<'_>) -> Result<(), String>,
+        f: &mut impl FnMut(Item<'_>) -> ControlFlow<Stop>,
     ) -> Flow {
         let res = match rec {
             Record::Schema { header, data } => {
@@ -302,7 +341,7 @@ impl Reading {
                         data: data.into_owned(),
                     },
                 );
-                Ok(())
+                ControlFlow::Continue(())
             }
             Record::Channel(c) => {
                 let schema = self.schemas.get(&c.schema_id).cloned();
@@ -316,7 +355,7 @@ impl Reading {
                         schema,
                     },
                 );
-                Ok(())
+                ControlFlow::Continue(())
             }
             Record::Message { header, data } if !self.in_summary_section => {
                 self.summary.messages += 1;
@@ -349,26 +388,23 @@ impl Reading {
                 if let Some(g) = self.counting.and_then(|i| self.summary.damaged.get_mut(i)) {
                     *g.messages.get_or_insert(0) += ix.records.len() as u64;
                 }
-                Ok(())
+                ControlFlow::Continue(())
             }
             Record::DataEnd(_) => {
                 self.in_summary_section = true;
-                Ok(())
+                ControlFlow::Continue(())
             }
             Record::Footer(_) => {
                 self.summary.complete = true;
-                Ok(())
+                ControlFlow::Continue(())
             }
-            _ => Ok(()),
+            _ => ControlFlow::Continue(()),
         };
-        match res {
-            Ok(()) => Flow::On,
-            Err(e) => Flow::Stop(e),
-        }
+        res.into()
     }
 
     /// A chunk: its records, or (damaged) a gap noted and the read on.
-    fn chunk(&mut self, body: &[u8], f: &mut impl FnMut(Item<'_>) -> Result<(), String>) -> Flow {
+    fn chunk(&mut self, body: &[u8], f: &mut impl FnMut(Item<'_>) -> ControlFlow<Stop>) -> Flow {
         self.counting = None;
         match unpack_chunk(body) {
             Ok((_, data)) => {
@@ -379,8 +415,9 @@ impl Reading {
                     let Ok(rec) = mcap::parse_record(opcode, rec_body) else {
                         continue;
                     };
-                    if let Flow::Stop(e) = self.record(rec, f) {
-                        return Flow::Stop(e);
+                    match self.record(rec, f) {
+                        Flow::On => {}
+                        stop => return stop,
                     }
                 }
                 Flow::On
@@ -426,11 +463,11 @@ fn next_whole_chunk(file: &mut File, from: u64, len: u64) -> std::io::Result<Opt
 /// Read `path` from start to end, calling `f` for every item in file order.
 /// A damaged chunk (or a record whose length is garbage) is skipped, the
 /// read goes on with the next whole chunk, and [`ReadSummary::damaged`]
-/// says what was lost. Stops early (and says so in the summary) when `f`
-/// returns an error or the file ends inside a record.
+/// says what was lost. Stops early when `f` breaks ([`Stop`]: enough, or
+/// refused and said in the summary) or the file ends inside a record.
 pub fn read(
     path: &Path,
-    mut f: impl FnMut(Item<'_>) -> Result<(), String>,
+    mut f: impl FnMut(Item<'_>) -> ControlFlow<Stop>,
 ) -> Result<ReadSummary, ReadError> {
     let io = |cause| ReadError::Io {
         path: path.display().to_string(),
@@ -469,8 +506,9 @@ pub fn read(
     {
         pass_start = next;
     }
+    let enough = st.enough;
     let mut summary = st.summary;
-    if !summary.complete {
+    if !summary.complete && !enough {
         summary.bytes_lost = file_bytes.saturating_sub(complete_prefix(&mut file).map_err(io)?);
     }
     Ok(summary)
@@ -495,6 +533,7 @@ impl Reading {
             },
             in_summary_section: false,
             counting: None,
+            enough: false,
         }
     }
 
@@ -507,7 +546,7 @@ impl Reading {
         file: &mut File,
         pass_start: u64,
         file_bytes: u64,
-        f: &mut impl FnMut(Item<'_>) -> Result<(), String>,
+        f: &mut impl FnMut(Item<'_>) -> ControlFlow<Stop>,
     ) -> std::io::Result<Option<u64>> {
         file.seek(SeekFrom::Start(pass_start))?;
         let mut reader = LinearReader::new_with_options(
@@ -571,9 +610,16 @@ impl Reading {
                             Err(e) => Flow::Stop(format!("unreadable record: {e}")),
                         }
                     };
-                    if let Flow::Stop(e) = flow {
-                        self.summary.stopped = Some(e);
-                        return Ok(None);
+                    match flow {
+                        Flow::On => {}
+                        Flow::Stop(e) => {
+                            self.summary.stopped = Some(e);
+                            return Ok(None);
+                        }
+                        Flow::Enough => {
+                            self.enough = true;
+                            return Ok(None);
+                        }
                     }
                 }
             }

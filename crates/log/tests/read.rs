@@ -9,7 +9,7 @@
 use std::path::{Path, PathBuf};
 
 use gyrobench_log::schema::{RUN_META, Rate1Hz, topics};
-use gyrobench_log::{Item, read};
+use gyrobench_log::{Item, Stop, read};
 
 fn fixture() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fixtures/logs/format1/whole/run.mcap")
@@ -19,18 +19,21 @@ fn fixture() -> PathBuf {
 /// whether its run metadata was there.
 fn seconds(path: &Path) -> (Vec<Rate1Hz>, bool, gyrobench_log::ReadSummary) {
     let (mut out, mut meta) = (Vec::new(), false);
-    let summary = read(path, |item| {
-        match item {
-            Item::Meta { name, entries } if name == RUN_META => {
-                meta = entries.contains_key("procedure_toml");
+    let summary = read(
+        path,
+        gyrobench_log::refusing(|item| {
+            match item {
+                Item::Meta { name, entries } if name == RUN_META => {
+                    meta = entries.contains_key("procedure_toml");
+                }
+                Item::Message { topic, data, .. } if topic == topics::RATE_1HZ => {
+                    out.push(serde_json::from_slice(data).map_err(|e| e.to_string())?);
+                }
+                _ => {}
             }
-            Item::Message { topic, data, .. } if topic == topics::RATE_1HZ => {
-                out.push(serde_json::from_slice(data).map_err(|e| e.to_string())?);
-            }
-            _ => {}
-        }
-        Ok(())
-    })
+            Ok::<(), String>(())
+        }),
+    )
     .expect("the log reads");
     (out, meta, summary)
 }
@@ -82,4 +85,39 @@ fn a_log_cut_short_reads_to_its_last_whole_chunk_and_says_what_was_lost() {
         lost_seconds,
         "a cut inside a chunk loses that chunk's seconds"
     );
+}
+
+#[test]
+fn a_sink_stops_the_read_when_it_has_enough_or_refuses_the_log() {
+    use std::ops::ControlFlow;
+    let path = fixture();
+    // Enough after ten seconds: the rest unread, nothing said lost.
+    let mut seen = 0;
+    let summary = read(&path, |item| {
+        if let Item::Message { topic, .. } = item
+            && topic == topics::RATE_1HZ
+        {
+            seen += 1;
+            if seen == 10 {
+                return ControlFlow::Break(Stop::Enough);
+            }
+        }
+        ControlFlow::Continue(())
+    })
+    .expect("the log reads");
+    assert_eq!(seen, 10);
+    assert!(
+        !summary.complete && summary.stopped.is_none() && summary.bytes_lost == 0,
+        "{summary:?}"
+    );
+    // Refused at the run record: said as the read's stop.
+    let summary = read(&path, |item| match item {
+        Item::Meta { name, .. } if name == RUN_META => {
+            ControlFlow::Break(Stop::Refused("not this bench's".into()))
+        }
+        _ => ControlFlow::Continue(()),
+    })
+    .expect("the log reads");
+    assert_eq!(summary.stopped.as_deref(), Some("not this bench's"));
+    assert!(!summary.complete && summary.messages == 0, "{summary:?}");
 }

@@ -93,33 +93,37 @@ pub fn export_unit(log: &Path, out: &Path, unit: Option<&str>) -> Result<Exporte
     let mut meta: Option<Result<RunMeta, String>> = None;
     let mut angles_known = false;
     let mut start_ns = None;
-    let read = super::super::view::read_unit(log, unit, |item| {
-        match item {
-            Item::Meta { name, entries } if name == RUN_META => {
-                start_ns = start_ns.or_else(|| super::super::recover::part_start_ns(entries));
-                if meta.is_none() {
-                    meta = Some(RunMeta::from_entries(entries).map_err(|e| e.to_string()));
+    let read = super::super::view::read_unit(
+        log,
+        unit,
+        crate::runlog::refusing(|item| {
+            match item {
+                Item::Meta { name, entries } if name == RUN_META => {
+                    start_ns = start_ns.or_else(|| super::super::recover::part_start_ns(entries));
+                    if meta.is_none() {
+                        meta = Some(RunMeta::from_entries(entries).map_err(|e| e.to_string()));
+                    }
                 }
+                Item::Message { topic, data, .. } if topic == topics::TABLE => {
+                    let t: TableState =
+                        serde_json::from_slice(data).map_err(|e| format!("{topic}: {e}"))?;
+                    angles_known |= t.outer_deg.is_some() && t.inner_deg.is_some();
+                    table = Some(t);
+                }
+                Item::Message { topic, data, .. } if topic == topics::RATE_1HZ => {
+                    let r: Rate1Hz =
+                        serde_json::from_slice(data).map_err(|e| format!("{topic}: {e}"))?;
+                    let Some(t) = &table else {
+                        return Err("a 1 Hz interval before any table state".into());
+                    };
+                    w.write_record(row(&r, t)).map_err(|e| err(&e))?;
+                    rows += 1;
+                }
+                _ => {}
             }
-            Item::Message { topic, data, .. } if topic == topics::TABLE => {
-                let t: TableState =
-                    serde_json::from_slice(data).map_err(|e| format!("{topic}: {e}"))?;
-                angles_known |= t.outer_deg.is_some() && t.inner_deg.is_some();
-                table = Some(t);
-            }
-            Item::Message { topic, data, .. } if topic == topics::RATE_1HZ => {
-                let r: Rate1Hz =
-                    serde_json::from_slice(data).map_err(|e| format!("{topic}: {e}"))?;
-                let Some(t) = &table else {
-                    return Err("a 1 Hz interval before any table state".into());
-                };
-                w.write_record(row(&r, t)).map_err(|e| err(&e))?;
-                rows += 1;
-            }
-            _ => {}
-        }
-        Ok(())
-    })?;
+            Ok::<(), String>(())
+        }),
+    )?;
     let fail = |m: String| ImportError::Other(m);
     // `--unit` naming a unit the log lacks stopped the read: say so.
     if let (None, Some(why), Some(_)) = (&meta, &read.stopped, unit) {
