@@ -13,10 +13,10 @@ use gyrobench::clock::Pacing;
 use gyrobench::coeffs::{Chosen, CoeffsSource, SetIdentity, SetStatus};
 use gyrobench::procedure::Procedure;
 use gyrobench::runlog::live::{Live as LiveStream, LiveError};
-use gyrobench::sequencer::embedded::Fault;
 use gyrobench::sequencer::{self, Event, Interrupt, Observer, Operator};
 use gyrobench::session::rundir::RunDirError;
 use gyrobench::session::{self, Place, Plan, SessionError};
+use gyrobench::sim::embedded::Fault;
 use gyrobench::twin::TwinConfig;
 use gyrobench::unit::{SIMULATED_SERIAL, check_operator, check_serial};
 

@@ -235,7 +235,7 @@ mod tests {
     use super::*;
     use crate::bench::BenchConfig;
     use crate::clock::{Pacing, VirtualClock};
-    use crate::sequencer::embedded::EmbeddedBench;
+    use crate::sim::embedded::EmbeddedBench;
     use crate::twin::TwinConfig;
 
     fn guarded() -> Guarded<EmbeddedBench> {

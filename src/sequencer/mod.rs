@@ -9,7 +9,6 @@
 
 pub mod compensated;
 pub mod device;
-pub mod embedded;
 pub mod events;
 pub mod finish;
 pub mod guard;

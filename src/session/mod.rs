@@ -24,11 +24,11 @@ use crate::runlog::replay::{
 use crate::runlog::schema::FORMAT;
 use crate::runlog::writer::{FrameScales, Recorder};
 use crate::sequencer::device::DeviceBench;
-use crate::sequencer::embedded::{EmbeddedBench, Fault};
 use crate::sequencer::guard::Guarded;
 use crate::sequencer::{
     self, BenchIo, Event, Interrupt, Observer, Operator, Options, Resume, RunResult,
 };
+use crate::sim::embedded::{EmbeddedBench, Fault};
 use crate::twin::TwinConfig;
 use rundir::{RunDir, RunDirError};
 

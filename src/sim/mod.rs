@@ -8,6 +8,7 @@
 //! to misbehave through [`Faults`].
 
 pub mod acl;
+pub mod embedded;
 pub mod espec;
 pub mod faults;
 pub mod gyro;

@@ -6,13 +6,13 @@ use std::sync::Arc;
 
 use async_trait::async_trait;
 
-use super::{BenchIo, BenchState, FrameRecord, SlotTick, Tick};
 use crate::bench::{SupplyDevice, SupplySafe};
 use crate::clock::{Clock, VirtualClock};
 use crate::driver::{ChamberMode, ChamberReading, DeviceError, TableReading};
 use crate::geometry::{Site, TableAngles, TableGeometry};
 use crate::protocol::frame::LinkStats;
 use crate::protocol::supply::{Command, configure};
+use crate::sequencer::{BenchIo, BenchState, FrameRecord, SlotTick, Tick};
 use crate::sim::PASSIVE_DRIFT_C_PER_MIN;
 use crate::sim::supply::Supply;
 use crate::twin::{AxisDemand, GyroSample, Twin, TwinConfig};
@@ -529,9 +529,9 @@ impl BenchIo for EmbeddedBench {
         }
     }
 
-    async fn identify(&mut self) -> super::Identities {
+    async fn identify(&mut self) -> crate::sequencer::Identities {
         // The embedded instruments answer as `sim serve`'s do.
-        super::Identities {
+        crate::sequencer::Identities {
             chamber: Ok(crate::sim::identity::chamber(
                 crate::bench::ChamberProtocol::EspecAscii,
             )),
