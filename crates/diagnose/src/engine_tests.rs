@@ -5,7 +5,7 @@
 
 use super::*;
 use crate::library::{Effect, LIBRARY, MODEL4, Param, Term};
-use crate::selection_tests::runs::{POSES, WARMUP_TAU_S, inject, run, study};
+use crate::selection_tests::runs::{POSES, WARMUP_TAU_S, inject, per_row, run, study};
 
 /// Model 4 with the made-up runs' own warm-up time constant.
 fn model4() -> Vec<Term> {
@@ -23,11 +23,6 @@ fn with(model: &[Term], effect: Effect) -> Vec<Term> {
     let mut m = model.to_vec();
     m.push(Term::new(effect, Param::None));
     m
-}
-
-/// A signal per row of `runs`, from each sample.
-fn per_row(runs: &[RunData], f: impl Fn(&crate::data::Sample) -> f64) -> Vec<f64> {
-    runs.iter().flat_map(|r| r.samples.iter().map(&f)).collect()
 }
 
 #[test]

@@ -6,7 +6,7 @@
 pub(crate) mod runs;
 
 use super::*;
-use runs::{ROLLS_EAST, cycle_air, inject, run, study};
+use runs::{ROLLS_EAST, cycle_air, inject, per_row, run, study};
 
 /// Model 4 as the reference, no simulated deciding run.
 fn options() -> Options {
@@ -164,15 +164,9 @@ fn a_bias_jump_outside_the_library_is_reported_not_attributed() {
 #[test]
 fn the_visible_gap_counts_only_what_the_reference_cannot_follow() {
     let runs = study(0.0, 1);
-    let tcase: Vec<f64> = runs
-        .iter()
-        .flat_map(|r| r.samples.iter().map(|s| 0.01 * s.iv.tcase_c))
-        .collect();
+    let tcase = per_row(&runs, |s| 0.01 * s.iv.tcase_c);
     assert!(visible_gap(&runs, &options(), &tcase) < 1e-6);
-    let g: Vec<f64> = runs
-        .iter()
-        .flat_map(|r| r.samples.iter().map(|s| 0.1 * s.gravity_body()[1]))
-        .collect();
+    let g = per_row(&runs, |s| 0.1 * s.gravity_body()[1]);
     let gap = visible_gap(&runs, &options(), &g);
     assert!((0.02..0.1).contains(&gap), "{gap}");
     assert!(visible_gap(&runs, &options(), &[0.0; 3]).is_nan());
@@ -185,19 +179,14 @@ fn the_visible_gap_counts_only_what_the_reference_cannot_follow() {
 fn the_residuals_period_is_found() {
     let runs = study(0.0, 1);
     let data = Data::new(&runs);
-    let time: Vec<f64> = runs
-        .iter()
-        .flat_map(|r| r.samples.iter().map(|s| s.iv.time_s))
-        .collect();
-    let sine: Vec<f64> = time
-        .iter()
-        .map(|t| (std::f64::consts::TAU * t / 3000.0).sin())
-        .collect();
+    let sine = per_row(&runs, |s| {
+        (std::f64::consts::TAU * s.iv.time_s / 3000.0).sin()
+    });
     let (period, frac) = periodicity(&data, &sine);
     let period = period.expect("a period");
     assert!((period / 3000.0 - 1.0).abs() < 0.03, "{period}");
     assert!(frac > 0.95, "{frac}");
-    let noise = runs::run(
+    let noise = run(
         "n",
         &vec![20.0; 20_000],
         &[(0.0, 90.0, 0.0)],
@@ -208,11 +197,7 @@ fn the_residuals_period_is_found() {
     );
     let noise_runs = [noise];
     let data = Data::new(&noise_runs);
-    let e: Vec<f64> = noise_runs[0]
-        .samples
-        .iter()
-        .map(|s| s.iv.bias_dph())
-        .collect();
+    let e = per_row(&noise_runs, |s| s.iv.bias_dph());
     assert!(periodicity(&data, &e).1 < THRESHOLDS.periodic_above);
 }
 

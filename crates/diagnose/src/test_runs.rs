@@ -166,3 +166,8 @@ pub fn inject(runs: &mut [RunData], effect: Effect, param: Param, coeffs: &[f64]
         }
     }
 }
+
+/// A value per stacked row of `runs` (runs in order), from each sample.
+pub fn per_row(runs: &[RunData], f: impl Fn(&Sample) -> f64) -> Vec<f64> {
+    runs.iter().flat_map(|r| r.samples.iter().map(&f)).collect()
+}

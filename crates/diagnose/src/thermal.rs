@@ -2484,11 +2484,7 @@ mod tests {
         close(at::BLOCK2_TAU, 0.05);
         close(at::MOUNT_TAU, 0.1);
         close(at::COUPLING_TAU, 0.1);
-        let cost = Cost {
-            runs: &data,
-            held_out: None,
-            full: false,
-        };
+        let cost = simple_form(&data);
         let at_truth = cost.cost(&cost.searched(&truth)).expect("a cost");
         let found = cost.cost(&cost.searched(&q)).expect("a cost");
         assert!(found <= 1.01 * at_truth, "{found} against {at_truth}");
@@ -2503,11 +2499,7 @@ mod tests {
         let data = twin_blocks(&cfg);
         let q = search_shape(&data, None, false, &[shape_of(&known_unit())], 1, 150);
         assert_eq!(clamp_shape(&q).1, 0.0, "{q:?}");
-        let cost = Cost {
-            runs: &data,
-            held_out: None,
-            full: false,
-        };
+        let cost = simple_form(&data);
         let (lin, _) = cost.fit_at(&q);
         assert!(within_bounds(&to_config(&cfg, &q, &lin)));
         let case = q[at::CASE_TAU].exp();
@@ -2535,13 +2527,16 @@ mod tests {
     /// The linear quantities and residuals of the twin's network `cfg`
     /// fitted at its own shape (the simpler form).
     fn cost_at(cfg: &ThermalConfig) -> (Linear, Vec<Vec<[f64; 3]>>) {
-        let data = twin_blocks(cfg);
+        simple_form(&twin_blocks(cfg)).fit_at(&shape_of(cfg))
+    }
+
+    /// The simpler form's cost on every block of `data`.
+    fn simple_form(data: &[Vec<Block>]) -> Cost<'_> {
         Cost {
-            runs: &data,
+            runs: data,
             held_out: None,
             full: false,
         }
-        .fit_at(&shape_of(cfg))
     }
 
     /// Within bounds a shape is kept as it is; past one, it is clamped and
