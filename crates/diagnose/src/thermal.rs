@@ -2213,8 +2213,10 @@ mod tests {
     }
 
     /// The twin's network `cfg` through the thermal cycle of
-    /// [`air_profiles`], the sensor axis vertical in its second half (a
-    /// record each), read without noise.
+    /// [`air_profiles`], the sensitive axis up in its first half and
+    /// horizontal north in its second (a record each), read without noise.
+    /// (The RL-16's sensor axis, body y, is horizontal at both: its
+    /// convection is not exercised.)
     fn twin_run(cfg: &ThermalConfig) -> RunData {
         let [cycle, _] = air_profiles();
         let mut net = ThermalNetwork::soaked(cfg, cycle[0]);
@@ -2262,8 +2264,8 @@ mod tests {
         )
     }
 
-    /// The twin's network `cfg` through a thermal cycle (the sensor axis
-    /// vertical in its second half), fitted at its own shape: the linear
+    /// The twin's network `cfg` through a thermal cycle ([`twin_run`]),
+    /// fitted at its own shape: the linear
     /// quantities and the worst block residual after the first, degC.
     fn fit_of_twin(cfg: &ThermalConfig) -> (Linear, f64) {
         let data = twin_blocks(cfg);
