@@ -1219,3 +1219,7 @@ mod tests {
         assert!(close(spent(&[&offset, &between, &within]), 2.0));
     }
 }
+
+#[cfg(test)]
+#[path = "engine_tests.rs"]
+mod more_tests;

@@ -2044,3 +2044,6 @@ mod tests {
         }
     }
 }
+
+#[cfg(test)]
+mod selection_tests;

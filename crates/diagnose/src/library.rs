@@ -439,3 +439,7 @@ mod tests {
         }
     }
 }
+
+#[cfg(test)]
+#[path = "library_tests.rs"]
+mod more_tests;

@@ -166,4 +166,136 @@ mod tests {
         let (p, f) = minimize(res, &[0.0], &[-10.0], &[10.0], 50);
         assert!(p[0] <= 1.0 && f.is_finite(), "{p:?} {f}");
     }
+
+    /// A model linear in its parameters (a line) through noisy points:
+    /// the minimum is the normal equations' solution, which the search
+    /// must reach to rounding, noise or not.
+    #[test]
+    fn a_linear_model_ends_at_the_normal_equations_solution() {
+        let t: Vec<f64> = (0..50).map(f64::from).collect();
+        // A fixed, irregular "noise" of about 0.3.
+        let y: Vec<f64> = t
+            .iter()
+            .map(|&t| 1.5 - 0.2 * t + 0.3 * (t * 1.7).sin())
+            .collect();
+        let n = t.len() as f64;
+        let (st, sy) = (t.iter().sum::<f64>(), y.iter().sum::<f64>());
+        let stt = t.iter().map(|t| t * t).sum::<f64>();
+        let sty = t.iter().zip(&y).map(|(t, y)| t * y).sum::<f64>();
+        let slope = (n * sty - st * sy) / (n * stt - st * st);
+        let intercept = (sy - slope * st) / n;
+        let res = |p: &[f64]| -> Vec<f64> {
+            t.iter()
+                .zip(&y)
+                .map(|(&t, y)| p[0] + p[1] * t - y)
+                .collect()
+        };
+        let (p, f) = minimize(res, &[0.0, 0.0], &[-10.0, -10.0], &[10.0, 10.0], 50);
+        assert!((p[0] - intercept).abs() < 1e-6, "{p:?} against {intercept}");
+        assert!((p[1] - slope).abs() < 1e-7, "{p:?} against {slope}");
+        let best: f64 = res(&[intercept, slope]).iter().map(|r| r * r).sum();
+        assert!(f <= best * (1.0 + 1e-9), "{f} against {best}");
+    }
+
+    /// An exponential decay under mild noise (1 % of its size): amplitude
+    /// and time constant within a few percent, the sum of squares that of
+    /// the noise.
+    #[test]
+    fn a_decay_under_mild_noise_is_recovered() {
+        let t: Vec<f64> = (0..300).map(|i| f64::from(i) * 10.0).collect();
+        // Deterministic noise of RMS about 0.01 (a sum of incommensurate
+        // sines).
+        let noise = |i: usize| 0.01 * ((i as f64 * 2.39).sin() + (i as f64 * 0.71).cos());
+        let y: Vec<f64> = t
+            .iter()
+            .enumerate()
+            .map(|(i, &t)| 1.0 + 3.0 * (-t / 600.0).exp() + noise(i))
+            .collect();
+        let res = |p: &[f64]| -> Vec<f64> {
+            t.iter()
+                .zip(&y)
+                .map(|(&t, y)| p[0] + p[1] * (-t / p[2]).exp() - y)
+                .collect()
+        };
+        let (p, f) = minimize(
+            res,
+            &[0.0, 1.0, 100.0],
+            &[-10.0, 0.0, 10.0],
+            &[10.0, 10.0, 1e5],
+            200,
+        );
+        assert!((p[0] - 1.0).abs() < 0.01, "{p:?}");
+        assert!((p[1] - 3.0).abs() < 0.03, "{p:?}");
+        assert!((p[2] / 600.0 - 1.0).abs() < 0.02, "{p:?}");
+        let noise_sse: f64 = (0..t.len()).map(|i| noise(i).powi(2)).sum();
+        assert!(f <= noise_sse, "{f} against the noise's {noise_sse}");
+    }
+
+    /// Rosenbrock's valley as residuals, from its classic start: the
+    /// damping must turn the Gauss-Newton steps along the curved valley.
+    #[test]
+    fn rosenbrocks_valley_is_followed_to_its_minimum() {
+        let res = |p: &[f64]| vec![10.0 * (p[1] - p[0] * p[0]), 1.0 - p[0]];
+        let (p, f) = minimize(res, &[-1.2, 1.0], &[-5.0, -5.0], &[5.0, 5.0], 200);
+        assert!(f < 1e-16, "{f} at {p:?}");
+        assert!(
+            (p[0] - 1.0).abs() < 1e-7 && (p[1] - 1.0).abs() < 1e-7,
+            "{p:?}"
+        );
+    }
+
+    /// Every quantity's optimum outside the box, on either side: each ends
+    /// on its bound; a start outside the box is taken into it first.
+    #[test]
+    fn optima_past_either_bound_end_on_the_bounds() {
+        let res = |p: &[f64]| vec![p[0] - 7.0, p[1] + 7.0, 0.5 * (p[0] - p[1])];
+        let (lo, hi) = ([-1.0, -2.0], [3.0, 4.0]);
+        for start in [[0.0, 0.0], [100.0, -100.0], [-50.0, 50.0]] {
+            let (p, _) = minimize(res, &start, &lo, &hi, 100);
+            assert_eq!(p, [3.0, -2.0], "from {start:?}");
+        }
+        // No iterations: the start, clamped, and its sum of squares.
+        let (p, f) = minimize(res, &[100.0, 0.0], &lo, &hi, 0);
+        assert_eq!(p, [3.0, 0.0]);
+        assert_eq!(f, 16.0 + 49.0 + 2.25);
+    }
+
+    /// A problem at its minimum stays there (no step lowers the sum).
+    #[test]
+    fn a_start_at_the_minimum_stays_there() {
+        let res = |p: &[f64]| vec![p[0] - 2.0, 3.0 * (p[1] + 1.0), (p[0] - 2.0) * p[1]];
+        let (p, f) = minimize(res, &[2.0, -1.0], &[-10.0, -10.0], &[10.0, 10.0], 100);
+        assert_eq!(p, [2.0, -1.0]);
+        assert_eq!(f, 0.0);
+        // Nor does a noisy minimum move: the line's solution from the
+        // solution itself.
+        let res = |p: &[f64]| vec![p[0] - 1.0, p[0] - 3.0, p[1]];
+        let (p, f) = minimize(res, &[2.0, 0.0], &[-10.0, -10.0], &[10.0, 10.0], 100);
+        assert_eq!((p, f), (vec![2.0, 0.0], 2.0));
+    }
+
+    /// Residuals that see only the sum of two quantities: a direction of
+    /// no information. The search ends at a point of the minimum's line,
+    /// finite and near its start (the damping keeps the free direction
+    /// from running off).
+    #[test]
+    fn a_rank_deficient_direction_does_not_blow_up() {
+        let res = |p: &[f64]| vec![p[0] + p[1] - 3.0, 2.0 * (p[0] + p[1] - 3.0)];
+        let (p, f) = minimize(res, &[0.5, 0.5], &[-1e6, -1e6], &[1e6, 1e6], 100);
+        assert!(p.iter().all(|v| v.is_finite() && v.abs() < 10.0), "{p:?}");
+        assert!(f < 1e-16 && (p[0] + p[1] - 3.0).abs() < 1e-8, "{f} {p:?}");
+    }
+
+    /// The Jacobian steps into the box: at the upper bound a quantity is
+    /// differenced backwards, never past the bound (where these
+    /// residuals are not defined), and still moves inward.
+    #[test]
+    fn the_jacobian_never_looks_past_the_upper_bound() {
+        let res = |p: &[f64]| {
+            assert!(p[0] <= 2.0, "evaluated past the bound at {p:?}");
+            vec![p[0] - 0.5]
+        };
+        let (p, f) = minimize(res, &[2.0], &[0.0], &[2.0], 50);
+        assert!((p[0] - 0.5).abs() < 1e-8 && f < 1e-16, "{p:?}");
+    }
 }

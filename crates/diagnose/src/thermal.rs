@@ -2212,10 +2212,12 @@ mod tests {
         );
     }
 
-    /// The twin's network `cfg` through a thermal cycle (the sensor axis
-    /// vertical in its second half), fitted at its own shape: the linear
-    /// quantities and the worst block residual after the first, degC.
-    fn fit_of_twin(cfg: &ThermalConfig) -> (Linear, f64) {
+    /// The twin's network `cfg` through the thermal cycle of
+    /// [`air_profiles`], the sensitive axis up in its first half and
+    /// horizontal north in its second (a record each), read without noise.
+    /// (The RL-16's sensor axis, body y, is horizontal at both: its
+    /// convection is not exercised.)
+    fn twin_run(cfg: &ThermalConfig) -> RunData {
         let [cycle, _] = air_profiles();
         let mut net = ThermalNetwork::soaked(cfg, cycle[0]);
         let mut samples = Vec::new();
@@ -2247,12 +2249,26 @@ mod tests {
                 table_rate_body_dph: nalgebra::Vector3::zeros(),
             });
         }
-        let runs = [RunData {
+        RunData {
             name: "twin".into(),
             site: TwinConfig::default_rl16().site,
             samples,
-        }];
-        let data = blocks(&runs, Vector3::from(cfg.sensor_axis_body).normalize());
+        }
+    }
+
+    /// [`twin_run`] as the fit's 60 s blocks.
+    fn twin_blocks(cfg: &ThermalConfig) -> Vec<Vec<Block>> {
+        blocks(
+            &[twin_run(cfg)],
+            Vector3::from(cfg.sensor_axis_body).normalize(),
+        )
+    }
+
+    /// The twin's network `cfg` through a thermal cycle ([`twin_run`]),
+    /// fitted at its own shape: the linear
+    /// quantities and the worst block residual after the first, degC.
+    fn fit_of_twin(cfg: &ThermalConfig) -> (Linear, f64) {
+        let data = twin_blocks(cfg);
         let cost = Cost {
             runs: &data,
             held_out: None,
@@ -2430,5 +2446,253 @@ mod tests {
         );
         let (_, clean) = noise_floor(&run(0.0, 0.0, 4));
         assert!(clean < 1e-4, "a noiseless ramp: {clean}");
+    }
+
+    /// The twin's RL-16 network with a mount node and blocks that load
+    /// the case: the unit the recovery tests simulate.
+    fn known_unit() -> ThermalConfig {
+        let mut cfg = TwinConfig::default_rl16().thermal;
+        cfg.mount_tau_s = 300.0;
+        cfg.block_capacity_ratio = [0.4, 0.2];
+        cfg
+    }
+
+    /// Started a third of a log unit off in every time constant, the
+    /// search settles on the simulated network's time constants, at a
+    /// training cost no higher than the truth's (what the fit's 10 s step
+    /// leaves). (The convection is not checked: the twin's sensor axis, y,
+    /// stays horizontal at both of these positions.)
+    #[test]
+    fn the_network_search_recovers_the_simulating_networks_time_constants() {
+        let cfg = known_unit();
+        let data = twin_blocks(&cfg);
+        let truth = shape_of(&cfg);
+        let mut start = truth;
+        for (k, i) in LOG_SCALED[..5].iter().enumerate() {
+            start[*i] += if k % 2 == 0 { 0.3 } else { -0.3 };
+        }
+        start[at::CONVECTION] = 0.2;
+        let q = search_shape(&data, None, false, &[start], 1, 150);
+        let close = |i: usize, within: f64| {
+            let (got, want) = (q[i].exp(), truth[i].exp());
+            assert!(
+                (got / want - 1.0).abs() < within,
+                "{}: {got} against {want}",
+                SHAPE[i].0
+            );
+        };
+        close(at::CASE_TAU, 0.02);
+        close(at::BLOCK1_TAU, 0.05);
+        close(at::BLOCK2_TAU, 0.05);
+        close(at::MOUNT_TAU, 0.1);
+        close(at::COUPLING_TAU, 0.1);
+        let cost = simple_form(&data);
+        let at_truth = cost.cost(&cost.searched(&truth)).expect("a cost");
+        let found = cost.cost(&cost.searched(&q)).expect("a cost");
+        assert!(found <= 1.01 * at_truth, "{found} against {at_truth}");
+    }
+
+    /// A case slower than the bounds allow (a 20 h time constant): the
+    /// search ends within its bounds, the case near its own.
+    #[test]
+    fn the_search_stays_within_its_bounds() {
+        let mut cfg = known_unit();
+        cfg.case_tau_s = 72_000.0;
+        let data = twin_blocks(&cfg);
+        let q = search_shape(&data, None, false, &[shape_of(&known_unit())], 1, 150);
+        assert_eq!(clamp_shape(&q).1, 0.0, "{q:?}");
+        let cost = simple_form(&data);
+        let (lin, _) = cost.fit_at(&q);
+        assert!(within_bounds(&to_config(&cfg, &q, &lin)));
+        let case = q[at::CASE_TAU].exp();
+        assert!(case > 0.5 * SHAPE[at::CASE_TAU].2, "{case}");
+    }
+
+    /// A chamber sensor reading half again the air: the linear solve holds
+    /// the air gain on its bound and solves the rest again.
+    #[test]
+    fn the_air_gain_is_held_on_its_bound() {
+        let mut cfg = known_unit();
+        cfg.air_gain = 1.5;
+        let (lin, _) = cost_at(&cfg);
+        assert_eq!(lin[0], AIR_GAIN.1, "{lin:?}");
+        assert!(
+            lin[1..4].iter().all(|r| (0.0..=RISE_MAX_C).contains(r)),
+            "{lin:?}"
+        );
+        // Within its bounds the gain is the unit's.
+        cfg.air_gain = 1.1;
+        let (lin, _) = cost_at(&cfg);
+        assert!((lin[0] - 1.1).abs() < 1e-3, "{lin:?}");
+    }
+
+    /// The linear quantities and residuals of the twin's network `cfg`
+    /// fitted at its own shape (the simpler form).
+    fn cost_at(cfg: &ThermalConfig) -> (Linear, Vec<Vec<[f64; 3]>>) {
+        simple_form(&twin_blocks(cfg)).fit_at(&shape_of(cfg))
+    }
+
+    /// The simpler form's cost on every block of `data`.
+    fn simple_form(data: &[Vec<Block>]) -> Cost<'_> {
+        Cost {
+            runs: data,
+            held_out: None,
+            full: false,
+        }
+    }
+
+    /// Within bounds a shape is kept as it is; past one, it is clamped and
+    /// the distance (in the searched, log units) is the penalty.
+    #[test]
+    fn a_shape_is_clamped_into_its_bounds_with_the_distance_as_penalty() {
+        let q = shape_of(&known_unit());
+        assert_eq!(clamp_shape(&q), (q, 0.0));
+        let mut past = q;
+        past[at::CASE_TAU] = SHAPE[at::CASE_TAU].2.ln() + 0.5;
+        past[at::CONVECTION] = -0.25;
+        let (c, outside) = clamp_shape(&past);
+        assert_eq!(c[at::CASE_TAU], SHAPE[at::CASE_TAU].2.ln());
+        assert_eq!(c[at::CONVECTION], 0.0);
+        assert!((outside - (0.25 + 0.0625)).abs() < 1e-12, "{outside}");
+        // And the twin's configuration round-trips through a shape.
+        let back = to_config(&known_unit(), &q, &[1.0, 1.5, 6.0, 4.0, 0.0, 0.0, 0.0]);
+        let cfg = known_unit();
+        for (a, b) in [
+            (back.case_tau_s, cfg.case_tau_s),
+            (back.block1_tau_s, cfg.block1_tau_s),
+            (back.coupling_tau_s, cfg.coupling_tau_s),
+            (back.mount_tau_s, cfg.mount_tau_s),
+        ] {
+            assert!((a / b - 1.0).abs() < 1e-12, "{a} against {b}");
+        }
+    }
+
+    /// 60 s blocks never span a record change or a missing second; the
+    /// first 10 min are in every fold's training, the rest cut into
+    /// contiguous quarters, the first quarter of run r held out in fold r.
+    #[test]
+    fn blocks_are_whole_minutes_of_one_record_in_contiguous_folds() {
+        let mut run = twin_run(&known_unit());
+        run.samples.truncate(6000);
+        // A second missing at 3000 s; the record changes at 4530 s.
+        run.samples.remove(3000);
+        for s in &mut run.samples {
+            s.record = if s.iv.time_s < 4530.0 { "a" } else { "b" }.into();
+        }
+        let runs = [run.clone(), run];
+        let data = blocks(&runs, Vector3::y());
+        for (r, b) in data.iter().enumerate() {
+            for x in b {
+                assert_eq!(x.end_s - x.start_s, AVERAGING_S as f64);
+                let spans = |t: f64| x.start_s < t && t < x.end_s;
+                assert!(
+                    !spans(3000.5) && !spans(4530.0),
+                    "{} {}",
+                    x.start_s,
+                    x.end_s
+                );
+                if x.start_s < PINNED_S {
+                    assert_eq!(x.fold, PINNED);
+                } else {
+                    assert!(x.fold < FOLDS);
+                }
+            }
+            // Folds change in order (one quarter after another, cyclic).
+            let folds: Vec<usize> = b.iter().map(|x| x.fold).filter(|&f| f != PINNED).collect();
+            let changes = folds.windows(2).filter(|w| w[0] != w[1]).count();
+            assert_eq!(changes, FOLDS - 1, "run {r}: {folds:?}");
+            assert!(
+                b.iter()
+                    .all(|x| x.fold != (r + FOLDS - 1) % FOLDS || x.start_s > 2000.0)
+            );
+        }
+        assert_ne!(
+            data[0].last().map(|b| b.fold),
+            data[1].last().map(|b| b.fold)
+        );
+    }
+
+    /// The twin's network driven by the measured air of runs it made
+    /// itself leaves no gap; a unit whose case is twice as slow does.
+    #[test]
+    fn the_twin_reproduces_its_own_runs_and_not_another_units() {
+        let twin = TwinConfig::default_rl16();
+        let made_by = |cfg: &ThermalConfig| {
+            let [cycle, _] = air_profiles();
+            let axis = Vector3::from(cfg.sensor_axis_body).normalize();
+            let mut net = ThermalNetwork::soaked(cfg, cycle[0]);
+            let orientation = Orientation::new(0.0, 0.0, 0.0);
+            let g = (orientation.rotation().inverse() * crate::geometry::gravity_ned_g())
+                .dot(&axis)
+                .abs();
+            let samples: Vec<Sample> = cycle
+                .iter()
+                .take(20_000)
+                .enumerate()
+                .map(|(t, &air)| {
+                    let time_s = t as f64 + 0.5;
+                    net.step(
+                        if t == 0 { 0.5 } else { 1.0 },
+                        air,
+                        true,
+                        1.0 + cfg.convection_gain * g,
+                    );
+                    Sample {
+                        iv: Interval {
+                            time_s,
+                            rate_dph: 0.0,
+                            reference_dph: 0.0,
+                            t1_c: net.t1_c,
+                            t2_c: net.t2_c,
+                            tcase_c: net.case_c,
+                            chamber_c: air,
+                            frames: 400,
+                        },
+                        orientation,
+                        record: "r".into(),
+                        step: "s".into(),
+                        table_rate_body_dph: nalgebra::Vector3::zeros(),
+                    }
+                })
+                .collect();
+            [RunData {
+                name: "made".into(),
+                site: twin.site,
+                samples,
+            }]
+        };
+        let own = layer(&made_by(&twin.thermal), Some(&twin), false);
+        assert!(own.gap_c < 1e-9, "{}", own.gap_c);
+        assert!(own.fitted.is_none() && own.fitted_gap_c.is_none());
+        assert_eq!(own.series[0].len(), 20_000 / AVERAGING_S);
+        let mut slower = twin.thermal.clone();
+        slower.case_tau_s *= 2.0;
+        let other = layer(&made_by(&slower), Some(&twin), false);
+        assert!(other.gap_c > 0.1, "{}", other.gap_c);
+    }
+
+    /// A quantised sensor's step is read from the steps between samples;
+    /// a sensor that is not quantised (or whose steps are not multiples of
+    /// the smallest) has none.
+    #[test]
+    fn a_sensors_resolution_is_its_smallest_whole_step() {
+        let q = 0.0625;
+        let steps: Vec<f64> = (1..50).map(|k| q * f64::from(k % 4 + 1)).collect();
+        assert_eq!(resolution(&steps), q);
+        let mut odd = steps.clone();
+        odd.extend((0..20).map(|k| q * (1.37 + 0.1 * f64::from(k))));
+        assert_eq!(resolution(&odd), 0.0);
+        assert_eq!(resolution(&[]), 0.0);
+        assert_eq!(median_abs(&mut [-3.0, 1.0, -2.0]), Some(2.0));
+        assert_eq!(median_abs(&mut []), None);
+    }
+
+    /// The two workers' results come back in the jobs' order.
+    #[test]
+    fn work_on_two_threads_keeps_the_jobs_order() {
+        let jobs: Vec<u64> = (0..9).collect();
+        let out = on_two_threads(&jobs, |&j| j * j);
+        assert_eq!(out, jobs.iter().map(|j| j * j).collect::<Vec<_>>());
+        assert!(on_two_threads(&[] as &[u64], |&j| j).is_empty());
     }
 }

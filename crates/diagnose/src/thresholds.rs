@@ -84,3 +84,74 @@ pub const THRESHOLDS: Thresholds = Thresholds {
     max_outside: 2,
     joint_from: 3,
 };
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The bars fit together: fractions are fractions, a candidate
+    /// reported inconclusive is one that missed the naming bar, and the
+    /// selection has room for the joint step's pair.
+    #[test]
+    fn the_bars_are_consistent_with_each_other() {
+        let t = THRESHOLDS;
+        for (name, v) in [
+            ("alpha", t.alpha),
+            ("min_gain", t.min_gain),
+            ("tie", t.tie),
+            ("swap_within", t.swap_within),
+            ("inconclusive_gain", t.inconclusive_gain),
+            ("inconclusive_p", t.inconclusive_p),
+            ("rival_share", t.rival_share),
+            ("deciding_power", t.deciding_power),
+            ("periodic_above", t.periodic_above),
+            ("min_between_dof", t.min_between_dof),
+        ] {
+            assert!(v > 0.0 && v < 1.0, "{name} = {v}");
+        }
+        assert!(t.share_margin > 0.0 && t.share_margin <= 1.0);
+        // Inconclusive: a gain below the bar, a p-value above it.
+        assert!(t.inconclusive_gain < t.min_gain);
+        assert!(t.inconclusive_p > t.alpha);
+        // Tied candidates both pass the bar when the best clears it well.
+        assert!(t.tie < t.min_gain);
+        // A joint step names two effects and pairs at least two.
+        assert!(t.max_effects >= 2 && t.joint_from >= 2);
+        assert!(t.max_outside >= 1);
+        // A run offset spends one degree of freedom on the record means:
+        // the bar for a between-record test lies far below it.
+        assert!(t.min_between_dof < 0.5);
+    }
+
+    /// The values docs/diagnosis.md gives for the bars are the ones the
+    /// selection uses.
+    #[test]
+    fn the_documentation_gives_the_bars_in_use() {
+        let doc: String = include_str!("../../../docs/diagnosis.md")
+            .split_whitespace()
+            .collect::<Vec<_>>()
+            .join(" ");
+        let t = THRESHOLDS;
+        let count = ["one", "two", "three", "four", "five"];
+        for phrase in [
+            format!(
+                "at least {:.0} % of the held-out sum of squares (`min_gain`",
+                100.0 * t.min_gain
+            ),
+            format!(
+                "within {:.0} % of the best improvement (`tie`)",
+                100.0 * t.tie
+            ),
+            format!("below {} / (candidates left)", t.alpha),
+            format!(
+                "less than {} there gets no between-record test",
+                t.min_between_dof
+            ),
+            format!("at most {} effects", count[t.max_effects - 1]),
+            format!("at most {})", count[t.max_outside - 1]),
+        ] {
+            assert!(doc.contains(&phrase), "docs/diagnosis.md lacks {phrase:?}");
+        }
+        assert_eq!(t.swap_within, 0.2, "the documentation says a fifth");
+    }
+}
