@@ -521,6 +521,7 @@ fn parameters(s: &Scored, effect: Effect) -> (BTreeMap<String, f64>, BTreeMap<St
     for &Term {
         effect: e,
         param: p,
+        ..
     } in &s.model
     {
         let n = e.terms().len();
@@ -959,7 +960,7 @@ fn outside_found(
 ) -> Vec<OutsideFound> {
     let mut term = 0;
     let mut out = Vec::new();
-    for (k, &Term { effect: e, param }) in s.model.iter().enumerate() {
+    for (k, &Term { effect: e, param, .. }) in s.model.iter().enumerate() {
         term += e.terms().len();
         if k < from || e != o {
             continue;
