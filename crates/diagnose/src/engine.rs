@@ -497,6 +497,9 @@ struct Design<'d> {
     q: usize,
     /// All columns.
     p: usize,
+    /// Per run: its effect columns that can be non-zero (a lot's unit's:
+    /// its own and the shared ones; a single unit's: all).
+    effect_cols_of_run: Vec<Vec<usize>>,
 }
 
 impl<'d> Design<'d> {
@@ -513,6 +516,16 @@ impl<'d> Design<'d> {
         // nuisance (a misaligned axis, for one, reads every turn short by
         // its cosine).
         let p = q + data.runs.len() + data.turning_runs.len();
+        let effect_cols_of_run = (0..data.runs.len())
+            .map(|run| {
+                (0..q)
+                    .filter(|&j| {
+                        let (e, _, units, _) = keys[j];
+                        e.is_outside() || data.acts_in(units, run)
+                    })
+                    .collect()
+            })
+            .collect();
         Self {
             data,
             keys,
@@ -520,6 +533,7 @@ impl<'d> Design<'d> {
             scales,
             q,
             p,
+            effect_cols_of_run,
         }
     }
 
@@ -532,11 +546,9 @@ impl<'d> Design<'d> {
         let data = self.data;
         let nruns = data.runs.len();
         let turn = data.turning_runs.iter().position(|&r| r == run);
-        (0..self.q)
-            .filter(|&j| {
-                let (e, _, units, _) = self.keys[j];
-                e.is_outside() || data.acts_in(units, run)
-            })
+        self.effect_cols_of_run[run]
+            .iter()
+            .copied()
             .chain([self.q + run])
             .chain(turn.map(|t| self.q + nruns + t))
             .collect()
@@ -546,7 +558,8 @@ impl<'d> Design<'d> {
     fn predict(&self, i: usize, beta: &DVector<f64>) -> f64 {
         let (data, q, nruns) = (self.data, self.q, self.data.runs.len());
         let mut v = beta[q + data.run_of[i]];
-        for j in 0..q {
+        // The columns zero in this row's unit add nothing.
+        for &j in &self.effect_cols_of_run[data.run_of[i]] {
             v += self.cols[j][i] / self.scales[j] * beta[j];
         }
         if let Some(t) = data.turning_of[i] {
