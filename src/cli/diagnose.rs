@@ -1,4 +1,5 @@
-//! `gyrobench diagnose RUN.mcap... [--twin TWIN.toml] --out DIR` and
+//! `gyrobench diagnose RUN.mcap... [--twin TWIN.toml] --out DIR`,
+//! `gyrobench diagnose --lot LOG... --out DIR` and
 //! `gyrobench diagnose selfcheck [--runs N] [--seed S] --out DIR`.
 
 use std::path::{Path, PathBuf};
@@ -8,14 +9,14 @@ use clap::{Args, Subcommand};
 
 use super::{Outcome, Usage};
 use crate::diagnose::library::Effect;
-use crate::diagnose::{self, Options, data, html, selfcheck};
+use crate::diagnose::{self, Options, data, html, lot_files, lot_html, selfcheck};
 use crate::twin::TwinConfig;
 
 #[derive(Debug, Args)]
 #[command(
     args_conflicts_with_subcommands = true,
     after_help = after_help!(
-        "gyrobench diagnose runs/c1/run.mcap runs/c2/run.mcap --out diag",
+        "gyrobench diagnose runs/c1/run.mcap runs/c2/run.mcap --out diag\n  gyrobench diagnose --lot runs/batch/run.mcap --out lot",
         plain
     )
 )]
@@ -45,6 +46,15 @@ pub struct DiagnoseArgs {
     /// headline says so.
     #[arg(long)]
     allow_mixed_units: bool,
+    /// Diagnose a lot: the logs are of several units (a batch's log holds
+    /// several; one unit's logs are grouped by its serial), all of one
+    /// type at one site. Each unit is diagnosed alone, then all together:
+    /// the effects the lot shares (the bench's, with their likely seat:
+    /// fixture, table, site), each unit's own, and the unit unlike the
+    /// others. Writes lot.json, lot.html, bench-correction.toml and each
+    /// unit's diagnosis and twins under units/SERIAL/.
+    #[arg(long, conflicts_with_all = ["unit", "allow_mixed_units"])]
+    lot: bool,
 }
 
 #[derive(Debug, Subcommand)]
@@ -280,6 +290,9 @@ pub fn run(args: DiagnoseArgs) -> Result<Outcome> {
     if args.runs.is_empty() {
         return Err(Usage("give one or more run logs (RUN.mcap...)".into()).into());
     }
+    if args.lot {
+        return run_lot(&args);
+    }
     let Some(out) = args.out else {
         return Err(Usage(
             "--out DIR is required: where diagnosis.json, diagnosis.html and twin-updated.toml go"
@@ -310,6 +323,140 @@ pub fn run(args: DiagnoseArgs) -> Result<Outcome> {
     print_summary(&d, &out, args.twin.is_some())?;
     errln!("diagnosis in {}", out.display());
     Ok(Outcome::Success)
+}
+
+/// `diagnose --lot`: the units of the logs as a lot.
+fn run_lot(args: &DiagnoseArgs) -> Result<Outcome> {
+    let Some(out) = &args.out else {
+        return Err(Usage(
+            "--out DIR is required: where lot.json, lot.html, bench-correction.toml and each unit's files go"
+                .into(),
+        )
+        .into());
+    };
+    let twin = match &args.twin {
+        Some(p) => Some(TwinConfig::load(p).context("loading the twin file")?),
+        None => None,
+    };
+    let units = data::load_lot(&args.runs)?;
+    errln!(
+        "lot: {} unit(s) in {} log(s): {}",
+        units.len(),
+        args.runs.len(),
+        units
+            .iter()
+            .map(|u| format!("{} ({} run(s))", u.serial, u.runs.len()))
+            .collect::<Vec<_>>()
+            .join(", ")
+    );
+    let lot = diagnose::lot::diagnose_lot(
+        units,
+        &Options {
+            twin: twin.clone(),
+            fit_thermal: true,
+            power_replications: args.power_replications,
+        },
+    )
+    .map_err(|e| Usage(e.to_string()))?;
+    write_lot_outputs(out, &lot, twin.as_ref())?;
+    outln!("{}", lot_html::headline(&lot))?;
+    outln!("{}", render_lot_units(&lot))?;
+    errln!("lot diagnosis in {}", out.display());
+    Ok(Outcome::Success)
+}
+
+/// Write a lot's files into `out`: lot.json, lot.html,
+/// bench-correction.toml, deciding-run.toml (or remove an earlier one),
+/// and each unit's diagnosis and twins under units/SERIAL/ (`twin`, else
+/// the RL-16's, updated).
+fn write_lot_outputs(
+    out: &Path,
+    lot: &diagnose::lot::Lot,
+    twin: Option<&TwinConfig>,
+) -> Result<()> {
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    write(&out.join("lot.json"), &serde_json::to_string_pretty(lot)?)?;
+    write(&out.join("lot.html"), &lot_html::render(lot))?;
+    write(
+        &out.join("bench-correction.toml"),
+        &lot_files::bench_correction(lot).context("writing the bench's correction as TOML")?,
+    )?;
+    let deciding = out.join("deciding-run.toml");
+    match &lot.deciding_procedure {
+        Some(text) => write(&deciding, text)?,
+        None if deciding.exists() => std::fs::remove_file(&deciding)
+            .with_context(|| format!("removing {}", deciding.display()))?,
+        None => {}
+    }
+    let base = twin.cloned().unwrap_or_else(TwinConfig::default_rl16);
+    let mut dirs: Vec<PathBuf> = Vec::new();
+    for (k, (u, d)) in lot.units.iter().zip(&lot.diagnoses).enumerate() {
+        let mut dir = out.join(lot_files::unit_dir(&u.serial));
+        // Two serials a file name cannot tell apart each get their own.
+        if dirs.contains(&dir) {
+            dir = out.join(format!("{}-{k}", lot_files::unit_dir(&u.serial).display()));
+        }
+        write_outputs(&dir, d, Some(base.clone()))?;
+        for (name, on_this_bench) in [
+            ("twin-updated.toml", false),
+            ("twin-on-this-bench.toml", true),
+        ] {
+            let t = lot
+                .unit_twin(k, &base, on_this_bench)
+                .context("a unit of the lot without its diagnosis")?;
+            write(
+                &dir.join(name),
+                &format!(
+                    "# Unit {}'s twin from gyrobench diagnose --lot: its thermal network fitted to its runs and {}.
+{}",
+                    u.serial,
+                    if on_this_bench {
+                        "its own effects and the effects the lot shares on this bench (the bench's, in bench-correction.toml)"
+                    } else {
+                        "its own effects alone (the ones the lot shares are the bench's: bench-correction.toml)"
+                    },
+                    t.to_toml().context("writing a unit's twin as TOML")?
+                ),
+            )?;
+        }
+        dirs.push(dir);
+    }
+    Ok(())
+}
+
+/// One line per unit under the headline: its own effects, its gap
+/// through the lot's fits, and whether it is unlike the lot.
+fn render_lot_units(lot: &diagnose::lot::Lot) -> String {
+    let mut lines = Vec::new();
+    for s in &lot.shared_effects {
+        lines.push(format!(
+            "  shared {:<24} seat {:<8} units {} (shrink {:.0} %, p {}, agreement p {})",
+            s.name,
+            s.seat,
+            s.units.join(", "),
+            100.0 * s.shrink,
+            crate::view::p_phrase(s.p_value),
+            crate::view::p_phrase(s.agreement_p)
+        ));
+    }
+    for u in &lot.units {
+        let own: Vec<&str> = u.effects.iter().map(|a| a.name.as_str()).collect();
+        lines.push(format!(
+            "  unit {:<12} own {:<32} gap {:.5} -> {:.5} -> {:.5} deg/h (noise {:.5}){}",
+            u.serial,
+            if own.is_empty() {
+                "none".to_owned()
+            } else {
+                own.join(", ")
+            },
+            u.gap_dph,
+            u.gap_after_shared_dph,
+            u.gap_after_dph,
+            u.noise_dph,
+            if u.outlier { "  OUTLIER" } else { "" }
+        ));
+    }
+    lines.join("\n")
 }
 
 fn run_selfcheck(a: SelfcheckArgs) -> Result<Outcome> {

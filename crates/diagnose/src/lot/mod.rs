@@ -11,8 +11,10 @@
 //! - `weigh`: shared or own, effect by effect, and the effects only the
 //!   lot's pooled runs show;
 //! - `evidence`: what makes a unit the outlier, and each shared effect's
-//!   seat.
+//!   seat;
+//! - `act`: the bench's correction and each unit's twin.
 
+mod act;
 mod evidence;
 mod weigh;
 

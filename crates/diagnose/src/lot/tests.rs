@@ -245,6 +245,22 @@ fn a_fixture_tilt_is_shared_and_a_units_own_effect_sets_it_apart() {
         "{}",
         serde_json_like(u2)
     );
+    // The bench's correction holds the tilt alone; U2's own twin its
+    // g-sensitivity alone, and on this bench the tilt as well.
+    let bench = lot.bench_effects();
+    assert!(bench.axis_misalignment.is_some_and(|m| m.enabled));
+    assert!(bench.g_sensitivity.is_none());
+    let base = TwinConfig::default_rl16();
+    let own = lot.unit_twin(2, &base, false).expect("U2");
+    assert!(own.effects.g_sensitivity.is_some_and(|g| g.enabled));
+    assert!(own.effects.axis_misalignment.is_none_or(|m| !m.enabled));
+    let here = lot.unit_twin(2, &base, true).expect("U2");
+    let m = here
+        .effects
+        .axis_misalignment
+        .expect("the tilt on this bench");
+    assert!((m.about_z_arcmin - 8.0).abs() < 0.5, "{m:?}");
+    assert!(lot.unit_twin(4, &base, true).is_none());
 }
 
 fn serde_json_like(u: &UnitResult) -> String {
