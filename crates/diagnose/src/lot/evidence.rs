@@ -105,9 +105,12 @@ pub(super) fn judge(
                 "the other units share {} and its own differs (p {:.2e}): {} against the lot's {} ({} off by {:.1} standard errors)",
                 d.effect.name(),
                 d.p_value,
-                coefficients(&d.value),
-                coefficients(&d.lot),
-                d.z.1,
+                coefficients(d.effect, &d.value),
+                coefficients(d.effect, &d.lot),
+                coefficient(d.effect, &d.z.1, 0.0)
+                    .split(" = ")
+                    .next()
+                    .unwrap_or_default(),
                 d.z.0.abs()
             ),
             value: d.z.0.abs(),
@@ -211,10 +214,24 @@ fn thermal(units: &mut [UnitResult]) {
     }
 }
 
-/// Coefficients in words, `name = value`.
-fn coefficients(m: &BTreeMap<String, f64>) -> String {
+/// A coefficient in words: a misalignment's in arcmin (its coefficients
+/// are theta_z and -theta_y, rad), the rest as fitted.
+fn coefficient(e: Effect, k: &str, v: f64) -> String {
+    match (e, k) {
+        (Effect::AxisMisalignment, "earth_y") => {
+            format!("theta_z = {:.2} arcmin", v.to_degrees() * 60.0)
+        }
+        (Effect::AxisMisalignment, "earth_z") => {
+            format!("-theta_y = {:.2} arcmin", v.to_degrees() * 60.0)
+        }
+        _ => format!("{k} = {v:.3e}"),
+    }
+}
+
+/// Coefficients in words.
+fn coefficients(e: Effect, m: &BTreeMap<String, f64>) -> String {
     m.iter()
-        .map(|(k, v)| format!("{k} = {v:.3e}"))
+        .map(|(k, v)| coefficient(e, k, *v))
         .collect::<Vec<_>>()
         .join(", ")
 }

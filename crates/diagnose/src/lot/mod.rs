@@ -626,7 +626,7 @@ fn assemble(
         dut_type,
         site,
         protocol: format!(
-            "each unit diagnosed alone; then every unit's runs fitted together, each unit's reference and own effects its own, blocked cross-validation over every unit's records ({} folds over {} run(s) of {n} units), scores on 60 s means; a per-run offset is a nuisance",
+            "Each unit diagnosed alone; then every unit's runs fitted together, each unit's reference and own effects its own, blocked cross-validation over every unit's records ({} folds over {} run(s) of {n} units), scores on 60 s means; a per-run offset is a nuisance",
             stack.data.folds.len(),
             stack.data.runs.len()
         ),
