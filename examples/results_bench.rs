@@ -92,6 +92,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                         records: Vec::new(),
                         note: String::new(),
                         std_error: None,
+                        uncertainty: None,
+                        uncertainty_reason: None,
+                        guard_band: None,
+                        margin: None,
+                        margin_u: None,
+                        noise_floor: None,
                         trace: None,
                         band: None,
                     }

@@ -12,7 +12,7 @@ use crate::config::{Checker, ConfigError, Source};
 use crate::driver::acl::AclTable;
 use crate::driver::espec::EspecChamber;
 use crate::driver::gyro::GyroReader;
-use crate::driver::link::{Connector, LineLink};
+use crate::driver::link::{Connector, LineLink, LinkWatch};
 use crate::driver::supply::ScpiSupply;
 use crate::driver::watlow::WatlowChamber;
 use crate::driver::{Chamber, DeviceError, MotionTable, RetryPolicy};
@@ -59,6 +59,10 @@ pub struct BenchConfig {
     /// with slots runs a batch: one procedure, every unit.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub slots: Vec<Slot>,
+    /// The bench's own Type B contributions to its figures' uncertainty,
+    /// each with its source (`[uncertainty]`, `docs/bench.md`).
+    #[serde(default, skip_serializing_if = "crate::typeb::TypeB::is_empty")]
+    pub uncertainty: crate::typeb::TypeB,
 }
 
 /// `on_unit_error`: a batch goes on without a unit that cannot be judged,
@@ -543,6 +547,7 @@ impl BenchConfig {
         self.table.geometry.validate(&c, "table.geometry")?;
         self.validate_slots(&c)?;
         self.validate_devices(&c, src)?;
+        self.uncertainty.validate(&c)?;
         self.validate_limits(&c)
     }
 
@@ -959,6 +964,28 @@ impl BenchConfig {
     pub fn frame_layout(&self) -> FrameLayout {
         self.devices.gyro.frame.clone().unwrap_or_default()
     }
+
+    /// What the status word of each unit's frames means, in unit order
+    /// (the slots', or the one unit's).
+    pub fn status_bits(&self) -> Vec<crate::protocol::frame::StatusBits> {
+        if self.slots.is_empty() {
+            return vec![self.frame_layout().status_bits];
+        }
+        self.slots
+            .iter()
+            .map(|s| self.slot_frame_layout(s).status_bits)
+            .collect()
+    }
+
+    /// What the status word of the unit in slot `name` means (the one
+    /// unit's for an empty name or a bench without slots).
+    pub fn unit_status_bits(&self, name: &str) -> crate::protocol::frame::StatusBits {
+        self.slots
+            .iter()
+            .find(|s| s.name == name)
+            .map_or_else(|| self.frame_layout(), |s| self.slot_frame_layout(s))
+            .status_bits
+    }
 }
 
 fn connector(spec: DeviceSpec, timeout: Duration) -> Connector {
@@ -998,6 +1025,8 @@ pub struct OpenBench {
     pub(crate) others: Vec<GyroReader<BoxTransport>>,
     /// The unit's supply, if the bench has one.
     pub(crate) supply: Option<ScpiSupply>,
+    /// What every link above says as it drops, comes back or is lost.
+    pub(crate) watch: Arc<LinkWatch>,
 }
 
 impl std::fmt::Debug for OpenBench {
@@ -1012,6 +1041,7 @@ impl std::fmt::Debug for OpenBench {
 /// Open every device of a bench whose specs are byte streams (not `sim://`).
 pub async fn open_bench(cfg: &BenchConfig) -> Result<OpenBench, DeviceError> {
     let d = &cfg.devices;
+    let watch = LinkWatch::new();
     let ct = Duration::from_secs_f64(d.chamber.timeout_s);
     let (cs, t) = open_device("chamber", &d.chamber.spec, ct).await?;
     let cpol = RetryPolicy {
@@ -1021,28 +1051,29 @@ pub async fn open_bench(cfg: &BenchConfig) -> Result<OpenBench, DeviceError> {
     };
     let chamber: Box<dyn Chamber> = match d.chamber.protocol {
         ChamberProtocol::EspecAscii => Box::new(EspecChamber::new(
-            LineLink::new("chamber", t, Some(connector(cs, ct)), cpol),
+            LineLink::new("chamber", t, Some(connector(cs, ct)), cpol).with_watch(watch.clone()),
             d.chamber.address,
         )),
-        ChamberProtocol::WatlowF4tModbus => Box::new(WatlowChamber::new(
-            "chamber",
-            t,
-            Some(connector(cs, ct)),
-            cpol,
-        )),
+        ChamberProtocol::WatlowF4tModbus => Box::new(
+            WatlowChamber::new("chamber", t, Some(connector(cs, ct)), cpol)
+                .with_watch(watch.clone()),
+        ),
     };
     let tt = Duration::from_secs_f64(d.table.timeout_s);
     let (ts, t) = open_device("table", &d.table.spec, tt).await?;
-    let table = AclTable::new(LineLink::new(
-        "table",
-        t,
-        Some(connector(ts, tt)),
-        RetryPolicy {
-            timeout: tt,
-            attempts: d.table.attempts,
-            reconnect_window: Duration::from_secs_f64(d.table.reconnect_window_s),
-        },
-    ));
+    let table = AclTable::new(
+        LineLink::new(
+            "table",
+            t,
+            Some(connector(ts, tt)),
+            RetryPolicy {
+                timeout: tt,
+                attempts: d.table.attempts,
+                reconnect_window: Duration::from_secs_f64(d.table.reconnect_window_s),
+            },
+        )
+        .with_watch(watch.clone()),
+    );
     let supply = match &d.supply {
         Some(p) => {
             let pt = Duration::from_secs_f64(p.timeout_s);
@@ -1057,7 +1088,8 @@ pub async fn open_bench(cfg: &BenchConfig) -> Result<OpenBench, DeviceError> {
                         attempts: p.attempts,
                         reconnect_window: Duration::from_secs_f64(p.reconnect_window_s),
                     },
-                ),
+                )
+                .with_watch(watch.clone()),
                 p.protocol,
             ))
         }
@@ -1065,11 +1097,16 @@ pub async fn open_bench(cfg: &BenchConfig) -> Result<OpenBench, DeviceError> {
     };
     let gt = Duration::from_secs_f64(d.gyro.silence_s);
     let window = Duration::from_secs_f64(d.gyro.reconnect_window_s);
-    let open_gyro = |device: String, spec: String, layout: FrameLayout| async move {
-        let (gs, t) = open_device(&device, &spec, gt).await?;
-        Ok::<_, DeviceError>(
-            GyroReader::new(&device, t, layout, gt).with_reconnect(connector(gs, gt), window),
-        )
+    let open_gyro = |device: String, spec: String, layout: FrameLayout| {
+        let watch = watch.clone();
+        async move {
+            let (gs, t) = open_device(&device, &spec, gt).await?;
+            Ok::<_, DeviceError>(
+                GyroReader::new(&device, t, layout, gt)
+                    .with_reconnect(connector(gs, gt), window)
+                    .with_watch(watch),
+            )
+        }
     };
     // A batch's units each on their own link, `gyro/SLOT`.
     let mut gyros = Vec::new();
@@ -1094,6 +1131,7 @@ pub async fn open_bench(cfg: &BenchConfig) -> Result<OpenBench, DeviceError> {
         gyro,
         others: gyros.collect(),
         supply,
+        watch,
     })
 }
 

@@ -65,9 +65,10 @@ pub fn load_unit(path: &Path, unit: Option<&str>) -> Result<RunSeries, ReplayErr
             _ => None,
         })
         .collect();
+    // As the scale-factor figures take them: over whole revolutions.
     let rate: Vec<RatePoint> = turning
         .iter()
-        .filter_map(|l| RatePoint::of(&r.result.records.get(l)?))
+        .filter_map(|l| r.result.records.rate_point(l).map(|(p, _)| p))
         .collect();
     let thermal: Vec<String> = r
         .procedure

@@ -22,7 +22,12 @@
 //!
 //! A set whose `[unit]` is missing (a file of an earlier version, or runs
 //! of several units fitted together) names no unit: `run --coeffs` refuses
-//! it without `--coeffs-override`.
+//! it without `--coeffs-override`. What the text claims (unit, version) is
+//! checked against the results store when a run chooses the set
+//! ([`identity`]): the run records what was verified, never a claim as a
+//! fact.
+
+pub mod identity;
 
 use std::path::Path;
 
@@ -31,6 +36,7 @@ use serde::{Deserialize, Serialize};
 use crate::analysis::model::Fit;
 use crate::compensation::{Model1, Model3, Model4};
 use crate::config::{Checker, ConfigError, Source};
+pub use identity::{SetIdentity, SetStatus, StoredSet};
 
 /// `[unit]`: whose coefficients these are.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
@@ -209,6 +215,12 @@ pub struct CoeffsUsed {
     pub from: Option<String>,
     /// Why a set of another unit (or naming none) was used anyway.
     pub override_reason: Option<String>,
+    /// The set's identity as checked against the results store when the
+    /// run chose it (none: fitted, or a log written before the check).
+    /// `serial`, `dut_type` and `version` above are what the check
+    /// verified: `version` only for a set the store holds byte for byte.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub identity: Option<SetIdentity>,
 }
 
 impl CoeffsUsed {
@@ -222,6 +234,7 @@ impl CoeffsUsed {
             sha256: None,
             from: None,
             override_reason: None,
+            identity: None,
         }
     }
 
@@ -236,24 +249,33 @@ impl CoeffsUsed {
             sha256: Some(sha256.to_owned()),
             from: Some(from.to_owned()),
             override_reason: None,
+            identity: None,
         }
     }
 
     /// In words, for the report and the measurement notes.
     pub fn describe(&self) -> String {
         if self.source == CoeffsSource::Fitted {
-            return "fitted on these records (no --coeffs given)".into();
+            return "fitted within the run (no --coeffs given)".into();
         }
         if self.sha256.is_none() && self.from.is_none() {
             // A log written before coefficient sets were named.
             return "the coefficients given by --coeffs".into();
         }
-        let version = self
-            .version
-            .map_or_else(|| "a set not in a store".to_owned(), |v| format!("set {v}"));
-        let unit = match (&self.dut_type, &self.serial) {
-            (Some(t), Some(s)) => format!(" of {t} {s}"),
-            _ => " naming no unit".into(),
+        let (head, checked) = match &self.identity {
+            Some(id) => (id.head(), id.tail()),
+            // A log written before sets were checked: the set as it named
+            // itself.
+            None => {
+                let version = self
+                    .version
+                    .map_or_else(|| "a set not in a store".to_owned(), |v| format!("set {v}"));
+                let unit = match (&self.dut_type, &self.serial) {
+                    (Some(t), Some(s)) => format!(" of {t} {s}"),
+                    _ => " naming no unit".into(),
+                };
+                (format!("{version}{unit}"), "")
+            }
         };
         let sha = self.sha256.as_deref().map_or(String::new(), |h| {
             format!(", sha256 {}", &h[..h.len().min(12)])
@@ -269,7 +291,7 @@ impl CoeffsUsed {
             .override_reason
             .as_deref()
             .map_or(String::new(), |r| format!("; used for another unit: {r}"));
-        format!("{version}{unit}{from}{sha}{why}")
+        format!("{head}{from}{sha}{checked}{why}")
     }
 }
 
@@ -285,6 +307,24 @@ pub enum SetMismatch {
         from: String,
         /// The set in words.
         set: String,
+        /// The run's unit type.
+        dut_type: String,
+        /// The run's serial.
+        serial: String,
+    },
+    /// The set names a unit the results store contradicts: it holds the
+    /// set (or the set it was edited from) as another unit's, or the runs
+    /// it was fitted on are another unit's.
+    #[error(
+        "{from} claims {claim}, but {why}: its unit is not the one it names; calibrate {dut_type} {serial}, or give --coeffs-override REASON to use it anyway (the reason goes in the report and the store)"
+    )]
+    NotItsUnit {
+        /// The file or the store.
+        from: String,
+        /// What the set claims to be, in words.
+        claim: String,
+        /// What the store knows instead.
+        why: String,
         /// The run's unit type.
         dut_type: String,
         /// The run's serial.
@@ -369,6 +409,43 @@ impl Chosen {
             text: src.text.clone(),
             used,
         })
+    }
+
+    /// The set with its identity as checked against the results store:
+    /// the run's record names the unit the store knows it as, and its
+    /// version only when the store holds this text.
+    pub fn identified(mut self, identity: SetIdentity) -> Self {
+        self.used.version = match (&identity.status, &identity.stored) {
+            (SetStatus::Registered, Some(s)) => Some(s.version),
+            _ => None,
+        };
+        if let Some(s) = &identity.stored {
+            self.used.serial = Some(s.serial.clone());
+            self.used.dut_type = Some(s.dut_type.clone());
+        }
+        self.used.identity = Some(identity);
+        self
+    }
+
+    /// Whether the set may compensate unit `serial` of type `dut_type`:
+    /// [`CoefficientSet::check_unit`] on the unit it names, once the store
+    /// (when it was asked) agrees that unit is its own.
+    pub fn check_unit(&self, from: &str, dut_type: &str, serial: &str) -> Result<(), SetMismatch> {
+        if self.set.model4.is_none() {
+            return Err(SetMismatch::NoModel4 { from: from.into() });
+        }
+        if let Some(id) = &self.used.identity
+            && let Some(why) = id.disagreement()
+        {
+            return Err(SetMismatch::NotItsUnit {
+                from: from.into(),
+                claim: id.claim(),
+                why,
+                dut_type: dut_type.into(),
+                serial: serial.into(),
+            });
+        }
+        self.set.check_unit(from, dut_type, serial)
     }
 
     /// What a run compensates with, when the set holds model 4.
@@ -486,6 +563,85 @@ mod tests {
         assert!(e.to_string().contains("model4.warmup_tau_s"), "{e}");
     }
 
+    /// What the store found of a set whose text claims `claimed`.
+    fn checked(
+        status: SetStatus,
+        claimed: &CoefficientSet,
+        stored: Option<(&str, i64)>,
+    ) -> SetIdentity {
+        SetIdentity {
+            status,
+            claimed_unit: claimed.unit.clone(),
+            claimed_version: claimed.set.as_ref().and_then(|s| s.version),
+            stored: stored.map(|(serial, version)| StoredSet {
+                serial: serial.into(),
+                dut_type: "RL-16".into(),
+                version,
+                sha256: Some("cd".repeat(32)),
+            }),
+            fitted_on_runs: Vec::new(),
+            store: Some("results.sqlite".into()),
+            note: String::new(),
+        }
+    }
+
+    fn chosen(s: &CoefficientSet) -> Chosen {
+        let text = s.to_toml().unwrap();
+        Chosen::from_source(
+            &Source::from_text("unit.toml", &text),
+            CoeffsSource::File,
+            "unit.toml",
+        )
+        .unwrap()
+    }
+
+    #[test]
+    fn an_edited_set_is_recorded_as_edited_never_as_the_set_it_claims() {
+        // Its serial edited to another unit's: the store knows it as
+        // RL16-0042's set 2, so the unit it names is refused.
+        let forged = set("RL16-0099");
+        let c =
+            chosen(&forged).identified(checked(SetStatus::Edited, &forged, Some(("RL16-0042", 2))));
+        assert_eq!(c.used.version, None, "an edited set has no version");
+        assert_eq!(c.used.serial.as_deref(), Some("RL16-0042"));
+        let e = c.check_unit("unit.toml", "RL-16", "RL16-0099").unwrap_err();
+        assert!(matches!(e, SetMismatch::NotItsUnit { .. }), "{e}");
+        assert!(
+            e.to_string()
+                .starts_with("unit.toml claims set 2 of RL-16 RL16-0099, but the results store results.sqlite holds it as set 2 of RL-16 RL16-0042"),
+            "{e}"
+        );
+        // Its own unit's set with a coefficient edited: usable, said so.
+        let own = set("RL16-0042");
+        let c = chosen(&own).identified(checked(SetStatus::Edited, &own, Some(("RL16-0042", 2))));
+        assert!(c.check_unit("unit.toml", "RL-16", "RL16-0042").is_ok());
+        let words = c.used.describe();
+        assert!(
+            words.starts_with("an edited copy of set 2 of RL-16 RL16-0042 from unit.toml")
+                && words.ends_with("not the text the results store holds"),
+            "{words}"
+        );
+        // The store holds it: its version is the store's.
+        let c =
+            chosen(&own).identified(checked(SetStatus::Registered, &own, Some(("RL16-0042", 2))));
+        assert_eq!(c.used.version, Some(2));
+        assert!(
+            c.used
+                .describe()
+                .starts_with("set 2 of RL-16 RL16-0042 from unit.toml")
+        );
+        // No store: the claim, said to be one.
+        let c = chosen(&own).identified(checked(SetStatus::Unchecked, &own, None));
+        assert_eq!(c.used.version, None);
+        assert!(
+            c.used
+                .describe()
+                .starts_with("set 2 of RL-16 RL16-0042 as its text claims from unit.toml"),
+            "{}",
+            c.used.describe()
+        );
+    }
+
     #[test]
     fn what_a_run_used_is_said_in_words() {
         let s = set("RL16-0042");
@@ -501,7 +657,7 @@ mod tests {
         );
         assert_eq!(
             CoeffsUsed::fitted().describe(),
-            "fitted on these records (no --coeffs given)"
+            "fitted within the run (no --coeffs given)"
         );
     }
 }

@@ -1,5 +1,6 @@
 //! Files that are never half-written, never written through a planted
-//! link, and never written over the file they were made from.
+//! link, never written over the file they were made from, and never put
+//! in a run directory by another command ([`check_output`], in `guard`).
 //!
 //! Output goes to a new file with a random name in the target's directory,
 //! created exclusively (`O_EXCL`, by the `tempfile` crate), synced, then
@@ -10,6 +11,11 @@
 use std::fs::File;
 use std::io::Write;
 use std::path::{Path, PathBuf};
+
+mod guard;
+pub use guard::{
+    OutputRefused, OutputRule, RUN_LOCK, RUN_LOG, check_output, is_run_dir, real_path,
+};
 
 /// A file being written beside `target`; [`Pending::commit`] puts it in
 /// place, dropping it removes it.
@@ -133,51 +139,6 @@ fn write_pending(mut p: Pending, bytes: &[u8]) -> std::io::Result<()> {
     }
     drop(f);
     p.commit()
-}
-
-/// An output that would write over a run's record.
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[error(
-    "{output} {what}: writing it would replace the record of a run; choose another output path, or give --force"
-)]
-pub struct OverRecord {
-    /// The output as given.
-    pub output: String,
-    /// What it is.
-    pub what: String,
-}
-
-/// Refuse (unless `force`) an output that exists and is a run's log (an
-/// MCAP file) or any file of a run directory (one holding `run.mcap` or
-/// `run.lock`).
-pub fn ensure_not_a_record(output: &Path, force: bool) -> Result<(), OverRecord> {
-    if force || std::fs::symlink_metadata(output).is_err() {
-        return Ok(());
-    }
-    let target = resolve(output);
-    let is_log = std::fs::File::open(&target)
-        .and_then(|mut f| {
-            use std::io::Read;
-            let mut magic = [0u8; 8];
-            f.read_exact(&mut magic).map(|()| magic)
-        })
-        .is_ok_and(|m| m == *mcap::MAGIC);
-    let dir = target
-        .parent()
-        .filter(|d| !d.as_os_str().is_empty())
-        .unwrap_or(Path::new("."));
-    let in_run_dir = dir.join("run.mcap").exists() || dir.join("run.lock").exists();
-    let what = if is_log {
-        "is a run's log".to_owned()
-    } else if in_run_dir {
-        format!("is a file of the run directory {}", dir.display())
-    } else {
-        return Ok(());
-    };
-    Err(OverRecord {
-        output: output.display().to_string(),
-        what,
-    })
 }
 
 /// An output that would destroy an input.

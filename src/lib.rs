@@ -51,6 +51,7 @@ pub mod sim;
 pub mod station;
 pub mod study;
 pub mod transport;
+pub mod typeb;
 /// The digital twin of the RL-16 on its bench: the `gyrobench-twin`
 /// crate (`crates/twin`).
 pub use gyrobench_twin::twin;

@@ -263,7 +263,7 @@ fn run_on_twin(
         bench_cfg.limits.clone(),
         bench_cfg.devices.supply.as_ref(),
     );
-    let opts = crate::session::options(bench_cfg, None, Arc::default(), None);
+    let opts = crate::session::options(procedure, bench_cfg, None, Arc::default(), None);
     let mut sink = Collect::new(bench_cfg.table.geometry);
     // No timers or I/O are awaited on the embedded bench: a plain executor will do.
     let rt = tokio::runtime::Builder::new_current_thread()

@@ -11,6 +11,11 @@ pub const SERIAL_MAX_CHARS: usize = 64;
 /// hardware run can be filed under it by mistake.
 pub const SIMULATED_SERIAL: &str = "SIMULATED";
 
+/// The serial an imported run is recorded under when neither `--dut` nor
+/// the export's sidecar names its unit. It names no unit, as
+/// [`SIMULATED_SERIAL`] does: the file's name is not a serial.
+pub const UNNAMED_SERIAL: &str = "UNNAMED";
+
 /// Why a serial number is refused.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum SerialError {
@@ -126,6 +131,13 @@ pub fn report_name(serial: &str) -> String {
     format!("report-{}", file_safe(serial))
 }
 
+/// Whether two serials' report files would be one file: their
+/// [`report_name`]s are equal, or differ only in letter case (one file on
+/// a case-insensitive file system, a Windows or macOS share).
+pub fn same_report_file(a: &str, b: &str) -> bool {
+    report_name(a).eq_ignore_ascii_case(&report_name(b))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -162,6 +174,15 @@ mod tests {
             msg.contains("U+202E") && msg.contains("character 2"),
             "{msg}"
         );
+    }
+
+    #[test]
+    fn serials_that_differ_only_in_case_or_unsafe_characters_share_a_report_file() {
+        assert!(same_report_file("s1", "S1"));
+        assert!(same_report_file("RL16-0042a", "rl16-0042A"));
+        assert!(same_report_file("A/1", "a:1"), "both report-a_1");
+        assert!(!same_report_file("S1", "S2"));
+        assert!(!same_report_file("S-1", "S_1"));
     }
 
     #[test]

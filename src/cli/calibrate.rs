@@ -13,13 +13,14 @@ use crate::calibrate::{
     ABSURD_OVER_RAW, Calibration, calibrate, load_unit, mixed_serials, scale_factor,
 };
 use crate::coeffs::{CoefficientSet, FittedOn, SetSection, UnitSection};
-use crate::fsutil::ensure_distinct;
+use crate::fsutil::{OutputRule, check_output};
 
 #[derive(Debug, Args)]
 #[command(after_help = after_help!(
     "gyrobench calibrate runs/c1/run.mcap runs/c2/run.mcap -o unit.toml",
     "0 coefficients written, 1 error (unreadable runs, runs too short or of different units, a \
-     fit that is not plausible), 2 usage (one run given twice, an output that is an input)"
+     fit that is not plausible), 2 usage (one run given twice, an output that is an input, a \
+     run's log or in a run directory without --force)"
 ))]
 pub struct CalibrateArgs {
     /// Run logs (.mcap) of one unit: thermal runs for the compensation
@@ -27,9 +28,15 @@ pub struct CalibrateArgs {
     /// scale factor and its temperature coefficient.
     #[arg(required = true)]
     runs: Vec<PathBuf>,
-    /// Coefficients file to write (the format `run --coeffs` reads).
+    /// Coefficients file to write (the format `run --coeffs` reads);
+    /// COEFFS.calibration.json and .html go beside it. None of them may
+    /// be a run's log or inside a run directory (without --force).
     #[arg(short, long)]
     out: PathBuf,
+    /// Write the outputs even if one is a run's log or inside a run
+    /// directory.
+    #[arg(long)]
+    force: bool,
     /// Fit runs of units with different serial numbers together (refused
     /// otherwise: coefficients belong to one unit).
     #[arg(long)]
@@ -50,7 +57,14 @@ pub fn run(args: CalibrateArgs) -> Result<Outcome> {
     let html_path = args.out.with_extension("calibration.html");
     let inputs: Vec<&std::path::Path> = args.runs.iter().map(PathBuf::as_path).collect();
     for out in [&args.out, &json_path, &html_path] {
-        ensure_distinct(out, &inputs)?;
+        check_output(
+            out,
+            OutputRule {
+                inputs: &inputs,
+                force: args.force,
+                own: None,
+            },
+        )?;
     }
     let runs = args
         .runs

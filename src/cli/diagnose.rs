@@ -33,9 +33,13 @@ pub struct DiagnoseArgs {
     /// model 4 fitted on held-out records).
     #[arg(long)]
     twin: Option<PathBuf>,
-    /// Where to write diagnosis.json, diagnosis.html, twin-updated.toml.
+    /// Where to write diagnosis.json, diagnosis.html, twin-updated.toml
+    /// (not a run directory, nor inside one, without --force).
     #[arg(long)]
     out: Option<PathBuf>,
+    /// Write into --out even if it is a run directory or inside one.
+    #[arg(long)]
+    force: bool,
     /// When the diagnosis is inconclusive: replications of the deciding
     /// run to simulate its power with on the fitted unit (0: estimate it
     /// from the observed statistic only).
@@ -104,9 +108,14 @@ struct SelfcheckArgs {
     /// With --randomize: how many units (the cases cycle among them).
     #[arg(long, default_value_t = 300)]
     units: usize,
-    /// Where to write selfcheck.json and selfcheck.html.
+    /// Where to write selfcheck.json and selfcheck.html (or
+    /// randomized.json): not a run directory, nor inside one, without
+    /// --force.
     #[arg(long)]
     out: PathBuf,
+    /// Write into --out even if it is a run directory or inside one.
+    #[arg(long)]
+    force: bool,
 }
 
 /// Each run's unit, `type serial`, from its log's metadata.
@@ -300,6 +309,7 @@ pub fn run(args: DiagnoseArgs) -> Result<Outcome> {
         )
         .into());
     };
+    check_out_dir(&out, args.force)?;
     let twin = match &args.twin {
         Some(p) => Some(TwinConfig::load(p).context("loading the twin file")?),
         None => None,
@@ -334,6 +344,7 @@ fn run_lot(args: &DiagnoseArgs) -> Result<Outcome> {
         )
         .into());
     };
+    check_out_dir(out, args.force)?;
     let twin = match &args.twin {
         Some(p) => Some(TwinConfig::load(p).context("loading the twin file")?),
         None => None,
@@ -459,7 +470,20 @@ fn render_lot_units(lot: &diagnose::lot::Lot) -> String {
     lines.join("\n")
 }
 
+/// An output directory, checked before the work (`fsutil::check_output`).
+fn check_out_dir(out: &Path, force: bool) -> Result<()> {
+    crate::fsutil::check_output(
+        out,
+        crate::fsutil::OutputRule {
+            force,
+            ..Default::default()
+        },
+    )?;
+    Ok(())
+}
+
 fn run_selfcheck(a: SelfcheckArgs) -> Result<Outcome> {
+    check_out_dir(&a.out, a.force)?;
     if a.randomize {
         return run_randomized(&a);
     }

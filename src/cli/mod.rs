@@ -91,8 +91,11 @@ pub fn out(text: &str) -> std::io::Result<()> {
 pub enum Outcome {
     /// Done (or the unit passed): exit 0.
     Success,
-    /// The unit failed its limits: exit 3.
+    /// The unit failed its limits (a conditional fail included): exit 3.
     Fail,
+    /// The unit passed conditionally (non-binary rule: within its limits
+    /// by less than its uncertainty): exit 4.
+    ConditionalPass,
     /// A device or data failure ended the run (reported): exit 1.
     Error,
     /// Interrupted: exit 128 + the signal (130 Ctrl-C, 143 SIGTERM,
@@ -126,12 +129,31 @@ pub struct Usage(pub String);
 pub const EXIT_ERROR: u8 = 1;
 /// Exit code for a usage error.
 pub const EXIT_USAGE: u8 = 2;
+/// Exit code of a unit that passed conditionally (a procedure judged by
+/// the non-binary decision rule): not a plain pass, not a fail.
+pub const EXIT_CONDITIONAL_PASS: u8 = 4;
+
+impl Outcome {
+    /// The exit of a run that ended `o`, interrupted by signal code
+    /// `signal` when it was aborted.
+    pub fn of_run(o: crate::sequencer::Outcome, signal: u8) -> Self {
+        use crate::sequencer::Outcome as Run;
+        match o {
+            Run::Pass => Self::Success,
+            Run::Fail | Run::ConditionalFail => Self::Fail,
+            Run::ConditionalPass => Self::ConditionalPass,
+            Run::Error => Self::Error,
+            Run::Aborted => Self::Interrupted(signal),
+        }
+    }
+}
 
 impl Outcome {
     fn code(self) -> u8 {
         match self {
             Self::Success => 0,
             Self::Fail => 3,
+            Self::ConditionalPass => EXIT_CONDITIONAL_PASS,
             Self::Error => EXIT_ERROR,
             Self::Interrupted(code) => code,
         }
@@ -146,6 +168,7 @@ impl Outcome {
     after_help = after_help!(
         "gyrobench run procedures/acceptance.toml",
         "0 success (for a run: the unit passed), 1 error, 2 usage, 3 the unit failed its limits, \
+         4 it passed conditionally (a non-binary decision rule), \
          130 Ctrl-C, 143 SIGTERM, 129 SIGHUP, 131 SIGQUIT; `gyrobench COMMAND --help` gives each \
          command's"
     )
@@ -222,11 +245,12 @@ pub fn main() -> ExitCode {
         Ok(outcome) => ExitCode::from(outcome.code()),
         Err(e) => {
             errln!("error: {e:#}");
-            // An output that is one of the inputs is a bad pair of arguments.
+            // An output that is one of the inputs, or in a run directory,
+            // is a bad pair of arguments.
             let usage = e.chain().any(|c| {
                 c.is::<Usage>()
                     || c.is::<crate::fsutil::SamePath>()
-                    || c.is::<crate::fsutil::OverRecord>()
+                    || c.is::<crate::fsutil::OutputRefused>()
             });
             ExitCode::from(if usage { EXIT_USAGE } else { EXIT_ERROR })
         }

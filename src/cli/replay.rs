@@ -11,14 +11,13 @@ use crate::clock::Stopwatch;
 use crate::coeffs::Chosen;
 use crate::report::{Report, render_html};
 use crate::runlog::replay::replay_unit;
-use crate::sequencer;
 
 #[derive(Debug, Args)]
 #[command(after_help = after_help!(
     "gyrobench replay runs/smoke/run.mcap",
     "0 the run passed, 3 it failed its limits, 1 error (an unreadable log, a run that ended in \
-     error or was cut short), 2 usage (an --out that is a run directory), 130 the run was \
-     interrupted"
+     error or was cut short), 2 usage (an --out that is a run directory, or inside another run's \
+     directory without --force), 130 the run was interrupted"
 ))]
 pub struct ReplayArgs {
     /// The run's log (live, recovered, truncated or imported).
@@ -27,10 +26,16 @@ pub struct ReplayArgs {
     #[arg(long)]
     coeffs: Option<PathBuf>,
     /// Where to write report.json and report.html (default: beside the log,
-    /// in <log dir>/replay).
+    /// in <log dir>/replay, the replay's own place in its run directory).
+    /// Never a run directory itself; inside one (other than the default),
+    /// only with --force.
     #[arg(long)]
     out: Option<PathBuf>,
-    /// Also index the run in the results store (idempotent).
+    /// Write into an --out inside a run directory.
+    #[arg(long)]
+    force: bool,
+    /// Also index the run in the results store (idempotent), and show in
+    /// the report who reviewed and approved it there (`results sign`).
     #[arg(long)]
     store: bool,
     /// The results store (with --store): a SQLite file, a postgres:// URL
@@ -44,6 +49,7 @@ pub struct ReplayArgs {
 }
 
 pub fn run(args: ReplayArgs) -> Result<Outcome> {
+    let out = out_dir(&args)?;
     let coeffs = match &args.coeffs {
         Some(p) => {
             let chosen = Chosen::from_file(p).context("loading the coefficient set")?;
@@ -75,13 +81,14 @@ pub fn run(args: ReplayArgs) -> Result<Outcome> {
     // The log's exit code is its worst unit's.
     let rank = |o: &Outcome| match o {
         Outcome::Success => 0,
-        Outcome::Fail => 1,
-        Outcome::Error => 2,
-        _ => 3,
+        Outcome::ConditionalPass => 1,
+        Outcome::Fail => 2,
+        Outcome::Error => 3,
+        _ => 4,
     };
     let mut worst = Outcome::Success;
     for serial in &serials {
-        let o = replay_one(&args, coeffs.as_ref(), serial.as_deref(), batch)?;
+        let o = replay_one(&args, &out, coeffs.as_ref(), serial.as_deref(), batch)?;
         if rank(&o) > rank(&worst) {
             worst = o;
         }
@@ -96,11 +103,40 @@ pub fn run(args: ReplayArgs) -> Result<Outcome> {
     Ok(worst)
 }
 
+/// Where the reports go: `--out`, or `<log dir>/replay`, the replay's own
+/// place in the run's directory. A run directory itself never (it keeps
+/// the run's own report); inside one, the default or with `--force`.
+fn out_dir(args: &ReplayArgs) -> Result<PathBuf> {
+    let own = args
+        .log
+        .parent()
+        .map_or_else(|| PathBuf::from("replay"), |d| d.join("replay"));
+    let out = args.out.clone().unwrap_or_else(|| own.clone());
+    if crate::session::rundir::is_run_dir(&out) {
+        return Err(Usage(format!(
+            "{} is a run directory (it holds run.mcap or run.lock): replay writes its report \
+             elsewhere; choose another --out",
+            out.display()
+        ))
+        .into());
+    }
+    crate::fsutil::check_output(
+        &out,
+        crate::fsutil::OutputRule {
+            inputs: &[],
+            force: args.force,
+            own: Some(&own),
+        },
+    )?;
+    Ok(out)
+}
+
 /// Replay one unit (`serial`; none: the log as written) and write its
-/// report: `report.json` and `.html`, or for a batch's unit
+/// report into `out`: `report.json` and `.html`, or for a batch's unit
 /// `report-SERIAL.json` and `.html`, the names its run wrote.
 fn replay_one(
     args: &ReplayArgs,
+    out: &std::path::Path,
     coeffs: Option<&crate::coeffs::Chosen>,
     serial: Option<&str>,
     batch: bool,
@@ -141,21 +177,13 @@ fn replay_one(
     if let Some(c) = &coeffs {
         report.coefficients = c.used.clone();
     }
-    let out = args.out.clone().unwrap_or_else(|| {
-        args.log
-            .parent()
-            .map_or_else(|| PathBuf::from("replay"), |d| d.join("replay"))
-    });
-    // A run's own directory keeps the run's report; replay never replaces it.
-    if crate::session::rundir::is_run_dir(&out) {
-        return Err(Usage(format!(
-            "{} is a run directory (it holds run.mcap or run.lock): replay writes its report \
-             elsewhere; choose another --out",
-            out.display()
-        ))
-        .into());
+    if args.store {
+        let loc = crate::results::Location::resolve(args.db.as_deref(), None);
+        if let Some(mut s) = crate::results::Store::open(&loc)? {
+            report.signatures = s.signatures(&format!("{}.{}", r.meta.run_id, r.meta.part))?;
+        }
     }
-    std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     let name = match serial.filter(|_| batch) {
         Some(s) => crate::unit::report_name(s),
         None => "report".to_owned(),
@@ -173,10 +201,5 @@ fn replay_one(
     }
     outf!("{}", report.render_text())?;
     errln!("report in {}", out.display());
-    Ok(match r.result.outcome {
-        sequencer::Outcome::Pass => Outcome::Success,
-        sequencer::Outcome::Fail => Outcome::Fail,
-        sequencer::Outcome::Error => Outcome::Error,
-        sequencer::Outcome::Aborted => Outcome::Interrupted(130),
-    })
+    Ok(Outcome::of_run(r.result.outcome, 130))
 }

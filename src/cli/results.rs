@@ -46,6 +46,19 @@ pub struct FilterArgs {
     /// trends, yields and exports too.
     #[arg(long)]
     include_reference: bool,
+    /// Count the simulated bench's unnamed unit (SIMULATED) in trends and
+    /// yields too.
+    #[arg(long)]
+    include_simulated: bool,
+    /// Only units whose compensated figures came from this source:
+    /// fitted (within the run), file or store (the unit's set).
+    #[arg(long, value_parser = ["fitted", "file", "store"])]
+    coeffs_source: Option<String>,
+    /// Only runs on this kind of bench: embedded (the simulated bench
+    /// inside gyrobench), simulated (devices that identified themselves
+    /// as gyrobench's simulators, `sim serve`), hardware, or imported.
+    #[arg(long, value_enum)]
+    bench_kind: Option<crate::results::facts::BenchKind>,
 }
 
 impl FilterArgs {
@@ -79,7 +92,13 @@ impl FilterArgs {
             since: self.since.clone(),
             until: self.until.clone(),
             latest_only,
-            include_reference: self.include_reference || outcome == Some(RunState::Reference),
+            include_reference: self.include_reference
+                || outcome == Some(RunState::Reference)
+                || self.bench_kind == Some(crate::results::facts::BenchKind::Imported),
+            include_simulated: self.include_simulated
+                || self.serial.as_deref() == Some(crate::unit::SIMULATED_SERIAL),
+            coeffs_source: self.coeffs_source.clone(),
+            bench_kind: self.bench_kind,
             limit,
         })
     }
@@ -117,7 +136,8 @@ pub enum ResultsCommand {
     /// One run whole: its record, measurements and parts.
     #[command(after_help = after_help!("gyrobench results show 3f2a9c", store))]
     Show {
-        /// The run's id (or its start), as `results list` shows it.
+        /// The run's id (or its start), as `results list` shows it, or its
+        /// run directory.
         run: String,
         /// As JSON.
         #[arg(long)]
@@ -143,9 +163,19 @@ pub enum ResultsCommand {
         measurement: String,
         #[command(flatten)]
         filter: FilterArgs,
-        /// Also write a chart page (values against time, limits).
+        /// Fewest values a capability index is shown for (default 25:
+        /// below it an index says little; lower it to look anyway, with
+        /// the index's interval and a warning).
+        #[arg(long, default_value_t = crate::results::query::MIN_CAPABILITY_N, value_name = "N")]
+        min_values: usize,
+        /// Also write a chart page (values against time, limits); not a
+        /// run's log, nor inside a run directory, without --force.
         #[arg(long, value_name = "FILE")]
         html: Option<PathBuf>,
+        /// Write the --html page even if it is a run's log or inside a
+        /// run directory.
+        #[arg(long, requires = "html")]
+        force: bool,
         /// As JSON.
         #[arg(long)]
         json: bool,
@@ -158,17 +188,25 @@ pub enum ResultsCommand {
     Export {
         #[command(flatten)]
         filter: FilterArgs,
-        /// JUnit XML file to write.
+        /// JUnit XML file to write (not a run's log, nor inside a run
+        /// directory, without --force).
         #[arg(long, value_name = "FILE", required_unless_present = "csv")]
         junit: Option<PathBuf>,
-        /// CSV file to write.
+        /// CSV file to write (as --junit).
         #[arg(long, value_name = "FILE")]
         csv: Option<PathBuf>,
+        /// Write the files even if one is a run's log or inside a run
+        /// directory.
+        #[arg(long)]
+        force: bool,
     },
     /// Whether the store tells the truth: every stored run checked against
-    /// its log (there, the same SHA-256, the same figures; recomputed from
-    /// the frames with --replay), and the logs below RUNS_DIR the store
-    /// lacks.
+    /// its log (there, the same SHA-256; every field of its record the log
+    /// gives: unit, each unit's outcome and coefficients, operator, times,
+    /// bench, host, software, procedure, instruments, each difference
+    /// named with the store's value and the log's; the same figures,
+    /// recomputed from the frames with --replay), and the logs below
+    /// RUNS_DIR the store lacks.
     #[command(after_help = after_help!(
         "gyrobench results verify runs/ --replay",
         "0 the store and the logs agree, 3 they do not (each finding printed), 1 error (a store \
@@ -185,6 +223,29 @@ pub enum ResultsCommand {
         /// As JSON.
         #[arg(long)]
         json: bool,
+    },
+    /// Sign a stored run: reviewed, then approved by another person. The
+    /// signature binds the log's SHA-256 and the stored verdict and
+    /// figures; `results verify` names a signed run that changed since.
+    #[command(after_help = after_help!(
+        "gyrobench results sign 0968c2e6 --role reviewed --by \"A. Quality\"",
+        "0 signed, 1 error (a store that cannot be reached, no such run), 2 usage (refused: \
+         a run not ended or imported, approved before a review or by the reviewer, signed twice)"
+    ))]
+    Sign {
+        /// The run's id (or its start), as `results list` shows it, or its
+        /// run directory.
+        run: String,
+        /// What the signature says: reviewed, or approved (after a review,
+        /// by someone else).
+        #[arg(long, value_parser = ["reviewed", "approved"])]
+        role: String,
+        /// Who signs.
+        #[arg(long)]
+        by: String,
+        /// A remark kept with the signature.
+        #[arg(long, default_value = "")]
+        note: String,
     },
     /// Index run directories from their logs (idempotent: what the store
     /// has is left alone; a run left running is completed).
@@ -235,6 +296,7 @@ pub fn run(args: ResultsArgs) -> Result<Outcome> {
             }
         }
         ResultsCommand::Show { run, json } => {
+            let run = run_id_of_dir(&run).unwrap_or(run);
             let d = store.show(&run)?;
             if json {
                 outln!("{}", serde_json::to_string_pretty(&d)?)?;
@@ -243,6 +305,34 @@ pub fn run(args: ResultsArgs) -> Result<Outcome> {
                     "{}",
                     render_run(&d.run, &d.fields, &d.measurements, &d.parts)
                 )?;
+                outf!("{}", render_signatures(&d.signatures))?;
+            }
+        }
+        ResultsCommand::Sign {
+            run,
+            role,
+            by,
+            note,
+        } => {
+            let role = match role.as_str() {
+                "approved" => crate::results::sign::Role::Approved,
+                _ => crate::results::sign::Role::Reviewed,
+            };
+            let run = run_id_of_dir(&run).unwrap_or(run);
+            match store.sign(&run, role, &by, &note) {
+                Ok(s) => errln!(
+                    "{}: {} by {} at {} (log sha256 {}, figures {})",
+                    s.run,
+                    s.role,
+                    crate::view::printable(&s.by),
+                    s.signed_utc,
+                    s.log_sha256.get(..12).unwrap_or(&s.log_sha256),
+                    s.figures_sha256.get(..12).unwrap_or(&s.figures_sha256)
+                ),
+                Err(crate::results::StoreError::Refused { why }) => {
+                    return Err(Usage(why).into());
+                }
+                Err(e) => return Err(e.into()),
             }
         }
         ResultsCommand::Unit { serial, json } => {
@@ -256,11 +346,14 @@ pub fn run(args: ResultsArgs) -> Result<Outcome> {
         ResultsCommand::Trend {
             measurement,
             filter,
+            min_values,
             html,
+            force,
             json,
         } => {
+            check_outputs(html.iter(), force)?;
             let f = filter.filter(true, None)?;
-            let t = store.trend(&measurement, &f)?;
+            let t = store.trend(&measurement, &f, min_values)?;
             if let Some(path) = &html {
                 let points = store.trend_points(&measurement, &f, 5000)?;
                 write_trend_page(path, &t, &points)?;
@@ -271,7 +364,13 @@ pub fn run(args: ResultsArgs) -> Result<Outcome> {
                 outf!("{}", render_trend(&t))?;
             }
         }
-        ResultsCommand::Export { filter, junit, csv } => {
+        ResultsCommand::Export {
+            filter,
+            junit,
+            csv,
+            force,
+        } => {
+            check_outputs(junit.iter().chain(&csv), force)?;
             let rows = store.export_rows(&filter.filter(true, None)?)?;
             if let Some(path) = &junit {
                 let xml = crate::results::junit::junit(&rows).context("writing JUnit XML")?;
@@ -309,6 +408,21 @@ pub fn run(args: ResultsArgs) -> Result<Outcome> {
         ResultsCommand::Sync { dirs } => return sync(&mut store, &dirs),
     }
     Ok(Outcome::Success)
+}
+
+/// The files a command will write, each checked before anything is done
+/// (`fsutil::check_output`).
+fn check_outputs<'a>(paths: impl Iterator<Item = &'a PathBuf>, force: bool) -> Result<()> {
+    for p in paths {
+        crate::fsutil::check_output(
+            p,
+            crate::fsutil::OutputRule {
+                force,
+                ..Default::default()
+            },
+        )?;
+    }
+    Ok(())
 }
 
 /// The trend's chart page at `path`, each point linked to its report.
@@ -397,13 +511,65 @@ fn render_measurements(ms: &[MeasurementRow]) -> String {
     let mut s = String::new();
     for m in ms {
         s.push_str(&format!(
-            "  {:<32} {:>12} {:<10} [{}..{}]  {}\n",
+            "  {:<32} {:>12} {:<10} {:<18} [{}..{}]  {}\n",
             m.name,
             opt(m.value, 4),
             m.unit,
+            m.uncertainty.map_or(String::new(), |u| format!(
+                "± {:.4} (k={:.2})",
+                u.expanded, u.k
+            )),
             lim(m.low),
             lim(m.high),
             m.outcome.as_str().to_uppercase()
+        ));
+    }
+    s
+}
+
+/// The run id of run directory `arg` (its report's), when it is one.
+fn run_id_of_dir(arg: &str) -> Option<String> {
+    let dir = std::path::Path::new(arg);
+    if !dir.is_dir() {
+        return None;
+    }
+    let report = std::fs::read_dir(dir)
+        .ok()?
+        .filter_map(Result::ok)
+        .map(|e| e.path())
+        .filter(|p| {
+            p.file_name()
+                .and_then(|n| n.to_str())
+                .is_some_and(|n| n.starts_with("report") && n.ends_with(".json"))
+        })
+        .min()?;
+    let bytes = crate::config::read_at_most(&report, 64 << 20).ok()?;
+    let v: serde_json::Value = serde_json::from_slice(&bytes).ok()?;
+    v["run_id"]
+        .as_str()
+        .filter(|s| !s.is_empty())
+        .map(str::to_owned)
+}
+
+/// A run's signatures for the terminal (or that it has none).
+fn render_signatures(signed: &[crate::results::sign::Signature]) -> String {
+    let p = crate::view::printable;
+    if signed.is_empty() {
+        return "signatures: none (results sign RUN --role reviewed|approved --by NAME)\n".into();
+    }
+    let mut s = String::from("signatures:\n");
+    for g in signed {
+        s.push_str(&format!(
+            "  {:<9} by {} at {} (log sha256 {}){}\n",
+            g.role,
+            p(&g.by),
+            g.signed_utc,
+            g.log_sha256.get(..12).unwrap_or(&g.log_sha256),
+            if g.note.is_empty() {
+                String::new()
+            } else {
+                format!(": {}", p(&g.note))
+            }
         ));
     }
     s
@@ -483,7 +649,7 @@ pub fn render_unit(h: &UnitHistory) -> String {
                 p(&r.bench_id)
             },
             r.software,
-            r.coefficients.describe(),
+            p(&r.coefficients.describe()),
             r.calibration_overdue
                 .as_deref()
                 .map_or(String::new(), |o| format!("; {o} calibration OVERDUE"))
@@ -545,7 +711,22 @@ pub fn render_trend(t: &Trend) -> String {
         idx(t.overall.upper),
         idx(t.overall.lower),
         idx(t.overall.k),
-    )
+    ) + &t.percentile.map_or(String::new(), |p| {
+        format!(
+            "  Ppu {}  Ppl {}  Ppk {}  (percentiles of a {} fit, ISO 22514-2: X50 {}  X99.865 {}){}\n",
+            idx(p.upper),
+            idx(p.lower),
+            idx(p.k),
+            p.model,
+            opt(Some(p.x_50), 4),
+            opt(Some(p.x_99865), 4),
+            if p.preferred {
+                "\n    a non-negative figure with an upper limit: read its performance here, not on the normal Ppk"
+            } else {
+                ""
+            }
+        )
+    }) + &t.caveat()
 }
 
 #[cfg(test)]

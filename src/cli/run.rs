@@ -10,7 +10,7 @@ use clap::Args;
 use super::check::load_bench;
 use super::{Outcome, Usage};
 use crate::clock::Pacing;
-use crate::coeffs::{Chosen, CoeffsSource};
+use crate::coeffs::{Chosen, CoeffsSource, SetIdentity, SetStatus};
 use crate::procedure::Procedure;
 use crate::runlog::live::{Live as LiveStream, LiveError};
 use crate::sequencer::embedded::Fault;
@@ -25,7 +25,8 @@ use crate::unit::{SIMULATED_SERIAL, check_operator, check_serial};
     "gyrobench run procedures/smoke.toml --out runs/smoke",
     "0 the unit passed, 3 it failed its limits, 1 error (bad input, I/O, a device, data that could \
      not be judged, a bench not left in a known state), 2 usage (bad arguments, a run directory \
-     that holds a run or is in use), 130 Ctrl-C, 143 SIGTERM, 129 SIGHUP, 131 SIGQUIT"
+     that holds a run or is in use, a bench another run is using), 130 Ctrl-C, 143 SIGTERM, \
+     129 SIGHUP, 131 SIGQUIT"
 ))]
 pub struct RunArgs {
     /// Procedure file (TOML), e.g. procedures/acceptance.toml.
@@ -55,8 +56,11 @@ pub struct RunArgs {
     seed: u64,
     /// The unit's coefficient set to compensate with: a file `calibrate`
     /// wrote, or `latest` for the unit's newest set in the results store
-    /// (default: model 4 fitted on the run's own records). A set of
-    /// another unit is refused.
+    /// (default: model 4 fitted on the run's own records). The set is
+    /// checked against the results store: a set it holds is recorded with
+    /// its version, an edited or unknown one as such (never as the set it
+    /// claims to be), and without a store as not checked. A set of another
+    /// unit (as it names itself, or as the store knows it) is refused.
     #[arg(long, value_name = "FILE|latest")]
     coeffs: Option<String>,
     /// Use the --coeffs set although it is another unit's or names no
@@ -84,9 +88,16 @@ pub struct RunArgs {
     /// (chamber-alarm, chamber-silent, table-interlock, gyro-silent,
     /// gyro-corrupt, gyro-stuck, gyro-saturated, process-kill, panic,
     /// supply-overcurrent, disk-full, sighup, sigquit; unit-lost: a
-    /// batch's last unit's link lost for good, the others go on).
+    /// batch's last unit's link lost for good, the others go on;
+    /// supply-ignores-off: the supply leaves its output on when told off).
     #[arg(long, value_name = "FAULT@SECONDS")]
     inject: Vec<String>,
+    /// Nobody watches the run: the procedure's prompts (unit mounted,
+    /// chamber door closed, ...) count as confirmed by --operator before
+    /// it starts, and the log says so at each one. Without it, a run on
+    /// real devices whose procedure asks something needs a terminal.
+    #[arg(long)]
+    unattended: bool,
     /// Publish the run's channels live on a Foxglove WebSocket server
     /// (loopback only; default 127.0.0.1:8765, port 0 picks a free one):
     /// Foxglove or Lichtblick shows the run as it goes.
@@ -103,10 +114,15 @@ struct Live {
     now_s: f64,
     chamber: String,
     rate: String,
+    /// The operator confirmed the procedure's prompts before the run
+    /// (`--unattended`).
+    unattended: bool,
+    /// The first unit's drift: the last minute of its record.
+    drift: crate::view::live::DriftWindow,
 }
 
 impl Live {
-    fn new(total_s: f64) -> Self {
+    fn new(total_s: f64, unattended: bool) -> Self {
         Self {
             bar: super::progress::Bar::new(
                 total_s.max(1.0) as u64,
@@ -116,6 +132,8 @@ impl Live {
             now_s: 0.0,
             chamber: String::new(),
             rate: String::new(),
+            unattended,
+            drift: crate::view::live::DriftWindow::default(),
         }
     }
 
@@ -162,14 +180,13 @@ impl Observer for Live {
                 );
                 self.rate.clear();
             }
-            Event::Interval { slot: 0, iv, .. } => {
-                self.rate = format!(
-                    "  rate {:+.3} deg/h  T1/T2/TK {:.2}/{:.2}/{:.2} degC",
-                    iv.bias_dph(),
-                    iv.t1_c,
-                    iv.t2_c,
-                    iv.tcase_c
-                );
+            Event::Interval {
+                slot: 0,
+                iv,
+                record,
+            } => {
+                self.drift.push(iv.time_s, iv.bias_dph(), record);
+                self.rate = render_unit(iv, self.drift.drift().as_ref());
             }
             // The first unit's link figures close every tick.
             Event::Link { slot: 0, .. } => self.show(),
@@ -179,17 +196,108 @@ impl Observer for Live {
     }
 }
 
+/// The first unit on the progress line: its drift (the mean Earth-removed
+/// rate over the last minute of its record, the window named), never one
+/// 1 s sample, then its temperatures.
+fn render_unit(
+    iv: &crate::analysis::series::Interval,
+    drift: Option<&crate::view::live::Drift>,
+) -> String {
+    let drift = drift.map_or_else(
+        || "drift - (no record yet)".to_owned(),
+        |d| format!("drift {}", d.render()),
+    );
+    format!(
+        "  {drift}  T1/T2/TK {:.2}/{:.2}/{:.2} degC",
+        iv.t1_c, iv.t2_c, iv.tcase_c
+    )
+}
+
 impl Operator for Live {
-    fn prompt(&mut self, text: &str) {
+    fn prompt(&mut self, text: &str) -> Result<sequencer::Confirmed, String> {
         use std::io::IsTerminal;
+        if self.unattended {
+            self.bar.println(&format!(
+                "prompt (confirmed beforehand, --unattended): {text}"
+            ));
+            return Ok(sequencer::Confirmed::Beforehand);
+        }
         if !std::io::stdin().is_terminal() {
-            errln!("prompt (no terminal, going on): {text}");
-            return;
+            return Err(NO_TERMINAL.into());
         }
         self.bar
             .suspend(|| errln!("{text} -- press Enter to continue"));
         let mut line = String::new();
-        let _ = std::io::stdin().read_line(&mut line);
+        match std::io::stdin().read_line(&mut line) {
+            Ok(0) => Err("the terminal closed before it was answered".into()),
+            Ok(_) => Ok(sequencer::Confirmed::Now),
+            Err(e) => Err(format!("the terminal could not be read ({e})")),
+        }
+    }
+}
+
+/// Why a prompt cannot be asked on the terminal.
+const NO_TERMINAL: &str = "there is no terminal to answer it on; run it from a terminal or the \
+     station, or confirm the procedure's prompts beforehand with --unattended --operator NAME";
+
+/// A run on real devices whose procedure asks the operator something
+/// needs someone to answer: a terminal, or `--unattended` (whose prompts
+/// the named operator confirmed before starting). Said before anything
+/// moves, naming the first prompt.
+fn check_prompts(plan: &Plan, unattended: bool) -> Result<()> {
+    use std::io::IsTerminal;
+    if unattended && plan.operator.trim().is_empty() {
+        return Err(Usage(
+            "--unattended records the procedure's prompts as confirmed beforehand by the operator: \
+             name them with --operator NAME"
+                .into(),
+        )
+        .into());
+    }
+    let p = &plan.procedure;
+    // On a bench without a supply the operator switches the unit, and the
+    // moment they confirm is its power-on: never confirmed beforehand.
+    let by_hand = |s: &&crate::procedure::Step| {
+        plan.bench_cfg.devices.supply.is_none()
+            && matches!(s.kind, crate::procedure::StepKind::Power { .. })
+    };
+    if unattended
+        && !plan.bench_cfg.is_embedded()
+        && let Some(s) = p
+            .setup
+            .iter()
+            .chain(&p.main)
+            .chain(&p.cleanup)
+            .find(by_hand)
+    {
+        return Err(Usage(format!(
+            "{} has the operator switch the unit at line {} ({}): the bench has no supply, and \
+             --unattended cannot confirm when a unit was switched; run it with an operator at \
+             the bench, or on a bench with [devices.supply]",
+            plan.procedure_path,
+            s.line,
+            s.describe()
+        ))
+        .into());
+    }
+    if plan.bench_cfg.is_embedded() || unattended || std::io::stdin().is_terminal() {
+        return Ok(());
+    }
+    let first = p
+        .setup
+        .iter()
+        .chain(&p.main)
+        .chain(&p.cleanup)
+        .find(|s| matches!(s.kind, crate::procedure::StepKind::Prompt { .. }) || by_hand(s));
+    match first {
+        Some(s) => Err(Usage(format!(
+            "{} asks the operator at line {} ({}), and {NO_TERMINAL}",
+            plan.procedure_path,
+            s.line,
+            s.describe()
+        ))
+        .into()),
+        None => Ok(()),
     }
 }
 
@@ -402,8 +510,9 @@ fn serial(dut: Option<&str>, embedded: bool) -> Result<String> {
 }
 
 /// The coefficient set `--coeffs` names (a file, or `latest` from the
-/// store), checked against the unit: another unit's set, or one naming
-/// none, needs `--coeffs-override REASON`.
+/// store), its identity checked against the results store, then checked
+/// against the unit: another unit's set, one the store knows as another
+/// unit's, or one naming none, needs `--coeffs-override REASON`.
 fn choose_coeffs(
     choice: &str,
     override_reason: Option<&str>,
@@ -414,17 +523,16 @@ fn choose_coeffs(
     let mut chosen = if choice == "latest" {
         latest_set(store, dut_type, serial)?
     } else {
-        Chosen::from_file(std::path::Path::new(choice)).context("loading the coefficient set")?
+        let chosen = Chosen::from_file(std::path::Path::new(choice))
+            .context("loading the coefficient set")?;
+        identified(chosen, store)
     };
     let from = chosen
         .used
         .from
         .clone()
         .unwrap_or_else(|| choice.to_owned());
-    match (
-        chosen.set.check_unit(&from, dut_type, serial),
-        override_reason,
-    ) {
+    match (chosen.check_unit(&from, dut_type, serial), override_reason) {
         (Ok(()), None) => {}
         (Ok(()), Some(_)) => {
             return Err(Usage(format!(
@@ -449,10 +557,43 @@ fn choose_coeffs(
             chosen.used.override_reason = Some(reason.to_owned());
         }
     }
+    if let Some(id) = chosen
+        .used
+        .identity
+        .as_ref()
+        .filter(|i| i.status != SetStatus::Registered)
+    {
+        errln!(
+            "warning: {from}: {}; the run records it as {}",
+            id.note,
+            id.head()
+        );
+    }
     Ok(chosen)
 }
 
-/// The unit's newest coefficient set in the results store.
+/// The set of `chosen` with its identity as the results store `store`
+/// knows it. A store that is not given or cannot be reached never stops
+/// the run: the set is recorded as not checked, saying why.
+fn identified(chosen: Chosen, store: &crate::results::Location) -> Chosen {
+    let sha = chosen.used.sha256.clone().unwrap_or_default();
+    let identity = match crate::results::Store::open(store) {
+        Ok(Some(mut s)) => match s.identify_set(&chosen.set, &sha) {
+            Ok(id) => id,
+            Err(e) => SetIdentity::unchecked(&chosen.set, Some(s.name()), &e.to_string()),
+        },
+        Ok(None) => SetIdentity::unchecked(
+            &chosen.set,
+            None,
+            "no results store (--db none) to check it against",
+        ),
+        Err(e) => SetIdentity::unchecked(&chosen.set, Some(&store.describe()), &e.to_string()),
+    };
+    chosen.identified(identity)
+}
+
+/// The unit's newest coefficient set in the results store, its text
+/// checked against what the store recorded of it.
 fn latest_set(store: &crate::results::Location, dut_type: &str, serial: &str) -> Result<Chosen> {
     let Some(mut s) = crate::results::Store::open(store)
         .context("opening the results store for --coeffs latest")?
@@ -474,7 +615,10 @@ fn latest_set(store: &crate::results::Location, dut_type: &str, serial: &str) ->
         &format!("coefficient set {version} of {serial} in {}", s.name()),
         &text,
     );
-    Ok(Chosen::from_source(&src, CoeffsSource::Store, s.name())?)
+    let chosen = Chosen::from_source(&src, CoeffsSource::Store, s.name())?;
+    let sha = chosen.used.sha256.clone().unwrap_or_default();
+    let identity = s.identify_set(&chosen.set, &sha)?;
+    Ok(chosen.identified(identity))
 }
 
 pub fn run(args: RunArgs) -> Result<Outcome> {
@@ -506,6 +650,7 @@ pub fn run(args: RunArgs) -> Result<Outcome> {
         }
         (None, None) => return Err(Usage("give a procedure file or --resume DIR".into()).into()),
     };
+    check_prompts(&plan, args.unattended)?;
     let rt = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
         .enable_all()
@@ -526,7 +671,7 @@ pub fn run(args: RunArgs) -> Result<Outcome> {
         None => None,
     };
     let plan = plan.with_live(live.clone());
-    let mut progress = Live::new(session::estimated_s(&plan));
+    let mut progress = Live::new(session::estimated_s(&plan), args.unattended);
     errln!("running {}", plan.procedure.meta.name);
     let finished = match session::execute(plan, place, &rt, &mut progress, interrupt) {
         Ok(f) => f,
@@ -537,7 +682,10 @@ pub fn run(args: RunArgs) -> Result<Outcome> {
                 | RunDirError::Locked { .. }
                 | RunDirError::Suspicious { .. },
             )
-            | SessionError::CalibrationOverdue { .. }),
+            | SessionError::CalibrationOverdue { .. }
+            | SessionError::BenchLock(crate::session::benchlock::BenchLockError::InUse {
+                ..
+            })),
         ) => {
             return Err(Usage(e.to_string()).into());
         }
@@ -571,10 +719,7 @@ pub fn run(args: RunArgs) -> Result<Outcome> {
     // A batch ends as its worst unit.
     Ok(match finished.result.worst() {
         _ if finished.report_error.is_some() => Outcome::Error,
-        sequencer::Outcome::Pass => Outcome::Success,
-        sequencer::Outcome::Fail => Outcome::Fail,
-        sequencer::Outcome::Error => Outcome::Error,
-        sequencer::Outcome::Aborted => Outcome::Interrupted(exit_code.load(Ordering::Relaxed)),
+        worst => Outcome::of_run(worst, exit_code.load(Ordering::Relaxed)),
     })
 }
 
@@ -636,4 +781,59 @@ fn watch_signals(interrupt: Arc<Interrupt>, exit_code: Arc<AtomicU8>) -> Result<
         });
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::analysis::series::Interval;
+
+    /// The progress line shows the record's mean over its last minute,
+    /// named, and neither the 1 s sample nor a slew's second.
+    #[test]
+    fn the_progress_line_shows_the_drift_over_a_named_window() {
+        let mut live = Live::new(3600.0, false);
+        let second = |t: f64, rate: f64| Interval {
+            time_s: t,
+            rate_dph: rate,
+            t1_c: 26.28,
+            t2_c: 25.33,
+            tcase_c: 21.17,
+            ..Interval::default()
+        };
+        let before = second(0.5, 4477.9);
+        let _ok = live.observe(&Event::Interval {
+            slot: 0,
+            iv: &before,
+            record: None,
+        });
+        assert_eq!(
+            live.rate,
+            "  drift - (no record yet)  T1/T2/TK 26.28/25.33/21.17 degC"
+        );
+        for k in 0..90 {
+            let r = if k % 2 == 0 { 0.152 } else { 0.652 };
+            let iv = second(1.5 + f64::from(k), r);
+            let _ok = live.observe(&Event::Interval {
+                slot: 0,
+                iv: &iv,
+                record: Some("up"),
+            });
+        }
+        assert_eq!(
+            live.rate,
+            "  drift +0.402 deg/h, mean of the last 60 s of record up  T1/T2/TK 26.28/25.33/21.17 degC"
+        );
+        let slew = second(95.5, -4701.8);
+        let _ok = live.observe(&Event::Interval {
+            slot: 0,
+            iv: &slew,
+            record: None,
+        });
+        assert!(
+            live.rate.contains("+0.402 deg/h") && live.rate.contains("(ended)"),
+            "{}",
+            live.rate
+        );
+    }
 }

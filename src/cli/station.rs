@@ -10,6 +10,7 @@ use clap::Args;
 
 use super::{Outcome, Usage};
 use crate::runlog::live::{Live, LiveError};
+use crate::station::listener::{Admission, Guarded};
 use crate::station::{Config, Station, new_token, router};
 
 #[derive(Debug, Args)]
@@ -104,37 +105,66 @@ pub fn run(args: StationArgs) -> Result<Outcome> {
         db: args.db,
         live,
     });
-    rt.block_on(async move {
-        let listener = tokio::net::TcpListener::bind(args.listen)
-            .await
-            .with_context(|| format!("serving the station on {}", args.listen))?;
-        let addr = listener.local_addr().context("the station's address")?;
-        if !addr.ip().is_loopback() {
-            errln!(
-                "warning: the station listens on {addr}, beyond this computer: anyone with the URL below (its token) can run the bench"
-            );
-        }
-        // The handlers are in place before the URL is printed: whoever reads
-        // it may send SIGTERM at once, and the station must stop cleanly.
-        let stop = stop_signal()
-            .context("installing the Ctrl-C, SIGTERM, SIGHUP and SIGQUIT handlers")?;
-        outln!("station http://{addr}/?token={token}")?;
-        errln!("open the URL above in a browser; Ctrl-C stops the station");
-        if let Some(b) = &banner {
-            errln!("{b}");
-        }
-        let app = router(station.clone());
-        let stopping = station.clone();
-        axum::serve(crate::station::listener::Guarded::new(listener), app)
-            .with_graceful_shutdown(async move {
-                stop.await;
-                errln!("stopping: a run going on is aborted and its cleanup runs first");
-                stopping.shut_down().await;
-            })
-            .await
-            .context("serving the station")
-    })?;
+    rt.block_on(serve(args.listen, station, token, banner))?;
+    // A handler's blocking work (a store query, say) is not waited for
+    // past this: the station has stopped.
+    rt.shutdown_timeout(STOP_GRACE);
     Ok(Outcome::Success)
+}
+
+/// How long the stop waits for connections still open after closing
+/// them all (a response being written, a client slow to read it).
+const STOP_GRACE: std::time::Duration = std::time::Duration::from_secs(2);
+
+/// Serve the station on `listen` until a stop signal; then a run going on
+/// is aborted (its cleanup runs), every connection is closed, whatever it
+/// waits for (a half-sent request, an idle browser, a flood of them), and
+/// this returns.
+async fn serve(
+    listen: SocketAddr,
+    station: Arc<Station>,
+    token: String,
+    banner: Option<String>,
+) -> Result<()> {
+    let listener = tokio::net::TcpListener::bind(listen)
+        .await
+        .with_context(|| format!("serving the station on {listen}"))?;
+    let addr = listener.local_addr().context("the station's address")?;
+    if !addr.ip().is_loopback() {
+        errln!(
+            "warning: the station listens on {addr}, beyond this computer: anyone with the URL below (its token) can run the bench"
+        );
+    }
+    // The handlers are in place before the URL is printed: whoever reads
+    // it may send SIGTERM at once, and the station must stop cleanly.
+    let stop =
+        stop_signal().context("installing the Ctrl-C, SIGTERM, SIGHUP and SIGQUIT handlers")?;
+    outln!("station http://{addr}/?token={token}")?;
+    errln!("open the URL above in a browser; Ctrl-C stops the station");
+    if let Some(b) = &banner {
+        errln!("{b}");
+    }
+    let app = router(station.clone()).into_make_service_with_connect_info::<Admission>();
+    let listener = Guarded::new(listener);
+    let closer = listener.closer();
+    let stopped = Arc::new(tokio::sync::Notify::new());
+    let server = {
+        let stopped = stopped.clone();
+        axum::serve(listener, app).with_graceful_shutdown(async move {
+            stop.await;
+            errln!("stopping: a run going on is aborted and its cleanup runs first");
+            station.shut_down().await;
+            closer.close_all();
+            stopped.notify_one();
+        })
+    };
+    tokio::select! {
+        served = server.into_future() => served.context("serving the station"),
+        () = async {
+            stopped.notified().await;
+            tokio::time::sleep(STOP_GRACE).await;
+        } => Ok(()),
+    }
 }
 
 /// Ctrl-C, SIGTERM, SIGHUP (the terminal or SSH session that started the

@@ -35,9 +35,13 @@ pub struct StudyArgs {
     /// Print JSON instead of a table.
     #[arg(long)]
     json: bool,
-    /// Also write the 1 Hz series as an interchange CSV.
+    /// Also write the 1 Hz series as an interchange CSV (not a run's log,
+    /// nor inside a run directory, without --force).
     #[arg(long, value_name = "FILE")]
     csv: Option<PathBuf>,
+    /// Write the --csv even if it is a run's log or inside a run directory.
+    #[arg(long, requires = "csv")]
+    force: bool,
 }
 
 #[derive(Debug, Args)]
@@ -60,6 +64,18 @@ fn load(config: Option<&PathBuf>) -> Result<TwinConfig> {
 pub fn run(cmd: TwinCommand) -> Result<Outcome> {
     match cmd {
         TwinCommand::Study(args) => {
+            if let Some(path) = &args.csv {
+                let inputs: Vec<&std::path::Path> =
+                    args.config.iter().map(PathBuf::as_path).collect();
+                crate::fsutil::check_output(
+                    path,
+                    crate::fsutil::OutputRule {
+                        inputs: &inputs,
+                        force: args.force,
+                        own: None,
+                    },
+                )?;
+            }
             let cfg = load(args.config.as_ref())?;
             errln!(
                 "simulating the 6.5 h thermal cycle at {} Hz ...",

@@ -7,7 +7,7 @@ use tokio::io::{AsyncRead, AsyncReadExt};
 use tokio::time::Instant;
 
 use super::DeviceError;
-use super::link::{Drops, Reopen, open_once};
+use super::link::{Drops, LinkWatch, Reopen, open_once};
 use crate::protocol::frame::{Decoder, Event, FrameLayout, LinkStats, WireFrame};
 
 /// Reads frames from a transport; counts resyncs, CRC failures, gaps,
@@ -56,6 +56,12 @@ impl<R: AsyncRead + Unpin> GyroReader<R> {
     /// read error), with backoff, for up to `window`.
     pub fn with_reconnect(mut self, reopen: Reopen<R>, window: Duration) -> Self {
         self.reopen = Some((reopen, window));
+        self
+    }
+
+    /// Tell the bench's `watch` of drops, returns and a loss.
+    pub fn with_watch(mut self, watch: std::sync::Arc<LinkWatch>) -> Self {
+        self.drops = Drops::watched(Some(watch));
         self
     }
 
@@ -123,6 +129,7 @@ impl<R: AsyncRead + Unpin> GyroReader<R> {
                     Ok(r) => {
                         self.reader = r;
                         self.reconnects += 1;
+                        self.drops.reopened(&self.device);
                         break;
                     }
                     Err(e) => cause = e,

@@ -47,6 +47,7 @@ pub struct LineLink {
     connector: Option<Connector>,
     policy: RetryPolicy,
     counters: LinkCounters,
+    watch: Option<std::sync::Arc<LinkWatch>>,
 }
 
 impl std::fmt::Debug for LineLink {
@@ -74,7 +75,14 @@ impl LineLink {
             connector,
             policy,
             counters: LinkCounters::default(),
+            watch: None,
         }
+    }
+
+    /// Tell the bench's `watch` of drops, returns and a loss.
+    pub fn with_watch(mut self, watch: std::sync::Arc<LinkWatch>) -> Self {
+        self.watch = Some(watch);
+        self
     }
 
     /// Device name.
@@ -99,6 +107,7 @@ impl LineLink {
                 Ok(t) => {
                     self.counters.reconnects += 1;
                     self.io = Some(BufReader::new(t));
+                    drops.reopened(&self.device);
                 }
                 Err(e) => {
                     drops
@@ -127,7 +136,7 @@ impl LineLink {
 
     /// Send a message that has no reply.
     pub async fn send(&mut self, request: &[u8]) -> Result<(), DeviceError> {
-        let mut drops = Drops::default();
+        let mut drops = Drops::watched(self.watch.clone());
         loop {
             let io = self.ensure_open(&mut drops).await?;
             let r = io.get_mut().write_all(request).await;
@@ -159,7 +168,7 @@ impl LineLink {
         let name = request_name(request);
         let device = self.device.clone();
         let policy = self.policy;
-        let mut a = Attempts::new(&device, &policy);
+        let mut a = Attempts::new(&device, &policy).watched(self.watch.clone());
         let mut buf = Vec::new();
         while a.left() {
             if a.retrying() {
@@ -219,21 +228,205 @@ impl LineLink {
     }
 }
 
+/// What happened to one of a bench's links, as the run tells its
+/// operator the moment it happens (a run waiting on a dropped link is not
+/// a frozen run).
+#[derive(Debug, Clone, PartialEq)]
+pub enum LinkNotice {
+    /// The link dropped; it is being reopened.
+    Dropped {
+        /// Device name.
+        device: String,
+        /// Why, in the system's words.
+        cause: String,
+        /// How long it is reopened before the device is declared lost, s.
+        window_s: f64,
+    },
+    /// The link was reopened after a drop.
+    Back {
+        /// Device name.
+        device: String,
+        /// How long it was down, s (wall time).
+        after_s: f64,
+    },
+    /// The link could not be reopened within its window.
+    Lost {
+        /// Device name.
+        device: String,
+        /// The window, s.
+        window_s: f64,
+    },
+}
+
+impl std::fmt::Display for LinkNotice {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Dropped {
+                device,
+                cause,
+                window_s,
+            } => write!(
+                f,
+                "the {device} link dropped ({cause}): reopening it for up to {window_s:.0} s \
+                 (reconnect_window_s in the bench file) before the run stops"
+            ),
+            Self::Back { device, after_s } => {
+                write!(f, "the {device} link is back after {after_s:.1} s")
+            }
+            Self::Lost { device, window_s } => write!(
+                f,
+                "the {device} link could not be reopened within {window_s:.0} s: the run stops, \
+                 and a link found down from now on is tried once, not waited for"
+            ),
+        }
+    }
+}
+
+/// Shared by every link of one bench: what the links say as they drop,
+/// come back or are lost (drained by the run, which tells its operator and
+/// its log), and the word that waiting for a dropped link is over because
+/// the run is stopping (an interrupt, or a device already declared lost):
+/// from then on a link found down is tried once and given up, so a bench
+/// that vanished ends its run within one reconnect window, not one per
+/// request of the safe state and cleanup.
+#[derive(Debug)]
+pub struct LinkWatch {
+    notices: std::sync::Mutex<Vec<LinkNotice>>,
+    told: tokio::sync::Notify,
+    stopping: tokio::sync::watch::Sender<Option<String>>,
+    /// The first link lost: device, window (s), attempts, the last cause.
+    lost: std::sync::Mutex<Option<(String, f64, u32, String)>>,
+}
+
+impl Default for LinkWatch {
+    fn default() -> Self {
+        Self {
+            notices: std::sync::Mutex::default(),
+            told: tokio::sync::Notify::new(),
+            stopping: tokio::sync::watch::Sender::new(None),
+            lost: std::sync::Mutex::default(),
+        }
+    }
+}
+
+impl LinkWatch {
+    /// A watch for one bench's links.
+    pub fn new() -> std::sync::Arc<Self> {
+        std::sync::Arc::new(Self::default())
+    }
+
+    fn tell(&self, n: LinkNotice) {
+        self.notices
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .push(n);
+        self.told.notify_one();
+    }
+
+    /// What the links said since the last call, oldest first.
+    pub fn take(&self) -> Vec<LinkNotice> {
+        std::mem::take(
+            &mut *self
+                .notices
+                .lock()
+                .unwrap_or_else(std::sync::PoisonError::into_inner),
+        )
+    }
+
+    /// Wait until a link says something (returns at once when something
+    /// was said and not yet waited for).
+    pub async fn told(&self) {
+        self.told.notified().await;
+    }
+
+    /// The run is stopping (`why`): dropped links are no longer waited for.
+    /// The first reason is kept.
+    pub fn stop_waiting(&self, why: &str) {
+        self.stopping.send_if_modified(|s| {
+            if s.is_some() {
+                return false;
+            }
+            *s = Some(why.to_owned());
+            true
+        });
+    }
+
+    /// Why dropped links are no longer waited for, if they are not.
+    pub fn stopping(&self) -> Option<String> {
+        self.stopping.borrow().clone()
+    }
+
+    /// The first link that was lost, as the error that lost it: what a run
+    /// stopped by a vanished bench names, whichever device it was waiting
+    /// on when it noticed.
+    pub fn first_loss(&self) -> Option<DeviceError> {
+        let lost = self
+            .lost
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        lost.as_ref().map(
+            |(device, window_s, attempts, cause)| DeviceError::Unreachable {
+                device: device.clone(),
+                window_s: *window_s,
+                attempts: *attempts,
+                cause: std::io::Error::other(cause.clone()),
+            },
+        )
+    }
+
+    fn lose(&self, device: &str, window_s: f64, attempts: u32, cause: &std::io::Error) {
+        let mut lost = self
+            .lost
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        if lost.is_none() {
+            *lost = Some((device.to_owned(), window_s, attempts, cause.to_string()));
+        }
+        drop(lost);
+        self.tell(LinkNotice::Lost {
+            device: device.to_owned(),
+            window_s,
+        });
+        self.stop_waiting(&format!("the {device} link was lost"));
+    }
+
+    /// Resolves once [`LinkWatch::stop_waiting`] was called.
+    async fn stopped(&self) {
+        let mut rx = self.stopping.subscribe();
+        let _ = rx.wait_for(Option::is_some).await;
+    }
+}
+
 /// Drops of a link during one exchange (or one outage of a stream): each
 /// waits (0.25 s doubling to 8 s) before the link is reopened; once the
 /// window has passed since the first, the device is unreachable. A
 /// connection that opens and closes at once (a device behind a rebooting
-/// switch) is a drop like any other, so nothing spins.
+/// switch) is a drop like any other, so nothing spins. With a
+/// [`LinkWatch`], a drop that the first reopening does not mend, its end
+/// and the loss are told as they happen, and a run that is stopping waits
+/// no more.
 #[derive(Debug, Default)]
 pub struct Drops {
     since: Option<tokio::time::Instant>,
     wait: Duration,
     count: u32,
+    /// Told down and not yet back.
+    down: bool,
+    watch: Option<std::sync::Arc<LinkWatch>>,
 }
 
 impl Drops {
+    /// Drops told to `watch`.
+    pub fn watched(watch: Option<std::sync::Arc<LinkWatch>>) -> Self {
+        Self {
+            watch,
+            ..Self::default()
+        }
+    }
+
     /// The link dropped with `cause`: wait before reopening it, or give up
-    /// once `window` has passed since the first drop.
+    /// once `window` has passed since the first drop (or at once when the
+    /// run is stopping).
     pub async fn dropped(
         &mut self,
         device: &str,
@@ -242,8 +435,31 @@ impl Drops {
     ) -> Result<(), DeviceError> {
         let since = *self.since.get_or_insert_with(tokio::time::Instant::now);
         self.count += 1;
+        let watch = self.watch.clone();
+        if let Some(w) = &watch {
+            if let Some(why) = w.stopping() {
+                return Err(DeviceError::GaveUp {
+                    device: device.to_owned(),
+                    why,
+                    cause,
+                });
+            }
+            // A link that reopens at the first try dropped for a moment
+            // (counted in its figures); one that does not is told.
+            if !self.down && self.count >= 2 {
+                self.down = true;
+                w.tell(LinkNotice::Dropped {
+                    device: device.to_owned(),
+                    cause: cause.to_string(),
+                    window_s: window.as_secs_f64(),
+                });
+            }
+        }
         let left = window.saturating_sub(since.elapsed());
         if left.is_zero() {
+            if let Some(w) = &watch {
+                w.lose(device, window.as_secs_f64(), self.count, &cause);
+            }
             return Err(DeviceError::Unreachable {
                 device: device.to_owned(),
                 window_s: window.as_secs_f64(),
@@ -256,13 +472,38 @@ impl Drops {
         } else {
             (self.wait * 2).min(BACKOFF_MAX)
         };
-        tokio::time::sleep(self.wait.min(left)).await;
+        let sleep = tokio::time::sleep(self.wait.min(left));
+        match &watch {
+            Some(w) => {
+                tokio::select! {
+                    () = sleep => {}
+                    // Asked to stop while waiting: the next drop gives up.
+                    () = w.stopped() => {}
+                }
+            }
+            None => sleep.await,
+        }
         Ok(())
+    }
+
+    /// The link was reopened (said; the window still runs from the first
+    /// drop until [`Drops::reset`], when the link works again).
+    pub fn reopened(&mut self, device: &str) {
+        if let (Some(since), Some(w)) = (self.since, &self.watch)
+            && self.down
+        {
+            self.down = false;
+            w.tell(LinkNotice::Back {
+                device: device.to_owned(),
+                after_s: since.elapsed().as_secs_f64(),
+            });
+        }
     }
 
     /// The link works again: the next drop starts a new outage.
     pub fn reset(&mut self) {
-        *self = Self::default();
+        let watch = self.watch.take();
+        *self = Self::watched(watch);
     }
 }
 
@@ -306,6 +547,12 @@ impl<'a> Attempts<'a> {
             attempt: 0,
             last_problem: None,
         }
+    }
+
+    /// Its drops told to the bench's `watch`.
+    pub fn watched(mut self, watch: Option<std::sync::Arc<LinkWatch>>) -> Self {
+        self.drops = Drops::watched(watch);
+        self
     }
 
     /// True while attempts are left.

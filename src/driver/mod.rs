@@ -18,6 +18,8 @@ mod sim_tests;
 pub(crate) mod supply;
 pub(crate) mod watlow;
 
+pub use link::{LinkNotice, LinkWatch};
+
 use std::time::Duration;
 
 use async_trait::async_trait;
@@ -139,6 +141,21 @@ pub enum DeviceError {
         /// Attempts made.
         attempts: u32,
         /// The last attempt's failure.
+        cause: std::io::Error,
+    },
+    /// The link was down when the run was already stopping (interrupted,
+    /// or another device lost): tried once, not waited for.
+    #[error(
+        "{device}: the link is down ({cause}) and the run is stopping ({why}): \
+         not waited for; check the device and its network before anyone opens the chamber \
+         or touches the fixture"
+    )]
+    GaveUp {
+        /// Device name.
+        device: String,
+        /// Why the run is stopping.
+        why: String,
+        /// The attempt's failure.
         cause: std::io::Error,
     },
     /// The supply's over-current protection switched the unit's power off.

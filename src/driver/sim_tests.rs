@@ -29,9 +29,12 @@ const POLICY: RetryPolicy = RetryPolicy {
     reconnect_window: Duration::from_secs(3),
 };
 
+/// The simulated bench with its unit powered from the start (these tests
+/// read the gyro's link, not its power-on).
 async fn serve(speed: f64) -> Served {
     let mut s = Serve::load(None).expect("defaults");
     s.config.speed = speed;
+    s.config.unit_powered = true;
     start(&s).await.expect("simulated bench starts")
 }
 
@@ -424,7 +427,8 @@ async fn a_bench_file_opens_every_device_of_sim_serve() {
     .expect("fixture")
     .replace("tcp://127.0.0.1:5001", &addr("chamber", "espec-ascii"))
     .replace("tcp://127.0.0.1:5003", &addr("table", "acl"))
-    .replace("tcp://127.0.0.1:5004", &addr("gyro", "rlg-frame"));
+    .replace("tcp://127.0.0.1:5004", &addr("gyro", "rlg-frame"))
+    .replace("tcp://127.0.0.1:5025", &addr("supply", "keysight-e36300"));
     let cfg =
         BenchConfig::from_source(&Source::from_text("bench.toml", &text)).expect("valid bench");
     let mut b = open_bench(&cfg).await.expect("every device opens");

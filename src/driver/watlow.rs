@@ -7,7 +7,7 @@ use async_trait::async_trait;
 use tokio_modbus::client::{Context, Reader, Writer};
 use tokio_modbus::{ExceptionCode, Slave};
 
-use super::link::{Attempts, Connector, LinkCounters, Try, open_once};
+use super::link::{Attempts, Connector, LinkCounters, LinkWatch, Try, open_once};
 use super::{Chamber, ChamberMode, ChamberReading, DeviceError, Identity, RetryPolicy};
 use crate::protocol::watlow::{self as w, decode_f32, encode_f32, mode};
 use crate::transport::BoxTransport;
@@ -35,6 +35,7 @@ pub struct WatlowChamber {
     connector: Option<Connector>,
     policy: RetryPolicy,
     counters: LinkCounters,
+    watch: Option<std::sync::Arc<LinkWatch>>,
 }
 
 impl std::fmt::Debug for WatlowChamber {
@@ -60,7 +61,14 @@ impl WatlowChamber {
             connector,
             policy,
             counters: LinkCounters::default(),
+            watch: None,
         }
+    }
+
+    /// Tell the bench's `watch` of drops, returns and a loss.
+    pub fn with_watch(mut self, watch: std::sync::Arc<LinkWatch>) -> Self {
+        self.watch = Some(watch);
+        self
     }
 
     /// Transient trouble so far (the tests read it).
@@ -73,12 +81,12 @@ impl WatlowChamber {
         let request = op.to_string();
         let device = self.device.clone();
         let policy = self.policy;
-        let mut a = Attempts::new(&device, &policy);
+        let mut a = Attempts::new(&device, &policy).watched(self.watch.clone());
         while a.left() {
             if a.retrying() {
                 self.counters.retries += 1;
             }
-            let t = self.try_once(&op).await?;
+            let t = self.try_once(&op, &mut a).await?;
             if let Some(words) = a.judge(t, &request).await? {
                 return Ok(words);
             }
@@ -89,10 +97,15 @@ impl WatlowChamber {
     /// One try of `op` on the Modbus session, reopened first if it was
     /// dropped (a broken or late session is dropped: the next try opens a
     /// fresh one).
-    async fn try_once(&mut self, op: &Op) -> Result<Try<Vec<u16>>, DeviceError> {
+    async fn try_once(
+        &mut self,
+        op: &Op,
+        a: &mut Attempts<'_>,
+    ) -> Result<Try<Vec<u16>>, DeviceError> {
         if self.ctx.is_none() {
             match open_once(&self.device, self.connector.as_ref()).await? {
                 Ok(t) => {
+                    a.drops.reopened(&self.device);
                     self.counters.reconnects += 1;
                     self.ctx = Some(tokio_modbus::client::tcp::attach_slave(t, Slave(1)));
                 }

@@ -5,6 +5,9 @@
 
 pub mod estimate;
 pub mod raw;
+pub mod rule;
+
+pub use rule::{DecisionRule, Statement};
 
 use std::collections::HashSet;
 use std::path::Path;
@@ -35,8 +38,13 @@ pub enum Metric {
     BiasStability,
     /// Peak-to-peak of the Earth-removed rate smoothed over `averaging_s`.
     DriftPp,
-    /// The same after model-4 compensation.
+    /// The same after model-4 compensation by coefficients that did not
+    /// see the judged records: the unit's set (`--coeffs`), else model 4
+    /// fitted held out within the run (blocked cross-validation).
     CompensatedDriftPp,
+    /// The same on the residual of model 4 fitted to the very records it
+    /// is taken on: the fit's residual, informative.
+    CompensatedDriftFitResidualPp,
     /// Self-heating transient over the first half hour after power-on.
     SelfHeating,
     /// Mean Earth-removed rate.
@@ -82,6 +90,24 @@ pub enum Metric {
     /// turn-on each record was made after to the record's end (the
     /// readings are taken fast for the first second after a turn-on).
     PowerPeak,
+    /// Bias sensitivity to gravity along the sensitive axis, deg/h/g: the
+    /// slope of the records' mean Earth-removed rates against the gravity
+    /// on the axis in each (minus the sine of the axis's elevation: -1 g
+    /// axis up), by least squares, with its standard error (IEEE Std 647's
+    /// g-sensitive drift).
+    GSensitivity,
+    /// Spread of the bias between positions, deg/h: the largest minus the
+    /// smallest of the records' mean Earth-removed rates.
+    BiasSpread,
+    /// Angle random walk N, deg/sqrt(h), from the Allan deviation of the
+    /// records' Earth-removed rate (IEEE Std 952 Annex C); its upper bound
+    /// from the curve where the curve does not resolve it.
+    Arw,
+    /// Bias instability B (the deviation's flicker floor / 0.664), deg/h,
+    /// the same way.
+    BiasInstability,
+    /// Rate random walk K, deg/h/sqrt(h), the same way.
+    RateRandomWalk,
 }
 
 /// `s` with `{label}` replaced by a repeat's position label.
@@ -98,6 +124,7 @@ impl Metric {
             "bias_stability" => Self::BiasStability,
             "drift_pp" => Self::DriftPp,
             "compensated_drift_pp" => Self::CompensatedDriftPp,
+            "compensated_drift_fit_residual_pp" => Self::CompensatedDriftFitResidualPp,
             "self_heating" => Self::SelfHeating,
             "mean_bias" => Self::MeanBias,
             "temperature_sensitivity" => Self::TemperatureSensitivity,
@@ -113,6 +140,11 @@ impl Metric {
             "warm_up_time" => Self::WarmUpTime,
             "power_steady" => Self::PowerSteady,
             "power_peak" => Self::PowerPeak,
+            "g_sensitivity" => Self::GSensitivity,
+            "bias_spread" => Self::BiasSpread,
+            "arw" => Self::Arw,
+            "bias_instability" => Self::BiasInstability,
+            "rate_random_walk" => Self::RateRandomWalk,
             _ => return None,
         })
     }
@@ -120,7 +152,11 @@ impl Metric {
     fn needs_averaging(self) -> bool {
         matches!(
             self,
-            Self::BiasStability | Self::DriftPp | Self::CompensatedDriftPp | Self::WarmUpTime
+            Self::BiasStability
+                | Self::DriftPp
+                | Self::CompensatedDriftPp
+                | Self::CompensatedDriftFitResidualPp
+                | Self::WarmUpTime
         )
     }
 }
@@ -187,6 +223,9 @@ pub enum StepKind {
         volts: f64,
         /// Current limit when on, A.
         limit_a: f64,
+        /// Switching on a unit found powered: switched off and rested
+        /// this long first, s (none: the run refuses to go on).
+        rest_if_on_s: Option<f64>,
     },
     /// Let time pass.
     Wait {
@@ -307,10 +346,15 @@ impl Step {
                 on: true,
                 volts,
                 limit_a,
-            } => {
+                ..
+            } if *volts > 0.0 => {
                 format!("power the unit on at {volts} V (limit {limit_a} A)")
             }
-            StepKind::Power { on: false, .. } => "power the unit off".to_owned(),
+            StepKind::Power { on: true, .. } => "the operator switches the unit on".to_owned(),
+            StepKind::Power {
+                on: false, volts, ..
+            } if *volts > 0.0 => "power the unit off".to_owned(),
+            StepKind::Power { on: false, .. } => "the operator switches the unit off".to_owned(),
             StepKind::Wait { duration_s } => format!("wait {duration_s:.0} s"),
             StepKind::Record { label, duration_s } => {
                 format!("record {label} for {duration_s:.0} s")
@@ -345,6 +389,11 @@ pub struct Meta {
     pub dut_type: String,
     /// Spec judged against.
     pub spec: String,
+    /// The decision rule its figures are judged by.
+    pub decision_rule: DecisionRule,
+    /// Whether the file names its rule (a log of an earlier format that
+    /// names none was judged by simple acceptance, and is replayed so).
+    pub rule_named: bool,
 }
 
 /// A validated procedure.
@@ -391,6 +440,18 @@ impl Procedure {
             description: raw.procedure.description.clone(),
             dut_type: raw.procedure.dut_type.clone(),
             spec: raw.procedure.spec.clone(),
+            decision_rule: match &raw.procedure.decision_rule {
+                Some(rule) => DecisionRule::parse(rule, raw.procedure.guard_band_u)
+                    .map_err(|e| src.invalid("procedure.decision_rule", e))?,
+                None if raw.procedure.guard_band_u.is_some() => {
+                    return Err(src.invalid(
+                        "procedure.guard_band_u",
+                        "goes with decision_rule = \"guarded\"",
+                    ));
+                }
+                None => DecisionRule::default(),
+            },
+            rule_named: raw.procedure.decision_rule.is_some(),
         };
         v.c.ensure(
             is_path_safe_name(&meta.name),
@@ -609,37 +670,61 @@ impl Validator<'_> {
                     orientation,
                 }
             }
-            RawStep::Power { on, volts, limit_a } => {
-                let Some(p) = &self.bench.devices.supply else {
-                    return Err(self.src.invalid(
-                        &k("action"),
-                        "a power step needs a supply, and the bench file names none ([devices.supply] in docs/bench.md)".to_owned(),
-                    ));
+            RawStep::Power {
+                on,
+                volts,
+                limit_a,
+                rest_if_on_s,
+            } => {
+                if let Some(rest) = rest_if_on_s {
+                    c.ensure(
+                        *on,
+                        &k("rest_if_on_s"),
+                        "is for a step that switches the unit on (on = true)",
+                    )?;
+                    self.duration(*rest, &k("rest_if_on_s"))?;
+                }
+                // A bench without a supply: the operator switches the
+                // unit by hand and confirms it (docs/procedures.md,
+                // "Power-on"); the voltage is theirs to set (0 here).
+                let (volts, limit_a) = match &self.bench.devices.supply {
+                    None => {
+                        c.ensure(
+                            volts.is_none() && limit_a.is_none(),
+                            &k("volts"),
+                            "a bench without a supply ([devices.supply]) has the unit switched by hand: its voltage and current limit are not the run's to set",
+                        )?;
+                        (0.0, 0.0)
+                    }
+                    Some(p) => {
+                        let volts = volts.unwrap_or(p.volts);
+                        let limit_a = limit_a.unwrap_or(p.limit_a);
+                        c.ensure(
+                            volts.is_finite() && volts > 0.0 && volts <= p.max_volts(),
+                            &k("volts"),
+                            &format!(
+                                "{} V is beyond the bench's supply limit 0..{} V (devices.supply.max_volts)",
+                                crate::config::num(volts),
+                                p.max_volts()
+                            ),
+                        )?;
+                        c.ensure(
+                            limit_a.is_finite() && limit_a > 0.0 && limit_a <= p.max_limit_a(),
+                            &k("limit_a"),
+                            &format!(
+                                "{} A is beyond the bench's supply limit 0..{} A (devices.supply.max_limit_a)",
+                                crate::config::num(limit_a),
+                                p.max_limit_a()
+                            ),
+                        )?;
+                        (volts, limit_a)
+                    }
                 };
-                let volts = volts.unwrap_or(p.volts);
-                let limit_a = limit_a.unwrap_or(p.limit_a);
-                c.ensure(
-                    volts.is_finite() && volts > 0.0 && volts <= p.max_volts(),
-                    &k("volts"),
-                    &format!(
-                        "{} V is beyond the bench's supply limit 0..{} V (devices.supply.max_volts)",
-                        crate::config::num(volts),
-                        p.max_volts()
-                    ),
-                )?;
-                c.ensure(
-                    limit_a.is_finite() && limit_a > 0.0 && limit_a <= p.max_limit_a(),
-                    &k("limit_a"),
-                    &format!(
-                        "{} A is beyond the bench's supply limit 0..{} A (devices.supply.max_limit_a)",
-                        crate::config::num(limit_a),
-                        p.max_limit_a()
-                    ),
-                )?;
                 StepKind::Power {
                     on: *on,
                     volts,
                     limit_a,
+                    rest_if_on_s: *rest_if_on_s,
                 }
             }
             RawStep::Wait { duration_s } => StepKind::Wait {
@@ -721,7 +806,7 @@ impl Validator<'_> {
                 &k("metric"),
                 format!(
                     "{metric:?} is not a metric; expected bias_stability, drift_pp, \
-                     compensated_drift_pp, self_heating, mean_bias, \
+                     compensated_drift_pp, compensated_drift_fit_residual_pp, self_heating, mean_bias, \
                      temperature_sensitivity, temperature_rate_sensitivity, \
                      scale_factor, scale_factor_nonlinearity, scale_factor_asymmetry, \
                      scale_factor_temperature, dead_band, threshold, axis_misalignment, \
@@ -814,11 +899,22 @@ impl Validator<'_> {
         if let (Some(lo), Some(hi)) = (low, high) {
             c.ensure(lo <= hi, &k("low"), "must not be above high")?;
         }
-        c.ensure(
-            low.is_some() || high.is_some(),
-            key,
-            "needs a limit: low, high or both",
-        )?;
+        // The fit's own residual is informative, never judged: it takes
+        // no limit; every other figure needs one.
+        if metric == Metric::CompensatedDriftFitResidualPp {
+            c.ensure(
+                low.is_none() && high.is_none(),
+                key,
+                "compensated_drift_fit_residual_pp is informative (the fit's own residual): \
+                 it takes no limit; judge compensated_drift_pp",
+            )?;
+        } else {
+            c.ensure(
+                low.is_some() || high.is_some(),
+                key,
+                "needs a limit: low, high or both",
+            )?;
+        }
         c.ensure(
             !unit.trim().is_empty(),
             &k("unit"),
@@ -1077,6 +1173,23 @@ fn is_plain_text(s: &str) -> bool {
 pub fn raw_name(text: &str) -> Option<String> {
     let t: toml::Table = toml::from_str(text).ok()?;
     t.get("procedure")?.get("name")?.as_str().map(str::to_owned)
+}
+
+/// The decision rule a run of the procedure text `text` was judged by, in
+/// a log of `format`: the rule it names, else the default (guarded), or
+/// simple acceptance for a log written before decision rules (none: the
+/// text is not a procedure, or names a rule this build does not know).
+pub fn raw_rule(text: &str, format: u32) -> Option<DecisionRule> {
+    let t: toml::Table = toml::from_str(text).ok()?;
+    let p = t.get("procedure")?;
+    let band = p
+        .get("guard_band_u")
+        .and_then(|v| v.as_float().or_else(|| v.as_integer().map(|i| i as f64)));
+    match p.get("decision_rule") {
+        Some(rule) => DecisionRule::parse(rule.as_str()?, band).ok(),
+        None if format < crate::runlog::schema::FORMAT_JUDGED => Some(DecisionRule::Simple),
+        None => Some(DecisionRule::default()),
+    }
 }
 
 /// A name that is safe as one path component: no separator, no `..`, no

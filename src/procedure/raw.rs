@@ -35,6 +35,14 @@ pub struct RawMeta {
     /// The specification it judges against, e.g. `0.05 deg/h bias stability`.
     #[serde(default)]
     pub spec: String,
+    /// How its figures are judged: `simple`, `guarded` (the default) or
+    /// `non_binary` (`procedure::rule`).
+    #[serde(default)]
+    pub decision_rule: Option<String>,
+    /// A guarded rule's guard band, as a multiple of the expanded
+    /// uncertainty (default 1).
+    #[serde(default)]
+    pub guard_band_u: Option<f64>,
 }
 
 /// A position of a `repeat` step.
@@ -86,6 +94,10 @@ pub enum RawStep {
         volts: Option<f64>,
         /// Current limit, A (default: the bench's `devices.supply.limit_a`).
         limit_a: Option<f64>,
+        /// A switch-on that finds the unit already powered switches it
+        /// off and lets it rest this long first, s (absent: the run
+        /// refuses to go on, since the figures after it count from it).
+        rest_if_on_s: Option<f64>,
     },
     /// Let time pass.
     Wait {

@@ -522,13 +522,24 @@ fn position_chart<'a>(
     c.render()
 }
 
-/// The points of a rate measurement's records, in input order.
+/// The points of a rate measurement's records, in input order: those of
+/// a scale-factor figure as it took them (in the angle domain), the
+/// others' from their 1 Hz means.
 fn rate_points(m: &Measurement, records: &Records) -> Vec<RatePoint> {
+    let angle_domain = matches!(
+        m.metric,
+        Metric::ScaleFactor | Metric::ScaleFactorNonlinearity | Metric::ScaleFactorAsymmetry
+    );
     let mut pts: Vec<RatePoint> = m
         .records
         .iter()
-        .filter_map(|l| records.get(l))
-        .filter_map(|ivs| RatePoint::of(&ivs))
+        .filter_map(|l| {
+            if angle_domain {
+                records.rate_point(l).map(|(p, _)| p)
+            } else {
+                RatePoint::of(&records.get(l)?)
+            }
+        })
         .collect();
     pts.sort_by(|a, b| a.input_dph.total_cmp(&b.input_dph));
     pts
@@ -818,7 +829,7 @@ fn noise_table(r: &Report) -> String {
         judged = esc(&n.judged),
         avg = n.bias_stability_averaging_s,
         bs = num(n.bias_stability_dph, 4),
-        b = num(Some(n.ieee_b_dph), 4),
+        b = num(n.ieee_b_dph, 4),
         min = num(Some(n.adev_min_dph), 4),
         tmin = n.adev_min_tau_s,
         arw = resolved(n.arw_deg_per_rt_h, 5, "deg/sqrt(h)"),
@@ -826,13 +837,11 @@ fn noise_table(r: &Report) -> String {
     )
 }
 
-/// A fitted noise coefficient, or that the record does not resolve it (the
-/// fit leaves it at zero: its slope never shows in this curve).
-fn resolved(v: f64, digits: usize, unit: &str) -> String {
-    if v.is_finite() && v > 0.0 {
-        format!("{v:.digits$} {unit}")
-    } else {
-        "not resolved by this record".into()
+/// A fitted noise coefficient, or that the record does not resolve it.
+fn resolved(v: Option<f64>, digits: usize, unit: &str) -> String {
+    match v {
+        Some(v) if v.is_finite() => format!("{v:.digits$} {unit}"),
+        _ => "not resolved by this record".into(),
     }
 }
 
@@ -918,8 +927,129 @@ fn headline(r: &Report) -> String {
         Outcome::Aborted => {
             "The run was interrupted before its end; what was measured is below.".to_owned()
         }
+        Outcome::ConditionalPass => format!(
+            "No measurement outside its limits, but {} within its expanded uncertainty of one \
+             (non-binary rule): a conditional pass.{key}",
+            r.measurements
+                .iter()
+                .filter(|m| m.outcome == MeasureOutcome::ConditionalPass)
+                .map(|m| m.name.as_str())
+                .collect::<Vec<_>>()
+                .join(", ")
+        ),
+        Outcome::ConditionalFail => format!(
+            "No measurement beyond its limits by more than its uncertainty, but {} outside one \
+             (non-binary rule): a conditional fail.{key}",
+            r.measurements
+                .iter()
+                .filter(|m| m.outcome == MeasureOutcome::ConditionalFail)
+                .map(|m| m.name.as_str())
+                .collect::<Vec<_>>()
+                .join(", ")
+        ),
     };
     esc(&s)
+}
+
+/// The first page's statement of how the unit was judged and by whom:
+/// the unit, the operator, the decision rule in words, and the lines the
+/// record is signed on.
+fn judgement(r: &Report) -> String {
+    let or_dash = |s: &str| {
+        if s.is_empty() { "-".to_owned() } else { esc(s) }
+    };
+    format!(
+        "<table class=record>\n<tr><th>unit</th><td>{} {}</td></tr>\n<tr><th>tested by</th><td>{} <span class=note>(operator), {}</span></td></tr>\n<tr><th>power-on</th><td>{}</td></tr>\n<tr><th>gyro status</th><td>{}</td></tr>\n<tr><th>decision rule</th><td><b>{}</b>{}: {}</td></tr>\n<tr><th>reviewed by</th><td class=sign>{}</td></tr>\n<tr><th>approved by</th><td class=sign>{}</td></tr>\n</table>\n",
+        esc(&r.dut.kind),
+        esc(&r.dut.serial),
+        or_dash(&r.operator),
+        esc(&utc_seconds(&r.start_time_utc)),
+        esc(&r.power_on.words),
+        esc(&r.gyro_status.words),
+        esc(&r.decision_rule.short()),
+        if r.decision_rule.named {
+            " (named by the procedure)"
+        } else {
+            " (the default)"
+        },
+        esc(&r.decision_rule.statement),
+        signed(r, "reviewed"),
+        signed(r, "approved"),
+    )
+}
+
+/// The signatures of `role` in words (blank for a pen on a printed copy).
+fn signed(r: &Report, role: &str) -> String {
+    r.signatures
+        .iter()
+        .filter(|s| s.role == role)
+        .map(|s| {
+            format!(
+                "{} <span class=note>{} (log sha256 {}){}</span>",
+                esc(&s.by),
+                esc(&s.signed_utc),
+                esc(s.log_sha256.get(..12).unwrap_or(&s.log_sha256)),
+                if s.note.is_empty() {
+                    String::new()
+                } else {
+                    format!(": {}", esc(&s.note))
+                }
+            )
+        })
+        .collect::<Vec<_>>()
+        .join("<br>")
+}
+
+/// A figure's expanded uncertainty with its coverage factor, its standard
+/// error where it has no budget, or a dash (its reason on hover).
+fn uncertainty_cell(m: &Measurement) -> String {
+    match (&m.uncertainty, m.std_error) {
+        _ if m.value.is_none() => "-".to_owned(),
+        (Some(u), _) => format!(
+            "{} <span class=note>(k={:.2})</span>",
+            num(Some(u.expanded), 4),
+            u.k
+        ),
+        (None, Some(se)) => format!("{} <span class=note>(1 s.e.)</span>", num(Some(se), 4)),
+        (None, None) => format!(
+            "<span title=\"{}\">-</span>",
+            esc(m.uncertainty_reason.as_deref().unwrap_or("not formed"))
+        ),
+    }
+}
+
+/// The distance to the nearer limit, and in expanded uncertainties.
+fn margin_cell(m: &Measurement) -> String {
+    match (m.margin, m.margin_u) {
+        (Some(d), Some(k)) => format!("{} <span class=note>({k:.1} U)</span>", num(Some(d), 4)),
+        (Some(d), None) => num(Some(d), 4),
+        _ => "-".to_owned(),
+    }
+}
+
+/// The row under a figure with its note and noise floor, across the
+/// table (none when it has neither).
+fn note_row(m: &Measurement, class: &str) -> String {
+    let floor = m.noise_floor.map(|f| {
+        format!(
+            "noise floor {} {} (a perfectly compensated unit with this run's noise)",
+            num(Some(f), 4),
+            esc(&m.unit)
+        )
+    });
+    let text: Vec<String> = (!m.note.is_empty())
+        .then(|| esc(&m.note))
+        .into_iter()
+        .chain(floor)
+        .collect();
+    if text.is_empty() {
+        String::new()
+    } else {
+        format!(
+            "<tr class={class}><td></td><td colspan=8 class=note>{}</td></tr>\n",
+            text.join("; ")
+        )
+    }
 }
 
 /// The measurements table's rows.
@@ -927,19 +1057,24 @@ fn measurement_rows(r: &Report) -> String {
     let mut rows = String::new();
     for m in &r.measurements {
         let class = m.outcome.as_str();
+        let informative = m.low.is_none() && m.high.is_none();
         rows.push_str(&format!(
-            "<tr class={class}><td>{}</td><td class=num>{}</td><td>{}</td><td class=num>{}</td><td class=num>{}</td><td class=\"outcome {class}\">{}</td><td>{}</td><td>{}</td></tr>\n",
+            "<tr class={class}><td>{}<br><span class=note>step {}</span></td><td class=num>{}</td><td class=num>{}</td><td>{}</td><td class=num>{}</td><td class=num>{}</td><td class=num>{}</td><td class=num>{}</td><td class=\"outcome {class}\">{}</td></tr>\n{}",
             esc(&m.name),
-            match m.std_error {
-                Some(se) if m.value.is_some() => format!("{} ± {}", num(m.value, 4), num(Some(se), 4)),
-                _ => num(m.value, 4),
-            },
+            esc(&m.step),
+            num(m.value, 4),
+            uncertainty_cell(m),
             esc(&m.unit),
             limit(m.low),
             limit(m.high),
-            m.outcome.as_str().to_uppercase(),
-            esc(&m.step),
-            esc(&m.note),
+            m.guard_band.map_or("-".to_owned(), |w| num(Some(w), 4)),
+            margin_cell(m),
+            if informative {
+                "informative".to_owned()
+            } else {
+                m.outcome.word().to_owned()
+            },
+            note_row(m, class),
         ));
     }
     rows
@@ -1000,12 +1135,13 @@ fn overdue_box(r: &Report) -> String {
 /// The whole page.
 pub fn render_html(r: &Report, records: &Records) -> String {
     let faults_before = records.read_faults();
-    let (colour, word) = match r.outcome {
-        Outcome::Pass => ("var(--pass)", "PASS"),
-        Outcome::Fail => ("var(--fail)", "FAIL"),
-        Outcome::Error => ("var(--error)", "ERROR"),
-        Outcome::Aborted => ("var(--aborted)", "ABORTED"),
+    let colour = match r.outcome {
+        Outcome::Pass => "var(--pass)",
+        Outcome::Fail | Outcome::ConditionalFail => "var(--fail)",
+        Outcome::Error => "var(--error)",
+        Outcome::Aborted | Outcome::ConditionalPass => "var(--aborted)",
     };
+    let word = super::outcome_word(r.outcome);
     let rows = measurement_rows(r);
     let error = stopped_box(r);
     let bench_left = bench_left_line(r);
@@ -1025,11 +1161,12 @@ pub fn render_html(r: &Report, records: &Records) -> String {
         r#"<div class=verdict style="background:{colour}">{word}</div>{overdue_tag}
 <h1>{proc} &mdash; {dut_type} {serial}</h1>
 <p class=headline>{headline}</p>
-{overdue}{error}{bench_left}<p class=note>Spec: {spec}<br>Started {start} &middot; {hours:.2} h of device time &middot; {frames} frames &middot; bench {bench}{seed} &middot; gyrobench {version}</p>
+{judgement}{overdue}{error}{bench_left}<p class=note>Spec: {spec}<br>Started {start} &middot; {hours:.2} h of device time &middot; {frames} frames &middot; bench {bench}{seed} &middot; gyrobench {version}</p>
 {headline_chart}
 <h2>Measurements</h2>
-<table><tr><th>name</th><th>value</th><th>unit</th><th>low</th><th>high</th><th>outcome</th><th>step</th><th>note</th></tr>
+<table><tr><th>name</th><th>value</th><th>U</th><th>unit</th><th>low</th><th>high</th><th>guard band</th><th>margin</th><th>outcome</th></tr>
 {rows}</table>
+<p class=note>U: the expanded uncertainty (coverage factor k for 95 % from the budget's degrees of freedom; docs/figures.md gives each figure's budget). Guard band: how far the decision rule moved the limits inward. Margin: the distance to the nearer limit (negative outside it), and in units of U.</p>
 <p class=note>Definitions: bias stability = 1-sigma of the averages over the averaging time of the Earth-removed rate; drift = peak-to-peak of the Earth-removed rate smoothed by a centred moving average of the averaging time; compensated = the same after the study's model 4; self-heating = mean of the first 120 s after power-on minus the mean of 1680..1800 s; scale factor, nonlinearity and asymmetry = the fit of output against input rate with one slope per direction; dead band and threshold = the inputs giving 10 % and 50 % of the expected output in a lock-in fit; axis misalignment = the slope of the Earth-removed rate against the rate of a table axis turning across the input axis, as an angle (&plusmn; one standard error). See docs/figures.md.</p>
 {record}{positions}{rate_table}{turn_ons}{noise}{allan}
 <h2>Traces</h2>
@@ -1038,6 +1175,7 @@ pub fn render_html(r: &Report, records: &Records) -> String {
 <p>{lf} frames, {lost} lost, {crc} CRC errors, {res} resyncs, {dup} duplicates.</p>
 "#,
         headline = headline(r),
+        judgement = judgement(r),
         positions = positions(r),
         rate_table = rate_table_charts(r, records),
         turn_ons = turn_on_section(r, records),
@@ -1212,6 +1350,12 @@ mod tests {
             records: Vec::new(),
             note: String::new(),
             std_error: None,
+            uncertainty: None,
+            uncertainty_reason: None,
+            guard_band: None,
+            margin: None,
+            margin_u: None,
+            noise_floor: None,
             trace: None,
             band: None,
         }

@@ -18,6 +18,18 @@ use crate::sequencer::{BenchLeft, Outcome, RunError, RunResult};
 
 pub use html::render_html;
 
+/// A run's outcome in the report's capitals.
+pub fn outcome_word(o: Outcome) -> &'static str {
+    match o {
+        Outcome::Pass => "PASS",
+        Outcome::Fail => "FAIL",
+        Outcome::Error => "ERROR",
+        Outcome::Aborted => "ABORTED",
+        Outcome::ConditionalPass => "CONDITIONAL PASS",
+        Outcome::ConditionalFail => "CONDITIONAL FAIL",
+    }
+}
+
 /// The unit under test.
 #[derive(Debug, Clone, Serialize)]
 pub struct Dut {
@@ -59,6 +71,8 @@ pub struct Report {
     pub calibration_overdue: Vec<String>,
     /// The coefficients the compensated figures use.
     pub coefficients: CoeffsUsed,
+    /// The decision rule every figure was judged by, stated.
+    pub decision_rule: RuleStated,
     /// Every measurement.
     pub measurements: Vec<Measurement>,
     /// What ended the run, when it did not finish.
@@ -90,6 +104,77 @@ pub struct Report {
     /// Where each record a measurement uses was taken (the table pose of
     /// the move before it), in run order.
     pub positions: Vec<Position>,
+    /// When the unit was switched on: the run's first power-on, the one
+    /// the figures that count from power-on rest on (self-heating, model
+    /// 4's warm-up), and how the run knows it.
+    pub power_on: PowerOnStated,
+    /// Every power-on of the run, in order (a turn-on procedure's several).
+    pub power_ons: Vec<PowerOnStated>,
+    /// What the unit's status bits took from the run's records, and its
+    /// mode hops.
+    pub gyro_status: GyroStatus,
+    /// Who reviewed and approved the run, as the results store holds it
+    /// (`results sign`): empty in the report a run writes; a replay with
+    /// `--store` fills it.
+    pub signatures: Vec<Signature>,
+}
+
+/// One signature of the run (`results sign`), as the results store keeps
+/// it and a replayed report shows it.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+pub struct Signature {
+    /// The part signed (`RUN_ID.PART`, the run's latest when signed).
+    pub run: String,
+    /// `reviewed` or `approved`.
+    pub role: String,
+    /// Who signed.
+    pub by: String,
+    /// When, UTC, RFC 3339.
+    pub signed_utc: String,
+    /// The log's SHA-256 the store held when it was signed.
+    pub log_sha256: String,
+    /// The digest of the part's stored verdict and figures when signed.
+    pub figures_sha256: String,
+    /// A remark (may be empty).
+    pub note: String,
+}
+
+/// The decision rule as `report.json` states it.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct RuleStated {
+    /// `simple`, `guarded` or `non_binary`.
+    pub rule: &'static str,
+    /// The guard band as a multiple of U (`guarded` only).
+    pub guard_band_u: Option<f64>,
+    /// Whether the procedure names it (else the default, or, in a log
+    /// written before decision rules, simple acceptance as it was judged).
+    pub named: bool,
+    /// The rule in a sentence, as the report's first page prints it.
+    pub statement: String,
+}
+
+impl RuleStated {
+    /// The rule `p`'s run logged in `format` was judged by.
+    pub fn of(p: &Procedure, format: u32) -> Self {
+        let rule = crate::sequencer::measure::Judging::rule_for(p, format);
+        Self {
+            rule: rule.name(),
+            guard_band_u: match rule {
+                crate::procedure::DecisionRule::Guarded { guard_band_u } => Some(guard_band_u),
+                _ => None,
+            },
+            named: p.meta.rule_named,
+            statement: rule.statement(),
+        }
+    }
+
+    /// The rule in a few words: `guarded, w = 1 U`.
+    pub fn short(&self) -> String {
+        match self.guard_band_u {
+            Some(w) => format!("{}, w = {w} U", self.rule),
+            None => self.rule.replace('_', "-"),
+        }
+    }
 }
 
 /// The pose of the unit while a record was taken.
@@ -203,16 +288,20 @@ pub struct NoiseFigures {
     pub bias_stability_dph: Option<f64>,
     /// Its averaging time, s.
     pub bias_stability_averaging_s: f64,
-    /// IEEE Std 952 coefficient B = ADEV floor / 0.664 (noise fit), deg/h.
-    pub ieee_b_dph: f64,
+    /// IEEE Std 952 coefficient B = ADEV floor / 0.664 (noise fit), deg/h;
+    /// `None` when the curve does not resolve it (`not_resolved` says why).
+    pub ieee_b_dph: Option<f64>,
     /// Raw minimum of the ADEV, deg/h.
     pub adev_min_dph: f64,
     /// Where it lies, s.
     pub adev_min_tau_s: f64,
-    /// Angle random walk from the fit, deg/sqrt(h).
-    pub arw_deg_per_rt_h: f64,
-    /// Rate random walk from the fit, deg/h/sqrt(h).
-    pub rate_random_walk_dph_per_rt_h: f64,
+    /// Angle random walk from the fit, deg/sqrt(h); `None` when unresolved.
+    pub arw_deg_per_rt_h: Option<f64>,
+    /// Rate random walk from the fit, deg/h/sqrt(h); `None` when unresolved.
+    pub rate_random_walk_dph_per_rt_h: Option<f64>,
+    /// Each term above the curve does not resolve: why, in words (the
+    /// keys of [`crate::analysis::allan::TERM_KEYS`], `ieee_b_dph` for B).
+    pub not_resolved: std::collections::BTreeMap<&'static str, String>,
     /// Averaging times, s.
     pub tau_s: Vec<f64>,
     /// Overlapping ADEV, deg/h.
@@ -251,6 +340,8 @@ impl NoiseFigures {
         let judged = measurements
             .iter()
             .find(|m| m.metric == Metric::BiasStability && m.records.contains(label))?;
+        // A term the curve does not resolve is no figure (as `allan` says).
+        let shown = |i: usize, v: f64| a.noise.resolved[i].is_resolved().then_some(v);
         Some(Self {
             record: label.clone(),
             judged: format!(
@@ -259,16 +350,175 @@ impl NoiseFigures {
             ),
             bias_stability_dph: judged.value,
             bias_stability_averaging_s: judged.averaging_s,
-            ieee_b_dph: a.bias_instability.ieee_b_dph,
+            ieee_b_dph: shown(2, a.bias_instability.ieee_b_dph),
             adev_min_dph: a.bias_instability.adev_min_dph,
             adev_min_tau_s: a.bias_instability.adev_min_tau_s,
-            arw_deg_per_rt_h: a.noise.arw_deg_per_rt_h,
-            rate_random_walk_dph_per_rt_h: a.noise.rate_random_walk_dph_per_rt_h,
+            arw_deg_per_rt_h: shown(1, a.noise.arw_deg_per_rt_h),
+            rate_random_walk_dph_per_rt_h: shown(3, a.noise.rate_random_walk_dph_per_rt_h),
+            not_resolved: [
+                (1, "arw_deg_per_rt_h"),
+                (2, "ieee_b_dph"),
+                (3, "rate_random_walk_dph_per_rt_h"),
+            ]
+            .into_iter()
+            .filter_map(|(i, key)| Some((key, a.noise.resolved[i].reason()?)))
+            .collect(),
             tau_s: a.points.iter().map(|p| p.tau_s).collect(),
             adev_dph: a.points.iter().map(|p| p.adev).collect(),
             lo_dph: a.points.iter().map(|p| p.lo).collect(),
             hi_dph: a.points.iter().map(|p| p.hi).collect(),
         })
+    }
+}
+
+/// What the unit's status bits took from the records (`gyro_status` in
+/// report.json; `docs/figures.md`, "Status bits").
+#[derive(Debug, Clone, Serialize)]
+pub struct GyroStatus {
+    /// Device time of the records' intervals left out because a frame of
+    /// theirs said the unit was not fit (not lasing, dither off,
+    /// path-length control out of lock), s.
+    pub dropped_s: f64,
+    /// Those intervals.
+    pub dropped_intervals: u64,
+    /// Resets of the path-length control (mode hops) the frames showed,
+    /// over the whole run.
+    pub mode_hops: usize,
+    /// Device time of each, s since its part of the run started.
+    pub mode_hop_times_s: Vec<f64>,
+    /// Each record the status bits touched.
+    pub records: Vec<RecordStatus>,
+    /// The same in words.
+    pub words: String,
+}
+
+/// One record's share of [`GyroStatus`].
+#[derive(Debug, Clone, Serialize)]
+pub struct RecordStatus {
+    /// The record's label.
+    pub record: String,
+    /// Device time left out, s.
+    pub dropped_s: f64,
+    /// Why: the fitness bits its left-out frames lacked, in words.
+    pub why: Vec<String>,
+    /// Mode hops during it.
+    pub mode_hops: usize,
+}
+
+impl GyroStatus {
+    /// What `records`' status bits took from them.
+    pub fn of(records: &Records) -> Self {
+        let bits = records.status_bits();
+        let hops = records.hops();
+        let mut by_record: Vec<RecordStatus> = Vec::new();
+        for label in &records.order {
+            if by_record.iter().any(|r| &r.record == label) {
+                continue;
+            }
+            let d = records.dropped().get(label).copied().unwrap_or_default();
+            let n = hops
+                .iter()
+                .filter(|(_, r)| r.as_ref() == Some(label))
+                .count();
+            if d.intervals > 0 || n > 0 {
+                by_record.push(RecordStatus {
+                    record: label.clone(),
+                    dropped_s: d.s,
+                    why: bits.unfit_words(!d.missing),
+                    mode_hops: n,
+                });
+            }
+        }
+        let dropped_s = by_record.iter().map(|r| r.dropped_s).sum::<f64>();
+        let dropped_intervals = records.dropped().values().map(|d| d.intervals).sum();
+        let words = match (dropped_intervals, hops.len()) {
+            (0, 0) => "every frame of the records fit to use; no mode hop".to_owned(),
+            (d, h) => {
+                let mut w = Vec::new();
+                if d > 0 {
+                    w.push(format!(
+                        "{dropped_s:.0} s of records left out, the unit not fit ({} of {} records)",
+                        by_record.iter().filter(|r| r.dropped_s > 0.0).count(),
+                        records.order.len()
+                    ));
+                }
+                if h > 0 {
+                    w.push(format!(
+                        "{h} mode hop{} (path-length control reset)",
+                        if h == 1 { "" } else { "s" }
+                    ));
+                }
+                w.join("; ")
+            }
+        };
+        Self {
+            dropped_s,
+            dropped_intervals,
+            mode_hops: hops.len(),
+            mode_hop_times_s: hops.iter().map(|(t, _)| *t).collect(),
+            records: by_record,
+            words,
+        }
+    }
+}
+
+/// A power-on as the report states it (`power_on` in report.json).
+#[derive(Debug, Clone, Serialize)]
+pub struct PowerOnStated {
+    /// Device time of the power-on, s since its part of the run started.
+    pub device_time_s: f64,
+    /// The same moment in UTC.
+    pub utc: String,
+    /// How the run knows it: `switched` (the run switched the supply on,
+    /// from off), `operator` (an operator switched it on and confirmed
+    /// it), `assumed` (not known: the start of the run is taken).
+    pub source: crate::sequencer::PowerOnSource,
+    /// The part of the run it was in (1 unless resumed).
+    pub part: u32,
+    /// The same in words.
+    pub words: String,
+}
+
+impl PowerOnStated {
+    /// The statement of power-on `on` in `part`.
+    pub fn of(part: u32, on: &crate::sequencer::PowerOn) -> Self {
+        Self {
+            device_time_s: on.t_s,
+            utc: on.utc.clone(),
+            source: on.source,
+            part,
+            words: format!(
+                "at {:.1} s of device time{}{}, {}",
+                on.t_s,
+                if part > 1 {
+                    format!(" of part {part}")
+                } else {
+                    String::new()
+                },
+                if on.utc.is_empty() {
+                    String::new()
+                } else {
+                    format!(" ({})", on.utc)
+                },
+                on.source.describe()
+            ),
+        }
+    }
+
+    /// The run's first power-on, or the run's start taken for it.
+    fn first(records: &Records, start_utc: &str) -> Self {
+        records.power_ons().first().map_or_else(
+            || Self {
+                device_time_s: 0.0,
+                utc: start_utc.to_owned(),
+                source: crate::sequencer::PowerOnSource::Assumed,
+                part: 1,
+                words: "not recorded: the figures that count from power-on take the start of \
+                        the run"
+                    .to_owned(),
+            },
+            |(part, on)| Self::of(*part, on),
+        )
     }
 }
 
@@ -307,6 +557,7 @@ impl Report {
                 .map(|i| i.role.clone())
                 .collect(),
             coefficients: unit.map_or_else(CoeffsUsed::fitted, |u| u.coefficients.clone()),
+            decision_rule: RuleStated::of(p, meta.format),
             measurements: r.measurements.clone(),
             error: r.error.clone(),
             cleanup_completed: r.cleanup_completed,
@@ -324,6 +575,15 @@ impl Report {
                 .into_iter()
                 .map(|q| q.on(unit_geometry(meta)))
                 .collect(),
+            power_on: PowerOnStated::first(&r.records, &meta.start_time_utc),
+            power_ons: r
+                .records
+                .power_ons()
+                .iter()
+                .map(|(part, on)| PowerOnStated::of(*part, on))
+                .collect(),
+            gyro_status: GyroStatus::of(&r.records),
+            signatures: Vec::new(),
         }
     }
 
@@ -357,18 +617,40 @@ impl Report {
             self.device_time_s / 3600.0,
             self.frames
         );
+        s.push_str(&format!("  power-on: {}\n", self.power_on.words));
+        if self.gyro_status.dropped_intervals > 0 || self.gyro_status.mode_hops > 0 {
+            s.push_str(&format!("  gyro status: {}\n", self.gyro_status.words));
+        }
+        s.push_str(&format!(
+            "  decision rule: {}{}\n",
+            self.decision_rule.short(),
+            if self.decision_rule.named {
+                ""
+            } else {
+                " (the default)"
+            }
+        ));
         for m in &self.measurements {
             s.push_str(&format!(
-                "  {:<32} {:>10} {:<6} [{}]  {}\n",
+                "  {:<38} {:>10} {:<6} {:<18} {}  {}\n",
                 m.name,
-                match (m.value, m.std_error) {
-                    (Some(v), Some(se)) => format!("{v:.4} ± {se:.4}"),
-                    (Some(v), None) => format!("{v:.4}"),
-                    (None, _) => "n/a".to_owned(),
-                },
+                m.value.map_or("n/a".to_owned(), |v| format!("{v:.4}")),
                 m.unit,
-                m.limits_text(),
-                m.outcome.as_str().to_uppercase()
+                match (&m.uncertainty, m.std_error) {
+                    (Some(u), _) => format!("± {:.4} (k={:.2})", u.expanded, u.k),
+                    (None, Some(se)) => format!("± {se:.4} (1 s.e.)"),
+                    (None, None) => String::new(),
+                },
+                if m.low.is_none() && m.high.is_none() {
+                    "(informative)".to_owned()
+                } else {
+                    format!("[{}]", m.limits_text())
+                },
+                if m.low.is_none() && m.high.is_none() {
+                    ""
+                } else {
+                    m.outcome.word()
+                }
             ));
         }
         if let Some(e) = &self.error {
@@ -410,13 +692,8 @@ impl Report {
         s
     }
 
-    /// PASS, FAIL, ERROR or ABORTED.
+    /// PASS, FAIL, ERROR, ABORTED, CONDITIONAL PASS or CONDITIONAL FAIL.
     pub fn outcome_word(&self) -> &'static str {
-        match self.outcome {
-            Outcome::Pass => "PASS",
-            Outcome::Fail => "FAIL",
-            Outcome::Error => "ERROR",
-            Outcome::Aborted => "ABORTED",
-        }
+        outcome_word(self.outcome)
     }
 }

@@ -43,10 +43,18 @@ pub fn junit(runs: &[(RunRow, Vec<MeasurementRow>)]) -> std::io::Result<String> 
     String::from_utf8(w.into_inner()).map_err(std::io::Error::other)
 }
 
-/// A run's failed measurements.
+/// A run's failed measurements (conditional statements among them: each
+/// is written as a failure of its own type).
 fn failures(ms: &[MeasurementRow]) -> usize {
     ms.iter()
-        .filter(|m| m.outcome == MeasureOutcome::Fail)
+        .filter(|m| {
+            matches!(
+                m.outcome,
+                MeasureOutcome::Fail
+                    | MeasureOutcome::ConditionalPass
+                    | MeasureOutcome::ConditionalFail
+            )
+        })
         .count()
 }
 
@@ -149,13 +157,33 @@ fn write_testcase(w: &mut Writer<Vec<u8>>, m: &MeasurementRow, class: &str) -> s
             el.write_empty()?;
         }
         outcome => {
-            let (tag, kind) = if outcome == MeasureOutcome::Error {
-                ("error", "not judged")
-            } else {
-                ("failure", "outside limits")
+            // A conditional statement (non-binary rule) is a failure of
+            // its own type: inside or outside a limit by less than its
+            // uncertainty, a verdict left for a person to decide.
+            let (tag, kind) = match outcome {
+                MeasureOutcome::Error => ("error", "not judged"),
+                MeasureOutcome::ConditionalPass => ("failure", "conditional pass"),
+                MeasureOutcome::ConditionalFail => ("failure", "conditional fail"),
+                _ => ("failure", "outside limits"),
             };
             let message = if outcome == MeasureOutcome::Error {
                 format!("{} not judged: {}", m.name, m.note)
+            } else if matches!(
+                outcome,
+                MeasureOutcome::ConditionalPass | MeasureOutcome::ConditionalFail
+            ) {
+                format!(
+                    "{} {} {} {} limits {}: within its expanded uncertainty of one (non-binary rule)",
+                    m.name,
+                    num(m.value),
+                    m.unit,
+                    if outcome == MeasureOutcome::ConditionalPass {
+                        "inside"
+                    } else {
+                        "outside"
+                    },
+                    limits(m)
+                )
             } else {
                 format!(
                     "{} {} {} outside {}",
@@ -335,6 +363,8 @@ mod tests {
                 outcome: MeasureOutcome::Fail,
                 step: "main.1".into(),
                 note: "<&>".into(),
+                uncertainty: None,
+                guard_band: None,
             },
         };
         let xml = junit(&[(run, vec![m])]).expect("xml");

@@ -11,11 +11,14 @@
 //! rebuilt from the logs at any time (`results sync`). A store that cannot
 //! be reached never stops a run: the run is queued and written later.
 
+pub mod facts;
 pub mod junit;
 pub mod page;
 pub mod pg;
 pub mod query;
 pub mod record;
+pub mod sets;
+pub mod sign;
 pub mod sql;
 pub mod sqlite;
 pub mod verify;
@@ -42,17 +45,23 @@ pub enum RunState {
     Aborted,
     /// An imported run: another bench's data, kept for comparison.
     Reference,
+    /// Non-binary rule: passed conditionally.
+    ConditionalPass,
+    /// Non-binary rule: failed conditionally.
+    ConditionalFail,
 }
 
 impl RunState {
     /// Every state, in the order the help lists them.
-    pub const ALL: [Self; 6] = [
+    pub const ALL: [Self; 8] = [
         Self::Running,
         Self::Pass,
         Self::Fail,
         Self::Error,
         Self::Aborted,
         Self::Reference,
+        Self::ConditionalPass,
+        Self::ConditionalFail,
     ];
 
     /// The store's word.
@@ -64,6 +73,8 @@ impl RunState {
             Self::Error => "error",
             Self::Aborted => "aborted",
             Self::Reference => "reference",
+            Self::ConditionalPass => "conditional_pass",
+            Self::ConditionalFail => "conditional_fail",
         }
     }
 
@@ -80,12 +91,17 @@ impl RunState {
             Outcome::Fail => Self::Fail,
             Outcome::Error => Self::Error,
             Outcome::Aborted => Self::Aborted,
+            Outcome::ConditionalPass => Self::ConditionalPass,
+            Outcome::ConditionalFail => Self::ConditionalFail,
         }
     }
 
-    /// True for a run judged PASS or FAIL.
+    /// True for a run judged PASS or FAIL (conditionally or not).
     pub fn judged(self) -> bool {
-        matches!(self, Self::Pass | Self::Fail)
+        matches!(
+            self,
+            Self::Pass | Self::Fail | Self::ConditionalPass | Self::ConditionalFail
+        )
     }
 }
 
@@ -120,6 +136,12 @@ pub enum StoreError {
         store: String,
         /// What is missing.
         what: String,
+    },
+    /// A request the store's rules refuse (a signature out of turn).
+    #[error("{why}")]
+    Refused {
+        /// Why, naming the run.
+        why: String,
     },
     /// A log or run directory could not be indexed.
     #[error("{path}: {message}")]

@@ -12,8 +12,17 @@ use crate::view::{Chart, Marker, Series, esc, page};
 
 /// The report of the run a point came from, as a link from a page in
 /// `page_dir`: relative when the report sits below it, else a file URL.
+/// A batch's unit has its own report beside the log, named as the batch
+/// names it (`report-SERIAL.html`); a single unit's is `report.html`.
 pub fn report_link(p: &TrendPoint, page_dir: &Path) -> Option<String> {
-    let report = Path::new(&p.log_path).parent()?.join("report.html");
+    let name = if p.slot.is_empty() {
+        "report".to_owned()
+    } else {
+        crate::unit::report_name(&p.serial)
+    };
+    let report = Path::new(&p.log_path)
+        .parent()?
+        .join(format!("{name}.html"));
     let abs_page = std::path::absolute(page_dir).ok()?;
     Some(match report.strip_prefix(&abs_page) {
         Ok(rel) => rel.display().to_string(),
@@ -148,8 +157,9 @@ fn page_body(t: &Trend, shown: usize, chart: &str, rows: &str) -> String {
 <tr><td class=num>{count}</td><td class=num>{judged}</td><td class=num>{mean}</td><td class=num>{sigma}</td><td class=num>{min}</td><td class=num>{max}</td><td class=num>{lo}..{hi}</td><td class=num>{yield_}</td></tr></table>
 <table><tr><th></th><th>upper</th><th>lower</th><th>index</th><th>sigma</th></tr>
 <tr><td>capability (run to run)</td><td class=num>Cpu {cpu}</td><td class=num>Cpl {cpl}</td><td class=num>Cpk {cpk}</td><td class=num>{sw} (moving ranges / 1.128)</td></tr>
-<tr><td>performance (all data)</td><td class=num>Ppu {ppu}</td><td class=num>Ppl {ppl}</td><td class=num>Ppk {ppk}</td><td class=num>{sigma} (sample)</td></tr></table>
-<p class=note>A figure with one limit is judged on that side alone: Cpk is then Cpu (or Cpl), Ppk is Ppu (or Ppl). Definitions in docs/results.md.</p>
+<tr><td>performance (all data)</td><td class=num>Ppu {ppu}</td><td class=num>Ppl {ppl}</td><td class=num>Ppk {ppk}</td><td class=num>{sigma} (sample)</td></tr>
+{percentile}</table>
+<p class=note>{caveat}A figure with one limit is judged on that side alone: Cpk is then Cpu (or Cpl), Ppk is Ppu (or Ppl). Definitions in docs/results.md.</p>
 {chart}
 <p class=note>{shown} value(s) shown (at most the 5,000 newest), each run's latest part; units: {unit}. Point over a dot to see its unit and run; click it for the run's report.</p>
 <h2>Values</h2>
@@ -176,6 +186,17 @@ fn page_body(t: &Trend, shown: usize, chart: &str, rows: &str) -> String {
         ppu = f(t.overall.upper, 2),
         ppl = f(t.overall.lower, 2),
         ppk = f(t.overall.k, 2),
+        caveat = esc(&t.caveat()).replace('\n', "<br>"),
+        percentile = t.percentile.map_or(String::new(), |p| format!(
+            "<tr><td>performance by percentiles ({}, ISO 22514-2){}</td><td class=num>Ppu {}</td><td class=num>Ppl {}</td><td class=num>Ppk {}</td><td class=num>X50 {} X99.865 {}</td></tr>",
+            p.model,
+            if p.preferred { ": <b>the one to read</b>" } else { "" },
+            f(p.upper, 2),
+            f(p.lower, 2),
+            f(p.k, 2),
+            f(Some(p.x_50), 4),
+            f(Some(p.x_99865), 4),
+        )),
     )
 }
 

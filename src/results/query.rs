@@ -33,16 +33,32 @@ pub struct Filter {
     pub include_reference: bool,
     /// At most this many rows (newest first); none: every row.
     pub limit: Option<usize>,
+    /// Count runs of the simulated bench's unnamed unit (`SIMULATED`) in
+    /// trends and yields (lists show them always): a simulated unit is not
+    /// one of the lot's.
+    pub include_simulated: bool,
+    /// Only units whose compensated figures came from this source
+    /// (`fitted`, `file`, `store`): a drift compensated within the run and
+    /// one compensated by the unit's delivered set are not one measurand.
+    pub coeffs_source: Option<String>,
+    /// Only runs on this kind of bench.
+    pub bench_kind: Option<super::facts::BenchKind>,
 }
 
 impl Filter {
     /// The clause that leaves imported runs (`reference`) out of figures.
-    fn reference_clause(&self) -> &'static str {
-        if self.include_reference {
-            ""
-        } else {
-            " AND ru.outcome <> 'reference'"
+    fn reference_clause(&self) -> String {
+        let mut out = String::new();
+        if !self.include_reference {
+            out.push_str(" AND ru.outcome <> 'reference'");
         }
+        if !self.include_simulated {
+            out.push_str(&format!(
+                " AND u.serial <> '{}'",
+                crate::unit::SIMULATED_SERIAL
+            ));
+        }
+        out
     }
 
     /// `WHERE` clauses on `r` (runs), `ru` (run units) and `u` (units),
@@ -68,6 +84,12 @@ impl Filter {
         add("(r.bench = $? OR r.station = $?)", &self.bench, &mut params);
         add("r.started_utc >= $?", &self.since, &mut params);
         add("r.started_utc < $?", &self.until, &mut params);
+        add("ru.coeffs_source = $?", &self.coeffs_source, &mut params);
+        add(
+            "r.bench_kind = $?",
+            &self.bench_kind.map(|k| k.as_str().to_owned()),
+            &mut params,
+        );
         if self.latest_only {
             sql.push_str(" AND r.latest = 1");
         }
@@ -116,43 +138,7 @@ pub struct RunRow {
     pub coefficients: StoredCoeffs,
 }
 
-/// The coefficients a run's unit used, as the store keeps them.
-#[derive(Debug, Clone, Default, PartialEq, Serialize)]
-pub struct StoredCoeffs {
-    /// `fitted`, `file` or `store` (none for runs stored before schema 3).
-    pub source: Option<String>,
-    /// The set's unit.
-    pub serial: Option<String>,
-    /// The set's version.
-    pub version: Option<i64>,
-    /// SHA-256 of the set's text.
-    pub sha256: Option<String>,
-    /// Why another unit's set was used.
-    pub override_reason: Option<String>,
-}
-
-impl StoredCoeffs {
-    /// In words.
-    pub fn describe(&self) -> String {
-        let set = match (self.version, &self.serial) {
-            (Some(v), Some(s)) => format!("set {v} of {s}"),
-            (None, Some(s)) => format!("a set of {s} not in a store"),
-            _ => "a set naming no unit".into(),
-        };
-        let sha = self.sha256.as_deref().map_or(String::new(), |h| {
-            format!(" (sha256 {})", h.get(..12).unwrap_or(h))
-        });
-        let why = self
-            .override_reason
-            .as_deref()
-            .map_or(String::new(), |r| format!(", used for another unit: {r}"));
-        match self.source.as_deref() {
-            None => "not recorded".into(),
-            Some("fitted") => "fitted on the run's records".into(),
-            Some(_) => format!("{set}{sha}{why}"),
-        }
-    }
-}
+pub use super::sets::StoredCoeffs;
 
 /// The columns of a run's row, each read back by its name.
 const RUN_COLUMNS: &[(&str, &str)] = &[
@@ -179,6 +165,9 @@ const RUN_COLUMNS: &[(&str, &str)] = &[
     ("ru.coeffs_version", "coeffs_version"),
     ("ru.coeffs_sha256", "coeffs_sha256"),
     ("ru.coeffs_override_reason", "coeffs_override_reason"),
+    ("ru.coeffs_identity", "coeffs_identity"),
+    ("ru.coeffs_claimed_version", "coeffs_claimed_version"),
+    ("ru.coeffs_identity_note", "coeffs_identity_note"),
 ];
 
 /// The select list of [`RUN_COLUMNS`].
@@ -216,13 +205,7 @@ fn run_row(r: &Row) -> RunRow {
             format!("{version} ({revision})")
         },
         calibration_overdue: r.opt_text("calibration_overdue"),
-        coefficients: StoredCoeffs {
-            source: r.opt_text("coeffs_source"),
-            serial: r.opt_text("coeffs_serial"),
-            version: r.int("coeffs_version"),
-            sha256: r.opt_text("coeffs_sha256"),
-            override_reason: r.opt_text("coeffs_override_reason"),
-        },
+        coefficients: StoredCoeffs::of_row(r),
     }
 }
 
@@ -237,8 +220,7 @@ pub struct MeasurementRow {
     pub measurement: ResultMeasurement,
 }
 
-const MEASUREMENT_COLUMNS: &str =
-    "m.run, m.name, m.value, m.unit, m.low, m.high, m.outcome, m.step, m.note";
+const MEASUREMENT_COLUMNS: &str = "m.run, m.name, m.value, m.unit, m.low, m.high, m.outcome, m.step, m.note, m.u, m.expanded_u, m.k, m.guard_band";
 
 impl std::ops::Deref for MeasurementRow {
     type Target = ResultMeasurement;
@@ -266,6 +248,13 @@ pub(super) fn measurement_of(r: &Row) -> ResultMeasurement {
         outcome: MeasureOutcome::parse(&r.text("outcome")).unwrap_or(MeasureOutcome::Error),
         step: r.text("step"),
         note: r.text("note"),
+        uncertainty: match (r.real("u"), r.real("expanded_u"), r.real("k")) {
+            (Some(u), Some(expanded), Some(k)) => {
+                Some(crate::analysis::uncertainty::Expanded { u, expanded, k })
+            }
+            _ => None,
+        },
+        guard_band: r.real("guard_band"),
     }
 }
 
@@ -280,6 +269,8 @@ pub struct RunDetail {
     pub measurements: Vec<MeasurementRow>,
     /// The other parts of the same run.
     pub parts: Vec<RunRow>,
+    /// Who reviewed and approved it (`results sign`).
+    pub signatures: Vec<super::sign::Signature>,
 }
 
 /// A unit's history.
@@ -346,6 +337,106 @@ pub struct Trend {
     pub within: Capability,
     /// Performance on the overall `sigma` (Ppu, Ppl, Ppk).
     pub overall: Capability,
+    /// Performance by ISO 22514-2's percentile method on a lognormal fit,
+    /// for a figure whose values are all above zero (none otherwise).
+    pub percentile: Option<Percentile>,
+    /// Values below which no index is shown (`--min-values`, default
+    /// [`MIN_CAPABILITY_N`]).
+    pub min_values: usize,
+}
+
+/// Performance by the percentile method (ISO 22514-2): `Ppu = (USL -
+/// X50) / (X99.865 - X50)`, `Ppl = (X50 - LSL) / (X50 - X0.135)`, the
+/// percentiles those of a lognormal fitted to the values (the mean and
+/// standard deviation of their logarithms). For a non-negative, skewed
+/// figure (a peak-to-peak, a stability, a noise term) the normal indices
+/// put the process's tail where it is not; these put it where the values'
+/// own shape does.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Percentile {
+    /// The distribution the percentiles come from.
+    pub model: &'static str,
+    /// The 0.135 % percentile.
+    pub x_0135: f64,
+    /// The median.
+    pub x_50: f64,
+    /// The 99.865 % percentile.
+    pub x_99865: f64,
+    /// Against the upper limit.
+    pub upper: Option<f64>,
+    /// Against the lower limit.
+    pub lower: Option<f64>,
+    /// The smaller (Ppk by percentiles).
+    pub k: Option<f64>,
+    /// The figure is one to read on these rather than on the normal
+    /// indices: every value above zero and an upper limit alone (ours:
+    /// a magnitude bounded below by zero is skewed by its nature).
+    pub preferred: bool,
+}
+
+impl Percentile {
+    /// The percentile indices of `values` against `(low, high)`; none
+    /// unless every value is above zero and their logarithms vary.
+    fn of(values: &[f64], (low, high): (Option<f64>, Option<f64>)) -> Option<Self> {
+        if values.len() < 2 || values.iter().any(|v| !(*v > 0.0 && v.is_finite())) {
+            return None;
+        }
+        let logs: Vec<f64> = values.iter().map(|v| v.ln()).collect();
+        let n = logs.len() as f64;
+        let mu = logs.iter().sum::<f64>() / n;
+        let s = (logs.iter().map(|l| (l - mu) * (l - mu)).sum::<f64>() / (n - 1.0)).sqrt();
+        if !(s > 0.0) {
+            return None;
+        }
+        let (x_0135, x_50, x_99865) = ((mu - 3.0 * s).exp(), mu.exp(), (mu + 3.0 * s).exp());
+        let upper = high.map(|h| (h - x_50) / (x_99865 - x_50));
+        let lower = low.map(|l| (x_50 - l) / (x_50 - x_0135));
+        let k = match (upper, lower) {
+            (Some(u), Some(l)) => Some(u.min(l)),
+            (u, l) => u.or(l),
+        };
+        Some(Self {
+            model: "lognormal",
+            x_0135,
+            x_50,
+            x_99865,
+            upper,
+            lower,
+            k,
+            preferred: high.is_some() && low.is_none_or(|l| l <= 0.0),
+        })
+    }
+}
+
+impl Trend {
+    /// The 95 % interval of Cpk and Ppk, and a warning when too few values
+    /// stand behind them to call them a capability.
+    pub fn caveat(&self) -> String {
+        let t = self;
+        let interval = |c: &Capability| {
+            c.k_interval
+                .map_or("-".to_owned(), |[a, b]| format!("{a:.2}..{b:.2}"))
+        };
+        let mut s = String::new();
+        if t.within.k.is_some() || t.overall.k.is_some() {
+            s.push_str(&format!(
+                "  95 % interval: Cpk {}  Ppk {}\n",
+                interval(&t.within),
+                interval(&t.overall)
+            ));
+        }
+        if t.within.k.is_some() && !t.within.enough {
+            s.push_str(&format!(
+                "  {} value(s), fewer than {}: the indices say little about the process (their interval above)\n",
+                t.count,
+                MIN_CAPABILITY_N
+            ));
+        }
+        if let Some(why) = &t.within.withheld {
+            s.push_str(&format!("  indices not shown: {why}\n"));
+        }
+        s
+    }
 }
 
 /// d2 of a moving range of two: E[|x1 - x2|] = 1.128 sigma.
@@ -355,7 +446,7 @@ pub const D2_MOVING_RANGE: f64 = 1.128;
 /// `upper = (USL - mean) / 3 sigma`, `lower = (mean - LSL) / 3 sigma`,
 /// `k` the smaller of those that exist (a figure with one limit is judged
 /// on that one).
-#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
+#[derive(Debug, Clone, Default, PartialEq, Serialize)]
 pub struct Capability {
     /// Against the upper limit (Cpu, Ppu).
     pub upper: Option<f64>,
@@ -363,21 +454,69 @@ pub struct Capability {
     pub lower: Option<f64>,
     /// The smaller (Cpk, Ppk).
     pub k: Option<f64>,
+    /// Its approximate 95 % confidence interval from the number of values
+    /// (Bissell: k +- 1.96 sqrt(1 / 9n + k^2 / 2(n - 1))).
+    pub k_interval: Option<[f64; 2]>,
+    /// Whether enough values stand behind it (`MIN_CAPABILITY_N`); with
+    /// fewer, and `--min-values` lowered to show it, the index is shown
+    /// with its interval and a warning, never as a capability.
+    pub enough: bool,
+    /// Why the indices are not shown: fewer values than `--min-values`
+    /// (none: shown).
+    pub withheld: Option<String>,
 }
 
+/// Values below which a capability index is not a statement about the
+/// process (ours, the common floor of capability studies; ISO 22514-2
+/// asks far more, 125, for a full study): with 25 values the 95 %
+/// interval of a Cpk of 1.33 is still about +-0.4.
+pub const MIN_CAPABILITY_N: usize = 25;
+
 impl Capability {
-    fn of(mean: Option<f64>, sigma: Option<f64>, low: Option<f64>, high: Option<f64>) -> Self {
+    fn of(
+        mean: Option<f64>,
+        sigma: Option<f64>,
+        (low, high): (Option<f64>, Option<f64>),
+        n: usize,
+        min_values: usize,
+    ) -> Self {
         let (Some(m), Some(s)) = (mean, sigma.filter(|s| *s > 0.0)) else {
             return Self::default();
         };
+        if n < min_values {
+            return Self {
+                withheld: Some(withheld(n, min_values)),
+                ..Self::default()
+            };
+        }
         let upper = high.map(|h| (h - m) / (3.0 * s));
         let lower = low.map(|l| (m - l) / (3.0 * s));
         let k = match (upper, lower) {
             (Some(u), Some(l)) => Some(u.min(l)),
             (u, l) => u.or(l),
         };
-        Self { upper, lower, k }
+        let k_interval = k.filter(|_| n > 1).map(|k| {
+            let n = n as f64;
+            let half = 1.96 * (1.0 / (9.0 * n) + k * k / (2.0 * (n - 1.0))).sqrt();
+            [k - half, k + half]
+        });
+        Self {
+            upper,
+            lower,
+            k,
+            k_interval,
+            enough: n >= MIN_CAPABILITY_N,
+            withheld: None,
+        }
     }
+}
+
+/// Why a capability index is not shown for `n` values.
+fn withheld(n: usize, min_values: usize) -> String {
+    format!(
+        "{n} value(s), fewer than {min_values}: a capability index from so few says little \
+         (--min-values lowers the floor)"
+    )
 }
 
 /// A value of a trend, with the run it came from.
@@ -395,6 +534,10 @@ pub struct TrendPoint {
     pub run: String,
     /// Its log (the report sits beside it).
     pub log_path: String,
+    /// The unit's slot on a batch's bench (empty: a run of one unit). A
+    /// batch unit's report is `report-SERIAL.html`, a single unit's
+    /// `report.html`.
+    pub slot: String,
     /// An imported run (judged for reference only).
     pub reference: bool,
 }
@@ -456,18 +599,20 @@ impl Store {
             .iter()
             .map(run_row)
             .collect();
+        let signatures = self.signatures(&run.id)?;
         Ok(RunDetail {
             run,
             fields,
             measurements,
             parts,
+            signatures,
         })
     }
 
     /// The run part `id` names: its key, or an unambiguous start of one
     /// (several parts of one run: the latest). None, or several runs, is
     /// an error saying so.
-    fn part_named(&mut self, id: &str) -> Result<RunRow, StoreError> {
+    pub(super) fn part_named(&mut self, id: &str) -> Result<RunRow, StoreError> {
         let store = self.name.clone();
         let rows = self.sql().query(
             &format!(
@@ -534,6 +679,7 @@ impl Store {
             "log_path",
             "log_sha256",
             "imported_from",
+            "bench_kind",
             "bench_id",
             "host",
             "software_revision",
@@ -637,7 +783,12 @@ impl Store {
     /// (their latest parts): one pass over the values in run order, the
     /// figures computed here (the mean first, then the squares about it,
     /// which do not cancel as the mean of the squares would).
-    pub fn trend(&mut self, name: &str, f: &Filter) -> Result<Trend, StoreError> {
+    pub fn trend(
+        &mut self,
+        name: &str,
+        f: &Filter,
+        min_values: usize,
+    ) -> Result<Trend, StoreError> {
         let (clauses, params) = f.clauses(2);
         let reference = f.reference_clause();
         let mut all = vec![Value::from(name)];
@@ -676,7 +827,9 @@ impl Store {
             let mr: f64 = values.windows(2).map(|w| (w[1] - w[0]).abs()).sum();
             mr / (n - 1.0) / D2_MOVING_RANGE
         });
-        let index = |spread: Option<f64>| Capability::of(mean, spread, low, high);
+        let index =
+            |spread: Option<f64>| Capability::of(mean, spread, (low, high), count, min_values);
+        let percentile = Percentile::of(&values, (low, high)).filter(|_| count >= min_values);
         Ok(Trend {
             name: name.to_owned(),
             unit,
@@ -692,6 +845,8 @@ impl Store {
             sigma_within,
             within: index(sigma_within),
             overall: index(sigma),
+            percentile,
+            min_values,
         })
     }
 
@@ -710,7 +865,7 @@ impl Store {
         all.push((max as i64).into());
         let rows = self.sql().query(
             &format!(
-                "SELECT r.started_utc, u.serial, m.value, m.outcome, r.id, r.log_path, ru.outcome AS run_outcome FROM measurements m \
+                "SELECT r.started_utc, u.serial, m.value, m.outcome, r.id, r.log_path, ru.slot, ru.outcome AS run_outcome FROM measurements m \
                  JOIN run_units ru ON ru.run = m.run AND ru.slot = m.slot \
                  JOIN runs r ON r.id = m.run JOIN units u ON u.id = ru.unit_id \
                  WHERE m.name = $1 AND r.latest = 1 AND m.value IS NOT NULL{reference}{clauses} \
@@ -730,6 +885,7 @@ impl Store {
                         .unwrap_or(MeasureOutcome::Error),
                     run: r.text("id"),
                     log_path: r.text("log_path"),
+                    slot: r.text("slot"),
                     reference: r.text("run_outcome") == "reference",
                 })
             })
@@ -753,9 +909,10 @@ impl Store {
                 .sql()
                 .query(
                     &format!(
-                        "SELECT {MEASUREMENT_COLUMNS} FROM measurements m WHERE m.run = $1 ORDER BY m.seq"
+                        "SELECT {MEASUREMENT_COLUMNS} FROM measurements m WHERE m.run = $1 AND m.slot = $2 ORDER BY m.seq"
                     ),
-                    &[r.id.clone().into()],
+                    // A batch's row is one unit's: its own slot's figures.
+                    &[r.id.clone().into(), r.slot.clone().into()],
                 )?
                 .iter()
                 .map(measurement_row)

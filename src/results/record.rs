@@ -4,12 +4,12 @@
 
 use std::path::Path;
 
+use super::facts::{self, Column};
 use super::sql::{Sql, Value, transaction};
 use super::{Store, StoreError};
 use crate::coeffs::CoefficientSet;
 use crate::protocol::frame::LinkStats;
 use crate::runlog::meta::RunMeta;
-use crate::runlog::replay::{replay, replay_unit};
 use crate::sequencer::RunResult;
 use crate::sequencer::measure::Measurement;
 
@@ -47,15 +47,6 @@ fn run_id(meta: &RunMeta, log: &Path) -> Result<String, StoreError> {
         message: format!("the first part of a run without a run id: {e}"),
     })?;
     Ok(format!("sha256-{}", &sha[..32]))
-}
-
-/// How the store names where a run's coefficients came from.
-fn coeffs_source(s: crate::coeffs::CoeffsSource) -> &'static str {
-    match s {
-        crate::coeffs::CoeffsSource::Fitted => "fitted",
-        crate::coeffs::CoeffsSource::File => "file",
-        crate::coeffs::CoeffsSource::Store => "store",
-    }
 }
 
 /// How a part ended, for the store.
@@ -112,24 +103,30 @@ fn insert_run_units(
         } else {
             unit_id(sql, &u.dut_type, &u.serial)?
         };
-        let c = &u.coefficients;
-        sql.execute(
-            "INSERT INTO run_units (run, slot, unit_id, outcome, coeffs_source, coeffs_serial, \
-             coeffs_version, coeffs_sha256, coeffs_override_reason) \
-             VALUES ($1, $2, $3, 'running', $4, $5, $6, $7, $8)",
-            &[
-                key.into(),
-                u.slot.clone().into(),
-                id.into(),
-                coeffs_source(c.source).into(),
-                c.serial.clone().into(),
-                c.version.into(),
-                c.sha256.clone().into(),
-                c.override_reason.clone().into(),
-            ],
-        )?;
+        let mut cols: Vec<Column> = vec![
+            ("run", key.into()),
+            ("slot", u.slot.clone().into()),
+            ("unit_id", id.into()),
+            ("outcome", "running".into()),
+        ];
+        cols.extend(facts::coefficients(&u.coefficients));
+        insert(sql, "run_units", cols)?;
     }
     Ok(())
+}
+
+/// `INSERT INTO table` of `cols`.
+fn insert(sql: &mut dyn Sql, table: &str, cols: Vec<Column>) -> Result<u64, StoreError> {
+    let (names, values): (Vec<&str>, Vec<Value>) = cols.into_iter().unzip();
+    let marks: Vec<String> = (1..=values.len()).map(|i| format!("${i}")).collect();
+    sql.execute(
+        &format!(
+            "INSERT INTO {table} ({}) VALUES ({})",
+            names.join(", "),
+            marks.join(", ")
+        ),
+        &values,
+    )
 }
 
 fn unit_id(sql: &mut dyn Sql, dut_type: &str, serial: &str) -> Result<i64, StoreError> {
@@ -169,8 +166,6 @@ impl Store {
             .unwrap_or_else(|_| log.to_owned())
             .display()
             .to_string();
-        let parent = (meta.part > 1).then(|| format!("{run}.{}", meta.part - 1));
-        let procedure_name = crate::procedure::raw_name(&meta.procedure_toml).unwrap_or_default();
         let store = self.name.clone();
         transaction(self.sql(), |sql| {
             let unit = unit_id(sql, &meta.dut_type, &meta.dut_serial).map_err(|e| match e {
@@ -181,47 +176,15 @@ impl Store {
                 "UPDATE runs SET latest = 0 WHERE run_id = $1 AND part < $2",
                 &[run.clone().into(), i64::from(meta.part).into()],
             )?;
-            let overdue: Vec<&str> = meta
-                .instruments
-                .iter()
-                .filter(|i| i.calibration_overdue)
-                .map(|i| i.role.as_str())
-                .collect();
-            sql.execute(
-                "INSERT INTO runs (id, run_id, part, parent_id, latest, unit_id, procedure_name, \
-                 procedure_sha256, procedure_path, bench, station, operator, seed, software_version, \
-                 run_started_utc, started_utc, outcome, log_path, imported_from, recorded_utc, \
-                 bench_id, host, software_revision, instruments, calibration_overdue) \
-                 VALUES ($1, $2, $3, $4, 1, $5, $6, $7, $8, $9, $10, $11, $12, $13, $14, $15, 'running', $16, $17, $18, \
-                 $19, $20, $21, $22, $23)",
-                &[
-                    key.clone().into(),
-                    run.clone().into(),
-                    i64::from(meta.part).into(),
-                    parent.into(),
-                    unit.into(),
-                    procedure_name.into(),
-                    super::record::sha256_text(&meta.procedure_toml).into(),
-                    meta.procedure_path.clone().into(),
-                    meta.bench.clone().into(),
-                    meta.station.clone().into(),
-                    meta.operator.clone().into(),
-                    meta.seed.and_then(|s| i64::try_from(s).ok()).into(),
-                    meta.software_version.clone().into(),
-                    meta.start_time_utc.clone().into(),
-                    meta.part_start_time_utc.clone().into(),
-                    log_path.into(),
-                    meta.imported_from.clone().into(),
-                    now.into(),
-                    meta.bench_id.clone().into(),
-                    meta.host.clone().into(),
-                    meta.software_revision.clone().into(),
-                    serde_json::to_string(&meta.instruments)
-                        .unwrap_or_default()
-                        .into(),
-                    (!overdue.is_empty()).then(|| overdue.join(",")).into(),
-                ],
-            )?;
+            let mut cols = facts::begun(meta, &key, &run);
+            cols.extend([
+                ("latest", 1.into()),
+                ("unit_id", unit.into()),
+                ("outcome", "running".into()),
+                ("log_path", log_path.into()),
+                ("recorded_utc", now.into()),
+            ]);
+            insert(sql, "runs", cols)?;
             insert_run_units(sql, &key, meta, unit)
         })?;
         Ok(key)
@@ -238,37 +201,23 @@ impl Store {
     ) -> Result<(), StoreError> {
         let sha = sha256_file(log).ok();
         let r = end.result;
-        // A batch's row carries its worst unit's error.
-        let error = r.unit(r.worst_unit()).error;
-        let l = &end.link;
-        let left = r.bench_left.as_ref();
         let store = self.name.clone();
+        let mut cols = facts::ended(r, Some(&end.link), Some(&end.ended_utc));
+        cols.push(("log_sha256", sha.into()));
+        let (names, mut values): (Vec<&str>, Vec<Value>) = cols.into_iter().unzip();
+        let set: Vec<String> = names
+            .iter()
+            .enumerate()
+            .map(|(i, n)| format!("{n} = ${}", i + 2))
+            .collect();
+        values.insert(0, key.into());
         transaction(self.sql(), |sql| {
             let n = sql.execute(
-                "UPDATE runs SET ended_utc = $2, device_time_s = $3, frames = $4, outcome = $5, \
-                 error_step = $6, error_device = $7, error_message = $8, cleanup_completed = $9, \
-                 bench_left = $10, bench_left_verified = $11, link_frames = $12, link_lost_frames = $13, \
-                 link_crc_errors = $14, link_reconnects = $15, link_longest_gap_ms = $16, log_sha256 = $17 \
-                 WHERE id = $1 AND outcome = 'running'",
-                &[
-                    key.into(),
-                    end.ended_utc.clone().into(),
-                    r.device_time_s.into(),
-                    i64::try_from(r.frames).ok().into(),
-                    r.worst().as_str().into(),
-                    error.as_ref().map(|e| e.step.clone()).into(),
-                    error.as_ref().and_then(|e| e.device.clone()).into(),
-                    error.as_ref().map(|e| e.message.clone()).into(),
-                    r.cleanup_completed.into(),
-                    left.map(|b| b.summary.clone()).into(),
-                    left.map(|b| b.verified).into(),
-                    i64::try_from(l.frames).ok().into(),
-                    i64::try_from(l.lost_frames).ok().into(),
-                    i64::try_from(l.crc_errors).ok().into(),
-                    i64::try_from(l.reconnects).ok().into(),
-                    i64::try_from(l.longest_gap_ms).ok().into(),
-                    sha.clone().into(),
-                ],
+                &format!(
+                    "UPDATE runs SET {} WHERE id = $1 AND outcome = 'running'",
+                    set.join(", ")
+                ),
+                &values,
             )?;
             if n != 1 {
                 return Err(StoreError::NotFound {
@@ -330,18 +279,7 @@ impl Store {
         {
             return Ok(Indexed::AlreadyThere);
         }
-        let mut r = replay(log, None).map_err(|e| bad(e.to_string()))?;
-        // A batch: its other units replayed each from its own view.
-        for u in r.meta.units.iter().skip(1) {
-            let o = replay_unit(log, None, Some(&u.serial)).map_err(|e| bad(e.to_string()))?;
-            r.result.others.push(crate::sequencer::UnitResult {
-                outcome: Some(o.result.outcome),
-                measurements: o.result.measurements,
-                error: o.result.error,
-                frames: o.result.frames,
-                records: Default::default(),
-            });
-        }
+        let r = facts::replay_all(log).map_err(bad)?;
         let slots = r.meta.units.iter().map(|u| u.slot.clone()).collect();
         let key = part_key(&r.meta, log)?;
         let before = outcome_of(self.sql(), &key)?;
@@ -351,10 +289,16 @@ impl Store {
         if before.is_none() {
             self.begin_part(&r.meta, log)?;
         }
-        let ended = std::fs::metadata(log)
-            .and_then(|m| m.modified())
-            .map(|t| chrono::DateTime::<chrono::Utc>::from(t).to_rfc3339())
-            .unwrap_or_default();
+        // When the part ended, as its log states it (a log without its end
+        // record, or of an earlier gyrobench: when the file was last
+        // written).
+        let ended = match &r.end_time_utc {
+            Some(t) => t.clone(),
+            None => std::fs::metadata(log)
+                .and_then(|m| m.modified())
+                .map(|t| chrono::DateTime::<chrono::Utc>::from(t).to_rfc3339())
+                .unwrap_or_default(),
+        };
         self.finish_part(
             &key,
             log,
@@ -400,7 +344,7 @@ impl Store {
             }
         };
         for run_dir in run_dirs(dir) {
-            for log in parts(&run_dir) {
+            for (n, log) in (1..).zip(parts(&run_dir)) {
                 let Ok(seen) = LogFile::of(&log) else {
                     done.failed
                         .push(format!("{}: cannot be read", log.display()));
@@ -408,6 +352,10 @@ impl Store {
                 };
                 if known.get(&seen.path) == Some(&seen) {
                     done.unchanged += 1;
+                    continue;
+                }
+                if let Some(why) = not_a_part(&run_dir, &log, n) {
+                    done.failed.push(why);
                     continue;
                 }
                 match self.index_log(&log) {
@@ -623,7 +571,8 @@ pub fn parts(run_dir: &Path) -> Vec<std::path::PathBuf> {
         } else {
             run_dir.join(format!("run.part{part}.mcap"))
         };
-        if !log.exists() {
+        // A regular file only: opening a FIFO put there would wait for ever.
+        if !log.is_file() {
             break;
         }
         out.push(log);
@@ -631,18 +580,52 @@ pub fn parts(run_dir: &Path) -> Vec<std::path::PathBuf> {
     out
 }
 
-/// Run directories at or below `dir`, sorted.
+/// Why `log`, found as part `n` of the run in `run_dir` (`run.partN.mcap`),
+/// is not that run's part: its own metadata name another run or another
+/// part (a file put there by hand or with `--force`). `None` when it is
+/// the run's, and for the first part (it names the run).
+pub fn not_a_part(run_dir: &Path, log: &Path, n: u32) -> Option<String> {
+    if n < 2 {
+        return None;
+    }
+    let first = run_dir.join("run.mcap");
+    let first_meta = crate::runlog::meta::read_run_meta(&first).ok()?;
+    let ours = run_id(&first_meta, &first).ok()?;
+    let why = match crate::runlog::meta::read_run_meta(log) {
+        Err(e) => format!("its run metadata cannot be read: {e}"),
+        Ok(m) => {
+            let theirs = run_id(&m, log).unwrap_or_default();
+            if theirs == ours && m.part == n {
+                return None;
+            }
+            format!(
+                "it is part {} of run {theirs}, not part {n} of run {ours}",
+                m.part
+            )
+        }
+    };
+    Some(format!(
+        "{}: not indexed: {why}; move it out of the run directory {}",
+        log.display(),
+        run_dir.display()
+    ))
+}
+
+/// Run directories at or below `dir`, sorted; a run directory's `replay`
+/// directory (`replay`'s own place) is not searched.
 pub fn run_dirs(dir: &Path) -> Vec<std::path::PathBuf> {
     let mut out = Vec::new();
     let mut stack = vec![dir.to_owned()];
     while let Some(d) = stack.pop() {
-        if d.join("run.mcap").is_file() {
+        let is_run = d.join("run.mcap").is_file();
+        if is_run {
             out.push(d.clone());
         }
         if let Ok(entries) = std::fs::read_dir(&d) {
             for e in entries.filter_map(Result::ok) {
                 let p = e.path();
-                if e.file_type().is_ok_and(|t| t.is_dir()) && !p.ends_with("replay") {
+                if e.file_type().is_ok_and(|t| t.is_dir()) && !(is_run && e.file_name() == "replay")
+                {
                     stack.push(p);
                 }
             }
@@ -659,27 +642,16 @@ fn insert_measurements(
     key: &str,
     all: &[(&str, &Measurement)],
 ) -> Result<(), StoreError> {
+    const COLUMNS: usize = 15;
     // One statement for every measurement (a round trip each would
     // cost a lab's server more than the rest of the run's record).
     for (chunk_at, chunk) in all.chunks(100).enumerate() {
         let mut values = Vec::with_capacity(chunk.len());
-        let mut params: Vec<Value> = Vec::with_capacity(11 * chunk.len());
+        let mut params: Vec<Value> = Vec::with_capacity(COLUMNS * chunk.len());
         for (i, (slot, m)) in chunk.iter().enumerate() {
             let b = params.len();
-            values.push(format!(
-                "(${}, ${}, ${}, ${}, ${}, ${}, ${}, ${}, ${}, ${}, ${})",
-                b + 1,
-                b + 2,
-                b + 3,
-                b + 4,
-                b + 5,
-                b + 6,
-                b + 7,
-                b + 8,
-                b + 9,
-                b + 10,
-                b + 11
-            ));
+            let marks: Vec<String> = (1..=COLUMNS).map(|c| format!("${}", b + c)).collect();
+            values.push(format!("({})", marks.join(", ")));
             params.extend([
                 key.into(),
                 ((chunk_at * 100 + i) as i64).into(),
@@ -692,11 +664,16 @@ fn insert_measurements(
                 m.step.clone().into(),
                 m.note.clone().into(),
                 (*slot).into(),
+                m.uncertainty.as_ref().map(|u| u.u).into(),
+                m.uncertainty.as_ref().map(|u| u.expanded).into(),
+                m.uncertainty.as_ref().map(|u| u.k).into(),
+                m.guard_band.into(),
             ]);
         }
         sql.execute(
             &format!(
-                "INSERT INTO measurements (run, seq, name, value, unit, low, high, outcome, step, note, slot) VALUES {}",
+                "INSERT INTO measurements (run, seq, name, value, unit, low, high, outcome, step, note, slot, \
+                 u, expanded_u, k, guard_band) VALUES {}",
                 values.join(", ")
             ),
             &params,
@@ -760,8 +737,22 @@ mod tests {
         );
         let h = store.unit("RL16-0042").expect("history");
         assert_eq!(h.measurements.len(), 1, "measurements keep their unit");
+        // Schema 7 classes the old parts' benches from what they kept.
+        let mut kind = |k| {
+            let f = super::super::query::Filter {
+                bench_kind: Some(k),
+                include_reference: true,
+                ..Default::default()
+            };
+            let rows = store.list(&f).expect("list");
+            rows.into_iter().map(|r| r.id).collect::<Vec<_>>()
+        };
+        use super::super::facts::BenchKind;
+        assert_eq!(kind(BenchKind::Embedded), ["r1.1"]);
+        assert_eq!(kind(BenchKind::Imported), ["r2.1"]);
+        assert!(kind(BenchKind::Hardware).is_empty());
         let t = store
-            .trend("compensated_drift_pp_dph", &Default::default())
+            .trend("compensated_drift_pp_dph", &Default::default(), 0)
             .expect("trend");
         assert_eq!(t.judged, 1, "the reference is left out");
     }

@@ -171,6 +171,26 @@ pub fn migrations(engine: Engine) -> &'static [(i64, &'static str, &'static str)
                 "unit record",
                 include_str!("migrations/sqlite/0003_unit_record.sql"),
             ),
+            (
+                4,
+                "set identity",
+                include_str!("migrations/sqlite/0004_set_identity.sql"),
+            ),
+            (
+                5,
+                "judged",
+                include_str!("migrations/sqlite/0005_judged.sql"),
+            ),
+            (
+                6,
+                "signatures",
+                include_str!("migrations/sqlite/0006_signatures.sql"),
+            ),
+            (
+                7,
+                "bench kind",
+                include_str!("migrations/sqlite/0007_bench_kind.sql"),
+            ),
         ],
         Engine::Postgres => &[
             (1, "init", include_str!("migrations/postgres/0001_init.sql")),
@@ -183,6 +203,26 @@ pub fn migrations(engine: Engine) -> &'static [(i64, &'static str, &'static str)
                 3,
                 "unit record",
                 include_str!("migrations/postgres/0003_unit_record.sql"),
+            ),
+            (
+                4,
+                "set identity",
+                include_str!("migrations/postgres/0004_set_identity.sql"),
+            ),
+            (
+                5,
+                "judged",
+                include_str!("migrations/postgres/0005_judged.sql"),
+            ),
+            (
+                6,
+                "signatures",
+                include_str!("migrations/postgres/0006_signatures.sql"),
+            ),
+            (
+                7,
+                "bench kind",
+                include_str!("migrations/postgres/0007_bench_kind.sql"),
             ),
         ],
     }

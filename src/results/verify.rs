@@ -1,17 +1,22 @@
 //! `results verify`: whether the store tells the truth about the logs. Every
 //! stored part of a run is checked against its log: the log is where the
-//! store says, its SHA-256 is the one stored when the part ended, and the
-//! figures the store holds are the log's (its `result` record, or with
-//! `replay` the figures recomputed from its frames). Logs below a runs
-//! directory that the store lacks are listed too.
+//! store says, its SHA-256 is the one stored when the part ended, every
+//! field of its record the log gives is the log's (the unit, each unit's
+//! outcome and coefficients, the operator, the times, the bench, the
+//! software, the procedure, the instruments: the lists of
+//! [`super::facts`], the ones the store is written from), and the figures
+//! the store holds are the log's (its `result` records, or with `replay`
+//! the figures recomputed from its frames). Logs below a runs directory
+//! that the store lacks are listed too.
 
 use std::path::Path;
 
 use serde::Serialize;
 
+use super::facts::{self, Column, LogFacts};
+use super::sql::{Row, Value};
 use super::{Store, StoreError};
-use crate::runlog::meta::{ResultMeasurement, ResultMeta};
-use crate::sequencer::measure::MeasureOutcome;
+use crate::runlog::meta::ResultMeasurement;
 
 /// What is wrong with a stored part or a log.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
@@ -23,6 +28,9 @@ pub enum Problem {
     Changed,
     /// The stored figures are not the log's.
     FiguresDiffer,
+    /// Fields of the stored record (the run's row, its units' rows) are
+    /// not what the log says.
+    RecordDiffers,
     /// The store never saw the part end (its run was killed); a sync
     /// completes it from the log.
     Incomplete,
@@ -30,6 +38,9 @@ pub enum Problem {
     Unreadable,
     /// A log below the runs directory that the store lacks.
     NotIndexed,
+    /// A signed part whose log or stored figures are no longer what was
+    /// signed.
+    SignatureBroken,
 }
 
 /// One finding.
@@ -43,6 +54,22 @@ pub struct Finding {
     pub log: String,
     /// In words.
     pub detail: String,
+    /// Each field that differs (a record that differs).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub differences: Vec<Difference>,
+}
+
+/// A stored field that is not what the log says.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+pub struct Difference {
+    /// The field: a column of the run's row (`operator`, `outcome`), the
+    /// unit it names (`serial`, `dut_type`), or a unit's (`unit.outcome`,
+    /// `unit[B].coeffs_sha256` in a batch).
+    pub field: String,
+    /// What the store holds (null: nothing).
+    pub store: serde_json::Value,
+    /// What the log says (null: nothing).
+    pub log: serde_json::Value,
 }
 
 /// The outcome of a verification.
@@ -61,13 +88,47 @@ pub struct Verification {
     pub findings: Vec<Finding>,
 }
 
-/// How the figures are compared: a value, its outcome and its name, in
-/// order.
-fn key(m: &ResultMeasurement) -> (String, Option<u64>, MeasureOutcome) {
-    (m.name.clone(), m.value.map(f64::to_bits), m.outcome)
+/// How the figures are compared: every field of each measurement (its
+/// value and limits to the bit) and the unit's slot, in order.
+fn same_figure(a: &(String, ResultMeasurement), b: &(String, ResultMeasurement)) -> bool {
+    let bits = |v: Option<f64>| v.map(f64::to_bits);
+    let ((sa, a), (sb, b)) = (a, b);
+    sa == sb
+        && a.name == b.name
+        && bits(a.value) == bits(b.value)
+        && a.outcome == b.outcome
+        && a.unit == b.unit
+        && bits(a.low) == bits(b.low)
+        && bits(a.high) == bits(b.high)
+        && a.step == b.step
+        && a.note == b.note
 }
 
-fn first_difference(stored: &[ResultMeasurement], log: &[ResultMeasurement]) -> Option<String> {
+/// A measurement as a finding names it.
+fn figure_text((slot, m): &(String, ResultMeasurement)) -> String {
+    let f = |v: Option<f64>| v.map_or(String::new(), |v| format!("{v}"));
+    format!(
+        "{}{} = {} {} [{}..{}] {} (step {}, note {:?})",
+        m.name,
+        if slot.is_empty() {
+            String::new()
+        } else {
+            format!(" of unit {slot}")
+        },
+        m.value.map_or("none".to_owned(), |v| format!("{v}")),
+        m.unit,
+        f(m.low),
+        f(m.high),
+        m.outcome.as_str(),
+        m.step,
+        m.note
+    )
+}
+
+fn first_difference(
+    stored: &[(String, ResultMeasurement)],
+    log: &[(String, ResultMeasurement)],
+) -> Option<String> {
     if stored.len() != log.len() {
         return Some(format!(
             "the store holds {} measurement(s), the log {}",
@@ -76,70 +137,140 @@ fn first_difference(stored: &[ResultMeasurement], log: &[ResultMeasurement]) -> 
         ));
     }
     stored.iter().zip(log).find_map(|(a, b)| {
-        (key(a) != key(b)).then(|| {
-            let v = |m: &ResultMeasurement| m.value.map_or("none".to_owned(), |v| format!("{v}"));
+        (!same_figure(a, b)).then(|| {
             format!(
-                "{}: the store has {} ({}), the log {} ({})",
-                a.name,
-                v(a),
-                a.outcome.as_str(),
-                v(b),
-                b.outcome.as_str()
+                "{}: the store has {}, the log {}",
+                b.1.name,
+                figure_text(a),
+                figure_text(b)
             )
         })
     })
 }
 
-/// The figures a log holds: its `result` record's (a killed run's log has
-/// none: replayed), or replayed when asked.
-fn log_figures(log: &Path, replay: bool) -> Result<Vec<ResultMeasurement>, String> {
-    if replay {
-        // A batch's units in order, each from its own view of the log.
-        let units = crate::runlog::view::log_units(log).unwrap_or_default();
-        let serials: Vec<Option<&str>> = if crate::runlog::view::is_batch(&units) {
-            units.iter().map(|(_, s)| Some(s.as_str())).collect()
+/// Whether a stored value is the log's: text as text, numbers to the bit
+/// (an integer column and a float the same number), and a field the log
+/// leaves empty the same as a null the store holds for it (a run stored
+/// before the store had the column).
+fn same(stored: &Value, log: &Value) -> bool {
+    let blank = |v: &Value| match v {
+        Value::Null => true,
+        Value::Text(t) => t.is_empty() || t == "[]",
+        _ => false,
+    };
+    match (stored, log) {
+        (a, b) if blank(a) && blank(b) => true,
+        (Value::Text(a), Value::Text(b)) => a == b,
+        (a @ (Value::Int(_) | Value::Real(_)), b @ (Value::Int(_) | Value::Real(_))) => {
+            a.real().map(f64::to_bits) == b.real().map(f64::to_bits)
+        }
+        _ => false,
+    }
+}
+
+/// A value as a finding holds it.
+fn shown(v: &Value) -> serde_json::Value {
+    match v {
+        Value::Null => serde_json::Value::Null,
+        Value::Int(i) => (*i).into(),
+        Value::Real(r) => (*r).into(),
+        Value::Text(t) => t.clone().into(),
+    }
+}
+
+/// The differences between the `expected` columns and the stored `row`,
+/// each named `prefix` + its column.
+fn differences(prefix: &str, expected: &[Column], row: &Row) -> Vec<Difference> {
+    expected
+        .iter()
+        .filter(|(name, want)| !same(row.get(name), want))
+        .map(|(name, want)| Difference {
+            field: format!("{prefix}{name}"),
+            store: shown(row.get(name)),
+            log: shown(want),
+        })
+        .collect()
+}
+
+/// The `runs` columns the log gives, with the unit the row names.
+fn expected_run(f: &LogFacts, key: &str, run: &str) -> Vec<Column> {
+    let mut cols = facts::begun(&f.meta, key, run);
+    cols.extend([
+        ("dut_type", f.meta.dut_type.clone().into()),
+        ("serial", f.meta.dut_serial.clone().into()),
+    ]);
+    cols.extend(facts::ended(
+        &f.result,
+        f.link.as_ref(),
+        f.ended_utc.as_deref(),
+    ));
+    if f.meta.imported_from.is_some() {
+        // An imported run is kept for reference, never judged.
+        for (name, v) in &mut cols {
+            if *name == "outcome" {
+                *v = "reference".into();
+            }
+        }
+    }
+    cols
+}
+
+/// The differences between each unit the log names and its stored row
+/// (`rows`, one per slot): the unit, its outcome (`outcome` the run's as
+/// stored for one unit), the coefficients it used.
+fn unit_differences(f: &LogFacts, rows: &[Row]) -> Vec<Difference> {
+    let mut out = Vec::new();
+    let imported = f.meta.imported_from.is_some();
+    for (k, u) in f.meta.units.iter().enumerate() {
+        let prefix = if u.slot.is_empty() {
+            "unit.".to_owned()
         } else {
-            vec![None]
+            format!("unit[{}].", u.slot)
         };
-        let mut all = Vec::new();
-        for serial in serials {
-            let r =
-                crate::runlog::replay::replay_unit(log, None, serial).map_err(|e| e.to_string())?;
-            all.extend(r.result.measurements.iter().map(ResultMeasurement::new));
-        }
-        return Ok(all);
+        let Some(row) = rows.iter().find(|r| r.text("slot") == u.slot) else {
+            out.push(Difference {
+                field: prefix.trim_end_matches('.').to_owned(),
+                store: serde_json::Value::Null,
+                log: format!("{} {}", u.dut_type, u.serial).into(),
+            });
+            continue;
+        };
+        let outcome = if imported {
+            "reference"
+        } else {
+            f.result.unit(k).outcome.as_str()
+        };
+        let mut cols: Vec<Column> = vec![
+            ("dut_type", u.dut_type.clone().into()),
+            ("serial", u.serial.clone().into()),
+            ("outcome", outcome.into()),
+        ];
+        let coeffs = facts::coefficients(&u.coefficients);
+        // A run stored before the store kept coefficients (schema 3), of a
+        // log that names no set: nothing to compare but the source.
+        let legacy = row.get("coeffs_source") == &Value::Null && u.coefficients.sha256.is_none();
+        cols.extend(
+            coeffs
+                .into_iter()
+                .filter(|(name, _)| !(legacy && *name == "coeffs_source")),
+        );
+        out.extend(differences(&prefix, &cols, row));
     }
-    // The run's `result`, then a batch's other units' (`result/NAME`, in
-    // unit order as written).
-    let mut found = None;
-    let mut others: Vec<Result<ResultMeta, String>> = Vec::new();
-    crate::runlog::read(log, |item| {
-        if let crate::runlog::Item::Meta { name, entries } = item {
-            let result = crate::runlog::schema::RESULT_META;
-            if name == result {
-                found = Some(ResultMeta::from_entries(entries).map_err(|e| e.to_string()));
-            } else if name
-                .strip_prefix(result)
-                .is_some_and(|r| r.starts_with('/'))
-            {
-                others.push(ResultMeta::from_entries(entries).map_err(|e| e.to_string()));
-            }
+    for r in rows {
+        let slot = r.text("slot");
+        if !f.meta.units.iter().any(|u| u.slot == slot) {
+            out.push(Difference {
+                field: if slot.is_empty() {
+                    "unit".into()
+                } else {
+                    format!("unit[{slot}]")
+                },
+                store: format!("{} {}", r.text("dut_type"), r.text("serial")).into(),
+                log: serde_json::Value::Null,
+            });
         }
-        Ok(())
-    })
-    .map_err(|e| e.to_string())?;
-    match found {
-        Some(r) => {
-            let mut all = r?.measurements;
-            for o in others {
-                all.extend(o?.measurements);
-            }
-            Ok(all)
-        }
-        // A killed run's log ends without one: its figures are what a
-        // replay makes of it, as the sync that completed it did.
-        None => log_figures(log, true),
     }
+    out
 }
 
 impl Store {
@@ -155,18 +286,15 @@ impl Store {
                 path: dir.map_or(String::new(), |d| d.display().to_string()),
                 message: e.to_string(),
             })?;
+        // Every column of each part, with the unit its row names.
         let parts = self.sql().query(
-            "SELECT id, log_path, log_sha256, outcome FROM runs ORDER BY started_utc, id",
+            "SELECT r.*, u.dut_type AS dut_type, u.serial AS serial FROM runs r \
+             JOIN units u ON u.id = r.unit_id ORDER BY r.started_utc, r.id",
             &[],
         )?;
         let mut stored_logs = std::collections::HashSet::new();
         for row in &parts {
-            let (run, log, sha, outcome) = (
-                row.text("id"),
-                row.text("log_path"),
-                row.text("log_sha256"),
-                row.text("outcome"),
-            );
+            let log = row.text("log_path");
             stored_logs.insert(log.clone());
             if let Some(u) = &under
                 && !Path::new(&log).starts_with(u)
@@ -175,7 +303,11 @@ impl Store {
                 continue;
             }
             v.checked += 1;
-            self.check_part(&mut v, &run, &log, &sha, &outcome, replay)?;
+            let found = v.findings.len();
+            self.check_part(&mut v, row, replay)?;
+            if v.findings.len() == found {
+                v.agree += 1;
+            }
         }
         if let Some(dir) = dir {
             self.find_unindexed(&mut v, dir, &stored_logs)?;
@@ -183,37 +315,47 @@ impl Store {
         Ok(v)
     }
 
-    /// Check one stored part (`run`, its `log`, the `sha` stored when it
-    /// ended, its `outcome`) against its log, in order: the log is there,
-    /// the part ended, the log is unchanged, its figures are the stored
-    /// ones. The first thing wrong becomes a finding; a part with none
-    /// counts as agreeing.
+    /// Check one stored part (its `row` of `runs`) against its log, in
+    /// order: the log is there, the part ended, the log is unchanged; then
+    /// its record and its figures are the log's. Each thing wrong becomes
+    /// a finding.
     fn check_part(
         &mut self,
         v: &mut Verification,
-        run: &str,
-        log: &str,
-        sha: &str,
-        outcome: &str,
+        row: &Row,
         replay: bool,
     ) -> Result<(), StoreError> {
-        let mut find = |problem, detail: String| {
+        let run = row.text("id");
+        let log = row.text("log_path");
+        let sha = row.text("log_sha256");
+        for why in self.broken_signatures(&run)? {
+            v.findings.push(Finding {
+                problem: Problem::SignatureBroken,
+                run: Some(run.clone()),
+                log: log.clone(),
+                detail: why,
+                differences: Vec::new(),
+            });
+        }
+        let mut find = |problem, detail: String, differences: Vec<Difference>| {
             v.findings.push(Finding {
                 problem,
-                run: Some(run.to_owned()),
-                log: log.to_owned(),
+                run: Some(run.clone()),
+                log: log.clone(),
                 detail,
+                differences,
             });
         };
-        let path = Path::new(log);
+        let path = Path::new(&log);
         if !path.is_file() {
-            find(Problem::Missing, "the log is not there".into());
+            find(Problem::Missing, "the log is not there".into(), Vec::new());
             return Ok(());
         }
-        if outcome == "running" {
+        if row.text("outcome") == "running" {
             find(
                 Problem::Incomplete,
                 "the store never saw this part end; `gyrobench results sync` on its directory completes it".into(),
+                Vec::new(),
             );
             return Ok(());
         }
@@ -227,23 +369,60 @@ impl Store {
                         &now[..16],
                         sha.get(..16).unwrap_or("(none stored)")
                     ),
+                    Vec::new(),
                 );
                 return Ok(());
             }
             Err(e) => {
-                find(Problem::Unreadable, e.to_string());
+                find(Problem::Unreadable, e.to_string(), Vec::new());
                 return Ok(());
             }
         }
-        let stored = self.stored_figures(run)?;
-        match log_figures(path, replay) {
-            Ok(figures) => match first_difference(&stored, &figures) {
-                Some(d) => find(Problem::FiguresDiffer, d),
-                None => v.agree += 1,
-            },
-            Err(e) => find(Problem::Unreadable, e),
+        let facts = match LogFacts::read(path, replay) {
+            Ok(f) => f,
+            Err(e) => {
+                find(Problem::Unreadable, e, Vec::new());
+                return Ok(());
+            }
+        };
+        let diffs = self.record_differences(row, &facts, path)?;
+        if !diffs.is_empty() {
+            let fields: Vec<&str> = diffs.iter().map(|d| d.field.as_str()).collect();
+            find(
+                Problem::RecordDiffers,
+                format!(
+                    "{} field(s) of the stored record are not the log's: {}",
+                    diffs.len(),
+                    fields.join(", ")
+                ),
+                diffs,
+            );
+        }
+        let stored = self.stored_figures(&run)?;
+        if let Some(d) = first_difference(&stored, &facts.figures) {
+            find(Problem::FiguresDiffer, d, Vec::new());
         }
         Ok(())
+    }
+
+    /// Every field of the part's stored record (its `row` of `runs`, its
+    /// units' rows) that is not what its log's `facts` say.
+    fn record_differences(
+        &mut self,
+        row: &Row,
+        facts: &LogFacts,
+        log: &Path,
+    ) -> Result<Vec<Difference>, StoreError> {
+        let key = super::record::part_key(&facts.meta, log)?;
+        let run = key.rsplit_once('.').map_or(key.as_str(), |(r, _)| r);
+        let mut out = differences("", &expected_run(facts, &key, run), row);
+        let units = self.sql().query(
+            "SELECT ru.*, u.dut_type AS dut_type, u.serial AS serial FROM run_units ru \
+             JOIN units u ON u.id = ru.unit_id WHERE ru.run = $1 ORDER BY ru.slot",
+            &[row.get("id").clone()],
+        )?;
+        out.extend(unit_differences(facts, &units));
+        Ok(out)
     }
 
     /// Count the logs below `dir` and list those the store lacks: neither
@@ -256,12 +435,17 @@ impl Store {
         stored_logs: &std::collections::HashSet<String>,
     ) -> Result<(), StoreError> {
         for run_dir in super::record::run_dirs(dir) {
-            for log in super::record::parts(&run_dir) {
-                v.logs_found += 1;
+            for (n, log) in (1..).zip(super::record::parts(&run_dir)) {
                 let abs = std::path::absolute(&log).unwrap_or_else(|_| log.clone());
                 if stored_logs.contains(&abs.display().to_string()) {
+                    v.logs_found += 1;
                     continue;
                 }
+                // Not a part of the run it lies with: sync refuses it too.
+                if super::record::not_a_part(&run_dir, &log, n).is_some() {
+                    continue;
+                }
+                v.logs_found += 1;
                 // Stored under another path (a directory moved, a
                 // copy): known by its key.
                 let known = match super::record::part_key_of_log(&log) {
@@ -277,6 +461,7 @@ impl Store {
                         run: None,
                         log: abs.display().to_string(),
                         detail: "the store has no record of this log; `gyrobench results sync` indexes it".into(),
+                        differences: Vec::new(),
                     });
                 }
             }
@@ -284,17 +469,37 @@ impl Store {
         Ok(())
     }
 
-    fn stored_figures(&mut self, run: &str) -> Result<Vec<ResultMeasurement>, StoreError> {
+    /// The part's stored figures, each with its unit's slot, in order.
+    fn stored_figures(
+        &mut self,
+        run: &str,
+    ) -> Result<Vec<(String, ResultMeasurement)>, StoreError> {
         Ok(self
             .sql()
             .query(
-                "SELECT name, value, unit, low, high, outcome, step, note FROM measurements \
+                "SELECT name, value, unit, low, high, outcome, step, note, u, expanded_u, k, guard_band, slot FROM measurements \
                  WHERE run = $1 ORDER BY seq",
                 &[run.into()],
             )?
             .iter()
-            .map(super::query::measurement_of)
+            .map(|r| (r.text("slot"), super::query::measurement_of(r)))
             .collect())
+    }
+}
+
+/// A value for the terminal: `none`, a number, or text quoted with what a
+/// terminal would obey shown as text; a long one (the instruments' JSON)
+/// cut to its start.
+fn clipped(v: &serde_json::Value) -> String {
+    const MAX: usize = 160;
+    let v = match v {
+        serde_json::Value::Null => return "none".into(),
+        v => v.to_string(),
+    };
+    let v = crate::view::printable(&v);
+    match v.char_indices().nth(MAX) {
+        Some((at, _)) => format!("{}... ({} characters)", &v[..at], v.chars().count()),
+        None => v.into_owned(),
     }
 }
 
@@ -312,9 +517,11 @@ impl Verification {
                 Problem::Missing => "MISSING",
                 Problem::Changed => "CHANGED",
                 Problem::FiguresDiffer => "FIGURES DIFFER",
+                Problem::RecordDiffers => "RECORD DIFFERS",
                 Problem::Incomplete => "INCOMPLETE",
                 Problem::Unreadable => "UNREADABLE",
                 Problem::NotIndexed => "NOT INDEXED",
+                Problem::SignatureBroken => "SIGNATURE BROKEN",
             };
             s.push_str(&format!(
                 "{what:<15} {} {}\n                {}\n",
@@ -322,6 +529,14 @@ impl Verification {
                 f.log,
                 f.detail
             ));
+            for d in &f.differences {
+                s.push_str(&format!(
+                    "                  {}: the store has {}, the log {}\n",
+                    d.field,
+                    clipped(&d.store),
+                    clipped(&d.log)
+                ));
+            }
         }
         s.push_str(&format!(
             "{} stored part(s) checked, {} agree with their logs, {} finding(s){}{}\n",
@@ -349,18 +564,24 @@ impl Verification {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::sequencer::measure::MeasureOutcome;
 
-    fn m(name: &str, value: Option<f64>, outcome: &str) -> ResultMeasurement {
-        ResultMeasurement {
-            name: name.into(),
-            value,
-            unit: "deg/h".into(),
-            low: None,
-            high: Some(0.05),
-            outcome: MeasureOutcome::parse(outcome).expect("a word of the three"),
-            step: "main.1".into(),
-            note: String::new(),
-        }
+    fn m(name: &str, value: Option<f64>, outcome: &str) -> (String, ResultMeasurement) {
+        (
+            String::new(),
+            ResultMeasurement {
+                name: name.into(),
+                value,
+                unit: "deg/h".into(),
+                low: None,
+                high: Some(0.05),
+                outcome: MeasureOutcome::parse(outcome).expect("a word of the three"),
+                step: "main.1".into(),
+                note: String::new(),
+                uncertainty: None,
+                guard_band: None,
+            },
+        )
     }
 
     #[test]
@@ -379,5 +600,35 @@ mod tests {
             first_difference(&log[..1], &log)
                 .is_some_and(|d| d.contains("1 measurement(s), the log 2"))
         );
+    }
+
+    #[test]
+    fn a_figures_limits_step_note_and_unit_are_compared_too() {
+        let log = [m("a", Some(0.03), "pass")];
+        let edits: [fn(&mut (String, ResultMeasurement)); 5] = [
+            |x| x.1.high = Some(0.5),
+            |x| x.1.low = Some(-1.0),
+            |x| x.1.step = "main.2".into(),
+            |x| x.1.note = "model 4 with set 9".into(),
+            |x| x.0 = "B".into(),
+        ];
+        for edit in edits {
+            let mut stored = log.clone();
+            edit(&mut stored[0]);
+            let d = first_difference(&stored, &log).expect("an edited figure differs");
+            assert!(d.starts_with("a: the store has a"), "{d}");
+        }
+    }
+
+    #[test]
+    fn a_stored_value_is_the_logs_as_text_or_to_the_bit_and_blank_is_blank() {
+        assert!(same(&Value::Text("ana".into()), &"ana".into()));
+        assert!(!same(&Value::Text("bob".into()), &"ana".into()));
+        assert!(same(&Value::Real(40620.0), &Value::Int(40620)));
+        assert!(!same(&Value::Real(0.1 + 0.2), &Value::Real(0.3)));
+        // A column the store did not have when it stored the run.
+        assert!(same(&Value::Null, &"".into()) && same(&Value::Null, &"[]".into()));
+        assert!(!same(&Value::Null, &"ana".into()), "a value nulled out");
+        assert!(!same(&Value::Text("1".into()), &Value::Int(1)));
     }
 }

@@ -1,27 +1,41 @@
-//! Runs recorded elsewhere, in and out: the interchange CSV becomes a log
-//! with the channels of a live run (`import`), and any log becomes the
-//! interchange CSV at 1 Hz (`export`). Both write to a temporary name and
-//! rename when complete.
+//! Runs recorded elsewhere, in and out: the interchange CSV (or a lab's
+//! file read through an import map) becomes a log with the channels of a
+//! live run (`import`), and any log becomes the interchange CSV at 1 Hz
+//! with its sidecar (`export`). Both write to a temporary name and rename
+//! when complete.
 //!
 //! An imported log has no `/gyro/frames` (the CSV holds interval means,
 //! not frames); its `/gyro/rate_1hz`, `/chamber/state`, `/table/state`,
-//! `/events` and `run` metadata are those of a live run, with a procedure
-//! made from the CSV's steps: one `record` step per stretch of rows with
-//! the same step label, then the figures the shipped acceptance judges, at
-//! its limits. `replay`, `calibrate`, `allan` and `diagnose` take it.
+//! `/steps`, `/events` and `run` metadata are those of a live run. Rows
+//! taken while the table turned, and rows outside records, are logged
+//! outside any record ([`parts`]). The procedure is the one the export's
+//! sidecar carries ([`sidecar`]), its steps matched to the rows in run
+//! order, or else one made from the rows: a `record` step per stretch of
+//! recorded rows with one step label, a `wait` per stretch outside
+//! records, then the figures the shipped acceptance judges, at its
+//! limits. `replay`, `calibrate`, `allan` and `diagnose` take it.
 
-use std::collections::BTreeMap;
-use std::path::Path;
+mod export;
+pub mod parts;
+pub mod sidecar;
 
-use serde::Deserialize;
+pub use export::{Exported, export, export_unit};
 
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+
+use self::parts::Part;
+use self::sidecar::Sidecar;
+use super::import_map::ImportMap;
 use super::interchange::{self, CsvError, Row};
 use super::meta::{ResultMeta, RunMeta};
-use super::reader::{self, Item, ReadSummary};
-use super::schema::{FORMAT, Level, RUN_META, Rate1Hz, StepPhase, TableState, topics};
+use super::reader;
+use super::schema::{FORMAT, Level, StepPhase};
 use super::writer::{FrameScales, Recorder};
 use crate::analysis::series::Interval;
 use crate::bench::BenchConfig;
+use crate::coeffs::{CoefficientSet, CoeffsUsed, Compensation};
 use crate::config::{Checker, ConfigError, Source};
 use crate::driver::{ChamberMode, ChamberReading, TableReading};
 use crate::fsutil::{Pending, ensure_distinct};
@@ -44,7 +58,7 @@ pub struct SiteFile {
 }
 
 /// `[table]` of a site file.
-#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct SiteTable {
     /// Axes and mount of the table the run was made on.
@@ -139,6 +153,42 @@ pub enum ImportError {
     /// The output would destroy the input.
     #[error(transparent)]
     SamePath(#[from] crate::fsutil::SamePath),
+    /// No site: neither `--site` nor a sidecar gives where the run stood.
+    #[error(
+        "{file}: give --site SITE.toml, where the run stood (no sidecar {sidecar} beside it gives it)"
+    )]
+    NoSite {
+        /// The file imported.
+        file: String,
+        /// Where its sidecar would be.
+        sidecar: String,
+    },
+    /// `--type` against the type the carried procedure tests.
+    #[error(
+        "--type {given:?}: the procedure in {sidecar} ({procedure}) tests units of type {carried:?}; leave --type out, or give {carried:?}"
+    )]
+    TypeConflict {
+        /// `--type`.
+        given: String,
+        /// The procedure's `dut_type`.
+        carried: String,
+        /// The sidecar.
+        sidecar: String,
+        /// The procedure's file as the run named it.
+        procedure: String,
+    },
+    /// The sidecar does not go with the file's rows.
+    #[error(
+        "{file}: {message}, in {sidecar}; the CSV and the sidecar beside it are not of one run: move the sidecar away to import the CSV alone"
+    )]
+    Mismatch {
+        /// The file imported.
+        file: String,
+        /// Its sidecar.
+        sidecar: String,
+        /// What does not fit.
+        message: String,
+    },
     /// Something else, with its file.
     #[error("{0}")]
     Other(String),
@@ -149,12 +199,39 @@ pub enum ImportError {
 pub struct Imported {
     /// 1 Hz intervals written.
     pub intervals: usize,
-    /// Records (stretches of one step label).
+    /// Records (stretches of recorded rows with one step label).
     pub records: Vec<String>,
-    /// The verdict of the generated procedure on the data.
+    /// Rows logged outside any record (moves, waits, soaks).
+    pub unrecorded: usize,
+    /// The sidecar read beside the file, whose procedure judged the rows
+    /// (none: a procedure made from the rows).
+    pub sidecar: Option<PathBuf>,
+    /// The unit's serial as recorded ([`crate::unit::UNNAMED_SERIAL`] when
+    /// none was given).
+    pub serial: String,
+    /// The unit's type as recorded.
+    pub dut_type: String,
+    /// The verdict of the procedure on the data.
     pub outcome: Outcome,
     /// The measurements behind it.
     pub measurements: Vec<measure::Measurement>,
+}
+
+/// Type of a unit an import is not told of (`--type`, a sidecar).
+pub const DEFAULT_TYPE: &str = "gyro";
+
+/// What `import` is given besides the file.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct ImportOptions<'a> {
+    /// `--site`: where the run stood (with a sidecar, it replaces the
+    /// sidecar's site, and its table geometry when it gives one).
+    pub site: Option<&'a SiteFile>,
+    /// `--dut`: the unit's serial.
+    pub dut: Option<&'a str>,
+    /// `--type`: the unit's type.
+    pub dut_type: Option<&'a str>,
+    /// `--map`: how to read a lab's own file.
+    pub map: Option<&'a ImportMap>,
 }
 
 /// Rows reduced to 1 s means (rows finer than 1 s are averaged per whole
@@ -177,210 +254,217 @@ fn to_one_hz(rows: &[Row], name: &str) -> Result<Vec<Row>, ImportError> {
     Ok(out.finish())
 }
 
-/// Stretches of rows with one step label: (label made unique, first, end).
-fn stretches(rows: &[Row]) -> Vec<(String, usize, usize)> {
-    let mut out: Vec<(String, usize, usize)> = Vec::new();
-    let mut seen: BTreeMap<String, usize> = BTreeMap::new();
-    let mut start = 0;
-    for i in 1..=rows.len() {
-        if i == rows.len() || rows[i].step != rows[start].step {
-            let base = if rows[start].step.is_empty() {
-                "unlabelled".to_owned()
-            } else {
-                rows[start].step.clone()
-            };
-            let n = seen.entry(base.clone()).or_insert(0);
-            *n += 1;
-            let label = if *n == 1 { base } else { format!("{base}#{n}") };
-            out.push((label, start, i));
-            start = i;
+/// Check a unit type given on the command line: 1 to 64 printable
+/// characters, no blanks around it (the serial's rule).
+pub fn check_type(t: &str) -> Result<&str, String> {
+    match crate::unit::check_serial(t) {
+        Ok(t) => Ok(t),
+        Err(crate::unit::SerialError::Empty) => {
+            Err("the unit type is empty; give it as the unit's own runs record it (RL-16)".into())
         }
+        Err(e) => Err(e
+            .to_string()
+            .replace("the serial number", "the unit type")
+            .replace("a serial is", "a unit type is")),
     }
-    out
 }
 
-fn toml_str(s: &str) -> String {
-    toml::Value::String(s.to_owned()).to_string()
-}
-
-/// The procedure an imported run is judged by: its records, then the
-/// acceptance's figures where the data allow them.
-fn procedure_text(name: &str, parts: &[(String, usize, usize)], rows: &[Row]) -> String {
-    let mut t = format!(
-        "# Made by gyrobench import from {name}: one record per stretch of rows with\n# one step label, judged with the limits of procedures/acceptance.toml.\n\n[procedure]\nname = {}\ndescription = {}\ndut_type = \"gyro\"\nspec = \"model-4 compensated drift 0.05 deg/h (p-p of 600 s averages); bias stability 0.05 deg/h (1-sigma of 100 s averages)\"\n",
-        toml_str("imported"),
-        toml_str(&format!("run imported from {name}"))
-    );
-    let measure = |t: &mut String,
-                   name: &str,
-                   metric: &str,
-                   records: &[&str],
-                   avg: Option<f64>,
-                   lim: &str| {
-        let recs: Vec<String> = records.iter().map(|r| toml_str(r)).collect();
-        t.push_str(&format!(
-            "\n[[main]]\naction = \"measure\"\nname = {}\nmetric = \"{metric}\"\nrecords = [{}]\n{}{lim}\nunit = \"deg/h\"\n",
-            toml_str(name),
-            recs.join(", "),
-            avg.map_or(String::new(), |a| format!("averaging_s = {a:.1}\n"))
-        ));
+/// Import `file` (the interchange CSV, or a lab's file through
+/// `opts.map`) as a log at `out`. The sidecar beside `file`
+/// (`RUN.export.toml`, written by `export`) is read when it is there: its
+/// procedure judges the rows, and its unit, site and coefficients are the
+/// run's unless `opts` say otherwise.
+pub fn import(file: &Path, opts: &ImportOptions<'_>, out: &Path) -> Result<Imported, ImportError> {
+    let side_path = sidecar::path_for(file);
+    let side = if side_path.is_file() {
+        Some(Sidecar::load(&side_path)?)
+    } else {
+        None
     };
-    for (label, a, b) in parts {
-        t.push_str(&format!(
-            "\n[[main]]\naction = \"record\"\nlabel = {}\nduration_s = {:.1}\n",
-            toml_str(label),
-            (b - a) as f64
-        ));
+    let mut inputs = vec![file];
+    if side.is_some() {
+        inputs.push(&side_path);
     }
-    let all: Vec<&str> = parts.iter().map(|p| p.0.as_str()).collect();
-    if let Some((first, a, b)) = parts.first()
-        && rows[*a].time_s < 60.0
-        && rows[b - 1].time_s >= 1800.0
-    {
-        measure(
-            &mut t,
-            "self_heating_dph",
-            "self_heating",
-            &[first],
-            None,
-            "high = 1.0",
-        );
-    }
-    if rows.len() >= 1200 {
-        measure(
-            &mut t,
-            "raw_drift_pp_dph",
-            "drift_pp",
-            &all,
-            Some(600.0),
-            "high = 1.0",
-        );
-        measure(
-            &mut t,
-            "compensated_drift_pp_dph",
-            "compensated_drift_pp",
-            &all,
-            Some(600.0),
-            "high = 0.05",
-        );
-    }
-    // Bias stability where it means something: records after the warm-up
-    // with the chamber steady (within 1 degC), as the acceptance's positions.
-    for (label, a, b) in parts {
-        let air = rows[*a..*b].iter().map(|r| r.chamber_c);
-        let spread =
-            air.clone().fold(f64::NEG_INFINITY, f64::max) - air.fold(f64::INFINITY, f64::min);
-        if b - a >= 300 && rows[*a].time_s >= 1800.0 && spread <= 1.0 {
-            measure(
-                &mut t,
-                &format!("bias_stability_dph:{label}"),
-                "bias_stability",
-                &[label],
-                Some(100.0),
-                "high = 0.05",
-            );
-        }
-    }
-    t
-}
-
-/// Import the interchange CSV at `csv` (site from `site`) as a log at
-/// `out`; `dut` is the unit's serial (default: the CSV's file stem).
-pub fn import(
-    csv: &Path,
-    site: &SiteFile,
-    dut: Option<&str>,
-    out: &Path,
-) -> Result<Imported, ImportError> {
-    ensure_distinct(out, &[csv])?;
-    let serial = serial_of(csv, dut)?;
-    let rows = interchange::read(csv)?;
-    import_rows(csv, rows, None, site, &serial, out)
-}
-
-/// Import a lab's own file at `file` read through `map` (see
-/// [`import_map`](super::import_map)), as [`import`] does the interchange CSV.
-pub fn import_mapped(
-    file: &Path,
-    map: &super::import_map::ImportMap,
-    site: &SiteFile,
-    dut: Option<&str>,
-    out: &Path,
-) -> Result<Imported, ImportError> {
-    ensure_distinct(out, &[file])?;
-    let serial = serial_of(file, dut)?;
-    let mapped = map.read(file).map_err(|e| match e {
-        super::import_map::MapError::Map(e) => ImportError::Config(e),
-        super::import_map::MapError::Csv(e) => ImportError::Csv(e),
-    })?;
-    import_rows(file, mapped.rows, mapped.power_on_utc, site, &serial, out)
-}
-
-/// The unit's serial: `dut`, else the file's stem (checked either way).
-fn serial_of(file: &Path, dut: Option<&str>) -> Result<String, ImportError> {
+    ensure_distinct(out, &inputs)?;
     let name = file.display().to_string();
-    let serial = match dut {
-        Some(d) => d.to_owned(),
-        None => file
-            .file_stem()
-            .map_or(String::new(), |s| s.to_string_lossy().into_owned()),
+    let site = match (opts.site, &side) {
+        (Some(s), Some(c)) => SiteFile {
+            site: s.site,
+            table: s.table.or(c.table),
+        },
+        (Some(s), None) => s.clone(),
+        (None, Some(c)) => SiteFile {
+            site: c.site,
+            table: c.table,
+        },
+        (None, None) => {
+            return Err(ImportError::NoSite {
+                file: name,
+                sidecar: side_path.display().to_string(),
+            });
+        }
     };
-    crate::unit::check_serial(&serial).map_err(|e| {
-        ImportError::Other(match dut {
-            Some(_) => format!("--dut {serial:?}: {e}"),
-            None => format!(
-                "{name}: its file name {serial:?} stands for the unit's serial and is not one ({e}); give --dut SERIAL"
-            ),
-        })
-    })?;
-    Ok(serial)
+    let (rows, power_on_utc) = match opts.map {
+        Some(map) => {
+            let mapped = map.read(file).map_err(|e| match e {
+                super::import_map::MapError::Map(e) => ImportError::Config(e),
+                super::import_map::MapError::Csv(e) => ImportError::Csv(e),
+            })?;
+            (mapped.rows, mapped.power_on_utc)
+        }
+        None => (interchange::read(file)?, None),
+    };
+    let serial = match (opts.dut, &side) {
+        (Some(d), _) => d.to_owned(),
+        (None, Some(c)) => c.unit.serial.clone(),
+        (None, None) => crate::unit::UNNAMED_SERIAL.to_owned(),
+    };
+    crate::unit::check_serial(&serial)
+        .map_err(|e| ImportError::Other(format!("--dut {serial:?}: {e}")))?;
+    let dut_type = match (opts.dut_type, &side) {
+        (Some(t), _) => t.to_owned(),
+        (None, Some(c)) => c.unit.dut_type.clone(),
+        (None, None) => DEFAULT_TYPE.to_owned(),
+    };
+    check_type(&dut_type).map_err(|e| ImportError::Other(format!("--type {dut_type:?}: {e}")))?;
+    let dated = power_on_utc.or_else(|| side.as_ref().map(|c| c.export.started_utc.clone()));
+    let unit = (serial, dut_type);
+    let side = side.map(|c| (side_path, c));
+    import_rows(file, rows, dated, &site, &unit, side.as_ref(), out)
 }
 
-/// Write `rows` read from `file` as a log at `out`; `power_on_utc` dates
-/// the run when the file gave dates (else the import dates it).
+/// The procedure the rows are judged by, with the step of each part: the
+/// sidecar's (checked against the type the import records), or one made
+/// from the rows.
+struct Judged {
+    text: String,
+    path: String,
+    procedure: Procedure,
+    parts: Vec<Part>,
+    /// Each part's step (its index in run order); none: between steps.
+    at: Vec<Option<usize>>,
+    carried: bool,
+}
+
+fn judged_by(
+    name: &str,
+    rows: &[Row],
+    bench: &BenchConfig,
+    dut_type: &str,
+    side: Option<&(PathBuf, Sidecar)>,
+) -> Result<Judged, ImportError> {
+    let Some((side_path, c)) = side else {
+        let parts = parts::parts(rows, true);
+        let text = parts::procedure_text(name, dut_type, &parts, rows);
+        let procedure =
+            Procedure::from_source(&Source::from_text("imported procedure", &text), bench)
+                .map_err(|e| {
+                    ImportError::Other(format!("{name}: the procedure made from its steps: {e}"))
+                })?;
+        let at = (0..parts.len())
+            .map(|i| Some(procedure.setup.len() + i))
+            .collect();
+        return Ok(Judged {
+            text,
+            path: format!("{name} (imported)"),
+            procedure,
+            parts,
+            at,
+            carried: false,
+        });
+    };
+    let side_name = side_path.display().to_string();
+    let mismatch = |message: String| ImportError::Mismatch {
+        file: name.to_owned(),
+        sidecar: side_name.clone(),
+        message,
+    };
+    let procedure = Procedure::from_source(
+        &Source::from_text(&format!("procedure.text in {side_name}"), &c.procedure.text),
+        bench,
+    )
+    .map_err(|e| {
+        mismatch(format!(
+            "its procedure does not fit the imported bench: {e}"
+        ))
+    })?;
+    if procedure.meta.dut_type != dut_type {
+        return Err(ImportError::TypeConflict {
+            given: dut_type.to_owned(),
+            carried: procedure.meta.dut_type.clone(),
+            sidecar: side_name,
+            procedure: c.procedure.path.clone(),
+        });
+    }
+    let parts = parts::parts(rows, false);
+    let at = parts::assign(&procedure, &parts, rows).map_err(mismatch)?;
+    Ok(Judged {
+        text: c.procedure.text.clone(),
+        path: format!("{} (carried by {side_name})", c.procedure.path),
+        procedure,
+        parts,
+        at,
+        carried: true,
+    })
+}
+
+/// Write `rows` read from `file` as a log at `out`; `dated` dates the run
+/// (the file's power-on, or the exported run's start; else the import's
+/// own time); `unit` is the serial and type recorded.
 fn import_rows(
     file: &Path,
     rows: Vec<Row>,
-    power_on_utc: Option<String>,
+    dated: Option<String>,
     site: &SiteFile,
-    serial: &str,
+    (serial, dut_type): &(String, String),
+    side: Option<&(PathBuf, Sidecar)>,
     out: &Path,
 ) -> Result<Imported, ImportError> {
     let name = file.display().to_string();
-    let serial = serial.to_owned();
-    let imported_at = power_on_utc.unwrap_or_else(|| crate::clock::utc_now().to_rfc3339());
+    let imported_at = dated.unwrap_or_else(|| crate::clock::utc_now().to_rfc3339());
     let rows = to_one_hz(&rows, &name)?;
     let geometry = site.table.as_ref().map(|t| t.geometry);
     let angles = table_angles(&rows, geometry.as_ref(), &name)?;
-    let parts = stretches(&rows);
     let mut bench = BenchConfig::embedded();
-    let site = site.site;
-    bench.site = site;
+    // Another lab's bench: its own uncertainties are not known here.
+    bench.uncertainty = crate::typeb::TypeB::default();
+    bench.site = site.site;
     if let Some(g) = geometry {
         bench.table.geometry = g;
     }
-    let text = procedure_text(&name, &parts, &rows);
-    let procedure = Procedure::from_source(&Source::from_text("imported procedure", &text), &bench)
-        .map_err(|e| {
-            ImportError::Other(format!("{name}: the procedure made from its steps: {e}"))
-        })?;
+    let judged = judged_by(&name, &rows, &bench, dut_type, side)?;
+    let coeffs = side.and_then(|(_, c)| c.coefficients.as_ref());
+    let compensation = coeffs
+        .map(|k| {
+            CoefficientSet::from_source(&Source::from_text("coefficients.text", &k.text)).map(
+                |set| {
+                    set.fit().map(|fit| Compensation {
+                        fit,
+                        used: k.used.clone(),
+                    })
+                },
+            )
+        })
+        .transpose()?
+        .flatten();
     let other = |what: &str, e: &dyn std::fmt::Display| {
         ImportError::Other(format!("{name}: writing the {what} into the log: {e}"))
     };
     let meta = RunMeta {
         format: FORMAT,
         run_id: crate::session::new_run_id(),
-        procedure_toml: text.clone(),
-        procedure_path: format!("{name} (imported)"),
+        procedure_toml: judged.text.clone(),
+        procedure_path: judged.path.clone(),
         bench_toml: toml::to_string_pretty(&bench).map_err(|e| other("bench", &e))?,
         bench: format!("imported from {name}"),
-        site_json: serde_json::to_string(&site).map_err(|e| other("site", &e))?,
+        site_json: serde_json::to_string(&site.site).map_err(|e| other("site", &e))?,
+        coeffs_toml: coeffs.map(|k| k.text.clone()),
         dut_serial: serial.clone(),
-        dut_type: "gyro".into(),
+        dut_type: dut_type.clone(),
         software_version: crate::version::VERSION.to_owned(),
         software_revision: crate::version::REVISION.to_owned(),
-        // Dated by the file's power-on where it gives dates, else by the
-        // import.
+        // Dated by the file's power-on where it gives dates (or the
+        // exported run's start), else by the import.
         start_time_utc: imported_at.clone(),
         part_start_time_utc: imported_at,
         part: 1,
@@ -389,9 +473,9 @@ fn import_rows(
         host: crate::session::rundir::hostname(),
         units: vec![crate::runlog::meta::RunUnit {
             slot: String::new(),
-            serial,
-            dut_type: "gyro".into(),
-            coefficients: crate::coeffs::CoeffsUsed::fitted(),
+            serial: serial.clone(),
+            dut_type: dut_type.clone(),
+            coefficients: coeffs.map_or_else(CoeffsUsed::fitted, |k| k.used.clone()),
             mount: None,
             twin_toml: None,
             seed: None,
@@ -403,32 +487,92 @@ fn import_rows(
     let (outcome, measurements) = write_log(
         &mut pending,
         &meta,
-        site,
-        &procedure,
-        &parts,
+        &judged,
         &rows,
         &angles,
+        compensation.as_ref(),
     )?;
     pending
         .commit()
         .map_err(|e| ImportError::Other(format!("writing {}: {e}", out.display())))?;
+    let recorded = judged.parts.iter().filter(|p| p.recorded);
     Ok(Imported {
         intervals: rows.len(),
-        records: parts.into_iter().map(|p| p.0).collect(),
+        records: recorded.clone().map(|p| p.label.clone()).collect(),
+        unrecorded: rows.len() - recorded.map(|p| p.b - p.a).sum::<usize>(),
+        sidecar: side.map(|(p, _)| p.clone()),
+        serial: serial.clone(),
+        dut_type: dut_type.clone(),
         outcome,
         measurements,
     })
 }
 
-/// Write the imported run's log to `tmp`; returns the verdict.
+/// The log of an imported run as it is written: its recorder, records
+/// and measurements so far.
+struct Writing<'a> {
+    rec: Recorder,
+    records: Records,
+    measurements: Vec<measure::Measurement>,
+    coeffs: Option<&'a Compensation>,
+    /// Judged as its replay judges it: the procedure's rule, no declared
+    /// uncertainties of the bench it came from.
+    judging: measure::Judging,
+}
+
+impl Writing<'_> {
+    /// Step `s` (at run-order `index`) starts at `t_s`: a record begins, a
+    /// measure step is computed on the records so far, as a run does.
+    fn start(&mut self, index: usize, s: &Step, t_s: f64) -> std::io::Result<()> {
+        self.rec.step(&crate::sequencer::events::step_event(
+            t_s,
+            StepPhase::Start,
+            index,
+            s,
+        ))?;
+        self.rec.event(t_s, Level::Debug, &s.start_message())?;
+        match &s.kind {
+            StepKind::Record { label, .. } => self.records.start(label),
+            StepKind::Measure(m) => {
+                let meas = measure::compute(m, &self.records, self.coeffs, &s.key, &self.judging);
+                let level = if meas.outcome == MeasureOutcome::Pass {
+                    Level::Info
+                } else {
+                    Level::Warning
+                };
+                let value = meas.value.map_or("n/a".into(), |v| format!("{v:.4}"));
+                self.rec
+                    .event(t_s, level, &format!("{} = {value}", meas.name))?;
+                self.measurements.push(meas);
+            }
+            _ => {}
+        }
+        Ok(())
+    }
+
+    /// Step `s` ends at `t_s`.
+    fn end(&mut self, index: usize, s: &Step, t_s: f64) -> std::io::Result<()> {
+        self.rec.step(&crate::sequencer::events::step_event(
+            t_s,
+            StepPhase::End,
+            index,
+            s,
+        ))?;
+        self.rec
+            .event(t_s, Level::Debug, &format!("end of step {}", s.key))
+    }
+}
+
+/// Write the imported run's log to `tmp`: each part's rows in its step,
+/// the steps without rows (measures, notes, set points) started and ended
+/// where they fall in run order; returns the verdict.
 fn write_log(
     tmp: &mut Pending,
     meta: &RunMeta,
-    site: Site,
-    procedure: &Procedure,
-    parts: &[(String, usize, usize)],
+    judged: &Judged,
     rows: &[Row],
     angles: &[Option<TableAngles>],
+    coeffs: Option<&Compensation>,
 ) -> Result<(Outcome, Vec<measure::Measurement>), ImportError> {
     let scales = FrameScales {
         dt_s: 1.0,
@@ -440,51 +584,61 @@ fn write_log(
         .map_err(|e| ImportError::Other(format!("writing {}: {e}", tmp.path().display())))?;
     let tmp_path = tmp.path().to_owned();
     let io = |e: std::io::Error| ImportError::Other(format!("writing {}: {e}", tmp_path.display()));
-    let mut rec = Recorder::from_file(file, &tmp_path, meta, 0, scales).map_err(io)?;
-    let mut records = Records::default();
-    let steps: Vec<_> = procedure.main.iter().collect();
-    let mut step_at = 0;
-    let setup = procedure.setup.len();
-    for (label, a, b) in parts {
-        let Some(step) = steps.get(step_at) else {
-            break;
-        };
-        let index = setup + step_at;
-        step_at += 1;
-        let t0 = rows[*a].time_s - 0.5;
-        rec.step(&crate::sequencer::events::step_event(
-            t0,
-            StepPhase::Start,
-            index,
-            step,
-        ))
-        .map_err(io)?;
-        rec.event(t0, Level::Debug, &step.start_message())
-            .map_err(io)?;
-        records.start(label);
-        for (r, known) in rows[*a..*b].iter().zip(&angles[*a..*b]) {
-            write_row(&mut rec, &mut records, (label, &step.key), r, *known, &site).map_err(io)?;
+    let site: Site = serde_json::from_str(&meta.site_json)
+        .map_err(|e| ImportError::Other(format!("the site: {e}")))?;
+    let mut w = Writing {
+        rec: Recorder::from_file(file, &tmp_path, meta, 0, scales).map_err(io)?,
+        records: Records::default(),
+        measurements: Vec::new(),
+        coeffs,
+        judging: measure::Judging {
+            rule: judged.procedure.meta.decision_rule,
+            ..measure::Judging::default()
+        },
+    };
+    let steps: Vec<&Step> = judged.procedure.steps().collect();
+    let (mut open, mut next): (Option<usize>, usize) = (None, 0);
+    for (p, &at) in judged.parts.iter().zip(&judged.at) {
+        let t0 = rows[p.a].time_s - 0.5;
+        if open != at {
+            if let Some(o) = open.take() {
+                w.end(o, steps[o], t0).map_err(io)?;
+            }
+            if let Some(j) = at {
+                for (k, s) in steps.iter().enumerate().take(j).skip(next) {
+                    w.start(k, s, t0).map_err(io)?;
+                    w.end(k, s, t0).map_err(io)?;
+                }
+                w.start(j, steps[j], t0).map_err(io)?;
+                (open, next) = (Some(j), j + 1);
+            }
         }
-        let t1 = rows[b - 1].time_s + 0.5;
-        rec.step(&crate::sequencer::events::step_event(
-            t1,
-            StepPhase::End,
-            index,
-            step,
-        ))
-        .map_err(io)?;
-        rec.event(t1, Level::Debug, &format!("end of step {}", step.key))
-            .map_err(io)?;
+        // A row outside records keeps its own step label where the
+        // procedure was made from the rows, or between a procedure's
+        // steps (export gives it back).
+        let key = match at {
+            Some(j) if judged.carried || p.recorded => steps[j].key.as_str(),
+            _ => p.step.as_str(),
+        };
+        let label = p.recorded.then_some(p.label.as_str());
+        for (r, known) in rows[p.a..p.b].iter().zip(&angles[p.a..p.b]) {
+            write_row(&mut w.rec, &mut w.records, (label, key), r, *known, &site).map_err(io)?;
+        }
     }
     let end_s = rows.last().map_or(0.0, |r| r.time_s + 0.5);
-    let measurements = write_measures(
-        &mut rec,
-        &steps[step_at..],
-        setup + step_at,
-        &records,
-        end_s,
-    )
-    .map_err(io)?;
+    if let Some(o) = open {
+        w.end(o, steps[o], end_s).map_err(io)?;
+    }
+    for (k, s) in steps.iter().enumerate().skip(next) {
+        w.start(k, s, end_s).map_err(io)?;
+        w.end(k, s, end_s).map_err(io)?;
+    }
+    let Writing {
+        rec,
+        records,
+        measurements,
+        ..
+    } = w;
     let failed = measurements
         .iter()
         .any(|m| m.outcome != MeasureOutcome::Pass);
@@ -506,11 +660,12 @@ fn write_log(
 }
 
 /// One imported row as the tick and 1 Hz interval a run logs, in record
-/// `label` of step `step_key`, filed in `records` too.
+/// `label` (none: outside any record) of step `step_key`, filed in
+/// `records` too.
 fn write_row(
     rec: &mut Recorder,
     records: &mut Records,
-    (label, step_key): (&str, &str),
+    (label, step_key): (Option<&str>, &str),
     r: &Row,
     known: Option<TableAngles>,
     site: &Site,
@@ -544,7 +699,7 @@ fn write_row(
         state: Some(state.clone()),
         slots: Vec::new(),
     };
-    rec.tick(&tick, Some(label), step_key)?;
+    rec.tick(&tick, label, step_key)?;
     let iv = Interval {
         time_s: r.time_s,
         rate_dph: r.rate_dph,
@@ -555,152 +710,6 @@ fn write_row(
         chamber_c: r.chamber_c,
         frames: 0,
     };
-    records.push(iv, Some(label));
-    rec.interval(&iv, Some(label))
-}
-
-/// The measure steps of `steps` (the first at index `first`), computed on
-/// `records` and logged at `end_s` as a run logs them.
-fn write_measures(
-    rec: &mut Recorder,
-    steps: &[&Step],
-    first: usize,
-    records: &Records,
-    end_s: f64,
-) -> std::io::Result<Vec<measure::Measurement>> {
-    let mut measurements = Vec::new();
-    for (i, step) in steps.iter().enumerate() {
-        if let StepKind::Measure(m) = &step.kind {
-            let index = first + i;
-            rec.step(&crate::sequencer::events::step_event(
-                end_s,
-                StepPhase::Start,
-                index,
-                step,
-            ))?;
-            rec.event(end_s, Level::Debug, &step.start_message())?;
-            let meas = measure::compute(m, records, None, &step.key);
-            rec.event(
-                end_s,
-                if meas.outcome == MeasureOutcome::Pass {
-                    Level::Info
-                } else {
-                    Level::Warning
-                },
-                &format!(
-                    "{} = {}",
-                    meas.name,
-                    meas.value.map_or("n/a".into(), |v| format!("{v:.4}"))
-                ),
-            )?;
-            rec.step(&crate::sequencer::events::step_event(
-                end_s,
-                StepPhase::End,
-                index,
-                step,
-            ))?;
-            rec.event(end_s, Level::Debug, &format!("end of step {}", step.key))?;
-            measurements.push(meas);
-        }
-    }
-    Ok(measurements)
-}
-
-/// What an export wrote.
-#[derive(Debug, Clone)]
-pub struct Exported {
-    /// Rows written.
-    pub rows: usize,
-    /// How the read of the log went (complete or truncated).
-    pub read: ReadSummary,
-    /// Damaged parts of the log skipped (rows missing), in words.
-    pub damage: Option<String>,
-}
-
-/// Write every 1 Hz interval of the log at `log` as interchange CSV at
-/// `out`; `step` is the record label, or the procedure step while not
-/// recording. A log with no interval at all is an error, and leaves no file.
-pub fn export(log: &Path, out: &Path) -> Result<Exported, ImportError> {
-    export_unit(log, out, None)
-}
-
-/// [`export`] of unit `unit` (a serial) of a batch's log (`super::view`).
-pub fn export_unit(log: &Path, out: &Path, unit: Option<&str>) -> Result<Exported, ImportError> {
-    ensure_distinct(out, &[log])?;
-    let mut pending =
-        Pending::output(out).map_err(|e| ImportError::Other(format!("{}: {e}", out.display())))?;
-    let tmp = pending.path().to_owned();
-    let err = |e: &dyn std::fmt::Display| format!("writing {}: {e}", tmp.display());
-    let file = pending
-        .take_file()
-        .map_err(|e| ImportError::Other(err(&e)))?;
-    let mut w = csv::Writer::from_writer(std::io::BufWriter::new(file));
-    w.write_record(interchange::HEADER)
-        .map_err(|e| ImportError::Other(err(&e)))?;
-    let mut table: Option<TableState> = None;
-    let mut rows = 0usize;
-    let mut saw_run = false;
-    let mut start_ns = None;
-    let read = super::view::read_unit(log, unit, |item| {
-        match item {
-            Item::Meta { name, entries } if name == RUN_META => {
-                saw_run = true;
-                start_ns = start_ns.or_else(|| super::recover::part_start_ns(entries));
-            }
-            Item::Message { topic, data, .. } if topic == topics::TABLE => {
-                table = Some(serde_json::from_slice(data).map_err(|e| format!("{topic}: {e}"))?);
-            }
-            Item::Message { topic, data, .. } if topic == topics::RATE_1HZ => {
-                let r: Rate1Hz =
-                    serde_json::from_slice(data).map_err(|e| format!("{topic}: {e}"))?;
-                let Some(t) = &table else {
-                    return Err("a 1 Hz interval before any table state".into());
-                };
-                let step = r.record.clone().unwrap_or_else(|| t.step.clone());
-                w.write_record([
-                    format!("{:.3}", r.t_s),
-                    format!("{}", r.rate_dph),
-                    format!("{}", r.t1_c),
-                    format!("{}", r.t2_c),
-                    format!("{}", r.tcase_c),
-                    format!("{}", r.chamber_c),
-                    format!("{}", t.azimuth_deg),
-                    format!("{}", t.elevation_deg),
-                    format!("{}", t.roll_deg),
-                    step,
-                ])
-                .map_err(|e| err(&e))?;
-                rows += 1;
-            }
-            _ => {}
-        }
-        Ok(())
-    })?;
-    let fail = |m: String| ImportError::Other(m);
-    // `--unit` naming a unit the log lacks stopped the read: say so.
-    if let (false, Some(why), Some(_)) = (saw_run, &read.stopped, unit) {
-        return Err(fail(format!("{}: {why}", log.display())));
-    }
-    if !saw_run {
-        return Err(fail(format!(
-            "{}: not a gyrobench log (no run metadata){}",
-            log.display(),
-            read.trouble()
-        )));
-    }
-    if let Some(why) = read.stopped.as_ref().filter(|_| read.complete) {
-        return Err(fail(format!("{}: {why}", log.display())));
-    }
-    if rows == 0 {
-        return Err(fail(format!(
-            "{}: no 1 Hz interval in the log{}; nothing to export",
-            log.display(),
-            read.trouble()
-        )));
-    }
-    w.flush().map_err(|e| fail(err(&e)))?;
-    drop(w);
-    pending.commit().map_err(|e| fail(err(&e)))?;
-    let damage = read.damage(start_ns);
-    Ok(Exported { rows, read, damage })
+    records.push(iv, label);
+    rec.interval(&iv, label)
 }

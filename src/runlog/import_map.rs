@@ -218,7 +218,8 @@ pub struct Boundary {
     pub label: String,
 }
 
-/// `[step]`: exactly one of its keys.
+/// `[step]`: exactly one of `column` or `boundaries`, and optionally
+/// `record`.
 #[derive(Debug, Clone, Default, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct StepMap {
@@ -228,6 +229,12 @@ pub struct StepMap {
     /// Boundaries by time, in increasing order.
     #[serde(default)]
     pub boundaries: Option<Vec<Boundary>>,
+    /// A column naming the record each row was recorded in (the interchange
+    /// CSV's `record`); an empty cell is a row taken outside any record (a
+    /// move, a wait, a soak). Without it, records are found as an import of
+    /// the interchange CSV without its `record` column finds them.
+    #[serde(default)]
+    pub record: Option<Column>,
 }
 
 /// `[table]`: the table axis angles, deg, where the file has them.
@@ -310,6 +317,17 @@ pub fn from_source(src: Source) -> Result<ImportMap, ConfigError> {
 /// `[time]`: its scale and offset, and what goes with its form.
 fn check_time(c: &Checker<'_>, src: &Source, t: &TimeMap) -> Result<(), ConfigError> {
     c.positive(t.scale_s, "time.scale_s")?;
+    // From a count of nanoseconds to one of days: a scale outside that
+    // makes every sample collapse into one second, or the run outlast
+    // any run.
+    c.ensure(
+        (1e-9..=86400.0).contains(&t.scale_s),
+        "time.scale_s",
+        &format!(
+            "is {} s per unit of the time column: give the seconds one unit stands for, from 1e-9 (a count of ns) to 86400 (a count of days); beyond that every sample falls within one second, or a run outlasts any run",
+            crate::config::num(t.scale_s)
+        ),
+    )?;
     c.within(t.offset_s, -1e7, 1e7, "time.offset_s")?;
     match t.form {
         TimeForm::Seconds => {
@@ -445,6 +463,7 @@ struct Resolved {
     temps: [usize; 4],
     orientation: Option<[usize; 3]>,
     step: Option<usize>,
+    record: Option<usize>,
     table: Option<[usize; 2]>,
 }
 
@@ -473,6 +492,39 @@ impl ImportMap {
         }
     }
 
+    /// Every column the map reads, with the key that names it, in the
+    /// map's order.
+    fn roles(&self) -> Vec<(&'static str, &Column)> {
+        let t = &self.temperatures;
+        let mut roles = vec![
+            ("time.column", &self.time.column),
+            ("rate.column", &self.rate.column),
+            ("temperatures.t1", &t.t1),
+            ("temperatures.t2", &t.t2),
+            ("temperatures.tcase", &t.tcase),
+            ("temperatures.chamber", &t.chamber),
+        ];
+        if let Some(o) = &self.orientation.columns {
+            roles.push(("orientation.columns.azimuth", &o.azimuth));
+            roles.push(("orientation.columns.elevation", &o.elevation));
+            roles.push(("orientation.columns.roll", &o.roll));
+        }
+        if let Some(c) = &self.step.column {
+            roles.push(("step.column", c));
+        }
+        if let Some(c) = &self.step.record {
+            roles.push(("step.record", c));
+        }
+        if let Some(t) = &self.table {
+            roles.push(("table.outer", &t.outer));
+            roles.push(("table.inner", &t.inner));
+        }
+        roles
+    }
+
+    /// The map's columns as indices of `header`; a column the header lacks,
+    /// or one column given two roles (by name or number), is refused at
+    /// the map's key.
     fn resolve(&self, header: &[String], file: &str) -> Result<Resolved, ConfigError> {
         let find = |c: &Column, key: &str| -> Result<usize, ConfigError> {
             let found = match c {
@@ -489,7 +541,24 @@ impl ImportMap {
                 )
             })
         };
+        let mut taken: BTreeMap<usize, &str> = BTreeMap::new();
+        for (key, c) in self.roles() {
+            let i = find(c, key)?;
+            if let Some(first) = taken.insert(i, key) {
+                return Err(self.invalid(
+                    key,
+                    format!(
+                        "names column {:?} of {file}, which `{first}` already reads: one column serves one role; give `{key}` its own column",
+                        header[i]
+                    ),
+                ));
+            }
+        }
         let t = &self.temperatures;
+        let pair =
+            |a: &Column, ka: &str, b: &Column, kb: &str| -> Result<[usize; 2], ConfigError> {
+                Ok([find(a, ka)?, find(b, kb)?])
+            };
         Ok(Resolved {
             time: find(&self.time.column, "time.column")?,
             rate: find(&self.rate.column, "rate.column")?,
@@ -507,30 +576,32 @@ impl ImportMap {
                 ]),
                 None => None,
             },
-            step: match &self.step.column {
-                Some(c) => Some(find(c, "step.column")?),
-                None => None,
-            },
-            table: match &self.table {
-                Some(t) => Some([
-                    find(&t.outer, "table.outer")?,
-                    find(&t.inner, "table.inner")?,
-                ]),
-                None => None,
-            },
+            step: self
+                .step
+                .column
+                .as_ref()
+                .map(|c| find(c, "step.column"))
+                .transpose()?,
+            record: self
+                .step
+                .record
+                .as_ref()
+                .map(|c| find(c, "step.record"))
+                .transpose()?,
+            table: self
+                .table
+                .as_ref()
+                .map(|t| pair(&t.outer, "table.outer", &t.inner, "table.inner"))
+                .transpose()?,
         })
     }
 
     /// Read the lab's file at `path` through this map.
     pub fn read(&self, path: &Path) -> Result<Mapped, MapError> {
         let name = path.display().to_string();
-        let file = std::fs::File::open(path).map_err(|cause| {
-            MapError::Csv(CsvError::Io {
-                path: name.clone(),
-                cause,
-            })
-        })?;
-        self.parse(std::io::BufReader::new(file), &name)
+        let mut input = super::interchange::open_rows(path).map_err(MapError::Csv)?;
+        self.parse(std::io::BufReader::new(&mut input), &name)
+            .map_err(|e| super::interchange::overlong(&input, &name).map_or(e, MapError::Csv))
     }
 
     /// Read a lab's file from any reader; `name` labels errors.
@@ -546,14 +617,18 @@ impl ImportMap {
         let cols = self.resolve(&header, name).map_err(MapError::Map)?;
         let mut out = super::interchange::OneHz::default();
         let mut prev_time: Option<f64> = None;
-        let mut power_on = match &self.time.power_on {
-            Some(p) => Some(
-                parse_datetime(p, None)
-                    .map_err(|e| MapError::Map(self.invalid("time.power_on", e)))?,
-            ),
-            None => None,
+        let mut dates = Dates {
+            power_on: match &self.time.power_on {
+                Some(p) => Some(
+                    parse_datetime(p, None)
+                        .map_err(|e| MapError::Map(self.invalid("time.power_on", e)))?,
+                ),
+                None => None,
+            },
+            first: None,
         };
         let mut samples = 0usize;
+        let mut second: (f64, usize) = (f64::NAN, 0);
         let mut rec = csv::StringRecord::new();
         loop {
             let more = rdr.read_record(&mut rec).map_err(|e| {
@@ -569,13 +644,24 @@ impl ImportMap {
                 line: rec.position().map_or(0, csv::Position::line) + skipped,
                 name,
             };
-            let row = self.map_row(&cols, &cells, &mut power_on)?;
+            let row = self.map_row(&cols, &cells, &mut dates)?;
             row.check_after(prev_time).map_err(|m| {
                 cells.error(format!(
                     "{m} (after the map's conversions; {})",
                     self.src_name()
                 ))
             })?;
+            // Samples that collapse into one second (a wrong scale) are
+            // refused rather than averaged away unseen.
+            let s = row.time_s.floor();
+            second = if s == second.0 {
+                (s, second.1 + 1)
+            } else {
+                (s, 1)
+            };
+            if second.1 > MAX_SAMPLES_PER_S {
+                return Err(cells.error(self.too_dense(&cols, &header, s)));
+            }
             prev_time = Some(row.time_s);
             samples += 1;
             out.push(row);
@@ -591,8 +677,53 @@ impl ImportMap {
         Ok(Mapped {
             rows,
             samples,
-            power_on_utc: power_on.map(|p| p.with_timezone(&chrono::Utc).to_rfc3339()),
+            power_on_utc: dates
+                .power_on
+                .map(|p| p.with_timezone(&chrono::Utc).to_rfc3339()),
         })
+    }
+
+    /// Where a key of the map is, `m.toml:5:11`, for a message about a row.
+    fn key_place(&self, key: &str) -> String {
+        let at = self.source.as_ref().and_then(|s| s.locate(key));
+        match at {
+            Some((line, col)) => format!("{}:{line}:{col}", self.src_name()),
+            None => self.src_name(),
+        }
+    }
+
+    /// Why more than [`MAX_SAMPLES_PER_S`] samples in second `s` are
+    /// refused, naming the map's line that made them so dense.
+    fn too_dense(&self, cols: &Resolved, header: &[String], s: f64) -> String {
+        let column = header.get(cols.time).cloned().unwrap_or_default();
+        let why = match self.time.form {
+            TimeForm::Seconds => {
+                let key = if self
+                    .source
+                    .as_ref()
+                    .and_then(|m| m.locate("time.scale_s"))
+                    .is_some()
+                {
+                    "time.scale_s"
+                } else {
+                    "time.column"
+                };
+                format!(
+                    "column {column:?} read as {} s per unit (`time.scale_s`, {}) puts them there; check `time.scale_s`, the seconds one unit of the column stands for",
+                    crate::config::num(self.time.scale_s),
+                    self.key_place(key)
+                )
+            }
+            TimeForm::Datetime => format!(
+                "column {column:?} (`time.column`, {}) gives them times that close together",
+                self.key_place("time.column")
+            ),
+        };
+        format!(
+            "more than {MAX_SAMPLES_PER_S} samples fall within one second ({} to {} s since power-on), more than any gyro output gyrobench reads; {why}",
+            crate::config::num(s),
+            crate::config::num(s + 1.0)
+        )
     }
 
     /// Skip the preamble's `[file] skip_lines` lines; how many were skipped.
@@ -636,13 +767,8 @@ impl ImportMap {
 
     /// One row of the lab's file as an interchange row: its time, rate,
     /// temperatures, step, pose and table angles, in that order.
-    fn map_row(
-        &self,
-        cols: &Resolved,
-        c: &Cells<'_>,
-        power_on: &mut Option<chrono::DateTime<chrono::FixedOffset>>,
-    ) -> Result<Row, MapError> {
-        let time_s = self.time_of(cols, c, power_on)?;
+    fn map_row(&self, cols: &Resolved, c: &Cells<'_>, dates: &mut Dates) -> Result<Row, MapError> {
+        let time_s = self.time_of(cols, c, dates)?;
         let rate_dph = self.rate_dph(c.number(cols.rate, "rate")?);
         let mut temps = [0.0; 4];
         for (k, (t, what)) in temps
@@ -684,18 +810,16 @@ impl ImportMap {
             step,
             outer_deg,
             inner_deg,
+            record: cols.record.map(|i| c.cell(i).to_owned()),
         })
     }
 
     /// A row's time since power-on, s: seconds scaled and offset, or a
     /// date and time less the power-on's (the first row's when the map
-    /// gives none).
-    fn time_of(
-        &self,
-        cols: &Resolved,
-        c: &Cells<'_>,
-        power_on: &mut Option<chrono::DateTime<chrono::FixedOffset>>,
-    ) -> Result<f64, MapError> {
+    /// gives none). A date-time that is before the power-on, or further
+    /// after it than a run can last, is refused naming both and the data's
+    /// first time.
+    fn time_of(&self, cols: &Resolved, c: &Cells<'_>, dates: &mut Dates) -> Result<f64, MapError> {
         Ok(match self.time.form {
             TimeForm::Seconds => {
                 c.number(cols.time, "time")? * self.time.scale_s + self.time.offset_s
@@ -704,12 +828,60 @@ impl ImportMap {
                 let t = parse_datetime(c.cell(cols.time), self.time.format.as_deref()).map_err(
                     |e| c.error(format!("column {:?} (time): {e}", c.cell_name(cols.time))),
                 )?;
-                let p0 = *power_on.get_or_insert(t);
-                (t - p0)
-                    .num_nanoseconds()
-                    .map_or(f64::NAN, |ns| ns as f64 * 1e-9)
+                let first = *dates.first.get_or_insert(t);
+                let p0 = *dates.power_on.get_or_insert(t);
+                let since = (t - p0).num_nanoseconds().map(|ns| ns as f64 * 1e-9);
+                let (lo, hi) = super::interchange::TIME_RANGE_S;
+                match since {
+                    Some(v) if (lo..=hi).contains(&v) => v,
+                    _ => {
+                        return Err(c.error(self.far_from_power_on(
+                            &c.cell_name(cols.time),
+                            t,
+                            p0,
+                            first,
+                            since,
+                        )));
+                    }
+                }
             }
         })
+    }
+
+    /// Why the date-time `t` cannot be read as time since the power-on
+    /// `p0`, in an operator's words (`since`: how far after it, s, when
+    /// that fits in a number).
+    fn far_from_power_on(
+        &self,
+        column: &str,
+        t: chrono::DateTime<chrono::FixedOffset>,
+        p0: chrono::DateTime<chrono::FixedOffset>,
+        first: chrono::DateTime<chrono::FixedOffset>,
+        since: Option<f64>,
+    ) -> String {
+        let rfc = |d: chrono::DateTime<chrono::FixedOffset>| d.to_rfc3339();
+        let how = match since {
+            Some(v) if v < 0.0 => format!("{} before", span_words(-v)),
+            Some(v) => format!("{} after", span_words(v)),
+            None if t < p0 => "more than 290 years before".to_owned(),
+            None => "more than 290 years after".to_owned(),
+        };
+        let limit = span_words(super::interchange::TIME_RANGE_S.1);
+        match &self.time.power_on {
+            Some(_) => format!(
+                "column {column:?} (time): {} is {how} the power-on {} (`time.power_on`, {}); the data's first time is {}: give the power-on of this run, at or before the data's first time and at most {limit} before its last",
+                rfc(t),
+                rfc(p0),
+                self.key_place("time.power_on"),
+                rfc(first)
+            ),
+            None => format!(
+                "column {column:?} (time): {} is {how} the data's first time {}, which stands for the power-on (no `time.power_on` in {}); a run gyrobench imports lasts at most {limit}: split the file, or check the column's dates",
+                rfc(t),
+                rfc(first),
+                self.src_name()
+            ),
+        }
     }
 
     /// A rate in the map's unit, in deg/h.
@@ -779,6 +951,37 @@ impl ImportMap {
     }
 }
 
+/// Most samples one second of a lab's file may hold (10 kHz: more than any
+/// laser gyro's output a lab logs; a file denser than that has a time
+/// column read at the wrong scale).
+pub const MAX_SAMPLES_PER_S: usize = 10_000;
+
+/// The power-on a `datetime` column counts from, and the data's first
+/// time, as the file is read.
+struct Dates {
+    /// Given by the map, else the first row's time once read.
+    power_on: Option<chrono::DateTime<chrono::FixedOffset>>,
+    /// The first row's time.
+    first: Option<chrono::DateTime<chrono::FixedOffset>>,
+}
+
+/// A span of time in the words an operator reads: `40 s`, `12 min`,
+/// `5 h`, `3 days`, `101 years`.
+fn span_words(s: f64) -> String {
+    let (v, unit) = if s < 120.0 {
+        (s, "s")
+    } else if s < 7200.0 {
+        (s / 60.0, "min")
+    } else if s < 2.0 * 86400.0 {
+        (s / 3600.0, "h")
+    } else if s < 2.0 * 365.25 * 86400.0 {
+        (s / 86400.0, "days")
+    } else {
+        (s / (365.25 * 86400.0), "years")
+    };
+    format!("{v:.0} {unit}")
+}
+
 /// A bad row of file `name` at `line`.
 fn row_error(name: &str, line: u64, message: String) -> MapError {
     MapError::Csv(CsvError::Row {
@@ -838,180 +1041,4 @@ pub enum MapError {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    fn map(text: &str) -> Result<ImportMap, ConfigError> {
-        from_source(Source::from_text("m.toml", text))
-    }
-
-    const TEMPS: &str = "[temperatures]\nt1 = \"a\"\nt2 = \"b\"\ntcase = \"c\"\nchamber = \"d\"\n";
-
-    fn with(rate: &str, rest: &str) -> String {
-        format!(
-            "[time]\ncolumn = \"t\"\nform = \"seconds\"\n\n[rate]\ncolumn = \"r\"\n{rate}\n\n{TEMPS}\n{rest}"
-        )
-    }
-
-    const FIXED: &str = "[orientation]\nfixed = { azimuth_deg = 90.0, elevation_deg = 0.0, roll_deg = 0.0 }\n[step]\nboundaries = [{ from_s = 0.0, label = \"a\" }, { from_s = 2.0, label = \"b\" }]\n";
-
-    #[test]
-    fn every_rate_unit_is_converted_to_deg_per_hour() {
-        let w = 7.292_115e-5_f64;
-        for (unit, cell, want) in [
-            ("unit = \"deg/h\"", "15.041", 15.041),
-            ("unit = \"deg/s\"", "0.5", 1800.0),
-            ("unit = \"rad/s\"", &format!("{w}"), w.to_degrees() * 3600.0),
-            // 0.15 arcsec in 10 ms is 15 arcsec/s, 15 deg/h.
-            ("unit = \"arcsec/sample\"\nsample_s = 0.01", "0.15", 15.0),
-            (
-                "unit = \"counts\"\nscale_arcsec = 0.05\nsample_s = 0.01",
-                "3",
-                15.0,
-            ),
-        ] {
-            let m = map(&with(unit, FIXED)).unwrap_or_else(|e| panic!("{unit}: {e}"));
-            let text = format!("t,r,a,b,c,d\n0.25,{cell},20,20,20,20\n");
-            let got = m.parse(text.as_bytes(), "f.csv").expect("parses");
-            assert!(
-                (got.rows[0].rate_dph - want).abs() < 1e-9 * want.abs().max(1.0),
-                "{unit}: {}",
-                got.rows[0].rate_dph
-            );
-        }
-    }
-
-    #[test]
-    fn kelvin_dates_steps_and_poses_come_out_as_interchange_rows() {
-        let text = "[file]\ndelimiter = \";\"\n[time]\ncolumn = 1\nform = \"datetime\"\n[rate]\ncolumn = \"r\"\nunit = \"deg/h\"\n[temperatures]\nunit = \"K\"\nt1 = \"a\"\nt2 = \"b\"\ntcase = \"c\"\nchamber = \"d\"\n[step]\ncolumn = \"s\"\n[orientation.by_step]\nup = { azimuth_deg = 0.0, elevation_deg = 90.0, roll_deg = 0.0 }\nnorth = { azimuth_deg = 0.0, elevation_deg = 0.0, roll_deg = 0.0 }\n";
-        let m = map(text).expect("map");
-        let csv = "when;r;a;b;c;d;s\n2026-03-02T08:00:00.5+07:00;12;293.15;294.15;295.15;296.15;up\n2026-03-02T01:00:01.5Z;9;293.15;293.15;293.15;293.15;north\n";
-        let got = m.parse(csv.as_bytes(), "f.csv").expect("parses");
-        assert_eq!(
-            got.power_on_utc.as_deref(),
-            Some("2026-03-02T01:00:00.500+00:00")
-        );
-        let r = &got.rows;
-        assert_eq!(r.len(), 2);
-        assert_eq!((r[0].time_s, r[1].time_s), (0.0, 1.0));
-        assert!((r[0].t1_c - 20.0).abs() < 1e-9 && (r[0].chamber_c - 23.0).abs() < 1e-9);
-        assert_eq!((r[0].elevation_deg, r[1].elevation_deg), (90.0, 0.0));
-        assert_eq!(r[1].step, "north");
-        // A step the map gives no pose is refused with its line.
-        let bad = format!("{csv}2026-03-02T08:00:02.5+07:00;9;293.15;293.15;293.15;293.15;east\n");
-        let e = m
-            .parse(bad.as_bytes(), "f.csv")
-            .expect_err("no pose")
-            .to_string();
-        assert!(e.starts_with("f.csv:4: step \"east\" has no pose"), "{e}");
-    }
-
-    #[test]
-    fn samples_finer_than_a_second_are_averaged_per_second_and_step() {
-        let m = map(&with(
-            "unit = \"counts\"\nscale_arcsec = 0.01\nsample_s = 0.01",
-            FIXED,
-        ))
-        .expect("map");
-        let mut csv = String::from("t,r,a,b,c,d\n");
-        for k in 0..400 {
-            // Alternating 10 and 20 counts: 15 counts of 0.01 arcsec per 10 ms.
-            csv.push_str(&format!(
-                "{},{},20,20,20,{}\n",
-                k as f64 * 0.01,
-                10 + 10 * (k % 2),
-                k / 100
-            ));
-        }
-        let got = m.parse(csv.as_bytes(), "f.csv").expect("parses");
-        assert_eq!(got.samples, 400);
-        let times: Vec<f64> = got.rows.iter().map(|r| r.time_s).collect();
-        assert_eq!(times, [0.5, 1.5, 2.5, 3.5]);
-        for (i, r) in got.rows.iter().enumerate() {
-            assert!((r.rate_dph - 15.0).abs() < 1e-9, "{r:?}");
-            assert_eq!(r.chamber_c, i as f64);
-            assert_eq!(r.step, if i < 2 { "a" } else { "b" });
-        }
-    }
-
-    #[test]
-    fn a_bad_map_or_cell_is_named_with_its_place() {
-        for (text, want) in [
-            (
-                with("unit = \"counts\"\nsample_s = 0.01", FIXED),
-                "m.toml:7:8: `rate.unit` is `counts`: give `scale_arcsec`",
-            ),
-            (
-                with("unit = \"deg/s\"\nsample_s = 0.01", FIXED),
-                "`rate.sample_s` is only for a rate per sample",
-            ),
-            (
-                with(
-                    "unit = \"deg/s\"",
-                    "[step]\ncolumn = \"s\"\n[orientation]\n",
-                ),
-                "`orientation` needs exactly one of",
-            ),
-            (
-                with(
-                    "unit = \"deg/s\"",
-                    "[orientation]\nfixed = { azimuth_deg = 0.0, elevation_deg = 95.0, roll_deg = 0.0 }\n[step]\ncolumn = \"s\"\n",
-                ),
-                "`orientation.fixed.elevation_deg`",
-            ),
-            (
-                with("unit = \"deg/s\"\nearth_rate_included = false", FIXED),
-                "`rate.earth_rate_included` must be true",
-            ),
-            (
-                with(
-                    "unit = \"deg/s\"",
-                    "[orientation]\nfixed = { azimuth_deg = 0.0, elevation_deg = 0.0, roll_deg = 0.0 }\n[step]\nboundaries = [{ from_s = 5.0, label = \"a\" }, { from_s = 2.0, label = \"b\" }]\n",
-                ),
-                "`step.boundaries.1.from_s` must be after",
-            ),
-        ] {
-            let e = map(&text).expect_err(want).to_string();
-            assert!(e.contains(want), "{e}");
-        }
-        let m = map(&with("unit = \"deg/s\"", FIXED)).expect("map");
-        for (csv, want) in [
-            (
-                "t,r,a,b,c\n",
-                "m.toml:13:11: `temperatures.chamber` names column \"d\", which f.csv's header does not have (its columns: t, r, a, b, c)",
-            ),
-            (
-                "t,r,a,b,c,d\n0,1,20,20,20,20\n1,x,20,20,20,20\n",
-                "f.csv:3: column \"r\" (rate): \"x\" is not a number",
-            ),
-            (
-                "t,r,a,b,c,d\n0,1,20,20,20,20\n0,1,20,20,20,20\n",
-                "f.csv:3: field time_s: 0 does not follow 0",
-            ),
-            (
-                "t,r,a,b,c,d\n0,1,20,20,20,900\n",
-                "f.csv:2: field chamber_c: 900 is outside",
-            ),
-            ("t,r,a,b,c,d\n", "f.csv:2: no samples"),
-        ] {
-            let e = m
-                .parse(csv.as_bytes(), "f.csv")
-                .expect_err(want)
-                .to_string();
-            assert!(e.starts_with(want), "{e}");
-        }
-    }
-
-    proptest::proptest! {
-        /// Arbitrary text under a good map: rows or an error, never a panic.
-        #[test]
-        fn arbitrary_input_never_panics(bytes in proptest::collection::vec(proptest::num::u8::ANY, 0..2000)) {
-            if let Ok(m) = map(&with("unit = \"counts\"\nscale_arcsec = 0.01\nsample_s = 0.01", FIXED)) {
-                let _ = m.parse(bytes.as_slice(), "fuzz.csv");
-                let mut text = b"t,r,a,b,c,d\n".to_vec();
-                text.extend_from_slice(&bytes);
-                let _ = m.parse(text.as_slice(), "fuzz.csv");
-            }
-        }
-    }
-}
+mod tests;

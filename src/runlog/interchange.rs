@@ -33,6 +33,12 @@ pub const HEADER: [&str; 10] = [
 /// neither; an empty cell is a row whose angles are not known).
 pub const TABLE_COLUMNS: [&str; 2] = ["outer_deg", "inner_deg"];
 
+/// Optional column after the ten (and the table's): the label of the
+/// record the row was recorded in, empty for a row taken outside any
+/// record (a move, a wait, a soak). `export` writes it; without it,
+/// `import` finds the records from the step labels.
+pub const RECORD_COLUMN: &str = "record";
+
 /// Table angles a row may have, deg (ten turns either way, as a bench's
 /// table range).
 pub const TABLE_RANGE_DEG: (f64, f64) = (-3600.0, 3600.0);
@@ -76,6 +82,11 @@ pub struct Row {
     /// Inner table axis angle, deg, where known.
     #[serde(default)]
     pub inner_deg: Option<f64>,
+    /// The record the row was recorded in: `Some("")` for a row taken
+    /// outside any record, none when the file does not say (no `record`
+    /// column).
+    #[serde(default)]
+    pub record: Option<String>,
 }
 
 impl Row {
@@ -166,6 +177,9 @@ pub enum CsvError {
         /// Cause.
         cause: std::io::Error,
     },
+    /// Not a regular file, or not readable (`config::open_file`).
+    #[error(transparent)]
+    File(#[from] crate::config::InputError),
     /// A bad header or row.
     #[error("{path}:{line}: {message}")]
     Row {
@@ -178,13 +192,37 @@ pub enum CsvError {
     },
 }
 
-/// Read and check a whole interchange CSV.
+/// The most one line of a CSV may hold, bytes: a row of a lab's file is
+/// a few hundred; a longer line is a file of another kind, and reading
+/// stops there rather than hold it.
+pub const MAX_LINE_BYTES: usize = 1 << 20;
+
+/// A CSV file opened for reading: a regular file (a FIFO or a device is
+/// refused by name, never waited on or read), its lines at most
+/// [`MAX_LINE_BYTES`] (the file itself may be of any length).
+pub fn open_rows(path: &Path) -> Result<crate::config::LinesOfAtMost<std::fs::File>, CsvError> {
+    let file = crate::config::open_file(path)?;
+    Ok(crate::config::LinesOfAtMost::new(file, MAX_LINE_BYTES))
+}
+
+/// The error of a read of `input` that stopped at a line longer than
+/// [`MAX_LINE_BYTES`], with its line; `name` labels it.
+pub fn overlong<R>(input: &crate::config::LinesOfAtMost<R>, name: &str) -> Option<CsvError> {
+    input.overlong().map(|e| CsvError::Row {
+        path: name.to_owned(),
+        line: e.line,
+        message: format!(
+            "the line is longer than {} bytes; a CSV row is far shorter: is it the right file?",
+            e.max
+        ),
+    })
+}
+
+/// Read and check a whole interchange CSV ([`open_rows`]).
 pub fn read(path: &Path) -> Result<Vec<Row>, CsvError> {
-    let file = std::fs::File::open(path).map_err(|cause| CsvError::Io {
-        path: path.display().to_string(),
-        cause,
-    })?;
-    parse(file, &path.display().to_string())
+    let name = path.display().to_string();
+    let mut input = open_rows(path)?;
+    parse(&mut input, &name).map_err(|e| overlong(&input, &name).unwrap_or(e))
 }
 
 /// Parse interchange CSV from any reader; `name` labels errors.
@@ -203,18 +241,7 @@ pub fn parse(input: impl std::io::Read, name: &str) -> Result<Vec<Row>, CsvError
         .map_err(|e| err(1, format!("unreadable header: {e}")))?
         .clone();
     let got: Vec<&str> = header.iter().collect();
-    let with_table: Vec<&str> = HEADER.iter().chain(&TABLE_COLUMNS).copied().collect();
-    if got != HEADER && got != with_table {
-        return Err(err(
-            1,
-            format!(
-                "the header must be `{}` (then `,{}` where the table angles are known); found `{}`",
-                HEADER.join(","),
-                TABLE_COLUMNS.join(","),
-                got.join(",")
-            ),
-        ));
-    }
+    let has_record = check_header(&got).map_err(|m| err(1, m))?;
     let mut rows: Vec<Row> = Vec::new();
     for rec in rdr.records() {
         let rec = rec.map_err(|e| {
@@ -235,6 +262,10 @@ pub fn parse(input: impl std::io::Read, name: &str) -> Result<Vec<Row>, CsvError
             };
             err(line, message)
         })?;
+        let mut row = row;
+        if has_record && row.record.is_none() {
+            row.record = Some(String::new());
+        }
         row.check(rows.last()).map_err(|m| err(line, m))?;
         rows.push(row);
     }
@@ -242,6 +273,33 @@ pub fn parse(input: impl std::io::Read, name: &str) -> Result<Vec<Row>, CsvError
         return Err(err(2, "no samples after the header".into()));
     }
     Ok(rows)
+}
+
+/// Check a header: the ten columns in order, then any of the optional
+/// ones (`outer_deg,inner_deg` together, `record`), each once. Whether it
+/// has the `record` column.
+fn check_header(got: &[&str]) -> Result<bool, String> {
+    let wrong = || {
+        format!(
+            "the header must be `{}`, then optionally `{}` (where the table angles are known) and `{RECORD_COLUMN}` (which rows were recorded); found `{}`",
+            HEADER.join(","),
+            TABLE_COLUMNS.join(","),
+            got.join(",")
+        )
+    };
+    if got.len() < HEADER.len() || got[..HEADER.len()] != HEADER {
+        return Err(wrong());
+    }
+    let rest = &got[HEADER.len()..];
+    let known = |c: &&str| TABLE_COLUMNS.contains(c) || *c == RECORD_COLUMN;
+    let once = rest
+        .iter()
+        .all(|c| rest.iter().filter(|d| *d == c).count() == 1);
+    let table = rest.iter().filter(|c| TABLE_COLUMNS.contains(c)).count();
+    if !rest.iter().all(known) || !once || table == 1 {
+        return Err(wrong());
+    }
+    Ok(rest.contains(&RECORD_COLUMN))
 }
 
 /// 1 s means built row by row: rows of one whole second of `time_s` and
@@ -259,7 +317,7 @@ impl OneHz {
     /// Take the next row (in time order).
     pub fn push(&mut self, r: Row) {
         if let Some((a, n)) = &mut self.acc {
-            if r.time_s.floor() == a.time_s.floor() && r.step == a.step {
+            if r.time_s.floor() == a.time_s.floor() && r.step == a.step && r.record == a.record {
                 a.rate_dph += r.rate_dph;
                 a.t1_c += r.t1_c;
                 a.t2_c += r.t2_c;

@@ -370,6 +370,14 @@ pub struct ResultMeasurement {
     pub step: String,
     /// How it was obtained, or why it could not be.
     pub note: String,
+    /// Its uncertainty `{u, U, k}` (none: it could not be formed, or a log
+    /// written before format 3).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub uncertainty: Option<crate::analysis::uncertainty::Expanded>,
+    /// The guard band the decision rule moved its limits by (none: simple
+    /// acceptance, no limit or no uncertainty).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub guard_band: Option<f64>,
 }
 
 impl ResultMeasurement {
@@ -384,6 +392,8 @@ impl ResultMeasurement {
             outcome: m.outcome,
             step: m.step.clone(),
             note: m.note.clone(),
+            uncertainty: m.uncertainty.as_ref().map(|u| u.brief()),
+            guard_band: m.guard_band,
         }
     }
 }
@@ -405,12 +415,17 @@ pub struct ResultMeta {
     pub measurements: Vec<ResultMeasurement>,
     /// The state the bench was left in, as read back.
     pub bench_left: Option<BenchLeft>,
+    /// When the part ended, UTC, RFC 3339: the time the results store
+    /// records as its end (none in logs written before the key, and in an
+    /// import's).
+    pub end_time_utc: Option<String>,
 }
 
 impl ResultMeta {
     /// The record of a run's result.
     pub fn new(r: &RunResult) -> Self {
         Self {
+            end_time_utc: None,
             outcome: r.outcome,
             cleanup_completed: r.cleanup_completed,
             device_time_s: Some(r.device_time_s),
@@ -418,6 +433,14 @@ impl ResultMeta {
             error: r.error.clone(),
             measurements: r.measurements.iter().map(ResultMeasurement::new).collect(),
             bench_left: r.bench_left.clone(),
+        }
+    }
+
+    /// The record, stating that the part ended at `utc` (RFC 3339).
+    pub fn ended_at(self, utc: &str) -> Self {
+        Self {
+            end_time_utc: Some(utc.to_owned()),
+            ..self
         }
     }
 
@@ -448,6 +471,9 @@ impl ResultMeta {
             && let Ok(j) = serde_json::to_string(b)
         {
             put("bench_left", j);
+        }
+        if let Some(t) = &self.end_time_utc {
+            put("end_time_utc", t.clone());
         }
         m
     }
@@ -496,6 +522,7 @@ impl ResultMeta {
             error,
             measurements,
             bench_left,
+            end_time_utc: take_opt(m, "end_time_utc"),
         })
     }
 }
@@ -544,6 +571,15 @@ mod tests {
                     sha256: Some("ab".repeat(32)),
                     from: Some("results.sqlite".into()),
                     override_reason: None,
+                    identity: Some(crate::coeffs::SetIdentity {
+                        status: crate::coeffs::SetStatus::Edited,
+                        claimed_unit: None,
+                        claimed_version: Some(9),
+                        stored: None,
+                        fitted_on_runs: Vec::new(),
+                        store: Some("results.sqlite".into()),
+                        note: "an edited copy".into(),
+                    }),
                 },
                 mount: Some(crate::geometry::Orientation::new(90.0, 0.0, 0.0)),
                 twin_toml: None,
@@ -600,6 +636,20 @@ mod tests {
         let res = ResultMeta::from_entries(&r).expect("format 1 result");
         assert_eq!(res.outcome, Outcome::Pass);
         assert!(res.measurements.is_empty() && res.device_time_s.is_none());
+    }
+
+    #[test]
+    fn a_result_states_when_its_part_ended_and_an_older_one_reads_without() {
+        let mut r = BTreeMap::new();
+        r.insert("outcome".to_owned(), "pass".to_owned());
+        let older = ResultMeta::from_entries(&r).expect("a result of an earlier gyrobench");
+        assert_eq!(older.end_time_utc, None);
+        let ended = older.ended_at("2026-12-03T10:00:00+00:00");
+        let back = ResultMeta::from_entries(&ended.to_entries()).expect("reads back");
+        assert_eq!(
+            back.end_time_utc.as_deref(),
+            Some("2026-12-03T10:00:00+00:00")
+        );
     }
 
     #[test]

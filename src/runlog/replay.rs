@@ -59,6 +59,9 @@ pub struct Replayed {
     /// Whether the log holds its end record (the run's own outcome); a
     /// log without one was cut short (a kill, a full disk).
     pub ended: bool,
+    /// When the part ended, as its end record states (none: a log without
+    /// one, or written before the key).
+    pub end_time_utc: Option<String>,
     /// The pose each record of an imported run was taken in, as logged
     /// (label, orientation, table angles where known), in run order; a
     /// live run's poses are its procedure's moves.
@@ -129,8 +132,7 @@ struct FramesMsg {
     t1_raw: Sum,
     t2_raw: Sum,
     tcase_raw: Sum,
-    #[serde(rename = "status")]
-    _status: IgnoredAny,
+    status: Vec<u16>,
 }
 
 /// Scale factors of the frames seen so far.
@@ -172,6 +174,8 @@ struct State<'a> {
     poses: Vec<(String, Orientation, Option<TableAngles>)>,
     /// How far a record's ends may fall off its frames on the logged bench.
     record_edge_s: f64,
+    /// What the run's figures were judged by.
+    judging: measure::Judging,
     link: LinkStats,
     frames: u64,
     last_step: Option<String>,
@@ -311,6 +315,7 @@ impl<'a> State<'a> {
                                 }),
                         });
                 self.record_edge_s = l.bench.record_edge_s();
+                self.judging = measure::Judging::new(&l.procedure, &l.bench, meta.format);
                 self.procedure = Some(l.procedure);
                 if let Some(prev) = &meta.previous_part {
                     if prev.contains('/') || prev.contains('\\') || prev.starts_with('.') {
@@ -348,6 +353,10 @@ impl<'a> State<'a> {
                     self.completed = r.start_at;
                     self.earlier = Some(Box::new(earlier));
                 }
+                self.records.set_status_bits(
+                    l.bench
+                        .unit_status_bits(meta.unit().map_or("", |u| u.slot.as_str())),
+                );
                 self.meta = Some(meta);
             }
             RESULT_META => {
@@ -370,6 +379,7 @@ impl<'a> State<'a> {
             meta: None,
             result_meta: None,
             procedure: None,
+            judging: measure::Judging::default(),
             coeffs: None,
             records: Records::default(),
             measurements: Vec::new(),
@@ -405,7 +415,10 @@ impl<'a> State<'a> {
                 let (outcome, error) = match r.outcome {
                     Outcome::Error | Outcome::Aborted => (r.outcome, r.error),
                     // pass or fail: the verdict is the recomputed one.
-                    Outcome::Pass | Outcome::Fail => (verdict, verdict_error),
+                    Outcome::Pass
+                    | Outcome::Fail
+                    | Outcome::ConditionalPass
+                    | Outcome::ConditionalFail => (verdict, verdict_error),
                 };
                 (
                     outcome,
@@ -502,13 +515,21 @@ impl<'a> State<'a> {
         }
         self.frames += m.counts.n;
         let clamp = |v: i64| i32::try_from(v).unwrap_or(if v < 0 { i32::MIN } else { i32::MAX });
-        let sums = TickSums {
+        if m.status.len() as u64 != m.counts.n {
+            return Err(self.log_err("a /gyro/frames message has arrays of unequal length"));
+        }
+        let mut sums = TickSums {
             n: m.counts.n,
             counts: m.counts.sum,
             temps: [m.t1_raw.sum, m.t2_raw.sum, m.tcase_raw.sum],
             extremes: m.counts.extremes.map(|(lo, hi)| (clamp(lo), clamp(hi))),
             runs: m.counts.runs,
+            ..TickSums::default()
         };
+        let bits = self.records.status_bits();
+        for &s in &m.status {
+            sums.add_status(s, &bits);
+        }
         let scales = Scales {
             dt_s: m.dt_s,
             lsb_arcsec: m.lsb_arcsec,
@@ -557,6 +578,8 @@ impl<'a> State<'a> {
             reference_dph: table.earth_rate_dph,
             chamber_c: self.chamber_c,
             table_rates_dps: table.rates_dps,
+            table_angles: table.angles,
+            axis_gravity_g: -table.orientation.elevation_deg.to_radians().sin(),
         };
         self.records.push_sums(
             &sums,
@@ -575,6 +598,10 @@ impl<'a> State<'a> {
     /// A step started or ended; a measure step is computed at its start,
     /// on the records so far, as in the live run.
     fn step_event(&mut self, e: &StepEvent) -> Result<(), String> {
+        // A power-on, as the live run recorded it (a step's or the run's own).
+        if let Some(on) = &e.power_on {
+            self.records.power_on(on.clone());
+        }
         if e.phase == StepPhase::Restore {
             return Ok(());
         }
@@ -614,8 +641,13 @@ impl<'a> State<'a> {
                     StepKind::Record { label, .. } => self.records.start(label),
                     StepKind::Measure(m) => {
                         let coeffs = self.coeffs_override.or(self.coeffs.as_ref());
-                        self.measurements
-                            .push(measure::compute(m, &self.records, coeffs, &e.key));
+                        self.measurements.push(measure::compute(
+                            m,
+                            &self.records,
+                            coeffs,
+                            &e.key,
+                            &self.judging,
+                        ));
                     }
                     _ => {}
                 }
@@ -718,6 +750,7 @@ pub fn replay_unit(
     };
     let last_state_s = st.table.map_or(0.0, |t| t.t_s);
     let ended = st.result_meta.is_some();
+    let end_time_utc = st.result_meta.as_ref().and_then(|r| r.end_time_utc.clone());
     let end = st.ending(&read, last_state_s);
     // Damaged parts skipped: what the log still holds is replayed, but the
     // run cannot be judged on a log with holes.
@@ -749,6 +782,7 @@ pub fn replay_unit(
         completed_steps: st.completed,
         part,
         ended,
+        end_time_utc,
         poses: st.poses,
     })
 }

@@ -75,12 +75,16 @@ pub struct DeviceBench {
     record_edge_s: f64,
     lsb_arcsec: f64,
     temp_lsb_c: f64,
+    /// What each unit's status word means.
+    status_bits: Vec<crate::protocol::frame::StatusBits>,
     supply: Option<(ScpiSupply, SupplyDevice)>,
     /// Whether the gyro's silence is expected now: while the run has the
     /// unit's power off, and for a while after switching it on.
     quiet: Arc<Mutex<Quiet>>,
     /// The table as the last tick ended (device time, angles, rates).
     last_pose: Option<(f64, (TableAngles, TableAngles))>,
+    /// What the links say as they drop, come back or are lost.
+    watch: Arc<crate::driver::LinkWatch>,
 }
 
 /// Longest time between two table reads over which the reference is
@@ -104,28 +108,28 @@ impl DeviceBench {
             gyro,
             others,
             supply,
+            watch,
         } = open;
         table.servo_on().await?;
-        // The unit is powered as the bench file says before anything else:
-        // an output already on at that voltage stays as it is.
-        let mut booting = false;
+        // The supply is set as the bench file says, its output left as
+        // found: the run switches the unit on itself, and records when
+        // (`Run::power_at_start`, a procedure's `power` step). A unit
+        // found off is silent until then.
+        let mut off = false;
         let supply = match (supply, &cfg.devices.supply) {
             (Some(mut p), Some(c)) => {
-                p.configure(c.channel, c.volts, c.limit_a, c.protection)
-                    .await?;
-                p.output(c.channel, true).await?;
-                // A unit that was off (a safe state's) boots first.
-                booting = true;
+                let found = p.read(c.channel).await?;
+                if !found.on {
+                    p.configure(c.channel, c.volts, c.limit_a, c.protection)
+                        .await?;
+                }
+                off = !found.on;
                 Some((p, c.clone()))
             }
             _ => None,
         };
         let reading = chamber.read().await?;
-        let quiet = Arc::new(Mutex::new(if booting {
-            Quiet::Booting(std::time::Instant::now() + Duration::from_secs_f64(BOOT_S))
-        } else {
-            Quiet::No
-        }));
+        let quiet = Arc::new(Mutex::new(if off { Quiet::Off } else { Quiet::No }));
         let batch = !cfg.slots.is_empty();
         let (tx, rx) = mpsc::channel(1 << 16);
         let stats: Vec<_> = std::iter::once(gyro)
@@ -175,9 +179,11 @@ impl DeviceBench {
             record_edge_s: cfg.record_edge_s(),
             lsb_arcsec: cfg.devices.gyro.lsb_arcsec,
             temp_lsb_c: layout.temp_lsb_c,
+            status_bits: cfg.status_bits(),
             supply,
             quiet,
             last_pose: None,
+            watch,
         })
     }
 
@@ -458,6 +464,10 @@ impl BenchIo for DeviceBench {
         self.stats.len()
     }
 
+    fn status_bits(&self, slot: usize) -> crate::protocol::frame::StatusBits {
+        self.status_bits.get(slot).copied().unwrap_or_default()
+    }
+
     fn slot_link_stats(&self, slot: usize) -> LinkStats {
         self.stats.get(slot).map_or_else(LinkStats::default, |s| {
             s.lock().map_or_else(|p| *p.into_inner(), |s| *s)
@@ -502,6 +512,10 @@ impl BenchIo for DeviceBench {
         let chamber = self.chamber.read().await?;
         let table = self.table.read().await?;
         Ok((chamber, table))
+    }
+
+    fn link_watch(&self) -> Option<Arc<crate::driver::LinkWatch>> {
+        Some(self.watch.clone())
     }
 
     async fn identify(&mut self) -> super::Identities {

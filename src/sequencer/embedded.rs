@@ -128,9 +128,10 @@ impl EmbeddedBench {
     }
 
     /// Power the unit from a simulated supply as the bench file describes
-    /// it: on at its voltage and limit from the start, settled.
+    /// it: wired at its voltage and limit, the output off until the run
+    /// switches it on (the unit off, as on a bench before its run).
     pub fn with_supply(mut self, cfg: &SupplyDevice) -> Self {
-        let sim = Supply::powering(
+        let sim = Supply::wired(
             cfg.protocol,
             cfg.channel,
             cfg.volts,
@@ -161,6 +162,10 @@ impl EmbeddedBench {
                 p.shorted = true;
                 p.sim.load.0.steady_a *= 3.0;
             }
+            p.sim.ignores_off |= self
+                .faults
+                .iter()
+                .any(|(t, f)| *f == Fault::SupplyIgnoresOff && self.twin.time_s() >= *t);
             self.twin.set_powered(p.sim.unit_powered());
             while let Some(t_change) = p.sim.advance_until_change(t_s) {
                 self.twin.run_until(t_change, |_, g| on_frame(g));
@@ -242,7 +247,11 @@ impl EmbeddedBench {
 
     fn state(&self) -> BenchState {
         let (air, target, _) = self.twin.chamber_state();
-        let angles = self.twin.table_angles();
+        // The table's encoder latched by the unit's frame strobe: its
+        // angles where the tick's last frame ended (the tick's end itself
+        // when the frames end with the periods), so that a record's
+        // counts and its table angles end together.
+        let angles = self.twin.frame_table_angles();
         let rates = self.twin.table_rates();
         BenchState {
             t_s: self.twin.time_s(),
@@ -280,6 +289,13 @@ impl BenchIo for EmbeddedBench {
 
     fn is_simulated(&self) -> bool {
         true
+    }
+
+    fn power_by_hand(&mut self, on: bool) {
+        // A bench with a supply powers its units through it alone.
+        if self.supply.is_none() {
+            self.twins().for_each(|t| t.set_powered(on));
+        }
     }
 
     fn frame_dt_s(&self) -> f64 {
@@ -452,7 +468,7 @@ impl BenchIo for EmbeddedBench {
         let mut crc_errors = 0;
         let from = (
             self.twin.time_s(),
-            self.twin.table_angles(),
+            self.twin.frame_table_angles(),
             self.twin.table_rates(),
         );
         self.run_to(t_s, |g| {

@@ -4,7 +4,7 @@
 
 use crate::procedure::Step;
 
-pub use gyrobench_log::schema::{Level, StepEvent, StepPhase};
+pub use gyrobench_log::schema::{Level, PowerOn, PowerOnSource, StepEvent, StepPhase};
 
 /// The event for step `s` at run-order position `index`.
 pub fn step_event(t_s: f64, phase: StepPhase, index: usize, s: &Step) -> StepEvent {
@@ -19,5 +19,6 @@ pub fn step_event(t_s: f64, phase: StepPhase, index: usize, s: &Step) -> StepEve
         description: s.describe(),
         link: None,
         slot_links: Vec::new(),
+        power_on: None,
     }
 }

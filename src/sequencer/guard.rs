@@ -64,6 +64,10 @@ impl<B: BenchIo> BenchIo for Guarded<B> {
         self.inner.is_simulated()
     }
 
+    fn power_by_hand(&mut self, on: bool) {
+        self.inner.power_by_hand(on);
+    }
+
     fn frame_dt_s(&self) -> f64 {
         self.inner.frame_dt_s()
     }
@@ -186,6 +190,10 @@ impl<B: BenchIo> BenchIo for Guarded<B> {
         self.inner.units()
     }
 
+    fn status_bits(&self, slot: usize) -> crate::protocol::frame::StatusBits {
+        self.inner.status_bits(slot)
+    }
+
     fn slot_link_stats(&self, slot: usize) -> LinkStats {
         self.inner.slot_link_stats(slot)
     }
@@ -213,6 +221,10 @@ impl<B: BenchIo> BenchIo for Guarded<B> {
 
     async fn identify(&mut self) -> super::Identities {
         self.inner.identify().await
+    }
+
+    fn link_watch(&self) -> Option<std::sync::Arc<crate::driver::LinkWatch>> {
+        self.inner.link_watch()
     }
 }
 

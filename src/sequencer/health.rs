@@ -247,6 +247,12 @@ impl RecordHealth {
             ));
         }
         let (len, value) = self.runs.longest;
+        // Zero counts frame after frame is a ring laser locked in (an
+        // input inside its lock-in band: the beams lock and it sends
+        // nothing), which the dead-band test measures: not a fault.
+        if value == 0 {
+            return None;
+        }
         let stuck_s = len as f64 * self.frame_dt_s;
         let after = if value.abs() <= SMALL_COUNTS {
             STUCK_AT_ZERO_AFTER_S
@@ -369,11 +375,12 @@ mod tests {
         brief.add(1_600, (0, 0), &stuck(1_600, 0), 0.0025, 0.25);
         brief.add(400, (-3, 4), &varied(400), 0.0025, 0.25);
         assert!(!brief.problem().is_some_and(|p| p.contains("stuck")));
-        // Zeros (or one count a frame) for 20 s: a quiet gyro near zero
-        // input, or at a whole count a frame; for 70 s: frozen.
+        // One count a frame for 20 s: a quiet gyro at a whole count a
+        // frame; for 70 s: frozen. Zeros, however long: locked in (the
+        // dead band), not stuck.
         for (value, zeros_s, frozen) in [
             (0, 20u64, false),
-            (0, 70, true),
+            (0, 70, false),
             (-1, 20, false),
             (-1, 70, true),
         ] {

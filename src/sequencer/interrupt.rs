@@ -5,11 +5,24 @@
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicBool, Ordering};
 
+/// Called with the cause of each request, as it is made.
+type Hook = Box<dyn Fn(&str) + Send + Sync>;
+
 /// A stop request shared between whoever asks and the sequencer.
-#[derive(Debug, Default)]
+#[derive(Default)]
 pub struct Interrupt {
     requested: AtomicBool,
     cause: Mutex<Option<String>>,
+    hooks: Mutex<Vec<Hook>>,
+}
+
+impl std::fmt::Debug for Interrupt {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Interrupt")
+            .field("requested", &self.requested)
+            .field("cause", &self.cause)
+            .finish_non_exhaustive()
+    }
 }
 
 impl Interrupt {
@@ -24,8 +37,30 @@ impl Interrupt {
         if first {
             *c = Some(cause.to_owned());
         }
+        drop(c);
         self.requested.store(true, Ordering::Relaxed);
+        for hook in self
+            .hooks
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .iter()
+        {
+            hook(cause);
+        }
         first
+    }
+
+    /// Call `hook` with the cause of every request from now on (at once
+    /// when one was made already): what waits on a device learns that
+    /// the run is stopping, even inside a wait.
+    pub fn on_request(&self, hook: impl Fn(&str) + Send + Sync + 'static) {
+        if let Some(cause) = self.cause() {
+            hook(&cause);
+        }
+        self.hooks
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .push(Box::new(hook));
     }
 
     /// A stop was asked for and not yet acted on.

@@ -7,6 +7,7 @@
 //! recorder, the display) and to the record store that measure steps
 //! compute on.
 
+pub mod compensated;
 pub mod device;
 pub mod embedded;
 pub mod events;
@@ -14,9 +15,11 @@ pub mod finish;
 pub mod guard;
 pub mod health;
 pub mod interrupt;
+mod links;
 pub mod measure;
 pub mod resume;
 pub mod spill;
+pub mod uncertainty;
 
 use std::sync::Arc;
 
@@ -26,7 +29,7 @@ use serde::Serialize;
 use crate::driver::{ChamberReading, DeviceError, InPosition, TableReading};
 use crate::geometry::{Orientation, TableAngles};
 use crate::procedure::{POWER_TIMEOUT_S, Procedure, Step, StepKind};
-pub use events::{Level, StepEvent, StepPhase};
+pub use events::{Level, PowerOn, PowerOnSource, StepEvent, StepPhase};
 pub use interrupt::Interrupt;
 use measure::{Measurement, Records};
 pub use resume::{Resume, resume_plan};
@@ -122,6 +125,10 @@ pub trait BenchIo: Send {
     fn now_s(&self) -> f64;
     /// True when the devices are simulated (prompts answer themselves).
     fn is_simulated(&self) -> bool;
+    /// A simulated bench without a supply: its operator switches the unit
+    /// on or off by hand, now (a device bench's operator does it on the
+    /// bench; nothing to do here).
+    fn power_by_hand(&mut self, _on: bool) {}
     /// Frame period, s.
     fn frame_dt_s(&self) -> f64;
     /// Device time by which a record's ends may fall off its frames', s:
@@ -158,6 +165,11 @@ pub trait BenchIo: Send {
     fn units(&self) -> usize {
         1
     }
+    /// What the status word of unit `slot`'s frames means (0: the first
+    /// unit's; default: the documented frame's).
+    fn status_bits(&self, _slot: usize) -> crate::protocol::frame::StatusBits {
+        crate::protocol::frame::StatusBits::default()
+    }
     /// Link figures of unit `slot`'s gyro so far (0: the first unit's,
     /// [`BenchIo::link_stats`]).
     fn slot_link_stats(&self, slot: usize) -> crate::protocol::frame::LinkStats {
@@ -189,6 +201,11 @@ pub trait BenchIo: Send {
     /// Ask the chamber and the table what they are, each as it reports
     /// itself (or why it did not).
     async fn identify(&mut self) -> Identities;
+    /// What the bench's links say as they drop, come back or are lost
+    /// (none: a bench without links, the embedded one).
+    fn link_watch(&self) -> Option<std::sync::Arc<crate::driver::LinkWatch>> {
+        None
+    }
 }
 
 /// The identities a bench's instruments reported.
@@ -295,14 +312,28 @@ pub trait Observer {
 /// An observer that is the run's operator too: it may be asked to
 /// confirm a prompt.
 pub trait Operator: Observer {
-    /// Ask the operator to confirm `text`; returns when confirmed. The
-    /// default confirms at once (no operator).
-    fn prompt(&mut self, _text: &str) {}
+    /// Ask the operator to confirm `text`; returns how it was confirmed,
+    /// or why it cannot be (the run then stops at the prompt). The
+    /// default has no operator to ask: on a real bench a prompt it meets
+    /// stops the run (a simulated one never asks it).
+    fn prompt(&mut self, _text: &str) -> Result<Confirmed, String> {
+        Err("nobody watches this run to answer it".into())
+    }
     /// Whether an operator answers prompts even on a simulated bench (a
     /// station page); else a simulated run goes on without asking.
     fn answers_prompts(&self) -> bool {
         false
     }
+}
+
+/// How an operator confirmed a prompt.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Confirmed {
+    /// Answered when asked (the terminal, the station's page).
+    Now,
+    /// Confirmed before the run started, for a run nobody watches
+    /// (`run --unattended --operator NAME`).
+    Beforehand,
 }
 
 /// Tell the run's operator (a display: whatever fails there loses nothing)
@@ -316,32 +347,56 @@ fn tell(log: &mut dyn Observer, watch: &mut dyn Operator, e: &Event<'_>) -> std:
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Outcome {
-    /// Every measurement within its limits.
+    /// Every measurement passed by the procedure's decision rule.
     Pass,
-    /// A measurement outside its limits.
+    /// A measurement outside its limits (or, guarded, inside its guard
+    /// band).
     Fail,
     /// A device or data failure ended the run.
     Error,
     /// The operator interrupted the run.
     Aborted,
+    /// Non-binary rule: none failed, and at least one passed only
+    /// conditionally (within its limits by less than its uncertainty).
+    ConditionalPass,
+    /// Non-binary rule: none failed outright, and at least one failed
+    /// conditionally (beyond its limits by less than its uncertainty).
+    ConditionalFail,
 }
 
 impl Outcome {
-    /// `pass`, `fail`, `error` or `aborted`.
+    /// Every outcome.
+    pub const ALL: [Self; 6] = [
+        Self::Pass,
+        Self::Fail,
+        Self::Error,
+        Self::Aborted,
+        Self::ConditionalPass,
+        Self::ConditionalFail,
+    ];
+
+    /// `pass`, `fail`, `error`, `aborted`, `conditional_pass` or
+    /// `conditional_fail`.
     pub fn as_str(self) -> &'static str {
         match self {
             Self::Pass => "pass",
             Self::Fail => "fail",
             Self::Error => "error",
             Self::Aborted => "aborted",
+            Self::ConditionalPass => "conditional_pass",
+            Self::ConditionalFail => "conditional_fail",
         }
     }
 
     /// The outcome named by [`Outcome::as_str`].
     pub fn parse(s: &str) -> Option<Self> {
-        [Self::Pass, Self::Fail, Self::Error, Self::Aborted]
-            .into_iter()
-            .find(|o| o.as_str() == s)
+        Self::ALL.into_iter().find(|o| o.as_str() == s)
+    }
+
+    /// A verdict a run that went to its end gives (not an error or an
+    /// abort).
+    pub fn is_verdict(self) -> bool {
+        !matches!(self, Self::Error | Self::Aborted)
     }
 }
 
@@ -420,9 +475,11 @@ impl RunResult {
     pub fn worst_unit(&self) -> usize {
         let rank = |o: Outcome| match o {
             Outcome::Pass => 0,
-            Outcome::Fail => 1,
-            Outcome::Error => 2,
-            Outcome::Aborted => 3,
+            Outcome::ConditionalPass => 1,
+            Outcome::ConditionalFail => 2,
+            Outcome::Fail => 3,
+            Outcome::Error => 4,
+            Outcome::Aborted => 5,
         };
         let outcome = |k: usize| match k.checked_sub(1).and_then(|i| self.others.get(i)) {
             Some(u) => u.outcome.unwrap_or(self.outcome),
@@ -523,17 +580,31 @@ pub struct Options {
     /// The bench's safe state leaves the supply's output on
     /// (`devices.supply.safe_state = "on"`).
     pub supply_safe_on: bool,
+    /// The bench's supply voltage and current limit (none: the bench has
+    /// no supply): a run whose procedure does not switch the unit on
+    /// itself switches it on at its start with them.
+    pub supply: Option<(f64, f64)>,
+    /// Wall time of this part's device time zero (the log's start): the
+    /// UTC of a power-on.
+    pub part_start_utc: Option<chrono::DateTime<chrono::Utc>>,
     /// A batch's units as the operator knows them (`slot A (RL16-0101)`),
     /// in order (empty: one unit).
     pub units: Vec<String>,
     /// A batch stops when one of its units cannot be judged (the bench's
     /// `on_unit_error = "stop"`); else that unit ends in error alone.
     pub stop_on_unit_error: bool,
+    /// What the figures are judged by (the procedure's decision rule, the
+    /// bench's declared uncertainties).
+    pub judging: measure::Judging,
 }
 
 /// How long past its expected end the bench may take to settle at the end
 /// of a run, s.
 pub const SETTLE_MARGIN_S: f64 = 120.0;
+
+/// The step key of the run's own switch-on at its start (a procedure
+/// that does not switch the unit on itself): its rows and events say so.
+pub const RUN_POWER_ON: &str = "power-on";
 
 /// How long after switching the unit on the `power` step reads the bench
 /// fast, s (ours: an RLG's turn-on inrush, the discharge igniting, is over
@@ -595,6 +666,8 @@ struct Run<'a> {
     /// The units (0: the first) whose record store's temporary file
     /// failed, and that was said.
     spill_said: Vec<usize>,
+    /// The power-on a step just made (for its end event).
+    pending_power_on: Option<PowerOn>,
 }
 
 /// One more unit of a batch as the run keeps it: the first unit's are the
@@ -731,6 +804,9 @@ impl Run<'_> {
     /// Write a step event (and its line in words).
     fn log_step(&mut self, phase: StepPhase, index: usize, s: &Step) -> Result<(), Stop> {
         let mut e = crate::sequencer::events::step_event(self.bench.now_s(), phase, index, s);
+        if phase != StepPhase::Start {
+            e.power_on = self.pending_power_on.take();
+        }
         if phase == StepPhase::End {
             e.link = self.record_link.take();
             if e.link.is_some() {
@@ -746,7 +822,14 @@ impl Run<'_> {
         let words = match phase {
             StepPhase::Start => s.start_message(),
             StepPhase::End => format!("end of step {}", s.key),
-            StepPhase::Restore => format!("restore {} (line {}): {}", s.key, s.line, s.describe()),
+            StepPhase::Restore => match &e.power_on {
+                Some(on) => format!(
+                    "power-on at {:.3} s of device time ({})",
+                    on.t_s,
+                    on.source.describe()
+                ),
+                None => format!("restore {} (line {}): {}", s.key, s.line, s.describe()),
+            },
         };
         self.log(Level::Debug, &words)
     }
@@ -754,6 +837,7 @@ impl Run<'_> {
     /// Say which of a batch's links failed since the last tick: the batch
     /// goes on without those units.
     fn say_unit_faults(&mut self) {
+        self.say_links();
         for (k, why) in self.bench.take_unit_faults() {
             let unit = self
                 .opts
@@ -765,6 +849,15 @@ impl Run<'_> {
             self.note(Level::Warning, &text);
         }
         self.say_spill_faults();
+    }
+
+    /// Tell what the bench's links said since last asked (a drop, a
+    /// return, a loss).
+    fn say_links(&mut self) {
+        if let Some(links) = self.bench.link_watch() {
+            let t_s = self.bench.now_s();
+            links::say(&links, t_s, self.log, self.watch, &mut self.log_failed);
+        }
     }
 
     /// Say once per unit that its record store's temporary file failed
@@ -842,11 +935,35 @@ impl Run<'_> {
         if self.opts.interrupt.is_requested() {
             return Err(Stop::Interrupted);
         }
-        let t = (self.bench.now_s() + 1.0).min(until_s);
-        self.bench
-            .advance(t, &mut self.tick)
-            .await
-            .map_err(Stop::Device)?;
+        let t0 = self.bench.now_s();
+        let t = (t0 + 1.0).min(until_s);
+        let links = self.bench.link_watch();
+        let advanced = links::telling(
+            self.bench.advance(t, &mut self.tick),
+            links.as_deref(),
+            t0,
+            self.log,
+            self.watch,
+            &mut self.log_failed,
+        )
+        .await;
+        if let Err(e) = advanced {
+            // A wait on a dropped link that an interrupt ended: the run
+            // stops as interrupted, the link's state said.
+            if matches!(e, DeviceError::GaveUp { .. }) && !self.cleaning_up {
+                if self.opts.interrupt.cause().is_some() {
+                    self.note(Level::Warning, &e.to_string());
+                    return Err(Stop::Interrupted);
+                }
+                // Found down after another link was lost: the run stops
+                // for the first loss.
+                if let Some(lost) = links.as_deref().and_then(|l| l.first_loss()) {
+                    self.note(Level::Warning, &e.to_string());
+                    return Err(Stop::Device(lost));
+                }
+            }
+            return Err(Stop::Device(e));
+        }
         self.say_unit_faults();
         self.frames += self.tick.frames.len() as u64;
         let r = tell(
@@ -967,9 +1084,19 @@ impl Run<'_> {
                 self.turn_step(key, *inner, *rate_dps, *settle_s, *acc_dps2)
                     .await
             }
-            StepKind::Power { on, volts, limit_a } => {
-                self.power_step(key, *on, *volts, *limit_a).await
-            }
+            StepKind::Power { on, .. } if self.opts.supply.is_none() => self.by_hand(s, *on),
+            StepKind::Power {
+                on: true,
+                volts,
+                limit_a,
+                rest_if_on_s,
+            } => self.switch_on(s, *volts, *limit_a, *rest_if_on_s).await,
+            StepKind::Power {
+                on: false,
+                volts,
+                limit_a,
+                ..
+            } => self.power_step(key, false, *volts, *limit_a).await,
             StepKind::Wait { duration_s } => self.run_for(*duration_s, None, key).await,
             StepKind::Record { label, duration_s } => {
                 self.records
@@ -998,8 +1125,22 @@ impl Run<'_> {
                 self.log(Level::Info, &format!("prompt: {text}"))?;
                 // Simulated benches have no operator to wait for.
                 if !self.bench.is_simulated() || self.watch.answers_prompts() {
-                    self.watch.prompt(text);
-                    self.log(Level::Info, "operator confirmed")?;
+                    match self.watch.prompt(text) {
+                        Ok(Confirmed::Now) => self.log(Level::Info, "operator confirmed")?,
+                        Ok(Confirmed::Beforehand) => self.log(
+                            Level::Info,
+                            "confirmed beforehand by the operator (run --unattended)",
+                        )?,
+                        Err(_) if self.opts.interrupt.is_requested() => {
+                            return Err(Stop::Interrupted);
+                        }
+                        Err(why) => {
+                            return Err(Stop::Data(format!(
+                                "the prompt of step {key} (line {}) needs an operator's answer before the run may go on: {why}",
+                                s.line
+                            )));
+                        }
+                    }
                 }
                 Ok(())
             }
@@ -1165,6 +1306,176 @@ impl Run<'_> {
         self.run_for(settle_s, None, key).await
     }
 
+    /// A `power` step's switch-on: from off (a unit found powered is
+    /// switched off and rested first when the step says how long, else
+    /// the run refuses to go on), the moment recorded as the power-on
+    /// the figures after it count from.
+    async fn switch_on(
+        &mut self,
+        s: &Step,
+        volts: f64,
+        limit_a: f64,
+        rest_if_on_s: Option<f64>,
+    ) -> Result<(), Stop> {
+        let key = s.key.as_str();
+        let found_on = self
+            .bench
+            .read_power()
+            .await
+            .map_err(Stop::Device)?
+            .is_some_and(|r| r.on);
+        if found_on {
+            let Some(rest) = rest_if_on_s else {
+                return Err(Stop::Data(format!(
+                    "the unit is already powered at step {key} (line {}), which switches it on: \
+                     the figures after it count from that moment, and a warm unit would be judged \
+                     as if cold; switch the unit off and let it cool before the run, or give the \
+                     step rest_if_on_s",
+                    s.line
+                )));
+            };
+            let text = format!(
+                "the unit was found powered at step {key} (line {}): switched off for a {rest:.0} s \
+                 rest before its power-on, so that a warm unit is not judged as if cold",
+                s.line
+            );
+            self.warn(&text);
+            self.log(Level::Warning, &text)?;
+            self.power_step(key, false, volts, limit_a).await?;
+            self.run_for(rest, None, key).await?;
+        }
+        let t_on = self.bench.now_s();
+        self.power_step(key, true, volts, limit_a).await?;
+        self.powered_on(t_on, PowerOnSource::Switched);
+        Ok(())
+    }
+
+    /// A `power` step on a bench without a supply: the operator switches
+    /// the unit and confirms it, and a switch-on's moment is the
+    /// confirmation's (source `operator`). A power-on confirmed before the
+    /// run (`--unattended`) says nothing of when it happened: refused.
+    fn by_hand(&mut self, s: &Step, on: bool) -> Result<(), Stop> {
+        let what = if on { "on" } else { "off" };
+        let text = format!(
+            "switch the unit {what} now and confirm when it is {what} (step {}, line {}: the bench \
+             has no supply{})",
+            s.key,
+            s.line,
+            if on {
+                "; the figures that count from power-on count from your confirmation"
+            } else {
+                ""
+            }
+        );
+        self.log(Level::Info, &format!("prompt: {text}"))?;
+        if !self.bench.is_simulated() || self.watch.answers_prompts() {
+            match self.watch.prompt(&text) {
+                Ok(Confirmed::Now) => self.log(Level::Info, "operator confirmed")?,
+                Ok(Confirmed::Beforehand) => {
+                    return Err(Stop::Data(format!(
+                        "step {} (line {}) needs an operator at the bench to switch the unit {what}: \
+                         a power-on confirmed beforehand (run --unattended) says nothing of when it \
+                         happened",
+                        s.key, s.line
+                    )));
+                }
+                Err(_) if self.opts.interrupt.is_requested() => return Err(Stop::Interrupted),
+                Err(why) => {
+                    return Err(Stop::Data(format!(
+                        "step {} (line {}) needs an operator's answer before the run may go on: {why}",
+                        s.key, s.line
+                    )));
+                }
+            }
+        }
+        // The simulated bench's operator switches its units at once.
+        self.bench.power_by_hand(on);
+        if on {
+            self.powered_on(self.bench.now_s(), PowerOnSource::Operator);
+        }
+        Ok(())
+    }
+
+    /// Record a power-on at device time `t_on` (for the figures, and for
+    /// the end event of the step that made it).
+    fn powered_on(&mut self, t_on: f64, source: PowerOnSource) {
+        let utc = self
+            .opts
+            .part_start_utc
+            .map(|start| {
+                (start + chrono::Duration::microseconds((t_on * 1e6).round() as i64))
+                    .to_rfc3339_opts(chrono::SecondsFormat::Millis, true)
+            })
+            .unwrap_or_default();
+        let on = PowerOn {
+            t_s: t_on,
+            utc,
+            source,
+        };
+        // A batch's units share the one supply (or the operator's hand).
+        for lane in &mut self.others {
+            lane.records.power_on(on.clone());
+        }
+        self.records.power_on(on.clone());
+        self.pending_power_on = Some(on);
+    }
+
+    /// At the start of a part: a bench with a supply whose procedure does
+    /// not switch the unit on itself before anything else (its first
+    /// `power` step is not a switch-on) has the unit switched on here,
+    /// from off, the moment recorded. A unit found powered is left so,
+    /// its power-on not known. `restoring`: a resumed part whose restore
+    /// sets the power itself.
+    async fn power_at_start(&mut self, p: &Procedure, restoring: bool) -> Result<(), Stop> {
+        let first = p.setup.iter().chain(&p.main).find_map(|s| match s.kind {
+            StepKind::Power { on, .. } => Some(on),
+            _ => None,
+        });
+        let Some((volts, limit_a)) = self.opts.supply else {
+            // A simulated bench without a supply whose procedure has its
+            // operator switch the unit on: off until then.
+            if first == Some(true) && !restoring && self.bench.is_simulated() {
+                self.bench.power_by_hand(false);
+            }
+            return Ok(());
+        };
+        let Some(reading) = self.bench.read_power().await.map_err(Stop::Device)? else {
+            return Ok(());
+        };
+        self.expected.power_on = Some(reading.on);
+        if first == Some(true) || restoring {
+            return Ok(());
+        }
+        if reading.on {
+            return self.log(
+                Level::Info,
+                "the unit was found powered at the start of the run and is left on: its \
+                 power-on time is not known, so the figures that count from power-on take the \
+                 run's start",
+            );
+        }
+        let step = Step {
+            group: crate::procedure::Group::Setup,
+            key: RUN_POWER_ON.into(),
+            line: 0,
+            kind: StepKind::Power {
+                on: true,
+                volts,
+                limit_a,
+                rest_if_on_s: None,
+            },
+        };
+        self.log(
+            Level::Info,
+            "the run switches the unit on at its start (its procedure has no power step before \
+             its records)",
+        )?;
+        let t_on = self.bench.now_s();
+        self.power_step(&step.key, true, volts, limit_a).await?;
+        self.powered_on(t_on, PowerOnSource::Switched);
+        self.log_step(StepPhase::Restore, 0, &step)
+    }
+
     /// Switch the unit's supply and wait until it reads so.
     async fn power_step(
         &mut self,
@@ -1243,7 +1554,13 @@ impl Run<'_> {
 
     /// Compute a figure on the records so far and judge it.
     fn measure_step(&mut self, key: &str, m: &crate::procedure::Measure) -> Result<(), Stop> {
-        let meas = measure::compute(m, &self.records, self.opts.coeffs.as_ref(), key);
+        let meas = measure::compute(
+            m,
+            &self.records,
+            self.opts.coeffs.as_ref(),
+            key,
+            &self.opts.judging,
+        );
         let msg = format!(
             "{} = {} {} [{}] ({})",
             meas.name,
@@ -1265,7 +1582,7 @@ impl Run<'_> {
         for (k, lane) in self.others.iter_mut().enumerate() {
             // Each unit is judged on its own records; coefficients are the
             // first unit's alone (a batch fits each unit's on its run).
-            let meas = measure::compute(m, &lane.records, None, key);
+            let meas = measure::compute(m, &lane.records, None, key, &self.opts.judging);
             let _ = self.watch.observe(&Event::Measured {
                 slot: k + 1,
                 m: &meas,
@@ -1329,20 +1646,44 @@ pub async fn run(
         record_link: None,
         expected: finish::Expected {
             supply_safe_on: opts.supply_safe_on,
-            // A bench's supply starts the unit powered.
-            power_on: Some(true),
+            // Read at the start ([`Run::power_at_start`]).
+            power_on: None,
             ..finish::Expected::default()
         },
         others: Vec::new(),
         spill_said: Vec::new(),
+        pending_power_on: None,
     };
     r.others
         .resize_with(r.bench.units().saturating_sub(1), Lane::default);
+    r.records.set_status_bits(r.bench.status_bits(0));
+    for (k, lane) in r.others.iter_mut().enumerate() {
+        lane.records.set_status_bits(r.bench.status_bits(k + 1));
+    }
+    // An interrupt ends every wait on a dropped link: the run stops now,
+    // and a link found down from then on is tried once.
+    if let Some(links) = r.bench.link_watch() {
+        opts.interrupt
+            .on_request(move |cause| links.stop_waiting(&format!("{cause} asked to stop")));
+    }
     let total = p.steps().count();
     let mut stop: Option<(Stop, String)> = None;
     let start_at = opts.resume.as_ref().map_or(0, |res| res.start_at);
     if let Some(res) = &opts.resume {
         r.carry_on_from(res);
+    }
+    let restoring = opts.resume.as_ref().is_some_and(|res| {
+        resume_plan(p, res.completed)
+            .1
+            .iter()
+            .any(|(_, s)| matches!(s.kind, StepKind::Power { .. }))
+    });
+    if let Err(e) = r.power_at_start(p, restoring).await {
+        stop = Some((e, "power-on".to_owned()));
+    }
+    if stop.is_none()
+        && let Some(res) = &opts.resume
+    {
         stop = restore(&mut r, p, res).await.err();
     }
     let run_order = p.setup.iter().chain(&p.main).enumerate();
@@ -1443,6 +1784,27 @@ impl Run<'_> {
                 StepKind::Power { .. } => Some("supply"),
                 _ => None,
             };
+            // A run that stopped leaves the unit as the safe state left it:
+            // a cleanup that powers it again (a turn-on procedure's) is for
+            // a run that went to its end, unless the bench's safe state
+            // itself keeps the unit powered.
+            if stop.is_some()
+                && matches!(s.kind, StepKind::Power { on: true, .. })
+                && !self.opts.supply_safe_on
+            {
+                cleanup_completed = false;
+                if !self.expected.skipped.iter().any(|x| x == "supply") {
+                    self.expected.skipped.push("supply".to_owned());
+                }
+                self.note(
+                    Level::Warning,
+                    &format!(
+                        "cleanup step {} skipped: the run stopped, so the unit stays unpowered as the safe state left it (a bench whose devices.supply.safe_state is \"on\" powers it again)",
+                        s.key
+                    ),
+                );
+                continue;
+            }
             if let (Some(d), Some(f)) = (needs, faulted)
                 && d == f
             {
@@ -1617,6 +1979,10 @@ async fn restore(r: &mut Run<'_>, p: &Procedure, res: &Resume) -> Result<(), (St
         r.doing(s, k, restore.len(), true);
         r.log_step(StepPhase::Restore, *index, s).map_err(at)?;
         r.step(s).await.map_err(|e| (e, s.key.clone()))?;
+        // A restored switch-on is a power-on: said in a restore event.
+        if r.pending_power_on.is_some() {
+            r.log_step(StepPhase::Restore, *index, s).map_err(at)?;
+        }
     }
     Ok(())
 }
@@ -1655,10 +2021,17 @@ pub fn verdict(measurements: &[Measurement]) -> (Outcome, Option<RunError>) {
             }),
         );
     }
-    let failed = measurements
-        .iter()
-        .any(|m| m.outcome != MeasureOutcome::Pass);
-    (if failed { Outcome::Fail } else { Outcome::Pass }, None)
+    let any = |o: MeasureOutcome| measurements.iter().any(|m| m.outcome == o);
+    let outcome = if any(MeasureOutcome::Fail) {
+        Outcome::Fail
+    } else if any(MeasureOutcome::ConditionalFail) {
+        Outcome::ConditionalFail
+    } else if any(MeasureOutcome::ConditionalPass) {
+        Outcome::ConditionalPass
+    } else {
+        Outcome::Pass
+    };
+    (outcome, None)
 }
 
 fn device_of(e: &DeviceError) -> Option<String> {
@@ -1673,6 +2046,7 @@ fn device_of(e: &DeviceError) -> Option<String> {
         | DeviceError::Interlock { device }
         | DeviceError::Overcurrent { device, .. }
         | DeviceError::Unreachable { device, .. }
+        | DeviceError::GaveUp { device, .. }
         | DeviceError::Silent { device, .. } => Some(device.clone()),
     }
 }

@@ -101,15 +101,33 @@ pub fn resume_plan(p: &Procedure, completed: usize) -> (usize, Vec<(usize, Step)
     }
 
     // A turn-on whose records the break reached is taken again from the
-    // turn-on (a record after it, a warm-up, counts from turn-on), and with
-    // the time off before it when that is where the procedure put it (a
-    // cool-down: the turn-on is a cold one). The safe state switched the
-    // unit off anyway.
+    // turn-on (a record right after it, a warm-up, counts from turn-on), and
+    // with the time off before it when that is where the procedure put it
+    // (a cool-down: the turn-on is a cold one). The safe state switched the
+    // unit off anyway. The turn-on's records are those that follow it with
+    // nothing but measures, waits and notes between: a thermal run's later
+    // records (after a chamber step) are a segment of their own, resumed
+    // on a new power-on of their part, as model 4 counts them.
     let is_power = |s: &&Step| matches!(s.kind, StepKind::Power { .. });
+    let turn_on_end = |pw: usize| {
+        steps[pw + 1..]
+            .iter()
+            .position(|s| {
+                !matches!(
+                    s.kind,
+                    StepKind::Record { .. }
+                        | StepKind::Measure(_)
+                        | StepKind::Wait { .. }
+                        | StepKind::Note { .. }
+                )
+            })
+            .map_or(steps.len(), |i| pw + 1 + i)
+    };
     if let Some(pw) = steps[..completed].iter().rposition(is_power)
         && matches!(steps[pw].kind, StepKind::Power { on: true, .. })
         && pw < start_at
         && completed < steps.len()
+        && completed < turn_on_end(pw)
         && steps[pw + 1..=completed]
             .iter()
             .any(|s| matches!(s.kind, StepKind::Record { .. }))
@@ -149,14 +167,20 @@ pub fn resume_plan(p: &Procedure, completed: usize) -> (usize, Vec<(usize, Step)
         start_at = start_at.min(off);
     }
     // The unit's power as the last power step before the resume point left
-    // it, restored last: a soak reads the unit's case sensor, which an
-    // unpowered unit does not send.
+    // it: a switch-on first (a soak reads the unit's case sensor, which an
+    // unpowered unit does not send, and the part's records count from that
+    // power-on), a switch-off last.
     let power = steps[..start_at]
         .iter()
         .rposition(is_power)
         .map(|pw| (pw, steps[pw].clone()));
     let (start_at, mut restore) = restore_conditions(&steps, start_at);
-    restore.extend(power);
+    match power {
+        Some(on) if matches!(on.1.kind, StepKind::Power { on: true, .. }) => {
+            restore.insert(0, on);
+        }
+        off => restore.extend(off),
+    }
     (start_at, restore)
 }
 
@@ -369,17 +393,19 @@ mod tests {
         assert_eq!(
             kinds(&restore),
             [
+                "main.0",
                 "setup.0",
                 "main.5",
                 "main.5.resume_arrive",
                 "main.5.resume_dwell"
-            ]
+            ],
+            "the switch-on first: a soak reads the unit's case sensor"
         );
-        let StepKind::Wait { duration_s } = restore[3].1.kind else {
+        let StepKind::Wait { duration_s } = restore[4].1.kind else {
             panic!("a dwell")
         };
         assert_eq!(duration_s, 10_800.0 - 5_400.0);
-        let StepKind::Soak { timeout_s, .. } = restore[2].1.kind else {
+        let StepKind::Soak { timeout_s, .. } = restore[3].1.kind else {
             panic!("arrive")
         };
         assert!(timeout_s >= 90.0 * 60.0, "{timeout_s}");
@@ -405,6 +431,10 @@ mod tests {
             + p.setup.len();
         let (start, restore) = resume_plan(&p, at);
         assert_eq!(start, at);
+        assert!(
+            matches!(restore[0].1.kind, StepKind::Power { on: true, .. }),
+            "the acceptance's switch-on restored first"
+        );
         let last = &restore.last().expect("restore").1;
         assert!(last.key.ends_with("resume_soak"), "{}", last.key);
         let StepKind::Soak {
@@ -442,9 +472,9 @@ mod tests {
                 "cut at step {cut} of c2: c1's power-off and cool-down first"
             );
             assert_eq!(
-                restore.last().map(|(i, _)| *i),
+                restore.first().map(|(i, _)| *i),
                 Some(cycle(0, 0)),
-                "c1 switched the unit on last: restored last, after the soak"
+                "c1 switched the unit on last: restored first, before the soak reads its case"
             );
         }
         // In the cool-down, the move after it or the turn-on: from the
@@ -453,7 +483,7 @@ mod tests {
             let (start, restore) = resume_plan(&p, at);
             assert_eq!(start, cycle(1, 4), "break at {at}");
             assert!(matches!(
-                restore.last().map(|(_, s)| &s.kind),
+                restore.first().map(|(_, s)| &s.kind),
                 Some(StepKind::Power { on: true, .. })
             ));
         }

@@ -4,6 +4,7 @@
 //! the end of the log and the report. `import` and `twin study` share the
 //! pieces they need (the run id, the embedded bench).
 
+pub mod benchlock;
 pub mod rundir;
 
 use std::path::{Path, PathBuf};
@@ -37,6 +38,9 @@ pub enum SessionError {
     /// The run directory cannot be used.
     #[error(transparent)]
     RunDir(#[from] RunDirError),
+    /// The bench is in use by another run (or cannot be locked).
+    #[error(transparent)]
+    BenchLock(#[from] benchlock::BenchLockError),
     /// The run to resume cannot be read.
     #[error("reading the run to resume")]
     Replay(#[from] ReplayError),
@@ -177,13 +181,14 @@ pub fn batch_units(
             return Err((at, format!("unit {serial} is given for two slots")));
         }
         // Each unit's report is named by its serial as a file name.
-        if let Some((_, g)) = taken.iter().find(|(_, g)| {
-            crate::unit::report_name(&given[*g].1) == crate::unit::report_name(serial)
-        }) {
+        if let Some((_, g)) = taken
+            .iter()
+            .find(|(_, g)| crate::unit::same_report_file(&given[*g].1, serial))
+        {
             return Err((
                 at,
                 format!(
-                    "units {} and {serial} would share one report file ({}.html): their serials differ only in characters a file name cannot hold",
+                    "units {} and {serial} would share one report file ({}.html): their serials differ only in letter case or in characters a file name cannot hold; give each unit its own serial",
                     given[*g].1,
                     crate::unit::report_name(serial)
                 ),
@@ -670,12 +675,18 @@ pub const MOVE_TIMEOUT_S: f64 = 600.0;
 
 /// The sequencer's options for a run on `bench`.
 pub fn options(
+    procedure: &Procedure,
     bench: &BenchConfig,
     coeffs: Option<crate::coeffs::Compensation>,
     interrupt: Arc<Interrupt>,
     resume: Option<Resume>,
 ) -> Options {
     Options {
+        judging: crate::sequencer::measure::Judging::new(
+            procedure,
+            bench,
+            crate::runlog::schema::FORMAT,
+        ),
         coeffs,
         interrupt,
         dut_max_c: bench.limits.dut_max_c,
@@ -692,6 +703,8 @@ pub fn options(
             .is_some_and(|p| p.safe_state == crate::bench::SupplySafe::On),
         units: Vec::new(),
         stop_on_unit_error: bench.on_unit_error == crate::bench::OnUnitError::Stop,
+        supply: bench.devices.supply.as_ref().map(|p| (p.volts, p.limit_a)),
+        part_start_utc: None,
     }
 }
 
@@ -768,7 +781,11 @@ pub fn execute(
         .resume
         .as_ref()
         .map_or_else(|| start.to_rfc3339(), |r| r.start_time_utc.clone());
+    // The bench before its run directory: a run refused for a bench in
+    // use leaves nothing behind.
+    let mut bench_lock = lock_bench(&plan, &run_start)?;
     let (dir, mut notes) = open_run_dir(place, &plan.procedure.meta.name, &start)?;
+    bench_lock.set_run_dir(&dir.path);
 
     let mut bench = bench_for(&plan, part, rt)?;
     let (meta, log, mut recorder) = open_log(
@@ -786,11 +803,13 @@ pub fn execute(
     });
     let notes_at_begin = notes.len();
     let mut opts = options(
+        &plan.procedure,
         &plan.bench_cfg,
         plan.coeffs.as_ref().and_then(Chosen::compensation),
         interrupt,
         plan.resume.as_ref().map(|r| r.state.clone()),
     );
+    opts.part_start_utc = Some(start);
     opts.units = plan
         .batch
         .iter()
@@ -805,13 +824,15 @@ pub fn execute(
         Report::new(&plan.procedure, &result.unit(k), &meta.for_unit(k), link)
     };
     let end_s = bench.now_s();
+    // One end time, stated in the log and recorded in the store alike.
+    let ended_utc = utc_now().to_rfc3339();
     let (result, reports) = close_log(
         recorder,
         &log,
         result,
         &meta,
         finish,
-        (end_s, &part_link, &part_slot_links),
+        (end_s, &ended_utc, &part_link, &part_slot_links),
         &mut notes,
     );
     let (report_error, units) = write_reports(&dir.path, &meta, &result, &reports);
@@ -819,7 +840,7 @@ pub fn execute(
         .into_iter()
         .next()
         .unwrap_or_else(|| finish(&result, 0));
-    store.finish(&log, &result, link, &mut notes);
+    store.finish(&log, &result, link, &ended_utc, &mut notes);
     Ok(Finished {
         dir: dir.path.clone(),
         log,
@@ -953,7 +974,7 @@ fn close_log(
     mut result: RunResult,
     meta: &RunMeta,
     report_of: impl Fn(&RunResult, usize) -> Report,
-    (end_s, part_link, slot_links): (f64, &LinkStats, &[LinkStats]),
+    (end_s, ended_utc, part_link, slot_links): (f64, &str, &LinkStats, &[LinkStats]),
     notes: &mut Vec<String>,
 ) -> (RunResult, Vec<Report>) {
     let reports_of = |result: &RunResult| {
@@ -981,7 +1002,7 @@ fn close_log(
                     recorder.unit_result(
                         &u.slot,
                         &u.serial,
-                        &ResultMeta::new(&result.unit(k)),
+                        &ResultMeta::new(&result.unit(k)).ended_at(ended_utc),
                         &r.to_json(),
                         end_s,
                     )
@@ -989,7 +1010,11 @@ fn close_log(
         })
         .and_then(|()| {
             let first = reports.first().map(Report::to_json);
-            recorder.finish_run(&ResultMeta::new(&result), first.as_deref(), end_s)
+            recorder.finish_run(
+                &ResultMeta::new(&result).ended_at(ended_utc),
+                first.as_deref(),
+                end_s,
+            )
         });
     let Err(e) = log_end else {
         return (result, reports);
@@ -1086,6 +1111,37 @@ fn open_run_dir(
     Ok((dir, notes))
 }
 
+/// Every device the plan drives, locked for the run's life (the embedded
+/// bench's, none).
+fn lock_bench(plan: &Plan, started: &str) -> Result<benchlock::BenchLock, SessionError> {
+    let units = if plan.batch.is_empty() {
+        plan.dut.clone()
+    } else {
+        plan.batch
+            .iter()
+            .map(|u| u.serial.as_str())
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    let holder = benchlock::Holder {
+        procedure: plan.procedure.meta.name.clone(),
+        units,
+        bench: plan.bench_label.clone(),
+        started_utc: started.to_owned(),
+    };
+    Ok(benchlock::BenchLock::acquire(&filled_slots(plan), &holder)?)
+}
+
+/// The bench file as the run opens it: a batch's filled slots alone (an
+/// empty slot's link is not opened: nothing may be behind it), in the
+/// run's order.
+fn filled_slots(plan: &Plan) -> BenchConfig {
+    let mut cfg = plan.bench_cfg.clone();
+    cfg.slots
+        .retain(|s| plan.batch.iter().any(|u| u.slot.name == s.name));
+    cfg
+}
+
 /// The bench the plan runs on: the embedded twin (seeded for the part),
 /// or the bench file's devices opened behind the bench's limits.
 fn bench_for(
@@ -1119,12 +1175,7 @@ fn bench_for(
             bench: plan.bench_label.clone(),
             source,
         };
-        // A batch's devices are its filled slots': an empty slot's link is
-        // not opened (nothing may be behind it), and the units keep the
-        // run's order.
-        let mut cfg = plan.bench_cfg.clone();
-        cfg.slots
-            .retain(|s| plan.batch.iter().any(|u| u.slot.name == s.name));
+        let cfg = filled_slots(plan);
         let open = rt.block_on(open_bench(&cfg)).map_err(bench_err)?;
         let device = rt
             .block_on(DeviceBench::start(&cfg, open))
@@ -1290,7 +1341,14 @@ impl StoreLink {
         link
     }
 
-    fn finish(&mut self, log: &Path, result: &RunResult, link: LinkStats, notes: &mut Vec<String>) {
+    fn finish(
+        &mut self,
+        log: &Path,
+        result: &RunResult,
+        link: LinkStats,
+        ended_utc: &str,
+        notes: &mut Vec<String>,
+    ) {
         if self.location == crate::results::Location::Off {
             return;
         }
@@ -1302,7 +1360,7 @@ impl StoreLink {
                     &crate::results::record::PartEnd {
                         result,
                         link,
-                        ended_utc: utc_now().to_rfc3339(),
+                        ended_utc: ended_utc.to_owned(),
                         slots: self.slots.clone(),
                     },
                 )

@@ -49,11 +49,15 @@ pub enum Fault {
     /// A batch's last unit's gyro link is lost for good: it sends nothing
     /// more (the others go on).
     UnitLost,
+    /// The supply takes `OUTP OFF` without an error and leaves its output
+    /// on (a welded relay, a firmware fault): the unit stays powered
+    /// whatever the run asks.
+    SupplyIgnoresOff,
 }
 
 impl Fault {
     /// Every fault, in the order `--help` lists them.
-    pub const ALL: [Self; 14] = [
+    pub const ALL: [Self; 15] = [
         Self::ChamberAlarm,
         Self::ChamberSilent,
         Self::TableInterlock,
@@ -68,13 +72,14 @@ impl Fault {
         Self::Hangup,
         Self::Quit,
         Self::UnitLost,
+        Self::SupplyIgnoresOff,
     ];
 
     /// Every fault by the name `--inject` takes.
-    pub const NAMES: [&str; 14] = {
-        let mut names = [""; 14];
+    pub const NAMES: [&str; 15] = {
+        let mut names = [""; 15];
         let mut i = 0;
-        while i < 14 {
+        while i < 15 {
             names[i] = Self::ALL[i].name();
             i += 1;
         }
@@ -114,7 +119,7 @@ impl Fault {
             | Self::GyroStuck
             | Self::GyroSaturated
             | Self::UnitLost => Some("gyro"),
-            Self::SupplyOvercurrent => Some("supply"),
+            Self::SupplyOvercurrent | Self::SupplyIgnoresOff => Some("supply"),
             Self::ProcessKill | Self::Panic | Self::DiskFull | Self::Hangup | Self::Quit => None,
         }
     }
@@ -136,6 +141,7 @@ impl Fault {
             Self::Hangup => "sighup",
             Self::Quit => "sigquit",
             Self::UnitLost => "unit-lost",
+            Self::SupplyIgnoresOff => "supply-ignores-off",
         }
     }
 

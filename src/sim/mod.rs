@@ -51,6 +51,17 @@ pub mod identity {
     /// Watlow F4T part number.
     pub const WATLOW_PART_NUMBER: &str = "F4T1L1AA1A1SIMA";
 
+    /// True when `id` is one of these simulators' answers (a run's
+    /// instruments that say so ran on `sim serve`, not on hardware).
+    pub fn is_simulator(id: &Identity) -> bool {
+        [ESPEC_ROM, "SIM-TABLE", WATLOW_PART_NUMBER]
+            .iter()
+            .any(|mark| {
+                let mark = mark.split(',').next().unwrap_or(mark);
+                id.raw.contains(mark)
+            })
+    }
+
     /// The simulated chamber's identity over `protocol`.
     pub fn chamber(protocol: crate::bench::ChamberProtocol) -> Identity {
         match protocol {
@@ -410,6 +421,7 @@ impl SharedBench {
                 b.shorted = true;
                 b.supply.load.0.steady_a *= 3.0;
             }
+            Fault::SupplyIgnoresOff => b.supply.ignores_off = true,
             Fault::ProcessKill | Fault::Panic | Fault::DiskFull | Fault::Hangup | Fault::Quit => {
                 return Err(format!(
                     "{} is a fault of the controller (its process or its log), not of a device: `gyrobench run --inject` plays it on the embedded bench",

@@ -49,6 +49,12 @@ pub struct ServeConfig {
     /// `keysight-e36300`; or `rigol-dp800`).
     #[serde(default)]
     pub supply: Dialect,
+    /// The unit powered from the start, as by hand (a bench file without
+    /// `[devices.supply]`, a batch's fixture); default false: the unit is
+    /// off until a client switches the supply's output on, as on a real
+    /// bench.
+    #[serde(default)]
+    pub unit_powered: bool,
     /// A batch's fixture: the units on the table's platform, in the
     /// bench's order, each on its own gyro line (none: one unit).
     #[serde(default)]
@@ -397,7 +403,11 @@ pub async fn start(s: &Serve) -> Result<Served, ServeError> {
             |b, u| b.with_unit(&u.name, u.twin.clone(), u.seed),
         ),
     };
-    sim.supply = Supply::powering_unit(s.config.supply);
+    sim.supply = if s.config.unit_powered {
+        Supply::powering_unit(s.config.supply)
+    } else {
+        Supply::unit_off(s.config.supply)
+    };
     let bench = SharedBench::new(sim, clock);
     bench.spawn_ticker(Duration::from_millis(5));
     let p = s.config.ports;

@@ -17,7 +17,7 @@ use super::SharedBench;
 use super::faults::Action;
 use super::lines::serve_lines;
 use crate::protocol::scpi::{ErrorQueue, NO_ERROR, Numeric, ScpiError, format_nr3};
-use crate::protocol::supply::{Command, Dialect, Rating, parse_message, ratings};
+use crate::protocol::supply::{Addressed, Command, Dialect, Rating, parse_message, ratings};
 
 /// Longest message accepted, bytes.
 pub const MAX_LINE: usize = 1024;
@@ -145,6 +145,9 @@ pub struct Supply {
     pub powered_s: f64,
     /// Peak current drawn since the last power-on, A.
     pub peak_a: f64,
+    /// A faulty supply (`--inject supply-ignores-off`): `OUTP OFF` is
+    /// taken without an error and does nothing, its output stays on.
+    pub ignores_off: bool,
     /// Time of the state, s.
     t_s: f64,
 }
@@ -160,6 +163,7 @@ impl Supply {
             load: (UnitLoad::RL16, 1),
             powered_s: 0.0,
             peak_a: 0.0,
+            ignores_off: false,
             t_s: 0.0,
         }
     }
@@ -222,6 +226,35 @@ impl Supply {
             s.peak_a = c.out_a;
         }
         s
+    }
+
+    /// The unit wired to `channel` (1-based) with the output set to
+    /// `volts` and `limit_a` and switched off: a bench before its run
+    /// switches the unit on (`OUTP ON` powers it at the bench's voltage).
+    pub fn wired(
+        dialect: Dialect,
+        channel: u8,
+        volts: f64,
+        limit_a: f64,
+        protection: bool,
+    ) -> Self {
+        let mut s = Self::powering(dialect, channel, volts, limit_a, protection);
+        let c = &mut s.channels[s.load.1];
+        c.on = false;
+        c.source_v = 0.0;
+        c.out_v = 0.0;
+        c.out_a = 0.0;
+        s.powered_s = 0.0;
+        s.peak_a = 0.0;
+        s
+    }
+
+    /// A supply of `dialect`'s model with the unit wired to channel 2 at
+    /// its nominal voltage, output off (`sim serve` starts so: the unit
+    /// is off until a run switches it on).
+    pub fn unit_off(dialect: Dialect) -> Self {
+        let limit = ratings(dialect)[1].max_a;
+        Self::wired(dialect, 2, UnitLoad::RL16.nominal_v, limit, false)
     }
 
     /// Move the outputs to time `t_s`: fine steps while anything changes,
@@ -383,6 +416,9 @@ impl Supply {
                 if on && self.channels[ch].tripped {
                     return Err(ScpiError::SETTINGS_CONFLICT);
                 }
+                if !on && self.ignores_off {
+                    return Ok(None);
+                }
                 self.channels[ch].on = on;
                 None
             }
@@ -414,12 +450,35 @@ impl Supply {
         Ok(reply)
     }
 
+    /// A command on the channels it names, each in turn (a query's
+    /// answers joined with `,`, in the list's order; the selection left as
+    /// it was), or on the selected channel. A channel the supply lacks, or
+    /// a setting one of them refuses, refuses the whole command: no
+    /// channel is touched.
+    fn execute_on(&mut self, a: Addressed) -> Result<Option<String>, ScpiError> {
+        let Some(list) = a.channels else {
+            return self.execute(a.command);
+        };
+        let mut trial = self.clone();
+        let mut answers = Vec::new();
+        for n in list.iter() {
+            trial.selected = usize::from(n)
+                .checked_sub(1)
+                .filter(|i| *i < trial.channels.len())
+                .ok_or(ScpiError::OUT_OF_RANGE)?;
+            answers.extend(trial.execute(a.command)?);
+        }
+        trial.selected = self.selected;
+        *self = trial;
+        Ok((!answers.is_empty()).then(|| answers.join(",")))
+    }
+
     /// Execute one message; the answers of its queries joined with `;`,
     /// none when it holds no query.
     pub fn message(&mut self, line: &str) -> Option<String> {
         let mut answers = Vec::new();
         for parsed in parse_message(line, self.dialect) {
-            match parsed.and_then(|c| self.execute(c)) {
+            match parsed.and_then(|a| self.execute_on(a)) {
                 Ok(Some(a)) => answers.push(a),
                 Ok(None) => {}
                 Err(e) => self.errors.push(e),
@@ -612,6 +671,101 @@ mod tests {
             tau > 0.9 && tau < 1.0,
             "time since power-on restarted: {tau}"
         );
+    }
+
+    /// Every error left in the queue, oldest first.
+    fn drain(s: &mut Supply) -> Vec<String> {
+        std::iter::from_fn(|| s.message("SYST:ERR?").filter(|e| !e.starts_with('0'))).collect()
+    }
+
+    #[test]
+    fn a_keysight_answers_and_sets_the_channels_a_list_names() {
+        let mut s = Supply::powering_unit(Dialect::KeysightE36300);
+        s.message("INST:NSEL 1");
+        assert_eq!(
+            s.message("MEAS:VOLT? (@2)").as_deref(),
+            Some("+1.50000000E+01")
+        );
+        assert_eq!(
+            s.message("MEAS:VOLT? (@1:3);:OUTP? (@3,2,1)").as_deref(),
+            Some("+0.00000000E+00,+1.50000000E+01,+0.00000000E+00;0,1,0")
+        );
+        s.message("VOLT 5,(@1,3);CURR 0.5,(@3)");
+        assert_eq!(
+            s.message("VOLT? (@1:3);CURR? (@3)").as_deref(),
+            Some("+5.00000000E+00,+1.50000000E+01,+5.00000000E+00;+5.00000000E-01")
+        );
+        assert_eq!(
+            s.message("INST:NSEL?").as_deref(),
+            Some("1"),
+            "selection kept"
+        );
+        // 20 V is beyond channel 1's 6 V: refused whole, channel 2 untouched;
+        // a channel the supply lacks is out of range.
+        s.message("VOLT 20,(@1,2);:MEAS:VOLT? (@4);:SYST:ERR? (@1)");
+        assert_eq!(
+            drain(&mut s),
+            [
+                "-222,\"Data out of range\"",
+                "-222,\"Data out of range\"",
+                "-108,\"Parameter not allowed\""
+            ]
+        );
+        assert_eq!(
+            s.message("VOLT? (@1,2)").as_deref(),
+            Some("+5.00000000E+00,+1.50000000E+01")
+        );
+        s.message("OUTP OFF,(@2)");
+        s.advance_to(1.0);
+        assert!(!s.unit_powered(), "switched off through the list");
+    }
+
+    #[test]
+    fn a_rigol_answers_the_channel_it_is_given_as_a_dp832_does() {
+        let mut s = Supply::powering_unit(Dialect::RigolDp800);
+        s.message("INST:NSEL 1");
+        assert_eq!(
+            s.message("MEAS:VOLT? CH2;:OUTP? CH2;:OUTP? CH1").as_deref(),
+            Some("15.0000;ON;OFF")
+        );
+        s.message("SOUR3:VOLT 3.3;CURR 0.2;:OUTP CH3,ON");
+        assert_eq!(
+            s.message("INST:NSEL 3;:VOLT?;CURR?;:OUTP?").as_deref(),
+            Some("3.3000;0.2000;ON")
+        );
+        s.message("MEAS:VOLT? (@2)");
+        assert_eq!(drain(&mut s), ["-108,\"Parameter not allowed\""]);
+    }
+
+    /// A channel-list query split at every byte boundary on the wire gets
+    /// the same answer: the line is whole before it is parsed.
+    #[tokio::test(flavor = "current_thread")]
+    async fn a_query_split_at_every_byte_boundary_gets_one_answer() {
+        use tokio::io::{AsyncBufReadExt, AsyncWriteExt, BufReader};
+        let clock: Arc<dyn crate::clock::Clock> =
+            Arc::new(crate::clock::VirtualClock::new(crate::clock::Pacing::Max));
+        let bench = SharedBench::new(crate::sim::test_bench(), clock);
+        let msg = b"MEAS:VOLT? (@1:3);:OUTP? (@2)\n";
+        for k in 1..msg.len() {
+            let (a, b) = tokio::io::duplex(256);
+            let server = tokio::spawn(serve_supply(b, bench.clone()));
+            let (r, mut w) = tokio::io::split(a);
+            w.write_all(&msg[..k]).await.expect("first part");
+            w.flush().await.expect("flush");
+            tokio::task::yield_now().await;
+            w.write_all(&msg[k..]).await.expect("second part");
+            let mut line = String::new();
+            BufReader::new(r)
+                .read_line(&mut line)
+                .await
+                .expect("an answer");
+            assert_eq!(
+                line, "+0.00000000E+00,+1.50000000E+01,+0.00000000E+00;1\n",
+                "split at {k}"
+            );
+            drop(w);
+            server.abort();
+        }
     }
 
     #[test]

@@ -10,6 +10,7 @@ use crate::analysis::series::Interval;
 use crate::procedure::Step;
 use crate::sequencer::measure::Measurement;
 use crate::sequencer::{BenchState, Event, Observer, Operator};
+use crate::view::live::{Drift, DriftWindow};
 
 /// One step of the plan.
 #[derive(Debug, Clone, Serialize)]
@@ -106,6 +107,34 @@ pub struct RunView {
     pub supply: Option<SupplyView>,
     /// A batch's units, one tile each (empty: one unit, `serial`).
     pub units: Vec<UnitView>,
+    /// The bench and the first unit now, as numbers (none before the
+    /// first tick).
+    pub now: Option<NowView>,
+}
+
+/// The bench and the first unit as the page's read-out shows them: the
+/// latest tick's chamber and table, the first unit's latest second and its
+/// drift.
+#[derive(Debug, Clone, Default, PartialEq, Serialize)]
+pub struct NowView {
+    /// Device time of the latest tick, s.
+    pub t_s: f64,
+    /// Chamber air, degC.
+    pub chamber_c: f64,
+    /// Chamber set point, degC.
+    pub set_point_c: f64,
+    /// Table outer axis, deg (measured).
+    pub outer_deg: f64,
+    /// Table inner axis, deg (measured).
+    pub inner_deg: f64,
+    /// The first unit's case, degC (none before its first second).
+    pub tcase_c: Option<f64>,
+    /// Its block sensor T1, degC.
+    pub t1_c: Option<f64>,
+    /// Its block sensor T2, degC.
+    pub t2_c: Option<f64>,
+    /// Its drift (none before its first record).
+    pub drift: Option<Drift>,
 }
 
 /// One unit of a batch, as its tile shows it.
@@ -115,8 +144,12 @@ pub struct UnitView {
     pub slot: String,
     /// Its serial.
     pub serial: String,
-    /// Its rate with the Earth rate removed, the last second's, deg/h.
+    /// Its rate with the Earth rate removed, the last second's, deg/h
+    /// (a slew's or a wait's too: the tile shows `drift`).
     pub bias_dph: Option<f64>,
+    /// Its drift: the mean Earth-removed rate over the last 60 s of the
+    /// record being taken (or the latest), named (none before a record).
+    pub drift: Option<Drift>,
     /// Its case temperature, degC.
     pub tcase_c: Option<f64>,
     /// Its verdict once the run ended (as in its report).
@@ -143,10 +176,57 @@ pub struct SupplyView {
     pub tripped: bool,
 }
 
-/// One 1 Hz sample for the charts: device time (h), Earth-removed rate
-/// (deg/h), chamber air, case, block T1, block T2 (degC), table outer and
-/// inner (deg).
-pub type Sample = [f64; 8];
+/// One 1 Hz sample of the first unit for the charts, sent as an array:
+/// `[t_h, bias_dph, chamber_c, tcase_c, t1_c, t2_c, outer_deg, inner_deg,
+/// record_dph, record_mean_dph]` (the last two `null` outside a record,
+/// the mean also in a record's first minute).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Sample {
+    /// Device time, h.
+    pub t_h: f64,
+    /// Rate with the Earth rate (and the table's) removed, deg/h: every
+    /// second, a slew's too.
+    pub bias_dph: f64,
+    /// Chamber air, degC.
+    pub chamber_c: f64,
+    /// Case, degC.
+    pub tcase_c: f64,
+    /// Block T1, degC.
+    pub t1_c: f64,
+    /// Block T2, degC.
+    pub t2_c: f64,
+    /// Table outer axis, deg.
+    pub outer_deg: f64,
+    /// Table inner axis, deg.
+    pub inner_deg: f64,
+    /// `bias_dph` when the second is one of a record's (the drift chart).
+    pub record_dph: Option<f64>,
+    /// The mean of the record's last 60 s, once it has lasted that long.
+    pub record_mean_dph: Option<f64>,
+}
+
+/// As an array, the page's (and the API's) form since its first eight.
+impl Serialize for Sample {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        use serde::ser::SerializeTuple;
+        let mut t = s.serialize_tuple(10)?;
+        for v in [
+            self.t_h,
+            self.bias_dph,
+            self.chamber_c,
+            self.tcase_c,
+            self.t1_c,
+            self.t2_c,
+            self.outer_deg,
+            self.inner_deg,
+        ] {
+            t.serialize_element(&v)?;
+        }
+        t.serialize_element(&self.record_dph)?;
+        t.serialize_element(&self.record_mean_dph)?;
+        t.end()
+    }
+}
 
 /// The station's shared knowledge.
 #[derive(Debug, Default)]
@@ -226,6 +306,26 @@ pub struct Reporter {
     /// The state of the latest tick (the first unit's interval after it
     /// takes the table's angles from it for its chart point).
     pub tick: Option<BenchState>,
+    /// Each unit's drift window, by slot.
+    pub drifts: Vec<DriftWindow>,
+}
+
+impl Reporter {
+    /// A run's reporter to `shared`, which stops waiting on a prompt when
+    /// `interrupt` is asked.
+    pub fn new(
+        shared: Arc<Shared>,
+        interrupt: Arc<crate::sequencer::interrupt::Interrupt>,
+    ) -> Self {
+        Self {
+            shared,
+            interrupt,
+            started: std::time::Instant::now(),
+            prompts: 0,
+            tick: None,
+            drifts: Vec::new(),
+        }
+    }
 }
 
 impl std::fmt::Debug for Reporter {
@@ -256,7 +356,7 @@ impl Observer for Reporter {
                 restore: true,
             } => self.restore(step, index, total),
             Event::State(st) => self.state(st),
-            Event::Interval { slot, iv, .. } => self.interval(slot, iv),
+            Event::Interval { slot, iv, record } => self.interval(slot, iv, record),
             Event::Link { slot: 0, stats, .. } => self.link(stats),
             Event::Measured { slot: 0, m } => self.measured(m),
             Event::Measured { slot, m } => self.slot_measured(slot, m),
@@ -320,6 +420,12 @@ impl Reporter {
             if let Some(run) = &mut b.run {
                 run.device_s = st.t_s;
                 run.elapsed_wall_s = wall;
+                let now = run.now.get_or_insert_with(NowView::default);
+                now.t_s = st.t_s;
+                now.chamber_c = st.chamber.air_c;
+                now.set_point_c = st.chamber.set_point_c;
+                now.outer_deg = st.table.angles.outer_deg;
+                now.inner_deg = st.table.angles.inner_deg;
                 if let Some(p) = st.power {
                     run.supply = Some(SupplyView {
                         v: p.v,
@@ -333,24 +439,43 @@ impl Reporter {
         });
     }
 
-    /// Unit `slot`'s latest second; the first unit's is a chart point too.
-    fn interval(&mut self, slot: usize, iv: &Interval) {
-        let sample = (slot == 0).then_some(()).and(self.tick.as_ref()).map(|st| {
-            [
-                iv.time_s / 3600.0,
-                iv.bias_dph(),
-                iv.chamber_c,
-                iv.tcase_c,
-                iv.t1_c,
-                iv.t2_c,
-                st.table.angles.outer_deg,
-                st.table.angles.inner_deg,
-            ]
-        });
+    /// Unit `slot`'s latest second (in `record`, if any); the first
+    /// unit's is a chart point and the read-out's too.
+    fn interval(&mut self, slot: usize, iv: &Interval, record: Option<&str>) {
+        if self.drifts.len() <= slot {
+            self.drifts.resize_with(slot + 1, DriftWindow::default);
+        }
+        let window = &mut self.drifts[slot];
+        window.push(iv.time_s, iv.bias_dph(), record);
+        let drift = window.drift();
+        let sample = (slot == 0)
+            .then_some(())
+            .and(self.tick.as_ref())
+            .map(|st| Sample {
+                t_h: iv.time_s / 3600.0,
+                bias_dph: iv.bias_dph(),
+                chamber_c: iv.chamber_c,
+                tcase_c: iv.tcase_c,
+                t1_c: iv.t1_c,
+                t2_c: iv.t2_c,
+                outer_deg: st.table.angles.outer_deg,
+                inner_deg: st.table.angles.inner_deg,
+                record_dph: record.map(|_| iv.bias_dph()),
+                record_mean_dph: window.full_mean_dph(),
+            });
         self.shared.update(|b| {
             if let Some(u) = b.run.as_mut().and_then(|r| r.units.get_mut(slot)) {
                 u.bias_dph = Some(iv.bias_dph());
                 u.tcase_c = Some(iv.tcase_c);
+                u.drift = drift.clone();
+            }
+            if slot == 0
+                && let Some(now) = b.run.as_mut().and_then(|r| r.now.as_mut())
+            {
+                now.tcase_c = Some(iv.tcase_c);
+                now.t1_c = Some(iv.t1_c);
+                now.t2_c = Some(iv.t2_c);
+                now.drift = drift;
             }
             if let Some(s) = sample {
                 b.samples.push(s);
@@ -403,7 +528,7 @@ impl Operator for Reporter {
         true
     }
 
-    fn prompt(&mut self, text: &str) {
+    fn prompt(&mut self, text: &str) -> Result<crate::sequencer::Confirmed, String> {
         self.prompts += 1;
         let id = self.prompts;
         let text = text.to_owned();
@@ -422,12 +547,18 @@ impl Operator for Reporter {
                 .unwrap_or_else(PoisonError::into_inner)
                 .0;
         }
+        let answered = b.answered >= id;
         drop(b);
         self.shared.update(|b| {
             if let Some(run) = &mut b.run {
                 run.prompt = None;
             }
         });
+        if answered {
+            Ok(crate::sequencer::Confirmed::Now)
+        } else {
+            Err("the run was aborted at the prompt".into())
+        }
     }
 }
 

@@ -6,6 +6,7 @@
 //! fetched), readable on a laptop and printable on A4.
 
 pub mod chart;
+pub mod live;
 mod page;
 
 pub use chart::{Chart, Marker, Series, Stroke};

@@ -15,7 +15,8 @@ table{border-collapse:collapse;margin:.6rem 0 1rem}
 td,th{border:1px solid var(--rule);padding:.25rem .55rem;font-size:.92rem;vertical-align:top}
 th{background:#f2f2f2;text-align:left}
 td.num{text-align:right;font-family:ui-monospace,"DejaVu Sans Mono",monospace;white-space:nowrap}
-tr.fail td{background:#fde7e6} tr.error td{background:#fff4e0}
+tr.fail td{background:#fde7e6} tr.error td{background:#fff4e0} tr.conditional_pass td,tr.conditional_fail td{background:#fff4e0}
+td.sign{min-width:22rem;height:2.2rem}
 .verdict{font-size:2rem;font-weight:700;color:#fff;padding:.2rem .7rem;border-radius:.2rem;display:inline-block;letter-spacing:.05em}
 td.outcome{font-weight:600} td.outcome.pass{color:var(--pass)} td.outcome.fail{color:var(--fail)} td.outcome.error{color:var(--error)}
 .box{background:#fff4e0;border-left:4px solid var(--error);padding:.5rem .8rem;margin:.8rem 0}

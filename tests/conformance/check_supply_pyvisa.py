@@ -7,7 +7,9 @@ DIALECT is keysight-e36300 or rigol-dp800. Over the raw socket
 steady draw, checks the error queue's numbers for bad commands and
 out-of-range values, trips the over-current protection, clears it and
 switches off. Over PTY (ASRL<path>::INSTR, the serial path) it asks the
-identity and a measurement.
+identity and a measurement. Channel-named queries: `MEAS:VOLT? (@2)`,
+`(@1:3)`, `OUTP? (@1,2)` on the Keysight, `MEAS:VOLT? CH2`, `OUTP? CH2`
+on the Rigol.
 """
 import sys
 import time
@@ -81,6 +83,29 @@ def socket_session(dialect, host, port):
     check("the output holds 15 V", abs(v - 15.0) < 0.01, str(v))
     on = inst.query("OUTP?").strip()
     check("OUTP? says on", on == ("1" if keysight else "ON"), on)
+
+    # A channel named in the command itself: the E36300's channel list,
+    # the DP832's CH<n> argument.
+    inst.write("INST:NSEL 1")
+    if keysight:
+        v = inst.query("MEAS:VOLT? (@2)").strip()
+        check("MEAS:VOLT? (@2) answers channel 2", abs(float(v) - 15.0) < 0.01, v)
+        vs = inst.query("MEAS:VOLT? (@1:3)").strip().split(",")
+        check(
+            "MEAS:VOLT? (@1:3) answers each channel in order",
+            len(vs) == 3 and abs(float(vs[1]) - 15.0) < 0.01 and float(vs[0]) == 0.0,
+            str(vs),
+        )
+        o = inst.query("OUTP? (@1,2)").strip()
+        check("OUTP? (@1,2) is 0,1", o == "0,1", o)
+    else:
+        v = inst.query("MEAS:VOLT? CH2").strip()
+        check("MEAS:VOLT? CH2 answers channel 2", abs(float(v) - 15.0) < 0.01, v)
+        o = inst.query("OUTP? CH2").strip()
+        check("OUTP? CH2 is ON", o == "ON", o)
+    check("channel-named queries leave no error", errors(inst) == [])
+    check("... and the selection as it was", inst.query("INST:NSEL?").strip() == "1")
+    inst.write("INST:NSEL 2")
 
     inst.write("VOLT:FOO 3")
     inst.write("VOLT 99")

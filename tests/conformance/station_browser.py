@@ -8,20 +8,24 @@ URL is the one `gyrobench station` prints (with its token). Runs the smoke
 procedure: types the serial and the operator (Enter, as a barcode scanner
 sends), ticks the checklist, starts (the form empties for the next unit),
 sees the bench named as simulated, the current step beside the status, the
-steps advance and the prompt, reloads mid-run (the same state comes back),
+steps advance and the prompt (no read-out before the first second), reloads mid-run (the same state comes back),
 opens a second browser (it sees the same run), answers the prompt, sees
-PASS, the Abort button greyed, the unit's history refreshed with a link to
+PASS, the read-out's numbers (the drift named by its window: the last
+60 s of the last record; chamber, case, block, table) and the drift
+chart's title, the Abort button greyed, the unit's history refreshed with a link to
 the report, and the report; then starts again and aborts at the prompt:
 cleanup runs, the verdict is ABORTED, and the first run's report is still
 served.
 With --batch, against a station on a bench with slots (quad.toml): one
 serial field per slot (Enter moves to the next slot), two slots filled and
 two left empty, the form empty again after the start, one tile per unit
-with its live rate, each tile's verdict PASS and its own report (the
+with its drift (the mean of the last 60 s of its record, the window named),
+each tile's verdict PASS and its own report (the
 unit's serial on it); the page is saved as SCREENSHOT.png when asked.
 Exits non-zero with the step that failed.
 """
 
+import re
 import sys
 import time
 
@@ -90,6 +94,10 @@ def main():
         assert "embedded" in bench and "simulated" in bench, bench
         wait(a, "the prompt", ec.visibility_of_element_located((By.ID, "prompt")))
         assert "connector" in text_of(a, "#prompt-text"), text_of(a, "#prompt-text")
+        # At the setup's prompt no record is taken yet: the read-out, once
+        # the run has read the bench (it switched the unit on at its
+        # start), shows no drift.
+        assert not a.find_element(By.ID, "readout").is_displayed() or "no record yet" in text_of(a, "#readout"), text_of(a, "#readout")
         steps_before = text_of(a, "#steps li.current")
         now = text_of(a, "#now")
         assert now.startswith("Now: step ") and steps_before in now, f"{now!r} against {steps_before!r}"
@@ -123,6 +131,18 @@ def main():
         # The unit's history refreshed by the run's end, linking its report.
         wait(a, "the unit's history with this run", lambda d: d.find_elements(By.CSS_SELECTOR, "#history tr td.pass"))
         stored = a.find_element(By.CSS_SELECTOR, "#history tr td a").get_attribute("href")
+        # The read-out gives the bench and the unit in numbers, the drift
+        # named by its window; the drift chart says what it shows.
+        readout = {k: text_of(a, f"#now-{k} .val") for k in ("drift", "chamber", "case", "block", "table")}
+        assert re.fullmatch(r"[+-]\d+\.\d{3} deg/h", readout["drift"]), readout
+        assert re.fullmatch(r"\+20\.\d\d degC", readout["chamber"]), readout
+        assert re.fullmatch(r"-?\d+\.\d\d degC", readout["case"]), readout
+        assert re.fullmatch(r"-?\d+\.\d\d / -?\d+\.\d\d", readout["block"]), readout
+        assert re.fullmatch(r"-?\d+\.\d\d / -?\d+\.\d\d", readout["table"]), readout
+        window = text_of(a, "#now-drift .w")
+        assert window == "mean of the last 60 s of record east (ended)", window
+        title = text_of(a, "#c-rate .u-title")
+        assert title.startswith("Drift") and "records" in title and "slews" in title, title
         supply = text_of(a, "#supply")
         assert supply.startswith("Unit's supply: 15.00 V, 0.550 A (8.25 W), output on"), supply
         report = a.find_element(By.ID, "report-link").get_attribute("href")
@@ -144,7 +164,7 @@ def main():
         # The first run's report is still served.
         a.get(report)
         wait(a, "the first run's report after a second run", lambda d: "PASS" in d.find_element(By.CSS_SELECTOR, ".verdict").text)
-        print("station page: start refused without a serial, an empty form after a start, the bench named, the current step by the status, prompt, reload, second browser, PASS, Abort greyed, the history's report link, the unit's supply, report, abort, an earlier report kept: ok")
+        print("station page: start refused without a serial, an empty form after a start, the bench named, the current step by the status, prompt, reload, second browser, PASS, the read-out in numbers and the drift chart named, Abort greyed, the history's report link, the unit's supply, report, abort, an earlier report kept: ok")
     finally:
         a.quit()
         b.quit()
@@ -175,7 +195,9 @@ def batch(url, driver_path, shot):
         a.find_element(By.ID, "prompt-ok").click()
         wait(a, "PASS on every tile", lambda d: len(d.find_elements(By.CSS_SELECTOR, "#units .tile .v.pass")) == 2)
         rates = [t.find_element(By.CSS_SELECTOR, ".rate").text for t in a.find_elements(By.CSS_SELECTOR, "#units .tile")]
-        assert all(r.endswith("deg/h") for r in rates) and rates[0] != rates[1], f"the tiles' rates: {rates}"
+        assert all(re.fullmatch(r"drift [+-]\d+\.\d{3} deg/h", r) for r in rates) and rates[0] != rates[1], f"the tiles' rates: {rates}"
+        windows = [t.find_element(By.CSS_SELECTOR, ".window").text for t in a.find_elements(By.CSS_SELECTOR, "#units .tile")]
+        assert all(w == "mean of the last 60 s of record east (ended)" for w in windows), f"the tiles' windows: {windows}"
         wait(a, "the batch's verdict", lambda d: d.find_elements(By.CSS_SELECTOR, ".verdict.pass"))
         assert not a.find_elements(By.ID, "report-link"), "a batch has no single report"
         if shot:
@@ -186,7 +208,7 @@ def batch(url, driver_path, shot):
             a.get(link)
             wait(a, f"the report of {serial}", lambda d: "PASS" in d.find_element(By.CSS_SELECTOR, ".verdict").text)
             assert serial in a.page_source, f"{serial} not on its report"
-        print("station page, batch: a serial field per slot, Enter to the next slot, empty slots, an empty form after the start, a tile per unit with its live rate and verdict, each unit's report: ok")
+        print("station page, batch: a serial field per slot, Enter to the next slot, empty slots, an empty form after the start, a tile per unit with its drift over a named window and its verdict, each unit's report: ok")
     finally:
         a.quit()
 

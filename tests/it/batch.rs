@@ -273,6 +273,50 @@ fn a_batch_is_recorded_in_the_store_unit_by_unit_and_verifies_against_its_log() 
         let o = results(args);
         assert_eq!(o.status.code(), Some(0), "{args:?}: {}", stderr(&o));
     }
+    // The export gives each unit its own figures, once: as many rows as its
+    // report has measurements, each value the report's.
+    let csv_path = dir.join("export.csv");
+    let o = results(&["export", "--csv", s(&csv_path)]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let rows: Vec<csv::StringRecord> = csv::Reader::from_path(&csv_path)
+        .expect("csv")
+        .records()
+        .collect::<Result<_, _>>()
+        .expect("csv rows");
+    for serial in ["S-1", "S-2", "S-4"] {
+        let report = figures(&out.join(format!("report-{serial}.json")));
+        let exported: Vec<(&str, f64)> = rows
+            .iter()
+            .filter(|r| &r[3] == serial)
+            .map(|r| (&r[9], r[10].parse().unwrap_or(f64::NAN)))
+            .collect();
+        assert_eq!(exported.len(), report.len(), "{serial}: {exported:?}");
+        for ((name, value), (want_name, want)) in exported.iter().zip(&report) {
+            assert_eq!(name, want_name, "{serial}");
+            assert!(
+                (value - want).abs() <= 1e-9 * want.abs().max(1.0),
+                "{serial} {name}: {value} != {want}"
+            );
+        }
+    }
+    // The trend page links each unit's own report, which the batch wrote.
+    let page = dir.join("trend.html");
+    let o = results(&["trend", "bias_dph:up", "--html", s(&page)]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let html = std::fs::read_to_string(&page).expect("page");
+    let links: Vec<&str> = html
+        .split("<a href=\"")
+        .skip(1)
+        .filter_map(|a| a.split('"').next())
+        .filter(|h| h.ends_with(".html"))
+        .collect();
+    for serial in ["S-1", "S-2", "S-4"] {
+        let want = format!("run/report-{serial}.html");
+        assert!(links.contains(&want.as_str()), "{want} in {links:?}");
+    }
+    for h in &links {
+        assert!(dir.join(h).is_file(), "{h} links no report");
+    }
 }
 
 #[test]
@@ -606,8 +650,10 @@ impl ServedQuad {
     fn start(name: &str) -> Self {
         let dir = temp_dir(name);
         let turn = crate::common::wall_clock_turn();
+        // The units powered from the start, as by hand: a bench with
+        // slots names no supply.
         let text = format!(
-            "speed = {}\nseed = 1\n\
+            "speed = {}\nseed = 1\nunit_powered = true\n\
              [[slots]]\nname = \"A\"\n[[slots]]\nname = \"B\"\n[[slots]]\nname = \"C\"\n\
              [[slots]]\nname = \"D\"\nmount = {Y_MOUNT}\n",
             Self::SPEED

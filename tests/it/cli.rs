@@ -7,8 +7,10 @@ use std::process::{Command, Output};
 pub fn command() -> Command {
     let home = std::env::temp_dir().join(format!("gyrobench-test-home-{}", std::process::id()));
     let mut c = Command::new(env!("CARGO_BIN_EXE_gyrobench"));
+    // Bench locks of this test binary's runs, apart from a real bench's.
     c.env("XDG_DATA_HOME", &home)
-        .env("GYROBENCH_DB", home.join("results.sqlite"));
+        .env("GYROBENCH_DB", home.join("results.sqlite"))
+        .env("GYROBENCH_LOCK_DIR", home.join("locks"));
     c
 }
 

@@ -83,7 +83,7 @@ fn the_served_bench_file_runs_at_the_speed_of_the_serve_configuration() {
         ("espec", "chamber"),
         ("acl", "table"),
         ("gyro", "gyro"),
-        ("supply", "supply (commented out)"),
+        ("supply", "supply"),
     ] {
         let port = ports.get(key).and_then(toml::Value::as_integer).expect(key);
         assert!(
@@ -91,26 +91,12 @@ fn the_served_bench_file_runs_at_the_speed_of_the_serve_configuration() {
             "{device} at port {port}"
         );
     }
-    // The supply block, uncommented, makes a bench with a supply.
-    let uncommented: String = text
-        .lines()
-        .map(|l| match l.strip_prefix("# ") {
-            Some(rest)
-                if rest.starts_with('[')
-                    || rest.split_once(" = ").is_some_and(|(k, _)| {
-                        k.chars().all(|c| c.is_ascii_lowercase() || c == '_')
-                    }) =>
-            {
-                rest
-            }
-            _ => l,
-        })
-        .collect::<Vec<_>>()
-        .join("\n");
-    let src = gyrobench::config::Source::from_text("sim-serve.toml", &uncommented);
+    // The served unit is off until a run switches its supply on: the
+    // bench file names that supply.
+    let src = gyrobench::config::Source::from_text("sim-serve.toml", &text);
     let cfg = gyrobench::bench::BenchConfig::from_source(&src)
-        .unwrap_or_else(|e| panic!("the bench with its supply: {e}"));
-    assert!(cfg.devices.supply.is_some(), "{uncommented}");
+        .unwrap_or_else(|e| panic!("the served bench: {e}"));
+    assert!(cfg.devices.supply.is_some(), "{text}");
 }
 
 /// The batch's served bench reads each unit on the gyro line its serve

@@ -180,9 +180,11 @@ fn a_turn_on_report_draws_the_bias_per_turn_on_the_warm_ups_and_the_current() {
     let dir = temp_dir("pages-turn-on");
     let procedure = crate::power::with_cycles(&dir, 3);
     let run = dir.join("run");
+    // Three turn-ons judge the repeatability with a wide U: any verdict
+    // (pass, fail, conditional) draws the page.
     let out = gyrobench(&["run", s(&procedure), "--out", s(&run), "--db", "none"]);
     assert!(
-        matches!(out.status.code(), Some(0 | 3)),
+        matches!(out.status.code(), Some(0 | 3 | 4)),
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );

@@ -172,30 +172,73 @@ fn an_overcurrent_trip_ends_the_run_with_the_unit_unpowered() {
     std::fs::remove_dir_all(&dir).expect("cleanup");
 }
 
-/// A procedure whose supply the bench lacks is refused at `check`, naming
-/// the step.
+/// On a bench without a supply the operator switches the unit by hand:
+/// the procedure checks; a voltage it cannot set is refused at its line;
+/// and `--unattended` is refused before anything moves, since a power-on
+/// confirmed beforehand says nothing of when it happened.
 #[test]
-fn a_power_step_on_a_bench_without_a_supply_is_refused_at_its_line() {
+fn a_power_step_on_a_bench_without_a_supply_is_the_operators() {
     let dir = temp_dir("power-nobench");
     let bench = std::fs::read_to_string(concat!(
         env!("CARGO_MANIFEST_DIR"),
         "/fixtures/bench/sim-serve.toml"
     ))
     .expect("fixture");
+    // The served bench without its supply: a unit powered by hand.
+    let start = bench
+        .find("[devices.supply]")
+        .expect("the fixture names its supply");
+    let end = bench[start..]
+        .find("\n\n")
+        .map_or(bench.len(), |i| start + i);
+    let bench = format!("{}{}", &bench[..start], &bench[end..]);
     let parsed: toml::Table = bench.parse().expect("TOML");
-    assert!(
-        parsed["devices"].get("supply").is_none(),
-        "the fixture keeps its supply commented out"
-    );
+    assert!(parsed["devices"].get("supply").is_none(), "{bench}");
     let bench = write(&dir, "bench.toml", &bench);
     let out = gyrobench(&["check", PROCEDURE, "--bench", s(&bench)]);
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    // A voltage the run cannot set, at its line.
+    let text = std::fs::read_to_string(PROCEDURE).expect("procedure");
+    let with_volts = text.replacen(
+        "action = \"power\"\non = false",
+        "action = \"power\"\non = false\nvolts = 15.0",
+        1,
+    );
+    assert_ne!(with_volts, text, "the shipped procedure switches off first");
+    let line = with_volts
+        .lines()
+        .position(|l| l == "volts = 15.0")
+        .expect("the voltage")
+        + 1;
+    let volts = write(&dir, "volts.toml", &with_volts);
+    let out = gyrobench(&["check", s(&volts), "--bench", s(&bench)]);
     assert_eq!(out.status.code(), Some(1), "{}", stderr(&out));
     let err = stderr(&out);
     assert!(
-        err.contains("bias_repeatability.toml:34:")
-            && err.contains("a power step needs a supply, and the bench file names none"),
+        err.contains(&format!("volts.toml:{line}:")) && err.contains("switched by hand"),
         "{err}"
     );
+    // Nobody at the bench to switch it: refused before the run starts.
+    let out = gyrobench(&[
+        "run",
+        PROCEDURE,
+        "--bench",
+        s(&bench),
+        "--dut",
+        "RL16-0042",
+        "--unattended",
+        "--operator",
+        "Ann",
+        "--out",
+        s(&dir.join("run")),
+    ]);
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+    assert!(
+        stderr(&out).contains("--unattended cannot confirm when a unit was switched"),
+        "{}",
+        stderr(&out)
+    );
+    assert!(!dir.join("run").join("run.mcap").exists());
     std::fs::remove_dir_all(&dir).expect("cleanup");
 }
 
@@ -208,13 +251,8 @@ fn the_turn_on_procedure_runs_on_sim_serve_through_the_supply_driver() {
     let dir = temp_dir("power-served");
     let speed = 100.0;
     let served = SimServe::start(&dir, speed);
+    // The served bench file names the served supply.
     let bench = served.bench_file(&dir, "tcp://", speed);
-    let mut text = std::fs::read_to_string(&bench).expect("bench file");
-    text.push_str(&format!(
-        "\n[devices.supply]\nspec = \"{}\"\nprotocol = \"keysight-e36300\"\nchannel = 2\nvolts = 15.0\nlimit_a = 1.0\ntimeout_s = 1.0\nattempts = 3\n",
-        served.addr("supply", "keysight-e36300", "tcp://")
-    ));
-    std::fs::write(&bench, text).expect("bench with a supply");
     let procedure = write(
         &dir,
         "two.toml",
@@ -351,7 +389,13 @@ fn a_turn_on_cut_short_is_retaken_cold_on_resume() {
         stderr(&killed)
     );
     let resumed = gyrobench(&["run", "--resume", s(&out_dir), "--db", "none"]);
-    assert_eq!(resumed.status.code(), Some(0), "{}", stderr(&resumed));
+    // Six turn-ons know their repeatability to about 30 %: the procedure's
+    // non-binary rule may call a sound unit a conditional pass (exit 4).
+    assert!(
+        matches!(resumed.status.code(), Some(0 | 4)),
+        "{}",
+        stderr(&resumed)
+    );
     let err = stderr(&resumed);
     assert!(
         err.contains("going on at step") && err.contains("(power the unit off)"),
@@ -368,7 +412,7 @@ fn a_turn_on_cut_short_is_retaken_cold_on_resume() {
         "--out",
         s(&replay),
     ]);
-    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    assert_eq!(out.status.code(), resumed.status.code(), "{}", stderr(&out));
     for f in ["report.json", "report.html"] {
         assert_eq!(
             std::fs::read(out_dir.join(f)).expect("live"),
@@ -440,5 +484,131 @@ unit = "deg/h"
     let left = &report["bench_left"];
     assert_eq!(left["verified"], true, "{left}");
     assert_eq!(left["supply_on"], false, "{left}");
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
+
+/// The acceptance's thermal head: the switch-on once the chamber holds
+/// +20 degC, the self-heating half hour, its figure.
+const HEAD: &str = r#"[procedure]
+name = "acceptance_head"
+dut_type = "RL-16"
+decision_rule = "simple"
+
+[[setup]]
+action = "move"
+table = { outer_deg = 90.0, inner_deg = 0.0 }
+
+[[setup]]
+action = "chamber"
+set_c = 20.0
+ramp_c_per_min = 1.0
+
+[[main]]
+action = "power"
+on = true
+rest_if_on_s = 1800.0
+
+[[main]]
+action = "record"
+label = "self_heating"
+duration_s = 1800.0
+
+[[main]]
+action = "measure"
+name = "self_heating_dph"
+metric = "self_heating"
+records = ["self_heating"]
+high = 1.0
+unit = "deg/h"
+"#;
+
+/// The `/steps` events of a log that carry a power-on.
+fn power_ons_logged(log: &Path) -> Vec<serde_json::Value> {
+    let bytes = std::fs::read(log).expect("run.mcap written");
+    mcap::MessageStream::new(&bytes)
+        .expect("a readable MCAP file")
+        .filter_map(|m| {
+            let m = m.expect("every message decodes");
+            (m.channel.topic == "/steps").then_some(())?;
+            let v: serde_json::Value = serde_json::from_slice(&m.data).expect("JSON");
+            v.get("power_on").cloned()
+        })
+        .collect()
+}
+
+/// On `sim serve` the unit is off until the run switches it on through
+/// the served supply: the log and the report name that moment, and the
+/// self-heating counts from it at the served bench's tick cadence. A
+/// second run finds the unit the first left powered: it is switched off
+/// and rests before its power-on, never judged warm as if cold.
+#[test]
+fn the_served_unit_is_switched_on_by_the_run_and_a_warm_one_rests_first() {
+    let _turn = wall_clock_turn();
+    let dir = temp_dir("power-on-served");
+    let speed = 500.0;
+    let served = SimServe::start(&dir, speed);
+    let bench = served.bench_file(&dir, "tcp://", speed);
+    let procedure = write(&dir, "head.toml", HEAD);
+    let run = |name: &str| {
+        let out_dir = dir.join(name);
+        let out = gyrobench(&[
+            "run",
+            s(&procedure),
+            "--bench",
+            s(&bench),
+            "--dut",
+            "RL16-0042",
+            "--db",
+            "none",
+            "--out",
+            s(&out_dir),
+        ]);
+        assert_eq!(out.status.code(), Some(0), "{name}: {}", stderr(&out));
+        (json(&out_dir.join("report.json")), out_dir)
+    };
+    let (cold, cold_dir) = run("cold");
+    let on = &cold["power_on"];
+    assert_eq!(on["source"], "switched", "{on}");
+    let t_on = on["device_time_s"].as_f64().expect("device time");
+    assert!(t_on > 0.0 && t_on < 120.0, "{on}");
+    assert!(
+        on["utc"].as_str().is_some_and(|u| u.starts_with("20")),
+        "{on}"
+    );
+    let logged = power_ons_logged(&cold_dir.join("run.mcap"));
+    assert_eq!(logged.len(), 1, "{logged:?}");
+    assert_eq!(logged[0]["t_s"].as_f64(), Some(t_on));
+    let heating = &cold["measurements"][0];
+    assert!(
+        heating["value"].as_f64().is_some_and(|v| v > 0.1),
+        "self-heating computed at the served cadence: {heating}"
+    );
+    assert!(
+        heating["note"]
+            .as_str()
+            .is_some_and(|n| n.contains("power-on at")),
+        "{heating}"
+    );
+
+    // The first run left the unit powered (its cleanup keeps it so).
+    let (warm, warm_dir) = run("warm");
+    let on = &warm["power_on"];
+    assert_eq!(on["source"], "switched", "{on}");
+    assert!(
+        on["device_time_s"].as_f64().is_some_and(|t| t >= 1800.0),
+        "switched on after its rest: {on}"
+    );
+    let bytes = std::fs::read(warm_dir.join("run.mcap")).expect("log");
+    let said = mcap::MessageStream::new(&bytes)
+        .expect("a readable MCAP file")
+        .filter_map(|m| {
+            let m = m.expect("every message decodes");
+            (m.channel.topic == "/events").then_some(())?;
+            let v: serde_json::Value = serde_json::from_slice(&m.data).expect("JSON");
+            v["message"].as_str().map(str::to_owned)
+        })
+        .any(|line| line.contains("found powered") && line.contains("rest"));
+    assert!(said, "the log says the unit was found powered and rested");
+    drop(served);
     std::fs::remove_dir_all(&dir).expect("cleanup");
 }

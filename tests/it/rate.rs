@@ -119,9 +119,14 @@ fn rate_transfer_figures_agree_with_the_twin_at_two_settings() {
 #[test]
 fn dead_band_and_threshold_agree_with_the_twin_at_two_settings() {
     let dir = temp_dir("dead-band");
-    for (i, lock_in) in [3.0, 8.0].into_iter().enumerate() {
+    // Dithered (one count rms of stripping residual), and undithered: a
+    // clean locked output, zero counts frame after frame inside the
+    // lock-in, which is a measurement (exit 3, beyond the limit), not a
+    // stuck gyro (exit 1).
+    for (i, (lock_in, residual)) in [(3.0, 1.0), (8.0, 1.0), (3.0, 0.0)].into_iter().enumerate() {
         let response = RateResponseConfig {
             lock_in_dph: lock_in,
+            dither_residual_counts: residual,
             ..RateResponseConfig::default()
         };
         let twin = twin_with(&dir, &format!("twin{i}.toml"), &response);
@@ -129,15 +134,17 @@ fn dead_band_and_threshold_agree_with_the_twin_at_two_settings() {
         let o = run("dead_band.toml", &twin, &out);
         assert_eq!(o.status.code(), Some(3), "beyond 2 deg/h: {}", stderr(&o));
         let report = json(&out.join("report.json"));
+        let lock_in = format!("lock-in {lock_in}, residual {residual} counts");
+        let lock_in_dph = response.lock_in_dph;
         assert_within_3_se(
-            &format!("lock-in {lock_in} dead band"),
+            &format!("{lock_in} dead band"),
             figure(&report, "dead_band_dph"),
-            input_for_share(lock_in, DEAD_BAND_SHARE),
+            input_for_share(lock_in_dph, DEAD_BAND_SHARE),
         );
         assert_within_3_se(
-            &format!("lock-in {lock_in} threshold"),
+            &format!("{lock_in} threshold"),
             figure(&report, "threshold_dph"),
-            input_for_share(lock_in, THRESHOLD_SHARE),
+            input_for_share(lock_in_dph, THRESHOLD_SHARE),
         );
     }
     std::fs::remove_dir_all(&dir).expect("cleanup");
@@ -475,6 +482,66 @@ fn the_scale_factor_temperature_coefficient_comes_from_rate_runs() {
     std::fs::remove_dir_all(&dir).expect("cleanup");
 }
 
+/// The scale factor is counts per angle: a unit whose frame clock is 50
+/// ppm fast (its frames read every rate 50 ppm low over time) gives the
+/// scale factor of the same unit at 0 ppm to within 1 ppm, the figures
+/// over whole revolutions of the table; the log replays to the same
+/// report.
+#[test]
+fn a_frame_clock_error_does_not_reach_the_scale_factor() {
+    let dir = temp_dir("rate-frame-clock");
+    let mut figures = Vec::new();
+    for ppm in [0.0, 50.0] {
+        let mut twin = TwinConfig::default_rl16();
+        twin.gyro.frame_clock_error_ppm = ppm;
+        let twin = write(
+            &dir,
+            &format!("twin{ppm}.toml"),
+            &twin.to_toml().expect("twin TOML"),
+        );
+        let out = dir.join(format!("run{ppm}"));
+        let o = run("rate_transfer.toml", &twin, &out);
+        assert_eq!(o.status.code(), Some(0), "{ppm} ppm: {}", stderr(&o));
+        let report = json(&out.join("report.json"));
+        let sf = report["measurements"]
+            .as_array()
+            .expect("measurements")
+            .iter()
+            .find(|m| m["name"] == "scale_factor_ppm")
+            .expect("scale factor");
+        assert_eq!(sf["note"], "", "every record over whole turns: {sf}");
+        figures.push(figure(&report, "scale_factor_ppm").0);
+        // Over time (counts over frames at the nominal period) the same
+        // records read the clock's error.
+        let log = out.join("run.mcap");
+        let replayed = replay(&log, None).expect("the log replays");
+        let records = &replayed.result.records;
+        let by_time: Vec<RatePoint> = records
+            .order
+            .iter()
+            .filter(|l| l.starts_with("rate_"))
+            .filter_map(|l| RatePoint::of(&records.get(l)?))
+            .collect();
+        let over_time = rate::scale_factor_ppm(&by_time).expect("fit").value;
+        assert!(
+            (over_time - figures[0] + ppm).abs() < 1.0,
+            "{ppm} ppm over time: {over_time}"
+        );
+        let again = dir.join(format!("replayed{ppm}"));
+        let r = gyrobench(&["replay", s(&log), "--out", s(&again)]);
+        assert_eq!(r.status.code(), Some(0), "{}", stderr(&r));
+        assert_eq!(
+            std::fs::read_to_string(out.join("report.json")).expect("live"),
+            std::fs::read_to_string(again.join("report.json")).expect("replayed"),
+        );
+    }
+    assert!(
+        (figures[1] - figures[0]).abs() < 1.0,
+        "50 ppm of frame clock moved the scale factor: {figures:?}"
+    );
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
+
 /// A rate run killed mid-record resumes with that record's turn: the
 /// table is turned again before the record is retaken, and the run ends
 /// with its figures.
@@ -558,6 +625,149 @@ fn the_misalignment_run_measures_the_twins_axis_tilts() {
             .map(|m| m.value)
             .collect();
         assert_eq!(live, again, "replay of {}", out.display());
+    }
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
+
+/// Three positions (axis up, horizontal east, tilted 35 deg) on a twin
+/// whose bias moves 0.2 deg/h per g of gravity along its axis: the
+/// g-sensitivity figure finds it, and the spread of the bias between the
+/// positions shows it; with the effect off both read near zero.
+#[test]
+fn the_g_sensitivity_and_the_positions_spread_find_the_twins_gravity_term() {
+    let dir = temp_dir("g-sensitivity");
+    let procedure = write(
+        &dir,
+        "g.toml",
+        r#"[procedure]
+name = "g_sensitivity"
+dut_type = "RL-16"
+decision_rule = "simple"
+
+[[main]]
+action = "wait"
+duration_s = 1800.0
+
+[[main]]
+action = "repeat"
+positions = [
+  { label = "up", orientation = { azimuth_deg = 90.0, elevation_deg = 90.0, roll_deg = 0.0 } },
+  { label = "east", orientation = { azimuth_deg = 90.0, elevation_deg = 0.0, roll_deg = 0.0 } },
+  { label = "tilt", orientation = { azimuth_deg = 90.0, elevation_deg = 35.0, roll_deg = 0.0 } },
+]
+
+[[main.steps]]
+action = "wait"
+duration_s = 300.0
+
+[[main.steps]]
+action = "record"
+label = "{label}"
+duration_s = 1200.0
+
+[[main]]
+action = "measure"
+name = "g_sensitivity_dph_per_g"
+metric = "g_sensitivity"
+records = ["up", "east", "tilt"]
+low = -1.0
+high = 1.0
+unit = "deg/h/g"
+
+[[main]]
+action = "measure"
+name = "bias_spread_dph"
+metric = "bias_spread"
+records = ["up", "east", "tilt"]
+high = 1.0
+unit = "deg/h"
+"#,
+    );
+    for (k, want) in [(0.2, 0.2), (0.0, 0.0)] {
+        let mut twin = TwinConfig::default_rl16();
+        twin.effects.g_sensitivity = Some(gyrobench::twin::config::GSensitivity {
+            enabled: k != 0.0,
+            coeff_dph_per_g: [k, 0.0, 0.0],
+        });
+        let file = write(
+            &dir,
+            &format!("twin-{k}.toml"),
+            &twin.to_toml().expect("TOML"),
+        );
+        let out = dir.join(format!("run-{k}"));
+        let o = gyrobench(&[
+            "run",
+            s(&procedure),
+            "--twin",
+            s(&file),
+            "--db",
+            "none",
+            "--out",
+            s(&out),
+        ]);
+        assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+        let report = json(&out.join("report.json"));
+        assert_within_3_se(
+            &format!("g-sensitivity {k}"),
+            figure(&report, "g_sensitivity_dph_per_g"),
+            want,
+        );
+        // Up to down the axis sees 1 g: the spread is the coefficient.
+        let (spread, _) = figure(&report, "bias_spread_dph");
+        assert!((spread - k).abs() < 0.05, "spread {spread} for {k}");
+    }
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
+
+/// `procedures/noise.toml` judges the twin's noise terms: its angle random
+/// walk found within three standard errors, a bias instability and rate
+/// random walk the record does not resolve judged on their bounds (at or
+/// above the truth); a unit four times noisier fails on its ARW.
+#[test]
+fn the_noise_procedure_judges_the_twins_noise_terms() {
+    let dir = temp_dir("noise");
+    for (arw, exit) in [(0.002, 0), (0.008, 3)] {
+        let mut twin = TwinConfig::default_rl16();
+        twin.noise.arw_deg_per_rt_h = arw;
+        let file = write(
+            &dir,
+            &format!("twin-{arw}.toml"),
+            &twin.to_toml().expect("TOML"),
+        );
+        let out = dir.join(format!("run-{arw}"));
+        let o = run("noise.toml", &file, &out);
+        assert_eq!(o.status.code(), Some(exit), "{}", stderr(&o));
+        let report = json(&out.join("report.json"));
+        assert_within_3_se(
+            &format!("ARW {arw}"),
+            figure(&report, "arw_deg_per_rt_h"),
+            arw,
+        );
+        let m = |name: &str| {
+            report["measurements"]
+                .as_array()
+                .expect("measurements")
+                .iter()
+                .find(|m| m["name"] == name)
+                .cloned()
+                .expect(name)
+        };
+        let b = m("bias_instability_dph");
+        let bound = b["value"].as_f64().expect("a bound");
+        let resolved = !b["note"]
+            .as_str()
+            .is_some_and(|n| n.contains("upper bound"));
+        assert!(
+            resolved || bound >= twin.noise.bias_instability_dph,
+            "a bound at or above the truth: {b}"
+        );
+        let k = m("rate_random_walk_dph_per_rt_h");
+        assert!(
+            k["note"]
+                .as_str()
+                .is_some_and(|n| n.contains("upper bound")),
+            "the twin has no rate random walk: {k}"
+        );
     }
     std::fs::remove_dir_all(&dir).expect("cleanup");
 }

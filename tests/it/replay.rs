@@ -85,7 +85,7 @@ fn replay_of_an_unchanged_log_is_identical_to_the_live_run() {
         r["measurements"][5]["note"]
             .as_str()
             .expect("note")
-            .contains("fitted on these records")
+            .contains("fitted held out")
     );
     std::fs::remove_dir_all(&dir).expect("cleanup");
 }
@@ -222,17 +222,28 @@ fn logs_of_the_first_format_still_replay_to_their_figures() {
         );
         let then = json(&fixtures.join(run).join("report.json"));
         let now = json(&out.join("report.json"));
-        for field in [
-            "outcome",
-            "measurements",
-            "frames",
-            "device_time_s",
-            "dut",
-            "seed",
-            "noise",
-        ] {
+        for field in ["outcome", "frames", "device_time_s", "dut", "seed", "noise"] {
             assert_eq!(now[field], then[field], "{run}: {field}");
         }
+        // Each figure as it was judged then, key for key (a replay adds
+        // the uncertainty, guard band and margin the format had none of).
+        let (ms_now, ms_then) = (&now["measurements"], &then["measurements"]);
+        assert_eq!(
+            ms_now.as_array().map(Vec::len),
+            ms_then.as_array().map(Vec::len)
+        );
+        for (m_now, m_then) in ms_now
+            .as_array()
+            .into_iter()
+            .flatten()
+            .zip(ms_then.as_array().into_iter().flatten())
+        {
+            for (k, v) in m_then.as_object().expect("a measurement") {
+                assert_eq!(&m_now[k], v, "{run}: {} {k}", m_then["name"]);
+            }
+        }
+        // Judged as it was then: simple acceptance.
+        assert_eq!(now["decision_rule"]["rule"], "simple", "{run}");
         // The link figures it had; later figures (reconnects) are new.
         for (k, v) in then["link"].as_object().expect("link") {
             assert_eq!(&now["link"][k], v, "{run}: link.{k}");

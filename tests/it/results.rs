@@ -166,6 +166,34 @@ fn lifecycle(db: &str, tag: &str) {
     );
     assert_eq!(trend.status.code(), Some(0), "{}", stderr(&trend));
     let t: serde_json::Value = serde_json::from_slice(&trend.stdout).expect("JSON");
+    // Below 25 values no index is shown, and the trend says why.
+    assert!(
+        t["within"]["k"].is_null() && t["overall"]["k"].is_null(),
+        "{t}"
+    );
+    assert!(
+        t["within"]["withheld"]
+            .as_str()
+            .is_some_and(|w| w.contains("fewer than 25")),
+        "{t}"
+    );
+    let trend = with_db(
+        db,
+        &[
+            "results",
+            "trend",
+            "bias_dph:up",
+            "--type",
+            "RL-16",
+            "--since",
+            "2000-01-01",
+            "--min-values",
+            "3",
+            "--json",
+        ],
+    );
+    assert_eq!(trend.status.code(), Some(0), "{}", stderr(&trend));
+    let t: serde_json::Value = serde_json::from_slice(&trend.stdout).expect("JSON");
     assert!(t["count"].as_i64().expect("count") >= 3, "{t}");
     assert_eq!(t["low"], -5.0);
     assert!(
@@ -581,4 +609,298 @@ fn a_queued_run_goes_only_to_the_store_it_was_meant_for() {
         Some(0)
     );
     std::fs::remove_dir_all(&dir).expect("cleanup");
+}
+
+/// Run `sql` on the store `db` (a SQLite file or a PostgreSQL URL), as
+/// someone with write access to it would.
+fn edit_store(db: &str, sql: &str) {
+    if db.starts_with("postgres") {
+        let mut c = postgres::Client::connect(db, postgres::NoTls).expect("the server");
+        c.batch_execute(sql).expect("the edit");
+    } else {
+        let c = rusqlite::Connection::open(db).expect("the file");
+        c.execute_batch(sql).expect("the edit");
+    }
+}
+
+/// A coefficient set of unit `serial` (type RL-16V) that no store holds.
+fn set_of(serial: &str) -> String {
+    format!(
+        "[unit]\nserial = \"{serial}\"\ntype = \"RL-16V\"\n\n[set]\ncreated_utc = \"2026-12-03T10:00:00+00:00\"\n\
+         software = \"gyrobench 0.1.0\"\nmodels = [\"model4\"]\n\n[model4]\nk1_dph_per_c = -0.12\n\
+         k2_dph_per_c2 = -0.01\nk3_dph_per_c_per_s = 20.0\nk4_dph_per_c = -0.007\nk5_dph = 0.36\n\
+         warmup_tau_s = 600.0\noffset_dph = 0.0\n"
+    )
+}
+
+/// A run of unit `TAG-A` (with a coefficient set and an operator) and a
+/// batch of two in `runs`, stored in `db`; verify agrees with them (and
+/// with --replay). Their parts' keys, the single run's first.
+fn stored_runs(db: &str, dir: &Path, runs: &Path, tag: &str) -> (String, String) {
+    // A type of their own: the lab questions of `lifecycle`, asked of the
+    // same server, are about RL-16s.
+    let p = write(
+        dir,
+        "tiny.toml",
+        &TINY.replace("dut_type = \"RL-16\"", "dut_type = \"RL-16V\""),
+    );
+    let unit = format!("{tag}-A");
+    let set = write(dir, "set.toml", &set_of(&unit));
+    let one = runs.join("one");
+    let mut args = vec!["run", s(&p), "--dut", &unit, "--operator", "ana"];
+    args.extend(["--coeffs", s(&set), "--out", s(&one)]);
+    let r = with_db(db, &args);
+    assert_eq!(r.status.code(), Some(0), "{}", stderr(&r));
+    let quad = Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/bench/quad.toml");
+    let (a, c) = (format!("A={tag}-Q1"), format!("C={tag}-Q3"));
+    let batch = runs.join("batch");
+    let mut args = vec!["run", s(&p), "--bench", s(&quad), "--dut", &a, "--dut", &c];
+    args.extend(["--out", s(&batch)]);
+    let r = with_db(db, &args);
+    assert_eq!(r.status.code(), Some(0), "{}", stderr(&r));
+    for more in [&[][..], &["--replay"][..]] {
+        let mut args = vec!["results", "verify", s(runs)];
+        args.extend(more);
+        let v = with_db(db, &args);
+        assert_eq!(v.status.code(), Some(0), "{}", stdout(&v));
+    }
+    let key = |report: std::path::PathBuf| {
+        let id = json(&report)["run_id"].clone();
+        format!("{}.1", id.as_str().expect("run id"))
+    };
+    (
+        key(one.join("report.json")),
+        key(batch.join(format!("report-{tag}-Q1.json"))),
+    )
+}
+
+/// The record differences verify's JSON `v` names for the part `run`:
+/// (field, the store's value, the log's).
+fn named(v: &serde_json::Value, run: &str) -> Vec<(String, serde_json::Value, serde_json::Value)> {
+    v["findings"]
+        .as_array()
+        .expect("findings")
+        .iter()
+        .filter(|f| f["run"] == run && f["problem"] == "record_differs")
+        .flat_map(|f| f["differences"].as_array().cloned().unwrap_or_default())
+        .map(|d| {
+            let field = d["field"].as_str().unwrap_or("").to_owned();
+            (field, d["store"].clone(), d["log"].clone())
+        })
+        .collect()
+}
+
+/// Runs stored in `db` ([`stored_runs`]), then their rows edited as the
+/// issue's attacker did: each edit is named by field with the store's
+/// value and the log's.
+fn verify_names_every_field_edited(db: &str, tag: &str) {
+    let dir = temp_dir(&format!("results-verify-fields-{tag}"));
+    let runs = dir.join("runs");
+    let (one, batch) = stored_runs(db, &dir, &runs, tag);
+    let log = json(&runs.join("one/report.json"));
+    let moved = format!("{tag}-MOVED");
+    edit_store(
+        db,
+        &format!(
+            "INSERT INTO units (dut_type, serial) VALUES ('RL-16V', '{moved}');
+             UPDATE runs SET outcome = 'fail', operator = 'mallory', started_utc = '2020-01-01T00:00:00+00:00',
+               bench_id = 'bench-9', software_revision = 'deadbeef',
+               unit_id = (SELECT id FROM units WHERE serial = '{moved}') WHERE id = '{one}';
+             UPDATE run_units SET outcome = 'fail', coeffs_sha256 = '00ff',
+               unit_id = (SELECT id FROM units WHERE serial = '{moved}') WHERE run = '{one}';
+             UPDATE run_units SET outcome = 'fail' WHERE run = '{batch}' AND slot = 'C';"
+        ),
+    );
+    let v = with_db(db, &["results", "verify", s(&runs), "--json"]);
+    assert_eq!(v.status.code(), Some(3), "{}", stdout(&v));
+    let v: serde_json::Value = serde_json::from_slice(&v.stdout).expect("JSON");
+    let j = serde_json::Value::from;
+    let unit = format!("{tag}-A");
+    let (moved, unit) = (j(moved.as_str()), j(unit.as_str()));
+    assert_eq!(
+        named(&v, &one),
+        [
+            ("operator".into(), j("mallory"), j("ana")),
+            (
+                "started_utc".into(),
+                j("2020-01-01T00:00:00+00:00"),
+                log["start_time_utc"].clone()
+            ),
+            ("bench_id".into(), j("bench-9"), j("embedded")),
+            (
+                "software_revision".into(),
+                j("deadbeef"),
+                log["software_revision"].clone()
+            ),
+            ("serial".into(), moved.clone(), unit.clone()),
+            ("outcome".into(), j("fail"), j("pass")),
+            ("unit.serial".into(), moved, unit),
+            ("unit.outcome".into(), j("fail"), j("pass")),
+            (
+                "unit.coeffs_sha256".into(),
+                j("00ff"),
+                log["coefficients"]["sha256"].clone()
+            ),
+        ]
+    );
+    assert_eq!(
+        named(&v, &batch),
+        [("unit[C].outcome".into(), j("fail"), j("pass"))]
+    );
+    // The terminal says the same, one line per field.
+    let text = stdout(&with_db(db, &["results", "verify", s(&runs)]));
+    assert!(
+        text.contains("RECORD DIFFERS")
+            && text.contains("operator: the store has \"mallory\", the log \"ana\""),
+        "{text}"
+    );
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
+
+#[test]
+fn sqlite_verify_names_every_field_edited_away_from_the_log() {
+    let dir = temp_dir("results-sqlite-verify-fields");
+    verify_names_every_field_edited(s(&dir.join("results.sqlite")), "sqlite");
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
+
+#[test]
+fn postgres_verify_names_every_field_edited_away_from_the_log() {
+    if let Some(url) = postgres() {
+        verify_names_every_field_edited(&url, &format!("pg{}", std::process::id()));
+    }
+}
+
+/// A run reviewed, then approved by someone else, in store `db`; each sign
+/// out of turn refused; `show` lists both; an edited figure breaks them.
+fn signing(db: &str, tag: &str) {
+    let dir = temp_dir(&format!("results-sign-{tag}"));
+    let p = write(
+        &dir,
+        "tiny.toml",
+        &TINY.replace("dut_type = \"RL-16\"", "dut_type = \"RL-16S\""),
+    );
+    let unit = format!("{tag}-S1");
+    let out = dir.join("run");
+    let r = with_db(db, &["run", s(&p), "--dut", &unit, "--out", s(&out)]);
+    assert_eq!(r.status.code(), Some(0), "{}", stderr(&r));
+    let run = json(&out.join("report.json"))["run_id"]
+        .as_str()
+        .expect("run id")
+        .to_owned();
+    let sign =
+        |role: &str, by: &str| with_db(db, &["results", "sign", &run, "--role", role, "--by", by]);
+    let refused = sign("approved", "Bo");
+    assert_eq!(refused.status.code(), Some(2), "{}", stderr(&refused));
+    assert!(
+        stderr(&refused).contains("not reviewed yet"),
+        "{}",
+        stderr(&refused)
+    );
+    let r = sign("reviewed", "Al");
+    assert_eq!(r.status.code(), Some(0), "{}", stderr(&r));
+    let again = sign("reviewed", "Al");
+    assert_eq!(again.status.code(), Some(2), "{}", stderr(&again));
+    let own = sign("approved", "Al");
+    assert_eq!(own.status.code(), Some(2), "{}", stderr(&own));
+    assert!(
+        stderr(&own).contains("another person approves it"),
+        "{}",
+        stderr(&own)
+    );
+    let r = sign("approved", "Bo");
+    assert_eq!(r.status.code(), Some(0), "{}", stderr(&r));
+
+    let shown = with_db(db, &["results", "show", &run, "--json"]);
+    assert_eq!(shown.status.code(), Some(0), "{}", stderr(&shown));
+    let d: serde_json::Value = serde_json::from_slice(&shown.stdout).expect("JSON");
+    let signed: Vec<(String, String)> = d["signatures"]
+        .as_array()
+        .expect("signatures")
+        .iter()
+        .map(|g| {
+            (
+                g["role"].as_str().unwrap_or("").to_owned(),
+                g["by"].as_str().unwrap_or("").to_owned(),
+            )
+        })
+        .collect();
+    assert_eq!(
+        signed,
+        [
+            ("reviewed".into(), "Al".into()),
+            ("approved".into(), "Bo".into())
+        ]
+    );
+    let text = stdout(&with_db(db, &["results", "show", &run]));
+    assert!(
+        text.contains("reviewed  by Al") && text.contains("approved  by Bo"),
+        "{text}"
+    );
+
+    // The report rendered again from the log with the store shows them.
+    let again = dir.join("again");
+    let r = with_db(
+        db,
+        &[
+            "replay",
+            s(&out.join("run.mcap")),
+            "--store",
+            "--out",
+            s(&again),
+        ],
+    );
+    assert_eq!(r.status.code(), Some(0), "{}", stderr(&r));
+    let html = std::fs::read_to_string(again.join("report.html")).expect("page");
+    for (role, by) in [("reviewed by", "Al"), ("approved by", "Bo")] {
+        let row = html.split(&format!("<th>{role}</th>")).nth(1).unwrap_or("");
+        let cell = row.split("</td>").next().unwrap_or("");
+        assert!(cell.contains(by), "{role}: {cell}");
+    }
+    assert_eq!(
+        json(&again.join("report.json"))["signatures"]
+            .as_array()
+            .map(Vec::len),
+        Some(2)
+    );
+
+    let v = with_db(db, &["results", "verify", s(&dir)]);
+    assert_eq!(v.status.code(), Some(0), "{}", stdout(&v));
+    // A figure edited in the store: both signatures no longer hold.
+    edit_store(
+        db,
+        &format!("UPDATE measurements SET value = value + 1 WHERE run = '{run}.1' AND seq = 0"),
+    );
+    let v = with_db(db, &["results", "verify", s(&dir), "--json"]);
+    assert_eq!(v.status.code(), Some(3), "{}", stdout(&v));
+    let j: serde_json::Value = serde_json::from_slice(&v.stdout).expect("JSON");
+    let broken: Vec<&str> = j["findings"]
+        .as_array()
+        .expect("findings")
+        .iter()
+        .filter(|f| f["problem"] == "signature_broken")
+        .filter_map(|f| f["detail"].as_str())
+        .collect();
+    assert_eq!(broken.len(), 2, "{j}");
+    assert!(
+        broken
+            .iter()
+            .all(|d| d.contains("stored verdict or figures")),
+        "{broken:?}"
+    );
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
+
+#[test]
+fn sqlite_signing_reviews_then_approves_and_verify_names_an_edit_since() {
+    let dir = temp_dir("results-sqlite-sign");
+    signing(s(&dir.join("results.sqlite")), "sqlite");
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
+
+#[test]
+fn postgres_signing_reviews_then_approves_and_verify_names_an_edit_since() {
+    if let Some(url) = postgres() {
+        signing(&url, &format!("pg{}", std::process::id()));
+    }
 }

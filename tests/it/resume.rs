@@ -100,7 +100,7 @@ fn an_interrupted_run_resumes_from_its_last_completed_step() {
     for want in [
         "restore setup.0",
         "setup.0.resume_arrive",
-        "setup.0.resume_dwell (line 8): wait 2040 s",
+        "setup.0.resume_dwell (line 9): wait 2040 s",
         "step main.3 (line",
         "step main.4 (line",
     ] {

@@ -82,6 +82,34 @@ fn smoke_passes_with_the_report_contract_and_a_complete_log() {
         assert!(m["value"].as_f64().expect("value") < m["high"].as_f64().expect("high"));
     }
     assert!(dir.join("report.html").exists());
+    // A noise term the curve does not resolve is null with its reason,
+    // never a number (3 min records resolve no rate random walk).
+    let noise = &r["noise"];
+    for k in [
+        "arw_deg_per_rt_h",
+        "ieee_b_dph",
+        "rate_random_walk_dph_per_rt_h",
+    ] {
+        let why = noise["not_resolved"][k].as_str();
+        match noise[k].as_f64() {
+            Some(v) => assert!(v > 0.0 && why.is_none(), "noise.{k}: {noise}"),
+            None => assert!(
+                noise[k].is_null() && why.is_some_and(|w| !w.is_empty()),
+                "noise.{k}: {noise}"
+            ),
+        }
+    }
+    assert!(noise["rate_random_walk_dph_per_rt_h"].is_null(), "{noise}");
+    // The embedded bench's supply starts off: the run switched the unit on
+    // at its start, and the report says when, on its first page too.
+    assert_eq!(r["power_on"]["source"], "switched", "{}", r["power_on"]);
+    assert_eq!(r["power_ons"].as_array().map(Vec::len), Some(1));
+    let html = std::fs::read_to_string(dir.join("report.html")).expect("report.html");
+    assert!(
+        html.contains("<th>power-on</th><td>at 0.0 s of device time")
+            && html.contains("switched on by the run, from off"),
+        "the first page states the power-on"
+    );
     let msgs = messages(&dir.join("run.mcap"));
     assert_eq!(
         frames_logged(&msgs),

@@ -312,3 +312,212 @@ fn a_full_disk_mid_run_stops_the_log_but_cleanup_runs_to_its_end() {
     assert_eq!(rec.status.code(), Some(0), "{}", stderr(&rec));
     std::fs::remove_dir_all(&dir).expect("cleanup");
 }
+
+/// `sim serve` at `speed` and a bench file of its TCP endpoints at the
+/// same speed, every link reopened for `window_s` after a drop.
+fn served_with_window(dir: &Path, speed: f64, window_s: f64) -> (SimServe, std::path::PathBuf) {
+    let served = SimServe::start(dir, speed);
+    let bench = served.bench_file(dir, "tcp://", speed);
+    let text = std::fs::read_to_string(&bench).expect("bench file");
+    let window = format!("reconnect_window_s = {window_s}\n");
+    let text = text
+        .replace("\nattempts = 3\n", &format!("\nattempts = 3\n{window}"))
+        .replace("silence_s = 1.0\n", &format!("silence_s = 1.0\n{window}"));
+    std::fs::write(&bench, text).expect("bench file with its windows");
+    (served, bench)
+}
+
+fn served_run(procedure: &Path, bench: &Path, out: &Path) -> Command {
+    let mut command = crate::cli::command();
+    command
+        .args([
+            "run",
+            s(procedure),
+            "--bench",
+            s(bench),
+            "--dut",
+            "RL16-0042",
+            "--operator",
+            "J.Doe",
+            "--unattended",
+            "--out",
+            s(out),
+        ])
+        .stdout(Stdio::null());
+    command
+}
+
+/// One bench, one run: a second run on a bench in use is refused before
+/// it sends anything (no run directory made), naming the run that holds
+/// it; once that run ends the bench is free again.
+#[test]
+fn a_second_run_on_a_bench_in_use_is_refused_naming_the_first() {
+    let dir = temp_dir("bench-in-use");
+    let _turn = crate::common::wall_clock_turn();
+    let served = SimServe::start(&dir, 20.0);
+    let bench = served.bench_file(&dir, "tcp://", 20.0);
+    let p = write(&dir, "mini.toml", MINI);
+    let first_dir = dir.join("first");
+    let mut first = Watched::spawn(served_run(&p, &bench, &first_dir));
+    first.wait_for_line("] record warm for");
+    let second_dir = dir.join("second");
+    let second = served_run(&p, &bench, &second_dir).output().expect("runs");
+    let err = stderr(&second);
+    assert_eq!(second.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("is in use by another run: mini on RL16-0042 in ")
+            && err.contains(s(&first_dir)),
+        "{err}"
+    );
+    assert!(!second_dir.exists(), "a refused run leaves nothing behind");
+    signal(first.child.id(), "TERM");
+    let (status, err) = first.finish();
+    assert_eq!(status.code(), Some(143), "{err}");
+    drop(served);
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
+
+/// A bench that vanishes (every device of `sim serve` killed at once)
+/// mid-run: the drop is told at once, the run stops when the first link's
+/// window ends (not one window per request of the safe state and
+/// cleanup), and it writes its report saying the bench is in no known
+/// state. A SIGTERM while it waits on the dropped links ends it at once.
+#[test]
+fn a_run_whose_bench_vanishes_ends_with_its_report_within_the_window() {
+    let dir = temp_dir("bench-vanishes");
+    let _turn = crate::common::wall_clock_turn();
+    let p = write(&dir, "mini.toml", MINI);
+    let window = std::time::Duration::from_secs(5);
+    for sigterm in [false, true] {
+        let (served, bench) = served_with_window(&dir, 20.0, window.as_secs_f64());
+        let out = dir.join(if sigterm { "term" } else { "window" });
+        let mut run = Watched::spawn(served_run(&p, &bench, &out));
+        run.wait_for_line("] record warm for");
+        drop(served);
+        run.wait_for_line("link dropped");
+        if sigterm {
+            signal(run.child.id(), "TERM");
+        }
+        // The bound: the reconnect window plus a minute.
+        let (status, err) = run.finish_within(window + std::time::Duration::from_secs(60));
+        let report = json(&out.join("report.json"));
+        let left = &report["bench_left"];
+        assert_eq!(left["verified"], false, "{left}");
+        assert!(
+            left["summary"]
+                .as_str()
+                .is_some_and(|t| t.starts_with("UNKNOWN")),
+            "{left}"
+        );
+        if sigterm {
+            assert_eq!(status.code(), Some(143), "{err}");
+            assert_eq!(report["outcome"], "aborted");
+        } else {
+            assert_eq!(status.code(), Some(1), "{err}");
+            assert!(
+                report["error"]["message"]
+                    .as_str()
+                    .is_some_and(|m| m.contains("could not be reopened within 5 s")),
+                "{}",
+                report["error"]
+            );
+            assert!(
+                err.contains("could not be reopened within 5 s: the run stops"),
+                "{err}"
+            );
+        }
+    }
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
+
+/// A real bench whose procedure asks the operator something needs an
+/// answer: with no terminal and no `--unattended`, the run is refused
+/// before anything moves, naming the prompt's line; `--unattended` needs
+/// the operator who confirms the prompts beforehand, and the log says so.
+#[test]
+fn a_real_benchs_prompt_needs_an_answer() {
+    let dir = temp_dir("prompt-needs-answer");
+    let _turn = crate::common::wall_clock_turn();
+    let served = SimServe::start(&dir, 200.0);
+    let bench = served.bench_file(&dir, "tcp://", 200.0);
+    let smoke = concat!(env!("CARGO_MANIFEST_DIR"), "/procedures/smoke.toml");
+    let out = dir.join("asked");
+    let base = [
+        "run",
+        smoke,
+        "--bench",
+        s(&bench),
+        "--dut",
+        "RL16-0042",
+        "--out",
+        s(&out),
+    ];
+    let r = crate::cli::command()
+        .args(base)
+        .stdin(Stdio::null())
+        .output()
+        .expect("runs");
+    let err = stderr(&r);
+    assert_eq!(r.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("smoke.toml asks the operator at line 17")
+            && err.contains("--unattended --operator NAME"),
+        "{err}"
+    );
+    assert!(!out.exists());
+    let r = crate::cli::command()
+        .args(base)
+        .arg("--unattended")
+        .stdin(Stdio::null())
+        .output()
+        .expect("runs");
+    assert_eq!(r.status.code(), Some(2), "{}", stderr(&r));
+    assert!(stderr(&r).contains("name them with --operator NAME"));
+    drop(served);
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
+
+/// Aborting a turn-on procedure leaves the unit unpowered: the safe state
+/// switches the supply off and the cleanup's `power on = true` (for a run
+/// that went to its end) is skipped. A supply that ignores `OUTP OFF` is
+/// flagged: the bench is not as asked.
+#[test]
+fn an_aborted_turn_on_procedure_leaves_the_unit_unpowered_or_says_it_is_not() {
+    let dir = temp_dir("abort-turn-on");
+    let p = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/procedures/bias_repeatability.toml"
+    );
+    // In the first turn-on's record (the main starts near 8000 s).
+    for (ignores_off, name) in [(false, "obeys"), (true, "ignores")] {
+        let out = dir.join(name);
+        let mut args = vec!["run", p, "--out", s(&out), "--inject", "sighup@12000"];
+        if ignores_off {
+            args.extend(["--inject", "supply-ignores-off@10000"]);
+        }
+        let r = gyrobench(&args);
+        assert_eq!(r.status.code(), Some(129), "{}", stderr(&r));
+        let report = json(&out.join("report.json"));
+        let left = &report["bench_left"];
+        if ignores_off {
+            assert_eq!(left["verified"], false, "{left}");
+            assert_eq!(left["supply_on"], true, "{left}");
+            assert!(
+                left["summary"].as_str().is_some_and(|t| t.contains(
+                    "the supply was asked to switch the unit's power off but its output is on"
+                )),
+                "{left}"
+            );
+        } else {
+            assert_eq!(left["verified"], true, "{left}");
+            assert_eq!(left["supply_on"], false, "{left}");
+            assert!(
+                left["summary"]
+                    .as_str()
+                    .is_some_and(|t| t.contains("except the supply (its cleanup was skipped")),
+                "{left}"
+            );
+        }
+    }
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}

@@ -22,6 +22,15 @@ impl Served {
     /// `extra` arguments after the usual ones (the embedded bench at full
     /// speed, a live stream on a free loopback port).
     fn start(dir: &Path, extra: &[&str]) -> Self {
+        Self::offering(
+            dir,
+            concat!(env!("CARGO_MANIFEST_DIR"), "/procedures"),
+            extra,
+        )
+    }
+
+    /// As [`Served::start`], offering the procedures of `procedures`.
+    fn offering(dir: &Path, procedures: &str, extra: &[&str]) -> Self {
         let mut child = command()
             .args([
                 "station",
@@ -30,7 +39,7 @@ impl Served {
                 "--live",
                 "127.0.0.1:0",
                 "--procedures",
-                concat!(env!("CARGO_MANIFEST_DIR"), "/procedures"),
+                procedures,
                 "--runs",
                 s(&dir.join("runs")),
                 "--db",
@@ -140,6 +149,22 @@ fn the_station_runs_a_procedure_from_start_to_report_and_refuses_what_it_must() 
         r#"{"procedure":"../x.toml","serial":"A1"}"#,
     );
     assert_eq!(code, 404, "{body}");
+    // Both ways of naming the unit: refused, naming both, none ignored;
+    // slots on a bench of one unit: refused, naming `serial`.
+    for (req, says) in [
+        (
+            r#"{"procedure":"smoke.toml","serial":"A1","serials":{"A":"A2"}}"#,
+            ["`serial` and `serials`", "not both"],
+        ),
+        (
+            r#"{"procedure":"smoke.toml","serials":{"A":"A2"}}"#,
+            ["one unit", "`serial`"],
+        ),
+    ] {
+        let (code, body) = st.request("POST", "/api/start", true, req);
+        assert_eq!(code, 400, "{req}: {body}");
+        assert!(says.iter().all(|w| body.contains(w)), "{req}: {body}");
+    }
     let (code, body) = st.request("GET", "/api/procedures", false, "");
     assert_eq!(code, 403, "{body}");
     let (code, body) = st.request("GET", "/api/procedures", true, "");
@@ -286,7 +311,7 @@ fn the_station_runs_a_batch_with_a_tile_and_a_report_per_unit() {
         "the page is told the bench's slots"
     );
     // No serial in any slot: refused with its reason; a slot the bench
-    // lacks too.
+    // lacks, and `serial` beside or instead of `serials`, too.
     for (body, says) in [
         (
             r#"{"procedure":"smoke.toml","serials":{"A":" ","B":""}}"#,
@@ -295,6 +320,14 @@ fn the_station_runs_a_batch_with_a_tile_and_a_report_per_unit() {
         (
             r#"{"procedure":"smoke.toml","serials":{"E":"RL16-1"}}"#,
             "its slots: A, B, C, D",
+        ),
+        (
+            r#"{"procedure":"smoke.toml","serial":"RL16-1","serials":{"A":"RL16-2"}}"#,
+            "`serial` and `serials` given together",
+        ),
+        (
+            r#"{"procedure":"smoke.toml","serial":"RL16-1"}"#,
+            "slots (A, B, C, D): give each unit's serial by slot in `serials`",
         ),
     ] {
         let (code, text) = st.request("POST", "/api/start", true, body);
@@ -328,6 +361,11 @@ fn the_station_runs_a_batch_with_a_tile_and_a_report_per_unit() {
         .map(|u| u["bias_dph"].as_f64().expect("a live rate"))
         .collect();
     assert_ne!(rates[0], rates[1], "each tile has its own unit's rate");
+    // And its drift over a named minute of its last record.
+    for u in done["run"]["units"].as_array().expect("units") {
+        assert_eq!(u["drift"]["seconds"], 60, "{u}");
+        assert_eq!(u["drift"]["record"], "east", "{u}");
+    }
     let run = &done["run"];
     assert_eq!(run["outcome"], "pass", "{run}");
     for (u, serial) in run["units"]
@@ -378,6 +416,105 @@ fn the_station_runs_a_batch_with_a_tile_and_a_report_per_unit() {
         }
         crate::common::conformance(&python, "station_browser.py", &args);
     }
+    assert!(st.stop().success());
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
+
+/// Two records with the inner axis turned half a turn between them: the
+/// 1 s rate of the turn reads hundreds of deg/h, which on a chart of every
+/// second flattens the drift to a line. The drift chart's series (sample
+/// columns 8 and 9) hold the records' seconds alone, the read-out gives
+/// the bench and the unit in numbers, the drift named by its window.
+#[test]
+fn the_drift_chart_and_read_out_leave_the_slews_out() {
+    let _busy = crate::common::busy_turn();
+    let dir = temp_dir("station-drift");
+    let procedures = dir.join("procedures");
+    std::fs::create_dir_all(&procedures).expect("procedures");
+    crate::common::write(
+        &procedures,
+        "turn.toml",
+        r#"[procedure]
+name = "turn"
+description = "Two short records, the inner axis turned half a turn between them."
+dut_type = "RL-16"
+
+[[main]]
+action = "move"
+table = { outer_deg = 90.0, inner_deg = 0.0 }
+
+[[main]]
+action = "record"
+label = "before"
+duration_s = 90.0
+
+[[main]]
+action = "move"
+table = { outer_deg = 90.0, inner_deg = 180.0 }
+
+[[main]]
+action = "record"
+label = "after"
+duration_s = 90.0
+"#,
+    );
+    let st = Served::offering(&dir, s(&procedures), &[]);
+    let (code, body) = st.request(
+        "POST",
+        "/api/start",
+        true,
+        r#"{"procedure":"turn.toml","serial":"RL16-0042"}"#,
+    );
+    assert_eq!(code, 200, "{body}");
+    let done = st.until("the verdict", |s| s["run"]["phase"] == "finished");
+    let samples = done["samples"].as_array().expect("samples");
+    assert!(
+        samples
+            .iter()
+            .all(|s| s.as_array().map(Vec::len) == Some(10)),
+        "ten columns: {:?}",
+        samples.first()
+    );
+    let column = |k: usize| -> Vec<f64> { samples.iter().filter_map(|s| s[k].as_f64()).collect() };
+    let widest = |v: &[f64]| v.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+    assert!(
+        widest(&column(1)) > 100.0,
+        "the turn in the 1 s rate: {}",
+        widest(&column(1))
+    );
+    let (drift, means) = (column(8), column(9));
+    assert!(
+        (170..=182).contains(&drift.len()),
+        "the records' seconds: {}",
+        drift.len()
+    );
+    assert!(widest(&drift) < 5.0, "the turn in the drift: {drift:?}");
+    assert!(
+        (50..=64).contains(&means.len()) && widest(&means) < 2.0,
+        "a mean once each record has lasted a minute: {means:?}"
+    );
+    let now = &done["run"]["now"];
+    assert!(
+        (now["chamber_c"].as_f64().expect("chamber") - 20.0).abs() < 0.5,
+        "{now}"
+    );
+    assert_eq!(
+        now["inner_deg"].as_f64().map(f64::round),
+        Some(180.0),
+        "{now}"
+    );
+    for sensor in ["tcase_c", "t1_c", "t2_c"] {
+        assert!(now[sensor].as_f64().is_some_and(|t| t > 15.0), "{now}");
+    }
+    assert_eq!(now["drift"]["seconds"], 60, "{now}");
+    assert_eq!(
+        now["drift"]["window"], "mean of the last 60 s of record after (ended)",
+        "{now}"
+    );
+    assert!(
+        now["drift"]["mean_dph"].as_f64().expect("drift").abs() < 2.0,
+        "{now}"
+    );
     assert!(st.stop().success());
     std::fs::remove_dir_all(&dir).expect("cleanup");
 }
@@ -514,6 +651,139 @@ fn a_flood_of_half_open_connections_leaves_the_page_reachable() {
     assert!(closed, "the oldest idle connection is still open: {read:?}");
     drop(flood);
     assert_eq!(st.stop().code(), Some(0));
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
+
+/// Everything `conn` receives until the station closes it (a guard of
+/// 60 s against a station that never would; not a measure of speed).
+fn answer_of(mut conn: &TcpStream) -> String {
+    conn.set_read_timeout(Some(std::time::Duration::from_secs(60)))
+        .expect("timeout");
+    let mut got = Vec::new();
+    let mut chunk = [0u8; 4096];
+    loop {
+        match conn.read(&mut chunk) {
+            Ok(0) => break,
+            Ok(n) => got.extend_from_slice(&chunk[..n]),
+            Err(e) => {
+                assert!(
+                    !matches!(
+                        e.kind(),
+                        std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut
+                    ),
+                    "still open after 60 s; received {:?}",
+                    String::from_utf8_lossy(&got)
+                );
+                break;
+            }
+        }
+    }
+    String::from_utf8_lossy(&got).into_owned()
+}
+
+/// A request head and the start of a body of 1000 bytes, the rest never
+/// sent.
+fn half_sent(host: &str, method: &str, path: &str, token: Option<&str>) -> TcpStream {
+    let mut c = TcpStream::connect(host).expect("a connection");
+    let auth = token.map_or(String::new(), |t| format!("X-Gyrobench-Token: {t}\r\n"));
+    write!(
+        c,
+        "{method} {path} HTTP/1.1\r\nHost: {host}\r\n{auth}Content-Type: application/json\r\nContent-Length: 1000\r\n\r\n{{\"procedure\":"
+    )
+    .expect("a half-sent request");
+    c
+}
+
+/// A connection that asked for the page's head (no token), was answered
+/// and stays open.
+fn page_kept_open(host: &str) -> TcpStream {
+    let mut c = TcpStream::connect(host).expect("a connection");
+    write!(c, "HEAD / HTTP/1.1\r\nHost: {host}\r\n\r\n").expect("a request");
+    c.set_read_timeout(Some(std::time::Duration::from_secs(60)))
+        .expect("timeout");
+    let mut got = Vec::new();
+    let mut byte = [0u8; 1];
+    while !got.ends_with(b"\r\n\r\n") {
+        let n = c.read(&mut byte).expect("the page's head");
+        assert_eq!(n, 1, "closed: {:?}", String::from_utf8_lossy(&got));
+        got.push(byte[0]);
+    }
+    assert!(
+        got.starts_with(b"HTTP/1.1 200"),
+        "{:?}",
+        String::from_utf8_lossy(&got)
+    );
+    c
+}
+
+/// 600 connections sending a request head without the token and a body
+/// they never finish, held open: the token holder is still answered (the
+/// page, the state, Abort). Sent to the API, each is refused on its head
+/// (403, the connection closed) without its body being waited for. 600
+/// connections kept open after asking for the page (which needs no
+/// token) never take the last slots: the oldest of them make room. SIGTERM then stops the
+/// station with the flood still open, and closes a token holder's own
+/// half-sent request rather than wait for its body's deadline.
+#[test]
+fn the_station_stays_reachable_for_its_token_holder_under_600_half_sent_requests() {
+    // Runs beside no wall-clock test (see `busy_turn`).
+    let _busy = crate::common::busy_turn();
+    let dir = temp_dir("station-half-sent");
+    let st = Served::start(&dir, &[]);
+    let host = st.base.trim_start_matches("http://").to_owned();
+    // One alone: refused on its head, its body never waited for.
+    let answer = answer_of(&half_sent(&host, "POST", "/api/start", None));
+    assert!(
+        answer.starts_with("HTTP/1.1 403") && answer.contains("token"),
+        "a half-sent request without the token: {answer:?}"
+    );
+    let paths = ["/api/start", "/api/abort", "/api/answer", "/api/resume"];
+    let flood: Vec<TcpStream> = (0..600)
+        .map(|i| half_sent(&host, "POST", paths[i % paths.len()], None))
+        .collect();
+    let (code, body) = st.request("GET", "/api/state", true, "");
+    assert_eq!(code, 200, "{body}");
+    let (code, body) = st.request("POST", "/api/abort", true, "{}");
+    assert_eq!(code, 400, "answered (nothing to abort): {body}");
+    assert!(body.contains("no run"), "{body}");
+    // Every one of them closed by the station: refused, or closed unread
+    // to make room when they came faster than their heads were read.
+    for (i, c) in flood.iter().enumerate() {
+        let answer = answer_of(c);
+        assert!(
+            answer.is_empty() || answer.starts_with("HTTP/1.1 403"),
+            "half-sent request {i} without the token: {answer:?}"
+        );
+    }
+    drop(flood);
+
+    // The page needs no token: connections that asked for it stay open
+    // (kept alive), but never in the token holder's slots.
+    let idle: Vec<TcpStream> = (0..600).map(|_| page_kept_open(&host)).collect();
+    let (code, page) = st.request("GET", &format!("/?token={}", st.token), false, "");
+    assert_eq!(code, 200);
+    assert!(page.contains("gyrobench station"));
+    let (code, body) = st.request("GET", "/api/state", true, "");
+    assert_eq!(code, 200, "{body}");
+    let evicted = answer_of(&idle[0]);
+    assert!(
+        evicted.is_empty(),
+        "the oldest is closed to make room: {evicted:?}"
+    );
+
+    // Stopped with all of it open.
+    let mine = half_sent(&host, "POST", "/api/start", Some(&st.token));
+    assert_eq!(
+        st.stop().code(),
+        Some(0),
+        "SIGTERM stops the station, the flood open"
+    );
+    let closed = answer_of(&mine);
+    assert!(
+        !closed.contains("408"),
+        "the stop waited for the body's deadline: {closed:?}"
+    );
+    drop(idle);
     std::fs::remove_dir_all(&dir).expect("cleanup");
 }
 

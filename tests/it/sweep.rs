@@ -218,7 +218,13 @@ impl Sweep {
                                 s(&out),
                             ],
                         );
-                        assert_eq!(r.status.code(), Some(0), "reference seed {seed} must pass");
+                        // A sound unit: a pass, or under a non-binary rule a
+                        // conditional pass (exit 4; docs/figures.md).
+                        assert!(
+                            matches!(r.status.code(), Some(0 | 4)),
+                            "reference seed {seed} must pass: exit {:?}",
+                            r.status.code()
+                        );
                         let report = json(&out.join("report.json")).expect("reference report");
                         reports
                             .lock()
@@ -383,7 +389,7 @@ impl Sweep {
         }
         // A fault after the last step finds the run over: nothing to resume.
         if let Some(r) = json(&dir.join("report.json"))
-            && r["outcome"] == "pass"
+            && (r["outcome"] == "pass" || r["outcome"] == "conditional_pass")
         {
             return Row {
                 fault: fault.to_owned(),
@@ -416,7 +422,11 @@ impl Sweep {
             .as_ref()
             .and_then(|r| r["outcome"].as_str().map(str::to_owned))
             .unwrap_or_else(|| "none".into());
-        if resume.status.code() != Some(0) || outcome != "pass" {
+        let judged_sound = matches!(
+            (resume.status.code(), outcome.as_str()),
+            (Some(0), "pass") | (Some(4), "conditional_pass")
+        );
+        if !judged_sound {
             problems.push(format!(
                 "resume failed: exit {:?}, outcome {outcome}: {}",
                 resume.status.code(),
@@ -435,10 +445,27 @@ impl Sweep {
                     r["bench_left"]
                 ));
             }
+            // A resume that switched the unit on again inside the thermal
+            // cycle (a power-on in a later part) puts a second warm-up in
+            // the records: the temperature-rate fit, one constant per
+            // power-on and no warm-up term, reads part of it as a rate
+            // sensitivity (seen: -0.065 against the references'
+            // -0.060..-0.052 for a break at the end of the cold soak,
+            // whose segment is retaken after an hour at +50 degC from a
+            // fresh switch-on). That figure is then another experiment's:
+            // still judged against its limits, not against uninterrupted
+            // runs' spread.
+            let powered_again = r["power_ons"].as_array().is_some_and(|ons| {
+                ons.iter()
+                    .any(|o| o["part"].as_u64().is_some_and(|p| p > 1))
+            });
             for m in r["measurements"].as_array().into_iter().flatten() {
                 let (Some(name), Some(v)) = (m["name"].as_str(), m["value"].as_f64()) else {
                     continue;
                 };
+                if powered_again && m["metric"] == "temperature_rate_sensitivity" {
+                    continue;
+                }
                 let Some(sp) = spread.get(name) else { continue };
                 let z = (v - sp.mean).abs() / sp.sd.max(1e-12);
                 if z > worst.1 {

@@ -478,6 +478,8 @@ fn a_trend_gives_one_sided_indices_and_every_point_names_its_unit_run_and_report
             "compensated_drift_pp_dph",
             "--html",
             s(&page),
+            "--min-values",
+            "3",
             "--json",
         ],
     );
@@ -494,6 +496,22 @@ fn a_trend_gives_one_sided_indices_and_every_point_names_its_unit_run_and_report
     let high = t["high"].as_f64().expect("high");
     let ppk = t["overall"]["k"].as_f64().expect("ppk");
     assert!((ppk - (high - mean) / (3.0 * sigma)).abs() < 1e-9, "{t}");
+    // A peak-to-peak is non-negative with an upper limit alone: its
+    // performance by percentiles of a lognormal fit is the one to read.
+    let p = &t["percentile"];
+    assert_eq!(p["preferred"], true, "{t}");
+    let (x50, x99) = (
+        p["x_50"].as_f64().expect("median"),
+        p["x_99865"].as_f64().expect("percentile"),
+    );
+    // The median of a lognormal fit lies among the values; its tail above.
+    let (lo, hi) = (
+        t["min"].as_f64().expect("min"),
+        t["max"].as_f64().expect("max"),
+    );
+    assert!(lo <= x50 && x50 <= hi && x99 > hi, "{t}");
+    let ppk_pct = p["k"].as_f64().expect("Ppk by percentiles");
+    assert!((ppk_pct - (high - x50) / (x99 - x50)).abs() < 1e-9, "{t}");
     let text = with(&db, &["results", "trend", "compensated_drift_pp_dph"]);
     assert!(stdout(&text).contains("Cpk ") && !stdout(&text).contains("needs both limits"));
     let html = std::fs::read_to_string(&page).expect("page");

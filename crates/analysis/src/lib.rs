@@ -4,7 +4,8 @@
 //! merit, `model` fits the study's compensation models (`compensation`
 //! holds them as data), `study` holds the definitions of the study's
 //! figures, `rate` the rate-table figures, `allan` the Allan deviation and
-//! its noise terms.
+//! its noise terms, `uncertainty` the GUM's combination and expansion of a
+//! figure's uncertainty budget.
 
 pub mod allan;
 pub mod compensation;
@@ -13,3 +14,4 @@ pub mod model;
 pub mod rate;
 pub mod series;
 pub mod study;
+pub mod uncertainty;

@@ -4,7 +4,10 @@
 //! and threshold near zero input. Each record of a rate procedure is one
 //! point: its mean input rate (Earth and table rate on the sensitive axis,
 //! from the table's angles and rates), its mean output rate and the
-//! standard error of that mean.
+//! standard error of that mean. For the scale-factor figures a record
+//! over whole revolutions is taken in the angle domain ([`angle`]).
+
+pub mod angle;
 
 use nalgebra::{DMatrix, DVector};
 
@@ -51,6 +54,17 @@ impl RatePoint {
             se_dph: (var / nf).sqrt(),
             block_c: mean(&|i| 0.5 * (i.t1_c + i.t2_c)),
         })
+    }
+
+    /// The point in the angle domain: its input and output over the
+    /// record's whole revolutions ([`angle::AngleSpan`]), its standard
+    /// error and block temperature from its 1 Hz means as before.
+    pub fn over_revolutions(self, span: &angle::AngleSpan) -> Self {
+        Self {
+            input_dph: span.input_dph,
+            output_dph: span.output_dph(),
+            ..self
+        }
     }
 }
 
@@ -365,10 +379,33 @@ pub fn lock_in(points: &[RatePoint]) -> Option<(f64, f64, Option<f64>)> {
         }
     });
     let s2 = ssr(points, b, l) / (n - 2) as f64;
-    let se = (jac.transpose() * &jac)
+    let linear = (jac.transpose() * &jac)
         .try_inverse()
         .map(|inv| (inv[(1, 1)] * s2).max(0.0).sqrt())
         .filter(|v| v.is_finite());
+    // Near zero the output hardly depends on the lock-in (its first
+    // derivative vanishes at 0), so the linearized error blows up; the
+    // profile of the cost is what the data say: the lock-in above the fit
+    // at which the least squares rise by one residual variance.
+    let profile = {
+        let rise = |x: f64| cost(x) - cost(l) - s2;
+        (rise(span) > 0.0).then(|| {
+            let (mut lo, mut hi) = (l, span);
+            for _ in 0..60 {
+                let mid = 0.5 * (lo + hi);
+                if rise(mid) > 0.0 {
+                    hi = mid;
+                } else {
+                    lo = mid;
+                }
+            }
+            hi - l
+        })
+    };
+    let se = match (linear, profile) {
+        (Some(a), Some(p)) => Some(a.min(p)),
+        (a, p) => a.or(p),
+    };
     Some((b, l, se))
 }
 

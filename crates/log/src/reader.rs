@@ -435,6 +435,20 @@ pub fn read(
         path: path.display().to_string(),
         cause,
     };
+    // A FIFO's open would wait for a writer, and a device never ends: a
+    // log is a regular file, and anything else is said before it is opened.
+    if let Ok(m) = std::fs::metadata(path)
+        && !m.is_file()
+    {
+        return Err(ReadError::NotMcap {
+            path: path.display().to_string(),
+            reason: if m.is_dir() {
+                "it is a directory, not a regular file".into()
+            } else {
+                "it is not a regular file: a FIFO, a device or a socket".into()
+            },
+        });
+    }
     let mut file = File::open(path).map_err(io)?;
     let file_bytes = file.metadata().map_err(io)?.len();
     let mut magic = [0u8; 8];

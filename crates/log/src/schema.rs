@@ -85,6 +85,46 @@ pub struct StepEvent {
     /// over it, in slot order (the first unit's are `link`).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub slot_links: Vec<LinkStats>,
+    /// At the end of a step that switched the unit on (a `power` step, or
+    /// the run's own power-on at its start, logged as a restore): when.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub power_on: Option<PowerOn>,
+}
+
+/// The moment the unit was switched on, as the run knows it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PowerOn {
+    /// Device time, s since this part of the run started.
+    pub t_s: f64,
+    /// The same moment in UTC (RFC 3339).
+    pub utc: String,
+    /// How the run knows it.
+    pub source: PowerOnSource,
+}
+
+/// How the run knows when the unit was switched on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum PowerOnSource {
+    /// The run switched the supply's output on, from off, and read it on.
+    Switched,
+    /// An operator switched the unit on and confirmed it at that moment
+    /// (a bench without a supply).
+    Operator,
+    /// Not known: the unit was found powered, or a log older than the
+    /// power-on record; the figures take the part's start.
+    Assumed,
+}
+
+impl PowerOnSource {
+    /// In words, for the report.
+    pub fn describe(self) -> &'static str {
+        match self {
+            Self::Switched => "switched on by the run, from off",
+            Self::Operator => "switched on by the operator, who confirmed it then",
+            Self::Assumed => "not known: taken as the start of the run",
+        }
+    }
 }
 
 /// Which group a step belongs to.
@@ -147,8 +187,16 @@ pub fn slot_topic(slot: &str, topic: &str) -> String {
 }
 
 /// Version of the log layout this build writes. Format 1 logs (no
-/// `/steps`, no attachments) still replay.
-pub const FORMAT: u32 = 2;
+/// `/steps`, no attachments) still replay; format 3 judges by a decision
+/// rule (`FORMAT_JUDGED`).
+pub const FORMAT: u32 = 3;
+
+/// The first format whose runs were judged by a decision rule with each
+/// figure's uncertainty, a procedure naming none judged guarded, and the
+/// compensated drift on coefficients fitted held out. A log of an earlier
+/// format is replayed as it was judged: by its limits alone, the drift
+/// compensated in sample.
+pub const FORMAT_JUDGED: u32 = 3;
 
 /// Name of the metadata record with the run's configuration.
 pub const RUN_META: &str = "run";
@@ -178,7 +226,7 @@ const TABLE_SCHEMA: &str = r#"{"type":"object","title":"gyrobench.TableState","d
 const SUPPLY_SCHEMA: &str = r#"{"type":"object","title":"gyrobench.SupplyState","description":"The supply output the unit hangs on","properties":{"t_s":{"type":"number"},"v":{"type":"number","description":"voltage measured at the output, V"},"a":{"type":"number","description":"current measured, A"},"w":{"type":"number","description":"power delivered, W"},"set_v":{"type":"number","description":"voltage setting, V"},"limit_a":{"type":"number","description":"current limit, A"},"on":{"type":"boolean"},"tripped":{"type":"boolean","description":"over-current protection tripped"}},"required":["t_s","v","a","w","set_v","limit_a","on","tripped"]}"#;
 const LOG_SCHEMA: &str = r#"{"type":"object","title":"foxglove.Log","properties":{"timestamp":{"type":"object","properties":{"sec":{"type":"integer","minimum":0},"nsec":{"type":"integer","minimum":0}}},"level":{"type":"integer","description":"1 debug, 2 info, 3 warning, 4 error, 5 fatal"},"message":{"type":"string"},"name":{"type":"string"},"file":{"type":"string"},"line":{"type":"integer"}},"required":["timestamp","level","message","name","file","line"]}"#;
 const LINK_SCHEMA: &str = r#"{"type":"object","title":"gyrobench.LinkStats","properties":{"t_s":{"type":"number"},"bytes":{"type":"integer"},"frames":{"type":"integer"},"resyncs":{"type":"integer"},"skipped_bytes":{"type":"integer"},"crc_errors":{"type":"integer"},"lost_frames":{"type":"integer"},"duplicates":{"type":"integer"},"reconnects":{"type":"integer"},"longest_gap_ms":{"type":"integer","description":"longest stretch without a valid frame, ms (host clock)"}},"required":["t_s","frames","lost_frames","crc_errors"]}"#;
-const STEP_SCHEMA: &str = r#"{"type":"object","title":"gyrobench.StepEvent","description":"A procedure step started, ended, or was run to restore a resumed run's conditions","properties":{"t_s":{"type":"number","description":"device time, s since this part of the run started"},"phase":{"type":"string","enum":["start","end","restore"]},"index":{"type":"integer","description":"position of the step in run order (setup, main, cleanup)"},"key":{"type":"string","description":"dotted key of the step in the procedure file"},"line":{"type":"integer"},"group":{"type":"string","enum":["setup","main","cleanup"]},"action":{"type":"string"},"description":{"type":"string"},"link":{"type":"object","description":"at the end of a record: the gyro link's figures over it"},"slot_links":{"type":"array","items":{"type":"object"},"description":"at the end of a record of a batch: each other unit's link figures over it, in slot order"}},"required":["t_s","phase","index","key","line","group","action","description"]}"#;
+const STEP_SCHEMA: &str = r#"{"type":"object","title":"gyrobench.StepEvent","description":"A procedure step started, ended, or was run to restore a resumed run's conditions","properties":{"t_s":{"type":"number","description":"device time, s since this part of the run started"},"phase":{"type":"string","enum":["start","end","restore"]},"index":{"type":"integer","description":"position of the step in run order (setup, main, cleanup)"},"key":{"type":"string","description":"dotted key of the step in the procedure file"},"line":{"type":"integer"},"group":{"type":"string","enum":["setup","main","cleanup"]},"action":{"type":"string"},"description":{"type":"string"},"link":{"type":"object","description":"at the end of a record: the gyro link's figures over it"},"slot_links":{"type":"array","items":{"type":"object"},"description":"at the end of a record of a batch: each other unit's link figures over it, in slot order"},"power_on":{"type":"object","description":"at the end of a step that switched the unit on: when (t_s, device time; utc) and how the run knows it (source: switched or operator)","properties":{"t_s":{"type":"number"},"utc":{"type":"string"},"source":{"type":"string","enum":["switched","operator","assumed"]}}}},"required":["t_s","phase","index","key","line","group","action","description"]}"#;
 
 /// `foxglove.Log` time stamp.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -405,6 +453,11 @@ mod tests {
             description: "chamber to +20.0 degC".into(),
             link: None,
             slot_links: Vec::new(),
+            power_on: Some(PowerOn {
+                t_s: 1.5,
+                utc: "2026-12-06T07:00:00Z".into(),
+                source: PowerOnSource::Switched,
+            }),
         };
         let text = serde_json::to_string(&e).expect("json");
         assert!(text.contains(r#""phase":"restore""#), "{text}");

@@ -60,6 +60,69 @@ pub struct FrameLayout {
     pub checksum: Checksum,
     /// Multi-byte fields big-endian (false: little-endian).
     pub big_endian: bool,
+    /// What the status word's bits say of the unit (default: the
+    /// documented frame's; left out of a file that keeps it).
+    #[serde(default, skip_serializing_if = "StatusBits::is_default")]
+    pub status_bits: StatusBits,
+}
+
+/// What the status word says of the unit: which bits must all be set for
+/// a frame to be used (the unit lasing, dithering, its path-length control
+/// in lock), and which one is the path-length control's lock, whose fall
+/// is a reset (a mode hop). The documented frame's bits: 0 lasing,
+/// 1 dither, 2 path-length control locked, 3 self-test passed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct StatusBits {
+    /// Bits that must all be set for a frame to be used (0: every frame
+    /// is used; a unit whose status word says nothing of its fitness).
+    pub fit_mask: u16,
+    /// The bit set while the path-length control is in lock (none: the
+    /// unit does not report it, and no reset is counted).
+    pub path_length_lock_bit: Option<u8>,
+}
+
+impl Default for StatusBits {
+    fn default() -> Self {
+        Self {
+            fit_mask: 0b0111,
+            path_length_lock_bit: Some(2),
+        }
+    }
+}
+
+impl StatusBits {
+    /// True for the documented frame's bits.
+    pub fn is_default(&self) -> bool {
+        *self == Self::default()
+    }
+
+    /// True when a frame with `status` may be used.
+    pub fn fit(&self, status: u16) -> bool {
+        status & self.fit_mask == self.fit_mask
+    }
+
+    /// Whether the path-length control is in lock (none: not reported).
+    pub fn path_length_locked(&self, status: u16) -> Option<bool> {
+        self.path_length_lock_bit.map(|b| status & (1u16 << b) != 0)
+    }
+
+    /// The bits of `fit_mask` that `status` lacks, in words (the
+    /// documented frame's meanings, else the bit's number).
+    pub fn unfit_words(&self, status: u16) -> Vec<String> {
+        let missing = self.fit_mask & !status;
+        (0..16u8)
+            .filter(|b| missing & (1 << b) != 0)
+            .map(|b| match b {
+                _ if self.path_length_lock_bit == Some(b) => {
+                    "path-length control out of lock".to_owned()
+                }
+                0 if self.is_default() => "not lasing".to_owned(),
+                1 if self.is_default() => "dither off".to_owned(),
+                _ => format!("status bit {b} clear"),
+            })
+            .collect()
+    }
 }
 
 impl Default for FrameLayout {
@@ -76,6 +139,7 @@ impl Default for FrameLayout {
             checksum_offset: 16,
             checksum: Checksum::Crc32Mpeg2,
             big_endian: false,
+            status_bits: StatusBits::default(),
         }
     }
 }
@@ -135,6 +199,13 @@ impl FrameLayout {
         }
         if !(self.temp_lsb_c.is_finite() && self.temp_lsb_c > 0.0) {
             return Err(LayoutError("temp_lsb_c must be above zero".into()));
+        }
+        if let Some(b) = self.status_bits.path_length_lock_bit
+            && b > 15
+        {
+            return Err(LayoutError(format!(
+                "status_bits.path_length_lock_bit {b} is not a bit of the 16-bit status word (0-15)"
+            )));
         }
         Ok(())
     }

@@ -13,6 +13,7 @@
 //! | clear a trip | `OUTP:PROT:CLE` | `CURR:PROT:CLE` |
 //! | numbers in replies | `+5.00000000E+00` | `5.000` |
 //! | `OUTP?` | `1`/`0` | `ON`/`OFF` |
+//! | a channel named in the command | an SCPI channel list as the last argument: `VOLT 5,(@2)`, `MEAS:VOLT? (@1:3)`, `OUTP ON,(@1,2)`; a query answers one value per channel, in the list's order, `,` between | `MEAS:VOLT? CH2`, `MEAS:CURR? CH2`, `OUTP CH2,ON`, `OUTP? CH2`, and `SOURce2:VOLT 5` (the channel as the header's suffix) |
 //!
 //! R&S HMP supplies share the selection and setting headers but protect
 //! with an electronic fuse (`FUSE:STAT`, `FUSE:TRIP?`); they are not
@@ -115,6 +116,105 @@ pub enum Command {
     ErrorQuery,
     /// `SYST:REM`: remote mode, needed before commands over serial.
     Remote,
+}
+
+/// Most channels one channel list may name (`(@1:16)`).
+pub const MAX_LISTED: usize = 16;
+
+/// The channels a command names for itself (1-based, in the order given;
+/// a channel may come twice): an SCPI channel list (Keysight) or a Rigol
+/// channel argument or header suffix. A command naming none acts on the
+/// channel `INST:NSEL` selected.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Channels {
+    list: [u8; MAX_LISTED],
+    len: usize,
+}
+
+impl Channels {
+    /// One channel.
+    pub fn one(n: u8) -> Self {
+        let mut list = [0; MAX_LISTED];
+        list[0] = n;
+        Self { list, len: 1 }
+    }
+
+    /// The channels, in order.
+    pub fn iter(&self) -> impl Iterator<Item = u8> + '_ {
+        self.list[..self.len].iter().copied()
+    }
+
+    fn push(&mut self, n: u8) -> Result<(), ScpiError> {
+        // More channels than any supply has: a list of nonsense.
+        let slot = self.list.get_mut(self.len).ok_or(ScpiError::OUT_OF_RANGE)?;
+        *slot = n;
+        self.len += 1;
+        Ok(())
+    }
+}
+
+/// A command as the instrument parsed it, with the channels it names.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Addressed {
+    /// What to do.
+    pub command: Command,
+    /// On which channels (none: the selected one).
+    pub channels: Option<Channels>,
+}
+
+impl From<Command> for Addressed {
+    fn from(command: Command) -> Self {
+        Self {
+            command,
+            channels: None,
+        }
+    }
+}
+
+/// An SCPI channel list, `(@1)`, `(@1,2)`, `(@1:3)`, `(@3:1)` (a range
+/// either way), or their mix `(@1,2:3)`; blanks allowed around the
+/// parts. A malformed list is a data type error (-104), a channel 0 or
+/// beyond 255 or a list of more than [`MAX_LISTED`] out of range (-222).
+pub fn parse_channel_list(arg: &str) -> Result<Channels, ScpiError> {
+    let inner = arg
+        .trim()
+        .strip_prefix('(')
+        .and_then(|a| a.strip_suffix(')'))
+        .map(str::trim)
+        .and_then(|a| a.strip_prefix('@'))
+        .ok_or(ScpiError::DATA_TYPE)?;
+    let mut out = Channels {
+        list: [0; MAX_LISTED],
+        len: 0,
+    };
+    for item in inner.split(',') {
+        let number = |s: &str| -> Result<u8, ScpiError> {
+            let s = s.trim();
+            if s.is_empty() || !s.bytes().all(|b| b.is_ascii_digit()) {
+                return Err(ScpiError::DATA_TYPE);
+            }
+            match s.parse::<u32>() {
+                Ok(n @ 1..=255) => Ok(n as u8),
+                _ => Err(ScpiError::OUT_OF_RANGE),
+            }
+        };
+        match item.split_once(':') {
+            Some((a, b)) => {
+                let (a, b) = (number(a)?, number(b)?);
+                if a <= b {
+                    for n in a..=b {
+                        out.push(n)?;
+                    }
+                } else {
+                    for n in (b..=a).rev() {
+                        out.push(n)?;
+                    }
+                }
+            }
+            None => out.push(number(item)?)?,
+        }
+    }
+    Ok(out)
 }
 
 fn num_text(n: Numeric) -> String {
@@ -251,12 +351,13 @@ const SYST_REMOTE: &[Node] = &[node("SYSTem"), node("REMote")];
 const VOLTS: &[(&str, f64)] = &[("V", 1.0), ("MV", 1e-3)];
 const AMPS: &[(&str, f64)] = &[("A", 1.0), ("MA", 1e-3)];
 
-/// Parse one received message into its commands; each failing command
-/// gives the error the instrument queues. SCPI's path rule holds: a
-/// message starts at the root; after a `;` a header continues from the
-/// branch of the one before (`SOUR:VOLT 5;CURR 1` sets `SOUR:CURR`) unless
-/// it starts with `:`; common commands (`*CLS`) leave the branch as it is.
-pub fn parse_message(line: &str, dialect: Dialect) -> Vec<Result<Command, ScpiError>> {
+/// Parse one received message into its commands, each with the channels
+/// it names; each failing command gives the error the instrument queues.
+/// SCPI's path rule holds: a message starts at the root; after a `;` a
+/// header continues from the branch of the one before (`SOUR:VOLT 5;CURR
+/// 1` sets `SOUR:CURR`) unless it starts with `:`; common commands
+/// (`*CLS`) leave the branch as it is.
+pub fn parse_message(line: &str, dialect: Dialect) -> Vec<Result<Addressed, ScpiError>> {
     let mut branch: Vec<String> = Vec::new();
     line.trim_end_matches(['\r', '\n'])
         .split(';')
@@ -274,7 +375,108 @@ pub fn parse_message(line: &str, dialect: Dialect) -> Vec<Result<Command, ScpiEr
         .collect()
 }
 
-fn parse_one(s: &super::scpi::Split<'_>, dialect: Dialect) -> Result<Command, ScpiError> {
+/// One command with the channels it names: a Keysight channel list as
+/// its last argument, a Rigol channel argument or `SOURce<n>` suffix, on
+/// the commands that take one.
+fn parse_one(s: &super::scpi::Split<'_>, dialect: Dialect) -> Result<Addressed, ScpiError> {
+    let mut s = s.clone();
+    let mut channels = None;
+    if !s.common {
+        match dialect {
+            Dialect::KeysightE36300 => {
+                if let Some(last) = s.args.last().filter(|a| a.starts_with('(')) {
+                    channels = Some(parse_channel_list(last)?);
+                    s.args.pop();
+                }
+            }
+            Dialect::RigolDp800 => channels = rigol_channel(&mut s)?,
+        }
+    }
+    let command = parse_bare(&s, dialect)?;
+    if channels.is_some() && !takes_channels(&command, dialect) {
+        return Err(ScpiError::PARAMETER_NOT_ALLOWED);
+    }
+    Ok(Addressed { command, channels })
+}
+
+/// The commands that act on the channels they name (the E36300's that
+/// take a channel list; the DP800's that take a channel argument or a
+/// `SOURce<n>` header).
+fn takes_channels(c: &Command, dialect: Dialect) -> bool {
+    use Command as C;
+    match dialect {
+        Dialect::KeysightE36300 => matches!(
+            c,
+            C::Voltage(_)
+                | C::VoltageQuery
+                | C::Current(_)
+                | C::CurrentQuery
+                | C::Output(_)
+                | C::OutputQuery
+                | C::MeasureVoltage
+                | C::MeasureCurrent
+                | C::Protection(_)
+                | C::ProtectionQuery
+                | C::Tripped
+                | C::ClearProtection
+        ),
+        Dialect::RigolDp800 => matches!(
+            c,
+            C::Voltage(_)
+                | C::VoltageQuery
+                | C::Current(_)
+                | C::CurrentQuery
+                | C::Output(_)
+                | C::OutputQuery
+                | C::MeasureVoltage
+                | C::MeasureCurrent
+                | C::Protection(_)
+                | C::ProtectionQuery
+                | C::ProtectionLevel(_)
+                | C::ProtectionLevelQuery
+                | C::Tripped
+                | C::ClearProtection
+        ),
+    }
+}
+
+/// A DP800's channel: `SOURce2:...` (the suffix taken off the header), or
+/// a `CH<n>` argument first (`OUTP CH2,ON`, `MEAS:VOLT? CH2`, taken off
+/// the arguments).
+fn rigol_channel(s: &mut super::scpi::Split<'_>) -> Result<Option<Channels>, ScpiError> {
+    if let Some(first) = s.parts.first_mut() {
+        let digits = first.trim_start_matches(|c: char| c.is_ascii_alphabetic());
+        let word = &first[..first.len() - digits.len()];
+        if !digits.is_empty() && matches!(word, "SOUR" | "SOURCE") {
+            let n = channel_number(digits).map_err(|_| ScpiError::UNDEFINED_HEADER)?;
+            *first = word.to_owned();
+            return Ok(Some(Channels::one(n)));
+        }
+    }
+    let is_output = header_matches(
+        &s.parts.iter().map(String::as_str).collect::<Vec<_>>(),
+        OUTPUT,
+    );
+    let is_measure = {
+        let parts: Vec<&str> = s.parts.iter().map(String::as_str).collect();
+        header_matches(&parts, MEAS_VOLTAGE) || header_matches(&parts, MEAS_CURRENT)
+    };
+    if !(is_output || is_measure) {
+        return Ok(None);
+    }
+    let named = s
+        .args
+        .first()
+        .is_some_and(|a| a.trim().to_ascii_uppercase().starts_with("CH"));
+    // `OUTP CH2,ON`, `OUTP? CH2`, `MEAS:VOLT? CH2`; `OUTP ON` alone names none.
+    if named && (s.query || s.args.len() == 2) {
+        let n = channel_name(s.args.remove(0))?;
+        return Ok(Some(Channels::one(n)));
+    }
+    Ok(None)
+}
+
+fn parse_bare(s: &super::scpi::Split<'_>, dialect: Dialect) -> Result<Command, ScpiError> {
     let parts: Vec<&str> = s.parts.iter().map(String::as_str).collect();
     let args = s.args.as_slice();
     // A set command takes exactly one argument, a query none.
@@ -400,8 +602,19 @@ mod tests {
     use super::*;
 
     fn ok(line: &str, d: Dialect) -> Vec<Command> {
+        at(line, d).into_iter().map(|(c, _)| c).collect()
+    }
+
+    /// Each command with the channels it names (empty: the selected one).
+    fn at(line: &str, d: Dialect) -> Vec<(Command, Vec<u8>)> {
         parse_message(line, d)
             .into_iter()
+            .map(|r| {
+                r.map(|a| {
+                    let chans = a.channels.map_or_else(Vec::new, |c| c.iter().collect());
+                    (a.command, chans)
+                })
+            })
             .collect::<Result<_, _>>()
             .expect("valid message")
     }
@@ -526,12 +739,108 @@ mod tests {
         assert_eq!(err("VO$T 1", K), ScpiError::SYNTAX);
     }
 
+    #[test]
+    fn channel_lists_are_read_as_the_e36300_manual_writes_them() {
+        let list = |a: &str| parse_channel_list(a).map(|c| c.iter().collect::<Vec<u8>>());
+        assert_eq!(list("(@1)"), Ok(vec![1]));
+        assert_eq!(list("(@1,2)"), Ok(vec![1, 2]));
+        assert_eq!(list("(@1:3)"), Ok(vec![1, 2, 3]));
+        assert_eq!(list("(@3:1)"), Ok(vec![3, 2, 1]));
+        assert_eq!(list(" ( @ 1 , 2:3 ) "), Ok(vec![1, 2, 3]));
+        assert_eq!(list("(@2,2)"), Ok(vec![2, 2]));
+        for bad in ["(@)", "(@1,)", "(@x)", "(@1:)", "@1", "(1)", "(@1", "(@-1)"] {
+            assert_eq!(list(bad), Err(ScpiError::DATA_TYPE), "{bad}");
+        }
+        for far in ["(@0)", "(@256)", "(@1:17)", "(@99999999999)"] {
+            assert_eq!(list(far), Err(ScpiError::OUT_OF_RANGE), "{far}");
+        }
+    }
+
+    #[test]
+    fn a_keysight_command_names_its_channels_in_a_list_as_its_last_argument() {
+        assert_eq!(
+            at("MEAS:VOLT? (@2)", K),
+            [(Command::MeasureVoltage, vec![2])]
+        );
+        assert_eq!(
+            at("VOLT 5,(@1,3);CURR 0.5, (@1:3);:OUTP ON,(@2)", K),
+            [
+                (Command::Voltage(Numeric::Value(5.0)), vec![1, 3]),
+                (Command::Current(Numeric::Value(0.5)), vec![1, 2, 3]),
+                (Command::Output(true), vec![2]),
+            ]
+        );
+        assert_eq!(
+            at(
+                "OUTP? (@1,2);:CURR:PROT:TRIP? (@2);:OUTP:PROT:CLE (@2);:MEAS:CURR?",
+                K
+            ),
+            [
+                (Command::OutputQuery, vec![1, 2]),
+                (Command::Tripped, vec![2]),
+                (Command::ClearProtection, vec![2]),
+                (Command::MeasureCurrent, vec![]),
+            ]
+        );
+        // A command that takes no list, or a list where a value belongs.
+        assert_eq!(err("SYST:ERR? (@1)", K), ScpiError::PARAMETER_NOT_ALLOWED);
+        assert_eq!(err("INST:NSEL 2,(@1)", K), ScpiError::PARAMETER_NOT_ALLOWED);
+        assert_eq!(err("*IDN? (@1)", K), ScpiError::PARAMETER_NOT_ALLOWED);
+        assert_eq!(err("VOLT (@1)", K), ScpiError::MISSING_PARAMETER);
+        assert_eq!(err("MEAS:VOLT? (@1:x)", K), ScpiError::DATA_TYPE);
+        // A Keysight has no channel as a header suffix.
+        assert_eq!(err("SOUR2:VOLT 5", K), ScpiError::UNDEFINED_HEADER);
+    }
+
+    #[test]
+    fn a_rigol_names_its_channel_as_that_instrument_does() {
+        assert_eq!(
+            at("MEAS:VOLT? CH2;CURR? CH3", R),
+            [
+                (Command::MeasureVoltage, vec![2]),
+                (Command::MeasureCurrent, vec![3])
+            ]
+        );
+        assert_eq!(
+            at("OUTP CH2,ON;:OUTP? CH2;:OUTP OFF", R),
+            [
+                (Command::Output(true), vec![2]),
+                (Command::OutputQuery, vec![2]),
+                (Command::Output(false), vec![]),
+            ]
+        );
+        // The suffix stays with the branch: `CURR` after `SOUR2:VOLT` is SOUR2's.
+        assert_eq!(
+            at("SOUR2:VOLT 5;CURR 1;:SOURce3:CURR:PROT:STAT ON", R),
+            [
+                (Command::Voltage(Numeric::Value(5.0)), vec![2]),
+                (Command::Current(Numeric::Value(1.0)), vec![2]),
+                (Command::Protection(true), vec![3]),
+            ]
+        );
+        assert_eq!(err("MEAS:VOLT? (@2)", R), ScpiError::PARAMETER_NOT_ALLOWED);
+        assert_eq!(err("OUTP? CHX", R), ScpiError::ILLEGAL_PARAMETER);
+        assert_eq!(err("SOUR0:VOLT 5", R), ScpiError::UNDEFINED_HEADER);
+    }
+
     proptest::proptest! {
         #[test]
         fn the_parser_never_panics(s in "\\PC*") {
             for d in Dialect::ALL {
                 let _ = parse_message(&s, d);
             }
+            let _ = parse_channel_list(&s);
+        }
+
+        /// Any list of channels written as a channel list reads back.
+        #[test]
+        fn written_channel_lists_read_back(chans in proptest::collection::vec(1u8..=255, 1..=MAX_LISTED)) {
+            let text = format!(
+                "(@{})",
+                chans.iter().map(u8::to_string).collect::<Vec<_>>().join(",")
+            );
+            let got: Vec<u8> = parse_channel_list(&text).expect("a list").iter().collect();
+            proptest::prop_assert_eq!(got, chans);
         }
     }
 }

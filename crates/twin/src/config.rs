@@ -12,6 +12,9 @@ use gyrobench_analysis::compensation::Model4;
 use serde::de::DeserializeOwned;
 use toml::de::{DeTable, DeValue};
 
+mod input;
+pub use input::{InputError, LineTooLong, LinesOfAtMost, open_file, read_at_most};
+
 /// What went wrong reading a configuration file, and where.
 #[derive(Debug, thiserror::Error)]
 pub enum ConfigError {
@@ -20,6 +23,16 @@ pub enum ConfigError {
     Read {
         path: PathBuf,
         cause: std::io::Error,
+    },
+    /// The path names a FIFO, a device, a directory or a socket.
+    #[error(
+        "{path} is {kind}, not a regular file; a configuration file is read from a file only: \
+         give the path of one"
+    )]
+    NotAFile {
+        path: PathBuf,
+        /// What it is ("a FIFO (named pipe)", "a character device", ...).
+        kind: &'static str,
     },
     /// The text is not valid TOML, or does not match the expected structure
     /// (unknown key, wrong type, missing field).
@@ -45,7 +58,7 @@ impl ConfigError {
     /// The 1-based line the error points at.
     pub fn line(&self) -> Option<usize> {
         match self {
-            Self::Read { .. } => None,
+            Self::Read { .. } | Self::NotAFile { .. } => None,
             Self::Parse { line, .. } | Self::Invalid { line, .. } => Some(*line),
         }
     }
@@ -141,37 +154,33 @@ fn walk_value(v: &DeValue<'_>, path: &str, keys: &mut HashMap<String, usize>) {
 pub const MAX_FILE_BYTES: u64 = 1 << 20;
 
 impl Source {
-    /// Read a file from disk (at most [`MAX_FILE_BYTES`]).
+    /// Read a file from disk: a regular file only (a FIFO, a device, a
+    /// directory are refused by name, without waiting on them), at most
+    /// [`MAX_FILE_BYTES`] of it (the read stops one byte past, whatever
+    /// the file's size says).
     pub fn read(path: &Path) -> Result<Self, ConfigError> {
-        if let Ok(m) = std::fs::metadata(path)
-            && m.is_file()
-            && m.len() > MAX_FILE_BYTES
-        {
-            return Err(ConfigError::Parse {
-                path: path.to_owned(),
-                line: 1,
-                column: 1,
-                message: format!(
-                    "the file is {} bytes; a configuration file is at most {MAX_FILE_BYTES} bytes (1 MiB)",
-                    m.len()
-                ),
-            });
-        }
-        let text = std::fs::read_to_string(path).map_err(|source| {
-            if source.kind() == std::io::ErrorKind::InvalidData {
-                ConfigError::Parse {
-                    path: path.to_owned(),
-                    line: 1,
-                    column: 1,
-                    message: "the file is not UTF-8 text; expected a TOML file".into(),
-                }
-            } else {
-                ConfigError::Read {
-                    path: path.to_owned(),
-                    cause: source,
-                }
-            }
+        let parse = |message: String| ConfigError::Parse {
+            path: path.to_owned(),
+            line: 1,
+            column: 1,
+            message,
+        };
+        let bytes = read_at_most(path, MAX_FILE_BYTES).map_err(|e| match e {
+            InputError::Io { path, cause } => ConfigError::Read { path, cause },
+            InputError::NotAFile { path, kind } => ConfigError::NotAFile { path, kind },
+            InputError::TooLarge { .. } => parse(format!(
+                "the file {}; a configuration file is at most {MAX_FILE_BYTES} bytes (1 MiB)",
+                std::fs::metadata(path)
+                    .ok()
+                    .filter(|m| m.len() > MAX_FILE_BYTES)
+                    .map_or_else(
+                        || format!("holds more than {MAX_FILE_BYTES} bytes"),
+                        |m| format!("is {} bytes", m.len())
+                    )
+            )),
         })?;
+        let text = String::from_utf8(bytes)
+            .map_err(|_| parse("the file is not UTF-8 text; expected a TOML file".into()))?;
         Ok(Self {
             path: path.to_owned(),
             text,

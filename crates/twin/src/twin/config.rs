@@ -40,11 +40,79 @@ pub struct TwinConfig {
     /// asymmetry, lock-in); nominal unless set.
     #[serde(default)]
     pub rate_response: RateResponseConfig,
+    /// The path-length control's resets (mode hops); none unless set,
+    /// and left out of a file that has none.
+    #[serde(default, skip_serializing_if = "PathLengthControlConfig::is_off")]
+    pub path_length_control: PathLengthControlConfig,
+}
+
+/// The path-length control (`docs/twin.md`, "Path-length control"): it
+/// holds the cavity on its lasing mode by moving a mirror, and its
+/// transducer's travel covers only so much of the block's expansion;
+/// past it the control resets to the next mode. While it relocks the
+/// status word's lock bit is clear and the output is not fit to use; the
+/// new mode has its own bias. Off by default (`reset_span_c = 0`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct PathLengthControlConfig {
+    /// Change of the block's mean temperature, from the last reset (or
+    /// the power-on), that the control follows before it resets, degC
+    /// (0: never resets).
+    pub reset_span_c: f64,
+    /// How long a reset keeps the control out of lock, s.
+    pub relock_s: f64,
+    /// Bias of the second mode against the first, deg/h: the unit steps
+    /// by it at one reset and back at the next.
+    pub mode_bias_dph: f64,
+    /// Rate error of the output while out of lock, deg/h (its sign drawn
+    /// at each reset): what a record would take in if it kept those frames.
+    pub relock_error_dph: f64,
+}
+
+impl Default for PathLengthControlConfig {
+    fn default() -> Self {
+        Self {
+            reset_span_c: 0.0,
+            relock_s: 0.5,
+            mode_bias_dph: 0.0,
+            relock_error_dph: 0.0,
+        }
+    }
+}
+
+impl PathLengthControlConfig {
+    /// True when the control never resets.
+    pub fn is_off(&self) -> bool {
+        self.reset_span_c == 0.0
+    }
+
+    fn validate(&self, c: &Checker<'_>) -> Result<(), ConfigError> {
+        c.within(
+            self.reset_span_c,
+            0.0,
+            1000.0,
+            "path_length_control.reset_span_c",
+        )?;
+        c.within(self.relock_s, 0.0, 60.0, "path_length_control.relock_s")?;
+        c.within(
+            self.mode_bias_dph,
+            -100.0,
+            100.0,
+            "path_length_control.mode_bias_dph",
+        )?;
+        c.within(
+            self.relock_error_dph,
+            0.0,
+            1e6,
+            "path_length_control.relock_error_dph",
+        )?;
+        Ok(())
+    }
 }
 
 /// The output's response to the input rate (`docs/twin.md`, "Rate
 /// response"). Every term is zero by default: the output is the input.
-#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct RateResponseConfig {
     /// Scale factor error against the nominal count (`gyro.lsb_arcsec`), ppm.
@@ -68,6 +136,26 @@ pub struct RateResponseConfig {
     /// Random walk the dither adds to the angle output, deg/sqrt(h)
     /// (beyond `noise.arw_deg_per_rt_h`).
     pub dither_random_walk_deg_per_rt_h: f64,
+    /// The dither-stripping residual of a locking gyro: white angle jitter
+    /// of this many counts rms on its frames (default 1, a dithered
+    /// unit's). 0: no dither at all, a clean locked output: inside the
+    /// lock-in the beams lock and the unit sends no counts, not even its
+    /// noise's.
+    pub dither_residual_counts: f64,
+}
+
+impl Default for RateResponseConfig {
+    fn default() -> Self {
+        Self {
+            scale_factor_error_ppm: 0.0,
+            nonlinearity_ppm: 0.0,
+            full_scale_dps: 0.0,
+            asymmetry_ppm: 0.0,
+            lock_in_dph: 0.0,
+            dither_random_walk_deg_per_rt_h: 0.0,
+            dither_residual_counts: 1.0,
+        }
+    }
 }
 
 impl RateResponseConfig {
@@ -85,6 +173,9 @@ impl RateResponseConfig {
                 + 1e-6 * self.nonlinearity_ppm * input_dph.abs() / (self.full_scale_dps * 3600.0);
         }
         let x = k * input_dph + bias_dph;
+        if self.locked(x) {
+            return 0.0;
+        }
         if self.lock_in_dph > 0.0 {
             let l = self.lock_in_dph;
             if x.abs() <= l {
@@ -95,6 +186,18 @@ impl RateResponseConfig {
         } else {
             x
         }
+    }
+
+    /// Whether an input of `x` deg/h (scaled, bias added) lies inside the
+    /// lock-in: the beams lock and the output is zero.
+    pub fn locked(&self, x: f64) -> bool {
+        self.lock_in_dph > 0.0 && x.abs() <= self.lock_in_dph
+    }
+
+    /// Whether the unit, undithered, sends no counts at all while locked
+    /// (its noise included): `dither_residual_counts = 0`.
+    pub fn locks_clean(&self) -> bool {
+        self.lock_in_dph > 0.0 && self.dither_residual_counts == 0.0
     }
 
     fn validate(&self, c: &Checker<'_>) -> Result<(), ConfigError> {
@@ -128,6 +231,12 @@ impl RateResponseConfig {
             0.0,
             1.0,
             "rate_response.dither_random_walk_deg_per_rt_h",
+        )?;
+        c.within(
+            self.dither_residual_counts,
+            0.0,
+            100.0,
+            "rate_response.dither_residual_counts",
         )?;
         Ok(())
     }
@@ -221,7 +330,23 @@ pub struct GyroConfig {
     pub lsb_arcsec: f64,
     /// Resolution of the temperature fields, degC.
     pub temp_lsb_c: f64,
+    /// Error of the unit's frame oscillator, ppm: its frames come at
+    /// `(1 + e 1e-6)` times `frame_rate_hz` of true time, each covering
+    /// that much less of it, while the bench still takes them to be
+    /// `frame_rate_hz` apart. 0 (the default, left out of the file): the
+    /// frames come at `frame_rate_hz` exactly.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub frame_clock_error_ppm: f64,
 }
+
+fn is_zero(v: &f64) -> bool {
+    *v == 0.0
+}
+
+/// Largest frame-clock error the twin takes, ppm (a crystal oscillator is
+/// off by tens of ppm; a thousand is a broken one). Within it a frame
+/// period holds at most two frame ends.
+pub const MAX_FRAME_CLOCK_ERROR_PPM: f64 = 1000.0;
 
 /// Model-4 thermal bias `K1 dT + K2 dT^2 + K3 d(dT)/dt + K4 T_K + K5 F(tau)`
 /// with `dT = T1 - T2`, `F(tau) = exp(-tau/tau_w)`, plus a fixed bias (the
@@ -584,6 +709,12 @@ impl TwinConfig {
         c.within(g.frame_rate_hz, 1.0, 100_000.0, "gyro.frame_rate_hz")?;
         c.within(g.lsb_arcsec, 1e-6, 100.0, "gyro.lsb_arcsec")?;
         c.within(g.temp_lsb_c, 1e-6, 1.0, "gyro.temp_lsb_c")?;
+        c.within(
+            g.frame_clock_error_ppm,
+            -MAX_FRAME_CLOCK_ERROR_PPM,
+            MAX_FRAME_CLOCK_ERROR_PPM,
+            "gyro.frame_clock_error_ppm",
+        )?;
 
         c.non_negative(self.bias.turn_on_sigma_dph, "bias.turn_on_sigma_dph")?;
         c.model4(&self.bias.model4, "bias")?;
@@ -616,6 +747,7 @@ impl TwinConfig {
         )?;
 
         self.rate_response.validate(c)?;
+        self.path_length_control.validate(c)?;
         self.effects.validate(c)
     }
 }
@@ -847,6 +979,38 @@ mod tests {
             "{err}"
         );
         assert_eq!(err.line(), Some(line_of("latitude_deg")));
+    }
+
+    #[test]
+    fn a_frame_clock_error_beyond_a_thousand_ppm_is_refused_with_its_key() {
+        let line = DEFAULT_TWIN_TOML
+            .lines()
+            .find(|l| l.starts_with("temp_lsb_c"))
+            .expect("fixture has temp_lsb_c");
+        let ok = with(line, &format!("{line}\nframe_clock_error_ppm = -50.0")).expect("50 ppm");
+        assert_eq!(ok.gyro.frame_clock_error_ppm, -50.0);
+        let err = with(line, &format!("{line}\nframe_clock_error_ppm = 1500.0"))
+            .expect_err("beyond 1000 ppm");
+        let msg = err.to_string();
+        assert!(
+            msg.contains("`gyro.frame_clock_error_ppm` must be between -1000 and 1000, got 1500"),
+            "{msg}"
+        );
+        assert_eq!(err.line(), Some(line_of("temp_lsb_c") + 1));
+        // Written back when set; at 0 it stays out of the file the twin
+        // writes (the logs of runs without it are as before).
+        assert!(
+            ok.to_toml()
+                .expect("renders")
+                .contains("frame_clock_error_ppm = -50.0")
+        );
+        let nominal = with(line, line).expect("as shipped");
+        assert!(
+            !nominal
+                .to_toml()
+                .expect("renders")
+                .contains("frame_clock_error_ppm")
+        );
     }
 
     #[test]

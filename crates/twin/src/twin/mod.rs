@@ -4,7 +4,9 @@
 //! Deterministic: the same configuration and seed give the same frames bit
 //! for bit. The slow physics (air, thermal network, bias, flicker) advances on
 //! a fixed 0.1 s step; each frame adds white angle noise to the cached rate
-//! and quantizes the angle, carrying the residual so no angle is lost.
+//! and quantizes the angle, carrying the residual so no angle is lost. A
+//! unit whose frame clock is off nominal (`gyro.frame_clock_error_ppm`)
+//! sends its frames on its own period; the physics keeps the nominal one.
 
 pub mod config;
 pub mod effects;
@@ -124,6 +126,45 @@ pub struct Twin {
     jitter: Option<(f64, f64)>,
     true_angle_arcsec: f64,
     true_angle_comp: f64,
+    /// The unit's frame oscillator when it is off nominal (none: one
+    /// frame ends with every period of `frame_dt_s`).
+    frame_clock: Option<FrameClock>,
+    /// A second frame that ended within the last period (a fast frame
+    /// clock), handed over after the first.
+    extra: Option<GyroSample>,
+    /// With a frame clock off nominal: the table's angles at the end of
+    /// the last frame, and the period it ended in.
+    frame_latch: Option<(u64, TableAngles)>,
+    /// The path-length control, when it resets.
+    plc: Option<Plc>,
+    /// The status word of the frames now.
+    status: u16,
+}
+
+/// The path-length control of a unit whose control resets
+/// (`config::PathLengthControlConfig`).
+#[derive(Debug, Clone, PartialEq)]
+struct Plc {
+    cfg: config::PathLengthControlConfig,
+    /// The blocks' mean temperature at the last reset (or power-on), degC.
+    from_c: f64,
+    /// The period until which the control is out of lock.
+    relock_until: u64,
+    /// On the second mode (its bias added).
+    second_mode: bool,
+    /// Rate error while out of lock now, deg/h.
+    error_dph: f64,
+}
+
+/// The unit's frame oscillator off nominal: its frames end every
+/// `frame_dt_s / ratio` of device time, not every `frame_dt_s`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct FrameClock {
+    /// Frames per nominal period, `1 + e 1e-6`.
+    ratio: f64,
+    /// How far the frame under way has got, in frames, at the end of the
+    /// last period (0 <= phase < 1).
+    phase: f64,
 }
 
 impl Twin {
@@ -170,9 +211,28 @@ impl Twin {
             magnetic_body_ut: Vector3::zeros(),
             sensor_c: [cfg.chamber.initial_c; 3],
             residual_arcsec: 0.0,
-            jitter: (cfg.rate_response.lock_in_dph > 0.0).then_some((cfg.gyro.lsb_arcsec, 0.0)),
+            jitter: (cfg.rate_response.lock_in_dph > 0.0
+                && cfg.rate_response.dither_residual_counts > 0.0)
+                .then_some((
+                    cfg.rate_response.dither_residual_counts * cfg.gyro.lsb_arcsec,
+                    0.0,
+                )),
             true_angle_arcsec: 0.0,
             true_angle_comp: 0.0,
+            frame_clock: (cfg.gyro.frame_clock_error_ppm != 0.0).then_some(FrameClock {
+                ratio: 1.0 + cfg.gyro.frame_clock_error_ppm * 1e-6,
+                phase: 0.0,
+            }),
+            extra: None,
+            frame_latch: None,
+            plc: (!cfg.path_length_control.is_off()).then(|| Plc {
+                cfg: cfg.path_length_control.clone(),
+                from_c: cfg.chamber.initial_c,
+                relock_until: 0,
+                second_mode: false,
+                error_dph: 0.0,
+            }),
+            status: status::NOMINAL,
             cfg,
         };
         twin.axis_body = twin.effects.sensitive_axis_body();
@@ -197,7 +257,46 @@ impl Twin {
         self.residual_arcsec = 0.0;
         self.true_angle_arcsec = 0.0;
         self.true_angle_comp = 0.0;
+        if let Some(c) = &mut self.frame_clock {
+            c.phase = 0.0;
+        }
+        self.extra = None;
+        let block_c = self.thermal.block_c();
+        let relock = self.relock_periods();
+        if let Some(p) = &mut self.plc {
+            // The control acquires its lock as the laser lights (its
+            // first frame is the next period's).
+            p.from_c = block_c;
+            p.relock_until = self.tick + 1 + relock;
+            p.second_mode = false;
+            p.error_dph = 0.0;
+        }
         self.refresh_bias();
+    }
+
+    /// Periods a reset of the path-length control keeps it out of lock.
+    fn relock_periods(&self) -> u64 {
+        self.plc
+            .as_ref()
+            .map_or(0, |p| (p.cfg.relock_s / self.frame_dt_s).round() as u64)
+    }
+
+    /// Reset the path-length control when the blocks have moved its
+    /// transducer to the end of its travel: out of lock for `relock_s`,
+    /// onto the other mode.
+    fn path_length_control(&mut self) {
+        let block_c = self.thermal.block_c();
+        let relock = self.relock_periods();
+        let Some(p) = &mut self.plc else {
+            return;
+        };
+        if (block_c - p.from_c).abs() >= p.cfg.reset_span_c {
+            p.from_c = block_c;
+            p.relock_until = self.tick + relock;
+            p.second_mode = !p.second_mode;
+            let sign = if self.rng.random::<bool>() { 1.0 } else { -1.0 };
+            p.error_dph = sign * p.cfg.relock_error_dph;
+        }
     }
 
     /// Switch the gyro off (no frames; the unit cools towards the case).
@@ -225,7 +324,11 @@ impl Twin {
         self.tick as f64 * self.frame_dt_s
     }
 
-    /// Time between frames, s.
+    /// Time between frames as the bench takes it (the nominal frame
+    /// period, `1 / gyro.frame_rate_hz`), s. The twin advances its
+    /// physics on it; with a frame-clock error
+    /// (`gyro.frame_clock_error_ppm`) the unit's frames end on its own
+    /// period, a little shorter or longer.
     pub fn frame_dt_s(&self) -> f64 {
         self.frame_dt_s
     }
@@ -295,6 +398,17 @@ impl Twin {
         }
     }
 
+    /// Table angles at the end of the gyro's last frame, as a bench whose
+    /// encoder is latched by the unit's frame strobe reads them: the
+    /// angles now when the frames end with the periods (no frame-clock
+    /// error), or when the gyro sent no frame in the last two periods.
+    pub fn frame_table_angles(&self) -> TableAngles {
+        match self.frame_latch {
+            Some((period, angles)) if self.is_powered() && period + 1 >= self.tick => angles,
+            _ => self.table_angles(),
+        }
+    }
+
     /// True while either axis moves.
     pub fn table_moving(&self) -> bool {
         self.outer.is_moving() || self.inner.is_moving()
@@ -324,12 +438,17 @@ impl Twin {
             .map_or(0.0, |t0| (self.tick - t0) as f64 * self.frame_dt_s)
     }
 
-    /// Advance one frame period. Returns the frame the gyro sent, or `None`
-    /// while it is off.
+    /// Advance one (nominal) frame period. Returns the frame the gyro
+    /// sent, or `None` while it is off (or, its frame clock slow, when no
+    /// frame ended in the period); a second frame ending in the same
+    /// period (its frame clock fast) waits in `extra`.
     #[inline]
-    pub fn step(&mut self) -> Option<GyroSample> {
+    fn step(&mut self) -> Option<GyroSample> {
         self.tick += 1;
         let moving = self.outer.is_moving() || self.inner.is_moving();
+        // Where the table was at the period's start, for the frames that
+        // end within it (a frame clock off nominal).
+        let from = (moving && self.frame_clock.is_some()).then(|| self.table_angles());
         if moving {
             self.outer.step(self.frame_dt_s);
             self.inner.step(self.frame_dt_s);
@@ -339,19 +458,94 @@ impl Twin {
             self.slow_step();
         }
         self.power_on_tick?;
+        let relock_dph = match &self.plc {
+            Some(p) if self.tick < p.relock_until => {
+                self.status = status::NOMINAL & !status::PATH_LENGTH_LOCK;
+                p.error_dph
+            }
+            _ => {
+                self.status = status::NOMINAL;
+                0.0
+            }
+        };
 
         let rate_dph = match &self.response {
             None => self.scale_factor * self.kinematic_dph + self.bias_dph,
             Some(r) => r.output_dph(self.kinematic_dph, self.scale_factor, self.bias_dph),
         };
-        let d_angle = rate_dph * self.frame_dt_s + self.noise.frame_angle_arcsec(&mut self.rng);
+        // An undithered unit inside its lock-in sends nothing: its beams
+        // are locked, and its noise with them.
+        let locked = rate_dph == 0.0 && self.response.as_ref().is_some_and(|r| r.locks_clean());
+        let d_angle = if locked {
+            0.0
+        } else {
+            (rate_dph + relock_dph) * self.frame_dt_s + self.noise.frame_angle_arcsec(&mut self.rng)
+        };
         // Kahan sum: the reference angle must stay exact over 1e7+ frames.
         let y = d_angle - self.true_angle_comp;
         let t = self.true_angle_arcsec + y;
         self.true_angle_comp = (t - self.true_angle_arcsec) - y;
         self.true_angle_arcsec = t;
 
-        self.residual_arcsec += d_angle;
+        match self.frame_clock {
+            None => {
+                self.residual_arcsec += d_angle;
+                Some(self.frame(self.time_s()))
+            }
+            Some(clock) => self.clocked_frames(clock, d_angle, from),
+        }
+    }
+
+    /// The frames of a unit whose frame clock is off nominal that end in
+    /// the period just stepped, which brought `d_angle_arcsec`: at most
+    /// two (`|error| <= 1000 ppm`), each quantizing the angle up to its
+    /// own end (the angle taken as even over the period), the rest carried
+    /// to the next. The first is returned, a second left in `extra`. The
+    /// table's angles at each frame's end are latched, between `from`
+    /// (the period's start; none: the table did not move) and now.
+    fn clocked_frames(
+        &mut self,
+        clock: FrameClock,
+        d_angle_arcsec: f64,
+        from: Option<TableAngles>,
+    ) -> Option<GyroSample> {
+        let start_s = self.time_s() - self.frame_dt_s;
+        let now = self.table_angles();
+        // A turning axis reads within one turn: its step is under a degree.
+        let step = |a: f64, b: f64| (b - a + 180.0).rem_euclid(360.0) - 180.0;
+        let end_phase = clock.phase + clock.ratio;
+        let mut given = 0.0;
+        let mut first = None;
+        let mut boundary = 1.0;
+        while boundary <= end_phase {
+            let at = (boundary - clock.phase) / clock.ratio;
+            self.residual_arcsec += (at - given) * d_angle_arcsec;
+            given = at;
+            let sample = self.frame(start_s + at * self.frame_dt_s);
+            let angles = from.map_or(now, |a| TableAngles {
+                outer_deg: a.outer_deg + at * step(a.outer_deg, now.outer_deg),
+                inner_deg: a.inner_deg + at * step(a.inner_deg, now.inner_deg),
+            });
+            self.frame_latch = Some((self.tick, angles));
+            if first.is_none() {
+                first = Some(sample);
+            } else {
+                self.extra = Some(sample);
+            }
+            boundary += 1.0;
+        }
+        self.residual_arcsec += (1.0 - given) * d_angle_arcsec;
+        self.frame_clock = Some(FrameClock {
+            phase: end_phase - (boundary - 1.0),
+            ..clock
+        });
+        first
+    }
+
+    /// The frame ending at `time_s`: the angle in the quantizer (with the
+    /// dither's jitter) as whole counts, the rest carried.
+    #[inline]
+    fn frame(&mut self, time_s: f64) -> GyroSample {
         if let Some((sigma, last)) = &mut self.jitter {
             let j = *sigma * self.rng.sample::<f64, _>(StandardNormal);
             self.residual_arcsec += j - *last;
@@ -361,15 +555,15 @@ impl Twin {
         let counts = (self.residual_arcsec / lsb).floor();
         self.residual_arcsec -= counts * lsb;
         self.frame_index += 1;
-        Some(GyroSample {
+        GyroSample {
             index: self.frame_index,
-            time_s: self.time_s(),
+            time_s,
             delta_counts: counts as i32,
             t1_c: self.sensor_c[0],
             t2_c: self.sensor_c[1],
             tcase_c: self.sensor_c[2],
-            status: status::NOMINAL,
-        })
+            status: self.status,
+        }
     }
 
     /// Advance until device time reaches `t_s`, handing every frame to `sink`.
@@ -377,6 +571,9 @@ impl Twin {
         let end_tick = (t_s / self.frame_dt_s).round() as u64;
         while self.tick < end_tick {
             if let Some(sample) = self.step() {
+                sink(self, &sample);
+            }
+            if let Some(sample) = self.extra.take() {
                 sink(self, &sample);
             }
         }
@@ -418,6 +615,9 @@ impl Twin {
             magnetic_body_ut: self.magnetic_body_ut,
         });
         self.noise_dph = self.noise.step_bias_dph(&mut self.rng);
+        if powered {
+            self.path_length_control();
+        }
         self.refresh_bias();
         self.read_sensors();
     }
@@ -429,7 +629,12 @@ impl Twin {
             + b.model4
                 .thermal_bias_dph(&model4_inputs(&self.thermal, self.tau_s()), b.terms)
             + self.effect_dph
-            + self.noise_dph;
+            + self.noise_dph
+            + self
+                .plc
+                .as_ref()
+                .filter(|p| p.second_mode)
+                .map_or(0.0, |p| p.cfg.mode_bias_dph);
     }
 
     fn read_sensors(&mut self) {

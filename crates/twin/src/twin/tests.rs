@@ -100,6 +100,60 @@ fn no_angle_is_lost_to_quantization_over_ten_million_frames() {
     assert!((out - fed).abs() < 1.7, "counts {out} vs fed {fed} arcsec");
 }
 
+/// A frame clock off nominal: more (or fewer) frames in the same device
+/// time, each covering that much less (more) of it, and the same angle
+/// in all of them; the frames' own clock reads the rate off by the error.
+#[test]
+fn a_frame_clock_error_changes_the_frames_not_the_angle() {
+    let frames = |ppm: f64| {
+        let mut c = TwinConfig::default_rl16();
+        c.gyro.frame_clock_error_ppm = ppm;
+        let mut twin = Twin::new(c, 5);
+        twin.demand_table(None, Some(AxisDemand::Rate(50.0)));
+        let mut v = Vec::new();
+        twin.run_until(1000.0, |_, g| v.push(*g));
+        (v, twin.truth().angle_arcsec)
+    };
+    let counts = |v: &[GyroSample]| v.iter().map(|g| i64::from(g.delta_counts)).sum::<i64>();
+    let (nominal, fed) = frames(0.0);
+    assert_eq!(nominal.len(), 400_000);
+    for ppm in [50.0, -50.0, 1000.0, -1000.0] {
+        let (v, fed_here) = frames(ppm);
+        // 400 000 (1 + e) frames, one either way for where the last fell.
+        let want = 400_000.0 * (1.0 + ppm * 1e-6);
+        assert!(
+            (v.len() as f64 - want).abs() <= 1.0,
+            "{ppm} ppm: {} frames",
+            v.len()
+        );
+        // Numbered without a gap, each later than the one before.
+        assert!(
+            v.windows(2).all(|w| w[1].index == w[0].index + 1),
+            "{ppm} ppm"
+        );
+        assert!(v.windows(2).all(|w| w[1].time_s > w[0].time_s), "{ppm} ppm");
+        // The same physics (seed, noise) fed the same angle; the counts
+        // hold it to within the part of a frame not yet sent.
+        assert_eq!(fed_here, fed, "{ppm} ppm");
+        let lsb = 0.25;
+        let per_frame = 50.0 * 3600.0 / 400.0;
+        let lag = fed - counts(&v) as f64 * lsb;
+        assert!(
+            lag > -lsb && lag < per_frame + lsb,
+            "{ppm} ppm: {lag} arcsec behind"
+        );
+        // Counts over frames taken at the nominal period read the rate
+        // off by the error: -e for a fast clock.
+        let naive = counts(&v) as f64 * lsb / (v.len() as f64 / 400.0);
+        let truth = counts(&nominal) as f64 * lsb / 1000.0;
+        let err_ppm = (naive / truth - 1.0) * 1e6;
+        assert!(
+            (err_ppm + ppm).abs() < 0.5 + 1e-3 * ppm.abs(),
+            "{ppm} ppm reads {err_ppm}"
+        );
+    }
+}
+
 #[test]
 fn same_seed_same_frames_other_seed_other_frames() {
     let frames = |seed| {
@@ -344,4 +398,50 @@ fn bias_instability_sets_the_allan_floor() {
         let got = adev(&x, tau);
         assert!((got / (0.664 * b) - 1.0).abs() < 0.25, "tau {tau}: {got}");
     }
+}
+
+/// The path-length control resets each time the blocks have moved
+/// `reset_span_c` since the last reset: out of lock for `relock_s` (the
+/// status word's lock bit clear, the other bits set), and the bias steps
+/// by `mode_bias_dph` onto the other mode and back at the next reset.
+#[test]
+fn the_path_length_control_resets_on_the_blocks_span_and_hops_mode() {
+    let mut c = quiet();
+    c.path_length_control.reset_span_c = 10.0;
+    c.path_length_control.relock_s = 0.5;
+    c.path_length_control.mode_bias_dph = 0.2;
+    let mut twin = Twin::new(c, 3);
+    twin.set_chamber(50.0, 3.0).expect("within the chamber");
+    let mut resets: Vec<(f64, f64)> = Vec::new();
+    let mut out_of_lock = 0u64;
+    // Before the first frame: no lock to lose (the acquisition is not a reset).
+    let mut last = 0;
+    let mut bias = Vec::new();
+    twin.run_until(4.0 * 3600.0, |t, g| {
+        let lost = g.status & status::PATH_LENGTH_LOCK == 0;
+        if lost {
+            out_of_lock += 1;
+            assert_eq!(g.status, status::NOMINAL & !status::PATH_LENGTH_LOCK);
+        }
+        if lost && last & status::PATH_LENGTH_LOCK != 0 {
+            let tr = t.truth();
+            resets.push((g.time_s, 0.5 * (tr.t1_c + tr.t2_c)));
+            bias.push(tr.bias_dph);
+        }
+        last = g.status;
+    });
+    // From about +20 to +50 degC: three resets 10 degC apart.
+    assert_eq!(resets.len(), 3, "{resets:?}");
+    for w in resets.windows(2) {
+        assert!((w[1].1 - w[0].1 - 10.0).abs() < 0.05, "{resets:?}");
+    }
+    // The acquisition at power-on and each reset, 0.5 s at 400 Hz.
+    assert_eq!(out_of_lock, 4 * 200);
+    // The bias alternates between the two modes (the rest of it is the
+    // quiet twin's zero).
+    assert!(
+        (bias[0] - 0.2).abs() < 1e-9 && bias[1].abs() < 1e-9,
+        "{bias:?}"
+    );
+    assert!((bias[2] - 0.2).abs() < 1e-9, "{bias:?}");
 }

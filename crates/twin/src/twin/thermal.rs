@@ -189,6 +189,11 @@ impl ThermalNetwork {
         self.ddt_dt_c_per_s = ((self.t1_c - self.t2_c) - dt_before) / dt_s;
     }
 
+    /// Mean of the two block nodes, degC.
+    pub fn block_c(&self) -> f64 {
+        0.5 * (self.t1_c + self.t2_c)
+    }
+
     /// Block gradient dT = T1 - T2, degC.
     pub fn gradient_c(&self) -> f64 {
         self.t1_c - self.t2_c
