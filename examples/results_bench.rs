@@ -17,7 +17,7 @@ use std::time::Instant;
 
 use gyrobench::procedure::Metric;
 use gyrobench::protocol::frame::LinkStats;
-use gyrobench::results::query::Filter;
+use gyrobench::results::query::{Filter, MIN_CAPABILITY_N};
 use gyrobench::results::record::PartEnd;
 use gyrobench::results::{Location, Store};
 use gyrobench::runlog::meta::RunMeta;
@@ -181,8 +181,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     time(
         "trend compensated_drift_pp_dph across all units",
         &mut |s| {
-            s.trend("compensated_drift_pp_dph", &Filter::default())
-                .map_or(0, |t| t.count as usize)
+            s.trend(
+                "compensated_drift_pp_dph",
+                &Filter::default(),
+                MIN_CAPABILITY_N,
+            )
+            .map_or(0, |t| t.count as usize)
         },
     );
     time(
@@ -195,6 +199,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     since: Some("2026-06-01".into()),
                     ..Filter::default()
                 },
+                MIN_CAPABILITY_N,
             )
             .map_or(0, |t| t.count as usize)
         },

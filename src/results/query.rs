@@ -385,7 +385,7 @@ impl Percentile {
         let n = logs.len() as f64;
         let mu = logs.iter().sum::<f64>() / n;
         let s = (logs.iter().map(|l| (l - mu) * (l - mu)).sum::<f64>() / (n - 1.0)).sqrt();
-        if !(s > 0.0) {
+        if s.is_nan() || s <= 0.0 {
             return None;
         }
         let (x_0135, x_50, x_99865) = ((mu - 3.0 * s).exp(), mu.exp(), (mu + 3.0 * s).exp());
