@@ -137,7 +137,10 @@ fn a_lots_shared_tilt_is_the_benchs_and_the_odd_unit_is_named() {
     assert_eq!(lot["outliers"], serde_json::json!(["LOT-C"]));
     let g = &lot["gap"];
     let f = |k: &str| g[k].as_f64().expect("gap");
-    assert!(f("after_shared_dph") < f("gap_dph") && f("after_dph") < f("after_shared_dph"), "{g}");
+    assert!(
+        f("after_shared_dph") < f("gap_dph") && f("after_dph") < f("after_shared_dph"),
+        "{g}"
+    );
 
     // The page and the headline say it first.
     let html = std::fs::read_to_string(out.join("lot.html")).expect("lot.html");
@@ -151,7 +154,12 @@ fn a_lots_shared_tilt_is_the_benchs_and_the_odd_unit_is_named() {
             && headline.contains("LOT-C is unlike the lot"),
         "{headline}"
     );
-    for part in ["Shared effects: the bench", "each unit&#39;s own against the lot", "Held-out rate gap, unit by unit", "Every effect weighed"] {
+    for part in [
+        "Shared effects: the bench",
+        "each unit&#39;s own against the lot",
+        "Held-out rate gap, unit by unit",
+        "Every effect weighed",
+    ] {
         assert!(html.contains(part), "lot.html lacks {part}");
     }
     let stdout = String::from_utf8_lossy(&r.stdout);
@@ -160,7 +168,8 @@ fn a_lots_shared_tilt_is_the_benchs_and_the_odd_unit_is_named() {
     // Acting on it: the bench's correction holds the tilt; each unit's
     // twin on this bench closes its gap, its own twin leaves the tilt to
     // the bench.
-    let correction = std::fs::read_to_string(out.join("bench-correction.toml")).expect("correction");
+    let correction =
+        std::fs::read_to_string(out.join("bench-correction.toml")).expect("correction");
     let table: toml::Table = correction.parse().expect("TOML");
     assert_eq!(table["shared"][0]["seat"].as_str(), Some("fixture"));
     assert_eq!(
@@ -185,7 +194,12 @@ fn a_lots_shared_tilt_is_the_benchs_and_the_odd_unit_is_named() {
             "--out",
             s(&again),
         ]);
-        assert_eq!(r.status.code(), Some(0), "{}", String::from_utf8_lossy(&r.stderr));
+        assert_eq!(
+            r.status.code(),
+            Some(0),
+            "{}",
+            String::from_utf8_lossy(&r.stderr)
+        );
         let d = json(&again.join("diagnosis.json"));
         let got: Vec<&str> = d["effects"]
             .as_array()
@@ -224,7 +238,12 @@ fn units_of_several_types_or_sites_are_refused_as_a_lot() {
         a.extend(args.iter().copied());
         a.extend(["--dut", serial, "--out", s(&out)]);
         let r = gyrobench(&a);
-        assert_eq!(r.status.code(), Some(0), "{}", String::from_utf8_lossy(&r.stderr));
+        assert_eq!(
+            r.status.code(),
+            Some(0),
+            "{}",
+            String::from_utf8_lossy(&r.stderr)
+        );
     }
     let log = |n: &str| dir.join(n).join("run.mcap");
     let refused = |logs: &[&std::path::Path], says: &str| {

@@ -33,7 +33,7 @@ pub(super) struct Found {
     /// Units that named it alone.
     pub named_alone: Vec<usize>,
     /// Each unit's own parameters at the shared nonlinear parameter.
-    pub per_unit: Vec<(usize, BTreeMap<String, f64>, BTreeMap<String, f64>)>,
+    pub per_unit: Vec<UnitValue>,
 }
 
 /// A unit whose parameters of an effect the rest of the lot shares
@@ -242,10 +242,14 @@ fn weigh(
     let s_own = score(data, &own_model);
     let (gain, p_shared) = improvement(&s0, &s_shared);
     let (agree, agreement_p, ratio) = Bars::agree(&s_shared, &s_own);
-    let per_unit: Vec<_> = (0..n)
+    let per_unit: Vec<UnitValue> = (0..n)
         .map(|u| {
-            let (v, err, _) = term_values(&s_own, without.len() + u);
-            (u, v, err)
+            let (parameters, uncertainties, _) = term_values(&s_own, without.len() + u);
+            UnitValue {
+                serial: serials[u].clone(),
+                parameters,
+                uncertainties,
+            }
         })
         .collect();
     let mut considered = Considered {
@@ -434,15 +438,7 @@ impl Found {
                 .iter()
                 .map(|&u| serials[u].clone())
                 .collect(),
-            per_unit: self
-                .per_unit
-                .iter()
-                .map(|(u, parameters, uncertainties)| UnitValue {
-                    serial: serials[*u].clone(),
-                    parameters: parameters.clone(),
-                    uncertainties: uncertainties.clone(),
-                })
-                .collect(),
+            per_unit: self.per_unit.clone(),
         }
     }
 }
