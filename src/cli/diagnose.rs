@@ -108,6 +108,13 @@ struct SelfcheckArgs {
     /// With --randomize: how many units (the cases cycle among them).
     #[arg(long, default_value_t = 300)]
     units: usize,
+    /// Lots instead: N lots of three or four randomised units on one
+    /// bench, in turn one with a bench fault every unit shares (a fixture
+    /// tilt, the latitude or the north stated wrong), one with nothing,
+    /// one with an odd unit, each diagnosed as `diagnose --lot` does
+    /// (docs/diagnosis.md, "Lots"); writes lots.json.
+    #[arg(long, value_name = "N", conflicts_with_all = ["randomize", "separating", "effects"])]
+    lots: Option<usize>,
     /// Where to write selfcheck.json and selfcheck.html (or
     /// randomized.json): not a run directory, nor inside one, without
     /// --force.
@@ -484,6 +491,9 @@ fn check_out_dir(out: &Path, force: bool) -> Result<()> {
 
 fn run_selfcheck(a: SelfcheckArgs) -> Result<Outcome> {
     check_out_dir(&a.out, a.force)?;
+    if let Some(lots) = a.lots {
+        return run_lot_selfcheck(&a, lots);
+    }
     if a.randomize {
         return run_randomized(&a);
     }
@@ -564,6 +574,112 @@ fn run_selfcheck(a: SelfcheckArgs) -> Result<Outcome> {
     }
     errln!("self-check in {}", a.out.display());
     Ok(Outcome::Success)
+}
+
+fn run_lot_selfcheck(a: &SelfcheckArgs, lots: usize) -> Result<Outcome> {
+    use crate::diagnose::lot_selfcheck;
+    if lots == 0 {
+        return Err(Usage("--lots must be 1 or more".into()).into());
+    }
+    let bar = super::progress::Bar::new(lots as u64, "{bar:30} {pos}/{len} lots  {msg}");
+    errln!(
+        "self-check on {lots} lots of randomised units from seed {}, diagnosed as lots without a twin",
+        a.seed
+    );
+    let r = lot_selfcheck::run(lots, a.seed, &|done, _, t| {
+        let line = render_lot_trial(done, lots, t);
+        bar.println(&line);
+        bar.set(done as u64, line);
+    });
+    bar.clear();
+    std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
+    write(&a.out.join("lots.json"), &serde_json::to_string_pretty(&r)?)?;
+    outln!("{}", render_lot_selfcheck(&r))?;
+    errln!("self-check in {}", a.out.display());
+    Ok(Outcome::Success)
+}
+
+/// One finished lot of the lot self-check as a progress line.
+fn render_lot_trial(done: usize, lots: usize, t: &diagnose::lot_selfcheck::LotTrial) -> String {
+    let own: Vec<String> = t
+        .own
+        .iter()
+        .filter(|(_, v)| !v.is_empty())
+        .map(|(s, v)| format!("{s}: {}", v.join(", ")))
+        .collect();
+    format!(
+        "[{done}/{lots}] lot seed {} ({} units{}): {}; shared {}; own {}; outliers {}",
+        t.seed,
+        t.serials.len(),
+        if t.low_latitude { ", low latitude" } else { "" },
+        t.injected,
+        if t.shared.is_empty() {
+            "none".to_owned()
+        } else {
+            t.shared.join("; ")
+        },
+        if own.is_empty() {
+            "none".to_owned()
+        } else {
+            own.join("; ")
+        },
+        if t.outliers.is_empty() {
+            "none".to_owned()
+        } else {
+            t.outliers
+                .iter()
+                .map(|o| match t.evidence.get(o) {
+                    Some(why) => format!("{o} ({})", why.join(", ")),
+                    None => o.clone(),
+                })
+                .collect::<Vec<_>>()
+                .join(", ")
+        },
+    )
+}
+
+/// The lot self-check's figures, one line each.
+fn render_lot_selfcheck(r: &diagnose::lot_selfcheck::LotSelfCheck) -> String {
+    let rate = |x: &diagnose::lot_selfcheck::Rate| match x.rate {
+        Some(r) => format!("{:.0} % ({} of {})", 100.0 * r, x.hits, x.of),
+        None => "no lot of its kind".to_owned(),
+    };
+    let mut lines = vec![format!(
+        "shared fault named right (effect, every unit, seat): {}",
+        rate(&r.shared_named_right)
+    )];
+    for (f, x) in &r.shared_named_right_by_fault {
+        lines.push(format!("  {f:<16} {}", rate(x)));
+    }
+    lines.extend([
+        format!(
+            "  a unit flagged an outlier in a shared lot: {}",
+            rate(&r.shared_false_outlier)
+        ),
+        format!(
+            "odd unit flagged, and no other: {}",
+            rate(&r.outlier_flagged_right)
+        ),
+        format!("  its own effect named: {}", rate(&r.own_effect_named)),
+        format!(
+            "  a shared effect named in an outlier lot: {}",
+            rate(&r.outlier_false_shared)
+        ),
+        format!(
+            "null lots with anything attributed: {}",
+            rate(&r.null_false_attribution)
+        ),
+        format!(
+            "  a shared effect {}; a unit's own effect {}; an outlier {}",
+            rate(&r.null_false_shared),
+            rate(&r.null_false_own),
+            rate(&r.null_false_outlier)
+        ),
+    ]);
+    for why in &r.skipped {
+        lines.push(format!("  not diagnosed: {why}"));
+    }
+    lines.join("\n")
 }
 
 fn run_randomized(a: &SelfcheckArgs) -> Result<Outcome> {

@@ -8,7 +8,9 @@
 //! - `randomized`: the same on units drawn far from the twin;
 //! - `html`: the page;
 //! - `lot_html`, `lot_files`: a lot's page and headline, its bench
-//!   correction and where each unit's files go.
+//!   correction and where each unit's files go;
+//! - `lot_selfcheck`: lots of randomised units with a shared bench fault,
+//!   with nothing, or with one odd unit, diagnosed as lots.
 
 pub use gyrobench_diagnose::*;
 
@@ -16,6 +18,7 @@ pub mod data;
 pub mod html;
 pub mod lot_files;
 pub mod lot_html;
+pub mod lot_selfcheck;
 pub mod randomized;
 pub mod selfcheck;
 #[cfg(test)]

@@ -275,3 +275,48 @@ fn units_of_several_types_or_sites_are_refused_as_a_lot() {
     refused(&[&log("a")], "two or more units");
     std::fs::remove_dir_all(&dir).expect("cleanup");
 }
+
+/// `diagnose selfcheck --lots N`: N lots diagnosed, their figures in
+/// `lots.json` and on stdout; no lots is a usage error.
+#[test]
+fn the_lot_selfcheck_writes_its_figures() {
+    let _busy = crate::common::busy_turn();
+    let dir = temp_dir("lot-selfcheck");
+    let out = dir.join("sc");
+    let r = gyrobench(&[
+        "diagnose",
+        "selfcheck",
+        "--lots",
+        "1",
+        "--seed",
+        "1",
+        "--out",
+        s(&out),
+    ]);
+    assert_eq!(
+        r.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&r.stderr)
+    );
+    let sc = json(&out.join("lots.json"));
+    assert_eq!(sc["lots"], 1);
+    let trials = sc["trials"].as_array().expect("trials");
+    assert_eq!(trials.len(), 1, "{sc}");
+    // The first lot is a shared lot: counted there, no other kind run.
+    assert_eq!(trials[0]["case"]["kind"], "shared");
+    assert_eq!(sc["shared_named_right"]["of"], 1);
+    assert!(sc["null_false_attribution"]["rate"].is_null(), "{sc}");
+    assert!(sc["outlier_flagged_right"]["rate"].is_null(), "{sc}");
+    let stdout = String::from_utf8_lossy(&r.stdout);
+    assert!(
+        stdout.contains("shared fault named right (effect, every unit, seat): "),
+        "{stdout}"
+    );
+    assert!(stdout.contains("null lots with anything attributed: no lot of its kind"));
+
+    let r = gyrobench(&["diagnose", "selfcheck", "--lots", "0", "--out", s(&out)]);
+    assert_eq!(r.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&r.stderr).contains("--lots must be 1 or more"));
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
