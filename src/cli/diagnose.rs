@@ -653,7 +653,12 @@ fn render_lot_selfcheck(r: &diagnose::lot_selfcheck::LotSelfCheck) -> String {
     }
     lines.extend([
         format!(
-            "  a unit flagged an outlier in a shared lot: {}",
+            "  anything else attributed in a shared lot: {}",
+            rate(&r.shared_false_attribution)
+        ),
+        format!(
+            "  a unit's own effect {}; an outlier {}",
+            rate(&r.shared_false_own),
             rate(&r.shared_false_outlier)
         ),
         format!(
@@ -661,6 +666,10 @@ fn render_lot_selfcheck(r: &diagnose::lot_selfcheck::LotSelfCheck) -> String {
             rate(&r.outlier_flagged_right)
         ),
         format!("  its own effect named: {}", rate(&r.own_effect_named)),
+        format!(
+            "  anything else attributed in an outlier lot: {}",
+            rate(&r.outlier_false_attribution)
+        ),
         format!(
             "  a shared effect named in an outlier lot: {}",
             rate(&r.outlier_false_shared)

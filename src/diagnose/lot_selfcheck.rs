@@ -184,12 +184,21 @@ pub struct LotSelfCheck {
     pub shared_named_right_by_fault: BTreeMap<String, Rate>,
     /// Shared lots: a unit flagged an outlier (none is unlike the lot).
     pub shared_false_outlier: Rate,
+    /// Shared lots: an effect named as a unit's own (each carries only
+    /// the bench's).
+    pub shared_false_own: Rate,
+    /// Shared lots: anything attributed besides the fault's effects
+    /// shared (another shared effect, a unit's own effect, an outlier).
+    pub shared_false_attribution: Rate,
     /// Outlier lots: the odd unit flagged, and no other.
     pub outlier_flagged_right: Rate,
     /// Outlier lots: its own effect named among its own.
     pub own_effect_named: Rate,
     /// Outlier lots: any effect named shared.
     pub outlier_false_shared: Rate,
+    /// Outlier lots: anything attributed besides the odd unit and its own
+    /// effects (a shared effect, another unit's own effect or flag).
+    pub outlier_false_attribution: Rate,
     /// Null lots: anything attributed (a shared effect, a unit's own
     /// effect, or an outlier).
     pub null_false_attribution: Rate,
@@ -597,6 +606,7 @@ pub fn run(lots: usize, seed: u64, progress: Progress<'_>) -> LotSelfCheck {
 
 fn summarise(lots: usize, seed: u64, trials: Vec<LotTrial>, skipped: Vec<String>) -> LotSelfCheck {
     let of = |c: LotCase| trials.iter().filter(move |t| t.case == c);
+    // A unit's own effect named.
     let null_own = |t: &LotTrial| t.own.values().any(|v| !v.is_empty());
     let by_fault = [Fault::FixtureTilt, Fault::WrongLatitude, Fault::WrongNorth]
         .into_iter()
@@ -615,11 +625,28 @@ fn summarise(lots: usize, seed: u64, trials: Vec<LotTrial>, skipped: Vec<String>
         shared_named_right: Rate::of(of(LotCase::Shared), |t| t.shared_named_right == Some(true)),
         shared_named_right_by_fault: by_fault,
         shared_false_outlier: Rate::of(of(LotCase::Shared), |t| !t.outliers.is_empty()),
+        shared_false_own: Rate::of(of(LotCase::Shared), null_own),
+        shared_false_attribution: Rate::of(of(LotCase::Shared), |t| {
+            let names = t.fault.map_or(&[][..], |f| f.expected().0);
+            let other_shared = t
+                .shared
+                .iter()
+                .any(|s| !names.iter().any(|n| s.starts_with(&format!("{n} ("))));
+            other_shared || null_own(t) || !t.outliers.is_empty()
+        }),
         outlier_flagged_right: Rate::of(of(LotCase::Outlier), |t| {
             t.outlier_flagged_right == Some(true)
         }),
         own_effect_named: Rate::of(of(LotCase::Outlier), |t| t.own_effect_named == Some(true)),
         outlier_false_shared: Rate::of(of(LotCase::Outlier), |t| !t.shared.is_empty()),
+        outlier_false_attribution: Rate::of(of(LotCase::Outlier), |t| {
+            let odd = t.odd_unit.as_deref();
+            !t.shared.is_empty()
+                || t.own
+                    .iter()
+                    .any(|(s, v)| Some(s.as_str()) != odd && !v.is_empty())
+                || t.outliers.iter().any(|o| Some(o.as_str()) != odd)
+        }),
         null_false_attribution: Rate::of(of(LotCase::Null), |t| {
             !t.shared.is_empty() || null_own(t) || !t.outliers.is_empty()
         }),

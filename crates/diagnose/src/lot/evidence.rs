@@ -2,9 +2,10 @@
 //! effect likely sits.
 //!
 //! A unit is set apart by its gap (with the shared effects given to the
-//! bench, its held-out gap over the noise of its 60 s means stands above
-//! `outlier_gap_ratio` and that many times above the median of the other
-//! units'), by its own parameters of an effect the rest share, by an own
+//! bench, its held-out gap stands above `outlier_gap_ratio` times the
+//! noise of its 60 s means, and what it holds beyond that noise stands
+//! that many times above the median of the other units'), by its own
+//! parameters of an effect the rest share, by an own
 //! effect fewer than half the units show, or by a thermal layer that
 //! misses where the others' match. It is flagged an outlier only in a lot
 //! of three or more, and only when fewer than half the units are set
@@ -55,19 +56,56 @@ fn median(mut v: Vec<f64>) -> f64 {
     }
 }
 
+/// The median of every value of `v` but the `u`-th.
+fn median_of_others(v: &[f64], u: usize) -> f64 {
+    median(
+        v.iter()
+            .enumerate()
+            .filter(|&(k, _)| k != u)
+            .map(|(_, x)| *x)
+            .collect(),
+    )
+}
+
 /// Each value against the median of the others': the indices of those
 /// above `bar` in their own right and `bar` times above that median.
 fn above_the_rest(v: &[f64], bar: f64) -> Vec<(usize, f64)> {
     (0..v.len())
         .filter_map(|u| {
-            let others = median(
-                v.iter()
-                    .enumerate()
-                    .filter(|&(k, _)| k != u)
-                    .map(|(_, x)| *x)
-                    .collect(),
-            );
+            let others = median_of_others(v, u);
             (v[u] > bar && v[u] > bar * others).then_some((u, others))
+        })
+        .collect()
+}
+
+/// The units whose gap sets them apart, each with its gap over its noise,
+/// the other units' median of that, its gap beyond its noise (deg/h,
+/// `sqrt(gap^2 - noise^2)`) and the others' median of that. A gap beyond
+/// the noise is compared, not the ratio: a residual every unit shares (a
+/// bench effect the library does not hold whole) is the same in each, and
+/// over the noise it would set the quietest unit apart.
+fn gap_apart(units: &[UnitResult], bar: f64) -> Vec<(usize, [f64; 4])> {
+    let ratios: Vec<f64> = units
+        .iter()
+        .map(|u| u.gap_after_shared_dph / u.noise_dph)
+        .collect();
+    let beyond: Vec<f64> = units
+        .iter()
+        .map(|u| {
+            (u.gap_after_shared_dph.powi(2) - u.noise_dph.powi(2))
+                .max(0.0)
+                .sqrt()
+        })
+        .collect();
+    (0..units.len())
+        .filter_map(|u| {
+            let others = median_of_others(&beyond, u);
+            (ratios[u] > bar && beyond[u] > bar * others).then(|| {
+                (
+                    u,
+                    [ratios[u], median_of_others(&ratios, u), beyond[u], others],
+                )
+            })
         })
         .collect()
 }
@@ -79,20 +117,17 @@ pub(super) fn judge(
     differs: &[Differs],
 ) -> (Vec<String>, Option<String>) {
     let n = units.len();
-    let bar = LOT_THRESHOLDS.outlier_gap_ratio;
-    let ratios: Vec<f64> = units
-        .iter()
-        .map(|u| u.gap_after_shared_dph / u.noise_dph)
-        .collect();
-    for (u, others) in above_the_rest(&ratios, bar) {
+    for (u, [ratio, others, beyond, others_beyond]) in
+        gap_apart(units, LOT_THRESHOLDS.outlier_gap_ratio)
+    {
         units[u].evidence.push(Evidence {
             kind: "gap".into(),
             effect: None,
             text: format!(
-                "with the shared effects given to the bench its held-out gap is {:.5} deg/h, {:.2} times the noise of its 60 s means, against a median of {:.2} times for the other units",
-                units[u].gap_after_shared_dph, ratios[u], others
+                "with the shared effects given to the bench its held-out gap is {:.5} deg/h, {ratio:.2} times the noise of its 60 s means (a median of {others:.2} times for the other units); beyond its noise it holds {beyond:.5} deg/h, against a median of {others_beyond:.5} deg/h for the others",
+                units[u].gap_after_shared_dph
             ),
-            value: ratios[u],
+            value: ratio,
             lot_value: others,
             p_value: None,
         });
@@ -292,5 +327,64 @@ pub fn seat(e: Effect, parameters: &BTreeMap<String, f64>) -> (&'static str, Str
                 e.name()
             ),
         ),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A unit with held-out gap `gap` over noise `noise`, deg/h, and a
+    /// thermal layer that matches.
+    fn unit(serial: &str, gap: f64, noise: f64) -> UnitResult {
+        UnitResult {
+            serial: serial.into(),
+            slot: String::new(),
+            runs: Vec::new(),
+            effects: Vec::new(),
+            outlier: false,
+            evidence: Vec::new(),
+            gap_dph: gap,
+            gap_after_shared_dph: gap,
+            gap_after_dph: gap,
+            noise_dph: noise,
+            thermal_gap_c: 0.01,
+            thermal_noise_floor_c: 0.01,
+            confounded: Vec::new(),
+            inconclusive: None,
+        }
+    }
+
+    #[test]
+    fn a_residual_every_unit_shares_sets_no_unit_apart() {
+        // 0.02 deg/h left in every unit over noises of 0.01, 0.02, 0.03:
+        // over its noise the quietest stands 2.2 times, the others 1.4
+        // and 1.2, yet each holds the same beyond it.
+        let r: f64 = 0.02;
+        let mut units: Vec<UnitResult> = [0.01_f64, 0.02, 0.03]
+            .iter()
+            .enumerate()
+            .map(|(k, &n)| unit(&format!("U{k}"), r.hypot(n), n))
+            .collect();
+        let (flagged, why) = judge(&mut units, &[]);
+        assert!(flagged.is_empty(), "{:?}", units[0].evidence);
+        assert!(why.is_none());
+    }
+
+    #[test]
+    fn a_unit_with_a_gap_of_its_own_is_the_outlier() {
+        let mut units = vec![
+            unit("U0", 0.0105, 0.01),
+            unit("U1", 0.0210, 0.02),
+            unit("U2", 0.0300, 0.01),
+            unit("U3", 0.0110, 0.01),
+        ];
+        let (flagged, _) = judge(&mut units, &[]);
+        assert_eq!(flagged, ["U2"]);
+        assert!(units[2].outlier);
+        let e = &units[2].evidence[0];
+        assert_eq!(e.kind, "gap");
+        assert!((e.value - 3.0).abs() < 1e-9, "{e:?}");
+        assert!(e.text.contains("0.02828 deg/h"), "{}", e.text);
     }
 }

@@ -111,9 +111,10 @@ pub struct LotThresholds {
     pub agree_alpha: f64,
     /// A unit's gap is unlike the lot's when, with the shared effects
     /// given to the bench, it stands this many times above the noise of
-    /// its 60 s means and this many times above the median of the other
-    /// units' (ours: the factor the single-unit headline calls "at the
-    /// noise"; measured on null lots by the lot self-check).
+    /// its 60 s means and what it holds beyond that noise (deg/h) stands
+    /// this many times above the median of the other units' (ours: the
+    /// factor the single-unit headline calls "at the noise"; measured on
+    /// null lots by the lot self-check).
     pub outlier_gap_ratio: f64,
     /// Runs whose sites differ by more than this in latitude or longitude,
     /// deg, are at different sites (ours: about 1 km).
