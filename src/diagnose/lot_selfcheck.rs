@@ -26,9 +26,9 @@ use serde::Serialize;
 
 use super::data::RunData;
 use super::library::{Effect, Param};
-use super::lot::{Lot, LotUnit, diagnose_lot};
+use super::lot::{Lot, LotUnit, diagnose_lot, two_at_a_time};
 use super::randomized::draw_unit;
-use super::selfcheck::{contribution, inject, runs_of};
+use super::selfcheck::{contribution, inject, injected_param, runs_of};
 use super::{Options, diagnose_rate, visible_gap};
 use crate::geometry::{Orientation, TableGeometry};
 use crate::study::StudyError;
@@ -247,32 +247,6 @@ fn options() -> Options {
     }
 }
 
-/// `f` on every item, two at a time (each diagnosis fits its thermal
-/// layer on a thread of its own), in the items' order.
-fn each<T: Sync, R: Send>(items: &[T], f: impl Fn(usize, &T) -> R + Sync) -> Vec<R> {
-    let next = std::sync::atomic::AtomicUsize::new(0);
-    let done = std::sync::Mutex::new(Vec::new());
-    std::thread::scope(|s| {
-        for _ in 0..2.min(items.len()) {
-            s.spawn(|| {
-                loop {
-                    let k = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-                    let Some(item) = items.get(k) else { break };
-                    let r = f(k, item);
-                    done.lock()
-                        .unwrap_or_else(std::sync::PoisonError::into_inner)
-                        .push((k, r));
-                }
-            });
-        }
-    });
-    let mut done = done
-        .into_inner()
-        .unwrap_or_else(std::sync::PoisonError::into_inner);
-    done.sort_by_key(|(k, _)| *k);
-    done.into_iter().map(|(_, r)| r).collect()
-}
-
 /// The median of `v`.
 fn median(mut v: Vec<f64>) -> f64 {
     v.sort_by(f64::total_cmp);
@@ -373,7 +347,7 @@ fn trial(seed: u64, case: LotCase) -> Result<LotTrial, StudyError> {
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed ^ 0x107c_4ec4);
     let n = if rng.random::<f64>() < 0.5 { 3 } else { 4 };
     let twins = draw_lot(seed, n);
-    let drawn: Vec<Result<Drawn, StudyError>> = each(&twins, |k, twin| {
+    let drawn: Vec<Result<Drawn, StudyError>> = two_at_a_time(&twins, |k, twin| {
         let s = unit_seed(seed, k);
         let runs = runs_of(twin, s, false)?;
         let noise = diagnose_rate(&runs, &options()).layers.rate.gap_dph;
@@ -427,18 +401,7 @@ fn trial(seed: u64, case: LotCase) -> Result<LotTrial, StudyError> {
             let j = rng.random_range(0..n);
             let e = OWN_EFFECTS[rng.random_range(0..OWN_EFFECTS.len())];
             let u = &mut units[j];
-            let p = match e {
-                // As `selfcheck::inject` puts them in: on the case.
-                Effect::Hysteresis => Param::Memory {
-                    on: tc::EffectTemperature::Case,
-                    value: 2.0,
-                },
-                Effect::ThermalLag => Param::Memory {
-                    on: tc::EffectTemperature::Case,
-                    value: 1800.0,
-                },
-                _ => Param::None,
-            };
+            let p = injected_param(&u.twin, e);
             let c = sized(&u.runs, &contribution(&u.runs, e, p), amp, u.noise);
             u.runs = runs_of(&inject(&u.twin, e, c).0, u.seed, false)?;
             t.amplitude = Some(amp);
@@ -501,7 +464,7 @@ fn add_fault(
                 about_y_arcmin: arcmin(-c * cz),
                 about_z_arcmin: arcmin(c * cy),
             };
-            let done: Vec<Result<Vec<RunData>, StudyError>> = each(units, |_, u| {
+            let done: Vec<Result<Vec<RunData>, StudyError>> = two_at_a_time(units, |_, u| {
                 let mut twin = u.twin.clone();
                 twin.effects.axis_misalignment = Some(tilt.clone());
                 runs_of(&twin, u.seed, false)

@@ -4,7 +4,7 @@
 //! outlier; each unit's twin on this bench closes its gap; units of
 //! several types or sites are refused.
 
-use crate::cli::{gyrobench, temp_dir};
+use crate::cli::{gyrobench, gyrobench_ok, temp_dir};
 use crate::common::{json, s};
 
 const SERIALS: [&str; 3] = ["LOT-A", "LOT-B", "LOT-C"];
@@ -283,22 +283,7 @@ fn the_lot_selfcheck_writes_its_figures() {
     let _busy = crate::common::busy_turn();
     let dir = temp_dir("lot-selfcheck");
     let out = dir.join("sc");
-    let r = gyrobench(&[
-        "diagnose",
-        "selfcheck",
-        "--lots",
-        "1",
-        "--seed",
-        "1",
-        "--out",
-        s(&out),
-    ]);
-    assert_eq!(
-        r.status.code(),
-        Some(0),
-        "{}",
-        String::from_utf8_lossy(&r.stderr)
-    );
+    let r = gyrobench_ok(&["diagnose", "selfcheck", "--lots", "1", "--out", s(&out)]);
     let sc = json(&out.join("lots.json"));
     assert_eq!(sc["lots"], 1);
     let trials = sc["trials"].as_array().expect("trials");
