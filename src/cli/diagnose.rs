@@ -1,4 +1,5 @@
-//! `gyrobench diagnose RUN.mcap... [--twin TWIN.toml] --out DIR` and
+//! `gyrobench diagnose RUN.mcap... [--twin TWIN.toml] --out DIR`,
+//! `gyrobench diagnose --lot LOG... --out DIR` and
 //! `gyrobench diagnose selfcheck [--runs N] [--seed S] --out DIR`.
 
 use std::path::{Path, PathBuf};
@@ -8,14 +9,14 @@ use clap::{Args, Subcommand};
 
 use super::{Outcome, Usage};
 use gyrobench::diagnose::library::Effect;
-use gyrobench::diagnose::{self, Options, data, html, selfcheck};
+use gyrobench::diagnose::{self, Options, data, html, lot_files, lot_html, selfcheck};
 use gyrobench::twin::TwinConfig;
 
 #[derive(Debug, Args)]
 #[command(
     args_conflicts_with_subcommands = true,
     after_help = after_help!(
-        "gyrobench diagnose runs/c1/run.mcap runs/c2/run.mcap --out diag",
+        "gyrobench diagnose runs/c1/run.mcap runs/c2/run.mcap --out diag\n  gyrobench diagnose --lot runs/batch/run.mcap --out lot",
         plain
     )
 )]
@@ -49,6 +50,15 @@ pub struct DiagnoseArgs {
     /// headline says so.
     #[arg(long)]
     allow_mixed_units: bool,
+    /// Diagnose a lot: the logs are of several units (a batch's log holds
+    /// several; one unit's logs are grouped by its serial), all of one
+    /// type at one site. Each unit is diagnosed alone, then all together:
+    /// the effects the lot shares (the bench's, with their likely seat:
+    /// fixture, table, site), each unit's own, and the unit unlike the
+    /// others. Writes lot.json, lot.html, bench-correction.toml and each
+    /// unit's diagnosis and twins under units/SERIAL/.
+    #[arg(long, conflicts_with_all = ["unit", "allow_mixed_units"])]
+    lot: bool,
 }
 
 #[derive(Debug, Subcommand)]
@@ -98,6 +108,13 @@ struct SelfcheckArgs {
     /// With --randomize: how many units (the cases cycle among them).
     #[arg(long, default_value_t = 300)]
     units: usize,
+    /// Lots instead: N lots of three or four randomised units on one
+    /// bench, in turn one with a bench fault every unit shares (a fixture
+    /// tilt, the latitude or the north stated wrong), one with nothing,
+    /// one with an odd unit, each diagnosed as `diagnose --lot` does
+    /// (docs/diagnosis.md, "Lots"); writes lots.json.
+    #[arg(long, value_name = "N", conflicts_with_all = ["randomize", "separating", "effects"])]
+    lots: Option<usize>,
     /// Where to write selfcheck.json and selfcheck.html (or
     /// randomized.json): not a run directory, nor inside one, without
     /// --force.
@@ -289,6 +306,9 @@ pub fn run(args: DiagnoseArgs) -> Result<Outcome> {
     if args.runs.is_empty() {
         return Err(Usage("give one or more run logs (RUN.mcap...)".into()).into());
     }
+    if args.lot {
+        return run_lot(&args);
+    }
     let Some(out) = args.out else {
         return Err(Usage(
             "--out DIR is required: where diagnosis.json, diagnosis.html and twin-updated.toml go"
@@ -322,6 +342,141 @@ pub fn run(args: DiagnoseArgs) -> Result<Outcome> {
     Ok(Outcome::Success)
 }
 
+/// `diagnose --lot`: the units of the logs as a lot.
+fn run_lot(args: &DiagnoseArgs) -> Result<Outcome> {
+    let Some(out) = &args.out else {
+        return Err(Usage(
+            "--out DIR is required: where lot.json, lot.html, bench-correction.toml and each unit's files go"
+                .into(),
+        )
+        .into());
+    };
+    check_out_dir(out, args.force)?;
+    let twin = match &args.twin {
+        Some(p) => Some(TwinConfig::load(p).context("loading the twin file")?),
+        None => None,
+    };
+    let units = data::load_lot(&args.runs)?;
+    errln!(
+        "lot: {} unit(s) in {} log(s): {}",
+        units.len(),
+        args.runs.len(),
+        units
+            .iter()
+            .map(|u| format!("{} ({} run(s))", u.serial, u.runs.len()))
+            .collect::<Vec<_>>()
+            .join(", ")
+    );
+    let lot = diagnose::lot::diagnose_lot(
+        units,
+        &Options {
+            twin: twin.clone(),
+            fit_thermal: true,
+            power_replications: args.power_replications,
+        },
+    )
+    .map_err(|e| Usage(e.to_string()))?;
+    write_lot_outputs(out, &lot, twin.as_ref())?;
+    outln!("{}", lot_html::headline(&lot))?;
+    outln!("{}", render_lot_units(&lot))?;
+    errln!("lot diagnosis in {}", out.display());
+    Ok(Outcome::Success)
+}
+
+/// Write a lot's files into `out`: lot.json, lot.html,
+/// bench-correction.toml, deciding-run.toml (or remove an earlier one),
+/// and each unit's diagnosis and twins under units/SERIAL/ (`twin`, else
+/// the RL-16's, updated).
+fn write_lot_outputs(
+    out: &Path,
+    lot: &diagnose::lot::Lot,
+    twin: Option<&TwinConfig>,
+) -> Result<()> {
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    write(&out.join("lot.json"), &serde_json::to_string_pretty(lot)?)?;
+    write(&out.join("lot.html"), &lot_html::render(lot))?;
+    write(
+        &out.join("bench-correction.toml"),
+        &lot_files::bench_correction(lot).context("writing the bench's correction as TOML")?,
+    )?;
+    let deciding = out.join("deciding-run.toml");
+    match &lot.deciding_procedure {
+        Some(text) => write(&deciding, text)?,
+        None if deciding.exists() => std::fs::remove_file(&deciding)
+            .with_context(|| format!("removing {}", deciding.display()))?,
+        None => {}
+    }
+    let base = twin.cloned().unwrap_or_else(TwinConfig::default_rl16);
+    let mut dirs: Vec<PathBuf> = Vec::new();
+    for (k, (u, d)) in lot.units.iter().zip(&lot.diagnoses).enumerate() {
+        let mut dir = out.join(lot_files::unit_dir(&u.serial));
+        // Two serials a file name cannot tell apart each get their own.
+        if dirs.contains(&dir) {
+            dir = out.join(format!("{}-{k}", lot_files::unit_dir(&u.serial).display()));
+        }
+        write_outputs(&dir, d, Some(base.clone()))?;
+        for (name, on_this_bench) in [
+            ("twin-updated.toml", false),
+            ("twin-on-this-bench.toml", true),
+        ] {
+            let t = lot
+                .unit_twin(k, &base, on_this_bench)
+                .context("a unit of the lot without its diagnosis")?;
+            write(
+                &dir.join(name),
+                &format!(
+                    "# Unit {}'s twin from gyrobench diagnose --lot: its thermal network fitted to its runs and {}.
+{}",
+                    u.serial,
+                    if on_this_bench {
+                        "its own effects and the effects the lot shares on this bench (the bench's, in bench-correction.toml)"
+                    } else {
+                        "its own effects alone (the ones the lot shares are the bench's: bench-correction.toml)"
+                    },
+                    t.to_toml().context("writing a unit's twin as TOML")?
+                ),
+            )?;
+        }
+        dirs.push(dir);
+    }
+    Ok(())
+}
+
+/// One line per unit under the headline: its own effects, its gap
+/// through the lot's fits, and whether it is unlike the lot.
+fn render_lot_units(lot: &diagnose::lot::Lot) -> String {
+    let mut lines = Vec::new();
+    for s in &lot.shared_effects {
+        lines.push(format!(
+            "  shared {:<24} seat {:<8} units {} (shrink {:.0} %, p {}, agreement p {})",
+            s.name,
+            s.seat,
+            s.units.join(", "),
+            100.0 * s.shrink,
+            gyrobench::view::p_phrase(s.p_value),
+            gyrobench::view::p_phrase(s.agreement_p)
+        ));
+    }
+    for u in &lot.units {
+        let own: Vec<&str> = u.effects.iter().map(|a| a.name.as_str()).collect();
+        lines.push(format!(
+            "  unit {:<12} own {:<32} gap {:.5} -> {:.5} -> {:.5} deg/h (noise {:.5}){}",
+            u.serial,
+            if own.is_empty() {
+                "none".to_owned()
+            } else {
+                own.join(", ")
+            },
+            u.gap_dph,
+            u.gap_after_shared_dph,
+            u.gap_after_dph,
+            u.noise_dph,
+            if u.outlier { "  OUTLIER" } else { "" }
+        ));
+    }
+    lines.join("\n")
+}
+
 /// An output directory, checked before the work (`fsutil::check_output`).
 fn check_out_dir(out: &Path, force: bool) -> Result<()> {
     gyrobench::fsutil::check_output(
@@ -336,6 +491,9 @@ fn check_out_dir(out: &Path, force: bool) -> Result<()> {
 
 fn run_selfcheck(a: SelfcheckArgs) -> Result<Outcome> {
     check_out_dir(&a.out, a.force)?;
+    if let Some(lots) = a.lots {
+        return run_lot_selfcheck(&a, lots);
+    }
     if a.randomize {
         return run_randomized(&a);
     }
@@ -416,6 +574,121 @@ fn run_selfcheck(a: SelfcheckArgs) -> Result<Outcome> {
     }
     errln!("self-check in {}", a.out.display());
     Ok(Outcome::Success)
+}
+
+fn run_lot_selfcheck(a: &SelfcheckArgs, lots: usize) -> Result<Outcome> {
+    use gyrobench::diagnose::lot_selfcheck;
+    if lots == 0 {
+        return Err(Usage("--lots must be 1 or more".into()).into());
+    }
+    let bar = super::progress::Bar::new(lots as u64, "{bar:30} {pos}/{len} lots  {msg}");
+    errln!(
+        "self-check on {lots} lots of randomised units from seed {}, diagnosed as lots without a twin",
+        a.seed
+    );
+    let r = lot_selfcheck::run(lots, a.seed, &|done, _, t| {
+        let line = render_lot_trial(done, lots, t);
+        bar.println(&line);
+        bar.set(done as u64, line);
+    });
+    bar.clear();
+    std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
+    write(&a.out.join("lots.json"), &serde_json::to_string_pretty(&r)?)?;
+    outln!("{}", render_lot_selfcheck(&r))?;
+    errln!("self-check in {}", a.out.display());
+    Ok(Outcome::Success)
+}
+
+/// One finished lot of the lot self-check as a progress line.
+fn render_lot_trial(done: usize, lots: usize, t: &diagnose::lot_selfcheck::LotTrial) -> String {
+    let own: Vec<String> = t
+        .own
+        .iter()
+        .filter(|(_, v)| !v.is_empty())
+        .map(|(s, v)| format!("{s}: {}", v.join(", ")))
+        .collect();
+    format!(
+        "[{done}/{lots}] lot seed {} ({} units{}): {}; shared {}; own {}; outliers {}",
+        t.seed,
+        t.serials.len(),
+        if t.low_latitude { ", low latitude" } else { "" },
+        t.injected,
+        if t.shared.is_empty() {
+            "none".to_owned()
+        } else {
+            t.shared.join("; ")
+        },
+        if own.is_empty() {
+            "none".to_owned()
+        } else {
+            own.join("; ")
+        },
+        if t.outliers.is_empty() {
+            "none".to_owned()
+        } else {
+            t.outliers
+                .iter()
+                .map(|o| match t.evidence.get(o) {
+                    Some(why) => format!("{o} ({})", why.join(", ")),
+                    None => o.clone(),
+                })
+                .collect::<Vec<_>>()
+                .join(", ")
+        },
+    )
+}
+
+/// The lot self-check's figures, one line each.
+fn render_lot_selfcheck(r: &diagnose::lot_selfcheck::LotSelfCheck) -> String {
+    let rate = |x: &diagnose::lot_selfcheck::Rate| match x.rate {
+        Some(r) => format!("{:.0} % ({} of {})", 100.0 * r, x.hits, x.of),
+        None => "no lot of its kind".to_owned(),
+    };
+    let mut lines = vec![format!(
+        "shared fault named right (effect, every unit, seat): {}",
+        rate(&r.shared_named_right)
+    )];
+    for (f, x) in &r.shared_named_right_by_fault {
+        lines.push(format!("  {f:<16} {}", rate(x)));
+    }
+    lines.extend([
+        format!(
+            "  anything else attributed in a shared lot: {}",
+            rate(&r.shared_false_attribution)
+        ),
+        format!(
+            "  a unit's own effect {}; an outlier {}",
+            rate(&r.shared_false_own),
+            rate(&r.shared_false_outlier)
+        ),
+        format!(
+            "odd unit flagged, and no other: {}",
+            rate(&r.outlier_flagged_right)
+        ),
+        format!("  its own effect named: {}", rate(&r.own_effect_named)),
+        format!(
+            "  anything else attributed in an outlier lot: {}",
+            rate(&r.outlier_false_attribution)
+        ),
+        format!(
+            "  a shared effect named in an outlier lot: {}",
+            rate(&r.outlier_false_shared)
+        ),
+        format!(
+            "null lots with anything attributed: {}",
+            rate(&r.null_false_attribution)
+        ),
+        format!(
+            "  a shared effect {}; a unit's own effect {}; an outlier {}",
+            rate(&r.null_false_shared),
+            rate(&r.null_false_own),
+            rate(&r.null_false_outlier)
+        ),
+    ]);
+    for why in &r.skipped {
+        lines.push(format!("  not diagnosed: {why}"));
+    }
+    lines.join("\n")
 }
 
 fn run_randomized(a: &SelfcheckArgs) -> Result<Outcome> {

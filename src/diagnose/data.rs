@@ -12,6 +12,7 @@ use crate::runlog::schema::{RUN_META, Rate1Hz, TableState, topics};
 use crate::runlog::{self, Item};
 
 pub use gyrobench_diagnose::data::{MOVING_DEG, RunData, Sample};
+use gyrobench_diagnose::lot::LotUnit;
 
 /// The samples taken while the table was still: a sample whose orientation
 /// differs from a neighbour's by more than [`MOVING_DEG`] was taken during
@@ -67,33 +68,124 @@ pub fn load_unit(path: &Path, unit: Option<&str>) -> Result<RunData, ReplayError
     };
     let mut reading = Reading::default();
     let read = runlog::view::read_unit(path, unit, runlog::refusing(|item| reading.take(item)))?;
-    let Reading {
-        site,
-        geometry,
-        samples,
-        ..
-    } = reading;
     // A read stopped on purpose (`--unit` naming a unit the log lacks)
     // says why.
-    if let (Some(why), true, Some(_)) = (&read.stopped, site.is_none(), unit) {
+    if let (Some(why), true, Some(_)) = (&read.stopped, reading.site.is_none(), unit) {
         return Err(log_err(why.clone()));
     }
-    let site = site.ok_or_else(|| log_err("no site in the run metadata".into()))?;
-    let samples = samples
-        .into_iter()
-        .map(|s| s.on_the_bench(geometry.as_ref()).map_err(log_err))
-        .collect::<Result<Vec<_>, _>>()?;
-    let samples = without_moves(samples);
-    if samples.len() < 60 {
-        return Err(log_err(
-            "fewer than 60 recorded seconds: nothing to diagnose".into(),
-        ));
+    reading.into_run(path)
+}
+
+/// Load units `serials` of a batch's log, each as its own run, from one
+/// pass over the log (`runlog::view::read_units`).
+pub fn load_units(path: &Path, serials: &[String]) -> Result<Vec<RunData>, ReplayError> {
+    let mut readings: Vec<Reading> = serials.iter().map(|_| Reading::default()).collect();
+    let read = runlog::view::read_units(path, serials, |k, item| match readings[k].take(item) {
+        Ok(()) => std::ops::ControlFlow::Continue(()),
+        Err(why) => std::ops::ControlFlow::Break(runlog::Stop::Refused(why)),
+    })?;
+    if let (Some(why), true) = (&read.stopped, readings.iter().any(|r| r.site.is_none())) {
+        return Err(ReplayError::Log {
+            path: path.display().to_string(),
+            message: why.clone(),
+        });
     }
-    Ok(RunData {
-        name: path.display().to_string(),
-        site,
-        samples,
-    })
+    readings.into_iter().map(|r| r.into_run(path)).collect()
+}
+
+impl Reading {
+    /// The run read: its samples on the logged bench, those taken while
+    /// the table moved left out.
+    fn into_run(self, path: &Path) -> Result<RunData, ReplayError> {
+        let log_err = |message: String| ReplayError::Log {
+            path: path.display().to_string(),
+            message,
+        };
+        let Self {
+            site,
+            geometry,
+            samples,
+            ..
+        } = self;
+        let site = site.ok_or_else(|| log_err("no site in the run metadata".into()))?;
+        let samples = samples
+            .into_iter()
+            .map(|s| s.on_the_bench(geometry.as_ref()).map_err(log_err))
+            .collect::<Result<Vec<_>, _>>()?;
+        let samples = without_moves(samples);
+        if samples.len() < 60 {
+            return Err(log_err(
+                "fewer than 60 recorded seconds: nothing to diagnose".into(),
+            ));
+        }
+        Ok(RunData {
+            name: path.display().to_string(),
+            site,
+            samples,
+        })
+    }
+}
+
+/// The units of a set of logs, each with its runs (`diagnose --lot`): a
+/// batch's log gives each of its units a run, and the logs of one unit
+/// are that unit's runs (grouped by serial, in the order first met; a
+/// run of a batch's unit named `LOG (SERIAL)`). A unit whose logs give it
+/// two types is refused here, naming both logs.
+pub fn load_lot(paths: &[std::path::PathBuf]) -> Result<Vec<LotUnit>, ReplayError> {
+    let mut units: Vec<LotUnit> = Vec::new();
+    for path in paths {
+        let log_err = |message: String| ReplayError::Log {
+            path: path.display().to_string(),
+            message,
+        };
+        let meta = crate::runlog::meta::read_run_meta(path).map_err(|e| {
+            log_err(
+                e.strip_prefix(&format!("{}: ", path.display()))
+                    .map_or(e.clone(), str::to_owned),
+            )
+        })?;
+        let held: Vec<(String, String, String)> = if meta.units.is_empty() {
+            vec![(
+                String::new(),
+                meta.dut_serial.clone(),
+                meta.dut_type.clone(),
+            )]
+        } else {
+            meta.units
+                .iter()
+                .map(|u| (u.slot.clone(), u.serial.clone(), u.dut_type.clone()))
+                .collect()
+        };
+        let several = held.len() > 1;
+        let runs = if meta.units.is_empty() {
+            vec![load_unit(path, None)?]
+        } else {
+            let serials: Vec<String> = held.iter().map(|h| h.1.clone()).collect();
+            load_units(path, &serials)?
+        };
+        for ((slot, serial, dut_type), mut run) in held.into_iter().zip(runs) {
+            if several {
+                run.name = format!("{} ({serial})", path.display());
+            }
+            match units.iter_mut().find(|u| u.serial == serial) {
+                Some(u) if u.dut_type != dut_type => {
+                    return Err(log_err(format!(
+                        "unit {serial} is of type {dut_type} here and of type {} in {}: one unit has one type; check the serials",
+                        u.dut_type,
+                        u.runs.first().map_or("", |r| r.name.as_str())
+                    )));
+                }
+                Some(u) => u.runs.push(run),
+                None => units.push(LotUnit {
+                    serial,
+                    dut_type,
+                    slot,
+                    runs: vec![run],
+                }),
+            }
+        }
+    }
+    Ok(units)
 }
 
 /// A recorded sample as read, before the logged bench is known.

@@ -263,6 +263,23 @@ fn size(runs: &[RunData], e: Effect, p: Param, reference: &TwinConfig) -> Size {
     }
 }
 
+/// The nonlinear parameter effect `e` has as [`inject`] puts it in `base`:
+/// the warm-up's time constant, memory effects on the case.
+pub(crate) fn injected_param(base: &TwinConfig, e: Effect) -> Param {
+    match e {
+        Effect::SelfHeating => Param::TauS(base.bias.model4.warmup_tau_s),
+        Effect::Hysteresis => Param::Memory {
+            on: tc::EffectTemperature::Case,
+            value: 2.0,
+        },
+        Effect::ThermalLag => Param::Memory {
+            on: tc::EffectTemperature::Case,
+            value: 1800.0,
+        },
+        _ => Param::None,
+    }
+}
+
 /// The twin with effect `e` added at coefficient `a` (along [`DIRECTION`]),
 /// and the reference twin without it.
 pub(crate) fn inject(base: &TwinConfig, e: Effect, a: f64) -> (TwinConfig, TwinConfig) {
@@ -537,19 +554,7 @@ fn cases(plan: &Plan, base: &TwinConfig, probe: &[RunData], noise: f64) -> Cases
     let mut sizes = Vec::new();
     let mut coefficients: BTreeMap<(String, u64), f64> = BTreeMap::new();
     for &e in &plan.effects {
-        let p = match e {
-            Effect::SelfHeating => Param::TauS(base.bias.model4.warmup_tau_s),
-            // As `inject` puts them in: on the case.
-            Effect::Hysteresis => Param::Memory {
-                on: tc::EffectTemperature::Case,
-                value: 2.0,
-            },
-            Effect::ThermalLag => Param::Memory {
-                on: tc::EffectTemperature::Case,
-                value: 1800.0,
-            },
-            _ => Param::None,
-        };
+        let p = injected_param(base, e);
         let unit = size(probe, e, p, &inject(base, e, 1.0).1);
         sizes.push(EffectSize {
             effect: e.name().into(),

@@ -65,6 +65,85 @@ pub fn read_unit(
     })
 }
 
+/// Read `path` once as the logs of each unit of `serials` alone: `f(k,
+/// item)` gets every item of unit `serials[k]` as [`read_unit`] would
+/// give it (the units in turn, item by item), so a batch's units are had
+/// from one pass over its chunks. A log without one of them stops the
+/// read with a message naming the units it holds.
+pub fn read_units(
+    path: &Path,
+    serials: &[String],
+    mut f: impl FnMut(usize, Item<'_>) -> ControlFlow<Stop>,
+) -> Result<ReadSummary, ReadError> {
+    let mut units: Vec<Unit> = Vec::new();
+    reader::read(path, |item| match item {
+        Item::Meta { name, entries } if name == RUN_META => {
+            let meta = match RunMeta::from_entries(entries) {
+                Ok(m) => m,
+                Err(e) => return ControlFlow::Break(Stop::Refused(e.to_string())),
+            };
+            for (i, serial) in serials.iter().enumerate() {
+                let Some(k) = meta.units.iter().position(|u| &u.serial == serial) else {
+                    let held: Vec<&str> = meta.units.iter().map(|u| u.serial.as_str()).collect();
+                    return ControlFlow::Break(Stop::Refused(format!(
+                        "the log holds no unit {serial} (its units: {})",
+                        held.join(", ")
+                    )));
+                };
+                units.push(Unit::new(k, &meta.units[k].slot, serial));
+                let entries = meta.for_unit(k).to_entries();
+                f(
+                    i,
+                    Item::Meta {
+                        name,
+                        entries: &entries,
+                    },
+                )?;
+            }
+            ControlFlow::Continue(())
+        }
+        item if units.is_empty() => (0..serials.len()).try_for_each(|i| f(i, again(&item))),
+        item => units
+            .iter()
+            .enumerate()
+            .try_for_each(|(i, u)| u.pass(again(&item), &mut |it| f(i, it))),
+    })
+}
+
+/// The same item again (its parts are borrowed: a view hands one item to
+/// each unit it shows).
+fn again<'a>(item: &Item<'a>) -> Item<'a> {
+    match *item {
+        Item::Meta { name, entries } => Item::Meta { name, entries },
+        Item::Message {
+            topic,
+            channel,
+            sequence,
+            log_time_ns,
+            publish_time_ns,
+            data,
+        } => Item::Message {
+            topic,
+            channel,
+            sequence,
+            log_time_ns,
+            publish_time_ns,
+            data,
+        },
+        Item::Attachment {
+            name,
+            media_type,
+            log_time_ns,
+            data,
+        } => Item::Attachment {
+            name,
+            media_type,
+            log_time_ns,
+            data,
+        },
+    }
+}
+
 /// The unit a view shows.
 struct Unit {
     /// Its place in the run's units (0: the first).

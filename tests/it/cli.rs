@@ -21,6 +21,19 @@ pub fn gyrobench(args: &[&str]) -> Output {
         .expect("the gyrobench binary runs")
 }
 
+/// `gyrobench ARGS`, which must exit 0 (its stderr shown when it does not).
+pub fn gyrobench_ok(args: &[&str]) -> Output {
+    let r = gyrobench(args);
+    assert_eq!(
+        r.status.code(),
+        Some(0),
+        "gyrobench {}: {}",
+        args.join(" "),
+        String::from_utf8_lossy(&r.stderr)
+    );
+    r
+}
+
 pub fn temp_dir(name: &str) -> std::path::PathBuf {
     let dir = std::env::temp_dir().join(format!("gyrobench-test-{name}-{}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("temp dir");

@@ -12,6 +12,7 @@ mod calibrate;
 mod cli;
 mod common;
 mod diagnose;
+mod diagnose_lot;
 mod docs;
 mod fuzz;
 mod http;

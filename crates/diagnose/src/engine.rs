@@ -15,7 +15,7 @@ use std::sync::{Arc, Mutex};
 use nalgebra::{DMatrix, DVector};
 
 use super::data::RunData;
-use super::library::{Effect, Param, Term};
+use super::library::{Effect, Param, Term, Units};
 
 /// Averaging time of the scores, s (samples are 1 Hz).
 pub const AVERAGING_S: usize = 60;
@@ -60,6 +60,10 @@ pub struct Data<'a> {
     y: Vec<f64>,
     /// Run of each row.
     pub run_of: Vec<usize>,
+    /// Unit of each run (a lot's runs of several units stacked,
+    /// [`Data::with_units`]; else every run unit 0): a term acts in the
+    /// runs of its [`Units`].
+    pub unit_of_run: Vec<usize>,
     /// The folds, in row order.
     pub folds: Vec<Fold>,
     /// Rows of records taken while the table turned (rate runs), by the
@@ -79,14 +83,14 @@ pub struct Data<'a> {
     stats: Mutex<ColumnStats>,
 }
 
-/// Stacked columns by effect and parameter.
-type ColumnCache = Mutex<HashMap<(Effect, ParamKey), Vec<Arc<Vec<f64>>>>>;
+/// Stacked columns by effect, parameter and units.
+type ColumnCache = Mutex<HashMap<(Effect, ParamKey, Units), Vec<Arc<Vec<f64>>>>>;
 
 /// A parameter told apart bit for bit ([`Param::key`]).
 type ParamKey = (u8, u64, u64);
 
-/// One stacked effect column: effect, parameter, term.
-type ColumnKey = (Effect, ParamKey, usize);
+/// One stacked effect column: effect, parameter, units, term.
+type ColumnKey = (Effect, ParamKey, Units, usize);
 
 /// What the Gram matrix needs of the columns every model has: per run its
 /// rows and the sum of its data; per rate run (as [`Data::turning_runs`])
@@ -175,6 +179,7 @@ impl<'a> Data<'a> {
             runs,
             y,
             run_of,
+            unit_of_run: vec![0; runs.len()],
             folds,
             turning_of,
             turning_runs,
@@ -198,6 +203,25 @@ impl<'a> Data<'a> {
             }
             .with_fixed_sums()
         })
+    }
+
+    /// The same runs as a lot's: `unit_of_run[r]` the unit (below
+    /// [`Units::MAX`]) of run `r`, so a term in some [`Units`] acts in
+    /// their runs alone. `None` when there is not one unit per run.
+    pub fn with_units(self, unit_of_run: Vec<usize>) -> Option<Self> {
+        (unit_of_run.len() == self.runs.len() && unit_of_run.iter().all(|&u| u < Units::MAX)).then(
+            || Self {
+                unit_of_run,
+                cache: Mutex::default(),
+                stats: Mutex::default(),
+                ..self
+            },
+        )
+    }
+
+    /// Whether a term in `units` acts in the rows of run `run`.
+    fn acts_in(&self, units: Units, run: usize) -> bool {
+        units.holds(self.unit_of_run.get(run).copied().unwrap_or(0))
     }
 
     fn with_fixed_sums(mut self) -> Self {
@@ -238,9 +262,10 @@ impl<'a> Data<'a> {
         for &Term {
             effect: e,
             param: p,
+            units,
         } in model
         {
-            let key = (e, p.key());
+            let key = (e, p.key(), units);
             let cached = self
                 .cache
                 .lock()
@@ -254,8 +279,19 @@ impl<'a> Data<'a> {
                         .map(Arc::new)
                         .collect()
                 } else {
-                    let per_run: Vec<Vec<Vec<f64>>> =
-                        self.runs.iter().map(|r| e.columns(r, p)).collect();
+                    // A unit's own term is zero in the other units' runs.
+                    let per_run: Vec<Vec<Vec<f64>>> = self
+                        .runs
+                        .iter()
+                        .enumerate()
+                        .map(|(k, r)| {
+                            if self.acts_in(units, k) {
+                                e.columns(r, p)
+                            } else {
+                                vec![vec![0.0; r.samples.len()]; e.terms().len()]
+                            }
+                        })
+                        .collect();
                     (0..e.terms().len())
                         .map(|c| {
                             Arc::new(
@@ -277,7 +313,7 @@ impl<'a> Data<'a> {
                 built
                     .into_iter()
                     .enumerate()
-                    .map(|(t, c)| ((e, p.key(), t), c)),
+                    .map(|(t, c)| ((e, p.key(), units, t), c)),
             );
         }
         cols
@@ -323,6 +359,10 @@ impl<'a> Data<'a> {
 
     /// The cross product of two effect columns, made once per [`Data`].
     fn cross(&self, a: (ColumnKey, &[f64]), b: (ColumnKey, &[f64])) -> f64 {
+        // Two units' own columns never meet in a row.
+        if a.0.2.apart(b.0.2) {
+            return 0.0;
+        }
         let key = if a.0 <= b.0 { (a.0, b.0) } else { (b.0, a.0) };
         if let Some(&v) = self.lock_stats().pair.get(&key) {
             return v;
@@ -457,6 +497,9 @@ struct Design<'d> {
     q: usize,
     /// All columns.
     p: usize,
+    /// Per run: its effect columns that can be non-zero (a lot's unit's:
+    /// its own and the shared ones; a single unit's: all).
+    effect_cols_of_run: Vec<Vec<usize>>,
 }
 
 impl<'d> Design<'d> {
@@ -473,6 +516,16 @@ impl<'d> Design<'d> {
         // nuisance (a misaligned axis, for one, reads every turn short by
         // its cosine).
         let p = q + data.runs.len() + data.turning_runs.len();
+        let effect_cols_of_run = (0..data.runs.len())
+            .map(|run| {
+                (0..q)
+                    .filter(|&j| {
+                        let (e, _, units, _) = keys[j];
+                        e.is_outside() || data.acts_in(units, run)
+                    })
+                    .collect()
+            })
+            .collect();
         Self {
             data,
             keys,
@@ -480,14 +533,33 @@ impl<'d> Design<'d> {
             scales,
             q,
             p,
+            effect_cols_of_run,
         }
+    }
+
+    /// The columns that can be non-zero in the rows of run `run`, in
+    /// order: the effect columns of the terms acting in its unit (a
+    /// disturbance outside the library, built per run, always), its
+    /// offset, its scale factor when it turns. A lot's unit's rows meet
+    /// only its own and the shared columns: its Gram sums need no more.
+    fn active_in(&self, run: usize) -> Vec<usize> {
+        let data = self.data;
+        let nruns = data.runs.len();
+        let turn = data.turning_runs.iter().position(|&r| r == run);
+        self.effect_cols_of_run[run]
+            .iter()
+            .copied()
+            .chain([self.q + run])
+            .chain(turn.map(|t| self.q + nruns + t))
+            .collect()
     }
 
     /// The fitted value of row `i` for coefficients `beta`.
     fn predict(&self, i: usize, beta: &DVector<f64>) -> f64 {
         let (data, q, nruns) = (self.data, self.q, self.data.runs.len());
         let mut v = beta[q + data.run_of[i]];
-        for j in 0..q {
+        // The columns zero in this row's unit add nothing.
+        for &j in &self.effect_cols_of_run[data.run_of[i]] {
             v += self.cols[j][i] / self.scales[j] * beta[j];
         }
         if let Some(t) = data.turning_of[i] {
@@ -596,13 +668,20 @@ fn fold_sums(data: &Data<'_>, design: &Design<'_>) -> FoldSums {
     let mut h_all = DVector::zeros(p);
     let mut x = DVector::zeros(p);
     for f in &data.folds {
-        let mut g = DMatrix::zeros(p, p);
+        // The Gram sums over the columns the fold's rows can reach (a
+        // lot's unit: its own and the shared ones), put in place after.
+        let active = design.active_in(f.run);
+        let mut ga = DMatrix::zeros(active.len(), active.len());
+        let mut xa = DVector::zeros(active.len());
         let mut h = DVector::zeros(p);
         let mut means: Vec<(DVector<f64>, f64)> = Vec::new();
         let mut acc = (DVector::zeros(p), 0.0, 0usize);
         for i in f.start..f.end {
             design.row_into(i, &mut x);
-            g.syger(1.0, &x, &x, 1.0);
+            for (k, &j) in active.iter().enumerate() {
+                xa[k] = x[j];
+            }
+            ga.syger(1.0, &xa, &xa, 1.0);
             h.axpy(data.y[i], &x, 1.0);
             acc.0 += &x;
             acc.1 += data.y[i];
@@ -613,7 +692,13 @@ fn fold_sums(data: &Data<'_>, design: &Design<'_>) -> FoldSums {
                 acc = (DVector::zeros(p), 0.0, 0);
             }
         }
-        g.fill_upper_triangle_with_lower_triangle();
+        ga.fill_upper_triangle_with_lower_triangle();
+        let mut g = DMatrix::zeros(p, p);
+        for (ka, &ja) in active.iter().enumerate() {
+            for (kb, &jb) in active.iter().enumerate() {
+                g[(ja, jb)] = ga[(ka, kb)];
+            }
+        }
         g_all += &g;
         h_all += &h;
         grams.push((g, h));
@@ -781,6 +866,19 @@ pub fn with_best_parameter(
     effect: Effect,
     free: &[Effect],
 ) -> Vec<Term> {
+    with_best_parameter_in(data, model, effect, Units::ALL, free)
+}
+
+/// [`with_best_parameter`] with the effect in `units` alone (a lot's:
+/// shared by some of its units, or one unit's own), its parameter chosen
+/// on the in-sample fit of every row.
+pub fn with_best_parameter_in(
+    data: &Data<'_>,
+    model: &[Term],
+    effect: Effect,
+    units: Units,
+    free: &[Effect],
+) -> Vec<Term> {
     let mut bases = vec![model.to_vec()];
     for &f in free {
         if let Some(i) = model.iter().position(|m| m.effect == f) {
@@ -810,7 +908,7 @@ pub fn with_best_parameter(
                 .copied()
                 .filter(|p| p.temperature() == Some(form))
                 .collect();
-            let found = best_on_grid(data, &[model.to_vec()], effect, &g, true)
+            let found = best_on_grid(data, &[model.to_vec()], (effect, units), &g, true)
                 .map(|(sse, m)| refine(data, sse, m, &g));
             if let Some((sse, m)) = found
                 && best.as_ref().is_none_or(|(x, _)| sse < *x)
@@ -828,7 +926,7 @@ pub fn with_best_parameter(
         grid.retain(|p| p.temperature() == form);
     }
     let choose = bases.len() > 1 || grid.len() > 1;
-    match best_on_grid(data, &bases, effect, &grid, choose) {
+    match best_on_grid(data, &bases, (effect, units), &grid, choose) {
         Some((sse, m)) if grid.len() > 1 => refine(data, sse, m, &grid).1,
         Some((_, m)) => m,
         None => model.to_vec(),
@@ -840,7 +938,7 @@ pub fn with_best_parameter(
 fn best_on_grid(
     data: &Data<'_>,
     bases: &[Vec<Term>],
-    effect: Effect,
+    (effect, units): (Effect, Units),
     grid: &[Param],
     choose: bool,
 ) -> Option<(f64, Vec<Term>)> {
@@ -848,7 +946,7 @@ fn best_on_grid(
     for b in bases {
         for &p in grid {
             let mut m = b.clone();
-            m.push(Term::new(effect, p));
+            m.push(Term::in_units(effect, p, units));
             let sse = if choose { in_sample_sse(data, &m) } else { 0.0 };
             if best.as_ref().is_none_or(|(x, _)| sse < *x) {
                 best = Some((sse, m));

@@ -7,7 +7,9 @@
 //! - `library`: the candidate effects as regressors;
 //! - `engine`: held-out fitting and the paired significance test;
 //! - `thermal`: the thermal layer (chamber air -> sensor temperatures);
-//! - `thresholds`: every decision threshold with its source.
+//! - `thresholds`: every decision threshold with its source;
+//! - `lot`: several units' runs together: what the lot shares (the
+//!   bench's), what each unit owns, which unit is the outlier.
 //!
 //! The engine alone, on runs given as [`data::RunData`]: the controller
 //! (`gyrobench`) reads runs from logs, runs the self-checks on the twin
@@ -16,6 +18,7 @@
 pub mod data;
 pub mod engine;
 pub mod library;
+pub mod lot;
 mod lsq;
 pub mod thermal;
 pub mod thresholds;
@@ -521,6 +524,7 @@ fn parameters(s: &Scored, effect: Effect) -> (BTreeMap<String, f64>, BTreeMap<St
     for &Term {
         effect: e,
         param: p,
+        ..
     } in &s.model
     {
         let n = e.terms().len();
@@ -959,7 +963,13 @@ fn outside_found(
 ) -> Vec<OutsideFound> {
     let mut term = 0;
     let mut out = Vec::new();
-    for (k, &Term { effect: e, param }) in s.model.iter().enumerate() {
+    for (
+        k,
+        &Term {
+            effect: e, param, ..
+        },
+    ) in s.model.iter().enumerate()
+    {
         term += e.terms().len();
         if k < from || e != o {
             continue;

@@ -128,19 +128,65 @@ impl Param {
     }
 }
 
-/// One term of a model: an effect at its parameter.
+/// The units of a lot a term acts in (`lot`: runs of several units
+/// stacked, each run a unit's): a set of unit indices, one bit each. A
+/// unit's own term acts in its runs alone (its columns zero in the
+/// others'); a term the lot shares acts in every unit's runs with one
+/// coefficient. A diagnosis of one unit has every term in [`Units::ALL`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub struct Units(u64);
+
+impl Units {
+    /// Every unit (the one of a single unit's diagnosis).
+    pub const ALL: Self = Self(u64::MAX);
+    /// The most units a lot may hold (one bit each).
+    pub const MAX: usize = 64;
+
+    /// Unit `u` alone (`u` below [`Units::MAX`]; beyond it, none).
+    pub fn one(u: usize) -> Self {
+        Self(1_u64.checked_shl(u as u32).unwrap_or(0))
+    }
+
+    /// The units `us` (those beyond [`Units::MAX`] left out).
+    pub fn of(us: impl IntoIterator<Item = usize>) -> Self {
+        Self(us.into_iter().fold(0, |m, u| m | Self::one(u).0))
+    }
+
+    /// Whether unit `u` is among them.
+    pub fn holds(self, u: usize) -> bool {
+        self.0 & Self::one(u).0 != 0
+    }
+
+    /// Whether the two share no unit (their columns never meet in a row).
+    pub fn apart(self, other: Self) -> bool {
+        self.0 & other.0 == 0
+    }
+}
+
+/// One term of a model: an effect at its parameter, in some units.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Term {
     /// The effect.
     pub effect: Effect,
     /// Its nonlinear parameter.
     pub param: Param,
+    /// The units it acts in ([`Units::ALL`] but in a lot's own terms).
+    pub units: Units,
 }
 
 impl Term {
-    /// `effect` at `param`.
+    /// `effect` at `param`, in every unit.
     pub fn new(effect: Effect, param: Param) -> Self {
-        Self { effect, param }
+        Self::in_units(effect, param, Units::ALL)
+    }
+
+    /// `effect` at `param`, in `units` alone.
+    pub fn in_units(effect: Effect, param: Param, units: Units) -> Self {
+        Self {
+            effect,
+            param,
+            units,
+        }
     }
 }
 
