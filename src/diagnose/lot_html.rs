@@ -247,7 +247,7 @@ fn gap_chart(lot: &Lot) -> String {
 /// The shared effects' table rows.
 fn shared_rows(lot: &Lot) -> String {
     if lot.shared_effects.is_empty() {
-        return "<tr><td colspan=8>the units share no effect</td></tr>".into();
+        return "<tr><td colspan=7>the units share no effect</td></tr>".into();
     }
     lot.shared_effects
         .iter()
@@ -261,7 +261,7 @@ fn shared_rows(lot: &Lot) -> String {
                 })
                 .collect();
             format!(
-                "<tr><td>{}</td><td><b>{}</b></td><td>{}</td><td>{}</td><td class=num>{:.5} &rarr; {:.5}</td><td class=num>{:.0} %</td><td class=num>{} / {}</td><td class=note>{}</td></tr>\n",
+                "<tr><td>{}</td><td><b>{}</b></td><td>{}</td><td>{}</td><td class=num>{:.5} &rarr; {:.5}</td><td class=num>{:.0} %</td><td class=num>{} / {}</td></tr>\n<tr><td></td><td colspan=6 class=note>why there: {}</td></tr>\n",
                 esc(&s.name),
                 esc(&s.seat),
                 esc(&s.units.join(", ")),
@@ -359,7 +359,7 @@ pub fn render(lot: &Lot) -> String {
         }
     );
     let body = format!(
-        "<h1>Lot diagnosis</h1>\n<p class=headline>{headline}</p>\n<p class=note>{size} {protocol}.</p>\n<h2>The lot's gap</h2>\n<table><tr><th>held-out rate gap</th><th>deg/h</th><th>smaller by</th></tr><tr><td>each unit's reference alone</td><td class=num>{g0:.5}</td><td></td></tr><tr><td>shared effects given to the bench</td><td class=num>{g1:.5}</td><td class=num>{s1:.0} %</td></tr><tr><td>each unit's own effects as well</td><td class=num>{g2:.5}</td><td class=num>{s2:.0} %</td></tr></table>\n<h2>Shared effects: the bench's</h2>\n<table><tr><th>effect</th><th>seat</th><th>units</th><th>parameters (one set)</th><th>lot's gap without &rarr; with</th><th>shrink</th><th>p / agreement p</th><th>why there</th></tr>\n{shared}</table>\n{charts}<h2>Units</h2>\n<table><tr><th>unit</th><th>own effects (shrink)</th><th>gap: reference &rarr; shared &rarr; own, deg/h</th><th>noise of 60 s means</th><th>thermal gap, degC</th><th>unlike the lot?</th></tr>\n{units}</table>\n{gap_chart}<h2>Every effect weighed</h2>\n<p class=note>Shared: the units' parameters agree (p of one set per unit over one shared set at or over {agree}) and one shared set is not worse held out (held-out sum of squares within {tie:.0} % of one set per unit's), and it passes the selection's bars. Shared by some: all units but one (that one's own set let free).</p><table><tr><th>effect</th><th>decision</th><th>named alone in</th><th>one shared set removes</th><th>p</th><th>agreement p</th><th>shared / own, held out</th></tr>{considered}</table>\n<h2>Acting on it</h2>{act}\n",
+        "<h1>Lot diagnosis</h1>\n<p class=headline>{headline}</p>\n<p class=note>{size} {protocol}.</p>\n<h2>The lot's gap</h2>\n<table><tr><th>held-out rate gap</th><th>deg/h</th><th>smaller by</th></tr><tr><td>each unit's reference alone</td><td class=num>{g0:.5}</td><td></td></tr><tr><td>shared effects given to the bench</td><td class=num>{g1:.5}</td><td class=num>{s1:.0} %</td></tr><tr><td>each unit's own effects as well</td><td class=num>{g2:.5}</td><td class=num>{s2:.0} %</td></tr></table>\n<h2>Shared effects: the bench's</h2>\n<table><tr><th>effect</th><th>seat</th><th>units</th><th>parameters (one set)</th><th>lot's gap without &rarr; with</th><th>shrink</th><th>p / agreement p</th></tr>\n{shared}</table>\n{charts}<h2>Units</h2>\n<table><tr><th>unit</th><th>own effects (shrink)</th><th>gap: reference &rarr; shared &rarr; own, deg/h</th><th>noise of 60 s means</th><th>thermal gap, degC</th><th>unlike the lot?</th></tr>\n{units}</table>\n{gap_chart}<h2>Every effect weighed</h2>\n<p class=note>Shared: the units' parameters agree (p of one set per unit over one shared set at or over {agree}) and one shared set is not worse held out (held-out sum of squares within {tie:.0} % of one set per unit's), and it passes the selection's bars. Shared by some: all units but one (that one's own set let free).</p><table><tr><th>effect</th><th>decision</th><th>named alone in</th><th>one shared set removes</th><th>p</th><th>agreement p</th><th>shared / own, held out</th></tr>{considered}</table>\n<h2>Acting on it</h2>{act}\n",
         headline = esc(&headline(lot)),
         size = esc(&lot.lot_size),
         protocol = esc(&lot.protocol),
