@@ -35,34 +35,7 @@ pub fn read_unit(
     let Some(serial) = serial else {
         return reader::read(path, f);
     };
-    let mut unit: Option<Unit> = None;
-    reader::read(path, |item| match item {
-        Item::Meta { name, entries } if name == RUN_META => {
-            let meta = match RunMeta::from_entries(entries) {
-                Ok(m) => m,
-                Err(e) => return ControlFlow::Break(Stop::Refused(e.to_string())),
-            };
-            let Some(k) = meta.units.iter().position(|u| u.serial == serial) else {
-                let held: Vec<&str> = meta.units.iter().map(|u| u.serial.as_str()).collect();
-                return ControlFlow::Break(Stop::Refused(format!(
-                    "the log holds no unit {serial} (its units: {})",
-                    held.join(", ")
-                )));
-            };
-            let u = Unit::new(k, &meta.units[k].slot, serial);
-            let entries = meta.for_unit(k).to_entries();
-            unit = Some(u);
-            f(Item::Meta {
-                name,
-                entries: &entries,
-            })
-        }
-        item => match &unit {
-            // Nothing of a unit comes before the run record.
-            None => f(item),
-            Some(u) => u.pass(item, &mut f),
-        },
-    })
+    read_units(path, &[serial.to_owned()], |_, item| f(item))
 }
 
 /// Read `path` once as the logs of each unit of `serials` alone: `f(k,
