@@ -51,7 +51,8 @@ pub(super) trait Squares: CostFunction<Param = Vec<f64>, Output = f64> + Clone {
 
 /// Every start scored, the best `keep` searched by the simplex for
 /// `iters` iterations, the best of them settled by Levenberg-Marquardt
-/// within the bounds (at most [`SETTLE_ITERS`] Jacobians).
+/// within the bounds (at most the evaluations of [`SETTLE_ITERS`]
+/// Jacobians).
 pub(super) fn multistart<C: Squares>(
     cost: C,
     starts: &[Vec<f64>],
@@ -78,8 +79,10 @@ pub(super) fn multistart<C: Squares>(
     }
 }
 
-/// Most Jacobians of the settling search (ours: the study's runs settle
-/// in 11 to 26; each is one evaluation per searched quantity).
+/// The settling search's budget, in forward-difference Jacobians (one
+/// evaluation per searched quantity each; ours: the study's runs settle
+/// in 4 to 40, a unit the form does not hold used up 100 of them before
+/// the secant updates, `lsq`).
 pub(super) const SETTLE_ITERS: usize = 100;
 
 /// The starts: a coarse grid over the shapes a unit can have, not the
