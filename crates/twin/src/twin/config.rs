@@ -12,6 +12,8 @@ use crate::config::{Checker, ConfigError, Source};
 use crate::geometry::{Site, TableAngles, TableGeometry};
 use gyrobench_analysis::compensation::{Model4, Model4Terms};
 
+pub use super::thermal_effects::ThermalEffects;
+
 /// The default twin configuration, embedded so the tool runs without files.
 pub const DEFAULT_TWIN_TOML: &str = include_str!("../../../../fixtures/twin/rl16.toml");
 
@@ -314,6 +316,12 @@ pub struct ThermalConfig {
     /// constant is `coupling_tau_s` over this.
     #[serde(default = "one")]
     pub block_capacity_1_over_2: f64,
+    /// What the unit's thermal physics holds beyond this network (sensor
+    /// lags and gain errors, a coupling that changes with orientation, a
+    /// path from the air to a block, a case conductance that changes with
+    /// temperature), each off by default.
+    #[serde(default, skip_serializing_if = "ThermalEffects::is_none")]
+    pub effects: ThermalEffects,
 }
 
 fn one() -> f64 {
@@ -808,7 +816,7 @@ impl ThermalConfig {
         c.within(th.block1_rise_c, 0.0, 50.0, "thermal.block1_rise_c")?;
         c.within(th.block2_rise_c, 0.0, 50.0, "thermal.block2_rise_c")?;
         c.within(th.sensor_noise_c, 0.0, 5.0, "thermal.sensor_noise_c")?;
-        Ok(())
+        th.effects.validate(c)
     }
 }
 

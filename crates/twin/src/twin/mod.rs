@@ -13,6 +13,7 @@ pub mod effects;
 pub mod noise;
 pub mod table;
 pub mod thermal;
+pub mod thermal_effects;
 
 use nalgebra::Vector3;
 use rand::{RngExt, SeedableRng};
@@ -27,7 +28,7 @@ use crate::geometry::{DPS_TO_DPH, Orientation, TableAngles, gravity_ned_g};
 use effects::{EffectInputs, Effects};
 use gyrobench_analysis::compensation::Model4Inputs;
 use noise::Noise;
-use thermal::{ChamberAir, ThermalNetwork};
+use thermal::{ChamberAir, Exchange, ThermalNetwork};
 
 /// Length of the slow-physics step, s (ours: 40 frames at 400 Hz).
 pub const THERMAL_STEP_S: f64 = 0.1;
@@ -115,7 +116,7 @@ pub struct Twin {
     bias_dph: f64,
     effect_dph: f64,
     noise_dph: f64,
-    convection: f64,
+    exchange: Exchange,
     gravity_body_g: Vector3<f64>,
     magnetic_body_ut: Vector3<f64>,
     sensor_c: [f64; 3],
@@ -206,7 +207,7 @@ impl Twin {
             bias_dph: 0.0,
             effect_dph: 0.0,
             noise_dph: 0.0,
-            convection: 1.0,
+            exchange: Exchange::convection(1.0),
             gravity_body_g: Vector3::zeros(),
             magnetic_body_ut: Vector3::zeros(),
             sensor_c: [cfg.chamber.initial_c; 3],
@@ -591,9 +592,7 @@ impl Twin {
         let r_bn = r_nb.inverse();
         self.gravity_body_g = r_bn * gravity_ned_g();
         self.magnetic_body_ut = r_bn * self.cfg.site.magnetic_ned_ut();
-        let s = Vector3::from(self.cfg.thermal.sensor_axis_body).normalize();
-        self.convection =
-            1.0 + self.cfg.thermal.convection_gain * self.gravity_body_g.dot(&s).abs();
+        self.exchange = Exchange::at(&self.cfg.thermal, &self.gravity_body_g);
     }
 
     /// The 0.1 s physics step: air, thermal network, bias, sensors.
@@ -602,7 +601,7 @@ impl Twin {
         let powered = self.is_powered();
         self.chamber.step(dt);
         self.thermal
-            .step(dt, self.chamber.air_c(), powered, self.convection);
+            .step_in(dt, self.chamber.air_c(), powered, &self.exchange);
         let th = &self.thermal;
         self.scale_factor = self.effects.scale_factor(0.5 * (th.t1_c + th.t2_c));
         let t_s = self.time_s();
@@ -638,12 +637,10 @@ impl Twin {
     }
 
     fn read_sensors(&mut self) {
-        let th = &self.thermal;
-        let truth = [th.t1_c, th.t2_c, th.case_c];
-        let c = &self.cfg.thermal;
-        let (noise, lsb) = (c.sensor_noise_c, self.cfg.gyro.temp_lsb_c);
-        for ((out, t), offset) in self.sensor_c.iter_mut().zip(truth).zip(c.sensor_offset_c) {
-            let noisy = t + offset + noise * self.rng.sample::<f64, _>(StandardNormal);
+        let reading = self.thermal.readings_c();
+        let (noise, lsb) = (self.cfg.thermal.sensor_noise_c, self.cfg.gyro.temp_lsb_c);
+        for (out, r) in self.sensor_c.iter_mut().zip(reading) {
+            let noisy = r + noise * self.rng.sample::<f64, _>(StandardNormal);
             *out = (noisy / lsb).round() * lsb;
         }
     }
