@@ -20,6 +20,10 @@ usage: independent_units.py --seed N --case CASE --out DIR [--factor F]
         axis_misalignment | pair_g_hyst | pair_mag_lag | step | sine
   --factor: size of a withheld effect in units of the unit's noise of 60 s means
             (default: uniform 2..4, drawn from the seed)
+  --thermal-effect EFFECT: thermal physics the twin's network does not have
+            (sensor_lag | sensor_gain | orientation_coupling | air_path |
+            conductance_temperature), drawn from a stream of its own so the
+            unit is otherwise the one the seed gives without it
 Writes DIR/cycle.csv, DIR/orient.csv, DIR/site.toml, DIR/truth.json.
 """
 import argparse
@@ -183,9 +187,11 @@ class Network:
         self.tk_w = np.eye(n)[0]
         self._cache = {}
 
-    def laplacian(self, conv_factor):
+    def laplacian(self, conv_factor, air_factor=1.0):
         n = len(self.C)
-        L = np.diag(self.Gair.copy())
+        gair = self.Gair.copy()
+        gair[0] *= air_factor
+        L = np.diag(gair)
         for k, (i, j, g) in enumerate(self.edges):
             if k == 0:
                 g = g * conv_factor
@@ -195,11 +201,11 @@ class Network:
             L[j, i] -= g
         return L
 
-    def discrete(self, conv_factor, dt=1.0):
-        key = round(conv_factor, 9)
+    def discrete(self, conv_factor, dt=1.0, air_factor=1.0):
+        key = (round(conv_factor, 9), round(air_factor, 9))
         if key in self._cache:
             return self._cache[key]
-        L = self.laplacian(conv_factor)
+        L = self.laplacian(conv_factor, air_factor)
         Cs = np.sqrt(self.C)
         S = -(L / Cs[:, None]) / Cs[None, :]  # symmetric similar of A = -C^-1 L
         lam, V = np.linalg.eigh(S)
@@ -207,7 +213,9 @@ class Network:
         Ad = (Ad / Cs[:, None]) * Cs[None, :]
         A = -L / self.C[:, None]
         # inputs: air temperature (through Gair) and power
-        B = np.column_stack([self.Gair / self.C, self.P / self.C])
+        gair = self.Gair.copy()
+        gair[0] *= air_factor
+        B = np.column_stack([gair / self.C, self.P / self.C])
         Bd = np.linalg.solve(A, (Ad - np.eye(len(self.C))) @ B)
         out = (A, B, Ad, Bd, -1.0 / lam)
         self._cache[key] = out
@@ -216,15 +224,17 @@ class Network:
     def time_constants(self):
         return sorted(self.discrete(1.0)[4].tolist())
 
-    def simulate(self, air, conv_factors, T0):
+    def simulate(self, air, conv_factors, T0, air_factors=None):
         """ZOH exact stepping at 1 s. Returns node temperatures at interval midpoints
-        (approximated by the average of both ends) and the node derivatives."""
+        (approximated by the average of both ends) and the node derivatives.
+        `air_factors` scale the case's conductance to the air step by step."""
         N = len(air)
         X = np.empty((N, self.n))
         Xd = np.empty((N, self.n))
         x = np.full(self.n, T0, dtype=float)
         for k in range(N):
-            A, B, Ad, Bd, _ = self.discrete(conv_factors[k])
+            af = 1.0 if air_factors is None else air_factors[k]
+            A, B, Ad, Bd, _ = self.discrete(conv_factors[k], air_factor=af)
             u = np.array([air[k], 1.0])
             xn = Ad @ x + Bd @ u
             X[k] = 0.5 * (x + xn)
@@ -286,6 +296,10 @@ def main():
                     help="a lab near the equator: latitude within 12 deg of it, the thermal cycle with the "
                          "axis horizontal pointing north, the orientation run's four azimuths with the axis "
                          "horizontal, its four rolls about the axis pointing north, the 55 deg tilt toward north")
+    ap.add_argument("--thermal-effect", default=None,
+                    choices=["sensor_lag", "sensor_gain", "orientation_coupling", "air_path",
+                             "conductance_temperature"],
+                    help="thermal physics beyond the twin's network form (see the module's docstring)")
     ap.add_argument("--long", action="store_true",
                     help="runs of a lab's own length: a 9 h thermal cycle (longer soaks) and a 7 h "
                          "orientation run (2600 s per position) instead of 6.5 h and 4.25 h")
@@ -345,6 +359,28 @@ def main():
     net = Network(rng)
     truth["thermal"] = {"variant_nodes": net.n, "names": net.names, "time_constants_s": net.time_constants(),
                         "rise_block_c": net.rise_total, "conv": net.conv}
+    # thermal physics beyond the twin's form, from a stream of its own
+    th = {}
+    if a.thermal_effect:
+        trng = np.random.default_rng(a.seed + 7_000_003)
+        sign = lambda: float(trng.choice([-1.0, 1.0]))  # noqa: E731
+        if a.thermal_effect == "sensor_lag":
+            th = dict(sensor=str(trng.choice(["t1", "t2", "tk"])), tau_s=float(trng.uniform(90, 600)))
+        elif a.thermal_effect == "sensor_gain":
+            th = dict(sensor=str(trng.choice(["t1", "t2", "tk"])), gain_error=float(trng.uniform(0.01, 0.03)) * sign())
+        elif a.thermal_effect == "orientation_coupling":
+            # block 1's conductance to the case grows with gravity along a body axis
+            # other than the sensitive axis (x)
+            th = dict(axis=int(trng.choice([1, 2])), k=float(trng.uniform(0.3, 0.8)))
+        elif a.thermal_effect == "air_path":
+            # block 1 sees the air directly as well as through the case
+            th = dict(tau_s=float(trng.uniform(2000, 12000)))
+            net.Gair[1] = net.C[1] / th["tau_s"]
+            net._cache = {}
+        elif a.thermal_effect == "conductance_temperature":
+            th = dict(per_c=float(trng.uniform(0.004, 0.01)) * sign())
+        th["effect"] = a.thermal_effect
+    truth["thermal_effect"] = th
     tau_ch = rng.uniform(60, 120)
     ch_gain, ch_off = 1 + rng.uniform(-0.005, 0.005), rng.uniform(-0.3, 0.3)
     ch_osc_amp, ch_osc_per = rng.uniform(0, 0.08), rng.uniform(300, 900)
@@ -413,8 +449,14 @@ def main():
         R = [r_nb(*o) for o in orients]
         elev = np.array([orients[i][1] for i in ori])
         conv = 1.0 + net.conv * (1.0 - np.abs(np.sin(elev * D2R)))
+        if th.get("effect") == "orientation_coupling":
+            g_axis = np.array([abs((r_nb(*o).T @ np.array([0.0, 0.0, 1.0]))[th["axis"]]) for o in orients])[ori]
+            conv = conv * (1.0 + th["k"] * g_axis)
+        air_factors = None
+        if th.get("effect") == "conductance_temperature":
+            air_factors = np.maximum(1.0 + th["per_c"] * (np.round(air * 2.0) / 2.0 - 20.0), 0.05)
         T0 = 20.0 + a.unsoaked * rng.uniform(-1, 1)  # unit soaked at the chamber air before power-on
-        X, Xd = net.simulate(air, conv, T0)
+        X, Xd = net.simulate(air, conv, T0, air_factors)
         T1, T2, TK = X @ net.t1_w, X @ net.t2_w, X @ net.tk_w
         dT = T1 - T2
         dTr = Xd @ net.t1_w - Xd @ net.t2_w
@@ -542,7 +584,12 @@ def main():
         meas = {}
         for s, key in (("t1", "T1"), ("t2", "T2"), ("tk", "TK")):
             off, sd, q = sens[s]
-            meas[s] = quant(r[key] + off + rng.normal(0, sd, N), q)
+            node = r[key]
+            if th.get("sensor") == s and "tau_s" in th:
+                node = lag(node, th["tau_s"], node[0])
+            if th.get("sensor") == s and "gain_error" in th:
+                node = (1.0 + th["gain_error"]) * node
+            meas[s] = quant(node + off + rng.normal(0, sd, N), q)
         ch = quant(r["air"] * ch_gain + ch_off + rng.normal(0, 0.01, N), 0.01)
         idx = np.flatnonzero(r["labels"] != None)  # noqa: E711
         with open(os.path.join(a.out, fname), "w") as f:

@@ -79,6 +79,20 @@ pub struct ThermalLayer {
     /// runs: the held-out gap and where it lies.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub form_misfit: Option<thermal::FormMisfit>,
+    /// The thermal effects named, strongest first (empty when the network
+    /// alone follows the runs, or no effect passed): each goes into the
+    /// fitted network and `twin-updated.toml`'s `[thermal.effects]`.
+    pub effects: Vec<thermal::FoundEffect>,
+    /// Every effect weighed against the network alone when it missed
+    /// (empty when it did not).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub effect_candidates: Vec<thermal::CandidateScore>,
+    /// The bars the effects were chosen by (with `effect_candidates`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub effect_thresholds: Option<thermal::ThermalThresholds>,
+    /// The gap the network matches within, degC: 0.05 degC or twice the
+    /// sensors' noise floor, whichever is more.
+    pub match_limit_c: f64,
     /// Held-out residual per run (for the page).
     #[serde(skip)]
     pub series: Vec<thermal::Series>,

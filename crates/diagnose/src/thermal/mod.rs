@@ -24,13 +24,19 @@ use super::engine::AVERAGING_S;
 use super::lsq;
 use crate::twin::TwinConfig;
 use crate::twin::config::ThermalConfig;
-use crate::twin::thermal::ThermalNetwork;
+use crate::twin::thermal::{Exchange, ThermalNetwork};
+use crate::twin::thermal_effects as twin_effects;
 
+mod effects;
 mod floor;
 mod modal;
 mod network;
 mod search;
 
+pub use effects::{
+    CandidateScore, FoundEffect, THERMAL_LIBRARY, THERMAL_THRESHOLDS, ThermalEffect,
+    ThermalThresholds, match_limit_c,
+};
 pub use floor::noise_floor;
 pub use modal::MODES;
 use modal::*;
@@ -185,6 +191,11 @@ pub struct Fitted {
     /// Set when the network (or even the modal model) misses by more than
     /// [`FORM_MISFIT_C`] held out.
     pub misfit: Option<FormMisfit>,
+    /// The thermal effects named (in `network`), strongest first.
+    pub effects: Vec<FoundEffect>,
+    /// The effects weighed at the first step, when the network alone
+    /// missed.
+    pub candidates: Vec<CandidateScore>,
 }
 
 const SENSORS: [&str; 3] = ["t1_c", "t2_c", "tcase_c"];
@@ -288,9 +299,10 @@ enum FitOut {
 pub fn fitted_network(runs: &[RunData], base: &ThermalConfig, prior: bool) -> Fitted {
     let axis = Vector3::from(base.sensor_axis_body).normalize();
     let data = blocks(runs, axis);
-    let prior = prior.then(|| shape_of(base));
+    let prior = prior.then(|| (shape_of(base), form_of(base)));
     let base_axis = twin_convection_axis(base);
-    let prior = prior.as_ref();
+    let prior = prior.as_ref().map(|(q, f)| (q, *f));
+    let form = prior.map_or_else(Form::default, |p| p.1);
     let (outs, all_modes) = fits_on_all_and_folds(&data, base, prior, base_axis);
     let mut modes: Vec<[f64; MODES]> = outs
         .iter()
@@ -310,19 +322,29 @@ pub fn fitted_network(runs: &[RunData], base: &ThermalConfig, prior: bool) -> Fi
             FitOut::Modal(_) => None,
         })
         .collect();
-    let shapes = cross_started(&data, shapes, prior.is_some_and(is_full));
-    let NetworkHeldOut {
-        all,
-        all_lin,
-        held: net,
-    } = network_in_its_form(runs, &data, &shapes, base);
+    let shapes = cross_started(&data, shapes, form);
+    let in_form = network_in_its_form(runs, &data, &shapes, form, base);
+    let (_, floor_c) = noise_floor(runs);
+    let effects::Selected {
+        net:
+            NetworkHeldOut {
+                all,
+                form,
+                all_lin,
+                held: net,
+                ..
+            },
+        effects,
+        candidates,
+    } = effects::select(runs, &data, in_form, floor_c);
     let modal = modal_held_out(runs, &data, &modes, axis);
-    let network = to_config(base, &all, &all_lin);
+    let network = to_config(base, &all, &form, &all_lin);
     let net_gap = quadratic_mean(&net.per_sensor_c);
     let modal_gap = quadratic_mean(&modal.per_sensor_c);
-    let misfit = (net_gap.is_nan() || net_gap > FORM_MISFIT_C).then_some(FormMisfit {
+    let limit_c = match_limit_c(floor_c);
+    let misfit = (net_gap.is_nan() || net_gap > limit_c).then_some(FormMisfit {
         gap_c: net_gap,
-        limit_c: FORM_MISFIT_C,
+        limit_c,
         modal_gap_c: modal_gap,
         r#where: net.stretches,
     });
@@ -334,6 +356,8 @@ pub fn fitted_network(runs: &[RunData], base: &ThermalConfig, prior: bool) -> Fi
         modal_series: modal.series,
         network_series: net.series,
         misfit,
+        effects,
+        candidates,
     }
 }
 
@@ -359,7 +383,7 @@ fn twin_convection_axis(base: &ThermalConfig) -> usize {
 fn fits_on_all_and_folds(
     data: &[Vec<Block>],
     base: &ThermalConfig,
-    prior: Option<&Shape>,
+    prior: Option<(&Shape, Form)>,
     base_axis: usize,
 ) -> (Vec<FitOut>, [f64; MODES]) {
     let run = |j: &FitJob| match *j {
@@ -374,12 +398,12 @@ fn fits_on_all_and_folds(
         [FitOut::Network(q), FitOut::Modal(t)] => (*q, *t),
         _ => (shape_of(base), [600.0; MODES]),
     };
-    let full_prior = prior.is_some_and(is_full);
+    let form = prior.map_or_else(Form::default, |p| p.1);
     let fold_jobs: Vec<FitJob> = (0..FOLDS)
         .flat_map(|k| [FitJob::Network(Some(k)), FitJob::Modal(Some(k), base_axis)])
         .collect();
     let fold_fit = |j: &FitJob| match *j {
-        FitJob::Network(k) => FitOut::Network(warm_shape(data, k, full_prior, &all_shape)),
+        FitJob::Network(k) => FitOut::Network(warm_shape(data, k, form, &all_shape)),
         FitJob::Modal(k, axis) => FitOut::Modal(warm_modes(data, k, axis, &all_modes)),
     };
     let outs = firsts
@@ -439,13 +463,16 @@ fn network_in_its_form(
     runs: &[RunData],
     data: &[Vec<Block>],
     shapes: &[Shape],
+    form: Form,
     base: &ThermalConfig,
 ) -> NetworkHeldOut {
-    let mut net = network_held_out(runs, data, shapes, shape_of(base));
+    let mut net = network_held_out(runs, data, shapes, form, shape_of(base));
     let gap = |n: &NetworkHeldOut| quadratic_mean(&n.held.per_sensor_c);
     let missed = gap(&net).is_nan() || gap(&net) > FORM_MISFIT_C;
-    if missed && !is_full(&net.all) {
-        let full = network_held_out(runs, data, &in_full_form(data, shapes), net.all);
+    if missed && !form.full {
+        let full_form = Form { full: true, ..form };
+        let searched = in_full_form(data, shapes, form);
+        let full = network_held_out(runs, data, &searched, full_form, net.all);
         if gap(&full) < gap(&net) || gap(&net).is_nan() {
             net = full;
         }
@@ -475,39 +502,47 @@ fn modal_held_out(
     held_out(runs, data, &modal_res)
 }
 
-/// The network fitted on all the runs, its linear quantities, and its
-/// held-out figures.
+/// The network fitted on all the runs, its form, its linear quantities,
+/// and its held-out figures and residuals.
 struct NetworkHeldOut {
     all: Shape,
+    form: Form,
     all_lin: Linear,
     held: HeldOut,
+    /// Every block's residual with fold k held out, per fold.
+    fold_res: Vec<Vec<Vec<[f64; 3]>>>,
 }
 
 /// The network fits (`shapes[0]` on all the runs, `shapes[k + 1]` with
-/// fold k held out; `fallback` for any missing) scored held out.
+/// fold k held out; `fallback` for any missing) in `form` scored held out.
 fn network_held_out(
     runs: &[RunData],
     data: &[Vec<Block>],
     shapes: &[Shape],
+    form: Form,
     fallback: Shape,
 ) -> NetworkHeldOut {
     let all = shapes.first().copied().unwrap_or(fallback);
     let cost = |held_out| Cost {
         runs: data,
         held_out,
-        full: false,
+        form,
     };
     let (all_lin, _) = cost(None).fit_at(&all);
-    let network_res: Vec<_> = (0..FOLDS)
-        .map(|k| {
-            let q = shapes.get(k + 1).copied().unwrap_or(all);
-            cost(Some(k)).fit_at(&q).1
-        })
+    let folds: Vec<Shape> = (0..FOLDS)
+        .map(|k| shapes.get(k + 1).copied().unwrap_or(all))
+        .collect();
+    let fold_res: Vec<_> = folds
+        .iter()
+        .enumerate()
+        .map(|(k, q)| cost(Some(k)).fit_at(q).1)
         .collect();
     NetworkHeldOut {
         all,
+        form,
         all_lin,
-        held: held_out(runs, data, &network_res),
+        held: held_out(runs, data, &fold_res),
+        fold_res,
     }
 }
 
@@ -515,7 +550,6 @@ fn network_held_out(
 /// is fitted); RMS of the 60 s means of measured minus simulated, and the
 /// residual series.
 fn twin_sensor_rms(runs: &[RunData], twin: &TwinConfig) -> (BTreeMap<String, f64>, Vec<Series>) {
-    let axis = Vector3::from(twin.thermal.sensor_axis_body).normalize();
     let mut series = Vec::new();
     let (mut sse, mut n) = ([0.0; 3], 0usize);
     for run in runs {
@@ -527,19 +561,18 @@ fn twin_sensor_rms(runs: &[RunData], twin: &TwinConfig) -> (BTreeMap<String, f64
         let mut t = 0.0;
         let mut res = Vec::with_capacity(run.samples.len());
         for s in &run.samples {
-            let convection = 1.0 + twin.thermal.convection_gain * s.gravity_body().dot(&axis).abs();
+            let exchange = Exchange::at(&twin.thermal, &s.gravity_body());
             while t < s.iv.time_s {
                 let dt = (s.iv.time_s - t).min(1.0);
-                net.step(dt, s.iv.chamber_c, true, convection);
+                net.step_in(dt, s.iv.chamber_c, true, &exchange);
                 t += dt;
             }
+            // What the twin's sensors read (its offsets, and its
+            // `[thermal.effects]` sensor lags and gain errors, included).
+            let [t1, t2, tk] = net.readings_c();
             res.push((
                 s.iv.time_s,
-                [
-                    s.iv.t1_c - net.t1_c,
-                    s.iv.t2_c - net.t2_c,
-                    s.iv.tcase_c - net.case_c,
-                ],
+                [s.iv.t1_c - t1, s.iv.t2_c - t2, s.iv.tcase_c - tk],
             ));
         }
         let blocks: Series = res
@@ -580,6 +613,8 @@ pub fn layer(runs: &[RunData], twin: Option<&TwinConfig>, fit_with_twin: bool) -
     let mut fitted_gap_c = None;
     let mut form_misfit = None;
     let mut modes_s = None;
+    let mut effects = Vec::new();
+    let mut candidates = Vec::new();
     let (per_sensor_c, series, reference) = match twin {
         Some(t) => {
             let (per_sensor, series) = twin_sensor_rms(runs, t);
@@ -590,6 +625,7 @@ pub fn layer(runs: &[RunData], twin: Option<&TwinConfig>, fit_with_twin: bool) -
                     network = Some(f.network);
                 }
                 form_misfit = f.misfit;
+                (effects, candidates) = (f.effects, f.candidates);
             }
             (
                 per_sensor,
@@ -630,6 +666,7 @@ pub fn layer(runs: &[RunData], twin: Option<&TwinConfig>, fit_with_twin: bool) -
                 network = Some(f.network);
             }
             form_misfit = f.misfit;
+            (effects, candidates) = (f.effects, f.candidates);
             out
         }
     };
@@ -644,6 +681,10 @@ pub fn layer(runs: &[RunData], twin: Option<&TwinConfig>, fit_with_twin: bool) -
         fitted: network,
         fitted_gap_c,
         form_misfit,
+        effect_thresholds: (!candidates.is_empty()).then_some(THERMAL_THRESHOLDS),
+        effects,
+        effect_candidates: candidates,
+        match_limit_c: match_limit_c(noise_floor_c),
         series,
     }
 }

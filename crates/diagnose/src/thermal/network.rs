@@ -10,7 +10,11 @@ use super::*;
 /// the mount node (1 s: none), the case, the two blocks and their
 /// exchange, s, the convection gain, the blocks' capacity ratios, and the
 /// heat sink's time constant, s, and capacity ratio (a baseplate can weigh
-/// many times the case), and block 1's heat capacity over block 2's.
+/// many times the case), and block 1's heat capacity over block 2's; then
+/// the thermal effects' (`[thermal.effects]`, searched only in a form that
+/// has them, [`Form`]): a sensor's own lag, s, a sensor's gain error, the
+/// blocks' orientation coupling, a path from the air to a block, s, and
+/// the case conductance's change with the air temperature, per degC.
 pub(super) const SHAPE: [(&str, f64, f64); SHAPE_LEN] = [
     ("mount_tau_s", 1.0, 7200.0),
     ("case_tau_s", 60.0, 36_000.0),
@@ -23,8 +27,16 @@ pub(super) const SHAPE: [(&str, f64, f64); SHAPE_LEN] = [
     ("sink_tau_s", 60.0, 36_000.0),
     ("sink_capacity_ratio", 0.0, 20.0),
     ("block_capacity_1_over_2", 0.05, 20.0),
+    ("sensor_lag_s", 1.0, 3600.0),
+    ("sensor_gain_error", -0.2, 0.2),
+    ("orientation_coupling[0]", -0.9, 5.0),
+    ("orientation_coupling[1]", -0.9, 5.0),
+    ("air_path_tau_s", 60.0, 1.0e6),
+    ("case_conductance_per_c", -0.03, 0.05),
 ];
-pub(super) const SHAPE_LEN: usize = 11;
+pub(super) const SHAPE_LEN: usize = 17;
+/// The network's own quantities, before the effects'.
+pub(super) const BASE_LEN: usize = 11;
 /// Where each quantity of [`SHAPE`] sits in a shape (the search works on
 /// the vector; the code reads it by these names).
 pub(super) mod at {
@@ -39,12 +51,18 @@ pub(super) mod at {
     pub const SINK_TAU: usize = 8;
     pub const SINK_RATIO: usize = 9;
     pub const BLOCKS_1_OVER_2: usize = 10;
+    pub const LAG_TAU: usize = 11;
+    pub const SENSOR_GAIN: usize = 12;
+    pub const COUPLING1: usize = 13;
+    pub const COUPLING2: usize = 14;
+    pub const AIR_PATH_TAU: usize = 15;
+    pub const CONDUCTANCE: usize = 16;
 }
 /// The quantities searched in the simpler form: no heat sink (its
 /// capacity ratio 0), blocks of equal capacity.
 pub(super) const SIMPLE_LEN: usize = 8;
 /// The searched quantities held as logarithms.
-pub(super) const LOG_SCALED: [usize; 7] = [
+pub(super) const LOG_SCALED: [usize; 9] = [
     at::MOUNT_TAU,
     at::CASE_TAU,
     at::BLOCK1_TAU,
@@ -52,7 +70,83 @@ pub(super) const LOG_SCALED: [usize; 7] = [
     at::COUPLING_TAU,
     at::SINK_TAU,
     at::BLOCKS_1_OVER_2,
+    at::LAG_TAU,
+    at::AIR_PATH_TAU,
 ];
+
+/// What a network holds besides its quantities: the full form's sink and
+/// unequal blocks searched, and which thermal effects act (each with its
+/// discrete choice: the sensor, the body axis, the block).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub(super) struct Form {
+    /// The heat sink's two quantities and block 1's capacity over block
+    /// 2's are searched (without, no sink and blocks of equal capacity).
+    pub(super) full: bool,
+    /// This sensor (0 T1, 1 T2, 2 TK) reads its node through a lag.
+    pub(super) lag: Option<usize>,
+    /// This sensor has a gain error.
+    pub(super) gain: Option<usize>,
+    /// The blocks' conductances to the case change with gravity along
+    /// this body axis (0 x, 1 y, 2 z).
+    pub(super) coupling: Option<usize>,
+    /// A path from the air to this block (0 block 1, 1 block 2).
+    pub(super) air_path: Option<usize>,
+    /// The case's conductance changes with the air temperature.
+    pub(super) conductance: bool,
+}
+
+impl Form {
+    /// The shape's quantities a search moves in this form.
+    pub(super) fn searched(&self) -> Vec<usize> {
+        let mut out: Vec<usize> = (0..if self.full { BASE_LEN } else { SIMPLE_LEN }).collect();
+        if self.lag.is_some() {
+            out.push(at::LAG_TAU);
+        }
+        if self.gain.is_some() {
+            out.push(at::SENSOR_GAIN);
+        }
+        if self.coupling.is_some() {
+            out.extend([at::COUPLING1, at::COUPLING2]);
+        }
+        if self.air_path.is_some() {
+            out.push(at::AIR_PATH_TAU);
+        }
+        if self.conductance {
+            out.push(at::CONDUCTANCE);
+        }
+        out
+    }
+
+    /// Its nodes: the mount, the case, the two blocks, then the sink (when
+    /// `sink`) and the lagging sensor's own node.
+    pub(super) fn layout(&self, sink: bool) -> Layout {
+        let mut n = 4;
+        let sink = sink.then(|| {
+            n += 1;
+            n - 1
+        });
+        let mut sensors = BASE_SENSOR_NODES;
+        if let Some(k) = self.lag {
+            sensors[k] = n;
+            n += 1;
+        }
+        Layout {
+            nodes: n,
+            sink,
+            sensors,
+        }
+    }
+}
+
+/// Where a network's nodes sit in its state.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct Layout {
+    pub(super) nodes: usize,
+    pub(super) sink: Option<usize>,
+    /// The nodes T1, T2 and TK read.
+    pub(super) sensors: [usize; 3],
+}
+
 /// Self-heating rises, degC: never negative (ours: at most 30).
 pub(super) const RISE_MAX_C: f64 = 30.0;
 /// The air gain's range (ours: a chamber sensor or a workspace gradient
@@ -93,6 +187,9 @@ pub(super) fn clamp_shape(q: &Shape) -> (Shape, f64) {
 }
 
 pub(super) fn shape_of(c: &ThermalConfig) -> Shape {
+    let fx = &c.effects;
+    let form = form_of(c);
+    let off = off();
     let (m, _) = clamp_shape(&[
         c.mount_tau_s.max(1.0).ln(),
         c.case_tau_s.ln(),
@@ -113,14 +210,55 @@ pub(super) fn shape_of(c: &ThermalConfig) -> Shape {
             0.0
         },
         c.block_capacity_1_over_2.ln(),
+        form.lag
+            .map_or(off[at::LAG_TAU], |k| fx.sensor_lag_s[k].ln()),
+        form.gain.map_or(0.0, |k| fx.sensor_gain_error[k]),
+        fx.orientation_coupling[0],
+        fx.orientation_coupling[1],
+        form.air_path
+            .map_or(off[at::AIR_PATH_TAU], |k| fx.air_path_tau_s[k].ln()),
+        fx.case_conductance_per_c,
     ]);
     m
 }
 
-/// A network beyond the simpler form: a heat sink, or blocks of unequal
-/// capacity.
-pub(super) fn is_full(q: &Shape) -> bool {
-    has_sink(q) || q[at::BLOCKS_1_OVER_2] != 0.0
+/// The form of a twin's network: its full form's quantities, and its
+/// effects as the fitted network holds them (one lagging sensor, one
+/// gain error, one block with an air path: the largest of each; the
+/// orientation coupling on the body axis its axis lies most along).
+pub(super) fn form_of(c: &ThermalConfig) -> Form {
+    let fx = &c.effects;
+    let largest = |v: &[f64]| {
+        (0..v.len())
+            .filter(|&k| v[k] != 0.0)
+            .max_by(|&a, &b| v[a].abs().total_cmp(&v[b].abs()))
+    };
+    let axis = fx.orientation_axis();
+    Form {
+        full: c.sink_tau_s > 0.0 && c.sink_capacity_ratio > 0.0 || c.block_capacity_1_over_2 != 1.0,
+        lag: largest(&fx.sensor_lag_s),
+        gain: largest(&fx.sensor_gain_error),
+        coupling: (fx.orientation_coupling != [0.0; 2])
+            .then(|| largest(&[axis.x, axis.y, axis.z]))
+            .flatten(),
+        air_path: largest(
+            &fx.air_path_tau_s
+                .map(|t| if t > 0.0 { 1.0 / t } else { 0.0 }),
+        ),
+        conductance: fx.case_conductance_per_c != 0.0,
+    }
+}
+
+/// A shape's values where nothing is searched: no sink (its time
+/// constant where a search that adds one starts), blocks of equal
+/// capacity, and the effects' where a search of them starts (a lag of a
+/// minute, an air path of 10,000 s; ours).
+pub(super) fn off() -> Shape {
+    let mut q = [0.0; SHAPE_LEN];
+    q[at::SINK_TAU] = SINK_START_S.ln();
+    q[at::LAG_TAU] = 60.0f64.ln();
+    q[at::AIR_PATH_TAU] = 10_000.0f64.ln();
+    q
 }
 
 /// A network with a heat sink on the case.
@@ -139,19 +277,54 @@ pub(super) const INPUTS: usize = 4;
 /// one), its response to each input.
 pub(super) type Nodes<const N: usize> = SMatrix<f64, N, INPUTS>;
 
+/// What a block's orientation and air change in the network: the
+/// blocks' exchange (convection), the orientation coupling's share of
+/// gravity, and the air temperature the case's conductance follows (on a
+/// 0.5 degC grid; 20 degC without the effect). Blocks with the same key
+/// share one discretisation.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(super) struct Key {
+    pub(super) convection: f64,
+    pub(super) coupling: f64,
+    pub(super) air_c: f64,
+}
+
+/// The air grid of [`Key`], degC (ours: the conductance's change over
+/// half a degree is a few thousandths of itself at most).
+const AIR_KEY_C: f64 = 0.5;
+
+impl Key {
+    fn of(q: &Shape, form: &Form, b: &Block) -> Self {
+        Self {
+            convection: 1.0 + q[at::CONVECTION] * b.gravity_along_axis,
+            coupling: form.coupling.map_or(0.0, |a| b.gravity_abs[a]),
+            air_c: if form.conductance {
+                let mean = b.air_c.iter().sum::<f64>() / BLOCK_STEPS as f64;
+                (mean / AIR_KEY_C).round() * AIR_KEY_C
+            } else {
+                twin_effects::CONDUCTANCE_REFERENCE_C
+            },
+        }
+    }
+}
+
 /// The state transition over `dt_s` of the network's `N` nodes (mount,
-/// case, block 1, block 2, and the sink when `N` is 5) and its input matrix
-/// for the [`INPUTS`], exact for inputs held over the step (`M` = `N` +
-/// [`INPUTS`]: the augmented matrix whose exponential holds both).
+/// case, block 1, block 2, then the sink and a lagging sensor's node when
+/// the layout has them) and its input matrix for the [`INPUTS`], exact for
+/// inputs held over the step (`M` = `N` + [`INPUTS`]: the augmented matrix
+/// whose exponential holds both). The twin's equations
+/// (`twin::thermal::ThermalNetwork::step_in`), the rises heat inputs.
 pub(super) fn discretize<const N: usize, const M: usize>(
     q: &Shape,
-    convection: f64,
+    form: &Form,
+    layout: &Layout,
+    key: &Key,
     dt_s: f64,
 ) -> (SMatrix<f64, N, N>, Nodes<N>)
 where
     Const<M>: DimMin<Const<M>, Output = Const<M>>,
 {
-    debug_assert!(M == N + INPUTS && (N == 4 || N == 5));
+    debug_assert!(M == N + INPUTS && N == layout.nodes);
     let [tm, tk, t1, t2, tc, ts] = [
         at::MOUNT_TAU,
         at::CASE_TAU,
@@ -161,33 +334,60 @@ where
         at::SINK_TAU,
     ]
     .map(|i| q[i].exp());
-    let kc = convection / tc;
+    let kc = key.convection / tc;
     // One conductance between the blocks, seen from both ends.
     let kc2 = kc * q[at::BLOCKS_1_OVER_2].exp();
-    let (r1, r2) = (q[at::RATIO1] / t1, q[at::RATIO2] / t2);
+    // The orientation scales each block's conductance to the case (seen
+    // from the block and, through its capacity ratio, from the case).
+    let floor = twin_effects::CONDUCTANCE_FLOOR;
+    let (f1, f2) = match form.coupling {
+        Some(_) => (
+            (1.0 + q[at::COUPLING1] * key.coupling).max(floor),
+            (1.0 + q[at::COUPLING2] * key.coupling).max(floor),
+        ),
+        None => (1.0, 1.0),
+    };
+    let sc = if form.conductance {
+        let c = q[at::CONDUCTANCE] * (key.air_c - twin_effects::CONDUCTANCE_REFERENCE_C);
+        (1.0 + c).max(floor)
+    } else {
+        1.0
+    };
+    let (r1, r2) = (f1 * q[at::RATIO1] / t1, f2 * q[at::RATIO2] / t2);
     let mut m = SMatrix::<f64, M, M>::zeros();
     m[(0, 0)] = -1.0 / tm;
-    m[(1, 0)] = 1.0 / tk;
-    m[(1, 1)] = -1.0 / tk - r1 - r2;
+    m[(1, 0)] = sc / tk;
+    m[(1, 1)] = -sc / tk - r1 - r2;
     m[(1, 2)] = r1;
     m[(1, 3)] = r2;
-    if N == 5 {
+    if let Some(k) = layout.sink {
         let rs = q[at::SINK_RATIO] / ts;
         m[(1, 1)] -= rs;
-        m[(1, 4)] = rs;
-        m[(4, 1)] = 1.0 / ts;
-        m[(4, 4)] = -1.0 / ts;
+        m[(1, k)] = rs;
+        m[(k, 1)] = 1.0 / ts;
+        m[(k, k)] = -1.0 / ts;
     }
-    m[(2, 1)] = 1.0 / t1;
-    m[(2, 2)] = -1.0 / t1 - kc;
+    m[(2, 1)] = f1 / t1;
+    m[(2, 2)] = -f1 / t1 - kc;
     m[(2, 3)] = kc;
-    m[(3, 1)] = 1.0 / t2;
-    m[(3, 3)] = -1.0 / t2 - kc2;
+    m[(3, 1)] = f2 / t2;
+    m[(3, 3)] = -f2 / t2 - kc2;
     m[(3, 2)] = kc2;
     m[(0, N)] = 1.0 / tm;
     m[(1, N + 1)] = 1.0 / tk;
     m[(2, N + 2)] = 1.0 / t1;
     m[(3, N + 3)] = 1.0 / t2;
+    if let Some(b) = form.air_path {
+        let kp = 1.0 / q[at::AIR_PATH_TAU].exp();
+        m[(2 + b, 2 + b)] -= kp;
+        m[(2 + b, N)] += kp;
+    }
+    if let Some(s) = form.lag {
+        let (node, from) = (layout.sensors[s], BASE_SENSOR_NODES[s]);
+        let kl = 1.0 / q[at::LAG_TAU].exp();
+        m[(node, from)] = kl;
+        m[(node, node)] = -kl;
+    }
     let e = (m * dt_s).exp();
     (
         e.fixed_view::<N, N>(0, 0).into_owned(),
@@ -201,23 +401,38 @@ where
 /// are linear in these: `gain * air + rises + offset`.
 pub(super) type Responses = Vec<[[f64; 4]; 3]>;
 
-pub(super) fn simulate(q: &Shape, run: &[Block]) -> Responses {
-    // Without a sink, its node is left out (a fifth of the work).
-    if has_sink(q) {
-        simulate_nodes::<5, 9>(q, run)
-    } else {
-        simulate_nodes::<4, 8>(q, run)
+pub(super) fn simulate(q: &Shape, form: &Form, run: &[Block]) -> Responses {
+    // Without a sink or a lagging sensor, their nodes are left out.
+    let layout = form.layout(has_sink(q));
+    let mut resp = match layout.nodes {
+        4 => simulate_nodes::<4, 8>(q, form, &layout, run),
+        5 => simulate_nodes::<5, 9>(q, form, &layout, run),
+        _ => simulate_nodes::<6, 10>(q, form, &layout, run),
+    };
+    if let Some(s) = form.gain {
+        let g = 1.0 + q[at::SENSOR_GAIN];
+        for rb in &mut resp {
+            for v in &mut rb[s] {
+                *v *= g;
+            }
+        }
     }
+    resp
 }
 
-pub(super) fn simulate_nodes<const N: usize, const M: usize>(q: &Shape, run: &[Block]) -> Responses
+fn simulate_nodes<const N: usize, const M: usize>(
+    q: &Shape,
+    form: &Form,
+    layout: &Layout,
+    run: &[Block],
+) -> Responses
 where
     Const<M>: DimMin<Const<M>, Output = Const<M>>,
 {
     let Some(first) = run.first() else {
         return Vec::new();
     };
-    let mut cache: Vec<(f64, SMatrix<f64, N, N>, Nodes<N>, BlockStep<N>)> = Vec::new();
+    let mut cache: Vec<(Key, SMatrix<f64, N, N>, Nodes<N>, BlockStep<N>)> = Vec::new();
     let mut x = Nodes::<N>::zeros();
     for i in 0..N {
         x[(i, 0)] = first.air_c[0];
@@ -230,12 +445,12 @@ where
     let mut t = 0.0;
     run.iter()
         .map(|b| {
-            let convection = 1.0 + q[at::CONVECTION] * b.gravity_along_axis;
-            let k = match cache.iter().position(|c| c.0 == convection) {
+            let key = Key::of(q, form, b);
+            let k = match cache.iter().position(|c| c.0 == key) {
                 Some(k) => k,
                 None => {
-                    let (p, g) = discretize::<N, M>(q, convection, STEP_S);
-                    cache.push((convection, p, g, BlockStep::new(&p, &g)));
+                    let (p, g) = discretize::<N, M>(q, form, layout, &key, STEP_S);
+                    cache.push((key, p, g, BlockStep::new(&p, &g, &layout.sensors)));
                     cache.len() - 1
                 }
             };
@@ -246,7 +461,7 @@ where
                 if dt == STEP_S {
                     advance(&mut x, phi, gamma, b.air_c[0]);
                 } else {
-                    let (p, g) = discretize::<N, M>(q, convection, dt);
+                    let (p, g) = discretize::<N, M>(q, form, layout, &key, dt);
                     advance(&mut x, &p, &g, b.air_c[0]);
                 }
                 t += dt;
@@ -257,8 +472,9 @@ where
         .collect()
 }
 
-/// Nodes of T1, T2 and TK: block 1, block 2, the case.
-pub(super) const SENSOR_NODES: [usize; 3] = [2, 3, 1];
+/// Nodes of T1, T2 and TK without a lagging sensor: block 1, block 2,
+/// the case.
+pub(super) const BASE_SENSOR_NODES: [usize; 3] = [2, 3, 1];
 /// Steps of [`STEP_S`] in a block.
 pub(super) const BLOCK_STEPS: usize = AVERAGING_S / STEP_S as usize;
 const _: () = assert!(BLOCK_STEPS * STEP_S as usize == AVERAGING_S);
@@ -279,7 +495,7 @@ pub(super) struct BlockStep<const N: usize> {
 }
 
 impl<const N: usize> BlockStep<N> {
-    pub(super) fn new(phi: &SMatrix<f64, N, N>, gamma: &Nodes<N>) -> Self {
+    pub(super) fn new(phi: &SMatrix<f64, N, N>, gamma: &Nodes<N>, sensors: &[usize; 3]) -> Self {
         const K: usize = BLOCK_STEPS;
         // pow[k] = phi^k.
         let mut pow = vec![SMatrix::<f64, N, N>::identity()];
@@ -289,7 +505,7 @@ impl<const N: usize> BlockStep<N> {
         // The trapezoids' weights on the states 0..=K, over the block.
         let w = |k: usize| if k == 0 || k == K { 0.5 } else { 1.0 } / K as f64;
         let rows =
-            |m: &SMatrix<f64, N, N>| SMatrix::<f64, 3, N>::from_fn(|r, c| m[(SENSOR_NODES[r], c)]);
+            |m: &SMatrix<f64, N, N>| SMatrix::<f64, 3, N>::from_fn(|r, c| m[(sensors[r], c)]);
         let mean_full = (0..=K).fold(SMatrix::<f64, N, N>::zeros(), |a, k| a + pow[k] * w(k));
         // An input at step j reaches state k > j through phi^(k - 1 - j).
         let after = |j: usize| {
@@ -461,36 +677,34 @@ pub(super) fn predict(rb: &[[f64; 4]; 3], lin: &Linear) -> [f64; 3] {
 pub(super) struct Cost<'a> {
     pub(super) runs: &'a [Vec<Block>],
     pub(super) held_out: Option<usize>,
-    /// The full form is searched: the heat sink's two quantities and block
-    /// 1's capacity over block 2's too (without, the network has no sink
-    /// and blocks of equal capacity).
-    pub(super) full: bool,
+    /// The form searched: which quantities move and which effects act.
+    pub(super) form: Form,
 }
 
 impl Cost<'_> {
     /// The quantities the search moves, from a shape.
     pub(super) fn searched(&self, q: &Shape) -> Vec<f64> {
-        q[..self.len()].to_vec()
+        self.form.searched().iter().map(|&i| q[i]).collect()
     }
 
-    pub(super) fn len(&self) -> usize {
-        if self.full { SHAPE_LEN } else { SIMPLE_LEN }
-    }
-
-    /// The shape of the searched quantities `p`, within bounds, and how far
-    /// outside they were.
+    /// The shape of the searched quantities `p` (the rest as [`off`]),
+    /// within bounds, and how far outside they were.
     pub(super) fn shape(&self, p: &[f64]) -> (Shape, f64) {
-        let mut q = [0.0; SHAPE_LEN];
-        q[at::SINK_TAU] = SINK_START_S.ln();
-        let n = p.len().min(self.len());
-        q[..n].copy_from_slice(&p[..n]);
+        let mut q = off();
+        for (&i, v) in self.form.searched().iter().zip(p) {
+            q[i] = *v;
+        }
         clamp_shape(&q)
     }
 
     /// The linear quantities and the residuals (measured - simulated) per
     /// block at `q`.
     pub(super) fn fit_at(&self, q: &Shape) -> (Linear, Vec<Vec<[f64; 3]>>) {
-        let resp: Vec<Responses> = self.runs.iter().map(|r| simulate(q, r)).collect();
+        let resp: Vec<Responses> = self
+            .runs
+            .iter()
+            .map(|r| simulate(q, &self.form, r))
+            .collect();
         let lin = solve_linear(self.runs, &resp, self.held_out);
         let res = self
             .runs
@@ -531,10 +745,11 @@ impl Squares for Cost<'_> {
     }
 
     fn bounds(&self) -> (Vec<f64>, Vec<f64>) {
-        SHAPE[..self.len()]
+        self.form
+            .searched()
             .iter()
-            .enumerate()
-            .map(|(i, &(_, lo, hi))| {
+            .map(|&i| {
+                let (_, lo, hi) = SHAPE[i];
                 if LOG_SCALED.contains(&i) {
                     (lo.ln(), hi.ln())
                 } else {
@@ -552,7 +767,11 @@ impl CostFunction for Cost<'_> {
     fn cost(&self, p: &Vec<f64>) -> Result<f64, Error> {
         let (q, outside) = self.shape(p);
         // fit_at's residuals summed as they come (the search's hot path).
-        let resp: Vec<Responses> = self.runs.iter().map(|r| simulate(&q, r)).collect();
+        let resp: Vec<Responses> = self
+            .runs
+            .iter()
+            .map(|r| simulate(&q, &self.form, r))
+            .collect();
         let lin = solve_linear(self.runs, &resp, self.held_out);
         let mut sse = 0.0;
         for (run, r) in self.runs.iter().zip(&resp) {
@@ -568,8 +787,14 @@ impl CostFunction for Cost<'_> {
         Ok(if sse.is_finite() { sse } else { f64::MAX })
     }
 }
-/// The fitted network as the twin's configuration.
-pub(super) fn to_config(base: &ThermalConfig, q: &Shape, lin: &Linear) -> ThermalConfig {
+/// The fitted network as the twin's configuration (its effects as
+/// `[thermal.effects]`, the rest of them off).
+pub(super) fn to_config(
+    base: &ThermalConfig,
+    q: &Shape,
+    form: &Form,
+    lin: &Linear,
+) -> ThermalConfig {
     let mut c = base.clone();
     // (exp(ln(x)) can land a rounding below the bound.)
     let tau = |i: usize| q[i].exp().clamp(SHAPE[i].1, SHAPE[i].2);
@@ -595,5 +820,23 @@ pub(super) fn to_config(base: &ThermalConfig, q: &Shape, lin: &Linear) -> Therma
     c.block1_rise_c = lin[2];
     c.block2_rise_c = lin[3];
     c.sensor_offset_c = [lin[4], lin[5], lin[6]];
+    let mut fx = crate::twin::config::ThermalEffects::default();
+    if let Some(k) = form.lag {
+        fx.sensor_lag_s[k] = tau(at::LAG_TAU);
+    }
+    if let Some(k) = form.gain {
+        fx.sensor_gain_error[k] = q[at::SENSOR_GAIN];
+    }
+    if let Some(a) = form.coupling {
+        fx.orientation_coupling = [q[at::COUPLING1], q[at::COUPLING2]];
+        fx.orientation_axis_body = std::array::from_fn(|k| if k == a { 1.0 } else { 0.0 });
+    }
+    if let Some(k) = form.air_path {
+        fx.air_path_tau_s[k] = tau(at::AIR_PATH_TAU);
+    }
+    if form.conductance {
+        fx.case_conductance_per_c = q[at::CONDUCTANCE];
+    }
+    c.effects = fx;
     c
 }

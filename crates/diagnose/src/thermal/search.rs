@@ -96,7 +96,8 @@ pub(super) fn grid() -> Vec<Shape> {
             for block in [150.0f64, 600.0, 2000.0] {
                 for coupling in [300.0f64, 5000.0] {
                     for ratio in [0.0, 0.5] {
-                        out.push([
+                        let mut q = off();
+                        q[..SIMPLE_LEN].copy_from_slice(&[
                             mount.ln(),
                             case.ln(),
                             block.ln(),
@@ -105,10 +106,8 @@ pub(super) fn grid() -> Vec<Shape> {
                             0.5,
                             ratio,
                             ratio,
-                            SINK_START_S.ln(),
-                            0.0,
-                            0.0,
                         ]);
+                        out.push(q);
                     }
                 }
             }
@@ -118,25 +117,26 @@ pub(super) fn grid() -> Vec<Shape> {
 }
 
 /// Identify the network on the blocks outside `held_out` from the grid of
-/// starts (and `prior`, a twin's network, as one more; the full form is
-/// searched when the prior has it).
+/// starts (and `prior`, a twin's network, as one more; the prior's form
+/// is searched when there is one: its full form's quantities and its
+/// effects).
 pub(super) fn identify(
     runs: &[Vec<Block>],
     held_out: Option<usize>,
-    prior: Option<&Shape>,
+    prior: Option<(&Shape, Form)>,
 ) -> Shape {
-    let starts: Vec<Shape> = grid().into_iter().chain(prior.copied()).collect();
-    let full = prior.is_some_and(is_full);
-    search_shape(runs, held_out, full, &starts, 6, 150)
+    let form = prior.map_or_else(Form::default, |p| p.1);
+    let starts: Vec<Shape> = grid().into_iter().chain(prior.map(|p| *p.0)).collect();
+    search_shape(runs, held_out, form, &starts, 6, 150)
 }
 
 /// The network's shape searched from `starts` ([`multistart`]) on the
-/// blocks outside `held_out`, within bounds; with `full`, the full form's
-/// quantities too.
+/// blocks outside `held_out`, within bounds, in `form` (which quantities
+/// move, which effects act).
 pub(super) fn search_shape(
     runs: &[Vec<Block>],
     held_out: Option<usize>,
-    full: bool,
+    form: Form,
     starts: &[Shape],
     keep: usize,
     iters: u64,
@@ -144,7 +144,7 @@ pub(super) fn search_shape(
     let cost = Cost {
         runs,
         held_out,
-        full,
+        form,
     };
     let starts: Vec<Vec<f64>> = starts.iter().map(|q| cost.searched(q)).collect();
     let p = multistart(cost, &starts, keep, iters);
@@ -167,11 +167,13 @@ pub(super) const FULL_STARTS: [(f64, f64, f64); 8] = [
     (SINK_START_S, 0.0, 1.0 / 3.0),
 ];
 
-/// The fits searched again in the full form: the one on all the runs
-/// from its own optimum with each of [`FULL_STARTS`], each fold from that
-/// ([`warm_shape`]), then started again from the others' optima as in the
-/// simpler form ([`cross_started`]).
-pub(super) fn in_full_form(data: &[Vec<Block>], shapes: &[Shape]) -> Vec<Shape> {
+/// The fits searched again in the full form (of `form`'s effects): the
+/// one on all the runs from its own optimum with each of
+/// [`FULL_STARTS`], each fold from that ([`warm_shape`]), then started
+/// again from the others' optima as in the simpler form
+/// ([`cross_started`]).
+pub(super) fn in_full_form(data: &[Vec<Block>], shapes: &[Shape], form: Form) -> Vec<Shape> {
+    let form = Form { full: true, ..form };
     let Some(first) = shapes.first() else {
         return Vec::new();
     };
@@ -185,14 +187,14 @@ pub(super) fn in_full_form(data: &[Vec<Block>], shapes: &[Shape]) -> Vec<Shape> 
             q
         })
         .collect();
-    let all = search_shape(data, None, true, &starts, 2, 150);
+    let all = search_shape(data, None, form, &starts, 2, 150);
     let folds: Vec<usize> = (0..shapes.len() - 1).collect();
     let searched = std::iter::once(all)
         .chain(on_two_threads(&folds, |&k| {
-            warm_shape(data, Some(k), true, &all)
+            warm_shape(data, Some(k), form, &all)
         }))
         .collect();
-    cross_started(data, searched, true)
+    cross_started(data, searched, form)
 }
 
 /// Simplex iterations of a fold's search from the fit on all the runs
@@ -212,10 +214,10 @@ pub(super) const WARM_ITERS: u64 = 30;
 pub(super) fn warm_shape(
     runs: &[Vec<Block>],
     held_out: Option<usize>,
-    full: bool,
+    form: Form,
     start: &Shape,
 ) -> Shape {
-    search_shape(runs, held_out, full, &[*start], 1, WARM_ITERS)
+    search_shape(runs, held_out, form, &[*start], 1, WARM_ITERS)
 }
 
 /// A fold's modes, searched from `start` (the modes on all the runs), as
@@ -279,14 +281,14 @@ pub(super) const CROSS_ITERS: u64 = 150;
 /// eight say `form_misfit`. Each fit still
 /// minimises only its own training cost (a start from a fit that saw the
 /// held-out quarter is a start, not a fit to it).
-pub(super) fn cross_started(data: &[Vec<Block>], shapes: Vec<Shape>, full: bool) -> Vec<Shape> {
+pub(super) fn cross_started(data: &[Vec<Block>], shapes: Vec<Shape>, form: Form) -> Vec<Shape> {
     let fold = |i: usize| (i > 0).then(|| i - 1);
     let better: Vec<(usize, Option<Shape>)> = (0..shapes.len())
         .map(|i| {
             let cost = Cost {
                 runs: data,
                 held_out: fold(i),
-                full,
+                form,
             };
             let at = |q: &Shape| cost.cost(&cost.searched(q)).unwrap_or(f64::MAX);
             let own = at(&shapes[i]);
@@ -304,7 +306,7 @@ pub(super) fn cross_started(data: &[Vec<Block>], shapes: Vec<Shape>, full: bool)
         .filter_map(|(i, q)| Some((i, q?)))
         .collect();
     let searched = on_two_threads(&jobs, |&(i, q)| {
-        search_shape(data, fold(i), full, &[q], 1, CROSS_ITERS)
+        search_shape(data, fold(i), form, &[q], 1, CROSS_ITERS)
     });
     let mut out = shapes;
     for (&(i, _), q) in jobs.iter().zip(searched) {

@@ -5,8 +5,8 @@
 //! exact discretisation, read through offset, noisy, quantised sensors
 //! and a chamber sensor with a gain error, with rows missing.
 
-use super::*;
 use super::floor::{median_abs, resolution};
+use super::*;
 use crate::analysis::series::Interval;
 use crate::data::Sample;
 use crate::geometry::Orientation;
@@ -330,7 +330,17 @@ fn a_block_as_one_map_is_the_block_stepped() {
         q[at::SINK_RATIO],
         q[at::BLOCKS_1_OVER_2],
     ) = (300f64.ln(), 0.4, 2000f64.ln(), 1.5, 0.5f64.ln());
-    let (phi, gamma) = discretize::<5, 9>(&q, 1.3, STEP_S);
+    let form = Form {
+        full: true,
+        ..Form::default()
+    };
+    let layout = form.layout(true);
+    let key = Key {
+        convection: 1.3,
+        coupling: 0.0,
+        air_c: twin_effects::CONDUCTANCE_REFERENCE_C,
+    };
+    let (phi, gamma) = discretize::<5, 9>(&q, &form, &layout, &key, STEP_S);
     let air = [20.0, 21.5, 23.0, 22.0, 19.0, 18.5];
     let mut x = Nodes::<5>::from_fn(|i, j| (i * 4 + j) as f64 * 0.1 + 15.0);
     let mut stepped = x;
@@ -342,9 +352,9 @@ fn a_block_as_one_map_is_the_block_stepped() {
         stepped = phi * stepped + u;
         acc += (before + stepped) * (0.5 / air.len() as f64);
     }
-    let mean = BlockStep::new(&phi, &gamma).apply(&mut x, &air);
+    let mean = BlockStep::new(&phi, &gamma, &layout.sensors).apply(&mut x, &air);
     assert!((x - stepped).abs().max() < 1e-9, "{x} vs {stepped}");
-    for (s, node) in SENSOR_NODES.iter().enumerate() {
+    for (s, node) in layout.sensors.iter().enumerate() {
         for j in 0..4 {
             assert!((mean[s][j] - acc[(*node, j)]).abs() < 1e-9);
         }
@@ -364,7 +374,7 @@ fn the_fitted_form_is_the_twins_network() {
     cfg.convection_gain = 0.8;
     let (lin, worst) = fit_of_twin(&cfg);
     assert!(worst < 0.01, "worst block {worst} degC");
-    let fitted = to_config(&cfg, &shape_of(&cfg), &lin);
+    let fitted = to_config(&cfg, &shape_of(&cfg), &form_of(&cfg), &lin);
     assert!((fitted.air_gain - 1.02).abs() < 1e-3, "{fitted:?}");
     assert!(
         (fitted.case_rise_c - cfg.case_rise_c).abs() < 0.02,
@@ -385,7 +395,7 @@ fn the_fitted_form_is_the_twins_network() {
     cfg.block_capacity_1_over_2 = 4.0;
     let (lin, worst) = fit_of_twin(&cfg);
     assert!(worst < 0.01, "in the full form: worst block {worst} degC");
-    let fitted = to_config(&cfg, &shape_of(&cfg), &lin);
+    let fitted = to_config(&cfg, &shape_of(&cfg), &form_of(&cfg), &lin);
     assert!(
         (fitted.sink_tau_s - 2500.0).abs() < 1e-6
             && fitted.sink_capacity_ratio == 1.5
@@ -412,15 +422,15 @@ fn twin_run(cfg: &ThermalConfig) -> RunData {
         for _ in 0..10 {
             net.step(0.1, air, true, 1.0 + cfg.convection_gain * g);
         }
-        let o = cfg.sensor_offset_c;
+        let [t1_c, t2_c, tcase_c] = net.readings_c();
         samples.push(Sample {
             iv: Interval {
                 time_s: t as f64 + 0.5,
                 rate_dph: 0.0,
                 reference_dph: 0.0,
-                t1_c: net.t1_c + o[0],
-                t2_c: net.t2_c + o[1],
-                tcase_c: net.case_c + o[2],
+                t1_c,
+                t2_c,
+                tcase_c,
                 chamber_c: air,
                 frames: 400,
             },
@@ -454,7 +464,10 @@ fn fit_of_twin(cfg: &ThermalConfig) -> (Linear, f64) {
     let cost = Cost {
         runs: &data,
         held_out: None,
-        full: true,
+        form: Form {
+            full: true,
+            ..form_of(cfg)
+        },
     };
     let (lin, res) = cost.fit_at(&shape_of(cfg));
     // (The first minute, where the blocks start from the soak, differs
@@ -644,6 +657,44 @@ fn known_unit() -> ThermalConfig {
 /// training cost no higher than the truth's (what the fit's 10 s step
 /// leaves). (The convection is not checked: the twin's sensor axis, y,
 /// stays horizontal at both of these positions.)
+/// Units with thermal physics the network form does not have, each made
+/// by the twin with one `[thermal.effects]` entry: the layer names that
+/// effect (and on what), brings the held-out gap within its limit, and
+/// writes the effect into the fitted network; the same unit without it
+/// gets none.
+#[test]
+fn a_thermal_effect_the_form_lacks_is_named_and_none_where_there_is_none() {
+    let plain = layer(&[twin_run(&known_unit())], None, false);
+    assert!(plain.effects.is_empty(), "{:?}", plain.effects);
+    assert!(
+        plain.effect_candidates.is_empty(),
+        "the network alone followed"
+    );
+    let mut cfg = known_unit();
+    cfg.effects.case_conductance_per_c = 0.008;
+    let with = layer(&[twin_run(&cfg)], None, false);
+    let named: Vec<&str> = with.effects.iter().map(|e| e.name.as_str()).collect();
+    assert_eq!(
+        named.first(),
+        Some(&"conductance_temperature"),
+        "{:?}",
+        with.effect_candidates
+    );
+    let e = &with.effects[0];
+    let per_c = e.parameters["case_conductance_per_c"];
+    assert!((per_c / 0.008 - 1.0).abs() < 0.25, "{per_c}");
+    assert!(
+        e.held_out_gap_before_c > FORM_MISFIT_C && e.shrink > 0.5,
+        "{e:?}"
+    );
+    assert!(with.form_misfit.is_none(), "{:?}", with.form_misfit);
+    let fitted = with
+        .fitted
+        .as_ref()
+        .expect("the network with its effect follows");
+    assert!((fitted.effects.case_conductance_per_c - per_c).abs() < 1e-12);
+}
+
 #[test]
 fn the_network_search_recovers_the_simulating_networks_time_constants() {
     let cfg = known_unit();
@@ -654,7 +705,7 @@ fn the_network_search_recovers_the_simulating_networks_time_constants() {
         start[*i] += if k % 2 == 0 { 0.3 } else { -0.3 };
     }
     start[at::CONVECTION] = 0.2;
-    let q = search_shape(&data, None, false, &[start], 1, 150);
+    let q = search_shape(&data, None, Form::default(), &[start], 1, 150);
     let close = |i: usize, within: f64| {
         let (got, want) = (q[i].exp(), truth[i].exp());
         assert!(
@@ -681,11 +732,18 @@ fn the_search_stays_within_its_bounds() {
     let mut cfg = known_unit();
     cfg.case_tau_s = 72_000.0;
     let data = twin_blocks(&cfg);
-    let q = search_shape(&data, None, false, &[shape_of(&known_unit())], 1, 150);
+    let q = search_shape(
+        &data,
+        None,
+        Form::default(),
+        &[shape_of(&known_unit())],
+        1,
+        150,
+    );
     assert_eq!(clamp_shape(&q).1, 0.0, "{q:?}");
     let cost = simple_form(&data);
     let (lin, _) = cost.fit_at(&q);
-    assert!(within_bounds(&to_config(&cfg, &q, &lin)));
+    assert!(within_bounds(&to_config(&cfg, &q, &Form::default(), &lin)));
     let case = q[at::CASE_TAU].exp();
     assert!(case > 0.5 * SHAPE[at::CASE_TAU].2, "{case}");
 }
@@ -719,7 +777,7 @@ fn simple_form(data: &[Vec<Block>]) -> Cost<'_> {
     Cost {
         runs: data,
         held_out: None,
-        full: false,
+        form: Form::default(),
     }
 }
 
@@ -737,7 +795,12 @@ fn a_shape_is_clamped_into_its_bounds_with_the_distance_as_penalty() {
     assert_eq!(c[at::CONVECTION], 0.0);
     assert!((outside - (0.25 + 0.0625)).abs() < 1e-12, "{outside}");
     // And the twin's configuration round-trips through a shape.
-    let back = to_config(&known_unit(), &q, &[1.0, 1.5, 6.0, 4.0, 0.0, 0.0, 0.0]);
+    let back = to_config(
+        &known_unit(),
+        &q,
+        &Form::default(),
+        &[1.0, 1.5, 6.0, 4.0, 0.0, 0.0, 0.0],
+    );
     let cfg = known_unit();
     for (a, b) in [
         (back.case_tau_s, cfg.case_tau_s),
