@@ -230,6 +230,25 @@ fn print_summary(d: &diagnose::Diagnosis, out: &Path, fitted_twin: bool) -> Resu
         th.gap_c,
         th.noise_floor_c,
     )?;
+    for e in &th.effects {
+        let on =
+            e.on.as_deref()
+                .map_or(String::new(), |o| format!(" on {o}"));
+        let parameters: Vec<String> = e
+            .parameters
+            .iter()
+            .map(|(k, v)| format!("{k} {v:.4}"))
+            .collect();
+        outln!(
+            "  thermal: {}{on} ({}) gap {:.4} -> {:.4} degC (shrink {:.0} %, p {})",
+            e.name,
+            parameters.join(", "),
+            e.held_out_gap_before_c,
+            e.held_out_gap_after_c,
+            100.0 * e.shrink,
+            gyrobench::view::p_phrase(e.p_value)
+        )?;
+    }
     if d.effects.is_empty() {
         outln!("no library effect is significant")?;
     }

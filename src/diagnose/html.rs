@@ -9,16 +9,12 @@ use crate::analysis::allan::{oadev, octave_factors};
 use crate::view::chart::Rule;
 use crate::view::{Chart, Marker, Series, Stroke, esc, p_value, page};
 
-/// Above this held-out gap the thermal layer, not the rate layer, is the
-/// first thing wrong (ours: a network that fits leaves a few hundredths of
-/// a degree on the twin's and other units' runs).
-const THERMAL_GAP_C: f64 = 0.05;
-
 /// The held-out gap the thermal layer may have and still match: 0.05 degC,
 /// or twice the floor the sensors' own noise and resolution leave, where
-/// that is more (a model cannot predict a sensor's noise).
+/// that is more (a model cannot predict a sensor's noise); the layer's own
+/// `match_limit_c`, which its effects are chosen against.
 fn thermal_limit_c(t: &super::ThermalLayer) -> f64 {
-    THERMAL_GAP_C.max(2.0 * t.noise_floor_c)
+    t.match_limit_c
 }
 
 /// Residual 60 s means of one run: (t h, reference, final).
@@ -303,9 +299,10 @@ fn headline_of_one_unit(d: &Diagnosis) -> String {
         && t.gap_c <= thermal_limit_c(t)
     {
         return format!(
-            "Simulator and runs agree: the thermal layer matches ({:.3} degC held out, noise floor {:.3} degC) and the rate gap of {:.5} deg/h held out is {}, so nothing is left for an effect to explain.",
+            "Simulator and runs agree: the thermal layer matches ({:.3} degC held out, noise floor {:.3} degC{}) and the rate gap of {:.5} deg/h held out is {}, so nothing is left for an effect to explain.",
             t.gap_c,
             t.noise_floor_c,
+            thermal_effects_phrase(t),
             r.gap_dph,
             noise_text(noise, r.gap_dph)
         );
@@ -340,6 +337,29 @@ fn noise_text(noise: Option<f64>, gap: f64) -> String {
     })
 }
 
+/// The thermal effects the layer named, as the headline says them ("once
+/// the thermal effect ... is added"), or nothing.
+fn thermal_effects_phrase(t: &super::ThermalLayer) -> String {
+    let named: Vec<String> = t
+        .effects
+        .iter()
+        .map(|e| {
+            let on =
+                e.on.as_deref()
+                    .map_or(String::new(), |o| format!(" on {o}"));
+            format!(
+                "{}{on} ({:.3} -> {:.3} degC)",
+                e.name, e.held_out_gap_before_c, e.held_out_gap_after_c
+            )
+        })
+        .collect();
+    if named.is_empty() {
+        String::new()
+    } else {
+        format!(" once the thermal effect {} is added", named.join(" and "))
+    }
+}
+
 /// The thermal layer's verdict, the headline's first sentence.
 fn thermal_sentence(t: &super::ThermalLayer) -> String {
     if t.gap_c > thermal_limit_c(t) {
@@ -356,8 +376,9 @@ fn thermal_sentence(t: &super::ThermalLayer) -> String {
             m.gap_c
         )
     });
+    let with = thermal_effects_phrase(t);
     format!(
-        "The thermal layer matches ({:.3} degC held out, noise floor {:.3} degC{by}); the gap is in the rate layer.",
+        "The thermal layer matches ({:.3} degC held out, noise floor {:.3} degC{by}{with}); the gap is in the rate layer.",
         t.gap_c, t.noise_floor_c
     )
 }

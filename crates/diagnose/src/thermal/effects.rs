@@ -251,7 +251,9 @@ pub(super) fn select(
     let mut current = base;
     let mut effects = Vec::new();
     let mut candidates = Vec::new();
-    while effects.len() < th.max_effects && !(gap_of(&current) <= limit) {
+    // A NaN gap (no held-out block) is beyond any limit.
+    let beyond = |g: f64| g.is_nan() || g > limit;
+    while effects.len() < th.max_effects && beyond(gap_of(&current)) {
         let remaining: Vec<ThermalEffect> = THERMAL_LIBRARY
             .into_iter()
             .filter(|e| !e.in_form(&current.form))
@@ -346,7 +348,7 @@ fn weigh(
                 .filter(|((je, _), _)| *je == e)
                 .min_by(|a, b| a.1.2.total_cmp(&b.1.2));
             let (choice, all) = best.map_or((0, (current.all, current.form, f64::MAX)), |b| {
-                (b.0.1, b.1.clone())
+                (b.0.1, *b.1)
             });
             Weighed {
                 effect: e,
@@ -508,7 +510,7 @@ fn diebold_mariano(d: &[Vec<f64>], lags: usize) -> f64 {
             * (1..=lags)
                 .map(|l| (1.0 - l as f64 / (lags + 1) as f64) * autocov(l))
                 .sum::<f64>();
-    if !(var > 0.0) {
+    if var.is_nan() || var <= 0.0 {
         return if mean > 0.0 { 0.0 } else { 1.0 };
     }
     let z = mean / (var / n as f64).sqrt();
