@@ -367,17 +367,10 @@ fn weigh(
         .collect();
     weighed.sort_by(|a, b| a.all.2.total_cmp(&b.all.2));
     for w in weighed.iter_mut().take(th.scored) {
-        // Settled on all the runs before its folds start from it: the
-        // weighing's short search ranks the candidates; a scored one
-        // left short of its optimum would leave part of its own misfit
-        // to the next step's effect (a gain error on T1 settled at 0.82
-        // of the sum of squares removed instead of 0.99, and an air path
-        // was named after it for the rest).
-        let (q0, form, _) = w.all;
-        let q = search_shape(data, None, form, &[q0], 1, CROSS_ITERS);
-        let sse = training_cost(data, &q, form);
-        w.all = (q, form, sse);
-        w.score.in_sample_improvement = 1.0 - sse / base_sse;
+        // (Settling the candidate again here, 150 more iterations from
+        // its weighing fit, changed no outcome on the twelve units of
+        // docs/diagnosis.md and took a fifth of the layer's time.)
+        let (q, form, _) = w.all;
         let folds = on_two_threads(&(0..FOLDS).collect::<Vec<_>>(), |&k| {
             warm_shape(data, Some(k), form, &q)
         });
