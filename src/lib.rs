@@ -34,13 +34,13 @@ pub mod coeffs;
 /// The study's compensation models as data (in `gyrobench-analysis`).
 pub use gyrobench_analysis::compensation;
 /// TOML loading and checking (in `gyrobench-twin`, `crates/twin`).
-pub use gyrobench_twin::config;
+pub use gyrobench_model::config;
 pub mod diagnose;
 pub mod driver;
 pub mod fsutil;
 /// Frames, orientation, Earth rate, the table's geometry (in
 /// `gyrobench-twin`).
-pub use gyrobench_twin::geometry;
+pub use gyrobench_model::geometry;
 pub mod procedure;
 /// The wire protocols, sans-IO: the `gyrobench-protocol` crate
 /// (`crates/protocol`), which drivers and simulators share.

@@ -23,7 +23,7 @@ use nalgebra::Vector3;
 
 /// The study's procedures the diagnosis repeats as a deciding run, as
 /// shipped (kept in `gyrobench-twin` so the diagnosis crate has them).
-pub use gyrobench_twin::procedures::{
+pub use gyrobench_model::procedures::{
     ORIENTATION_NORTH_TOML, ORIENTATION_TOML, SEPARATING_TOML, THERMAL_CYCLE_NORTH_TOML,
     THERMAL_CYCLE_TOML,
 };

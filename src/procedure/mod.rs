@@ -1218,7 +1218,7 @@ impl Validator<'_> {
 
 /// Whether `key` is the step key of the record of a `rate` step (in
 /// `gyrobench-twin`, which the diagnosis reads it from).
-pub use gyrobench_twin::procedures::is_rate_record_key;
+pub use gyrobench_model::procedures::is_rate_record_key;
 
 /// What a label or measurement name must be: it is shown in reports,
 /// stored in the results store and written in logs.

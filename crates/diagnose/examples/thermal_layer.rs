@@ -17,7 +17,7 @@ use std::time::Instant;
 use gyrobench_analysis::series::Interval;
 use gyrobench_diagnose::data::{RunData, Sample};
 use gyrobench_diagnose::thermal;
-use gyrobench_twin::geometry::Orientation;
+use gyrobench_model::geometry::Orientation;
 use gyrobench_twin::twin::TwinConfig;
 
 /// One interchange CSV file as a run; an error names the file and line.

@@ -35,9 +35,10 @@ pub use thresholds::{THRESHOLDS, Thresholds};
 
 /// The crates below under the paths the engine's code names them by.
 pub(crate) use gyrobench_analysis as analysis;
+pub(crate) use gyrobench_model::geometry;
 /// The study's procedures, whose texts a deciding run repeats.
-pub(crate) use gyrobench_twin::procedures as study;
-pub(crate) use gyrobench_twin::{geometry, twin};
+pub(crate) use gyrobench_model::procedures as study;
+pub(crate) use gyrobench_twin::twin;
 
 /// `layers.thermal` / `layers.rate`.
 #[derive(Debug, Clone, Serialize)]

@@ -1,10 +1,5 @@
-//! gyrobench's digital twin of the RL-16 on its bench, the geometry it
-//! turns in, and the TOML configuration checking every gyrobench file
-//! shares (`config::Checker`: errors that name the file, line, key and the
-//! fix). The modules keep the paths the controller gives them
-//! (`gyrobench::twin`, `gyrobench::geometry`, `gyrobench::config`).
+//! gyrobench's digital twin of the RL-16 on its bench. The geometry it
+//! turns in and the configuration checking it reads its file with are the
+//! vocabulary crate's (`gyrobench-model`).
 
-pub mod config;
-pub mod geometry;
-pub mod procedures;
 pub mod twin;

@@ -8,9 +8,9 @@ use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
-use crate::config::{Checker, ConfigError, Source};
-use crate::geometry::{Site, TableAngles, TableGeometry};
 use gyrobench_analysis::compensation::{Model4, Model4Terms};
+use gyrobench_model::config::{Checker, ConfigError, Source};
+use gyrobench_model::geometry::{Site, TableAngles, TableGeometry};
 
 pub use super::thermal_effects::ThermalEffects;
 

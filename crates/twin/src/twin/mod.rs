@@ -24,9 +24,9 @@ pub use config::TwinConfig;
 pub use table::{Axis, AxisDemand};
 pub use thermal::ChamberLimit;
 
-use crate::geometry::{DPS_TO_DPH, Orientation, TableAngles, gravity_ned_g};
 use effects::{EffectInputs, Effects};
 use gyrobench_analysis::compensation::Model4Inputs;
+use gyrobench_model::geometry::{DPS_TO_DPH, Orientation, TableAngles, gravity_ned_g};
 use noise::Noise;
 use thermal::{ChamberAir, Exchange, ThermalNetwork};
 

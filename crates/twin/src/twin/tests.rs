@@ -2,7 +2,7 @@
 //! and each extra effect acting only where its physics says.
 
 use super::*;
-use crate::geometry::EARTH_RATE_DPH;
+use gyrobench_model::geometry::EARTH_RATE_DPH;
 
 /// A twin whose output is exactly the kinematic rate: no bias, no noise.
 fn quiet() -> TwinConfig {

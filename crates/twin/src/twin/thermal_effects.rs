@@ -6,7 +6,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::config::{Checker, ConfigError};
+use gyrobench_model::config::{Checker, ConfigError};
 
 /// The thermal effects (`docs/twin.md`, "`[thermal.effects]`").
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -147,8 +147,8 @@ impl ThermalEffects {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::config::Source;
     use crate::twin::config::{DEFAULT_TWIN_TOML, TwinConfig};
+    use gyrobench_model::config::Source;
 
     const TABLE: &str = "\n[thermal.effects]\nsensor_lag_s = [0.0, 45.0, 0.0]\n\
         sensor_gain_error = [0.0, 0.0, 0.01]\norientation_coupling = [0.3, 0.0]\n\

@@ -619,6 +619,16 @@ mod tests {
         );
     }
 
+    /// The study's site (the twin's `fixtures/twin/rl16.toml`).
+    fn study_site() -> Site {
+        Site {
+            latitude_deg: 50.45,
+            longitude_deg: 30.52,
+            height_m: 180.0,
+            magnetic_field_ned_ut: [19.5, 2.7, 46.5],
+        }
+    }
+
     #[test]
     fn an_interval_reads_the_mean_of_the_turning_earth_rate_not_its_end() {
         // The axis horizontal north at the equator, the outer axis (east)
@@ -626,7 +636,7 @@ mod tests {
         let g = TableGeometry::north();
         let site = Site {
             latitude_deg: 0.0,
-            ..crate::twin::TwinConfig::default_rl16().site
+            ..study_site()
         };
         let rates = TableAngles {
             outer_deg: 5.0,
@@ -665,7 +675,7 @@ mod tests {
         // spin-up, a reversal within the interval, a turn through +-180 deg,
         // a 20 ms tick.
         let g = TableGeometry::study();
-        let site = crate::twin::TwinConfig::default_rl16().site;
+        let site = study_site();
         let a = |o: f64, i: f64| TableAngles {
             outer_deg: o,
             inner_deg: i,

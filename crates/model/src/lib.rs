@@ -1,0 +1,11 @@
+//! gyrobench's vocabulary, as data: the geometry a bench turns a gyro in
+//! (`geometry`: orientations, the two-axis table, frames), the TOML
+//! configuration checking every gyrobench file shares (`config::Checker`:
+//! errors that name the file, line, key and the fix), and the shipped
+//! procedures' texts (`procedures`, this package's `procedures/`, which the
+//! repository's top-level `procedures/` is). The controller keeps the paths
+//! it always gave them (`gyrobench::geometry`, `gyrobench::config`).
+
+pub mod config;
+pub mod geometry;
+pub mod procedures;

@@ -1,0 +1,22 @@
+//! The study's shipped procedures whose texts the diagnosis and the
+//! self-checks run (this package's `procedures/*.toml`, embedded as
+//! shipped), and how a procedure names a rate step's record.
+
+/// The study's thermal cycle, as shipped.
+pub const THERMAL_CYCLE_TOML: &str = include_str!("../procedures/thermal_cycle.toml");
+/// The study's orientation run, as shipped.
+pub const ORIENTATION_TOML: &str = include_str!("../procedures/orientation.toml");
+/// The study's thermal cycle with the axis horizontal north, for a lab
+/// near the equator ([`crate::geometry::TableGeometry::north`]), as shipped.
+pub const THERMAL_CYCLE_NORTH_TOML: &str = include_str!("../procedures/thermal_cycle_north.toml");
+/// The orientation run with its rolls and tilt about north, as shipped.
+pub const ORIENTATION_NORTH_TOML: &str = include_str!("../procedures/orientation_north.toml");
+/// The run that separates what those two cannot (thermal lag,
+/// scale-factor drift), as shipped.
+pub const SEPARATING_TOML: &str = include_str!("../procedures/separating.toml");
+
+/// Whether `key` is the step key of the record of a `rate` step (taken
+/// while the table turns): `KEY.record`.
+pub fn is_rate_record_key(key: &str) -> bool {
+    key.ends_with(".record")
+}
