@@ -423,49 +423,7 @@ pub struct GyroDevice {
     pub frame: Option<FrameLayout>,
 }
 
-/// `[limits]`: what the bench must never be driven beyond.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct Limits {
-    /// Lowest chamber set point, degC.
-    pub chamber_min_c: f64,
-    /// Highest chamber set point, degC.
-    pub chamber_max_c: f64,
-    /// Fastest chamber ramp, degC/min.
-    pub chamber_max_ramp_c_per_min: f64,
-    /// Outer axis travel, deg (`[min, max]`).
-    pub outer_range_deg: [f64; 2],
-    /// Inner axis travel, deg (`[min, max]`).
-    pub inner_range_deg: [f64; 2],
-    /// Fastest axis rate, deg/s.
-    pub table_max_rate_dps: f64,
-    /// Largest axis acceleration, deg/s^2.
-    pub table_max_acc_dps2: f64,
-    /// Fastest rate a `rate` step may ask of an axis in rate mode, deg/s
-    /// (none: the table has no rate mode, or no slip rings for continuous
-    /// turns, and `rate` steps are refused).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub table_rate_mode_max_dps: Option<f64>,
-    /// Largest acceleration of an axis in rate mode, deg/s^2 (default:
-    /// `table_max_acc_dps2`).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub table_rate_mode_max_acc_dps2: Option<f64>,
-    /// Hottest the gyro (any sensor) may get, degC.
-    pub dut_max_c: f64,
-}
-
-impl Limits {
-    /// Rate-mode rate and acceleration limits, if the table has a rate mode.
-    pub fn rate_mode(&self) -> Option<(f64, f64)> {
-        self.table_rate_mode_max_dps.map(|r| {
-            (
-                r,
-                self.table_rate_mode_max_acc_dps2
-                    .unwrap_or(self.table_max_acc_dps2),
-            )
-        })
-    }
-}
+pub use gyrobench_model::limits::Limits;
 
 /// The largest travel a table limit may name, deg: ten turns either way (a
 /// position-mode axis with slip rings); beyond is a slip of the keyboard.
@@ -480,6 +438,26 @@ pub const HOST_DELAY_S: f64 = 0.05;
 pub const EMBEDDED_BENCH_TOML: &str = include_str!("../fixtures/bench/embedded.toml");
 
 impl BenchConfig {
+    /// What a procedure is checked against on this bench: its limits, its
+    /// table's geometry and settling, its supply's values and limits.
+    pub fn procedure_limits(&self) -> gyrobench_model::limits::BenchLimits {
+        gyrobench_model::limits::BenchLimits {
+            limits: self.limits.clone(),
+            geometry: self.table.geometry.clone(),
+            table_settle_s: self.devices.table.settle_s,
+            supply: self
+                .devices
+                .supply
+                .as_ref()
+                .map(|p| gyrobench_model::limits::SupplyLimits {
+                    volts: p.volts,
+                    limit_a: p.limit_a,
+                    max_volts: p.max_volts(),
+                    max_limit_a: p.max_limit_a(),
+                }),
+        }
+    }
+
     /// The embedded simulated bench, used when no bench file is given.
     pub fn embedded() -> Self {
         // A unit test loads the embedded file, so this cannot fail.

@@ -33,15 +33,19 @@ pub mod clock;
 pub mod coeffs;
 /// The study's compensation models as data (in `gyrobench-analysis`).
 pub use gyrobench_analysis::compensation;
-/// TOML loading and checking (in `gyrobench-twin`, `crates/twin`).
+/// TOML loading and checking (in `gyrobench-model`, `crates/model`).
 pub use gyrobench_model::config;
 pub mod diagnose;
 pub mod driver;
 pub mod fsutil;
 /// Frames, orientation, Earth rate, the table's geometry (in
-/// `gyrobench-twin`).
+/// `gyrobench-model`).
 pub use gyrobench_model::geometry;
-pub mod procedure;
+/// Procedures as typed, validated values: the `gyrobench-model` crate's
+/// (`crates/model`), checked against a bench's [`BenchConfig::procedure_limits`].
+pub use gyrobench_model::procedure;
+#[cfg(test)]
+mod procedure_tests;
 /// The wire protocols, sans-IO: the `gyrobench-protocol` crate
 /// (`crates/protocol`), which drivers and simulators share.
 pub use gyrobench_protocol as protocol;

@@ -223,7 +223,10 @@ pub fn simulate(
     seed: u64,
 ) -> Result<(crate::sequencer::RunResult, Vec<Sample>), StudyError> {
     let bench_cfg = bench_of(cfg);
-    let procedure = Procedure::from_source(&Source::from_text(name, text), &bench_cfg)?;
+    let procedure = Procedure::from_source(
+        &Source::from_text(name, text),
+        &bench_cfg.procedure_limits(),
+    )?;
     run_on_twin(&procedure, &bench_cfg, name, cfg, seed)
 }
 
@@ -237,7 +240,10 @@ pub fn simulate_samples(
     seed: u64,
 ) -> Result<Vec<Sample>, StudyError> {
     let bench_cfg = bench_of(cfg);
-    let mut procedure = Procedure::from_source(&Source::from_text(name, text), &bench_cfg)?;
+    let mut procedure = Procedure::from_source(
+        &Source::from_text(name, text),
+        &bench_cfg.procedure_limits(),
+    )?;
     for steps in [
         &mut procedure.setup,
         &mut procedure.main,

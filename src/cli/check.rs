@@ -34,8 +34,9 @@ pub fn load_bench(path: Option<&PathBuf>) -> Result<BenchConfig> {
 
 pub fn run(args: CheckArgs) -> Result<Outcome> {
     let bench = load_bench(args.bench.as_ref())?;
-    let p = Procedure::load(&args.procedure, &bench).context("checking the procedure")?;
-    outf!("{}", render_plan(&p, &estimate(&p, &bench)))?;
+    let limits = bench.procedure_limits();
+    let p = Procedure::load(&args.procedure, &limits).context("checking the procedure")?;
+    outf!("{}", render_plan(&p, &estimate(&p, &limits)))?;
     Ok(Outcome::Success)
 }
 

@@ -402,8 +402,8 @@ fn fresh(args: &RunArgs, procedure_path: &std::path::Path, pacing: Pacing) -> Re
     if let Some(path) = &args.twin {
         place_twin(&mut bench_cfg, args.bench.is_some(), &twin, path)?;
     }
-    let procedure =
-        Procedure::load(procedure_path, &bench_cfg).context("checking the procedure")?;
+    let procedure = Procedure::load(procedure_path, &bench_cfg.procedure_limits())
+        .context("checking the procedure")?;
     let faults: Vec<(f64, Fault)> = args
         .inject
         .iter()

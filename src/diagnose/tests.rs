@@ -25,7 +25,7 @@ fn the_deciding_runs_repeated_positions_are_procedures_the_table_takes() {
         let text = super::repeated_positions(toml, name, 2);
         let mut bench = BenchConfig::embedded();
         bench.table.geometry = geometry;
-        let p = Procedure::from_source(&Source::from_text(name, &text), &bench);
+        let p = Procedure::from_source(&Source::from_text(name, &text), &bench.procedure_limits());
         assert!(p.is_ok(), "{name}: {p:?}");
     }
 }

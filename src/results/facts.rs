@@ -76,7 +76,12 @@ pub fn begun(meta: &RunMeta, key: &str, run: &str) -> Vec<Column> {
     // The rule the run was judged by, from the procedure it logged; none
     // for a log written before decision rules (judged by its limits).
     let rule = (meta.format >= crate::runlog::schema::FORMAT_JUDGED)
-        .then(|| crate::procedure::raw_rule(&meta.procedure_toml, meta.format))
+        .then(|| {
+            crate::procedure::raw_rule(
+                &meta.procedure_toml,
+                meta.format < crate::runlog::schema::FORMAT_JUDGED,
+            )
+        })
         .flatten();
     vec![
         ("id", key.into()),

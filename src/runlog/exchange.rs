@@ -356,11 +356,13 @@ fn judged_by(
     let Some((side_path, c)) = side else {
         let parts = parts::parts(rows, true);
         let text = parts::procedure_text(name, dut_type, &parts, rows);
-        let procedure =
-            Procedure::from_source(&Source::from_text("imported procedure", &text), bench)
-                .map_err(|e| {
-                    ImportError::Other(format!("{name}: the procedure made from its steps: {e}"))
-                })?;
+        let procedure = Procedure::from_source(
+            &Source::from_text("imported procedure", &text),
+            &bench.procedure_limits(),
+        )
+        .map_err(|e| {
+            ImportError::Other(format!("{name}: the procedure made from its steps: {e}"))
+        })?;
         let at = (0..parts.len())
             .map(|i| Some(procedure.setup.len() + i))
             .collect();
@@ -381,7 +383,7 @@ fn judged_by(
     };
     let procedure = Procedure::from_source(
         &Source::from_text(&format!("procedure.text in {side_name}"), &c.procedure.text),
-        bench,
+        &bench.procedure_limits(),
     )
     .map_err(|e| {
         mismatch(format!(

@@ -231,8 +231,11 @@ pub fn logged(meta: &RunMeta) -> Result<Logged, String> {
     } else {
         format!("{} (in the log)", meta.procedure_path)
     };
-    let procedure = Procedure::from_source(&Source::from_text(&name, &meta.procedure_toml), &bench)
-        .map_err(|e| format!("the logged procedure: {e}"))?;
+    let procedure = Procedure::from_source(
+        &Source::from_text(&name, &meta.procedure_toml),
+        &bench.procedure_limits(),
+    )
+    .map_err(|e| format!("the logged procedure: {e}"))?;
     let coeffs = meta
         .coeffs_toml
         .as_deref()

@@ -365,7 +365,7 @@ mod tests {
                 "acceptance.toml",
                 include_str!("../../procedures/acceptance.toml"),
             ),
-            &BenchConfig::embedded(),
+            &BenchConfig::embedded().procedure_limits(),
         )
         .expect("loads")
     }
@@ -453,7 +453,7 @@ mod tests {
                 "bias_repeatability.toml",
                 include_str!("../../procedures/bias_repeatability.toml"),
             ),
-            &BenchConfig::embedded(),
+            &BenchConfig::embedded().procedure_limits(),
         )
         .expect("loads")
     }

@@ -1577,5 +1577,5 @@ fn write_report_as(
 
 /// Device time the procedure needs at least, s (for progress bars).
 pub fn estimated_s(plan: &Plan) -> f64 {
-    min_total_s(&plan.procedure, &plan.bench_cfg)
+    min_total_s(&plan.procedure, &plan.bench_cfg.procedure_limits())
 }

@@ -248,13 +248,14 @@ impl Station {
     }
 
     fn check_offer(&self, file: String) -> (Offer, Option<Procedure>) {
-        match Procedure::load(&self.cfg.procedures.join(&file), &self.cfg.bench) {
+        let limits = self.cfg.bench.procedure_limits();
+        match Procedure::load(&self.cfg.procedures.join(&file), &limits) {
             Ok(proc_) => (
                 Offer {
                     file,
                     name: proc_.meta.name.clone(),
                     description: proc_.meta.description.clone(),
-                    device_s: Some(min_total_s(&proc_, &self.cfg.bench)),
+                    device_s: Some(min_total_s(&proc_, &limits)),
                     prompts: proc_
                         .steps()
                         .filter_map(|s| match &s.kind {

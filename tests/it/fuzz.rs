@@ -269,9 +269,9 @@ proptest! {
         which in prop::sample::select(vec!["procedures/acceptance.toml", "procedures/smoke.toml"]),
     ) {
         let text = apply(&text_of(which), &m);
-        match Procedure::from_source(&Source::from_text("fuzz.toml", &text), &BenchConfig::embedded()) {
+        match Procedure::from_source(&Source::from_text("fuzz.toml", &text), &BenchConfig::embedded().procedure_limits()) {
             Ok(p) => {
-                let _ = gyrobench::procedure::estimate::estimate(&p, &BenchConfig::embedded());
+                let _ = gyrobench::procedure::estimate::estimate(&p, &BenchConfig::embedded().procedure_limits());
             }
             Err(e) => prop_assert!(e.line().is_some(), "{e}"),
         }
@@ -295,7 +295,7 @@ proptest! {
                 while d.next_event().is_some() {}
                 let _ = Procedure::from_source(
                     &Source::from_text("smoke.toml", &text_of("procedures/smoke.toml")),
-                    &b,
+                    &b.procedure_limits(),
                 );
             }
             Err(e) => prop_assert!(e.line().is_some(), "{e}"),

@@ -193,7 +193,7 @@ impl Sweep {
         let text = std::fs::read_to_string(&self.procedure).expect("procedure");
         let procedure = Procedure::from_source(
             &Source::from_text(s(&self.procedure), &text),
-            &BenchConfig::embedded(),
+            &BenchConfig::embedded().procedure_limits(),
         )
         .expect("the procedure loads");
         // Reference runs: the figures' spread, and where each step lies.

@@ -127,28 +127,9 @@ impl PowerOnSource {
     }
 }
 
-/// Which group a step belongs to.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Group {
-    /// Brings the bench to its starting state.
-    Setup,
-    /// The measurement.
-    Main,
-    /// Always runs once setup has started.
-    Cleanup,
-}
-
-impl Group {
-    /// Its name in a step's dotted key (`setup.0`, `main.3`).
-    pub fn key(self) -> &'static str {
-        match self {
-            Self::Setup => "setup",
-            Self::Main => "main",
-            Self::Cleanup => "cleanup",
-        }
-    }
-}
+/// Which group a step belongs to (the procedure's vocabulary, logged in
+/// every [`StepEvent`]).
+pub use gyrobench_model::procedure::Group;
 
 /// Topics of a run log.
 pub mod topics {

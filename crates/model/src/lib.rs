@@ -8,4 +8,6 @@
 
 pub mod config;
 pub mod geometry;
+pub mod limits;
+pub mod procedure;
 pub mod procedures;

@@ -14,9 +14,9 @@ use std::path::Path;
 
 use serde::Serialize;
 
-use crate::bench::BenchConfig;
 use crate::config::{Checker, ConfigError, Source};
 use crate::geometry::{Orientation, TableAngles, TableGeometry};
+use crate::limits::BenchLimits;
 use raw::{RawPosition, RawProcedure, RawStep};
 
 /// Longest a single step may last (a wait, a record, a soak's timeout), s:
@@ -28,7 +28,28 @@ pub const MAX_STEP_S: f64 = 7.0 * 86_400.0;
 pub const MIN_RAMP_C_PER_MIN: f64 = 0.01;
 
 /// Which group a step belongs to (the log's word for it).
-pub use gyrobench_log::schema::Group;
+/// Which group a step belongs to.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Group {
+    /// Brings the bench to its starting state.
+    Setup,
+    /// The measurement.
+    Main,
+    /// Always runs once setup has started.
+    Cleanup,
+}
+
+impl Group {
+    /// Its name in a step's dotted key (`setup.0`, `main.3`).
+    pub fn key(self) -> &'static str {
+        match self {
+            Self::Setup => "setup",
+            Self::Main => "main",
+            Self::Cleanup => "cleanup",
+        }
+    }
+}
 
 /// Figures a `measure` step can compute (`docs/figures.md`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
@@ -416,17 +437,17 @@ pub struct Procedure {
 #[derive(Debug, Clone)]
 pub struct Context<'a> {
     /// Bench limits and geometry.
-    pub bench: &'a BenchConfig,
+    pub bench: &'a BenchLimits,
 }
 
 impl Procedure {
     /// Read and validate a procedure file against a bench.
-    pub fn load(path: &Path, bench: &BenchConfig) -> Result<Self, ConfigError> {
+    pub fn load(path: &Path, bench: &BenchLimits) -> Result<Self, ConfigError> {
         Self::from_source(&Source::read(path)?, bench)
     }
 
     /// Parse and validate procedure text against a bench.
-    pub fn from_source(src: &Source, bench: &BenchConfig) -> Result<Self, ConfigError> {
+    pub fn from_source(src: &Source, bench: &BenchLimits) -> Result<Self, ConfigError> {
         let raw: RawProcedure = src.parse()?;
         let mut v = Validator {
             src,
@@ -495,7 +516,7 @@ impl Procedure {
 struct Validator<'a> {
     src: &'a Source,
     c: Checker<'a>,
-    bench: &'a BenchConfig,
+    bench: &'a BenchLimits,
     records: Labels,
     measures: HashSet<String>,
 }
@@ -651,7 +672,7 @@ impl Validator<'_> {
         // A bench without a supply: the operator switches the unit by
         // hand and confirms it (docs/procedures.md, "Power-on"); the
         // voltage is theirs to set (0 here).
-        let (volts, limit_a) = match &self.bench.devices.supply {
+        let (volts, limit_a) = match &self.bench.supply {
             None => {
                 c.ensure(
                     volts.is_none() && limit_a.is_none(),
@@ -664,21 +685,21 @@ impl Validator<'_> {
                 let volts = volts.unwrap_or(p.volts);
                 let limit_a = limit_a.unwrap_or(p.limit_a);
                 c.ensure(
-                    volts.is_finite() && volts > 0.0 && volts <= p.max_volts(),
+                    volts.is_finite() && volts > 0.0 && volts <= p.max_volts,
                     &k("volts"),
                     &format!(
                         "{} V is beyond the bench's supply limit 0..{} V (devices.supply.max_volts)",
                         crate::config::num(volts),
-                        p.max_volts()
+                        p.max_volts
                     ),
                 )?;
                 c.ensure(
-                    limit_a.is_finite() && limit_a > 0.0 && limit_a <= p.max_limit_a(),
+                    limit_a.is_finite() && limit_a > 0.0 && limit_a <= p.max_limit_a,
                     &k("limit_a"),
                     &format!(
                         "{} A is beyond the bench's supply limit 0..{} A (devices.supply.max_limit_a)",
                         crate::config::num(limit_a),
-                        p.max_limit_a()
+                        p.max_limit_a
                     ),
                 )?;
                 (volts, limit_a)
@@ -1176,7 +1197,7 @@ impl Validator<'_> {
         orientation: Option<&Orientation>,
         table: Option<&TableAngles>,
     ) -> Result<(TableAngles, Orientation), ConfigError> {
-        let g: &TableGeometry = &self.bench.table.geometry;
+        let g: &TableGeometry = &self.bench.geometry;
         let l = &self.bench.limits;
         // With the axis vertical, yaw and roll turn about the same line and
         // the Euler split of a pose is arbitrary: keep the one asked for.
@@ -1218,7 +1239,7 @@ impl Validator<'_> {
 
 /// Whether `key` is the step key of the record of a `rate` step (in
 /// `gyrobench-twin`, which the diagnosis reads it from).
-pub use gyrobench_model::procedures::is_rate_record_key;
+pub use crate::procedures::is_rate_record_key;
 
 /// What a label or measurement name must be: it is shown in reports,
 /// stored in the results store and written in logs.
@@ -1235,11 +1256,11 @@ pub fn raw_name(text: &str) -> Option<String> {
     t.get("procedure")?.get("name")?.as_str().map(str::to_owned)
 }
 
-/// The decision rule a run of the procedure text `text` was judged by, in
-/// a log of `format`: the rule it names, else the default (guarded), or
-/// simple acceptance for a log written before decision rules (none: the
-/// text is not a procedure, or names a rule this build does not know).
-pub fn raw_rule(text: &str, format: u32) -> Option<DecisionRule> {
+/// The decision rule a run of the procedure text `text` was judged by:
+/// the rule it names, else the default (guarded), or simple acceptance
+/// for a run `before_rules` (its log written before decision rules) (none:
+/// the text is not a procedure, or names a rule this build does not know).
+pub fn raw_rule(text: &str, before_rules: bool) -> Option<DecisionRule> {
     let t: toml::Table = toml::from_str(text).ok()?;
     let p = t.get("procedure")?;
     let band = p
@@ -1247,7 +1268,7 @@ pub fn raw_rule(text: &str, format: u32) -> Option<DecisionRule> {
         .and_then(|v| v.as_float().or_else(|| v.as_integer().map(|i| i as f64)));
     match p.get("decision_rule") {
         Some(rule) => DecisionRule::parse(rule.as_str()?, band).ok(),
-        None if format < crate::runlog::schema::FORMAT_JUDGED => Some(DecisionRule::Simple),
+        None if before_rules => Some(DecisionRule::Simple),
         None => Some(DecisionRule::default()),
     }
 }
@@ -1274,6 +1295,3 @@ fn fit_range(a: TableAngles, outer: [f64; 2], inner: [f64; 2]) -> TableAngles {
         inner_deg: fit(a.inner_deg, inner),
     }
 }
-
-#[cfg(test)]
-mod tests;

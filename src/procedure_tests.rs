@@ -1,10 +1,21 @@
-use super::*;
+//! The procedures checked against the shipped benches' limits (the
+//! procedure types are `gyrobench-model`'s; the benches are the
+//! controller's files).
+
+use crate::bench::BenchConfig;
+use crate::config::{ConfigError, Source};
+use crate::geometry::{Orientation, TableAngles};
+use crate::procedure::estimate::{min_total_s, travel_s};
+use crate::procedure::*;
 
 fn load(name: &str, text: &str) -> Result<Procedure, ConfigError> {
-    Procedure::from_source(&Source::from_text(name, text), &BenchConfig::embedded())
+    Procedure::from_source(
+        &Source::from_text(name, text),
+        &BenchConfig::embedded().procedure_limits(),
+    )
 }
 
-const SMOKE: &str = include_str!("../../procedures/smoke.toml");
+const SMOKE: &str = include_str!("../procedures/smoke.toml");
 
 #[test]
 fn shipped_procedures_validate_against_the_embedded_bench() {
@@ -12,15 +23,15 @@ fn shipped_procedures_validate_against_the_embedded_bench() {
         ("smoke.toml", SMOKE),
         (
             "thermal_cycle.toml",
-            include_str!("../../procedures/thermal_cycle.toml"),
+            include_str!("../procedures/thermal_cycle.toml"),
         ),
         (
             "orientation.toml",
-            include_str!("../../procedures/orientation.toml"),
+            include_str!("../procedures/orientation.toml"),
         ),
         (
             "acceptance.toml",
-            include_str!("../../procedures/acceptance.toml"),
+            include_str!("../procedures/acceptance.toml"),
         ),
     ] {
         let p = load(name, text).unwrap_or_else(|e| panic!("{name}: {e}"));
@@ -32,7 +43,7 @@ fn shipped_procedures_validate_against_the_embedded_bench() {
 fn the_north_procedures_run_on_a_table_turned_north_and_say_where_the_study_table_falls_short() {
     let north = BenchConfig::from_source(&Source::from_text(
         "embedded-north.toml",
-        include_str!("../../fixtures/bench/embedded-north.toml"),
+        include_str!("../fixtures/bench/embedded-north.toml"),
     ))
     .expect("the north bench");
     assert_eq!(
@@ -49,7 +60,7 @@ fn the_north_procedures_run_on_a_table_turned_north_and_say_where_the_study_tabl
             crate::study::ORIENTATION_NORTH_TOML,
         ),
     ] {
-        let p = Procedure::from_source(&Source::from_text(name, text), &north)
+        let p = Procedure::from_source(&Source::from_text(name, text), &north.procedure_limits())
             .unwrap_or_else(|e| panic!("{name}: {e}"));
         assert!(!p.main.is_empty(), "{name}");
     }
@@ -70,7 +81,7 @@ fn the_north_procedures_run_on_a_table_turned_north_and_say_where_the_study_tabl
 fn orientation_run_reaches_the_nine_positions_of_the_study() {
     let p = load(
         "orientation.toml",
-        include_str!("../../procedures/orientation.toml"),
+        include_str!("../procedures/orientation.toml"),
     )
     .expect("valid");
     let moves: Vec<(TableAngles, Orientation)> = p
@@ -290,4 +301,25 @@ proptest::proptest! {
             proptest::prop_assert!(e.line().is_some(), "{}", e);
         }
     }
+}
+
+#[test]
+fn moves_follow_the_trapezoid_and_records_their_duration() {
+    // 90 deg at 20 deg/s, 10 deg/s^2: 2 s + 2.5 s + 2 s = 6.5 s.
+    assert!((travel_s(90.0, 20.0, 10.0) - 6.5).abs() < 1e-12);
+    // Short moves never reach full rate: 2 sqrt(d/a).
+    assert!((travel_s(10.0, 20.0, 10.0) - 2.0).abs() < 1e-12);
+    let bench = BenchConfig::embedded();
+    let p = Procedure::from_source(
+        &Source::from_text("t.toml", include_str!("../procedures/thermal_cycle.toml")),
+        &bench.procedure_limits(),
+    )
+    .expect("valid");
+    let total = min_total_s(&p, &bench.procedure_limits());
+    // 6.5 h of records plus the first move (90 deg outer from 0) and
+    // settling, and the switch-on's second.
+    assert!(
+        (total - (23_400.0 + 6.5 + bench.devices.table.settle_s + 1.0)).abs() < 1e-6,
+        "{total}"
+    );
 }

@@ -1,8 +1,8 @@
 //! Device time a procedure will take, step by step, before anything moves.
 
 use super::{Procedure, Step, StepKind};
-use crate::bench::BenchConfig;
 use crate::geometry::TableAngles;
+use crate::limits::BenchLimits;
 
 /// Room temperature the chamber is assumed to start from, degC (ours).
 pub const START_C: f64 = 20.0;
@@ -18,7 +18,7 @@ pub struct Estimate {
 }
 
 /// Time for an axis to travel `d` deg from rest to rest, s.
-fn travel_s(d: f64, rate: f64, acc: f64) -> f64 {
+pub fn travel_s(d: f64, rate: f64, acc: f64) -> f64 {
     let d = d.abs();
     if d * acc >= rate * rate {
         d / rate + rate / acc
@@ -29,15 +29,15 @@ fn travel_s(d: f64, rate: f64, acc: f64) -> f64 {
 
 /// Device time the whole procedure needs at least, s (progress bars, the
 /// station's offer).
-pub fn min_total_s(p: &Procedure, bench: &BenchConfig) -> f64 {
+pub fn min_total_s(p: &Procedure, bench: &BenchLimits) -> f64 {
     estimate(p, bench).iter().map(|(_, e)| e.min_s).sum()
 }
 
 /// Per-step estimates in run order (setup, main, cleanup). The table is
 /// assumed to start at (0, 0) and the chamber at [`START_C`].
-pub fn estimate<'p>(p: &'p Procedure, bench: &BenchConfig) -> Vec<(&'p Step, Estimate)> {
+pub fn estimate<'p>(p: &'p Procedure, bench: &BenchLimits) -> Vec<(&'p Step, Estimate)> {
     let l = &bench.limits;
-    let settle = bench.devices.table.settle_s;
+    let settle = bench.table_settle_s;
     let mut table = TableAngles::default();
     let mut chamber_c = START_C;
     let mut ramp_left_s = 0.0_f64;
@@ -100,34 +100,4 @@ pub fn estimate<'p>(p: &'p Procedure, bench: &BenchConfig) -> Vec<(&'p Step, Est
         ));
     }
     out
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::config::Source;
-
-    #[test]
-    fn moves_follow_the_trapezoid_and_records_their_duration() {
-        // 90 deg at 20 deg/s, 10 deg/s^2: 2 s + 2.5 s + 2 s = 6.5 s.
-        assert!((travel_s(90.0, 20.0, 10.0) - 6.5).abs() < 1e-12);
-        // Short moves never reach full rate: 2 sqrt(d/a).
-        assert!((travel_s(10.0, 20.0, 10.0) - 2.0).abs() < 1e-12);
-        let bench = BenchConfig::embedded();
-        let p = Procedure::from_source(
-            &Source::from_text(
-                "t.toml",
-                include_str!("../../procedures/thermal_cycle.toml"),
-            ),
-            &bench,
-        )
-        .expect("valid");
-        let total = min_total_s(&p, &bench);
-        // 6.5 h of records plus the first move (90 deg outer from 0) and
-        // settling, and the switch-on's second.
-        assert!(
-            (total - (23_400.0 + 6.5 + bench.devices.table.settle_s + 1.0)).abs() < 1e-6,
-            "{total}"
-        );
-    }
 }
