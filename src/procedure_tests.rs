@@ -323,3 +323,43 @@ fn moves_follow_the_trapezoid_and_records_their_duration() {
         "{total}"
     );
 }
+
+/// Every shipped procedure written from its raw value validates to the
+/// same procedure on the bench it is for (the north ones on the table
+/// turned north), step for step but for the lines the steps sit on.
+#[test]
+fn a_shipped_procedure_written_from_its_value_is_the_same_procedure() {
+    let north = BenchConfig::from_source(&Source::from_text(
+        "embedded-north.toml",
+        include_str!("../fixtures/bench/embedded-north.toml"),
+    ))
+    .expect("the north bench")
+    .procedure_limits();
+    let embedded = BenchConfig::embedded().procedure_limits();
+    for (name, text) in gyrobench_model::procedures::SHIPPED {
+        let bench = if name.contains("_north") {
+            &north
+        } else {
+            &embedded
+        };
+        let validated = |t: &str| {
+            Procedure::from_source(&Source::from_text(name, t), bench)
+                .unwrap_or_else(|e| panic!("{name}: {e}"))
+        };
+        let raw = raw::RawProcedure::from_toml(text).expect("a procedure");
+        let written = raw.to_toml(&[]).expect("written");
+        // Every step the same but for the line it sits on in its file.
+        let json = |p: &Procedure| {
+            let mut v = serde_json::to_value(p).expect("json");
+            for group in ["setup", "main", "cleanup"] {
+                if let Some(steps) = v[group].as_array_mut() {
+                    for s in steps {
+                        s.as_object_mut().map(|o| o.remove("line"));
+                    }
+                }
+            }
+            v
+        };
+        assert_eq!(json(&validated(&written)), json(&validated(text)), "{name}");
+    }
+}

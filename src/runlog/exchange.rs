@@ -355,7 +355,11 @@ fn judged_by(
 ) -> Result<Judged, ImportError> {
     let Some((side_path, c)) = side else {
         let parts = parts::parts(rows, true);
-        let text = parts::procedure_text(name, dut_type, &parts, rows);
+        let text = parts::procedure_text(name, dut_type, &parts, rows).map_err(|e| {
+            ImportError::Other(format!(
+                "{name}: writing the procedure made from its steps: {e}"
+            ))
+        })?;
         let procedure = Procedure::from_source(
             &Source::from_text("imported procedure", &text),
             &bench.procedure_limits(),

@@ -1893,39 +1893,37 @@ pub fn axis_horizontal_north(runs: &[RunData]) -> bool {
     north > east
 }
 
-/// An orientation procedure (`name`) with its positions taken `passes`
-/// times (the labels of later passes suffixed `-p2`, `-p3`, ...).
+/// An orientation procedure (`name`'s text `toml`) with its positions
+/// taken `passes` times (the labels of later passes suffixed `-p2`, `-p3`,
+/// ...), named `deciding-run`: built as the procedure's value and written
+/// as a procedure file. (A text that is no procedure is returned as it
+/// is: the shipped ones are read by a test.)
 pub fn repeated_positions(toml: &str, name: &str, passes: usize) -> String {
-    let Some(start) = toml.find("positions = [\n") else {
+    use gyrobench_model::procedure::raw::{RawProcedure, RawStep};
+    let Ok(mut p) = RawProcedure::from_toml(toml) else {
         return toml.to_owned();
     };
-    let body_start = start + "positions = [\n".len();
-    let Some(len) = toml[body_start..].find("\n]") else {
-        return toml.to_owned();
-    };
-    let body = &toml[body_start..body_start + len];
-    let mut out = String::new();
-    for pass in 1..=passes {
-        for line in body.lines() {
-            if pass == 1 {
-                out.push_str(line);
-            } else {
-                out.push_str(&line.replacen(
-                    "\", orientation",
-                    &format!("-p{pass}\", orientation"),
-                    1,
-                ));
-            }
-            out.push('\n');
+    for step in &mut p.main {
+        if let RawStep::Repeat { positions, .. } = step {
+            let once = std::mem::take(positions);
+            *positions = (1..=passes)
+                .flat_map(|pass| {
+                    once.iter().map(move |pos| {
+                        let mut pos = pos.clone();
+                        if pass > 1 {
+                            pos.label = format!("{}-p{pass}", pos.label);
+                        }
+                        pos
+                    })
+                })
+                .collect();
         }
     }
-    format!(
-        "# The deciding run: the nine positions {passes} time(s) after one warm-up.\n{}{}{}",
-        &toml[..body_start],
-        out.trim_end_matches('\n'),
-        &toml[body_start + len..]
-    )
-    .replace(&format!("name = \"{name}\""), "name = \"deciding-run\"")
+    p.procedure.name = "deciding-run".to_owned();
+    let header = format!(
+        "The deciding run: the nine positions of procedures/{name}.toml {passes} time(s) after one warm-up."
+    );
+    p.to_toml(&[&header]).unwrap_or_else(|_| toml.to_owned())
 }
 
 /// The twin with the accepted effects enabled and fitted.

@@ -15,6 +15,41 @@ pub const ORIENTATION_NORTH_TOML: &str = include_str!("../procedures/orientation
 /// scale-factor drift), as shipped.
 pub const SEPARATING_TOML: &str = include_str!("../procedures/separating.toml");
 
+/// Every procedure the package ships, by file name (`procedures/`).
+pub const SHIPPED: [(&str, &str); 13] = [
+    (
+        "acceptance.toml",
+        include_str!("../procedures/acceptance.toml"),
+    ),
+    (
+        "bias_repeatability.toml",
+        include_str!("../procedures/bias_repeatability.toml"),
+    ),
+    (
+        "dead_band.toml",
+        include_str!("../procedures/dead_band.toml"),
+    ),
+    (
+        "misalignment.toml",
+        include_str!("../procedures/misalignment.toml"),
+    ),
+    ("noise.toml", include_str!("../procedures/noise.toml")),
+    ("orientation.toml", ORIENTATION_TOML),
+    ("orientation_north.toml", ORIENTATION_NORTH_TOML),
+    (
+        "rate_transfer.toml",
+        include_str!("../procedures/rate_transfer.toml"),
+    ),
+    (
+        "rate_transfer_temperatures.toml",
+        include_str!("../procedures/rate_transfer_temperatures.toml"),
+    ),
+    ("separating.toml", SEPARATING_TOML),
+    ("smoke.toml", include_str!("../procedures/smoke.toml")),
+    ("thermal_cycle.toml", THERMAL_CYCLE_TOML),
+    ("thermal_cycle_north.toml", THERMAL_CYCLE_NORTH_TOML),
+];
+
 /// Whether `key` is the step key of the record of a `rate` step (taken
 /// while the table turns): `KEY.record`.
 pub fn is_rate_record_key(key: &str) -> bool {

@@ -18,6 +18,7 @@
 use std::collections::BTreeMap;
 
 use super::super::interchange::Row;
+use crate::procedure::raw::{RawMeta, RawProcedure, RawStep};
 use crate::procedure::{Procedure, Step, StepKind};
 
 /// A stretch of rows with one step label, all recorded or none.
@@ -146,48 +147,41 @@ pub(crate) fn parts(rows: &[Row], unique: bool) -> Vec<Part> {
     out
 }
 
-fn toml_str(s: &str) -> String {
-    toml::Value::String(s.to_owned()).to_string()
-}
-
 /// The procedure an imported run without a sidecar is judged by: a step
 /// per part (a `record`, or a `wait` for rows outside records), then the
-/// acceptance's figures where the records allow them.
-pub(crate) fn procedure_text(name: &str, dut_type: &str, parts: &[Part], rows: &[Row]) -> String {
-    let mut t = format!(
-        "# Made by gyrobench import from {name}: one record per stretch of recorded rows with\n# one step label, a wait for rows outside records, judged with the limits of\n# procedures/acceptance.toml.\n\n[procedure]\nname = {}\ndescription = {}\ndut_type = {}\nspec = \"model-4 compensated drift 0.05 deg/h (p-p of 600 s averages); bias stability 0.05 deg/h (1-sigma of 100 s averages)\"\n",
-        toml_str("imported"),
-        toml_str(&format!("run imported from {name}")),
-        toml_str(dut_type),
-    );
-    let measure = |t: &mut String,
-                   name: &str,
-                   metric: &str,
-                   records: &[&str],
-                   avg: Option<f64>,
-                   lim: &str| {
-        let recs: Vec<String> = records.iter().map(|r| toml_str(r)).collect();
-        t.push_str(&format!(
-            "\n[[main]]\naction = \"measure\"\nname = {}\nmetric = \"{metric}\"\nrecords = [{}]\n{}{lim}\nunit = \"deg/h\"\n",
-            toml_str(name),
-            recs.join(", "),
-            avg.map_or(String::new(), |a| format!("averaging_s = {a:.1}\n"))
-        ));
-    };
-    for p in parts {
-        if p.recorded {
-            t.push_str(&format!(
-                "\n[[main]]\naction = \"record\"\nlabel = {}\nduration_s = {:.1}\n",
-                toml_str(&p.label),
-                (p.b - p.a) as f64
-            ));
-        } else {
-            t.push_str(&format!(
-                "\n[[main]]\naction = \"wait\"\nduration_s = {:.1}\n",
-                (p.b - p.a) as f64
-            ));
-        }
-    }
+/// acceptance's figures where the records allow them; built as the
+/// procedure's value and written as a procedure file.
+pub(crate) fn procedure_text(
+    name: &str,
+    dut_type: &str,
+    parts: &[Part],
+    rows: &[Row],
+) -> Result<String, toml::ser::Error> {
+    let mut main: Vec<RawStep> = parts
+        .iter()
+        .map(|p| {
+            let duration_s = (p.b - p.a) as f64;
+            if p.recorded {
+                RawStep::Record {
+                    label: p.label.clone(),
+                    duration_s,
+                }
+            } else {
+                RawStep::Wait { duration_s }
+            }
+        })
+        .collect();
+    let measure =
+        |name: &str, metric: &str, records: &[&str], averaging_s, high| RawStep::Measure {
+            name: name.to_owned(),
+            metric: metric.to_owned(),
+            records: records.iter().map(|r| (*r).to_owned()).collect(),
+            averaging_s,
+            band: None,
+            low: None,
+            high,
+            unit: "deg/h".to_owned(),
+        };
     let records: Vec<&Part> = parts.iter().filter(|p| p.recorded).collect();
     let all: Vec<&str> = records.iter().map(|p| p.label.as_str()).collect();
     let recorded_rows: usize = records.iter().map(|p| p.b - p.a).sum();
@@ -195,42 +189,38 @@ pub(crate) fn procedure_text(name: &str, dut_type: &str, parts: &[Part], rows: &
         && rows[first.a].time_s < 60.0
         && rows[first.b - 1].time_s >= 1800.0
     {
-        measure(
-            &mut t,
+        main.push(measure(
             "self_heating_dph",
             "self_heating",
             &[&first.label],
             None,
-            "high = 1.0",
-        );
+            Some(1.0),
+        ));
     }
     if recorded_rows >= 1200 {
-        measure(
-            &mut t,
+        main.push(measure(
             "raw_drift_pp_dph",
             "drift_pp",
             &all,
             Some(600.0),
-            "high = 1.0",
-        );
-        measure(
-            &mut t,
+            Some(1.0),
+        ));
+        main.push(measure(
             "compensated_drift_pp_dph",
             "compensated_drift_pp",
             &all,
             Some(600.0),
-            "high = 0.05",
-        );
+            Some(0.05),
+        ));
         // The fit's own residual beside the judged, held-out figure:
         // informative, as the shipped thermal procedures show it.
-        measure(
-            &mut t,
+        main.push(measure(
             "compensated_drift_fit_residual_pp_dph",
             "compensated_drift_fit_residual_pp",
             &all,
             Some(600.0),
-            "",
-        );
+            None,
+        ));
     }
     // Bias stability where it means something: records after the warm-up
     // with the chamber steady (within 1 degC), as the acceptance's positions.
@@ -239,17 +229,33 @@ pub(crate) fn procedure_text(name: &str, dut_type: &str, parts: &[Part], rows: &
         let spread =
             air.clone().fold(f64::NEG_INFINITY, f64::max) - air.fold(f64::INFINITY, f64::min);
         if p.b - p.a >= 300 && rows[p.a].time_s >= 1800.0 && spread <= 1.0 {
-            measure(
-                &mut t,
+            main.push(measure(
                 &format!("bias_stability_dph:{}", p.label),
                 "bias_stability",
                 &[&p.label],
                 Some(100.0),
-                "high = 0.05",
-            );
+                Some(0.05),
+            ));
         }
     }
-    t
+    RawProcedure {
+        procedure: RawMeta {
+            name: "imported".to_owned(),
+            description: format!("run imported from {name}"),
+            dut_type: dut_type.to_owned(),
+            spec: "model-4 compensated drift 0.05 deg/h (p-p of 600 s averages); bias stability 0.05 deg/h (1-sigma of 100 s averages)".to_owned(),
+            decision_rule: None,
+            guard_band_u: None,
+        },
+        setup: Vec::new(),
+        main,
+        cleanup: Vec::new(),
+    }
+    .to_toml(&[
+        &format!("Made by gyrobench import from {name}: one record per stretch of recorded rows with"),
+        "one step label, a wait for rows outside records, judged with the limits of",
+        "procedures/acceptance.toml.",
+    ])
 }
 
 /// Whether `part`'s rows were taken in `step`: a record by its label, rows
