@@ -30,7 +30,7 @@ pub struct FilterArgs {
     #[arg(long)]
     procedure: Option<String>,
     /// Outcome (reference: an imported run).
-    #[arg(long, value_enum)]
+    #[arg(long, value_parser = run_state_words())]
     outcome: Option<RunState>,
     /// Bench (as the run named it) or station (host name).
     #[arg(long)]
@@ -761,4 +761,12 @@ mod tests {
             "{unit:?}"
         );
     }
+}
+
+/// `--outcome` takes the store's words (`conditional_pass`, not clap's
+/// kebab case), and its help lists them.
+fn run_state_words() -> impl clap::builder::TypedValueParser<Value = RunState> {
+    use clap::builder::TypedValueParser;
+    clap::builder::PossibleValuesParser::new(RunState::ALL.map(RunState::as_str))
+        .try_map(|w| RunState::parse(&w).ok_or_else(|| format!("not a run state: {w}")))
 }

@@ -18,7 +18,7 @@ use crate::analysis::rate::{self, Figure, RatePoint};
 use crate::analysis::series::Interval;
 use crate::analysis::study::{self_heating, sensitivity_fit};
 use crate::analysis::uncertainty::{Contribution, Uncertainty};
-use crate::procedure::{DecisionRule, Measure, Metric, Statement};
+use crate::procedure::{DecisionRule, Measure, Metric};
 use crate::protocol::frame::StatusBits;
 use crate::typeb::TypeB;
 
@@ -828,73 +828,8 @@ impl TickSums {
     }
 }
 
-/// Verdict of one measurement (`pass`, `fail`, `error` in the report,
-/// the log's `result` record, the store and the station).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, serde::Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum MeasureOutcome {
-    /// Within limits, as the decision rule judges.
-    Pass,
-    /// Outside limits, or not computable.
-    Fail,
-    /// Not judged: the data it would be computed on are unsound (a link
-    /// that lost frames, a stuck or saturated output).
-    Error,
-    /// Within its limits but within its expanded uncertainty of one (the
-    /// non-binary rule's conditional pass).
-    ConditionalPass,
-    /// Outside its limits but within its expanded uncertainty of one (the
-    /// non-binary rule's conditional fail).
-    ConditionalFail,
-}
-
-impl MeasureOutcome {
-    /// Every outcome.
-    pub const ALL: [Self; 5] = [
-        Self::Pass,
-        Self::Fail,
-        Self::Error,
-        Self::ConditionalPass,
-        Self::ConditionalFail,
-    ];
-
-    /// `pass`, `fail`, `error`, `conditional_pass` or `conditional_fail`.
-    pub fn as_str(self) -> &'static str {
-        match self {
-            Self::Pass => "pass",
-            Self::Fail => "fail",
-            Self::Error => "error",
-            Self::ConditionalPass => "conditional_pass",
-            Self::ConditionalFail => "conditional_fail",
-        }
-    }
-
-    /// In the report's capitals (`PASS`, `COND. PASS`, ...).
-    pub fn word(self) -> &'static str {
-        match self {
-            Self::Pass => "PASS",
-            Self::Fail => "FAIL",
-            Self::Error => "ERROR",
-            Self::ConditionalPass => "COND. PASS",
-            Self::ConditionalFail => "COND. FAIL",
-        }
-    }
-
-    /// The outcome a word names.
-    pub fn parse(word: &str) -> Option<Self> {
-        Self::ALL.into_iter().find(|o| o.as_str() == word)
-    }
-
-    /// The statement of a decision rule as a measurement's outcome.
-    pub fn of(s: Statement) -> Self {
-        match s {
-            Statement::Pass => Self::Pass,
-            Statement::ConditionalPass => Self::ConditionalPass,
-            Statement::ConditionalFail => Self::ConditionalFail,
-            Statement::Fail => Self::Fail,
-        }
-    }
-}
+/// Verdict of one measurement (the vocabulary crate's).
+pub use gyrobench_model::outcome::MeasureOutcome;
 
 /// What a run's figures are judged by: the procedure's decision rule and
 /// the bench's declared Type B contributions.

@@ -342,62 +342,8 @@ fn tell(log: &mut dyn Observer, watch: &mut dyn Operator, e: &Event<'_>) -> std:
     log.observe(e)
 }
 
-/// How a run ended.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, serde::Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Outcome {
-    /// Every measurement passed by the procedure's decision rule.
-    Pass,
-    /// A measurement outside its limits (or, guarded, inside its guard
-    /// band).
-    Fail,
-    /// A device or data failure ended the run.
-    Error,
-    /// The operator interrupted the run.
-    Aborted,
-    /// Non-binary rule: none failed, and at least one passed only
-    /// conditionally (within its limits by less than its uncertainty).
-    ConditionalPass,
-    /// Non-binary rule: none failed outright, and at least one failed
-    /// conditionally (beyond its limits by less than its uncertainty).
-    ConditionalFail,
-}
-
-impl Outcome {
-    /// Every outcome.
-    pub const ALL: [Self; 6] = [
-        Self::Pass,
-        Self::Fail,
-        Self::Error,
-        Self::Aborted,
-        Self::ConditionalPass,
-        Self::ConditionalFail,
-    ];
-
-    /// `pass`, `fail`, `error`, `aborted`, `conditional_pass` or
-    /// `conditional_fail`.
-    pub fn as_str(self) -> &'static str {
-        match self {
-            Self::Pass => "pass",
-            Self::Fail => "fail",
-            Self::Error => "error",
-            Self::Aborted => "aborted",
-            Self::ConditionalPass => "conditional_pass",
-            Self::ConditionalFail => "conditional_fail",
-        }
-    }
-
-    /// The outcome named by [`Outcome::as_str`].
-    pub fn parse(s: &str) -> Option<Self> {
-        Self::ALL.into_iter().find(|o| o.as_str() == s)
-    }
-
-    /// A verdict a run that went to its end gives (not an error or an
-    /// abort).
-    pub fn is_verdict(self) -> bool {
-        !matches!(self, Self::Error | Self::Aborted)
-    }
-}
+/// How a run ended (the vocabulary crate's).
+pub use gyrobench_model::outcome::Outcome;
 
 /// The failure that ended a run.
 #[derive(Debug, Clone, PartialEq, Serialize)]

@@ -9,5 +9,6 @@
 pub mod config;
 pub mod geometry;
 pub mod limits;
+pub mod outcome;
 pub mod procedure;
 pub mod procedures;
