@@ -443,7 +443,7 @@ impl BenchConfig {
     pub fn procedure_limits(&self) -> gyrobench_model::limits::BenchLimits {
         gyrobench_model::limits::BenchLimits {
             limits: self.limits.clone(),
-            geometry: self.table.geometry.clone(),
+            geometry: self.table.geometry,
             table_settle_s: self.devices.table.settle_s,
             supply: self
                 .devices

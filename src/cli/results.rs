@@ -718,6 +718,14 @@ pub fn render_trend(t: &Trend) -> String {
     }) + &t.caveat()
 }
 
+/// `--outcome` takes the store's words (`conditional_pass`, not clap's
+/// kebab case), and its help lists them.
+fn run_state_words() -> impl clap::builder::TypedValueParser<Value = RunState> {
+    use clap::builder::TypedValueParser;
+    clap::builder::PossibleValuesParser::new(RunState::ALL.map(RunState::as_str))
+        .try_map(|w| RunState::parse(&w).ok_or_else(|| format!("not a run state: {w}")))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -761,12 +769,4 @@ mod tests {
             "{unit:?}"
         );
     }
-}
-
-/// `--outcome` takes the store's words (`conditional_pass`, not clap's
-/// kebab case), and its help lists them.
-fn run_state_words() -> impl clap::builder::TypedValueParser<Value = RunState> {
-    use clap::builder::TypedValueParser;
-    clap::builder::PossibleValuesParser::new(RunState::ALL.map(RunState::as_str))
-        .try_map(|w| RunState::parse(&w).ok_or_else(|| format!("not a run state: {w}")))
 }

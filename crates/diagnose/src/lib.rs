@@ -17,6 +17,7 @@
 
 pub mod data;
 pub mod engine;
+pub mod fitted;
 pub mod library;
 pub mod lot;
 mod lsq;
@@ -30,6 +31,7 @@ use serde::Serialize;
 use crate::twin::TwinConfig;
 use data::RunData;
 use engine::{Data, Scored, improvement, score, with_best_parameter};
+pub use fitted::FittedEffect;
 use library::{Effect, LIBRARY, MODEL4, Param, Term, separate_with};
 pub use thresholds::{THRESHOLDS, Thresholds};
 
@@ -156,27 +158,40 @@ pub struct Accepted {
     /// of the two blocks) or `mean` (of block and case); none for the others.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub temperature: Option<String>,
+    /// The effect as fitted, typed (what `parameters` reads, and what the
+    /// updated twin is built from); none when the fit held no such term.
+    #[serde(skip)]
+    pub fitted: Option<FittedEffect>,
 }
 
 impl Accepted {
     /// Effect `e` as fitted in `s`, which took the held-out gap from
     /// `before` to `after` with p-value `p_value`.
     fn fitted(s: &Scored, e: Effect, before: f64, after: f64, p_value: f64) -> Self {
-        let (parameters, uncertainties) = parameters(s, e);
+        let fitted = s
+            .model
+            .iter()
+            .position(|m| m.effect == e)
+            .and_then(|k| FittedEffect::of(s, k));
         Self {
             name: e.name().into(),
-            parameters,
-            uncertainties,
+            parameters: fitted
+                .as_ref()
+                .map(FittedEffect::parameters)
+                .unwrap_or_default(),
+            uncertainties: fitted
+                .as_ref()
+                .map(FittedEffect::uncertainties)
+                .unwrap_or_default(),
             held_out_gap_before_dph: before,
             held_out_gap_after_dph: after,
             shrink: ((before - after) / before).clamp(0.0, 1.0),
             p_value,
-            temperature: s
-                .model
-                .iter()
-                .find(|m| m.effect == e)
-                .and_then(|m| m.param.temperature())
+            temperature: fitted
+                .as_ref()
+                .and_then(FittedEffect::temperature)
                 .map(|t| t.name().to_owned()),
+            fitted,
         }
     }
 }
@@ -531,30 +546,6 @@ pub fn visible_gap(runs: &[RunData], opts: &Options, signal: &[f64]) -> f64 {
     };
     let model = build(&data, &reference(opts.twin.as_ref()));
     score(&data, &model).gap()
-}
-
-fn parameters(s: &Scored, effect: Effect) -> (BTreeMap<String, f64>, BTreeMap<String, f64>) {
-    let mut at = 0;
-    let (mut vals, mut errs) = (BTreeMap::new(), BTreeMap::new());
-    for &Term {
-        effect: e,
-        param: p,
-        ..
-    } in &s.model
-    {
-        let n = e.terms().len();
-        if e == effect {
-            for (i, t) in e.terms().iter().enumerate() {
-                vals.insert((*t).to_owned(), s.coeffs[at + i]);
-                errs.insert((*t).to_owned(), s.stderr[at + i]);
-            }
-            if let Some(name) = e.parameter() {
-                vals.insert(name.to_owned(), p.value());
-            }
-        }
-        at += n;
-    }
-    (vals, errs)
 }
 
 fn segments(data: &Data<'_>, residual_sse: &[f64], blocks: &[usize]) -> Vec<Segment> {
@@ -1928,97 +1919,12 @@ pub fn repeated_positions(toml: &str, name: &str, passes: usize) -> String {
 
 /// The twin with the accepted effects enabled and fitted.
 pub fn updated_twin(base: &TwinConfig, d: &Diagnosis) -> TwinConfig {
-    use crate::twin::config as tc;
     let mut t = base.clone();
     if let Some(fitted) = &d.layers.thermal.fitted {
         t.thermal = fitted.clone();
     }
-    let get = |a: &Accepted, k: &str| a.parameters.get(k).copied().unwrap_or(0.0);
-    let form = |a: &Accepted| {
-        tc::EffectTemperature::ALL
-            .into_iter()
-            .find(|t| a.temperature.as_deref() == Some(t.name()))
-            .unwrap_or_default()
-    };
-    for a in &d.effects {
-        match Effect::from_name(&a.name) {
-            Some(Effect::Hysteresis) => {
-                t.effects.hysteresis = Some(tc::Hysteresis {
-                    enabled: true,
-                    amplitude_dph: get(a, "amplitude_dph"),
-                    width_c: get(a, "width_c"),
-                    temperature: form(a),
-                    shape: tc::HysteresisShape::Play,
-                });
-            }
-            Some(Effect::ThermalLag) => {
-                t.effects.thermal_lag = Some(tc::ThermalLag {
-                    enabled: true,
-                    coeff_dph_per_c: get(a, "coeff_dph_per_c"),
-                    tau_s: get(a, "tau_s"),
-                    reference_c: 20.0,
-                    temperature: form(a),
-                    order: 1,
-                });
-            }
-            Some(Effect::GSensitivity) => {
-                t.effects.g_sensitivity = Some(tc::GSensitivity {
-                    enabled: true,
-                    coeff_dph_per_g: [
-                        get(a, "x_dph_per_g"),
-                        get(a, "y_dph_per_g"),
-                        get(a, "z_dph_per_g"),
-                    ],
-                });
-            }
-            Some(Effect::MagneticSensitivity) => {
-                t.effects.magnetic_sensitivity = Some(tc::MagneticSensitivity {
-                    enabled: true,
-                    coeff_dph_per_ut: [
-                        get(a, "x_dph_per_ut"),
-                        get(a, "y_dph_per_ut"),
-                        get(a, "z_dph_per_ut"),
-                    ],
-                });
-            }
-            Some(Effect::AxisMisalignment) => {
-                // Axis x + theta_z y - theta_y z: the coefficients on the
-                // Earth rate's y and z body components are theta_z, -theta_y.
-                let arcmin = |rad: f64| rad.to_degrees() * 60.0;
-                t.effects.axis_misalignment = Some(tc::AxisMisalignment {
-                    enabled: true,
-                    about_y_arcmin: arcmin(-get(a, "earth_z")),
-                    about_z_arcmin: arcmin(get(a, "earth_y")),
-                });
-            }
-            Some(Effect::ScaleFactorTemperature) => {
-                t.effects.scale_factor_temperature = Some(tc::ScaleFactorTemperature {
-                    enabled: true,
-                    ppm_per_c: get(a, "per_c") * 1e6,
-                    reference_c: 20.0,
-                });
-            }
-            Some(Effect::SelfHeating) => {
-                t.bias.terms.self_heating = true;
-                t.bias.model4.k5_dph = get(a, "k5_dph");
-                t.bias.model4.warmup_tau_s = get(a, "warmup_tau_s");
-            }
-            Some(Effect::GradientRate) => {
-                t.bias.terms.gradient_rate = true;
-                t.bias.model4.k3_dph_per_c_per_s = get(a, "k3_dph_per_c_per_s");
-            }
-            Some(Effect::GradientQuadratic) => {
-                t.bias.terms.gradient_quadratic = true;
-                t.bias.model4.k2_dph_per_c2 = get(a, "k2_dph_per_c2");
-            }
-            Some(Effect::CaseTemperature) => {
-                t.bias.terms.case_temperature = true;
-                t.bias.model4.k4_dph_per_c = get(a, "k4_dph_per_c");
-            }
-            // Outside disturbances are never accepted effects.
-            Some(Effect::Gradient | Effect::BiasStep | Effect::BiasDrift | Effect::Periodic)
-            | None => {}
-        }
+    for f in d.effects.iter().filter_map(|a| a.fitted.as_ref()) {
+        f.apply_to(&mut t);
     }
     t
 }

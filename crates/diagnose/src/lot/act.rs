@@ -20,6 +20,7 @@ impl SharedEffect {
             shrink: self.shrink,
             p_value: self.p_value,
             temperature: self.temperature.clone(),
+            fitted: self.fitted.clone(),
         }
     }
 }

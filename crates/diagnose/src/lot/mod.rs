@@ -27,7 +27,8 @@ use crate::engine::{AVERAGING_S, Data, Scored, score};
 use crate::geometry::Site;
 use crate::library::{Effect, Param, Term, Units};
 use crate::{
-    Accepted, Confounded, Diagnosis, Inconclusive, Options, THRESHOLDS, Thresholds, diagnose,
+    Accepted, Confounded, Diagnosis, FittedEffect, Inconclusive, Options, THRESHOLDS, Thresholds,
+    diagnose,
 };
 pub use evidence::{Evidence, seat};
 
@@ -188,6 +189,10 @@ pub struct SharedEffect {
     /// Each unit's own parameters at the shared nonlinear parameter
     /// (fitted with one set per unit), for the comparison.
     pub per_unit: Vec<UnitValue>,
+    /// The shared effect as fitted, typed (what `parameters` reads, and
+    /// what the bench's correction and the units' twins are built from).
+    #[serde(skip)]
+    pub fitted: Option<FittedEffect>,
 }
 
 /// One unit's parameters of an effect, fitted with one set per unit.
@@ -669,28 +674,15 @@ pub(crate) fn term_values(
     s: &Scored,
     k: usize,
 ) -> (BTreeMap<String, f64>, BTreeMap<String, f64>, Option<String>) {
-    let at: usize = s.model[..k].iter().map(|t| t.effect.terms().len()).sum();
-    let (mut vals, mut errs) = (BTreeMap::new(), BTreeMap::new());
-    let Some(t) = s.model.get(k) else {
-        return (vals, errs, None);
-    };
-    for (i, name) in t.effect.terms().iter().enumerate() {
-        vals.insert(
-            (*name).to_owned(),
-            s.coeffs.get(at + i).copied().unwrap_or(f64::NAN),
-        );
-        errs.insert(
-            (*name).to_owned(),
-            s.stderr.get(at + i).copied().unwrap_or(f64::NAN),
-        );
-    }
-    if let Some(name) = t.effect.parameter() {
-        vals.insert(name.to_owned(), t.param.value());
-    }
-    (
-        vals,
-        errs,
-        t.param.temperature().map(|x| x.name().to_owned()),
+    FittedEffect::of(s, k).map_or_else(
+        || (BTreeMap::new(), BTreeMap::new(), None),
+        |f| {
+            (
+                f.parameters(),
+                f.uncertainties(),
+                f.temperature().map(|x| x.name().to_owned()),
+            )
+        },
     )
 }
 

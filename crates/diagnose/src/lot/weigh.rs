@@ -415,6 +415,7 @@ impl Found {
             score(&stack.data, &m).gap()
         });
         let after = fin.gap();
+        let fitted = k.and_then(|k| crate::FittedEffect::of(fin, k));
         let (seat, seat_why) = super::seat(self.term.effect, &parameters);
         let holds = |u: usize| self.term.units.holds(u);
         SharedEffect {
@@ -439,6 +440,7 @@ impl Found {
                 .map(|&u| serials[u].clone())
                 .collect(),
             per_unit: self.per_unit.clone(),
+            fitted,
         }
     }
 }
