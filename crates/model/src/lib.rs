@@ -1,10 +1,13 @@
 //! gyrobench's vocabulary, as data: the geometry a bench turns a gyro in
 //! (`geometry`: orientations, the two-axis table, frames), the TOML
 //! configuration checking every gyrobench file shares (`config::Checker`:
-//! errors that name the file, line, key and the fix), and the shipped
-//! procedures' texts (`procedures`, this package's `procedures/`, which the
-//! repository's top-level `procedures/` is). The controller keeps the paths
-//! it always gave them (`gyrobench::geometry`, `gyrobench::config`).
+//! errors that name the file, line, key and the fix), the procedure as
+//! typed values (`procedure`, checked against a bench's `limits`), how runs
+//! and measurements end (`outcome`), and the shipped procedures' texts
+//! (`procedures`, this package's `procedures/`, which the repository's
+//! top-level `procedures/` is). The controller keeps the paths it always
+//! gave them (`gyrobench::geometry`, `gyrobench::config`,
+//! `gyrobench::procedure`).
 
 pub mod config;
 pub mod geometry;
