@@ -403,6 +403,16 @@ impl<'a> Checker<'a> {
         Ok(value)
     }
 
+    /// A direction: three finite components, not all (nearly) zero.
+    pub fn direction(&self, v: &[f64; 3], key: &str) -> Result<(), ConfigError> {
+        let n = v.iter().map(|x| x * x).sum::<f64>().sqrt();
+        self.ensure(
+            n.is_finite() && n > 1e-6,
+            key,
+            "must be a non-zero direction",
+        )
+    }
+
     /// The values of a model 4 read from a file (a coefficient set's
     /// `[model4]`, the twin's `[bias]`): finite, tau_w > 0; errors name
     /// `section.key` and its line.

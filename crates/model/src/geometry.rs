@@ -180,12 +180,7 @@ impl TableGeometry {
             (self.outer_axis_ned, "outer_axis_ned"),
             (self.inner_axis_ned, "inner_axis_ned"),
         ] {
-            let n = v.iter().map(|x| x * x).sum::<f64>().sqrt();
-            c.ensure(
-                n.is_finite() && n > 1e-6,
-                &format!("{prefix}.{name}"),
-                "must be a non-zero direction",
-            )?;
+            c.direction(&v, &format!("{prefix}.{name}"))?;
         }
         let a = Vector3::from(self.outer_axis_ned).normalize();
         let b = Vector3::from(self.inner_axis_ned).normalize();

@@ -801,17 +801,7 @@ impl ThermalConfig {
         for (k, v) in th.sensor_offset_c.iter().enumerate() {
             c.within(*v, -20.0, 20.0, &format!("thermal.sensor_offset_c[{k}]"))?;
         }
-        let n = th
-            .sensor_axis_body
-            .iter()
-            .map(|v| v * v)
-            .sum::<f64>()
-            .sqrt();
-        c.ensure(
-            n.is_finite() && n > 1e-6,
-            "thermal.sensor_axis_body",
-            "must be a non-zero direction",
-        )?;
+        c.direction(&th.sensor_axis_body, "thermal.sensor_axis_body")?;
         c.within(th.case_rise_c, 0.0, 50.0, "thermal.case_rise_c")?;
         c.within(th.block1_rise_c, 0.0, 50.0, "thermal.block1_rise_c")?;
         c.within(th.block2_rise_c, 0.0, 50.0, "thermal.block2_rise_c")?;

@@ -115,16 +115,9 @@ impl ThermalEffects {
                 &format!("thermal.effects.orientation_coupling[{k}]"),
             )?;
         }
-        let n = self
-            .orientation_axis_body
-            .iter()
-            .map(|v| v * v)
-            .sum::<f64>()
-            .sqrt();
-        c.ensure(
-            n.is_finite() && n > 1e-6,
+        c.direction(
+            &self.orientation_axis_body,
             "thermal.effects.orientation_axis_body",
-            "must be a non-zero direction",
         )?;
         for (k, v) in self.air_path_tau_s.iter().enumerate() {
             c.within(
