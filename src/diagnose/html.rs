@@ -299,10 +299,10 @@ fn headline_of_one_unit(d: &Diagnosis) -> String {
         && t.gap_c <= thermal_limit_c(t)
     {
         return format!(
-            "Simulator and runs agree: the thermal layer matches ({:.3} degC held out, noise floor {:.3} degC{}) and the rate gap of {:.5} deg/h held out is {}, so nothing is left for an effect to explain.",
+            "Simulator and runs agree: the thermal layer matches ({:.3} degC held out{}, noise floor {:.3} degC) and the rate gap of {:.5} deg/h held out is {}, so nothing is left for an effect to explain.",
             t.gap_c,
-            t.noise_floor_c,
             thermal_effects_phrase(t),
+            t.noise_floor_c,
             r.gap_dph,
             noise_text(noise, r.gap_dph)
         );
@@ -378,7 +378,7 @@ fn thermal_sentence(t: &super::ThermalLayer) -> String {
     });
     let with = thermal_effects_phrase(t);
     format!(
-        "The thermal layer matches ({:.3} degC held out, noise floor {:.3} degC{by}{with}); the gap is in the rate layer.",
+        "The thermal layer matches ({:.3} degC held out{with}, noise floor {:.3} degC{by}); the gap is in the rate layer.",
         t.gap_c, t.noise_floor_c
     )
 }

@@ -649,11 +649,25 @@ pub fn layer(runs: &[RunData], twin: Option<&TwinConfig>, fit_with_twin: bool) -
             // network where its form holds (it also carries the orientation's
             // convection as a coupling, which the modal model only adds), the
             // modal model where it does not.
+            // The network carries the thermal effects named.
+            let with: Vec<String> = f
+                .effects
+                .iter()
+                .map(|e| match &e.on {
+                    Some(on) => format!("{} on {on}", e.name),
+                    None => e.name.clone(),
+                })
+                .collect();
+            let with = if with.is_empty() {
+                String::new()
+            } else {
+                format!(", with the thermal effect {}", with.join(" and "))
+            };
             let out = if net_gap <= modal {
                 (
                     f.network_per_sensor_c.clone(),
                     f.network_series,
-                    format!("{network_text}{folds}"),
+                    format!("{network_text}{with}{folds}"),
                 )
             } else {
                 (

@@ -688,6 +688,13 @@ fn a_thermal_effect_the_form_lacks_is_named_and_none_where_there_is_none() {
         "{e:?}"
     );
     assert!(with.form_misfit.is_none(), "{:?}", with.form_misfit);
+    // The reference says the network it is carries the effect.
+    assert!(
+        with.reference
+            .contains("with the thermal effect conductance_temperature"),
+        "{}",
+        with.reference
+    );
     let fitted = with
         .fitted
         .as_ref()
