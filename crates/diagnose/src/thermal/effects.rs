@@ -157,6 +157,14 @@ pub struct ThermalThresholds {
     /// The effects best in sample (on all the runs) that are scored held
     /// out at each step (ours: each held-out score is five fits).
     pub scored: usize,
+    /// A candidate after the best in sample is scored only when its
+    /// training sum of squares is within this factor of the best's (ours:
+    /// an effect of one or two quantities does not lose a lead of twice
+    /// the sum of squares held out; on the twelve units of
+    /// docs/diagnosis.md the candidates so far behind, 11 to 25 times,
+    /// scored far below the best held out too, and their folds were a
+    /// fifth of the layer's time on a unit whose conductance changes).
+    pub scored_within: f64,
     /// At most this many effects are named (ours).
     pub max_effects: usize,
 }
@@ -168,6 +176,7 @@ pub const THERMAL_THRESHOLDS: ThermalThresholds = ThermalThresholds {
     tie: 0.03,
     newey_west_lags: 60,
     scored: 2,
+    scored_within: 2.0,
     max_effects: 2,
 };
 
@@ -366,7 +375,9 @@ fn weigh(
         })
         .collect();
     weighed.sort_by(|a, b| a.all.2.total_cmp(&b.all.2));
-    for w in weighed.iter_mut().take(th.scored) {
+    let best_sse = weighed.first().map_or(f64::MAX, |w| w.all.2);
+    let close = |w: &&mut Weighed| w.all.2 <= th.scored_within * best_sse;
+    for w in weighed.iter_mut().take(th.scored).filter(close) {
         // (Settling the candidate again here, 150 more iterations from
         // its weighing fit, changed no outcome on the twelve units of
         // docs/diagnosis.md and took a fifth of the layer's time.)

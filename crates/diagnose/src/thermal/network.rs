@@ -279,9 +279,9 @@ pub(super) type Nodes<const N: usize> = SMatrix<f64, N, INPUTS>;
 
 /// What a block's orientation and air change in the network: the
 /// blocks' exchange (convection), the orientation coupling's share of
-/// gravity, and the air temperature the case's conductance follows (on a
-/// 0.5 degC grid; 20 degC without the effect). Blocks with the same key
-/// share one discretisation.
+/// gravity, and the air temperature the case's conductance follows (20
+/// degC without the effect). Blocks with the same key share one
+/// discretisation.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(super) struct Key {
     pub(super) convection: f64,
@@ -289,21 +289,38 @@ pub(super) struct Key {
     pub(super) air_c: f64,
 }
 
-/// The air grid of [`Key`], degC (ours: the conductance's change over
-/// half a degree is a few thousandths of itself at most).
-const AIR_KEY_C: f64 = 0.5;
+/// The air grid the case conductance's discretisations are taken on,
+/// degC; a block's is interpolated linearly between the two around its
+/// mean air (ours: the maps are smooth in the air temperature, their
+/// second derivative over a grid step a few 1e-8 of themselves, so the
+/// interpolation is closer to the exact map than a rounding to a
+/// 0.5 degC grid was, with a tenth of the matrix exponentials).
+const AIR_GRID_C: f64 = 5.0;
 
 impl Key {
-    fn of(q: &Shape, form: &Form, b: &Block) -> Self {
-        Self {
+    /// The block's key at the grid air below its mean air and, with the
+    /// conductance effect, the weight of the grid air above (0 without).
+    fn of(q: &Shape, form: &Form, b: &Block) -> (Self, f64) {
+        let (air_c, above) = if form.conductance {
+            let mean = b.air_c.iter().sum::<f64>() / BLOCK_STEPS as f64;
+            let below = (mean / AIR_GRID_C).floor() * AIR_GRID_C;
+            (below, (mean - below) / AIR_GRID_C)
+        } else {
+            (twin_effects::CONDUCTANCE_REFERENCE_C, 0.0)
+        };
+        let key = Self {
             convection: 1.0 + q[at::CONVECTION] * b.gravity_along_axis,
             coupling: form.coupling.map_or(0.0, |a| b.gravity_abs[a]),
-            air_c: if form.conductance {
-                let mean = b.air_c.iter().sum::<f64>() / BLOCK_STEPS as f64;
-                (mean / AIR_KEY_C).round() * AIR_KEY_C
-            } else {
-                twin_effects::CONDUCTANCE_REFERENCE_C
-            },
+            air_c,
+        };
+        (key, above)
+    }
+
+    /// The key at the grid air above.
+    fn above(self) -> Self {
+        Self {
+            air_c: self.air_c + AIR_GRID_C,
+            ..self
         }
     }
 }
@@ -432,7 +449,7 @@ where
     let Some(first) = run.first() else {
         return Vec::new();
     };
-    let mut cache: Vec<(Key, SMatrix<f64, N, N>, Nodes<N>, BlockStep<N>)> = Vec::new();
+    let mut cache = Vec::new();
     let mut x = Nodes::<N>::zeros();
     for i in 0..N {
         x[(i, 0)] = first.air_c[0];
@@ -442,24 +459,37 @@ where
         u.column_mut(0).scale_mut(air);
         *x = phi * *x + u;
     };
+    type Cached<const N: usize> = (Key, SMatrix<f64, N, N>, Nodes<N>, BlockStep<N>);
+    let at_key = |cache: &mut Vec<Cached<N>>, key: Key| match cache.iter().position(|c| c.0 == key)
+    {
+        Some(k) => k,
+        None => {
+            let (p, g) = discretize::<N, M>(q, form, layout, &key, STEP_S);
+            cache.push((key, p, g, BlockStep::new(&p, &g, &layout.sensors)));
+            cache.len() - 1
+        }
+    };
     let mut t = 0.0;
+    let mut blended = None;
     run.iter()
         .map(|b| {
-            let key = Key::of(q, form, b);
-            let k = match cache.iter().position(|c| c.0 == key) {
-                Some(k) => k,
-                None => {
-                    let (p, g) = discretize::<N, M>(q, form, layout, &key, STEP_S);
-                    cache.push((key, p, g, BlockStep::new(&p, &g, &layout.sensors)));
-                    cache.len() - 1
+            let (key, above) = Key::of(q, form, b);
+            let k = at_key(&mut cache, key);
+            let k_above = (above > 0.0).then(|| at_key(&mut cache, key.above()));
+            let (phi, gamma, whole) = match k_above {
+                None => (cache[k].1, cache[k].2, &cache[k].3),
+                Some(j) => {
+                    let (lo, hi) = (&cache[k], &cache[j]);
+                    let w = |a: f64, b: f64| a + above * (b - a);
+                    let step = blended.insert(BlockStep::blend(&lo.3, &hi.3, above));
+                    (lo.1.zip_map(&hi.1, w), lo.2.zip_map(&hi.2, w), &*step)
                 }
             };
-            let (_, phi, gamma, whole) = &cache[k];
             // Up to the block (gaps between records) on its first air.
             while t < b.start_s - 1e-9 {
                 let dt = (b.start_s - t).min(STEP_S);
                 if dt == STEP_S {
-                    advance(&mut x, phi, gamma, b.air_c[0]);
+                    advance(&mut x, &phi, &gamma, b.air_c[0]);
                 } else {
                     let (p, g) = discretize::<N, M>(q, form, layout, &key, dt);
                     advance(&mut x, &p, &g, b.air_c[0]);
@@ -534,6 +564,19 @@ impl<const N: usize> BlockStep<N> {
             air_mean,
             rise_end: sum_end * g_rise,
             rise_mean: rows(&sum_mean) * g_rise,
+        }
+    }
+
+    /// The map `a + w (b - a)`: between the maps at two air temperatures.
+    fn blend(a: &Self, b: &Self, w: f64) -> Self {
+        let lerp = |x: f64, y: f64| x + w * (y - x);
+        Self {
+            end: a.end.zip_map(&b.end, lerp),
+            mean: a.mean.zip_map(&b.mean, lerp),
+            air_end: std::array::from_fn(|j| a.air_end[j].zip_map(&b.air_end[j], lerp)),
+            air_mean: std::array::from_fn(|j| a.air_mean[j].zip_map(&b.air_mean[j], lerp)),
+            rise_end: a.rise_end.zip_map(&b.rise_end, lerp),
+            rise_mean: a.rise_mean.zip_map(&b.rise_mean, lerp),
         }
     }
 

@@ -80,9 +80,8 @@ pub(super) fn multistart<C: Squares>(
 }
 
 /// The settling search's budget, in forward-difference Jacobians (one
-/// evaluation per searched quantity each; ours: the study's runs settle
-/// in 4 to 40, a unit the form does not hold used up 100 of them before
-/// the secant updates, `lsq`).
+/// evaluation per searched quantity each, and two per step tried; ours:
+/// the study's runs settle in 4 to 40).
 pub(super) const SETTLE_ITERS: usize = 100;
 
 /// The starts: a coarse grid over the shapes a unit can have, not the

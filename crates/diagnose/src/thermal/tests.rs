@@ -504,18 +504,22 @@ fn units_of_other_network_forms_are_followed_and_never_get_an_unphysical_network
         }
         // The baseplate: a network without a sink does not follow it
         // (`form_misfit`); with one it does.
+        // The search settles it: with plain Levenberg-Marquardt steps
+        // (no geodesic acceleration) its fit on all the runs ended at
+        // 0.0126 degC, with them 0.0093.
         if seed == 2 {
             let n = layer.fitted.as_ref().expect("the sink's network follows");
             assert!(n.sink_tau_s > 0.0 && n.sink_capacity_ratio > 0.0, "{n:?}");
+            assert!(net_gap < 0.011, "seed 2: {net_gap}");
         }
         // Blocks of 1380 s and 110 s on one conductance (block 1 13
         // times block 2: exchange time constants of 3400 s and 270 s):
         // a network whose blocks exchange with one time constant missed
         // by 0.075 degC held out; the full form follows (it finds block
-        // 1 about 6 times block 2).
+        // 1 about 12 times block 2).
         if seed == 17 {
             let n = layer.fitted.as_ref().expect("unequal blocks follow");
-            assert!(n.block_capacity_1_over_2 > 2.0, "{n:?}");
+            assert!(n.block_capacity_1_over_2 > 8.0, "{n:?}");
         }
     }
 }
