@@ -341,11 +341,12 @@ pub fn run(args: DiagnoseArgs) -> Result<Outcome> {
         None => None,
     };
     let mixed_units = mixed_units_of(&args.runs, args.allow_mixed_units)?;
-    let runs = args
-        .runs
-        .iter()
-        .map(|p| data::load_unit(p, args.unit.as_deref()).map_err(anyhow::Error::from))
-        .collect::<Result<Vec<_>>>()?;
+    // The logs read two at a time (each read is one thread's work).
+    let runs = gyrobench_diagnose::lot::two_at_a_time(&args.runs, |_, p| {
+        data::load_unit(p, args.unit.as_deref())
+    })
+    .into_iter()
+    .collect::<Result<Vec<_>, _>>()?;
     let mut d = diagnose::diagnose(
         &runs,
         &Options {

@@ -132,37 +132,17 @@ impl Reading {
 /// run of a batch's unit named `LOG (SERIAL)`). A unit whose logs give it
 /// two types is refused here, naming both logs.
 pub fn load_lot(paths: &[std::path::PathBuf]) -> Result<Vec<LotUnit>, ReplayError> {
+    // The logs read two at a time (each read is one thread's work), then
+    // grouped in the order given.
+    let read = gyrobench_diagnose::lot::two_at_a_time(paths, |_, path| log_units(path));
     let mut units: Vec<LotUnit> = Vec::new();
-    for path in paths {
+    for (path, read) in paths.iter().zip(read) {
+        let (held, runs) = read?;
         let log_err = |message: String| ReplayError::Log {
             path: path.display().to_string(),
             message,
         };
-        let meta = crate::runlog::meta::read_run_meta(path).map_err(|e| {
-            log_err(
-                e.strip_prefix(&format!("{}: ", path.display()))
-                    .map_or(e.clone(), str::to_owned),
-            )
-        })?;
-        let held: Vec<(String, String, String)> = if meta.units.is_empty() {
-            vec![(
-                String::new(),
-                meta.dut_serial.clone(),
-                meta.dut_type.clone(),
-            )]
-        } else {
-            meta.units
-                .iter()
-                .map(|u| (u.slot.clone(), u.serial.clone(), u.dut_type.clone()))
-                .collect()
-        };
         let several = held.len() > 1;
-        let runs = if meta.units.is_empty() {
-            vec![load_unit(path, None)?]
-        } else {
-            let serials: Vec<String> = held.iter().map(|h| h.1.clone()).collect();
-            load_units(path, &serials)?
-        };
         for ((slot, serial, dut_type), mut run) in held.into_iter().zip(runs) {
             if several {
                 run.name = format!("{} ({serial})", path.display());
@@ -186,6 +166,31 @@ pub fn load_lot(paths: &[std::path::PathBuf]) -> Result<Vec<LotUnit>, ReplayErro
         }
     }
     Ok(units)
+}
+
+/// A log's units (slot, serial, type; one, unslotted, for a log of one
+/// unit) and each one's run.
+type LogUnits = (Vec<(String, String, String)>, Vec<RunData>);
+
+/// The units a log holds and their runs (`load_lot`).
+fn log_units(path: &Path) -> Result<LogUnits, ReplayError> {
+    let meta = crate::runlog::meta::read_run_meta(path).map_err(|e| ReplayError::Log {
+        path: path.display().to_string(),
+        message: e
+            .strip_prefix(&format!("{}: ", path.display()))
+            .map_or(e.clone(), str::to_owned),
+    })?;
+    if meta.units.is_empty() {
+        let held = vec![(String::new(), meta.dut_serial, meta.dut_type)];
+        return Ok((held, vec![load_unit(path, None)?]));
+    }
+    let held: Vec<(String, String, String)> = meta
+        .units
+        .iter()
+        .map(|u| (u.slot.clone(), u.serial.clone(), u.dut_type.clone()))
+        .collect();
+    let serials: Vec<String> = held.iter().map(|h| h.1.clone()).collect();
+    Ok((held, load_units(path, &serials)?))
 }
 
 /// A recorded sample as read, before the logged bench is known.

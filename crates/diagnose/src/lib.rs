@@ -670,19 +670,17 @@ fn each_against(
     over: &Scored,
     free: &[Effect],
 ) -> Vec<Tried> {
-    remaining
-        .iter()
-        .map(|&e| {
-            let s = score(data, &with_best_parameter(data, &over.model, e, free));
-            let (gain, p) = improvement(over, &s);
-            Tried {
-                effect: e,
-                scored: s,
-                gain,
-                p,
-            }
-        })
-        .collect()
+    // Two at a time: a lot's weighing has no thermal layer beside it.
+    lot::two_at_a_time(remaining, |_, &e| {
+        let s = score(data, &with_best_parameter(data, &over.model, e, free));
+        let (gain, p) = improvement(over, &s);
+        Tried {
+            effect: e,
+            scored: s,
+            gain,
+            p,
+        }
+    })
 }
 
 /// Two candidates that pass together where neither passes alone: each

@@ -230,16 +230,24 @@ fn weigh(
 ) -> Weighed {
     let (data, n) = (&stack.data, stack.units);
     let without: Vec<Term> = model.iter().copied().filter(|t| t.effect != e).collect();
-    let s0 = score(data, &without);
-    let shared_model = with_best_parameter_in(data, &without, e, Units::ALL, &[]);
+    // Two at a time: the lot without the effect beside the search of its
+    // shared parameter, then the shared and the per-unit sets' scores.
+    let (s0, shared_model) = std::thread::scope(|s| {
+        let s0 = s.spawn(|| score(data, &without));
+        let shared = with_best_parameter_in(data, &without, e, Units::ALL, &[]);
+        (joined(s0), shared)
+    });
     let p = shared_model.last().map_or(Param::None, |t| t.param);
-    let s_shared = score(data, &shared_model);
     let own_model: Vec<Term> = without
         .iter()
         .copied()
         .chain((0..n).map(|u| Term::in_units(e, p, Units::one(u))))
         .collect();
-    let s_own = score(data, &own_model);
+    let (s_shared, s_own) = std::thread::scope(|s| {
+        let shared = s.spawn(|| score(data, &shared_model));
+        let own = score(data, &own_model);
+        (joined(shared), own)
+    });
     let (gain, p_shared) = improvement(&s0, &s_shared);
     let (agree, agreement_p, ratio) = Bars::agree(&s_shared, &s_own);
     let per_unit: Vec<UnitValue> = (0..n)
@@ -343,8 +351,9 @@ fn all_but_one(
             ])
             .collect()
     };
-    let (v, s_rest) = (0..n)
-        .map(|v| (v, score(data, &model_without(v))))
+    let units: Vec<usize> = (0..n).collect();
+    let (v, s_rest) = super::two_at_a_time(&units, |_, &v| (v, score(data, &model_without(v))))
+        .into_iter()
         .min_by(|a, b| a.1.sse().total_cmp(&b.1.sse()))?;
     let (agree, agreement_p, _) = Bars::agree(&s_rest, s_own);
     let only_v: Vec<Term> = without
@@ -443,4 +452,9 @@ impl Found {
             fitted,
         }
     }
+}
+
+/// A scoped thread's result; its panic raised again here.
+fn joined<T>(h: std::thread::ScopedJoinHandle<'_, T>) -> T {
+    h.join().unwrap_or_else(|p| std::panic::resume_unwind(p))
 }
