@@ -342,7 +342,7 @@ pub fn run(args: DiagnoseArgs) -> Result<Outcome> {
     };
     let mixed_units = mixed_units_of(&args.runs, args.allow_mixed_units)?;
     // The logs read two at a time (each read is one thread's work).
-    let runs = gyrobench_diagnose::lot::two_at_a_time(&args.runs, |_, p| {
+    let runs = gyrobench_analysis::par::two_at_a_time(&args.runs, |_, p| {
         data::load_unit(p, args.unit.as_deref())
     })
     .into_iter()

@@ -134,7 +134,7 @@ impl Reading {
 pub fn load_lot(paths: &[std::path::PathBuf]) -> Result<Vec<LotUnit>, ReplayError> {
     // The logs read two at a time (each read is one thread's work), then
     // grouped in the order given.
-    let read = gyrobench_diagnose::lot::two_at_a_time(paths, |_, path| log_units(path));
+    let read = gyrobench_analysis::par::two_at_a_time(paths, |_, path| log_units(path));
     let mut units: Vec<LotUnit> = Vec::new();
     for (path, read) in paths.iter().zip(read) {
         let (held, runs) = read?;

@@ -26,7 +26,7 @@ use serde::Serialize;
 
 use super::data::RunData;
 use super::library::{Effect, Param};
-use super::lot::{Lot, LotUnit, diagnose_lot, two_at_a_time};
+use super::lot::{Lot, LotUnit, diagnose_lot};
 use super::randomized::draw_unit;
 use super::selfcheck::{contribution, inject, injected_param, runs_of};
 use super::{Options, diagnose_rate, visible_gap};
@@ -34,6 +34,7 @@ use crate::geometry::{Orientation, TableGeometry};
 use crate::study::StudyError;
 use crate::twin::TwinConfig;
 use crate::twin::config as tc;
+use gyrobench_analysis::par::two_at_a_time;
 
 /// A bench fault every unit of a lot carries alike.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]

@@ -273,6 +273,51 @@ fn unit_differences(f: &LogFacts, rows: &[Row]) -> Vec<Difference> {
     out
 }
 
+/// What a stored part's log shows, read apart from the store.
+enum Examined {
+    /// The log is not there.
+    Missing,
+    /// The store never saw the part end.
+    Running,
+    /// The log's SHA-256 is not the stored one (what differs, said).
+    Changed(String),
+    /// The log cannot be read, or its record (or replay) not made.
+    Unreadable(String),
+    /// Its record and figures (replayed when asked).
+    Read(Box<LogFacts>),
+}
+
+impl Examined {
+    /// The part of `row`: its log looked at, in the order
+    /// [`Store::check_part`] reports.
+    fn of(row: &Row, replay: bool) -> Self {
+        let log = row.text("log_path");
+        let sha = row.text("log_sha256");
+        let path = Path::new(&log);
+        if !path.is_file() {
+            return Self::Missing;
+        }
+        if row.text("outcome") == "running" {
+            return Self::Running;
+        }
+        match crate::fsutil::sha256_file(path) {
+            Ok(now) if now == sha => {}
+            Ok(now) => {
+                return Self::Changed(format!(
+                    "its SHA-256 is {} now, {} when the part ended",
+                    &now[..16],
+                    sha.get(..16).unwrap_or("(none stored)")
+                ));
+            }
+            Err(e) => return Self::Unreadable(e.to_string()),
+        }
+        match LogFacts::read(path, replay) {
+            Ok(f) => Self::Read(Box::new(f)),
+            Err(e) => Self::Unreadable(e),
+        }
+    }
+}
+
 impl Store {
     /// Check every stored part against its log (only those whose logs lie
     /// below `dir` when given, and then also the logs there the store
@@ -292,19 +337,25 @@ impl Store {
              JOIN units u ON u.id = r.unit_id ORDER BY r.started_utc, r.id",
             &[],
         )?;
-        let mut stored_logs = std::collections::HashSet::new();
-        for row in &parts {
-            let log = row.text("log_path");
-            stored_logs.insert(log.clone());
-            if let Some(u) = &under
-                && !Path::new(&log).starts_with(u)
-            {
-                v.elsewhere += 1;
-                continue;
-            }
+        let stored_logs: std::collections::HashSet<String> =
+            parts.iter().map(|row| row.text("log_path")).collect();
+        let mine: Vec<&Row> = parts
+            .iter()
+            .filter(|row| {
+                under
+                    .as_ref()
+                    .is_none_or(|u| Path::new(&row.text("log_path")).starts_with(u))
+            })
+            .collect();
+        v.elsewhere = parts.len() - mine.len();
+        // The logs are read (hashed, and replayed when asked) two at a
+        // time, apart from the store; then each part is checked in order.
+        let examined =
+            gyrobench_analysis::par::two_at_a_time(&mine, |_, row| Examined::of(row, replay));
+        for (row, examined) in mine.into_iter().zip(examined) {
             v.checked += 1;
             let found = v.findings.len();
-            self.check_part(&mut v, row, replay)?;
+            self.check_part(&mut v, row, examined)?;
             if v.findings.len() == found {
                 v.agree += 1;
             }
@@ -317,17 +368,16 @@ impl Store {
 
     /// Check one stored part (its `row` of `runs`) against its log, in
     /// order: the log is there, the part ended, the log is unchanged; then
-    /// its record and its figures are the log's. Each thing wrong becomes
-    /// a finding.
+    /// its record and its figures are the log's (`examined`: what its log
+    /// showed). Each thing wrong becomes a finding.
     fn check_part(
         &mut self,
         v: &mut Verification,
         row: &Row,
-        replay: bool,
+        examined: Examined,
     ) -> Result<(), StoreError> {
         let run = row.text("id");
         let log = row.text("log_path");
-        let sha = row.text("log_sha256");
         for why in self.broken_signatures(&run)? {
             v.findings.push(Finding {
                 problem: Problem::SignatureBroken,
@@ -347,41 +397,26 @@ impl Store {
             });
         };
         let path = Path::new(&log);
-        if !path.is_file() {
-            find(Problem::Missing, "the log is not there".into(), Vec::new());
-            return Ok(());
-        }
-        if row.text("outcome") == "running" {
-            find(
-                Problem::Incomplete,
-                "the store never saw this part end; `gyrobench results sync` on its directory completes it".into(),
-                Vec::new(),
-            );
-            return Ok(());
-        }
-        match crate::fsutil::sha256_file(path) {
-            Ok(now) if now == sha => {}
-            Ok(now) => {
+        let facts = match examined {
+            Examined::Read(facts) => *facts,
+            Examined::Missing => {
+                find(Problem::Missing, "the log is not there".into(), Vec::new());
+                return Ok(());
+            }
+            Examined::Running => {
                 find(
-                    Problem::Changed,
-                    format!(
-                        "its SHA-256 is {} now, {} when the part ended",
-                        &now[..16],
-                        sha.get(..16).unwrap_or("(none stored)")
-                    ),
+                    Problem::Incomplete,
+                    "the store never saw this part end; `gyrobench results sync` on its directory completes it".into(),
                     Vec::new(),
                 );
                 return Ok(());
             }
-            Err(e) => {
-                find(Problem::Unreadable, e.to_string(), Vec::new());
+            Examined::Changed(detail) => {
+                find(Problem::Changed, detail, Vec::new());
                 return Ok(());
             }
-        }
-        let facts = match LogFacts::read(path, replay) {
-            Ok(f) => f,
-            Err(e) => {
-                find(Problem::Unreadable, e, Vec::new());
+            Examined::Unreadable(detail) => {
+                find(Problem::Unreadable, detail, Vec::new());
                 return Ok(());
             }
         };

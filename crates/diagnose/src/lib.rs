@@ -671,7 +671,7 @@ fn each_against(
     free: &[Effect],
 ) -> Vec<Tried> {
     // Two at a time: a lot's weighing has no thermal layer beside it.
-    lot::two_at_a_time(remaining, |_, &e| {
+    gyrobench_analysis::par::two_at_a_time(remaining, |_, &e| {
         let s = score(data, &with_best_parameter(data, &over.model, e, free));
         let (gain, p) = improvement(over, &s);
         Tried {

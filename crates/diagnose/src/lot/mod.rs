@@ -489,38 +489,7 @@ impl<'a> Stack<'a> {
 /// Each unit's own diagnosis, two units at a time (a diagnosis runs its
 /// thermal layer beside its rate layer already).
 fn diagnose_each(runs: &[RunData], spans: &[(usize, usize)], opts: &Options) -> Vec<Diagnosis> {
-    two_at_a_time(spans, |_, &(a, b)| diagnose(&runs[a..b], opts))
-}
-
-/// `f` on every item (with its index), on at most two threads, the
-/// results in the items' order: two, as each diagnosis fits its thermal
-/// layer on a thread of its own beside its rate layer.
-pub fn two_at_a_time<T: Sync, R: Send>(items: &[T], f: impl Fn(usize, &T) -> R + Sync) -> Vec<R> {
-    let next = std::sync::atomic::AtomicUsize::new(0);
-    let done = std::sync::Mutex::new(Vec::new());
-    let workers = std::thread::available_parallelism()
-        .map_or(1, usize::from)
-        .clamp(1, 2)
-        .min(items.len());
-    std::thread::scope(|s| {
-        for _ in 0..workers {
-            s.spawn(|| {
-                loop {
-                    let k = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-                    let Some(item) = items.get(k) else { break };
-                    let r = f(k, item);
-                    done.lock()
-                        .unwrap_or_else(std::sync::PoisonError::into_inner)
-                        .push((k, r));
-                }
-            });
-        }
-    });
-    let mut done = done
-        .into_inner()
-        .unwrap_or_else(std::sync::PoisonError::into_inner);
-    done.sort_by_key(|(k, _)| *k);
-    done.into_iter().map(|(_, r)| r).collect()
+    gyrobench_analysis::par::two_at_a_time(spans, |_, &(a, b)| diagnose(&runs[a..b], opts))
 }
 
 /// What a lot of `n` units can and cannot tell.

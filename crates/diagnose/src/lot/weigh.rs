@@ -352,9 +352,10 @@ fn all_but_one(
             .collect()
     };
     let units: Vec<usize> = (0..n).collect();
-    let (v, s_rest) = super::two_at_a_time(&units, |_, &v| (v, score(data, &model_without(v))))
-        .into_iter()
-        .min_by(|a, b| a.1.sse().total_cmp(&b.1.sse()))?;
+    let (v, s_rest) =
+        gyrobench_analysis::par::two_at_a_time(&units, |_, &v| (v, score(data, &model_without(v))))
+            .into_iter()
+            .min_by(|a, b| a.1.sse().total_cmp(&b.1.sse()))?;
     let (agree, agreement_p, _) = Bars::agree(&s_rest, s_own);
     let only_v: Vec<Term> = without
         .iter()
