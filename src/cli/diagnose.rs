@@ -130,13 +130,7 @@ fn units_of(paths: &[PathBuf]) -> Result<Vec<(PathBuf, String)>> {
     paths
         .iter()
         .map(|p| {
-            let m = gyrobench::runlog::meta::read_run_meta(p).map_err(|e| {
-                if e.contains(&p.display().to_string()) {
-                    anyhow::anyhow!(e)
-                } else {
-                    anyhow::anyhow!("{}: {e}", p.display())
-                }
-            })?;
+            let m = gyrobench::runlog::meta::read_run_meta(p)?;
             let u = m.unit().map_or_else(
                 || format!("{} {}", m.dut_type, m.dut_serial),
                 |u| format!("{} {}", u.dut_type, u.serial),

@@ -174,12 +174,7 @@ type LogUnits = (Vec<(String, String, String)>, Vec<RunData>);
 
 /// The units a log holds and their runs (`load_lot`).
 fn log_units(path: &Path) -> Result<LogUnits, ReplayError> {
-    let meta = crate::runlog::meta::read_run_meta(path).map_err(|e| ReplayError::Log {
-        path: path.display().to_string(),
-        message: e
-            .strip_prefix(&format!("{}: ", path.display()))
-            .map_or(e.clone(), str::to_owned),
-    })?;
+    let meta = crate::runlog::meta::read_run_meta(path)?;
     if meta.units.is_empty() {
         let held = vec![(String::new(), meta.dut_serial, meta.dut_type)];
         return Ok((held, vec![load_unit(path, None)?]));

@@ -592,7 +592,7 @@ pub fn not_a_part(run_dir: &Path, log: &Path, n: u32) -> Option<String> {
     let first_meta = crate::runlog::meta::read_run_meta(&first).ok()?;
     let ours = run_id(&first_meta, &first).ok()?;
     let why = match crate::runlog::meta::read_run_meta(log) {
-        Err(e) => format!("its run metadata cannot be read: {e}"),
+        Err(e) => format!("its run metadata cannot be read: {}", e.detail()),
         Ok(m) => {
             let theirs = run_id(&m, log).unwrap_or_default();
             if theirs == ours && m.part == n {

@@ -330,23 +330,62 @@ impl RunMeta {
     }
 }
 
+/// Why a log's `run` metadata cannot be had.
+#[derive(Debug, thiserror::Error)]
+pub enum RunMetaError {
+    /// The file cannot be read as a log.
+    #[error(transparent)]
+    Read(#[from] crate::runlog::ReadError),
+    /// The metadata is there and a value of it does not parse.
+    #[error("{path}: {source}")]
+    Invalid {
+        /// File.
+        path: String,
+        /// The key and its value.
+        #[source]
+        source: MetaError,
+    },
+    /// The file holds no `run` metadata: not a gyrobench log.
+    #[error("{path}: no run metadata")]
+    Missing {
+        /// File.
+        path: String,
+    },
+}
+
+impl RunMetaError {
+    /// What is wrong, for a message that names the file already (a read
+    /// error names it itself).
+    pub fn detail(&self) -> String {
+        match self {
+            Self::Read(e) => e.to_string(),
+            Self::Invalid { source, .. } => source.to_string(),
+            Self::Missing { .. } => "no run metadata".into(),
+        }
+    }
+}
+
 /// The `run` metadata of the log at `path` (its first part's when the
 /// file holds several), or why it cannot be read.
-pub fn read_run_meta(path: &std::path::Path) -> Result<RunMeta, String> {
+pub fn read_run_meta(path: &std::path::Path) -> Result<RunMeta, RunMetaError> {
     let mut meta = None;
     let read = crate::runlog::read(path, |item| {
         if let crate::runlog::Item::Meta { name, entries } = item
             && name == crate::runlog::schema::RUN_META
         {
-            meta = Some(RunMeta::from_entries(entries).map_err(|e| e.to_string()));
+            meta = Some(RunMeta::from_entries(entries));
             return std::ops::ControlFlow::Break(crate::runlog::Stop::Enough);
         }
         std::ops::ControlFlow::Continue(())
     });
+    let path = || path.display().to_string();
     match (meta, read) {
-        (Some(m), _) => m,
-        (None, Err(e)) => Err(e.to_string()),
-        (None, Ok(_)) => Err(format!("{}: no run metadata", path.display())),
+        (Some(m), _) => m.map_err(|source| RunMetaError::Invalid {
+            path: path(),
+            source,
+        }),
+        (None, Err(e)) => Err(e.into()),
+        (None, Ok(_)) => Err(RunMetaError::Missing { path: path() }),
     }
 }
 

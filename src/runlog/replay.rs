@@ -84,6 +84,21 @@ pub enum ReplayError {
     },
 }
 
+impl From<crate::runlog::meta::RunMetaError> for ReplayError {
+    fn from(e: crate::runlog::meta::RunMetaError) -> Self {
+        use crate::runlog::meta::RunMetaError;
+        match e {
+            RunMetaError::Read(e) => Self::Read(e),
+            RunMetaError::Invalid { ref path, .. } | RunMetaError::Missing { ref path } => {
+                Self::Log {
+                    path: path.clone(),
+                    message: e.detail(),
+                }
+            }
+        }
+    }
+}
+
 /// A JSON array of integers reduced to its sum, length and extremes while
 /// parsing (no allocation per frame).
 #[derive(Debug, Default, Clone, Copy)]
