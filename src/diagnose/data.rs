@@ -7,7 +7,7 @@ use nalgebra::Vector3;
 
 use crate::geometry::{Orientation, Site, TableAngles, TableGeometry};
 use crate::runlog::meta::RunMeta;
-use crate::runlog::replay::{ReplayError, logged_bench};
+use crate::runlog::replay::{LoggedError, ReplayError, logged_bench};
 use crate::runlog::schema::{RUN_META, Rate1Hz, TableState, topics};
 use crate::runlog::{self, Item};
 
@@ -205,7 +205,7 @@ impl ReadSample {
     /// why it cannot be had.
     fn on_the_bench(
         self,
-        geometry: Option<&Result<TableGeometry, String>>,
+        geometry: Option<&Result<TableGeometry, LoggedError>>,
     ) -> Result<Sample, String> {
         let Self {
             sample: mut s,
@@ -249,7 +249,7 @@ impl ReadSample {
 struct Reading {
     site: Option<Site>,
     /// The logged bench's table geometry, needed only for a turning record.
-    geometry: Option<Result<TableGeometry, String>>,
+    geometry: Option<Result<TableGeometry, LoggedError>>,
     table: Option<TableState>,
     /// Each recorded sample with the table's angles and rates it was taken
     /// at (turned into a body rate once the logged bench is known).

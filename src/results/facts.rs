@@ -11,7 +11,7 @@ use super::sql::Value;
 use crate::coeffs::CoeffsUsed;
 use crate::protocol::frame::LinkStats;
 use crate::runlog::meta::{ResultMeasurement, ResultMeta, RunMeta};
-use crate::runlog::replay::{Replayed, replay, replay_unit};
+use crate::runlog::replay::{ReplayError, Replayed, replay, replay_unit};
 use crate::sequencer::{RunResult, UnitResult};
 
 /// The kind of bench a run ran on (`runs.bench_kind`; `results trend
@@ -205,10 +205,10 @@ pub fn ended(r: &RunResult, link: Option<&LinkStats>, ended_utc: Option<&str>) -
 
 /// A part's log replayed whole, as a sync indexes it: the first unit, and
 /// a batch's other units each from its own view of the log.
-pub fn replay_all(log: &Path) -> Result<Replayed, String> {
-    let mut r = replay(log, None).map_err(|e| e.to_string())?;
+pub fn replay_all(log: &Path) -> Result<Replayed, ReplayError> {
+    let mut r = replay(log, None)?;
     for u in r.meta.units.iter().skip(1) {
-        let o = replay_unit(log, None, Some(&u.serial)).map_err(|e| e.to_string())?;
+        let o = replay_unit(log, None, Some(&u.serial))?;
         r.result.others.push(UnitResult {
             outcome: Some(o.result.outcome),
             measurements: o.result.measurements,
@@ -258,7 +258,7 @@ impl LogFacts {
     /// from its frames.
     pub fn read(log: &Path, replay: bool) -> Result<Self, String> {
         if replay {
-            return Ok(Self::replayed(replay_all(log)?));
+            return Ok(Self::replayed(replay_all(log).map_err(|e| e.to_string())?));
         }
         let read = Records::read(log)?;
         let Some(meta) = read.meta else {
@@ -266,7 +266,7 @@ impl LogFacts {
         };
         let Some(first) = read.result else {
             // A killed run's log: what a sync made of it.
-            return Ok(Self::replayed(replay_all(log)?));
+            return Ok(Self::replayed(replay_all(log).map_err(|e| e.to_string())?));
         };
         let (result, figures) = from_records(&meta, &first, &read.others)?;
         Ok(Self {

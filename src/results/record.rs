@@ -279,7 +279,7 @@ impl Store {
         {
             return Ok(Indexed::AlreadyThere);
         }
-        let r = facts::replay_all(log).map_err(bad)?;
+        let r = facts::replay_all(log).map_err(|e| bad(e.to_string()))?;
         let slots = r.meta.units.iter().map(|u| u.slot.clone()).collect();
         let key = part_key(&r.meta, log)?;
         let before = outcome_of(self.sql(), &key)?;

@@ -215,15 +215,44 @@ pub struct Logged {
     pub twin: Option<TwinConfig>,
 }
 
+/// Why the configuration a run logged in its `run` metadata cannot be
+/// taken back from it.
+#[derive(Debug, thiserror::Error)]
+pub enum LoggedError {
+    /// A log of format 2 or later, or of a real bench, without its bench.
+    #[error("no bench configuration in the log's run metadata (bench {bench:?})")]
+    NoBench {
+        /// The bench the metadata names.
+        bench: String,
+    },
+    /// No procedure text.
+    #[error("no procedure in the log's run metadata")]
+    NoProcedure,
+    /// A logged text that does not load (file, line and field said by
+    /// its source).
+    #[error("the logged {part}: {source}")]
+    Invalid {
+        /// `bench configuration`, `procedure`, `coefficients` or `twin`.
+        part: &'static str,
+        /// Why.
+        #[source]
+        source: crate::config::ConfigError,
+    },
+}
+
+/// A logged text that does not load, as a [`LoggedError`].
+fn invalid(part: &'static str) -> impl Fn(crate::config::ConfigError) -> LoggedError {
+    move |source| LoggedError::Invalid { part, source }
+}
+
 /// The bench a run logged in its `run` metadata (`bench_toml`; the
 /// embedded bench for a format 1 log that left it empty).
-pub fn logged_bench(meta: &RunMeta) -> Result<BenchConfig, String> {
+pub fn logged_bench(meta: &RunMeta) -> Result<BenchConfig, LoggedError> {
     if meta.bench_toml.trim().is_empty() {
         if meta.format >= 2 || !meta.is_embedded() {
-            return Err(format!(
-                "no bench configuration in the log's run metadata (bench {:?})",
-                meta.bench
-            ));
+            return Err(LoggedError::NoBench {
+                bench: meta.bench.clone(),
+            });
         }
         return Ok(BenchConfig::embedded());
     }
@@ -231,15 +260,15 @@ pub fn logged_bench(meta: &RunMeta) -> Result<BenchConfig, String> {
         "bench_toml (in the log)",
         &meta.bench_toml,
     ))
-    .map_err(|e| format!("the logged bench configuration: {e}"))
+    .map_err(invalid("bench configuration"))
 }
 
 /// Parse the `run` metadata's configuration; errors say which part.
-pub fn logged(meta: &RunMeta) -> Result<Logged, String> {
+pub fn logged(meta: &RunMeta) -> Result<Logged, LoggedError> {
     let src = |k: &str, t: &str| Source::from_text(&format!("{k} (in the log)"), t);
     let bench = logged_bench(meta)?;
     if meta.procedure_toml.trim().is_empty() {
-        return Err("no procedure in the log's run metadata".to_owned());
+        return Err(LoggedError::NoProcedure);
     }
     let name = if meta.procedure_path.is_empty() {
         "procedure (in the log)".to_owned()
@@ -250,19 +279,19 @@ pub fn logged(meta: &RunMeta) -> Result<Logged, String> {
         &Source::from_text(&name, &meta.procedure_toml),
         &bench.procedure_limits(),
     )
-    .map_err(|e| format!("the logged procedure: {e}"))?;
+    .map_err(invalid("procedure"))?;
     let coeffs = meta
         .coeffs_toml
         .as_deref()
         .map(|t| CoefficientSet::from_source(&src("coeffs_toml", t)))
         .transpose()
-        .map_err(|e| format!("the logged coefficients: {e}"))?;
+        .map_err(invalid("coefficients"))?;
     let twin = meta
         .twin_toml
         .as_deref()
         .map(|t| TwinConfig::from_source(&src("twin_toml", t)))
         .transpose()
-        .map_err(|e| format!("the logged twin: {e}"))?;
+        .map_err(invalid("twin"))?;
     Ok(Logged {
         bench,
         procedure,
@@ -319,7 +348,7 @@ impl<'a> State<'a> {
             RUN_META => {
                 let meta =
                     RunMeta::from_entries(entries).map_err(|e| self.log_err(e.to_string()))?;
-                let l = logged(&meta).map_err(|e| self.log_err(e))?;
+                let l = logged(&meta).map_err(|e| self.log_err(e.to_string()))?;
                 self.coeffs =
                     l.coeffs
                         .as_ref()

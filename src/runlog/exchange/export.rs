@@ -180,7 +180,12 @@ pub fn export_unit(log: &Path, out: &Path, unit: Option<&str>) -> Result<Exporte
 /// bench when its table states carry angles), or why there is none.
 fn side_text(meta: &RunMeta, angles_known: bool, out: &Path, log: &Path) -> Result<String, String> {
     let geometry = if angles_known {
-        Some(super::super::replay::logged_bench(meta)?.table.geometry)
+        Some(
+            super::super::replay::logged_bench(meta)
+                .map_err(|e| e.to_string())?
+                .table
+                .geometry,
+        )
     } else {
         None
     };
