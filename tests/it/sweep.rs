@@ -285,29 +285,10 @@ impl Sweep {
                 }
             }
         }
-        let next = std::sync::atomic::AtomicUsize::new(0);
-        let rows = std::sync::Mutex::new(Vec::new());
-        std::thread::scope(|scope| {
-            for _ in 0..self.jobs.max(1) {
-                scope.spawn(|| {
-                    loop {
-                        let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-                        let Some((fault, t, key)) = jobs.get(i) else {
-                            break;
-                        };
-                        let row = self.one(i, &procedure, &spread, fault, *t, key);
-                        rows.lock()
-                            .unwrap_or_else(std::sync::PoisonError::into_inner)
-                            .push((i, row));
-                    }
-                });
-            }
-        });
-        let mut rows = rows
-            .into_inner()
-            .unwrap_or_else(std::sync::PoisonError::into_inner);
-        rows.sort_by_key(|(i, _)| *i);
-        let rows: Vec<Row> = rows.into_iter().map(|(_, r)| r).collect();
+        let rows: Vec<Row> =
+            gyrobench_analysis::par::on_threads(self.jobs, &jobs, |i, (fault, t, key)| {
+                self.one(i, &procedure, &spread, fault, *t, key)
+            });
         let mut t = Totals {
             runs: rows.len(),
             ..Totals::default()
