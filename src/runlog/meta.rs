@@ -5,6 +5,7 @@
 
 use std::collections::BTreeMap;
 
+pub use gyrobench_log::recover::utc_ns;
 use serde::Serialize;
 
 use crate::bench::Instrument;
@@ -158,13 +159,6 @@ fn json<T: serde::de::DeserializeOwned>(
             value: v,
         }),
     }
-}
-
-/// An RFC 3339 time as ns since the epoch (log times count from it), or
-/// none when it does not parse or falls outside 1970..2554.
-pub fn utc_ns(t: &str) -> Option<u64> {
-    let t = chrono::DateTime::parse_from_rfc3339(t).ok()?;
-    u64::try_from(t.timestamp_nanos_opt()?).ok()
 }
 
 impl RunMeta {

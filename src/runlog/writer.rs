@@ -1,57 +1,35 @@
-//! Writes a run's MCAP log (`docs/report.md`, "The MCAP log").
+//! The run's log: the sequencer's events as the log's messages, written
+//! through the log crate's [`LogWriter`] (`docs/report.md`, "The MCAP
+//! log").
 //!
-//! Channels, schemas, the `run` metadata and the procedure (as an
-//! attachment) go in up front. Gyro frames are batched one message per
-//! tick and zstd-compressed in chunks; a chunk is closed at least every
-//! second of wall time and every minute of device time, so a crash loses
-//! at most the last second (or, on a simulated bench, the last minute).
-//! [`Recorder::finish_run`] writes the `result` metadata, the report as an
-//! attachment, the summary and the footer.
-//!
-//! A write that fails (a full disk) is kept with its file and the first
-//! cause: every later call returns that cause, not the writer's "another
-//! write after a failed one", and what reached the disk stays there for
-//! `gyrobench recover`.
+//! The `run` metadata and the procedure go in up front; gyro frames are
+//! batched one message per tick; the link figures once a minute of device
+//! time. [`Recorder::finish_run`] writes the `result` metadata and the
+//! report, and ends the file.
 
 use std::collections::BTreeMap;
 use std::fs::File;
-use std::io::BufWriter;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::sync::Arc;
 
-use mcap::records::MessageHeader;
-use serde::Serialize;
+use gyrobench_log::{LogWriter, Opening, Tap};
 
 use super::live::Live;
 use super::meta::{ResultMeta, RunMeta};
 use super::schema::{
-    CHANNELS, ChamberState, GyroFrames, Level, LinkSample, LogLine, PROCEDURE_ATTACHMENT,
-    REPORT_ATTACHMENT, RESULT_META, RUN_META, Rate1Hz, SLOT_TOPICS, StepEvent, SupplyState,
+    ChamberState, GyroFrames, Level, LinkSample, LogLine, Rate1Hz, StepEvent, SupplyState,
     TableState, Timestamp, slot_topic, topics,
 };
 use crate::analysis::series::Interval;
-use crate::clock::Stopwatch;
 use crate::sequencer::{BenchState, Event, FrameRecord, Observer, Tick};
 
 /// Writes a run's MCAP file.
+#[derive(Debug)]
 pub struct Recorder {
-    path: PathBuf,
-    w: mcap::Writer<BufWriter<File>>,
-    ch: BTreeMap<String, u16>,
-    seq: u32,
-    start_ns: u64,
+    log: LogWriter,
     frame_dt_s: f64,
     lsb_arcsec: f64,
     temp_lsb_c: f64,
-    since_flush: Stopwatch,
-    /// Device time of the last flush, s.
-    flushed_t_s: f64,
-    buf: Vec<u8>,
-    messages: BTreeMap<String, u64>,
-    /// The first write failure, in words (file and cause).
-    failed: Option<String>,
-    /// Where every message is also published live, if anywhere.
-    live: Option<Arc<Live>>,
     /// A batch's other units' topics (slots after the first).
     slots: Vec<SlotTopics>,
     /// Device time the link figures were last written at, s (they are
@@ -60,35 +38,9 @@ pub struct Recorder {
     /// Device time of the tick whose link figures are being written (a
     /// batch's other units' follow the first unit's).
     links_at: Option<f64>,
-    /// Device time from which the disk is full (`--inject disk-full@T` on
-    /// the simulated bench).
-    full_from_s: Option<f64>,
     /// Whether the table angles of the states written are known (not for
     /// a run imported from another bench without them).
     table_angles_known: bool,
-}
-
-impl std::fmt::Debug for Recorder {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("Recorder")
-            .field("path", &self.path)
-            .field("messages", &self.messages)
-            .field("failed", &self.failed)
-            .finish_non_exhaustive()
-    }
-}
-
-/// The writer options every gyrobench log is written with. zstd level 1:
-/// on the acceptance's log (16.3 M frames) it wrote 14.2 MB in a 4.5 s
-/// run where the crate's default level wrote 18.5 MB in 5.2 s, and the log
-/// replays in 2.6 s instead of 4.0 (docs/benchmarks.md).
-pub(super) fn write_options(library: &str) -> mcap::WriteOptions {
-    mcap::WriteOptions::new()
-        .compression(Some(mcap::Compression::Zstd))
-        .compression_level(1)
-        .chunk_size(Some(4 * 1024 * 1024))
-        .profile("")
-        .library(library.to_owned())
 }
 
 /// The scales of the frames a run writes.
@@ -122,6 +74,12 @@ impl SlotTopics {
     }
 }
 
+impl Tap for Live {
+    fn publish(&self, topic: &str, log_time_ns: u64, json: &[u8]) {
+        Live::publish(self, topic, log_time_ns, json);
+    }
+}
+
 impl Recorder {
     /// Create `path` (which must not exist: a log is never overwritten)
     /// and write the header, schemas, channels, the `run` metadata and the
@@ -133,11 +91,8 @@ impl Recorder {
         start_ns: u64,
         scales: FrameScales,
     ) -> std::io::Result<Self> {
-        let file = std::fs::OpenOptions::new()
-            .write(true)
-            .create_new(true)
-            .open(path)?;
-        Self::from_file(file, path, meta, start_ns, scales)
+        let log = LogWriter::create(path, &opening(meta, start_ns))?;
+        Ok(Self::new(log, meta, scales))
     }
 
     /// The same on a file already open (a [`crate::fsutil::Pending`]
@@ -149,91 +104,31 @@ impl Recorder {
         start_ns: u64,
         scales: FrameScales,
     ) -> std::io::Result<Self> {
-        let library = format!("gyrobench {}", env!("CARGO_PKG_VERSION"));
-        let mut w = write_options(&library)
-            .create(BufWriter::new(file))
-            .map_err(mcap_err)?;
-        let mut ch = BTreeMap::new();
-        for (topic, name, schema) in CHANNELS {
-            let sid = w
-                .add_schema(name, "jsonschema", schema.as_bytes())
-                .map_err(mcap_err)?;
-            let cid = w
-                .add_channel(sid, topic, "json", &BTreeMap::new())
-                .map_err(mcap_err)?;
-            ch.insert(topic.to_owned(), cid);
-        }
-        // A batch's other units: each one's frames, 1 Hz rate and table
-        // state as it sees it, under its slot (the first unit's are the
-        // single-unit channels, so every reader of one-unit logs reads it).
-        let mut slot_schemas = BTreeMap::new();
-        for unit in meta.units.iter().skip(1) {
-            for (topic, name, schema) in CHANNELS {
-                if !SLOT_TOPICS.contains(&topic) {
-                    continue;
-                }
-                let sid = match slot_schemas.get(name) {
-                    Some(&sid) => sid,
-                    None => {
-                        let sid = w
-                            .add_schema(name, "jsonschema", schema.as_bytes())
-                            .map_err(mcap_err)?;
-                        slot_schemas.insert(name, sid);
-                        sid
-                    }
-                };
-                let topic = slot_topic(&unit.slot, topic);
-                let cid = w
-                    .add_channel(sid, &topic, "json", &BTreeMap::new())
-                    .map_err(mcap_err)?;
-                ch.insert(topic, cid);
-            }
-        }
-        let slots = meta
-            .units
-            .iter()
-            .skip(1)
-            .map(|u| SlotTopics::of(&u.slot))
-            .collect();
-        w.write_metadata(&mcap::records::Metadata {
-            name: RUN_META.into(),
-            metadata: meta.to_entries(),
-        })
-        .map_err(mcap_err)?;
-        w.attach(&mcap::Attachment {
-            log_time: start_ns,
-            create_time: start_ns,
-            name: PROCEDURE_ATTACHMENT.into(),
-            media_type: "application/toml".into(),
-            data: std::borrow::Cow::Borrowed(meta.procedure_toml.as_bytes()),
-        })
-        .map_err(mcap_err)?;
-        Ok(Self {
-            path: path.to_owned(),
-            w,
-            ch,
-            seq: 0,
-            start_ns,
+        let log = LogWriter::from_file(file, path, &opening(meta, start_ns))?;
+        Ok(Self::new(log, meta, scales))
+    }
+
+    fn new(log: LogWriter, meta: &RunMeta, scales: FrameScales) -> Self {
+        Self {
+            log,
             frame_dt_s: scales.dt_s,
             lsb_arcsec: scales.lsb_arcsec,
             temp_lsb_c: scales.temp_lsb_c,
-            since_flush: Stopwatch::start(),
-            flushed_t_s: 0.0,
-            buf: Vec::with_capacity(64 * 1024),
-            messages: BTreeMap::new(),
-            failed: None,
-            full_from_s: None,
-            table_angles_known: true,
-            live: None,
-            slots,
+            slots: meta
+                .units
+                .iter()
+                .skip(1)
+                .map(|u| SlotTopics::of(&u.slot))
+                .collect(),
             last_link_s: 0.0,
             links_at: None,
-        })
+            table_angles_known: true,
+        }
     }
 
     /// Publish every message written from now on on `live` too.
     pub fn publish_live(&mut self, live: Arc<Live>) {
-        self.live = Some(live);
+        self.log.tap(live);
     }
 
     /// Whether the table states written from now on carry table angles
@@ -244,76 +139,33 @@ impl Recorder {
 
     /// The file being written.
     pub fn path(&self) -> &Path {
-        &self.path
+        self.log.path()
     }
 
     /// Play a full disk from device time `t_s` on: every write from then
     /// fails as `No space left on device` would, and nothing more reaches
     /// the file (the simulated bench's `disk-full` fault).
     pub fn fill_disk_at(&mut self, t_s: f64) {
-        self.full_from_s = Some(t_s);
+        let why = format!(
+            "writing {}: {} (simulated: --inject disk-full)",
+            self.log.path().display(),
+            std::io::Error::from_raw_os_error(28)
+        );
+        self.log.fail_from(t_s, why);
     }
 
     /// The first write failure, if any ("writing FILE: cause").
     pub fn failure(&self) -> Option<&str> {
-        self.failed.as_deref()
+        self.log.failure()
     }
 
-    /// Run `f` on the writer unless it failed before; keep the first
-    /// failure with the file's name.
-    fn guarded(
+    fn write_json(
         &mut self,
-        f: impl FnOnce(&mut mcap::Writer<BufWriter<File>>) -> mcap::McapResult<()>,
+        topic: &str,
+        t_s: f64,
+        value: &impl serde::Serialize,
     ) -> std::io::Result<()> {
-        if let Some(why) = &self.failed {
-            return Err(std::io::Error::other(why.clone()));
-        }
-        f(&mut self.w).map_err(|e| {
-            let why = format!("writing {}: {}", self.path.display(), describe(&e));
-            self.failed = Some(why.clone());
-            std::io::Error::other(why)
-        })
-    }
-
-    fn write_json(&mut self, topic: &str, t_s: f64, value: &impl Serialize) -> std::io::Result<()> {
-        if self.failed.is_none() && self.full_from_s.is_some_and(|t| t_s >= t) {
-            self.failed = Some(format!(
-                "writing {}: {} (simulated: --inject disk-full)",
-                self.path.display(),
-                std::io::Error::from_raw_os_error(28)
-            ));
-        }
-        self.buf.clear();
-        serde_json::to_writer(&mut self.buf, value)?;
-        let time = self.ns(t_s);
-        self.seq += 1;
-        let header = MessageHeader {
-            channel_id: self.ch[topic],
-            sequence: self.seq,
-            log_time: time,
-            publish_time: time,
-        };
-        let buf = std::mem::take(&mut self.buf);
-        // Each second of wall time, and each minute of device time (a
-        // simulated bench runs far faster than the clock).
-        let flush = self.since_flush.elapsed_s() >= 1.0 || t_s - self.flushed_t_s >= 60.0;
-        let r = self.guarded(|w| {
-            w.write_to_known_channel(&header, &buf)?;
-            if flush { w.flush() } else { Ok(()) }
-        });
-        if r.is_ok()
-            && let Some(live) = &self.live
-        {
-            live.publish(topic, time, &buf);
-        }
-        self.buf = buf;
-        r?;
-        if flush {
-            self.since_flush.lap_s();
-            self.flushed_t_s = t_s;
-        }
-        *self.messages.entry(topic.to_owned()).or_default() += 1;
-        Ok(())
+        self.log.write(topic, t_s, value)
     }
 
     /// A tick's frames (nothing when there are none).
@@ -357,14 +209,9 @@ impl Recorder {
         self.write_json(topic, s.t_s, &table)
     }
 
-    fn ns(&self, t_s: f64) -> u64 {
-        self.start_ns
-            .saturating_add((t_s.max(0.0) * 1e9).min(u64::MAX as f64) as u64)
-    }
-
     /// Messages written per topic.
     pub fn message_counts(&self) -> &BTreeMap<String, u64> {
-        &self.messages
+        self.log.message_counts()
     }
 
     /// A batch's unit in `slot` (not the first): its result as the
@@ -378,73 +225,38 @@ impl Recorder {
         report_json: &str,
         end_s: f64,
     ) -> std::io::Result<()> {
-        let at = self.ns(end_s);
-        let entries = result.to_entries();
         let report = format!("{}.json", crate::unit::report_name(serial));
-        self.guarded(|w| {
-            write_result(
-                w,
-                format!("{RESULT_META}/{slot}"),
-                entries,
-                Some((report, report_json)),
-                at,
-            )
-        })
+        self.log
+            .unit_result(slot, result.to_entries(), report, report_json, end_s)
     }
 
     /// End the log of a run: the `result` metadata, the report (when there
     /// is one) as an attachment, the summary, indexes and footer. After a
     /// write failure, returns that failure; what reached the disk is kept.
     pub fn finish_run(
-        mut self,
+        self,
         result: &ResultMeta,
         report_json: Option<&str>,
         end_s: f64,
     ) -> std::io::Result<()> {
-        let at = self.ns(end_s);
-        let entries = result.to_entries();
-        let report = report_json.map(|r| (REPORT_ATTACHMENT.to_owned(), r));
-        self.guarded(|w| {
-            write_result(w, RESULT_META.into(), entries, report, at)?;
-            w.finish().map(|_| ())
-        })
+        self.log
+            .finish(result.to_entries(), report_json, end_s)
+            .map(|_| ())
     }
 }
 
-/// A result metadata record `name`, and its report (attachment name, JSON)
-/// when there is one, at log time `at`.
-fn write_result(
-    w: &mut mcap::Writer<BufWriter<File>>,
-    name: String,
-    entries: BTreeMap<String, String>,
-    report: Option<(String, &str)>,
-    at: u64,
-) -> mcap::McapResult<()> {
-    w.write_metadata(&mcap::records::Metadata {
-        name,
-        metadata: entries,
-    })?;
-    if let Some((name, json)) = report {
-        w.attach(&mcap::Attachment {
-            log_time: at,
-            create_time: at,
-            name,
-            media_type: "application/json".into(),
-            data: std::borrow::Cow::Borrowed(json.as_bytes()),
-        })?;
-    }
-    Ok(())
-}
-
-fn mcap_err(e: mcap::McapError) -> std::io::Error {
-    match e {
-        mcap::McapError::Io(e) => e,
-        e => std::io::Error::other(e),
+/// What a run's log starts with: its `run` metadata, its procedure, its
+/// batch's other units' slots.
+fn opening(meta: &RunMeta, start_ns: u64) -> Opening<'_> {
+    Opening {
+        library: format!("gyrobench {}", env!("CARGO_PKG_VERSION")),
+        run: meta.to_entries(),
+        procedure_toml: &meta.procedure_toml,
+        slots: meta.units.iter().skip(1).map(|u| u.slot.clone()).collect(),
+        start_ns,
     }
 }
 
-/// The cause of a writer error in words: the I/O error itself when there
-/// is one (`No space left on device`), not the writer's wrapper.
 /// The `/supply/state` message of a reading at `t_s`.
 fn supply_state(t_s: f64, r: &crate::driver::SupplyReading) -> SupplyState {
     SupplyState {
@@ -456,13 +268,6 @@ fn supply_state(t_s: f64, r: &crate::driver::SupplyReading) -> SupplyState {
         limit_a: r.limit_a,
         on: r.on,
         tripped: r.tripped,
-    }
-}
-
-fn describe(e: &mcap::McapError) -> String {
-    match e {
-        mcap::McapError::Io(io) => io.to_string(),
-        e => e.to_string(),
     }
 }
 
@@ -581,7 +386,7 @@ impl Recorder {
 
     /// A line for people.
     pub fn event(&mut self, t_s: f64, level: Level, message: &str) -> std::io::Result<()> {
-        let ns = self.ns(t_s);
+        let ns = self.log.ns(t_s);
         let line = LogLine {
             timestamp: Timestamp {
                 sec: ns / 1_000_000_000,

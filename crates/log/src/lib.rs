@@ -8,6 +8,10 @@
 //! - [`reader`]: streaming, bounded reading in file order; a file cut short
 //!   or damaged is read as far as it is whole, and the summary says what
 //!   was lost.
+//! - [`writer`]: a log written message by message, flushed every second
+//!   of wall time, whose first write failure sticks; `finish` returns what
+//!   it holds.
+//! - [`recover`]: a complete, indexed log from what a killed run flushed.
 //!
 //! ```no_run
 //! use std::ops::ControlFlow;
@@ -32,6 +36,10 @@
 //! ```
 
 pub mod reader;
+pub mod recover;
 pub mod schema;
+pub mod writer;
 
 pub use reader::{Item, ReadError, ReadSummary, Stop, read, refusing};
+pub use recover::{RecoverError, Recovered};
+pub use writer::{LogWriter, Opening, Tap, Written};
