@@ -181,21 +181,6 @@ pub fn scale_factor(runs: &[RunSeries]) -> Option<ScaleFactorCoeffs> {
     })
 }
 
-impl ScaleFactorCoeffs {
-    /// In words, for the operator.
-    pub fn render_text(&self) -> String {
-        let mut s = format!(
-            "scale factor from {} rate records: {:+.3} ± {:.3} ppm against nominal at {:.1} degC (block)",
-            self.records, self.error_ppm, self.error_ppm_stderr, self.reference_c
-        );
-        match (self.ppm_per_c, self.ppm_per_c_stderr) {
-            (Some(c), Some(e)) => s.push_str(&format!(", {c:+.4} ± {e:.4} ppm/degC\n")),
-            _ => s.push_str("; the records span less than 1 degC: no temperature coefficient\n"),
-        }
-        s
-    }
-}
-
 /// Residual figures of one model on one run (its own offset removed).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct Score {

@@ -58,10 +58,11 @@ pub mod sim;
 pub mod study;
 pub mod transport;
 pub mod typeb;
+/// The unit under test's serial rules (the vocabulary crate's).
+pub use gyrobench_model::unit;
 /// The digital twin of the RL-16 on its bench: the `gyrobench-twin`
 /// crate (`crates/twin`).
 pub use gyrobench_twin::twin;
-pub mod unit;
 pub mod view;
 
 pub use bench::BenchConfig;

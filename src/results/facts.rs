@@ -228,7 +228,7 @@ fn figures_of(meta: &RunMeta, r: &RunResult) -> Vec<(String, ResultMeasurement)>
             r.unit(k)
                 .measurements
                 .iter()
-                .map(|m| (slot.clone(), ResultMeasurement::new(m)))
+                .map(|m| (slot.clone(), ResultMeasurement::from(m)))
                 .collect::<Vec<_>>()
         })
         .collect()

@@ -660,7 +660,7 @@ fn write_log(
         bench_left: None,
         others: Vec::new(),
     };
-    rec.finish_run(&ResultMeta::new(&result), None, end_s)
+    rec.finish_run(&ResultMeta::from(&result), None, end_s)
         .map_err(io)?;
     Ok((outcome, measurements))
 }

@@ -3,7 +3,7 @@
 //! - [`schema`]: topics, JSON Schemas and the message types shared by the
 //!   writer and every reader; attachment and metadata record names (the
 //!   `gyrobench-log` crate's, with [`reader`]: the file format alone).
-//! - [`meta`]: the `run` and `result` metadata, typed.
+//! - [`meta`]: the `run` and `result` metadata, typed (the log crate's).
 //! - [`writer`]: the [`Recorder`](writer::Recorder), the run's log as an
 //!   [`Observer`](crate::sequencer::Observer), written through the log
 //!   crate's [`LogWriter`](gyrobench_log::LogWriter).
@@ -21,10 +21,9 @@ pub mod exchange;
 pub mod import_map;
 pub mod interchange;
 pub mod live;
-pub mod meta;
 pub mod recover;
 pub mod replay;
 pub mod view;
 pub mod writer;
 
-pub use gyrobench_log::{Item, ReadError, ReadSummary, Stop, read, reader, refusing, schema};
+pub use gyrobench_log::{Item, ReadError, ReadSummary, Stop, meta, read, reader, refusing, schema};

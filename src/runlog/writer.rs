@@ -15,13 +15,14 @@ use std::sync::Arc;
 use gyrobench_log::{LogWriter, Opening, Tap};
 
 use super::live::Live;
-use super::meta::{ResultMeta, RunMeta};
+use super::meta::{ResultMeasurement, ResultMeta, RunMeta};
 use super::schema::{
     ChamberState, GyroFrames, Level, LinkSample, LogLine, Rate1Hz, StepEvent, SupplyState,
     TableState, Timestamp, slot_topic, topics,
 };
 use crate::analysis::series::Interval;
-use crate::sequencer::{BenchState, Event, FrameRecord, Observer, Tick};
+use crate::sequencer::measure::Measurement;
+use crate::sequencer::{BenchState, Event, FrameRecord, Observer, RunResult, Tick};
 
 /// Writes a run's MCAP file.
 #[derive(Debug)]
@@ -254,6 +255,40 @@ fn opening(meta: &RunMeta, start_ns: u64) -> Opening<'_> {
         procedure_toml: &meta.procedure_toml,
         slots: meta.units.iter().skip(1).map(|u| u.slot.clone()).collect(),
         start_ns,
+    }
+}
+
+/// The `result` record of a run's result.
+impl From<&RunResult> for ResultMeta {
+    fn from(r: &RunResult) -> Self {
+        Self {
+            end_time_utc: None,
+            outcome: r.outcome,
+            cleanup_completed: r.cleanup_completed,
+            device_time_s: Some(r.device_time_s),
+            frames: r.frames,
+            error: r.error.clone(),
+            measurements: r.measurements.iter().map(ResultMeasurement::from).collect(),
+            bench_left: r.bench_left.clone(),
+        }
+    }
+}
+
+/// A measurement as the `result` record lists it.
+impl From<&Measurement> for ResultMeasurement {
+    fn from(m: &Measurement) -> Self {
+        Self {
+            name: m.name.clone(),
+            value: m.value,
+            unit: m.unit.clone(),
+            low: m.low,
+            high: m.high,
+            outcome: m.outcome,
+            step: m.step.clone(),
+            note: m.note.clone(),
+            uncertainty: m.uncertainty.as_ref().map(|u| u.brief()),
+            guard_band: m.guard_band,
+        }
     }
 }
 

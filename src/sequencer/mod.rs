@@ -23,7 +23,6 @@ pub mod uncertainty;
 use std::sync::Arc;
 
 use async_trait::async_trait;
-use serde::Serialize;
 
 use crate::driver::{ChamberReading, DeviceError, InPosition, TableReading};
 use crate::geometry::{Orientation, TableAngles};
@@ -342,19 +341,9 @@ fn tell(log: &mut dyn Observer, watch: &mut dyn Operator, e: &Event<'_>) -> std:
     log.observe(e)
 }
 
-/// How a run ended (the vocabulary crate's).
-pub use gyrobench_model::outcome::Outcome;
-
-/// The failure that ended a run.
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct RunError {
-    /// Device at fault, if any.
-    pub device: Option<String>,
-    /// Step key where it happened.
-    pub step: String,
-    /// What happened.
-    pub message: String,
-}
+/// How a run ended, the failure that ended it and the state it left the
+/// bench in (the vocabulary crate's).
+pub use gyrobench_model::outcome::{BenchLeft, Outcome, RunError};
 
 /// Everything a run produced.
 #[derive(Debug, Clone)]
@@ -461,38 +450,6 @@ impl RunResult {
             others: Vec::new(),
         }
     }
-}
-
-/// The state a run left the bench in, read back from the devices.
-#[derive(Debug, Clone, PartialEq, Serialize, serde::Deserialize)]
-pub struct BenchLeft {
-    /// What the end of the run asked for: `cleanup` (the procedure's
-    /// cleanup steps) or `safe_state` (the bench's safe state).
-    pub intended: String,
-    /// Chamber mode read back (`off`, `standby`, `constant`), or `unknown`.
-    pub chamber_mode: String,
-    /// Chamber set point read back, degC.
-    pub chamber_set_point_c: Option<f64>,
-    /// Chamber air read back, degC.
-    pub chamber_air_c: Option<f64>,
-    /// Table angles read back (outer, inner), deg.
-    pub table_deg: Option<[f64; 2]>,
-    /// Both table axes at rest.
-    pub table_at_rest: Option<bool>,
-    /// The supply's output read back: on (none: the bench has no supply,
-    /// or it could not be read).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub supply_on: Option<bool>,
-    /// The voltage it reads, V.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub supply_v: Option<f64>,
-    /// The current it reads, A.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub supply_a: Option<f64>,
-    /// The state read back is the one asked for.
-    pub verified: bool,
-    /// In words, for the report and the operator.
-    pub summary: String,
 }
 
 /// No display and no operator: a run nobody watches.

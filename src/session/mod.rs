@@ -1068,7 +1068,7 @@ fn close_log(
                     recorder.unit_result(
                         &u.slot,
                         &u.serial,
-                        &ResultMeta::new(&result.unit(k)).ended_at(ended_utc),
+                        &ResultMeta::from(&result.unit(k)).ended_at(ended_utc),
                         &r.to_json(),
                         end_s,
                     )
@@ -1077,7 +1077,7 @@ fn close_log(
         .and_then(|()| {
             let first = reports.first().map(Report::to_json);
             recorder.finish_run(
-                &ResultMeta::new(&result).ended_at(ended_utc),
+                &ResultMeta::from(&result).ended_at(ended_utc),
                 first.as_deref(),
                 end_s,
             )

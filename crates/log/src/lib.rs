@@ -8,6 +8,8 @@
 //! - [`reader`]: streaming, bounded reading in file order; a file cut short
 //!   or damaged is read as far as it is whole, and the summary says what
 //!   was lost.
+//! - [`meta`]: the `run` and `result` metadata, typed (MCAP metadata is
+//!   string to string; these types alone know the keys).
 //! - [`writer`]: a log written message by message, flushed every second
 //!   of wall time, whose first write failure sticks; `finish` returns what
 //!   it holds.
@@ -35,6 +37,7 @@
 //! # Ok::<(), gyrobench_log::ReadError>(())
 //! ```
 
+pub mod meta;
 pub mod reader;
 pub mod recover;
 pub mod schema;

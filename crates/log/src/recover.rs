@@ -64,14 +64,7 @@ pub enum RecoverError {
 /// metadata's `part_start_time_utc`): message log times are counted from
 /// it.
 pub fn part_start_ns(entries: &std::collections::BTreeMap<String, String>) -> Option<u64> {
-    utc_ns(entries.get("part_start_time_utc")?)
-}
-
-/// An RFC 3339 time as ns since the epoch (log times count from it), or
-/// none when it does not parse or falls outside 1970..2554.
-pub fn utc_ns(t: &str) -> Option<u64> {
-    let t = chrono::DateTime::parse_from_rfc3339(t).ok()?;
-    u64::try_from(t.timestamp_nanos_opt()?).ok()
+    crate::meta::utc_ns(entries.get("part_start_time_utc")?)
 }
 
 /// Copy one message to `w` on the output's channel for its input channel

@@ -3,15 +3,20 @@
 //! configuration checking every gyrobench file shares (`config::Checker`:
 //! errors that name the file, line, key and the fix), the procedure as
 //! typed values (`procedure`, checked against a bench's `limits`), how runs
-//! and measurements end (`outcome`), and the shipped procedures' texts
-//! (`procedures`, this package's `procedures/`, which the repository's
-//! top-level `procedures/` is). The controller keeps the paths it always
-//! gave them (`gyrobench::geometry`, `gyrobench::config`,
-//! `gyrobench::procedure`).
+//! and measurements end and what a run leaves (`outcome`), the unit under
+//! test's serial (`unit`), the instruments a run names (`instrument`), its coefficient set and that set's identity
+//! (`coefficients`), and the shipped procedures' texts (`procedures`,
+//! this package's `procedures/`, which the repository's top-level
+//! `procedures/` is). The controller keeps the paths it always gave them
+//! (`gyrobench::geometry`, `gyrobench::config`, `gyrobench::procedure`,
+//! `gyrobench::unit`, `gyrobench::coeffs`).
 
+pub mod coefficients;
 pub mod config;
 pub mod geometry;
+pub mod instrument;
 pub mod limits;
 pub mod outcome;
 pub mod procedure;
 pub mod procedures;
+pub mod unit;

@@ -1,8 +1,9 @@
 //! How runs and measurements end, in the words the report, the log, the
 //! store and the station all use: a measurement's verdict
-//! ([`MeasureOutcome`]), a run's ([`Outcome`]), and where a stored run
-//! stands ([`RunState`]: a run's outcome, or still running, or an imported
-//! reference).
+//! ([`MeasureOutcome`]), a run's ([`Outcome`]), the failure that ended it
+//! ([`RunError`]), the state it left the bench in ([`BenchLeft`]), and
+//! where a stored run stands ([`RunState`]: a run's outcome, or still
+//! running, or an imported reference).
 
 use serde::{Deserialize, Serialize};
 
@@ -214,4 +215,47 @@ impl From<Outcome> for RunState {
     fn from(o: Outcome) -> Self {
         Self::ended(o)
     }
+}
+
+/// The failure that ended a run.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct RunError {
+    /// Device at fault, if any.
+    pub device: Option<String>,
+    /// Step key where it happened.
+    pub step: String,
+    /// What happened.
+    pub message: String,
+}
+
+/// The state a run left the bench in, read back from the devices.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct BenchLeft {
+    /// What the end of the run asked for: `cleanup` (the procedure's
+    /// cleanup steps) or `safe_state` (the bench's safe state).
+    pub intended: String,
+    /// Chamber mode read back (`off`, `standby`, `constant`), or `unknown`.
+    pub chamber_mode: String,
+    /// Chamber set point read back, degC.
+    pub chamber_set_point_c: Option<f64>,
+    /// Chamber air read back, degC.
+    pub chamber_air_c: Option<f64>,
+    /// Table angles read back (outer, inner), deg.
+    pub table_deg: Option<[f64; 2]>,
+    /// Both table axes at rest.
+    pub table_at_rest: Option<bool>,
+    /// The supply's output read back: on (none: the bench has no supply,
+    /// or it could not be read).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub supply_on: Option<bool>,
+    /// The voltage it reads, V.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub supply_v: Option<f64>,
+    /// The current it reads, A.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub supply_a: Option<f64>,
+    /// The state read back is the one asked for.
+    pub verified: bool,
+    /// In words, for the report and the operator.
+    pub summary: String,
 }

@@ -5,13 +5,10 @@
 
 use std::collections::BTreeMap;
 
-pub use gyrobench_log::recover::utc_ns;
+use gyrobench_model::coefficients::{CoeffsSource, CoeffsUsed};
+use gyrobench_model::instrument::Instrument;
+use gyrobench_model::outcome::{BenchLeft, Outcome, RunError};
 use serde::Serialize;
-
-use crate::bench::Instrument;
-use crate::coeffs::{CoeffsSource, CoeffsUsed};
-use crate::sequencer::measure::Measurement;
-use crate::sequencer::{BenchLeft, Outcome, RunError, RunResult};
 
 /// A metadata value that does not parse.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -108,7 +105,7 @@ pub struct RunUnit {
     /// Its body orientation in NED with both table angles at zero (a
     /// batch's slots; none: the bench's `[table.geometry] mount`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub mount: Option<crate::geometry::Orientation>,
+    pub mount: Option<gyrobench_model::geometry::Orientation>,
     /// A batch unit's own twin (its slot's twin file, as read; none: the
     /// run's, `twin_toml`), for a resume on the same units.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -159,6 +156,13 @@ fn json<T: serde::de::DeserializeOwned>(
             value: v,
         }),
     }
+}
+
+/// An RFC 3339 time as ns since the epoch (log times count from it), or
+/// none when it does not parse or falls outside 1970..2554.
+pub fn utc_ns(t: &str) -> Option<u64> {
+    let t = chrono::DateTime::parse_from_rfc3339(t).ok()?;
+    u64::try_from(t.timestamp_nanos_opt()?).ok()
 }
 
 impl RunMeta {
@@ -329,7 +333,7 @@ impl RunMeta {
 pub enum RunMetaError {
     /// The file cannot be read as a log.
     #[error(transparent)]
-    Read(#[from] crate::runlog::ReadError),
+    Read(#[from] crate::ReadError),
     /// The metadata is there and a value of it does not parse.
     #[error("{path}: {source}")]
     Invalid {
@@ -363,12 +367,12 @@ impl RunMetaError {
 /// file holds several), or why it cannot be read.
 pub fn read_run_meta(path: &std::path::Path) -> Result<RunMeta, RunMetaError> {
     let mut meta = None;
-    let read = crate::runlog::read(path, |item| {
-        if let crate::runlog::Item::Meta { name, entries } = item
-            && name == crate::runlog::schema::RUN_META
+    let read = crate::read(path, |item| {
+        if let crate::Item::Meta { name, entries } = item
+            && name == crate::schema::RUN_META
         {
             meta = Some(RunMeta::from_entries(entries));
-            return std::ops::ControlFlow::Break(crate::runlog::Stop::Enough);
+            return std::ops::ControlFlow::Break(crate::Stop::Enough);
         }
         std::ops::ControlFlow::Continue(())
     });
@@ -398,7 +402,7 @@ pub struct ResultMeasurement {
     /// Upper limit.
     pub high: Option<f64>,
     /// The verdict (`pass`, `fail` or `error`).
-    pub outcome: crate::sequencer::measure::MeasureOutcome,
+    pub outcome: gyrobench_model::outcome::MeasureOutcome,
     /// Step key.
     pub step: String,
     /// How it was obtained, or why it could not be.
@@ -406,29 +410,11 @@ pub struct ResultMeasurement {
     /// Its uncertainty `{u, U, k}` (none: it could not be formed, or a log
     /// written before format 3).
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub uncertainty: Option<crate::analysis::uncertainty::Expanded>,
+    pub uncertainty: Option<gyrobench_analysis::uncertainty::Expanded>,
     /// The guard band the decision rule moved its limits by (none: simple
     /// acceptance, no limit or no uncertainty).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub guard_band: Option<f64>,
-}
-
-impl ResultMeasurement {
-    /// The entry of a measurement.
-    pub fn new(m: &Measurement) -> Self {
-        Self {
-            name: m.name.clone(),
-            value: m.value,
-            unit: m.unit.clone(),
-            low: m.low,
-            high: m.high,
-            outcome: m.outcome,
-            step: m.step.clone(),
-            note: m.note.clone(),
-            uncertainty: m.uncertainty.as_ref().map(|u| u.brief()),
-            guard_band: m.guard_band,
-        }
-    }
 }
 
 /// The `result` metadata: how a part of a run ended.
@@ -455,20 +441,6 @@ pub struct ResultMeta {
 }
 
 impl ResultMeta {
-    /// The record of a run's result.
-    pub fn new(r: &RunResult) -> Self {
-        Self {
-            end_time_utc: None,
-            outcome: r.outcome,
-            cleanup_completed: r.cleanup_completed,
-            device_time_s: Some(r.device_time_s),
-            frames: r.frames,
-            error: r.error.clone(),
-            measurements: r.measurements.iter().map(ResultMeasurement::new).collect(),
-            bench_left: r.bench_left.clone(),
-        }
-    }
-
     /// The record, stating that the part ended at `utc` (RFC 3339).
     pub fn ended_at(self, utc: &str) -> Self {
         Self {
@@ -581,7 +553,7 @@ mod tests {
             instruments: vec![Instrument {
                 role: "chamber".into(),
                 spec: "tcp://10.0.0.5:10001".into(),
-                identity: Some(crate::protocol::Identity {
+                identity: Some(gyrobench_protocol::Identity {
                     manufacturer: Some("Espec".into()),
                     model: Some("SCP-220".into()),
                     serial: None,
@@ -604,8 +576,8 @@ mod tests {
                     sha256: Some("ab".repeat(32)),
                     from: Some("results.sqlite".into()),
                     override_reason: None,
-                    identity: Some(crate::coeffs::SetIdentity {
-                        status: crate::coeffs::SetStatus::Edited,
+                    identity: Some(gyrobench_model::coefficients::SetIdentity {
+                        status: gyrobench_model::coefficients::SetStatus::Edited,
                         claimed_unit: None,
                         claimed_version: Some(9),
                         stored: None,
@@ -614,7 +586,7 @@ mod tests {
                         note: "an edited copy".into(),
                     }),
                 },
-                mount: Some(crate::geometry::Orientation::new(90.0, 0.0, 0.0)),
+                mount: Some(gyrobench_model::geometry::Orientation::new(90.0, 0.0, 0.0)),
                 twin_toml: None,
                 seed: None,
             }],
