@@ -9,9 +9,7 @@ use clap::Args;
 
 use super::{Outcome, Usage};
 use gyrobench::fsutil::{OutputRule, check_output};
-use gyrobench::runlog::exchange::{
-    ImportOptions, check_type, export_unit, import, load_site, sidecar,
-};
+use gyrobench::runlog::exchange::{ImportOptions, export_unit, import, load_site, sidecar};
 
 #[derive(Debug, Args)]
 #[command(after_help = after_help!(
@@ -91,7 +89,7 @@ pub fn run_import(args: ImportArgs) -> Result<Outcome> {
         gyrobench::unit::check_serial(d).map_err(|e| Usage(format!("--dut {d:?}: {e}")))?;
     }
     if let Some(t) = &args.dut_type {
-        check_type(t).map_err(|e| Usage(format!("--type {t:?}: {e}")))?;
+        gyrobench::unit::check_type(t).map_err(|e| Usage(format!("--type {t:?}: {e}")))?;
     }
     let side = sidecar::path_for(&args.csv);
     if args.site.is_none() && !side.is_file() {

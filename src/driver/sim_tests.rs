@@ -642,7 +642,7 @@ async fn the_named_faults_play_on_the_wire_at_their_device_time() {
     let one = Serve::load(None).expect("defaults");
     for f in [Fault::ProcessKill, Fault::DiskFull, Fault::Panic] {
         let e = can_play(&one, f).expect_err("the controller's own");
-        assert!(e.contains("run --inject"), "{e}");
+        assert!(e.to_string().contains("run --inject"), "{e}");
         assert!(served.bench.play(f).is_err());
     }
     assert!(can_play(&one, Fault::UnitLost).is_err());

@@ -256,17 +256,17 @@ impl LogFacts {
     /// `result/NAME`), or, for a log without one (a killed run, as a sync
     /// completed it) or with `replay`, its figures and ending recomputed
     /// from its frames.
-    pub fn read(log: &Path, replay: bool) -> Result<Self, String> {
+    pub fn read(log: &Path, replay: bool) -> Result<Self, FactsError> {
         if replay {
-            return Ok(Self::replayed(replay_all(log).map_err(|e| e.to_string())?));
+            return Ok(Self::replayed(replay_all(log)?));
         }
         let read = Records::read(log)?;
         let Some(meta) = read.meta else {
-            return Err("the log holds no `run` metadata".into());
+            return Err(FactsError::NoRunMeta);
         };
         let Some(first) = read.result else {
             // A killed run's log: what a sync made of it.
-            return Ok(Self::replayed(replay_all(log).map_err(|e| e.to_string())?));
+            return Ok(Self::replayed(replay_all(log)?));
         };
         let (result, figures) = from_records(&meta, &first, &read.others)?;
         Ok(Self {
@@ -301,16 +301,41 @@ struct Records {
     link: Option<LinkStats>,
 }
 
+/// Why a log's facts could not be read.
+#[derive(Debug, thiserror::Error)]
+pub enum FactsError {
+    /// The log cannot be read.
+    #[error(transparent)]
+    Read(#[from] crate::runlog::ReadError),
+    /// A metadata record does not parse (the first one that does not).
+    #[error(transparent)]
+    Meta(#[from] crate::runlog::meta::MetaError),
+    /// No `run` metadata.
+    #[error("the log holds no `run` metadata")]
+    NoRunMeta,
+    /// A batch's unit without its `result/SLOT` record.
+    #[error("the log holds no `result/{slot}` record for unit {serial} of its batch")]
+    NoUnitResult {
+        /// The unit's slot.
+        slot: String,
+        /// Its serial.
+        serial: String,
+    },
+    /// Its figures could not be replayed from its frames.
+    #[error(transparent)]
+    Replay(#[from] crate::runlog::replay::ReplayError),
+}
+
 impl Records {
-    fn read(log: &Path) -> Result<Self, String> {
+    fn read(log: &Path) -> Result<Self, FactsError> {
         use crate::runlog::schema::{REPORT_ATTACHMENT, RESULT_META, RUN_META};
         let mut out = Self::default();
         // A record that does not parse is said, never skipped.
-        let mut bad: Option<String> = None;
+        let mut bad: Option<crate::runlog::meta::MetaError> = None;
         let mut keep = |what: Result<ResultMeta, crate::runlog::meta::MetaError>| match what {
             Ok(r) => Some(r),
             Err(e) => {
-                bad.get_or_insert(e.to_string());
+                bad.get_or_insert(e);
                 None
             }
         };
@@ -322,7 +347,7 @@ impl Records {
                 {
                     match RunMeta::from_entries(entries) {
                         Ok(m) => out.meta = Some(m),
-                        Err(e) => meta_error = Some(e.to_string()),
+                        Err(e) => meta_error = Some(e),
                     }
                 }
                 crate::runlog::Item::Meta { name, entries } if name == RESULT_META => {
@@ -345,15 +370,11 @@ impl Records {
                 _ => {}
             }
             std::ops::ControlFlow::Continue(())
-        })
-        .map_err(|e| e.to_string())?;
-        if let Some(e) = meta_error {
-            return Err(e);
+        })?;
+        if let Some(e) = meta_error.or(bad) {
+            return Err(e.into());
         }
-        match bad {
-            Some(e) => Err(e),
-            None => Ok(out),
-        }
+        Ok(out)
     }
 }
 
@@ -363,7 +384,7 @@ fn from_records(
     meta: &RunMeta,
     first: &ResultMeta,
     others: &[(String, ResultMeta)],
-) -> Result<(RunResult, Vec<(String, ResultMeasurement)>), String> {
+) -> Result<(RunResult, Vec<(String, ResultMeasurement)>), FactsError> {
     let slot0 = meta.units.first().map_or(String::new(), |u| u.slot.clone());
     let mut figures: Vec<(String, ResultMeasurement)> = first
         .measurements
@@ -373,10 +394,10 @@ fn from_records(
     let mut units = Vec::new();
     for u in meta.units.iter().skip(1) {
         let Some((_, r)) = others.iter().find(|(slot, _)| *slot == u.slot) else {
-            return Err(format!(
-                "the log holds no `result/{}` record for unit {} of its batch",
-                u.slot, u.serial
-            ));
+            return Err(FactsError::NoUnitResult {
+                slot: u.slot.clone(),
+                serial: u.serial.clone(),
+            });
         };
         figures.extend(r.measurements.iter().map(|m| (u.slot.clone(), m.clone())));
         units.push(UnitResult {

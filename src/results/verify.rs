@@ -313,7 +313,7 @@ impl Examined {
         }
         match LogFacts::read(path, replay) {
             Ok(f) => Self::Read(Box::new(f)),
-            Err(e) => Self::Unreadable(e),
+            Err(e) => Self::Unreadable(e.to_string()),
         }
     }
 }

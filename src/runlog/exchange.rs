@@ -254,21 +254,6 @@ fn to_one_hz(rows: &[Row], name: &str) -> Result<Vec<Row>, ImportError> {
     Ok(out.finish())
 }
 
-/// Check a unit type given on the command line: 1 to 64 printable
-/// characters, no blanks around it (the serial's rule).
-pub fn check_type(t: &str) -> Result<&str, String> {
-    match crate::unit::check_serial(t) {
-        Ok(t) => Ok(t),
-        Err(crate::unit::SerialError::Empty) => {
-            Err("the unit type is empty; give it as the unit's own runs record it (RL-16)".into())
-        }
-        Err(e) => Err(e
-            .to_string()
-            .replace("the serial number", "the unit type")
-            .replace("a serial is", "a unit type is")),
-    }
-}
-
 /// Import `file` (the interchange CSV, or a lab's file through
 /// `opts.map`) as a log at `out`. The sidecar beside `file`
 /// (`RUN.export.toml`, written by `export`) is read when it is there: its
@@ -326,7 +311,8 @@ pub fn import(file: &Path, opts: &ImportOptions<'_>, out: &Path) -> Result<Impor
         (None, Some(c)) => c.unit.dut_type.clone(),
         (None, None) => DEFAULT_TYPE.to_owned(),
     };
-    check_type(&dut_type).map_err(|e| ImportError::Other(format!("--type {dut_type:?}: {e}")))?;
+    crate::unit::check_type(&dut_type)
+        .map_err(|e| ImportError::Other(format!("--type {dut_type:?}: {e}")))?;
     let dated = power_on_utc.or_else(|| side.as_ref().map(|c| c.export.started_utc.clone()));
     let unit = (serial, dut_type);
     let side = side.map(|c| (side_path, c));

@@ -103,16 +103,15 @@ impl Row {
         })
     }
 
-    /// What is wrong with this row after `prev`, in words naming the
-    /// field: a value that is not finite or outside what a gyro run can
-    /// record, a time that does not increase, one table angle without the
-    /// other.
-    pub fn check(&self, prev: Option<&Row>) -> Result<(), String> {
+    /// What is wrong with this row after `prev`, naming the field: a
+    /// value that is not finite or outside what a gyro run can record, a
+    /// time that does not increase, one table angle without the other.
+    pub fn check(&self, prev: Option<&Row>) -> Result<(), RowError> {
         self.check_after(prev.map(|p| p.time_s))
     }
 
     /// [`Row::check`] after a row at `prev_time_s`.
-    pub fn check_after(&self, prev_time_s: Option<f64>) -> Result<(), String> {
+    pub fn check_after(&self, prev_time_s: Option<f64>) -> Result<(), RowError> {
         let mut fields = vec![
             (self.time_s, "time_s", TIME_RANGE_S),
             (self.rate_dph, "rate_dph", RATE_RANGE_DPH),
@@ -126,44 +125,81 @@ impl Row {
         ];
         fields.extend(self.outer_deg.map(|v| (v, "outer_deg", TABLE_RANGE_DEG)));
         fields.extend(self.inner_deg.map(|v| (v, "inner_deg", TABLE_RANGE_DEG)));
-        for (v, name, (lo, hi)) in fields {
-            if !v.is_finite() {
-                return Err(format!("field {name}: {v} is not a finite number"));
+        for (value, field, (lo, hi)) in fields {
+            if !value.is_finite() {
+                return Err(RowError::NotFinite { field, value });
             }
-            if !(lo..=hi).contains(&v) {
-                return Err(format!(
-                    "field {name}: {} is outside {}..{}, beyond what a gyro run can record",
-                    num(v),
-                    num(lo),
-                    num(hi)
-                ));
+            if !(lo..=hi).contains(&value) {
+                return Err(RowError::OutOfRange {
+                    field,
+                    value,
+                    range: (lo, hi),
+                });
             }
         }
         if self.outer_deg.is_some() != self.inner_deg.is_some() {
-            return Err(format!(
-                "field {}: empty while {} has a value (give both table angles or neither)",
-                if self.outer_deg.is_none() {
-                    "outer_deg"
-                } else {
-                    "inner_deg"
-                },
-                if self.outer_deg.is_none() {
-                    "inner_deg"
-                } else {
-                    "outer_deg"
-                },
-            ));
+            let (field, other) = if self.outer_deg.is_none() {
+                ("outer_deg", "inner_deg")
+            } else {
+                ("inner_deg", "outer_deg")
+            };
+            return Err(RowError::OneTableAngle { field, other });
         }
-        if let Some(prev) = prev_time_s
-            && self.time_s <= prev
+        if let Some(prev_s) = prev_time_s
+            && self.time_s <= prev_s
         {
-            return Err(format!(
-                "field time_s: {} does not follow {prev} (time must increase)",
-                self.time_s
-            ));
+            return Err(RowError::TimeNotIncreasing {
+                time_s: self.time_s,
+                prev_s,
+            });
         }
         Ok(())
     }
+}
+
+/// What is wrong with one row of the interchange CSV (its file and line
+/// are the caller's to add).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum RowError {
+    /// A value that is not a number (NaN, infinite).
+    #[error("field {field}: {value} is not a finite number")]
+    NotFinite {
+        /// The column.
+        field: &'static str,
+        /// Its value.
+        value: f64,
+    },
+    /// A value beyond what a gyro run can record.
+    #[error(
+        "field {field}: {} is outside {}..{}, beyond what a gyro run can record",
+        num(*.value),
+        num(.range.0),
+        num(.range.1)
+    )]
+    OutOfRange {
+        /// The column.
+        field: &'static str,
+        /// Its value.
+        value: f64,
+        /// What the column can hold.
+        range: (f64, f64),
+    },
+    /// One table angle given without the other.
+    #[error("field {field}: empty while {other} has a value (give both table angles or neither)")]
+    OneTableAngle {
+        /// The empty one.
+        field: &'static str,
+        /// The one given.
+        other: &'static str,
+    },
+    /// A time at or before the row before it.
+    #[error("field time_s: {time_s} does not follow {prev_s} (time must increase)")]
+    TimeNotIncreasing {
+        /// This row's time, s.
+        time_s: f64,
+        /// The row before's, s.
+        prev_s: f64,
+    },
 }
 
 /// What is wrong with a CSV, and where.
@@ -267,7 +303,8 @@ pub fn parse(input: impl std::io::Read, name: &str) -> Result<Vec<Row>, CsvError
         if has_record && row.record.is_none() {
             row.record = Some(String::new());
         }
-        row.check(rows.last()).map_err(|m| err(line, m))?;
+        row.check(rows.last())
+            .map_err(|m| err(line, m.to_string()))?;
         rows.push(row);
     }
     if rows.is_empty() {

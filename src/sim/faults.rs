@@ -88,13 +88,58 @@ impl Fault {
 }
 
 impl std::str::FromStr for Fault {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
+    type Err = FaultSpecError;
+    fn from_str(s: &str) -> Result<Self, FaultSpecError> {
         Self::ALL
             .into_iter()
             .find(|f| f.name() == s)
-            .ok_or_else(|| format!("unknown fault {s:?}; expected {}", Self::NAMES.join(", ")))
+            .ok_or_else(|| FaultSpecError::Unknown(s.to_owned()))
     }
+}
+
+/// What is wrong with a fault as `--inject` takes it (`FAULT@SECONDS`).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum FaultSpecError {
+    /// No fault of that name.
+    #[error("unknown fault {0:?}; expected {names}", names = Fault::NAMES.join(", "))]
+    Unknown(String),
+    /// No `@` between the fault and its time.
+    #[error("{0:?}: expected FAULT@SECONDS, e.g. chamber-silent@600")]
+    NoTime(String),
+    /// The fault's name is not one (the spec, and why).
+    #[error("{0:?}: {1}")]
+    Name(String, Box<FaultSpecError>),
+    /// The time is not seconds of device time.
+    #[error("{0:?}: the time must be seconds of device time")]
+    Time(String),
+}
+
+/// Why a bench cannot play a fault.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum Unplayable {
+    /// A fault of the controller itself (its process or its log), which
+    /// the embedded bench plays, not a device.
+    #[error(
+        "{} is a fault of the controller (its process or its log), not of a device: `gyrobench run --inject` plays it on the embedded bench{}",
+        .fault.name(),
+        .served.as_ref().map_or(String::new(), |p| format!("; sim serve plays {p}"))
+    )]
+    OfTheController {
+        /// The fault.
+        fault: Fault,
+        /// The faults a served bench plays, in words, when the question
+        /// was one before serving.
+        served: Option<String>,
+    },
+    /// `unit-lost` on a bench of one unit.
+    #[error(
+        "unit-lost loses a batch's last unit: it needs a serve file with two slots or more{}",
+        .example.map_or(String::new(), |e| format!(" ({e})"))
+    )]
+    OneUnit {
+        /// A serve file with several units, when one can be named.
+        example: Option<&'static str>,
+    },
 }
 
 /// Counts per frame of a gyro whose output is stuck.
@@ -147,16 +192,18 @@ impl Fault {
 
     /// `FAULT@SECONDS` (`chamber-silent@600`): the fault and the device
     /// time it starts at, s. The error says what is wrong with `s`.
-    pub fn parse_at(s: &str) -> Result<(f64, Self), String> {
+    pub fn parse_at(s: &str) -> Result<(f64, Self), FaultSpecError> {
         let (f, t) = s
             .split_once('@')
-            .ok_or_else(|| format!("{s:?}: expected FAULT@SECONDS, e.g. chamber-silent@600"))?;
-        let fault: Self = f.parse().map_err(|e| format!("{s:?}: {e}"))?;
+            .ok_or_else(|| FaultSpecError::NoTime(s.to_owned()))?;
+        let fault: Self = f
+            .parse()
+            .map_err(|e| FaultSpecError::Name(s.to_owned(), Box::new(e)))?;
         let at: f64 = t
             .parse()
             .ok()
             .filter(|v: &f64| v.is_finite() && *v >= 0.0)
-            .ok_or_else(|| format!("{s:?}: the time must be seconds of device time"))?;
+            .ok_or_else(|| FaultSpecError::Time(s.to_owned()))?;
         Ok((at, fault))
     }
 }

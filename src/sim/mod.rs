@@ -22,7 +22,7 @@ use std::sync::{Arc, Mutex, MutexGuard};
 
 use tokio::sync::broadcast;
 
-pub use faults::{Action, DeviceFaults, Fault, Faults, GyroFaults};
+pub use faults::{Action, DeviceFaults, Fault, FaultSpecError, Faults, GyroFaults, Unplayable};
 
 use crate::clock::Clock;
 use crate::protocol::acl::ServoMode;
@@ -394,7 +394,7 @@ impl SharedBench {
     /// is `unit-lost` on a bench of one unit. A fault played again changes
     /// nothing (one alarm 9, one short); a saturated output stays
     /// saturated when a stuck one is played too, as on the embedded bench.
-    pub fn play(&self, fault: Fault) -> Result<(), String> {
+    pub fn play(&self, fault: Fault) -> Result<(), faults::Unplayable> {
         use std::sync::atomic::Ordering::Relaxed;
         let mut b = self.lock();
         match fault {
@@ -412,10 +412,7 @@ impl SharedBench {
             Fault::GyroStuck => b.forced_counts = Some(faults::STUCK_COUNTS),
             Fault::GyroSaturated => b.forced_counts = Some(faults::SATURATED_COUNTS),
             Fault::UnitLost if b.units.is_empty() => {
-                return Err(
-                    "unit-lost loses a batch's last unit: it needs a serve file with two slots or more"
-                        .into(),
-                );
+                return Err(faults::Unplayable::OneUnit { example: None });
             }
             Fault::UnitLost => self.faults.gyro.lost_line.store(b.units.len(), Relaxed),
             Fault::SupplyOvercurrent if b.shorted => {}
@@ -425,10 +422,10 @@ impl SharedBench {
             }
             Fault::SupplyIgnoresOff => b.supply.ignores_off = true,
             Fault::ProcessKill | Fault::Panic | Fault::DiskFull | Fault::Hangup | Fault::Quit => {
-                return Err(format!(
-                    "{} is a fault of the controller (its process or its log), not of a device: `gyrobench run --inject` plays it on the embedded bench",
-                    fault.name()
-                ));
+                return Err(faults::Unplayable::OfTheController {
+                    fault,
+                    served: None,
+                });
             }
         }
         Ok(())

@@ -8,7 +8,7 @@ use std::time::Duration;
 use serde::Deserialize;
 use tokio::net::TcpListener;
 
-use super::faults::Fault;
+use super::faults::{Fault, Unplayable};
 use super::{
     SharedBench, SimBench,
     acl::serve_acl,
@@ -467,22 +467,22 @@ pub async fn start(s: &Serve) -> Result<Served, ServeError> {
 /// Whether the served bench of `s` can play `fault`: a device's fault
 /// ([`Fault::device`]); `unit-lost` only on a batch of two units or more.
 /// The error says why not.
-pub fn can_play(s: &Serve, fault: Fault) -> Result<(), String> {
+pub fn can_play(s: &Serve, fault: Fault) -> Result<(), Unplayable> {
     match fault.device() {
-        None => Err(format!(
-            "{} is a fault of the controller (its process or its log), not of a device: `gyrobench run --inject` plays it on the embedded bench; sim serve plays {}",
-            fault.name(),
-            Fault::ALL
-                .iter()
-                .filter(|f| f.device().is_some())
-                .map(|f| f.name())
-                .collect::<Vec<_>>()
-                .join(", ")
-        )),
-        Some(_) if fault == Fault::UnitLost && s.units.len() < 2 => Err(
-            "unit-lost loses a batch's last unit: it needs a serve file with two slots or more (fixtures/sim/quad.toml)"
-                .into(),
-        ),
+        None => Err(Unplayable::OfTheController {
+            fault,
+            served: Some(
+                Fault::ALL
+                    .iter()
+                    .filter(|f| f.device().is_some())
+                    .map(|f| f.name())
+                    .collect::<Vec<_>>()
+                    .join(", "),
+            ),
+        }),
+        Some(_) if fault == Fault::UnitLost && s.units.len() < 2 => Err(Unplayable::OneUnit {
+            example: Some("fixtures/sim/quad.toml"),
+        }),
         Some(_) => Ok(()),
     }
 }
@@ -496,7 +496,7 @@ const FAULT_POLL: Duration = Duration::from_millis(20);
 pub fn schedule_faults(
     bench: &Arc<SharedBench>,
     faults: Vec<(f64, Fault)>,
-    played: impl Fn(f64, Fault, Result<(), String>) + Send + Sync + 'static,
+    played: impl Fn(f64, Fault, Result<(), Unplayable>) + Send + Sync + 'static,
 ) {
     let played = Arc::new(played);
     for (at_s, fault) in faults {

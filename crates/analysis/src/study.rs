@@ -27,13 +27,43 @@ pub fn self_heating_dph(series: &[Interval]) -> Option<f64> {
     self_heating(series).ok()
 }
 
+/// Why the self-heating figure cannot be formed: a window the record
+/// does not cover.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error(
+    "the {window} ({:.0} to {:.0} s after power-on) holds {covered_s:.0} s of data, \
+     and the figure needs {:.0} s of it: {}; record from the power-on for \
+     at least {SELF_HEATING_SPAN_S:.0} s",
+    .span_s.0,
+    .span_s.1,
+    0.9 * (.span_s.1 - .span_s.0),
+    held(*.record_s)
+)]
+pub struct SelfHeatingError {
+    /// `first window` or `last window`.
+    pub window: &'static str,
+    /// Its span, s after power-on.
+    pub span_s: (f64, f64),
+    /// The device time the record covers inside it, s.
+    pub covered_s: f64,
+    /// Where the record runs, s after power-on (none: no data).
+    pub record_s: Option<(f64, f64)>,
+}
+
+fn held(record_s: Option<(f64, f64)>) -> String {
+    match record_s {
+        Some((a, b)) => format!("the record runs from {a:.0} s to {b:.0} s after power-on"),
+        None => "the record holds no data".to_owned(),
+    }
+}
+
 /// [`self_heating_dph`], or why not in an operator's words. Each window
 /// is judged by the device time its intervals cover (90 % of it at
 /// least), whatever their cadence: a host that ticks every 1.2 s gives
 /// fewer, longer intervals than one at 1 Hz, and the same figure.
 /// `series` times count from power-on.
-pub fn self_heating(series: &[Interval]) -> Result<f64, String> {
-    let window = |lo: f64, hi: f64, name: &str| -> Result<f64, String> {
+pub fn self_heating(series: &[Interval]) -> Result<f64, SelfHeatingError> {
+    let window = |lo: f64, hi: f64, name: &'static str| -> Result<f64, SelfHeatingError> {
         let inside: Vec<&Interval> = series
             .iter()
             .filter(|s| s.time_s >= lo && s.time_s < hi)
@@ -41,20 +71,15 @@ pub fn self_heating(series: &[Interval]) -> Result<f64, String> {
         let times: Vec<f64> = inside.iter().map(|s| s.time_s).collect();
         let covered = covered_s(&times);
         if covered < 0.9 * (hi - lo) {
-            let first = series.first().map(|s| s.time_s);
-            let last = series.last().map(|s| s.time_s);
-            let held = match (first, last) {
-                (Some(a), Some(b)) => {
-                    format!("the record runs from {a:.0} s to {b:.0} s after power-on")
-                }
-                _ => "the record holds no data".to_owned(),
-            };
-            return Err(format!(
-                "the {name} ({lo:.0} to {hi:.0} s after power-on) holds {covered:.0} s of data, \
-                 and the figure needs {:.0} s of it: {held}; record from the power-on for \
-                 at least {SELF_HEATING_SPAN_S:.0} s",
-                0.9 * (hi - lo)
-            ));
+            return Err(SelfHeatingError {
+                window: name,
+                span_s: (lo, hi),
+                covered_s: covered,
+                record_s: series
+                    .first()
+                    .zip(series.last())
+                    .map(|(a, b)| (a.time_s, b.time_s)),
+            });
         }
         Ok(mean(
             &inside.iter().map(|s| s.bias_dph()).collect::<Vec<_>>(),
@@ -323,7 +348,9 @@ mod tests {
         assert!(at_1hz > 0.3, "{at_1hz}");
         // A record started 75 s late lacks most of the first window, and
         // says so in words.
-        let late = self_heating(&transient(75.0, 1.0)).expect_err("late");
+        let late = self_heating(&transient(75.0, 1.0))
+            .expect_err("late")
+            .to_string();
         assert!(
             late.contains("first window") && late.contains("runs from 76 s"),
             "{late}"

@@ -98,6 +98,30 @@ pub fn check_serial(s: &str) -> Result<&str, SerialError> {
     Ok(s)
 }
 
+/// Why a unit type is refused: the serial's rule, said of a type.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("{}", type_words(.0))]
+pub struct TypeError(pub SerialError);
+
+fn type_words(e: &SerialError) -> String {
+    match e {
+        SerialError::Empty => {
+            "the unit type is empty; give it as the unit's own runs record it (RL-16)".into()
+        }
+        e => e
+            .to_string()
+            .replace("the serial number", "the unit type")
+            .replace("a serial is", "a unit type is"),
+    }
+}
+
+/// Check a unit type given on the command line: 1 to
+/// [`SERIAL_MAX_CHARS`] printable characters, no blanks around it (the
+/// serial's rule).
+pub fn check_type(t: &str) -> Result<&str, TypeError> {
+    check_serial(t).map_err(TypeError)
+}
+
 /// Longest operator name accepted, characters.
 pub const OPERATOR_MAX_CHARS: usize = 64;
 

@@ -463,7 +463,7 @@ impl Procedure {
             spec: raw.procedure.spec.clone(),
             decision_rule: match &raw.procedure.decision_rule {
                 Some(rule) => DecisionRule::parse(rule, raw.procedure.guard_band_u)
-                    .map_err(|e| src.invalid("procedure.decision_rule", e))?,
+                    .map_err(|e| src.invalid("procedure.decision_rule", e.to_string()))?,
                 None if raw.procedure.guard_band_u.is_some() => {
                     return Err(src.invalid(
                         "procedure.guard_band_u",

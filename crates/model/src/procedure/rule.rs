@@ -57,6 +57,20 @@ pub enum Statement {
     Fail,
 }
 
+/// What is wrong with a procedure's `decision_rule` and `guard_band_u`.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum RuleError {
+    /// No rule of that name.
+    #[error("unknown decision rule {0:?}; expected \"simple\", \"guarded\" or \"non_binary\"")]
+    Unknown(String),
+    /// A guard band given with a rule that has none.
+    #[error("guard_band_u goes with decision_rule = \"guarded\", not {0:?}")]
+    BandWithout(&'static str),
+    /// A guard band out of range.
+    #[error("guard_band_u = {0}: expected a multiple of U from 0 to 10 (1 is usual)")]
+    Band(f64),
+}
+
 impl DecisionRule {
     /// `simple`, `guarded` or `non_binary`.
     pub fn name(self) -> &'static str {
@@ -69,11 +83,9 @@ impl DecisionRule {
 
     /// The rule from a procedure's `decision_rule` and `guard_band_u`;
     /// what is wrong with them otherwise.
-    pub fn parse(rule: &str, guard_band_u: Option<f64>) -> Result<Self, String> {
-        let band = |name: &str| match guard_band_u {
-            Some(_) => Err(format!(
-                "guard_band_u goes with decision_rule = \"guarded\", not {name:?}"
-            )),
+    pub fn parse(rule: &str, guard_band_u: Option<f64>) -> Result<Self, RuleError> {
+        let band = |name: &'static str| match guard_band_u {
+            Some(_) => Err(RuleError::BandWithout(name)),
             None => Ok(()),
         };
         match rule {
@@ -82,15 +94,11 @@ impl DecisionRule {
             "guarded" => {
                 let w = guard_band_u.unwrap_or(1.0);
                 if !(w.is_finite() && (0.0..=10.0).contains(&w)) {
-                    return Err(format!(
-                        "guard_band_u = {w}: expected a multiple of U from 0 to 10 (1 is usual)"
-                    ));
+                    return Err(RuleError::Band(w));
                 }
                 Ok(Self::Guarded { guard_band_u: w })
             }
-            other => Err(format!(
-                "unknown decision rule {other:?}; expected \"simple\", \"guarded\" or \"non_binary\""
-            )),
+            other => Err(RuleError::Unknown(other.to_owned())),
         }
     }
 
@@ -225,9 +233,9 @@ mod tests {
         );
         assert!(DecisionRule::parse("simple", Some(1.0)).is_err());
         assert!(DecisionRule::parse("guarded", Some(f64::NAN)).is_err());
-        assert!(
-            DecisionRule::parse("strict", None)
-                .is_err_and(|e| e.contains("expected \"simple\", \"guarded\" or \"non_binary\""))
-        );
+        assert!(DecisionRule::parse("strict", None).is_err_and(|e| {
+            e.to_string()
+                .contains("expected \"simple\", \"guarded\" or \"non_binary\"")
+        }));
     }
 }
