@@ -367,9 +367,31 @@ impl<'a> Data<'a> {
         if let Some(&v) = self.lock_stats().pair.get(&key) {
             return v;
         }
-        let v = a.1.iter().zip(b.1).map(|(x, y)| x * y).sum();
+        let v = if a.0.0.is_outside() || b.0.0.is_outside() {
+            a.1.iter().zip(b.1).map(|(x, y)| x * y).sum()
+        } else {
+            // A unit's own column is zero in the other units' runs: only
+            // the runs where both act are summed, in row order (the same
+            // sum, without a lot's other units' rows).
+            let both = |k: usize| self.acts_in(a.0.2, k) && self.acts_in(b.0.2, k);
+            self.run_rows()
+                .filter(|(k, _)| both(*k))
+                .flat_map(|(_, rows)| a.1[rows.clone()].iter().zip(&b.1[rows]))
+                .map(|(x, y)| x * y)
+                .sum()
+        };
         self.lock_stats().pair.insert(key, v);
         v
+    }
+
+    /// Each run with its rows (a run's samples are stacked together).
+    fn run_rows(&self) -> impl Iterator<Item = (usize, std::ops::Range<usize>)> + '_ {
+        let mut start = 0;
+        self.runs.iter().enumerate().map(move |(k, r)| {
+            let rows = start..start + r.samples.len();
+            start = rows.end;
+            (k, rows)
+        })
     }
 }
 
@@ -554,7 +576,9 @@ impl<'d> Design<'d> {
             .collect()
     }
 
-    /// The fitted value of row `i` for coefficients `beta`.
+    /// The fitted value of row `i` for coefficients `beta` (the tests'
+    /// reference for [`Design::fitted`]).
+    #[cfg(test)]
     fn predict(&self, i: usize, beta: &DVector<f64>) -> f64 {
         let (data, q, nruns) = (self.data, self.q, self.data.runs.len());
         let mut v = beta[q + data.run_of[i]];
@@ -568,6 +592,42 @@ impl<'d> Design<'d> {
         v
     }
 
+    /// The fitted values of rows `rows` for coefficients `beta`, column
+    /// by column over each run's stretch of rows (each row's sum taken in
+    /// the same order as row by row: its run's offset, the effect columns
+    /// acting in its unit, its turn; the same values to the bit, in a
+    /// loop the compiler vectorises).
+    fn fitted(&self, rows: std::ops::Range<usize>, beta: &DVector<f64>) -> Vec<f64> {
+        let (data, q, nruns) = (self.data, self.q, self.data.runs.len());
+        let mut out = Vec::with_capacity(rows.len());
+        let mut start = rows.start;
+        while start < rows.end {
+            let run = data.run_of[start];
+            let end = (start..rows.end)
+                .find(|&i| data.run_of[i] != run)
+                .unwrap_or(rows.end);
+            let base = out.len();
+            out.resize(base + (end - start), beta[q + run]);
+            let v = &mut out[base..];
+            for &j in &self.effect_cols_of_run[run] {
+                let (col, scale, b) = (&self.cols[j][start..end], self.scales[j], beta[j]);
+                for (vi, ci) in v.iter_mut().zip(col) {
+                    *vi += ci / scale * b;
+                }
+            }
+            for (vi, i) in v.iter_mut().zip(start..end) {
+                if let Some(t) = data.turning_of[i] {
+                    *vi += turn_value(data.reference[i]) * beta[q + nruns + t];
+                }
+            }
+            start = end;
+        }
+        out
+    }
+
+    /// Row `i` whole, every column (the tests' reference for the sums
+    /// over the active columns alone).
+    #[cfg(test)]
     fn row_into(&self, i: usize, x: &mut DVector<f64>) {
         let (data, q, nruns) = (self.data, self.q, self.data.runs.len());
         for j in 0..q {
@@ -579,6 +639,25 @@ impl<'d> Design<'d> {
         x[q + data.run_of[i]] = 1.0;
         if let Some(t) = data.turning_of[i] {
             x[q + nruns + t] = turn_value(data.reference[i]);
+        }
+    }
+
+    /// Row `i`'s values in the columns `active` (those of its run,
+    /// [`Design::active_in`]); every other column is zero in it.
+    fn active_row_into(&self, i: usize, active: &[usize], xa: &mut DVector<f64>) {
+        let (data, q, nruns) = (self.data, self.q, self.data.runs.len());
+        for (k, &j) in active.iter().enumerate() {
+            xa[k] = if j < q {
+                self.cols[j][i] / self.scales[j]
+            } else if j < q + nruns {
+                // The run's own offset (no other run's is active).
+                1.0
+            } else {
+                match data.turning_of[i] {
+                    Some(t) if j == q + nruns + t => turn_value(data.reference[i]),
+                    _ => 0.0,
+                }
+            };
         }
     }
 }
@@ -597,8 +676,11 @@ pub fn score(data: &Data<'_>, model: &[Term]) -> Scored {
     let beta_all = solve(&g_all, &h_all);
     let (fold_sse, fold_blocks, held_out) =
         held_out_by_fold(data, &design, &grams, &blocks, &g_all, &h_all);
-    let residual: Vec<f64> = (0..n)
-        .map(|i| data.y[i] - design.predict(i, &beta_all))
+    let residual: Vec<f64> = design
+        .fitted(0..n, &beta_all)
+        .iter()
+        .zip(&data.y)
+        .map(|(f, y)| y - f)
         .collect();
     let rss: f64 = residual.iter().map(|v| v * v).sum();
     let r1 = {
@@ -666,31 +748,40 @@ fn fold_sums(data: &Data<'_>, design: &Design<'_>) -> FoldSums {
     let mut blocks = Vec::with_capacity(data.folds.len());
     let mut g_all = DMatrix::zeros(p, p);
     let mut h_all = DVector::zeros(p);
-    let mut x = DVector::zeros(p);
     for f in &data.folds {
         // The Gram sums over the columns the fold's rows can reach (a
         // lot's unit: its own and the shared ones), put in place after.
         let active = design.active_in(f.run);
-        let mut ga = DMatrix::zeros(active.len(), active.len());
-        let mut xa = DVector::zeros(active.len());
-        let mut h = DVector::zeros(p);
+        let na = active.len();
+        let mut ga = DMatrix::zeros(na, na);
+        let mut xa = DVector::zeros(na);
+        let mut ha = DVector::zeros(na);
         let mut means: Vec<(DVector<f64>, f64)> = Vec::new();
-        let mut acc = (DVector::zeros(p), 0.0, 0usize);
-        for i in f.start..f.end {
-            design.row_into(i, &mut x);
-            for (k, &j) in active.iter().enumerate() {
-                xa[k] = x[j];
+        let mut acc = (DVector::zeros(na), 0.0, 0usize);
+        // The active columns of a 60 s block's mean row, put in place.
+        let placed = |sums: &DVector<f64>, k: f64| {
+            let mut m = DVector::zeros(p);
+            for (ka, &j) in active.iter().enumerate() {
+                m[j] = sums[ka] / k;
             }
+            m
+        };
+        for i in f.start..f.end {
+            design.active_row_into(i, &active, &mut xa);
             ga.syger(1.0, &xa, &xa, 1.0);
-            h.axpy(data.y[i], &x, 1.0);
-            acc.0 += &x;
+            ha.axpy(data.y[i], &xa, 1.0);
+            acc.0 += &xa;
             acc.1 += data.y[i];
             acc.2 += 1;
             if acc.2 == AVERAGING_S {
                 let k = AVERAGING_S as f64;
-                means.push((&acc.0 / k, acc.1 / k));
-                acc = (DVector::zeros(p), 0.0, 0);
+                means.push((placed(&acc.0, k), acc.1 / k));
+                acc = (DVector::zeros(na), 0.0, 0);
             }
+        }
+        let mut h = DVector::zeros(p);
+        for (ka, &j) in active.iter().enumerate() {
+            h[j] = ha[ka];
         }
         ga.fill_upper_triangle_with_lower_triangle();
         let mut g = DMatrix::zeros(p, p);
@@ -733,8 +824,11 @@ fn held_out_by_fold(
         let beta = solve(&(g_all - &grams[k].0), &(h_all - &grams[k].1));
         let alone = folds_of_run(f.run) < 2;
         let mut r: Vec<f64> = blocks[k].iter().map(|(x, y)| y - x.dot(&beta)).collect();
-        let mut rows: Vec<f64> = (f.start..f.end)
-            .map(|i| data.y[i] - design.predict(i, &beta))
+        let mut rows: Vec<f64> = design
+            .fitted(f.start..f.end, &beta)
+            .iter()
+            .zip(&data.y[f.start..f.end])
+            .map(|(f, y)| y - f)
             .collect();
         if alone {
             let m = rows.iter().sum::<f64>() / rows.len().max(1) as f64;
@@ -847,8 +941,11 @@ pub fn in_sample_sse(data: &Data<'_>, model: &[Term]) -> f64 {
     let beta = solve(&g, &h);
     // The residuals row by row: `y'y - 2 b'h + b'G b` cancels to noise
     // on these columns (uncentred, with an offset per run).
-    (0..data.y.len())
-        .map(|i| (data.y[i] - design.predict(i, &beta)).powi(2))
+    design
+        .fitted(0..data.y.len(), &beta)
+        .iter()
+        .zip(&data.y)
+        .map(|(f, y)| (y - f).powi(2))
         .sum()
 }
 
@@ -1276,6 +1373,71 @@ mod tests {
                     );
                 }
             }
+        }
+    }
+
+    #[test]
+    fn the_sums_and_fits_over_a_runs_columns_are_those_of_its_whole_rows() {
+        use super::super::library::{LIBRARY, MODEL4, Units};
+        // A lot of two units (the first run the first unit's, the others
+        // the second's): terms shared by both, and one of each unit's own,
+        // whose columns are zero in the other unit's rows.
+        let runs = synthetic_runs();
+        let lot = Data::new(&runs).with_units(vec![0, 1, 1]).expect("units");
+        let mut model: Vec<Term> = MODEL4.iter().map(|&e| Term::new(e, e.grid()[0])).collect();
+        model.push(Term::in_units(
+            LIBRARY[0],
+            LIBRARY[0].grid()[0],
+            Units::one(0),
+        ));
+        model.push(Term::in_units(
+            LIBRARY[1],
+            LIBRARY[1].grid()[0],
+            Units::one(1),
+        ));
+        let single = Data::new(&runs);
+        for (data, model) in [
+            (&lot, &model),
+            (&single, &model[..MODEL4.len() + 1].to_vec()),
+        ] {
+            let design = Design::new(data, model);
+            let sums = fold_sums(data, &design);
+            let (mut g, mut h) = (DMatrix::zeros(design.p, design.p), DVector::zeros(design.p));
+            let mut x = DVector::zeros(design.p);
+            for (k, f) in data.folds.iter().enumerate() {
+                let mut block = (DVector::zeros(design.p), 0.0);
+                let mut means = Vec::new();
+                for (n, i) in (f.start..f.end).enumerate() {
+                    design.row_into(i, &mut x);
+                    g.syger(1.0, &x, &x, 1.0);
+                    h.axpy(data.y[i], &x, 1.0);
+                    block.0 += &x;
+                    block.1 += data.y[i];
+                    if (n + 1) % AVERAGING_S == 0 {
+                        let a = AVERAGING_S as f64;
+                        means.push((&block.0 / a, block.1 / a));
+                        block = (DVector::zeros(design.p), 0.0);
+                    }
+                }
+                assert_eq!(sums.blocks[k], means, "fold {k}'s 60 s means");
+                let beta = DVector::from_fn(design.p, |j, _| 0.3 - 0.1 * j as f64);
+                let rows: Vec<f64> = (f.start..f.end).map(|i| design.predict(i, &beta)).collect();
+                assert_eq!(design.fitted(f.start..f.end, &beta), rows, "fold {k}'s fit");
+            }
+            let beta = DVector::from_fn(design.p, |j, _| 0.1 * j as f64 - 0.2);
+            let n = data.y.len();
+            let rows: Vec<f64> = (0..n).map(|i| design.predict(i, &beta)).collect();
+            assert_eq!(design.fitted(0..n, &beta), rows, "every run's rows");
+            g.fill_upper_triangle_with_lower_triangle();
+            let scale = g.amax();
+            assert!(
+                (&sums.g_all - &g).amax() <= 1e-12 * scale,
+                "the Gram matrix of every row"
+            );
+            assert!(
+                (&sums.h_all - &h).amax() <= 1e-12 * h.amax(),
+                "the right-hand side of every row"
+            );
         }
     }
 
