@@ -44,7 +44,7 @@ fn without_moves(samples: Vec<Sample>) -> Vec<Sample> {
                 .checked_sub(1)
                 .is_some_and(|j| apart(&samples[i], &samples[j]));
             let next = samples.get(i + 1).is_some_and(|n| apart(&samples[i], n));
-            (prev || next) && !crate::procedure::is_rate_record_key(&samples[i].step)
+            (prev || next) && !crate::procedure::StepKey::parse(&samples[i].step).is_rate_record()
         })
         .collect();
     samples

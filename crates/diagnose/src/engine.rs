@@ -12,6 +12,7 @@
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
 
+use gyrobench_model::procedure::StepKey;
 use nalgebra::{DMatrix, DVector};
 
 use super::data::RunData;
@@ -144,7 +145,7 @@ impl<'a> Data<'a> {
                 y.push(s.iv.bias_dph());
                 run_of.push(r);
                 reference.push(s.iv.reference_dph);
-                turning_of.push(if crate::study::is_rate_record_key(&s.step) {
+                turning_of.push(if StepKey::parse(&s.step).is_rate_record() {
                     if turning_runs.last() != Some(&r) {
                         turning_runs.push(r);
                     }

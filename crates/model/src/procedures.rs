@@ -49,9 +49,3 @@ pub const SHIPPED: [(&str, &str); 13] = [
     ("thermal_cycle.toml", THERMAL_CYCLE_TOML),
     ("thermal_cycle_north.toml", THERMAL_CYCLE_NORTH_TOML),
 ];
-
-/// Whether `key` is the step key of the record of a `rate` step (taken
-/// while the table turns): `KEY.record`.
-pub fn is_rate_record_key(key: &str) -> bool {
-    key.ends_with(".record")
-}

@@ -4,9 +4,11 @@
 //! into plain steps. The sequencer only ever sees a validated procedure.
 
 pub mod estimate;
+pub mod key;
 pub mod raw;
 pub mod rule;
 
+pub use key::{KeyPart, StepKey};
 pub use rule::{DecisionRule, Statement};
 
 use std::collections::HashSet;
@@ -570,7 +572,7 @@ impl Validator<'_> {
                 |n| matches!(n.kind, StepKind::Turn { inner: next, .. } if next == inner),
             );
             if !next_turns_it {
-                let key = s.key.trim_end_matches(".record");
+                let key = StepKey::parse(&s.key).step();
                 let axis = if inner { "inner" } else { "outer" };
                 return Err(self.src.invalid(
                     &format!("{key}.keep_turning"),
@@ -1141,7 +1143,7 @@ impl Validator<'_> {
         let line = self.line(key);
         let mut steps = vec![
             (
-                format!("{key}.turn"),
+                StepKey::of(key, KeyPart::Turn).to_string(),
                 StepKind::Turn {
                     inner,
                     rate_dps: *rate_dps,
@@ -1150,8 +1152,7 @@ impl Validator<'_> {
                 },
             ),
             (
-                // `is_rate_record_key` knows this suffix.
-                format!("{key}.record"),
+                StepKey::of(key, KeyPart::RateRecord).to_string(),
                 StepKind::Record {
                     label: l.clone(),
                     duration_s: duration,
@@ -1236,10 +1237,6 @@ impl Validator<'_> {
         Ok((angles, asked.unwrap_or_else(|| g.orientation(angles))))
     }
 }
-
-/// Whether `key` is the step key of the record of a `rate` step (in
-/// `gyrobench-twin`, which the diagnosis reads it from).
-pub use crate::procedures::is_rate_record_key;
 
 /// What a label or measurement name must be: it is shown in reports,
 /// stored in the results store and written in logs.
