@@ -1048,11 +1048,11 @@ pub fn compute(
         Some(v) => {
             super::uncertainty::of(m.metric, v, &series, m.averaging_s, &known, &judging.typeb)
         }
-        None => Err("the figure has no value".to_owned()),
+        None => Err(super::uncertainty::NoUncertainty::NoValue),
     };
     let (uncertainty, uncertainty_reason) = match uncertainty {
         Ok(u) => (Some(u), None),
-        Err(why) => (None, Some(why)),
+        Err(why) => (None, Some(why.to_string())),
     };
     let judged = judge(
         m,

@@ -208,7 +208,7 @@ fn type_a(
     series: &[Interval],
     averaging_s: f64,
     known: &Known,
-) -> Result<Vec<Contribution>, String> {
+) -> Result<Vec<Contribution>, NoUncertainty> {
     let bias: Vec<f64> = series.iter().map(Interval::bias_dph).collect();
     // Seconds as intervals: 1 s each at a 1 Hz tick, longer where the
     // host polls slower; the words say seconds.
@@ -218,11 +218,9 @@ fn type_a(
     match metric {
         Metric::BiasStability => {
             let n = bias.len() / window;
-            let (rel, dof) = of_std_dev(n).ok_or_else(|| {
-                format!(
-                    "{n} blocks of {} s: a spread needs two or more",
-                    secs(window)
-                )
+            let (rel, dof) = of_std_dev(n).ok_or(NoUncertainty::TooFewBlocks {
+                blocks: n,
+                block_s: secs(window),
             })?;
             Ok(vec![Contribution::type_a(
                 "noise: the spread of the block means",
@@ -239,11 +237,10 @@ fn type_a(
             let blocks = block_means(&bias, block);
             let n = blocks.len();
             if n < 2 {
-                return Err(format!(
-                    "{} s recorded: the mean's noise needs two blocks of {} s or more",
-                    secs(bias.len()),
-                    secs(block)
-                ));
+                return Err(NoUncertainty::TooShort {
+                    recorded_s: secs(bias.len()),
+                    block_s: secs(block),
+                });
             }
             Ok(vec![Contribution::type_a(
                 "noise: the scatter of the block means",
@@ -264,12 +261,9 @@ fn type_a(
                 ),
                 _ => window,
             };
-            let (sigma, edf) = noise_of_means(x, tau).ok_or_else(|| {
-                format!(
-                    "{} s of data: the noise of {} s means needs three times that",
-                    secs(x.len()),
-                    secs(tau)
-                )
+            let (sigma, edf) = noise_of_means(x, tau).ok_or(NoUncertainty::TooShortForNoise {
+                data_s: secs(x.len()),
+                mean_s: secs(tau),
             })?;
             Ok(vec![Contribution::type_a(
                 "noise of the means at either end",
@@ -302,6 +296,45 @@ fn type_a(
     }
 }
 
+/// Why a figure's uncertainty cannot be formed (the report says it
+/// beside the figure).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum NoUncertainty {
+    /// The figure has no value.
+    #[error("the figure has no value")]
+    NoValue,
+    /// Too few blocks for a spread.
+    #[error("{blocks} blocks of {block_s} s: a spread needs two or more")]
+    TooFewBlocks {
+        /// Blocks recorded.
+        blocks: usize,
+        /// A block's length, s.
+        block_s: f64,
+    },
+    /// Too short a record for the mean's noise.
+    #[error("{recorded_s} s recorded: the mean's noise needs two blocks of {block_s} s or more")]
+    TooShort {
+        /// The record's length, s.
+        recorded_s: f64,
+        /// A block's length, s.
+        block_s: f64,
+    },
+    /// Too little data for the noise of the means.
+    #[error("{data_s} s of data: the noise of {mean_s} s means needs three times that")]
+    TooShortForNoise {
+        /// The data's length, s.
+        data_s: f64,
+        /// The means' length, s.
+        mean_s: f64,
+    },
+    /// No statistic of the data bounds the figure.
+    #[error("no statistic of its data bounds it")]
+    NoStatistic,
+    /// The budget's contributions do not combine (not finite).
+    #[error("its budget does not combine")]
+    DoesNotCombine,
+}
+
 /// The uncertainty of `metric`'s `value` over `series` (its records),
 /// with the bench's declared contributions `b`; or why it cannot be
 /// formed. A declared source the figure needs but the bench does not
@@ -313,10 +346,10 @@ pub fn of(
     averaging_s: f64,
     known: &Known,
     b: &TypeB,
-) -> Result<Uncertainty, String> {
+) -> Result<Uncertainty, NoUncertainty> {
     let mut budget = type_a(metric, value, series, averaging_s, known)?;
     if budget.is_empty() && !matches!(metric, Metric::PowerPeak) {
-        return Err("no statistic of its data bounds it".into());
+        return Err(NoUncertainty::NoStatistic);
     }
     let (declared, missing) = type_b(metric, value, series, known, b);
     budget.extend(declared);
@@ -327,7 +360,7 @@ pub fn of(
             format!("the bench file's [uncertainty] does not declare {key}: counted as 0"),
         ));
     }
-    Uncertainty::combine(budget).ok_or_else(|| "its budget does not combine".into())
+    Uncertainty::combine(budget).ok_or(NoUncertainty::DoesNotCombine)
 }
 
 #[cfg(test)]
@@ -405,7 +438,7 @@ mod tests {
             &Known::default(),
             &b,
         );
-        assert!(too_short.is_err_and(|e| e.contains("1 blocks of 100 s")));
+        assert!(too_short.is_err_and(|e| e.to_string().contains("1 blocks of 100 s")));
     }
 
     #[test]

@@ -189,7 +189,8 @@ fn side_text(meta: &RunMeta, angles_known: bool, out: &Path, log: &Path) -> Resu
     } else {
         None
     };
-    Sidecar::of_run(meta, geometry, out, log)?
+    Sidecar::of_run(meta, geometry, out, log)
+        .map_err(|e| e.to_string())?
         .to_toml()
         .map_err(|e| e.to_string())
 }

@@ -100,6 +100,17 @@ pub fn path_for(csv: &Path) -> PathBuf {
     csv.with_extension("export.toml")
 }
 
+/// What a log lacks for a sidecar.
+#[derive(Debug, thiserror::Error)]
+pub enum SidecarError {
+    /// No procedure in its run metadata.
+    #[error("the log's run metadata has no procedure")]
+    NoProcedure,
+    /// Its site does not read.
+    #[error("the log's site does not read ({0})")]
+    Site(#[source] serde_json::Error),
+}
+
 impl Sidecar {
     /// The sidecar of a run from its `run` metadata; `geometry` is the
     /// table's when the log knows its angles. Errors say what the log
@@ -109,12 +120,11 @@ impl Sidecar {
         geometry: Option<crate::geometry::TableGeometry>,
         csv: &Path,
         log: &Path,
-    ) -> Result<Self, String> {
+    ) -> Result<Self, SidecarError> {
         if meta.procedure_toml.trim().is_empty() {
-            return Err("the log's run metadata has no procedure".into());
+            return Err(SidecarError::NoProcedure);
         }
-        let site: Site = serde_json::from_str(&meta.site_json)
-            .map_err(|e| format!("the log's site does not read ({e})"))?;
+        let site: Site = serde_json::from_str(&meta.site_json).map_err(SidecarError::Site)?;
         let (serial, dut_type) = meta.unit().map_or_else(
             || (meta.dut_serial.clone(), meta.dut_type.clone()),
             |u| (u.serial.clone(), u.dut_type.clone()),
