@@ -37,6 +37,7 @@ import sys
 import time
 
 from selenium import webdriver
+from selenium.common.exceptions import StaleElementReferenceException
 from selenium.webdriver.chrome.service import Service
 from selenium.webdriver.common.by import By
 from selenium.webdriver.common.keys import Keys
@@ -53,14 +54,34 @@ def browser(driver_path, size="1400,1000"):
 
 
 def wait(d, what, cond, timeout=60):
+    # The page redraws its live parts (the tiles, the read-out) on every
+    # update: an element read as it is replaced is "not yet", polled again.
     try:
-        return WebDriverWait(d, timeout).until(cond)
+        return WebDriverWait(d, timeout, ignored_exceptions=(StaleElementReferenceException,)).until(cond)
     except Exception as e:  # noqa: BLE001 - say which step failed
         sys.exit(f"station page: {what}: not seen within {timeout} s ({type(e).__name__})")
 
 
+def fresh(d, read, tries=50):
+    """`read(d)`, read again when the page redrew what it was reading."""
+    for _ in range(tries - 1):
+        try:
+            return read(d)
+        except StaleElementReferenceException:
+            continue
+    return read(d)
+
+
+def tile_texts(d, css=None):
+    """Each unit tile's text (or that of its `css` part), read whole."""
+    return fresh(d, lambda d: [
+        (t.find_element(By.CSS_SELECTOR, css) if css else t).text
+        for t in d.find_elements(By.CSS_SELECTOR, "#units .tile")
+    ])
+
+
 def text_of(d, css):
-    return d.find_element(By.CSS_SELECTOR, css).text
+    return fresh(d, lambda d: d.find_element(By.CSS_SELECTOR, css).text)
 
 
 def start_smoke(d, serial):
@@ -194,16 +215,17 @@ def batch(url, driver_path, shot):
         a.find_element(By.ID, "start").click()
         wait(a, "a tile per unit", lambda d: len(d.find_elements(By.CSS_SELECTOR, "#units .tile")) == 2)
         assert all(i.get_attribute("value") == "" for i in a.find_elements(By.CSS_SELECTOR, "#slot-serials input")), "a slot's serial stayed after the start"
-        tiles = a.find_elements(By.CSS_SELECTOR, "#units .tile")
-        assert "Slot A" in tiles[0].text and "RL16-0101" in tiles[0].text, tiles[0].text
-        assert "Slot C" in tiles[1].text and "RL16-0103" in tiles[1].text, tiles[1].text
+        tiles = tile_texts(a)
+        assert len(tiles) == 2, tiles
+        assert "Slot A" in tiles[0] and "RL16-0101" in tiles[0], tiles[0]
+        assert "Slot C" in tiles[1] and "RL16-0103" in tiles[1], tiles[1]
         assert "2 units" in text_of(a, "#run-title"), text_of(a, "#run-title")
         wait(a, "the prompt", ec.visibility_of_element_located((By.ID, "prompt")))
         a.find_element(By.ID, "prompt-ok").click()
         wait(a, "PASS on every tile", lambda d: len(d.find_elements(By.CSS_SELECTOR, "#units .tile .v.pass")) == 2)
-        rates = [t.find_element(By.CSS_SELECTOR, ".rate").text for t in a.find_elements(By.CSS_SELECTOR, "#units .tile")]
+        rates = tile_texts(a, ".rate")
         assert all(re.fullmatch(r"drift [+-]\d+\.\d{3} deg/h", r) for r in rates) and rates[0] != rates[1], f"the tiles' rates: {rates}"
-        windows = [t.find_element(By.CSS_SELECTOR, ".window").text for t in a.find_elements(By.CSS_SELECTOR, "#units .tile")]
+        windows = tile_texts(a, ".window")
         assert all(w == "mean of the last 60 s of record east (ended)" for w in windows), f"the tiles' windows: {windows}"
         wait(a, "the batch's verdict", lambda d: d.find_elements(By.CSS_SELECTOR, ".verdict.pass"))
         assert not a.find_elements(By.ID, "report-link"), "a batch has no single report"
@@ -249,7 +271,7 @@ def sign(url, driver_path, shot):
         a.find_element(By.ID, "sign-note").send_keys("released")
         a.find_element(By.ID, "sign").click()
         wait(a, "the approval listed", lambda d: "approved by B. Lead" in text_of(d, "#signatures"))
-        items = [li.text for li in a.find_elements(By.CSS_SELECTOR, "#signatures li")]
+        items = fresh(a, lambda d: [li.text for li in d.find_elements(By.CSS_SELECTOR, "#signatures li")])
         assert len(items) == 2 and items[1].startswith("approved by B. Lead") and items[1].endswith("released"), items
         assert text_of(a, "#sign-refusal") == "", text_of(a, "#sign-refusal")
         assert "approved" in text_of(a, "#history tr.chosen td.pass"), text_of(a, "#history tr.chosen")
