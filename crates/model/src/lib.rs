@@ -3,7 +3,8 @@
 //! configuration checking every gyrobench file shares (`config::Checker`:
 //! errors that name the file, line, key and the fix), the procedure as
 //! typed values (`procedure`, checked against a bench's `limits`), how runs
-//! and measurements end and what a run leaves (`outcome`), the unit under
+//! and measurements end and what a run leaves (`outcome`), the faults a
+//! run can meet by their `--inject` names (`fault`), the unit under
 //! test's serial (`unit`), the instruments a run names (`instrument`), its coefficient set and that set's identity
 //! (`coefficients`), and the shipped procedures' texts (`procedures`,
 //! this package's `procedures/`, which the repository's top-level
@@ -13,6 +14,7 @@
 
 pub mod coefficients;
 pub mod config;
+pub mod fault;
 pub mod geometry;
 pub mod instrument;
 pub mod limits;
