@@ -104,44 +104,7 @@ pub struct Compensation {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::compensation::Model4;
-
-    fn model4() -> Model4 {
-        Model4 {
-            k1_dph_per_c: -0.12,
-            k2_dph_per_c2: -0.01,
-            k3_dph_per_c_per_s: 20.0,
-            k4_dph_per_c: -0.007,
-            k5_dph: 0.36,
-            warmup_tau_s: 600.0,
-            offset_dph: 0.0,
-        }
-    }
-
-    fn set(serial: &str) -> CoefficientSet {
-        CoefficientSet {
-            unit: Some(UnitSection {
-                serial: serial.into(),
-                dut_type: "RL-16".into(),
-            }),
-            set: Some(SetSection {
-                version: Some(2),
-                created_utc: "2026-12-03T10:00:00+00:00".into(),
-                software: "gyrobench 0.1.0".into(),
-                models: vec!["model4".into()],
-                fitted_on: vec![FittedOn {
-                    run_id: "ab".into(),
-                    log_sha256: "cd".into(),
-                    log: "runs/c1/run.mcap".into(),
-                }],
-            }),
-            model4: Some(model4()),
-            model3: None,
-            model1: None,
-            scale_factor: None,
-            calibration: None,
-        }
-    }
+    use gyrobench_model::coefficients::fixtures::set;
 
     /// What the store found of a set whose text claims `claimed`.
     fn checked(

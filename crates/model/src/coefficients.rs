@@ -394,11 +394,14 @@ impl CoefficientSet {
     }
 }
 
-#[cfg(test)]
-mod tests {
+/// Example values for tests, here and in the crates that build on this one
+/// (their dev-dependency turns on the `fixtures` feature).
+#[cfg(any(test, feature = "fixtures"))]
+pub mod fixtures {
     use super::*;
 
-    fn model4() -> Model4 {
+    /// The twin's model 4 (`fixtures/twin/rl16.toml`: k1..k5, a 600 s warm-up).
+    pub fn model4() -> Model4 {
         Model4 {
             k1_dph_per_c: -0.12,
             k2_dph_per_c2: -0.01,
@@ -410,7 +413,8 @@ mod tests {
         }
     }
 
-    fn set(serial: &str) -> CoefficientSet {
+    /// A version-2 set of [`model4`] for `serial`, fitted on one run.
+    pub fn set(serial: &str) -> CoefficientSet {
         CoefficientSet {
             unit: Some(UnitSection {
                 serial: serial.into(),
@@ -434,6 +438,12 @@ mod tests {
             calibration: None,
         }
     }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::fixtures::{model4, set};
+    use super::*;
 
     #[test]
     fn a_set_reads_back_as_written_and_names_its_unit() {
