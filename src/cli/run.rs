@@ -214,7 +214,7 @@ fn render_unit(
 }
 
 impl Operator for Live {
-    fn prompt(&mut self, text: &str) -> Result<sequencer::Confirmed, String> {
+    fn prompt(&mut self, text: &str) -> Result<sequencer::Confirmed, sequencer::Unanswered> {
         use std::io::IsTerminal;
         if self.unattended {
             self.bar.println(&format!(
@@ -223,22 +223,18 @@ impl Operator for Live {
             return Ok(sequencer::Confirmed::Beforehand);
         }
         if !std::io::stdin().is_terminal() {
-            return Err(NO_TERMINAL.into());
+            return Err(sequencer::Unanswered::NoTerminal);
         }
         self.bar
             .suspend(|| errln!("{text} -- press Enter to continue"));
         let mut line = String::new();
         match std::io::stdin().read_line(&mut line) {
-            Ok(0) => Err("the terminal closed before it was answered".into()),
+            Ok(0) => Err(sequencer::Unanswered::TerminalClosed),
             Ok(_) => Ok(sequencer::Confirmed::Now),
-            Err(e) => Err(format!("the terminal could not be read ({e})")),
+            Err(e) => Err(sequencer::Unanswered::TerminalUnreadable(e)),
         }
     }
 }
-
-/// Why a prompt cannot be asked on the terminal.
-const NO_TERMINAL: &str = "there is no terminal to answer it on; run it from a terminal or the \
-     station, or confirm the procedure's prompts beforehand with --unattended --operator NAME";
 
 /// A run on real devices whose procedure asks the operator something
 /// needs someone to answer: a terminal, or `--unattended` (whose prompts
@@ -289,10 +285,11 @@ fn check_prompts(plan: &Plan, unattended: bool) -> Result<()> {
         });
     match first {
         Some(s) => Err(Usage(format!(
-            "{} asks the operator at line {} ({}), and {NO_TERMINAL}",
+            "{} asks the operator at line {} ({}), and {}",
             plan.procedure_path(),
             s.line,
-            s.describe()
+            s.describe(),
+            sequencer::Unanswered::NoTerminal
         ))
         .into()),
         None => Ok(()),

@@ -314,14 +314,37 @@ pub trait Operator: Observer {
     /// or why it cannot be (the run then stops at the prompt). The
     /// default has no operator to ask: on a real bench a prompt it meets
     /// stops the run (a simulated one never asks it).
-    fn prompt(&mut self, _text: &str) -> Result<Confirmed, String> {
-        Err("nobody watches this run to answer it".into())
+    fn prompt(&mut self, _text: &str) -> Result<Confirmed, Unanswered> {
+        Err(Unanswered::NobodyWatches)
     }
     /// Whether an operator answers prompts even on a simulated bench (a
     /// station page); else a simulated run goes on without asking.
     fn answers_prompts(&self) -> bool {
         false
     }
+}
+
+/// Why a prompt was not answered (the run stops at it, saying so).
+#[derive(Debug, thiserror::Error)]
+pub enum Unanswered {
+    /// No operator watches the run (the default [`Operator`]).
+    #[error("nobody watches this run to answer it")]
+    NobodyWatches,
+    /// The run's standard input is not a terminal.
+    #[error(
+        "there is no terminal to answer it on; run it from a terminal or the station, or confirm \
+         the procedure's prompts beforehand with --unattended --operator NAME"
+    )]
+    NoTerminal,
+    /// The terminal closed (end of input) while the prompt waited.
+    #[error("the terminal closed before it was answered")]
+    TerminalClosed,
+    /// The terminal could not be read.
+    #[error("the terminal could not be read ({0})")]
+    TerminalUnreadable(#[source] std::io::Error),
+    /// The run was aborted while the prompt waited (the station's Abort).
+    #[error("the run was aborted at the prompt")]
+    Aborted,
 }
 
 /// How an operator confirmed a prompt.

@@ -528,7 +528,10 @@ impl Operator for Reporter {
         true
     }
 
-    fn prompt(&mut self, text: &str) -> Result<gyrobench::sequencer::Confirmed, String> {
+    fn prompt(
+        &mut self,
+        text: &str,
+    ) -> Result<gyrobench::sequencer::Confirmed, gyrobench::sequencer::Unanswered> {
         self.prompts += 1;
         let id = self.prompts;
         let text = text.to_owned();
@@ -557,7 +560,7 @@ impl Operator for Reporter {
         if answered {
             Ok(gyrobench::sequencer::Confirmed::Now)
         } else {
-            Err("the run was aborted at the prompt".into())
+            Err(gyrobench::sequencer::Unanswered::Aborted)
         }
     }
 }
