@@ -306,7 +306,7 @@ fn unpack_chunk(
     while at < data.len() {
         match record_at(&data, at) {
             Some((opcode, body, next)) => {
-                if let Err(e) = mcap::parse_record(opcode, body) {
+                if let Err(e) = parse_record(opcode, body) {
                     return Err((Some(header.clone()), format!("a record inside: {e}")));
                 }
                 at = next;
@@ -315,6 +315,56 @@ fn unpack_chunk(
         }
     }
     Ok((header, data))
+}
+
+/// What kept a record from being parsed.
+#[derive(Debug, thiserror::Error)]
+enum RecordError {
+    /// An attachment record too short to hold its header, the length of
+    /// its data and its CRC.
+    #[error("an attachment record of {0} bytes cannot hold its header and CRC")]
+    ShortAttachment(usize),
+    /// What mcap's parser said.
+    #[error(transparent)]
+    Mcap(#[from] mcap::McapError),
+}
+
+/// `mcap::parse_record`, with an attachment's body checked first: mcap
+/// 0.26 takes an attachment's last four bytes as its CRC and slices its
+/// data up to them without checking that they lie past its header, so a
+/// record cut or damaged inside its header panicked there (found by the
+/// fuzz properties: one byte changed in a log).
+fn parse_record(opcode: u8, body: &[u8]) -> Result<Record<'_>, RecordError> {
+    if opcode == mcap::records::op::ATTACHMENT && !attachment_fits(body) {
+        return Err(RecordError::ShortAttachment(body.len()));
+    }
+    Ok(mcap::parse_record(opcode, body)?)
+}
+
+/// Whether an attachment record's body holds its header (two times, a name
+/// and a media type, each string a u32 length and its bytes), the u64
+/// length of its data and a u32 CRC.
+fn attachment_fits(body: &[u8]) -> bool {
+    let len_at = |i: usize| {
+        body.get(i..i.checked_add(4)?)
+            .and_then(|b| b.try_into().ok())
+            .map(u32::from_le_bytes)
+    };
+    // log_time and create_time, then the two strings.
+    let mut at = 16_usize;
+    for _ in 0..2 {
+        let Some(n) = len_at(at) else {
+            return false;
+        };
+        match usize::try_from(n)
+            .ok()
+            .and_then(|n| at.checked_add(4)?.checked_add(n))
+        {
+            Some(next) => at = next,
+            None => return false,
+        }
+    }
+    at.checked_add(8 + 4).is_some_and(|end| end <= body.len())
 }
 
 /// The record at `at` of `buf`: opcode, body and where the next begins.
@@ -412,7 +462,7 @@ impl Reading {
                 while let Some((opcode, rec_body, next)) = record_at(&data, at) {
                     at = next;
                     // Checked whole by unpack_chunk.
-                    let Ok(rec) = mcap::parse_record(opcode, rec_body) else {
+                    let Ok(rec) = parse_record(opcode, rec_body) else {
                         continue;
                     };
                     match self.record(rec, f) {
@@ -605,7 +655,7 @@ impl Reading {
                     let flow = if opcode == mcap::records::op::CHUNK {
                         self.chunk(data, f)
                     } else {
-                        match mcap::parse_record(opcode, data) {
+                        match parse_record(opcode, data) {
                             Ok(rec) => self.record(rec, f),
                             Err(e) => Flow::Stop(format!("unreadable record: {e}")),
                         }
@@ -645,5 +695,51 @@ fn complete_prefix(file: &mut File) -> std::io::Result<u64> {
             return Ok(at);
         }
         at = end;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// An attachment's body: two times, a name and a media type of one
+    /// byte each, the length of its data, `data` and `tail` (the CRC, or
+    /// less of it).
+    fn attachment(data_len: u64, data: &[u8], tail: &[u8]) -> Vec<u8> {
+        let mut b = Vec::new();
+        b.extend_from_slice(&1_u64.to_le_bytes());
+        b.extend_from_slice(&2_u64.to_le_bytes());
+        for s in [b"a", b"b"] {
+            b.extend_from_slice(&1_u32.to_le_bytes());
+            b.extend_from_slice(s);
+        }
+        b.extend_from_slice(&data_len.to_le_bytes());
+        b.extend_from_slice(data);
+        b.extend_from_slice(tail);
+        b
+    }
+
+    #[test]
+    fn an_attachment_cut_inside_its_crc_is_refused_not_a_panic() {
+        let op = mcap::records::op::ATTACHMENT;
+        let whole = attachment(2, b"xy", &[0; 4]);
+        match parse_record(op, &whole) {
+            Ok(Record::Attachment { data, .. }) => assert_eq!(&data[..], b"xy"),
+            other => panic!("a whole attachment: {other:?}"),
+        }
+        // Its header ends two bytes short of where the CRC would begin:
+        // mcap 0.26 alone slices past the body here and panics.
+        let cut = attachment(0, &[], &[0; 2]);
+        assert!(matches!(
+            parse_record(op, &cut),
+            Err(RecordError::ShortAttachment(36))
+        ));
+        // A string length that runs past the body.
+        let mut long_name = whole.clone();
+        long_name[16..20].copy_from_slice(&u32::MAX.to_le_bytes());
+        assert!(parse_record(op, &long_name).is_err());
+        for n in 0..whole.len() {
+            let _ = parse_record(op, &whole[..n]);
+        }
     }
 }
