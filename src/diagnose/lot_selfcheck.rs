@@ -58,17 +58,27 @@ impl Fault {
         }
     }
 
-    /// The library effects that hold it, and the seat they should be put
-    /// in (`lot::seat`): a tilt in the unit's frame is a misalignment (the
-    /// fixture's); a fixed vector on the bench read along the axis is a
-    /// g- or magnetic sensitivity along it (the table's, the site's
-    /// latitude or north).
-    pub fn expected(self) -> (&'static [&'static str], &'static str) {
+    /// The library effects that hold it, each with the seat it should be
+    /// put in (`lot::seat`): a tilt in the unit's frame is a misalignment
+    /// (the fixture's); a latitude or north stated wrong is the Earth rate
+    /// the bench subtracts off by a fixed vector (`earth_rate_error`: the
+    /// site's when it lies across the Earth rate in the north-down plane,
+    /// the table's when it is east), or, where that vector lies along
+    /// gravity or the field, a g- or magnetic sensitivity along the axis
+    /// (the table's).
+    pub fn expected(self) -> &'static [(&'static str, &'static str)] {
         match self {
-            Self::FixtureTilt => (&["axis_misalignment"], "fixture"),
-            Self::WrongLatitude | Self::WrongNorth => {
-                (&["g_sensitivity", "magnetic_sensitivity"], "table")
-            }
+            Self::FixtureTilt => &[("axis_misalignment", "fixture")],
+            Self::WrongLatitude => &[
+                ("earth_rate_error", "site"),
+                ("g_sensitivity", "table"),
+                ("magnetic_sensitivity", "table"),
+            ],
+            Self::WrongNorth => &[
+                ("earth_rate_error", "table"),
+                ("g_sensitivity", "table"),
+                ("magnetic_sensitivity", "table"),
+            ],
         }
     }
 }
@@ -533,11 +543,12 @@ fn judge(t: &mut LotTrial, lot: &Lot) {
         .collect();
     t.gap_dph = [lot.gap.gap_dph, lot.gap.after_shared_dph, lot.gap.after_dph];
     if let Some(f) = t.fault {
-        let (names, seat) = f.expected();
-        t.shared_named_right =
-            Some(lot.shared_effects.iter().any(|s| {
-                names.contains(&s.name.as_str()) && s.seat == seat && s.units == t.serials
-            }));
+        t.shared_named_right = Some(lot.shared_effects.iter().any(|s| {
+            f.expected()
+                .iter()
+                .any(|&(name, seat)| s.name == name && s.seat == seat)
+                && s.units == t.serials
+        }));
     }
     if let (Some(odd), Some(e)) = (&t.odd_unit, &t.own_effect) {
         t.outlier_flagged_right = Some(lot.outliers == [odd.clone()]);
@@ -591,11 +602,11 @@ fn summarise(lots: usize, seed: u64, trials: Vec<LotTrial>, skipped: Vec<String>
         shared_false_outlier: Rate::of(of(LotCase::Shared), |t| !t.outliers.is_empty()),
         shared_false_own: Rate::of(of(LotCase::Shared), null_own),
         shared_false_attribution: Rate::of(of(LotCase::Shared), |t| {
-            let names = t.fault.map_or(&[][..], |f| f.expected().0);
+            let names = t.fault.map_or(&[][..], Fault::expected);
             let other_shared = t
                 .shared
                 .iter()
-                .any(|s| !names.iter().any(|n| s.starts_with(&format!("{n} ("))));
+                .any(|s| !names.iter().any(|(n, _)| s.starts_with(&format!("{n} ("))));
             other_shared || null_own(t) || !t.outliers.is_empty()
         }),
         outlier_flagged_right: Rate::of(of(LotCase::Outlier), |t| {
@@ -661,11 +672,11 @@ mod tests {
 
         let f = shared.fault.expect("a shared lot's fault");
         assert_eq!(shared.shared_named_right, Some(true), "{shared:?}");
-        let (names, seat) = f.expected();
         assert!(
-            shared.shared.iter().any(|s| names
+            shared.shared.iter().any(|s| f
+                .expected()
                 .iter()
-                .any(|n| s.starts_with(&format!("{n} ({seat})")))),
+                .any(|(n, seat)| s.starts_with(&format!("{n} ({seat})")))),
             "{shared:?}"
         );
         // The bench's correction closes the lot's gap.

@@ -334,6 +334,13 @@ pub(crate) fn inject(base: &TwinConfig, e: Effect, a: f64) -> (TwinConfig, TwinC
                 reference_c: 20.0,
             });
         }
+        Effect::EarthRateError => {
+            data.effects.earth_rate_error = Some(tc::EarthRateError {
+                enabled: true,
+                latitude_dph: a * d[1],
+                east_dph: a * d[2],
+            });
+        }
         Effect::SelfHeating => {
             data.bias.model4.k5_dph = a;
             reference.bias.terms.self_heating = false;

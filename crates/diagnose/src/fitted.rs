@@ -133,6 +133,13 @@ impl FittedEffect {
                     about_z_arcmin: arcmin(self.coeff(0)),
                 });
             }
+            Effect::EarthRateError => {
+                t.effects.earth_rate_error = Some(tc::EarthRateError {
+                    enabled: true,
+                    latitude_dph: self.coeff(0),
+                    east_dph: self.coeff(1),
+                });
+            }
             Effect::ScaleFactorTemperature => {
                 t.effects.scale_factor_temperature = Some(tc::ScaleFactorTemperature {
                     enabled: true,

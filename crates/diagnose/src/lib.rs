@@ -510,6 +510,10 @@ fn reference(twin: Option<&TwinConfig>) -> Vec<(Effect, Option<Param>)> {
             fx.scale_factor_temperature.as_ref().map(|x| x.enabled),
             Effect::ScaleFactorTemperature,
         ),
+        (
+            fx.earth_rate_error.as_ref().map(|x| x.enabled),
+            Effect::EarthRateError,
+        ),
     ] {
         if on(x) {
             m.push((e, None));
@@ -1674,7 +1678,10 @@ fn deciding_procedure(
 ) -> (String, String, f64, String) {
     let positional = matches!(
         e,
-        Effect::GSensitivity | Effect::MagneticSensitivity | Effect::AxisMisalignment
+        Effect::GSensitivity
+            | Effect::MagneticSensitivity
+            | Effect::AxisMisalignment
+            | Effect::EarthRateError
     );
     // A lab whose table turns the axis north (near the equator) repeats
     // its own runs: the study's east-pointing poses are out of its reach.

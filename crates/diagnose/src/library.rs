@@ -37,6 +37,15 @@ pub enum Effect {
     AxisMisalignment,
     /// Scale factor drifting with the block temperature (times the input rate).
     ScaleFactorTemperature,
+    /// The bench's, never a unit's: the Earth rate the bench subtracts
+    /// turned from the one the units sense (the site's latitude or the
+    /// table's north stated wrong, the table's axis off level), read along
+    /// the sensitive axis: a vector fixed in north-east-down across the
+    /// Earth rate (a misstated angle turns it, never scales it), its part
+    /// in the north-down plane (a latitude's) and its east part (a
+    /// north's). Weighed on a lot's runs only ([`BENCH`]): one unit's
+    /// runs cannot tell it from the unit's own effects.
+    EarthRateError,
     /// Outside the library: a jump of the bias within one run (a ring laser
     /// gyro's mode hop). Its parameter is the stacked row the jump is at
     /// ([`Param::Row`]); [`super::engine::Data::columns`] builds it (never
@@ -204,6 +213,10 @@ pub const LIBRARY: [Effect; 10] = [
     Effect::ScaleFactorTemperature,
 ];
 
+/// The bench's own effects, weighed only where several units share a
+/// bench (`lot`): what the bench states about where it is.
+pub const BENCH: [Effect; 1] = [Effect::EarthRateError];
+
 /// Model 4's terms (the base of the reference simulator).
 pub const MODEL4: [Effect; 5] = [
     Effect::Gradient,
@@ -249,6 +262,7 @@ impl Effect {
             Self::MagneticSensitivity => "magnetic_sensitivity",
             Self::AxisMisalignment => "axis_misalignment",
             Self::ScaleFactorTemperature => "scale_factor_temperature",
+            Self::EarthRateError => "earth_rate_error",
             Self::BiasStep => "bias_step",
             Self::BiasDrift => "bias_drift",
             Self::Periodic => "periodic",
@@ -259,6 +273,7 @@ impl Effect {
     pub fn from_name(name: &str) -> Option<Self> {
         LIBRARY
             .iter()
+            .chain(&BENCH)
             .chain(&[Self::Gradient])
             .copied()
             .find(|e| e.name() == name)
@@ -289,6 +304,7 @@ impl Effect {
             Self::MagneticSensitivity => &["x_dph_per_ut", "y_dph_per_ut", "z_dph_per_ut"],
             Self::AxisMisalignment => &["earth_y", "earth_z"],
             Self::ScaleFactorTemperature => &["per_c"],
+            Self::EarthRateError => &["latitude_dph", "east_dph"],
             Self::BiasStep => &["step_dph"],
             Self::BiasDrift => &["drift_dph"],
             Self::Periodic => &["sin_dph", "cos_dph"],
@@ -351,6 +367,13 @@ impl Effect {
             Self::AxisMisalignment => (1..3)
                 .map(|i| col(&|x| x.inertial_rate_body(&run.site)[i]))
                 .collect(),
+            Self::EarthRateError => {
+                let across = earth_rate_turned(run.site.latitude_deg);
+                vec![
+                    col(&|x| x.orientation.sensitive_axis_ned().dot(&across)),
+                    col(&|x| x.orientation.sensitive_axis_ned().y),
+                ]
+            }
             Self::ScaleFactorTemperature => vec![col(&|x| {
                 x.iv.reference_dph * (0.5 * (x.iv.t1_c + x.iv.t2_c) - 20.0)
             })],
@@ -359,6 +382,13 @@ impl Effect {
             }
         }
     }
+}
+
+/// The unit vector the Earth rate turns along when the latitude grows
+/// (north-down plane, across the Earth rate): `(-sin lat, 0, -cos lat)`.
+pub fn earth_rate_turned(latitude_deg: f64) -> nalgebra::Vector3<f64> {
+    let phi = latitude_deg.to_radians();
+    nalgebra::Vector3::new(-phi.sin(), 0.0, -phi.cos())
 }
 
 /// d(dT)/dt by local regression, as model 4 uses it, over the samples'

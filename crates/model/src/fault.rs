@@ -20,7 +20,8 @@ pub enum Fault {
     GyroSilent,
     /// The gyro link corrupts every `CORRUPT_EVERY_FRAMES`th frame
     /// (dropped, counted as a CRC error; served: one bit flipped in every
-    /// 50 frames' bytes).
+    /// 50 frames' bytes). The constants named here and below are the
+    /// simulators' (the controller's `sim::faults`).
     GyroCorrupt,
     /// The gyro's output sticks at one value (`STUCK_COUNTS`).
     GyroStuck,

@@ -18,6 +18,7 @@ use serde::Serialize;
 
 use super::weigh::Differs;
 use super::{LOT_THRESHOLDS, UnitResult};
+use crate::geometry::EARTH_RATE_DPH;
 use crate::library::Effect;
 
 /// Above this held-out thermal gap (or twice the sensors' floor) a unit's
@@ -271,15 +272,71 @@ fn coefficients(e: Effect, m: &BTreeMap<String, f64>) -> String {
         .join(", ")
 }
 
+/// What an Earth-rate error is in the bench's words, at latitude
+/// `latitude_deg` (the one the runs state): the latitude it states off
+/// (its part across the Earth rate in the north-down plane: the Earth
+/// rate turns by `15.04 deg/h` a radian of latitude) and the north its
+/// table states off (its east part: an axis turned by `psi` about down
+/// reads `-psi 15.04 cos lat` east).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct EarthRateError {
+    /// The latitude the runs state minus the one the units sense, deg.
+    pub latitude_deg: f64,
+    /// The table's azimuths as stated minus as they are, deg (or an
+    /// east-west tilt of its axis; see `seat`).
+    pub north_deg: f64,
+}
+
+impl EarthRateError {
+    /// From the fitted `latitude_dph` and `east_dph`.
+    pub fn of(parameters: &BTreeMap<String, f64>, latitude_deg: f64) -> Self {
+        let get = |k: &str| parameters.get(k).copied().unwrap_or(0.0);
+        let cos = latitude_deg.to_radians().cos().abs().max(1e-3);
+        Self {
+            // The units sense Omega(true), the bench subtracts
+            // Omega(stated): the error is dOmega/dlat (true - stated).
+            latitude_deg: -(get("latitude_dph") / EARTH_RATE_DPH).to_degrees(),
+            north_deg: (get("east_dph") / (EARTH_RATE_DPH * cos)).to_degrees(),
+        }
+    }
+}
+
 /// Where an effect every unit of a lot shows alike likely sits, and why:
 /// `fixture`, `table`, `site` or `type` (ours, from the geometry of
-/// `docs/physics.md`).
-pub fn seat(e: Effect, parameters: &BTreeMap<String, f64>) -> (&'static str, String) {
+/// `docs/physics.md`); `latitude_deg` is the one the lot's runs state.
+pub fn seat(
+    e: Effect,
+    parameters: &BTreeMap<String, f64>,
+    latitude_deg: f64,
+) -> (&'static str, String) {
     let along_axis = |names: [&str; 3]| {
         let v = names.map(|k| parameters.get(k).copied().unwrap_or(0.0).abs());
         v[0] >= v[1].max(v[2])
     };
     match e {
+        Effect::EarthRateError => {
+            let x = EarthRateError::of(parameters, latitude_deg);
+            let get = |k: &str| parameters.get(k).copied().unwrap_or(0.0).abs();
+            if get("latitude_dph") >= get("east_dph") {
+                (
+                    "site",
+                    format!(
+                        "every unit reads the same vector fixed in north-east-down along its sensitive axis, mostly in the north-down plane across the Earth rate: the Earth rate the bench subtracts is that of a latitude {:.2} deg off the true one (the runs state {:.4} deg; the units sense about {:.4} deg), or the table's axis is tilted north-south by as much. Check the site file's latitude, then the table's level; correct the bench, not the units' coefficients",
+                        x.latitude_deg,
+                        latitude_deg,
+                        latitude_deg - x.latitude_deg
+                    ),
+                )
+            } else {
+                (
+                    "table",
+                    format!(
+                        "every unit reads the same vector fixed in north-east-down along its sensitive axis, mostly east: the table's north reference is off by about {:.2} deg (every azimuth turned alike), or its axis is tilted east-west. Check the table's azimuth alignment against true north, then its level; correct the bench, not the units' coefficients",
+                        x.north_deg
+                    ),
+                )
+            }
+        }
         Effect::AxisMisalignment => (
             "fixture",
             "every unit's sensitive axis is off by the same angles in its own frame: the mount they sit in (the fixture, or the table's inner axis) tilts them alike. Check the fixture's seating and the table's alignment before changing any unit's coefficients; the same units in another fixture, or a unit turned in its slot, would tell".into(),

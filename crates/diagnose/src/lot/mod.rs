@@ -250,10 +250,16 @@ pub struct Considered {
     /// Library name.
     pub name: String,
     /// `shared` (by every unit), `shared_by_some` (all but one),
-    /// `own` (each unit that named it), or `not_in_lot`.
+    /// `own` (each unit that named it), `explained_by_bench` (every unit
+    /// that named it holds no more of it once the bench's Earth-rate
+    /// error is given to the bench), or `not_in_lot`.
     pub decision: String,
     /// Serials whose own diagnosis named it.
     pub named_alone_in: Vec<String>,
+    /// Of those, the serials where it adds nothing once the bench's
+    /// Earth-rate error is the bench's (it is not theirs: left out of
+    /// their `effects`).
+    pub explained_by_bench_in: Vec<String>,
     /// p-value of one shared set over the lot's model without it.
     pub p_value: f64,
     /// Share of the lot's held-out sum of squares one shared set removes.
@@ -452,6 +458,14 @@ impl<'a> Stack<'a> {
             .unwrap_or(0)
     }
 
+    /// The held-out sum of squares of the folds of `units` in `s`.
+    pub fn units_sse(&self, s: &Scored, units: Units) -> f64 {
+        (0..s.fold_sse.len())
+            .filter(|&k| units.holds(self.unit_of_fold(k)))
+            .map(|k| s.fold_sse[k])
+            .sum()
+    }
+
     /// Unit `u`'s held-out gap in `s` (RMS of its folds' held-out 60 s
     /// means), deg/h.
     pub fn unit_gap(&self, s: &Scored, u: usize) -> f64 {
@@ -575,6 +589,10 @@ fn assemble(
                         .shared
                         .iter()
                         .any(|s| s.term.effect.name() == a.name && s.term.units.holds(u))
+                        && !settled
+                            .explained
+                            .iter()
+                            .any(|&(x, e)| x == u && e.name() == a.name)
                 })
                 .cloned()
                 .collect();

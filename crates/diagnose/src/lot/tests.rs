@@ -263,6 +263,92 @@ fn a_fixture_tilt_is_shared_and_a_units_own_effect_sets_it_apart() {
     assert!(lot.unit_twin(4, &base, true).is_none());
 }
 
+/// Every unit's runs with the Earth rate the units sense turned from the
+/// one the bench states (`latitude_deg`: the runs' latitude minus the one
+/// the units sense; `north_deg`: the table's azimuths as stated minus as
+/// they are), as the library's columns at those coefficients.
+fn stated_wrong(latitude_deg: f64, north_deg: f64) -> Added {
+    let phi = TwinConfig::default_rl16().site.latitude_deg.to_radians();
+    let w = crate::geometry::EARTH_RATE_DPH;
+    added(
+        Effect::EarthRateError,
+        &[
+            -w * latitude_deg.to_radians(),
+            w * phi.cos() * north_deg.to_radians(),
+        ],
+    )
+}
+
+#[test]
+fn a_latitude_stated_wrong_is_the_sites_and_no_units_own() {
+    let units: Vec<LotUnit> = (0..4)
+        .map(|u| {
+            unit(
+                &format!("U{u}"),
+                K[u],
+                &[stated_wrong(0.1, 0.0)],
+                300 + u as u64,
+            )
+        })
+        .collect();
+    let lot = diagnose_lot(units, &opts()).expect("a lot");
+    assert_eq!(
+        shared_names(&lot),
+        vec![("earth_rate_error", vec!["U0", "U1", "U2", "U3"])],
+        "{:#?}",
+        lot.considered
+    );
+    let e = &lot.shared_effects[0];
+    assert_eq!(e.seat, "site", "{}", e.seat_why);
+    let x = evidence::EarthRateError::of(&e.parameters, lot.site.latitude_deg);
+    assert!((x.latitude_deg - 0.1).abs() < 0.01, "{x:?}");
+    assert!(x.north_deg.abs() < 0.02, "{x:?}");
+    assert!(
+        e.seat_why.contains("latitude 0.10 deg off"),
+        "{}",
+        e.seat_why
+    );
+    for u in &lot.units {
+        assert!(u.effects.is_empty(), "{}: {:?}", u.serial, u.effects);
+    }
+    assert!(lot.outliers.is_empty(), "{:?}", lot.outliers);
+    // The bench's correction carries it; a unit's own twin does not.
+    let bench = lot.bench_effects();
+    let b = bench
+        .earth_rate_error
+        .expect("the bench's Earth-rate error");
+    assert!((b.latitude_dph - e.parameters["latitude_dph"]).abs() < 1e-12);
+    let base = TwinConfig::default_rl16();
+    let own = lot.unit_twin(0, &base, false).expect("U0");
+    assert!(own.effects.earth_rate_error.is_none());
+}
+
+#[test]
+fn a_north_stated_wrong_is_the_tables() {
+    let units: Vec<LotUnit> = (0..3)
+        .map(|u| {
+            unit(
+                &format!("U{u}"),
+                K[u],
+                &[stated_wrong(0.0, 0.25)],
+                400 + u as u64,
+            )
+        })
+        .collect();
+    let lot = diagnose_lot(units, &opts()).expect("a lot");
+    assert_eq!(
+        shared_names(&lot),
+        vec![("earth_rate_error", vec!["U0", "U1", "U2"])],
+        "{:#?}",
+        lot.considered
+    );
+    let e = &lot.shared_effects[0];
+    assert_eq!(e.seat, "table", "{}", e.seat_why);
+    let x = evidence::EarthRateError::of(&e.parameters, lot.site.latitude_deg);
+    assert!((x.north_deg - 0.25).abs() < 0.03, "{x:?}");
+    assert!(x.latitude_deg.abs() < 0.01, "{x:?}");
+}
+
 fn serde_json_like(u: &UnitResult) -> String {
     format!(
         "{}: {:.5} -> {:.5} -> {:.5} (noise {:.5})",

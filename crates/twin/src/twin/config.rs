@@ -482,6 +482,11 @@ pub struct EffectsConfig {
     /// library (its self-check uses it as the effect it must not name).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub periodic: Option<Periodic>,
+    /// The bench's, not the unit's: the Earth rate the unit senses off
+    /// the one the bench states (a lot's diagnosis names it; a twin of a
+    /// unit on that bench plays it).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub earth_rate_error: Option<EarthRateError>,
 }
 
 /// The temperature a memory effect (hysteresis, thermal lag) acts on.
@@ -650,6 +655,32 @@ pub struct Periodic {
     /// Period, s.
     pub period_s: f64,
 }
+
+/// `[effects.earth_rate_error]`: the Earth rate the unit senses is the
+/// one the bench states (from the site's latitude and the table's north)
+/// turned by a small angle: the site's latitude or the table's north
+/// stated wrong, or the table's axis off level. Every unit on the bench
+/// reads it along its sensitive axis alike. The turn adds a vector across
+/// the Earth rate, fixed in north-east-down: `latitude_dph` along
+/// `(-sin lat, 0, -cos lat)` (the way the Earth rate turns as the
+/// latitude grows: a latitude stated `x` rad too high gives
+/// `-x * 15.04 deg/h`) and `east_dph` east (an axis turned `psi` rad about
+/// down from its stated azimuth gives `-psi * 15.04 cos lat`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct EarthRateError {
+    /// On or off.
+    pub enabled: bool,
+    /// Part in the north-down plane, across the Earth rate, deg/h.
+    pub latitude_dph: f64,
+    /// East part, deg/h.
+    pub east_dph: f64,
+}
+
+/// The largest Earth-rate error a twin takes, deg/h: an error of the
+/// stated site or table turns the Earth rate (15.04 deg/h) by an angle,
+/// and more than the Earth rate itself is no such error.
+pub const EARTH_RATE_ERROR_MAX_DPH: f64 = 16.0;
 
 impl TwinConfig {
     /// This unit on `bench`'s bench: one of a batch's units keeps its own
@@ -859,6 +890,16 @@ impl EffectsConfig {
             c.finite(p.amplitude_dph, "effects.periodic.amplitude_dph")?;
             c.positive(p.period_s, "effects.periodic.period_s")?;
         }
+        if let Some(e) = &self.earth_rate_error {
+            let m = EARTH_RATE_ERROR_MAX_DPH;
+            c.within(
+                e.latitude_dph,
+                -m,
+                m,
+                "effects.earth_rate_error.latitude_dph",
+            )?;
+            c.within(e.east_dph, -m, m, "effects.earth_rate_error.east_dph")?;
+        }
         Ok(())
     }
 
@@ -886,6 +927,9 @@ impl EffectsConfig {
         }
         if on(self.periodic.as_ref().map(|e| e.enabled)) {
             out.push("periodic (outside the library)");
+        }
+        if on(self.earth_rate_error.as_ref().map(|e| e.enabled)) {
+            out.push("earth_rate_error");
         }
         out
     }

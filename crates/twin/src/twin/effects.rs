@@ -54,7 +54,8 @@ impl Effects {
             magnetic_sensitivity,
             axis_misalignment,
             scale_factor_temperature,
-            periodic
+            periodic,
+            earth_rate_error
         );
         Self {
             cfg,
@@ -77,6 +78,20 @@ impl Effects {
             }
             None => Vector3::x(),
         }
+    }
+
+    /// What the Earth rate the unit senses adds to the one the bench
+    /// states at latitude `latitude_deg`, NED, deg/h (zero unless
+    /// `earth_rate_error` is on).
+    pub fn earth_rate_error_ned_dph(&self, latitude_deg: f64) -> Vector3<f64> {
+        self.cfg
+            .earth_rate_error
+            .as_ref()
+            .map_or_else(Vector3::zeros, |e| {
+                let phi = latitude_deg.to_radians();
+                Vector3::new(-phi.sin(), 0.0, -phi.cos()) * e.latitude_dph
+                    + Vector3::y() * e.east_dph
+            })
     }
 
     /// Multiplier on the sensed (kinematic) rate at block temperature `block_c`.

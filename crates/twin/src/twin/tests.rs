@@ -284,6 +284,28 @@ fn axis_misalignment_changes_the_earth_rate_projection() {
 }
 
 #[test]
+fn an_earth_rate_error_is_read_along_the_axis_as_a_vector_fixed_on_the_bench() {
+    let d = effect_deltas(|c| {
+        c.effects.earth_rate_error = Some(crate::twin::config::EarthRateError {
+            enabled: true,
+            latitude_dph: 0.1,
+            east_dph: 0.05,
+        });
+    });
+    // Axis up: the turned part (-sin lat, 0, -cos lat) reads 0.1 cos lat
+    // at every azimuth; axis east or west: the east part, +-0.05, at
+    // every roll.
+    let up = 0.1 * 50.45f64.to_radians().cos();
+    for (k, x) in d[0..4].iter().enumerate() {
+        assert!((x - up).abs() < 0.003, "azimuth {k}: {d:?} vs {up}");
+    }
+    for (k, x) in d[4..8].iter().enumerate() {
+        assert!((x.abs() - 0.05).abs() < 0.003, "roll {k}: {d:?}");
+    }
+    assert!(spread(&d[4..8]) < 0.003, "rolls: {d:?}");
+}
+
+#[test]
 fn scale_factor_temperature_shows_under_rotation_not_at_rest() {
     let run = |enabled: bool, rotate: bool| {
         let mut c = at(TwinConfig::default_rl16(), 90.0, 0.0);
