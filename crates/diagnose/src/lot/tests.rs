@@ -310,6 +310,13 @@ fn a_latitude_stated_wrong_is_the_sites_and_no_units_own() {
     );
     for u in &lot.units {
         assert!(u.effects.is_empty(), "{}: {:?}", u.serial, u.effects);
+        // Nothing of its own: its gap with the bench's share is its gap
+        // in the final fit (both read from the same reference).
+        assert!(
+            (u.gap_after_shared_dph - u.gap_after_dph).abs() < 1e-9,
+            "{}",
+            serde_json_like(u)
+        );
     }
     assert!(lot.outliers.is_empty(), "{:?}", lot.outliers);
     // The bench's correction carries it; a unit's own twin does not.
