@@ -368,7 +368,7 @@ impl Effect {
                 .map(|i| col(&|x| x.inertial_rate_body(&run.site)[i]))
                 .collect(),
             Self::EarthRateError => {
-                let across = earth_rate_turned(run.site.latitude_deg);
+                let across = run.site.earth_rate_turned_ned();
                 vec![
                     col(&|x| x.orientation.sensitive_axis_ned().dot(&across)),
                     col(&|x| x.orientation.sensitive_axis_ned().y),
@@ -382,13 +382,6 @@ impl Effect {
             }
         }
     }
-}
-
-/// The unit vector the Earth rate turns along when the latitude grows
-/// (north-down plane, across the Earth rate): `(-sin lat, 0, -cos lat)`.
-pub fn earth_rate_turned(latitude_deg: f64) -> nalgebra::Vector3<f64> {
-    let phi = latitude_deg.to_radians();
-    nalgebra::Vector3::new(-phi.sin(), 0.0, -phi.cos())
 }
 
 /// d(dT)/dt by local regression, as model 4 uses it, over the samples'

@@ -62,6 +62,15 @@ impl Site {
         Vector3::new(phi.cos(), 0.0, -phi.sin()) * EARTH_RATE_DPH
     }
 
+    /// The direction the Earth rate turns in as the latitude grows, a
+    /// unit vector in NED across it: `(-sin phi, 0, -cos phi)`. A
+    /// latitude stated `x` rad too high adds `-x W` of it to the Earth
+    /// rate the units sense against the one the bench subtracts.
+    pub fn earth_rate_turned_ned(&self) -> Vector3<f64> {
+        let phi = self.latitude_deg.to_radians();
+        Vector3::new(-phi.sin(), 0.0, -phi.cos())
+    }
+
     /// Magnetic field in NED, microtesla.
     pub fn magnetic_ned_ut(&self) -> Vector3<f64> {
         Vector3::from(self.magnetic_field_ned_ut)
@@ -444,6 +453,21 @@ mod tests {
     #[test]
     fn earth_rate_constant_matches_physics_notes() {
         assert!((EARTH_RATE_DPH - 15.0411).abs() < 1e-4);
+    }
+
+    #[test]
+    fn the_earth_rate_turns_across_itself_as_the_latitude_grows() {
+        let site = kyiv();
+        let turned = site.earth_rate_turned_ned();
+        assert!((turned.norm() - 1.0).abs() < 1e-12);
+        assert!(turned.dot(&site.earth_rate_ned_dph()).abs() < 1e-12);
+        // One hundredth of a degree further north: the Earth rate moves
+        // along it by W times the angle, to first order.
+        let mut north = site;
+        north.latitude_deg += 0.01;
+        let moved = north.earth_rate_ned_dph() - site.earth_rate_ned_dph();
+        let want = turned * EARTH_RATE_DPH * 0.01_f64.to_radians();
+        assert!((moved - want).norm() < 1e-6, "{moved:?} vs {want:?}");
     }
 
     #[test]

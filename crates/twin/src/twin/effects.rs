@@ -4,6 +4,7 @@
 use nalgebra::{Rotation3, Vector3};
 
 use super::config::{EffectsConfig, HysteresisShape};
+use gyrobench_model::geometry::Site;
 
 /// Inputs an effect may depend on at one thermal step.
 #[derive(Debug, Clone, Copy)]
@@ -81,16 +82,13 @@ impl Effects {
     }
 
     /// What the Earth rate the unit senses adds to the one the bench
-    /// states at latitude `latitude_deg`, NED, deg/h (zero unless
-    /// `earth_rate_error` is on).
-    pub fn earth_rate_error_ned_dph(&self, latitude_deg: f64) -> Vector3<f64> {
+    /// states at `site`, NED, deg/h (zero unless `earth_rate_error` is on).
+    pub fn earth_rate_error_ned_dph(&self, site: &Site) -> Vector3<f64> {
         self.cfg
             .earth_rate_error
             .as_ref()
             .map_or_else(Vector3::zeros, |e| {
-                let phi = latitude_deg.to_radians();
-                Vector3::new(-phi.sin(), 0.0, -phi.cos()) * e.latitude_dph
-                    + Vector3::y() * e.east_dph
+                site.earth_rate_turned_ned() * e.latitude_dph + Vector3::y() * e.east_dph
             })
     }
 

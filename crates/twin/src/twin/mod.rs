@@ -587,9 +587,7 @@ impl Twin {
         let r_nb = geom.rotation(angles);
         let axis_ned = r_nb * self.axis_body;
         let omega_ned_dph = self.cfg.site.earth_rate_ned_dph()
-            + self
-                .effects
-                .earth_rate_error_ned_dph(self.cfg.site.latitude_deg)
+            + self.effects.earth_rate_error_ned_dph(&self.cfg.site)
             + geom.angular_velocity_ned_dps(angles, self.table_rates()) * DPS_TO_DPH;
         self.kinematic_dph = axis_ned.dot(&omega_ned_dph);
         let r_bn = r_nb.inverse();
