@@ -279,19 +279,25 @@ fn stated_wrong(latitude_deg: f64, north_deg: f64) -> Added {
     )
 }
 
-#[test]
-fn a_latitude_stated_wrong_is_the_sites_and_no_units_own() {
-    let units: Vec<LotUnit> = (0..4)
+/// A lot of `n` units (`U0`, ...) that all carry `bench` and nothing else,
+/// their noise from seeds `seed`, `seed + 1`, ...
+fn on_one_bench(n: usize, bench: &Added, seed: u64) -> Lot {
+    let units: Vec<LotUnit> = (0..n)
         .map(|u| {
             unit(
                 &format!("U{u}"),
                 K[u],
-                &[stated_wrong(0.1, 0.0)],
-                300 + u as u64,
+                std::slice::from_ref(bench),
+                seed + u as u64,
             )
         })
         .collect();
-    let lot = diagnose_lot(units, &opts()).expect("a lot");
+    diagnose_lot(units, &opts()).expect("a lot")
+}
+
+#[test]
+fn a_latitude_stated_wrong_is_the_sites_and_no_units_own() {
+    let lot = on_one_bench(4, &stated_wrong(0.1, 0.0), 300);
     assert_eq!(
         shared_names(&lot),
         vec![("earth_rate_error", vec!["U0", "U1", "U2", "U3"])],
@@ -332,17 +338,7 @@ fn a_latitude_stated_wrong_is_the_sites_and_no_units_own() {
 
 #[test]
 fn a_north_stated_wrong_is_the_tables() {
-    let units: Vec<LotUnit> = (0..3)
-        .map(|u| {
-            unit(
-                &format!("U{u}"),
-                K[u],
-                &[stated_wrong(0.0, 0.25)],
-                400 + u as u64,
-            )
-        })
-        .collect();
-    let lot = diagnose_lot(units, &opts()).expect("a lot");
+    let lot = on_one_bench(3, &stated_wrong(0.0, 0.25), 400);
     assert_eq!(
         shared_names(&lot),
         vec![("earth_rate_error", vec!["U0", "U1", "U2"])],
