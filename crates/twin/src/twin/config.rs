@@ -1,4 +1,5 @@
-//! The twin's TOML configuration (`fixtures/twin/rl16.toml` is the default).
+//! The twin's TOML configuration (`twins/rl16.toml` in this crate is the
+//! default; the workspace's `fixtures/twin/` is a link to that folder).
 //!
 //! Every key is documented in `docs/twin.md`. Structs mirror the file with
 //! `deny_unknown_fields`; [`TwinConfig::load`] then validates the values and
@@ -14,8 +15,9 @@ use gyrobench_model::geometry::{Site, TableAngles, TableGeometry};
 
 pub use super::thermal_effects::ThermalEffects;
 
-/// The default twin configuration, embedded so the tool runs without files.
-pub const DEFAULT_TWIN_TOML: &str = include_str!("../../../../fixtures/twin/rl16.toml");
+/// The default twin configuration, embedded so the tool runs without files
+/// (the file is the crate's own, so the package holds what it embeds).
+pub const DEFAULT_TWIN_TOML: &str = include_str!("../../twins/rl16.toml");
 
 /// Complete configuration of the simulated gyro and its bench.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
