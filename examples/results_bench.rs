@@ -21,8 +21,9 @@ use gyrobench::results::query::{Filter, MIN_CAPABILITY_N};
 use gyrobench::results::record::PartEnd;
 use gyrobench::results::{Location, Store};
 use gyrobench::runlog::meta::RunMeta;
-use gyrobench::sequencer::measure::{MeasureOutcome, Measurement, Records};
+use gyrobench::sequencer::measure::{MeasureOutcome, Records};
 use gyrobench::sequencer::{Outcome, RunResult};
+use gyrobench_model::measurement::Measurement;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().collect();

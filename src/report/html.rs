@@ -12,9 +12,10 @@ use crate::analysis::rate::{
 use crate::analysis::series::Interval;
 use crate::procedure::Metric;
 use crate::sequencer::Outcome;
-use crate::sequencer::measure::{MeasureOutcome, Measurement, Records};
+use crate::sequencer::measure::{MeasureOutcome, Records};
 use crate::view::chart::{Band, Rule};
 use crate::view::{Chart, Marker, Series, Stroke, esc, limit, num, page, utc_seconds};
+use gyrobench_model::measurement::Measurement;
 
 /// 60 s means against device time in hours.
 fn means_h(iv: &[Interval], f: impl Fn(&Interval) -> f64) -> Vec<(f64, f64)> {

@@ -13,8 +13,9 @@ use crate::geometry::{Orientation, TableAngles};
 use crate::procedure::{Metric, Procedure, StepKind};
 use crate::protocol::frame::LinkStats;
 use crate::runlog::meta::RunMeta;
-use crate::sequencer::measure::{Measurement, Records};
+use crate::sequencer::measure::Records;
 use crate::sequencer::{BenchLeft, Outcome, RunError, RunResult};
+use gyrobench_model::measurement::Measurement;
 
 pub use html::render_html;
 

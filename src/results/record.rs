@@ -11,7 +11,7 @@ use crate::coeffs::CoefficientSet;
 use crate::protocol::frame::LinkStats;
 use crate::runlog::meta::RunMeta;
 use crate::sequencer::RunResult;
-use crate::sequencer::measure::Measurement;
+use gyrobench_model::measurement::Measurement;
 
 pub use crate::fsutil::{sha256_file, sha256_text};
 

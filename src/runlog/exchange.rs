@@ -43,6 +43,7 @@ use crate::geometry::{Site, TableAngles, TableGeometry};
 use crate::procedure::{Procedure, Step, StepKind};
 use crate::sequencer::measure::{self, MeasureOutcome, Records};
 use crate::sequencer::{BenchState, Outcome, RunResult, Tick};
+use gyrobench_model::measurement::Measurement;
 
 /// `SITE.toml`: the `[site]` of a bench file alone, and, when the run was
 /// made on a two-axis table whose geometry is known, its `[table.geometry]`
@@ -214,7 +215,7 @@ pub struct Imported {
     /// The verdict of the procedure on the data.
     pub outcome: Outcome,
     /// The measurements behind it.
-    pub measurements: Vec<measure::Measurement>,
+    pub measurements: Vec<Measurement>,
 }
 
 /// Type of a unit an import is not told of (`--type`, a sidecar).
@@ -505,7 +506,7 @@ fn import_rows(
 struct Writing<'a> {
     rec: Recorder,
     records: Records,
-    measurements: Vec<measure::Measurement>,
+    measurements: Vec<Measurement>,
     coeffs: Option<&'a Compensation>,
     /// Judged as its replay judges it: the procedure's rule, no declared
     /// uncertainties of the bench it came from.
@@ -565,7 +566,7 @@ fn write_log(
     rows: &[Row],
     angles: &[Option<TableAngles>],
     coeffs: Option<&Compensation>,
-) -> Result<(Outcome, Vec<measure::Measurement>), ImportError> {
+) -> Result<(Outcome, Vec<Measurement>), ImportError> {
     let scales = FrameScales {
         dt_s: 1.0,
         lsb_arcsec: 1.0,

@@ -35,6 +35,7 @@ use crate::protocol::frame::LinkStats;
 use crate::sequencer::measure::{self, IntervalState, Records, TickSums};
 use crate::sequencer::{Outcome, Resume, RunError, RunResult, resume_plan};
 use crate::twin::TwinConfig;
+use gyrobench_model::measurement::Measurement;
 
 /// What a replay rebuilt.
 #[derive(Debug)]
@@ -178,7 +179,7 @@ struct State<'a> {
     procedure: Option<Procedure>,
     coeffs: Option<Compensation>,
     records: Records,
-    measurements: Vec<measure::Measurement>,
+    measurements: Vec<Measurement>,
     pending: Option<(TickSums, Scales)>,
     /// The tick's supply reading, filed with the record of the interval
     /// that follows it, or with none when the next message is not one.

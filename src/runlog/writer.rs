@@ -21,7 +21,6 @@ use super::schema::{
     TableState, Timestamp, slot_topic, topics,
 };
 use crate::analysis::series::Interval;
-use crate::sequencer::measure::Measurement;
 use crate::sequencer::{BenchState, Event, FrameRecord, Observer, RunResult, Tick};
 
 /// Writes a run's MCAP file.
@@ -275,23 +274,6 @@ impl From<&RunResult> for ResultMeta {
 }
 
 /// A measurement as the `result` record lists it.
-impl From<&Measurement> for ResultMeasurement {
-    fn from(m: &Measurement) -> Self {
-        Self {
-            name: m.name.clone(),
-            value: m.value,
-            unit: m.unit.clone(),
-            low: m.low,
-            high: m.high,
-            outcome: m.outcome,
-            step: m.step.clone(),
-            note: m.note.clone(),
-            uncertainty: m.uncertainty.as_ref().map(|u| u.brief()),
-            guard_band: m.guard_band,
-        }
-    }
-}
-
 /// The `/supply/state` message of a reading at `t_s`.
 fn supply_state(t_s: f64, r: &crate::driver::SupplyReading) -> SupplyState {
     SupplyState {

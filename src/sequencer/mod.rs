@@ -28,8 +28,9 @@ use crate::driver::{ChamberReading, DeviceError, InPosition, TableReading};
 use crate::geometry::{Orientation, TableAngles};
 use crate::procedure::{POWER_TIMEOUT_S, Procedure, Step, StepKind};
 pub use events::{Level, PowerOn, PowerOnSource, StepEvent, StepPhase};
+use gyrobench_model::measurement::Measurement;
 pub use interrupt::Interrupt;
-use measure::{Measurement, Records};
+use measure::Records;
 pub use resume::{Resume, resume_plan};
 
 /// One gyro frame as received (wire units).
@@ -293,7 +294,7 @@ pub enum Event<'a> {
         /// The unit.
         slot: usize,
         /// The measurement.
-        m: &'a measure::Measurement,
+        m: &'a Measurement,
     },
     /// Something the operator should know now, the run going on (a
     /// batch's unit whose link failed).

@@ -19,8 +19,9 @@
 //!
 //! Nothing before the interrupted segment is taken again.
 
-use super::measure::{Measurement, Records};
+use super::measure::Records;
 use crate::procedure::{Procedure, Step, StepKind};
+use gyrobench_model::measurement::Measurement;
 
 /// Where a resumed run picks up, and what the earlier parts left.
 #[derive(Debug, Clone, Default)]

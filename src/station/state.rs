@@ -8,9 +8,9 @@ use serde::Serialize;
 
 use gyrobench::analysis::series::Interval;
 use gyrobench::procedure::Step;
-use gyrobench::sequencer::measure::Measurement;
 use gyrobench::sequencer::{BenchState, Event, Observer, Operator};
 use gyrobench::view::live::{Drift, DriftWindow};
+use gyrobench_model::measurement::Measurement;
 
 /// One step of the plan.
 #[derive(Debug, Clone, Serialize)]

@@ -417,6 +417,24 @@ pub struct ResultMeasurement {
     pub guard_band: Option<f64>,
 }
 
+/// The record's entry of a measurement the run made.
+impl From<&gyrobench_model::measurement::Measurement> for ResultMeasurement {
+    fn from(m: &gyrobench_model::measurement::Measurement) -> Self {
+        Self {
+            name: m.name.clone(),
+            value: m.value,
+            unit: m.unit.clone(),
+            low: m.low,
+            high: m.high,
+            outcome: m.outcome,
+            step: m.step.clone(),
+            note: m.note.clone(),
+            uncertainty: m.uncertainty.as_ref().map(|u| u.brief()),
+            guard_band: m.guard_band,
+        }
+    }
+}
+
 /// The `result` metadata: how a part of a run ended.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ResultMeta {

@@ -3,7 +3,8 @@
 //! configuration checking every gyrobench file shares (`config::Checker`:
 //! errors that name the file, line, key and the fix), the procedure as
 //! typed values (`procedure`, checked against a bench's `limits`), how runs
-//! and measurements end and what a run leaves (`outcome`), the faults a
+//! and measurements end and what a run leaves (`outcome`), a measurement as
+//! a report gives it (`measurement`), the faults a
 //! run can meet by their `--inject` names (`fault`), the unit under
 //! test's serial (`unit`), the instruments a run names (`instrument`), its coefficient set and that set's identity
 //! (`coefficients`), and the shipped procedures' texts (`procedures`,
@@ -18,6 +19,7 @@ pub mod fault;
 pub mod geometry;
 pub mod instrument;
 pub mod limits;
+pub mod measurement;
 pub mod outcome;
 pub mod procedure;
 pub mod procedures;
