@@ -6,6 +6,7 @@ use std::path::Path;
 use nalgebra::Vector3;
 
 use crate::geometry::{Orientation, Site, TableAngles, TableGeometry};
+use crate::procedure::StepKeyBuf;
 use crate::runlog::meta::RunMeta;
 use crate::runlog::replay::{LoggedError, ReplayError, logged_bench};
 use crate::runlog::schema::{RUN_META, Rate1Hz, TableState, topics};
@@ -44,7 +45,7 @@ fn without_moves(samples: Vec<Sample>) -> Vec<Sample> {
                 .checked_sub(1)
                 .is_some_and(|j| apart(&samples[i], &samples[j]));
             let next = samples.get(i + 1).is_some_and(|n| apart(&samples[i], n));
-            (prev || next) && !crate::procedure::StepKey::parse(&samples[i].step).is_rate_record()
+            (prev || next) && !samples[i].step.as_key().is_rate_record()
         })
         .collect();
     samples
@@ -300,7 +301,7 @@ impl Reading {
                 iv: r.interval(),
                 orientation: Orientation::new(t.azimuth_deg, t.elevation_deg, t.roll_deg),
                 record,
-                step: t.step.clone(),
+                step: StepKeyBuf::parse(&t.step),
                 table_rate_body_dph: Vector3::zeros(),
             },
             angles: t

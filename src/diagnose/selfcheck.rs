@@ -156,7 +156,7 @@ pub(crate) fn to_run(samples: Vec<crate::study::Sample>, name: &str, twin: &Twin
             .map(|s| Sample {
                 iv: s.interval,
                 orientation: s.orientation,
-                step: s.step,
+                step: s.step.into(),
                 record: s.record,
                 table_rate_body_dph: s.table_rate_body_dph,
             })

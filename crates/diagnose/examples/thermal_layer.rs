@@ -44,7 +44,7 @@ fn read_run(path: &str) -> Result<RunData, String> {
             },
             orientation: Orientation::new(num(6)?, num(7)?, num(8)?),
             record: label.clone(),
-            step: label,
+            step: label.into(),
             table_rate_body_dph: nalgebra::Vector3::zeros(),
         });
     }

@@ -6,6 +6,7 @@ use nalgebra::Vector3;
 
 use crate::analysis::series::Interval;
 use crate::geometry::{Orientation, Site, gravity_ned_g};
+use gyrobench_model::procedure::StepKeyBuf;
 
 /// One 1 Hz interval with its context.
 #[derive(Debug, Clone)]
@@ -17,7 +18,7 @@ pub struct Sample {
     /// Record label.
     pub record: String,
     /// Procedure step key.
-    pub step: String,
+    pub step: StepKeyBuf,
     /// The table's angular velocity in the body frame, deg/h (zero at
     /// rest; a rate record's turning, which a misaligned axis reads a
     /// share of).

@@ -12,7 +12,7 @@
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
 
-use gyrobench_model::procedure::StepKey;
+use gyrobench_model::procedure::StepKeyBuf;
 use nalgebra::{DMatrix, DVector};
 
 use super::data::RunData;
@@ -44,7 +44,7 @@ pub struct Fold {
     /// Record label.
     pub record: String,
     /// Step key.
-    pub step: String,
+    pub step: StepKeyBuf,
     /// Rows `start..end` of the stacked design.
     pub start: usize,
     /// End row (exclusive).
@@ -145,7 +145,7 @@ impl<'a> Data<'a> {
                 y.push(s.iv.bias_dph());
                 run_of.push(r);
                 reference.push(s.iv.reference_dph);
-                turning_of.push(if StepKey::parse(&s.step).is_rate_record() {
+                turning_of.push(if s.step.as_key().is_rate_record() {
                     if turning_runs.last() != Some(&r) {
                         turning_runs.push(r);
                     }
@@ -1320,7 +1320,7 @@ mod tests {
                             step: if turning {
                                 "main.2.record".into()
                             } else {
-                                format!("main.{}", k / 300)
+                                format!("main.{}", k / 300).into()
                             },
                             table_rate_body_dph: if turning {
                                 nalgebra::Vector3::new(3600.0, 0.0, 0.0)

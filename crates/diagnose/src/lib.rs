@@ -582,7 +582,7 @@ fn segments(data: &Data<'_>, residual_sse: &[f64], blocks: &[usize]) -> Vec<Segm
             let o = a.orientation;
             Segment {
                 run: run.name.clone(),
-                step: f.step.clone(),
+                step: f.step.to_string(),
                 record: f.record.clone(),
                 start_s: a.iv.time_s - 0.5,
                 end_s: b.iv.time_s + 0.5,

@@ -117,7 +117,7 @@ pub fn run(
                 },
                 orientation,
                 record: format!("r{record}"),
-                step: format!("main.{record}"),
+                step: format!("main.{record}").into(),
                 table_rate_body_dph: nalgebra::Vector3::zeros(),
             }
         })

@@ -83,7 +83,7 @@ fn run(positions: bool, k: (f64, f64), effects: &[Added], seed: u64) -> RunData 
                 },
                 orientation,
                 record: record.clone(),
-                step: record,
+                step: record.into(),
                 table_rate_body_dph: nalgebra::Vector3::zeros(),
             }
         })

@@ -247,7 +247,7 @@ fn run_of(unit: &Unit, air: &[f64], seed: u64, name: &str) -> RunData {
             },
             orientation,
             record: format!("r{record}"),
-            step: format!("s{record}"),
+            step: format!("s{record}").into(),
             table_rate_body_dph: nalgebra::Vector3::zeros(),
         });
     }

@@ -6,7 +6,7 @@
 //! module asks a key what it names.
 
 /// The part of a procedure's step a key names.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum KeyPart {
     /// The step itself.
     Step,
@@ -77,6 +77,53 @@ impl std::fmt::Display for StepKey<'_> {
     }
 }
 
+/// A step key held (what a recorded sample carries), read once: the
+/// owned form of [`StepKey`], as `PathBuf` is of `Path`.
+#[derive(Debug, Clone, PartialEq, Eq, Hash)]
+pub struct StepKeyBuf {
+    step: String,
+    part: KeyPart,
+}
+
+impl StepKeyBuf {
+    /// Read `key` as [`StepKey::parse`] does.
+    pub fn parse(key: &str) -> Self {
+        StepKey::parse(key).into()
+    }
+
+    /// The key, borrowed.
+    pub fn as_key(&self) -> StepKey<'_> {
+        StepKey::of(&self.step, self.part)
+    }
+}
+
+impl From<StepKey<'_>> for StepKeyBuf {
+    fn from(k: StepKey<'_>) -> Self {
+        Self {
+            step: k.step.to_owned(),
+            part: k.part,
+        }
+    }
+}
+
+impl From<&str> for StepKeyBuf {
+    fn from(key: &str) -> Self {
+        Self::parse(key)
+    }
+}
+
+impl From<String> for StepKeyBuf {
+    fn from(key: String) -> Self {
+        Self::parse(&key)
+    }
+}
+
+impl std::fmt::Display for StepKeyBuf {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        self.as_key().fmt(f)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -97,6 +144,10 @@ mod tests {
             assert_eq!(StepKey::of(step, part), k);
         }
         assert!(StepKey::parse("main.5.record").is_rate_record());
+        let held = StepKeyBuf::parse("main.5.record");
+        assert_eq!(held.as_key(), StepKey::of("main.5", KeyPart::RateRecord));
+        assert_eq!(held.to_string(), "main.5.record");
+        assert_eq!(StepKeyBuf::from("main.4.2").as_key().part(), KeyPart::Step);
         assert!(!StepKey::parse("main.5.recording").is_rate_record());
         assert!(!StepKey::parse("main.5.turn").is_rate_record());
     }

@@ -8,7 +8,7 @@ pub mod key;
 pub mod raw;
 pub mod rule;
 
-pub use key::{KeyPart, StepKey};
+pub use key::{KeyPart, StepKey, StepKeyBuf};
 pub use rule::{DecisionRule, Statement};
 
 use std::collections::HashSet;
