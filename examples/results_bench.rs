@@ -42,95 +42,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     })?;
     let t0 = Instant::now();
     if have.is_empty() {
-        for i in 0..runs {
-            let unit = i % units;
-            let day = i * 365 / runs.max(1);
-            let started = format!(
-                "2026-{:02}-{:02}T{:02}:00:00+00:00",
-                1 + day / 31 % 12,
-                1 + day % 28,
-                i % 24
-            );
-            let procedure = ["acceptance", "smoke", "orientation"][i % 3];
-            let meta = RunMeta {
-                format: 2,
-                run_id: format!("bench{i:08}"),
-                procedure_toml: format!("[procedure]\nname = \"{procedure}\"\n"),
-                procedure_path: format!("procedures/{procedure}.toml"),
-                bench: format!("bench-{}", i % 8),
-                station: format!("pc-{}", i % 8),
-                dut_serial: format!("RL16-{unit:05}"),
-                dut_type: "RL-16".into(),
-                software_version: "bench".into(),
-                start_time_utc: started.clone(),
-                part_start_time_utc: started,
-                part: 1,
-                ..RunMeta::default()
-            };
-            let key = store.begin_part(&meta, &log)?;
-            let measurements: Vec<Measurement> = (0..per)
-                .map(|k| {
-                    let name = if k == 0 {
-                        "compensated_drift_pp_dph".to_owned()
-                    } else {
-                        format!("figure_{k:02}")
-                    };
-                    let value = 0.03 + 0.01 * (((i * 7 + k * 13) % 100) as f64 / 50.0 - 1.0);
-                    Measurement {
-                        name,
-                        value: Some(value),
-                        unit: "deg/h".into(),
-                        low: Some(0.0),
-                        high: Some(0.05),
-                        outcome: if value <= 0.05 {
-                            MeasureOutcome::Pass
-                        } else {
-                            MeasureOutcome::Fail
-                        },
-                        step: format!("main.{k}"),
-                        metric: Metric::CompensatedDriftPp,
-                        averaging_s: 600.0,
-                        records: Vec::new(),
-                        note: String::new(),
-                        std_error: None,
-                        uncertainty: None,
-                        uncertainty_reason: None,
-                        guard_band: None,
-                        margin: None,
-                        margin_u: None,
-                        noise_floor: None,
-                        trace: None,
-                        band: None,
-                    }
-                })
-                .collect();
-            let outcome = match i % 100 {
-                0..=94 => Outcome::Pass,
-                95..=98 => Outcome::Fail,
-                _ => Outcome::Error,
-            };
-            let result = RunResult {
-                outcome,
-                measurements,
-                error: None,
-                cleanup_completed: true,
-                device_time_s: 40_000.0,
-                frames: 16_000_000,
-                records: Records::default(),
-                bench_left: None,
-                others: Vec::new(),
-            };
-            store.finish_part(
-                &key,
-                &log,
-                &PartEnd {
-                    result: &result,
-                    link: LinkStats::default(),
-                    ended_utc: meta.part_start_time_utc.clone(),
-                    slots: Vec::new(),
-                },
-            )?;
-        }
+        fill(&mut store, &log, runs, units, per)?;
         println!(
             "filled {} with {runs} runs of {per} measurements in {:.1} s",
             store.name(),
@@ -206,4 +118,107 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         },
     );
     Ok(())
+}
+
+/// `runs` generated runs of `units` units, `per` measurements each,
+/// written as a live run writes itself: its start, then its end.
+fn fill(
+    store: &mut Store,
+    log: &std::path::Path,
+    runs: usize,
+    units: usize,
+    per: usize,
+) -> Result<(), Box<dyn std::error::Error>> {
+    for i in 0..runs {
+        let unit = i % units;
+        let day = i * 365 / runs.max(1);
+        let started = format!(
+            "2026-{:02}-{:02}T{:02}:00:00+00:00",
+            1 + day / 31 % 12,
+            1 + day % 28,
+            i % 24
+        );
+        let procedure = ["acceptance", "smoke", "orientation"][i % 3];
+        let meta = RunMeta {
+            format: 2,
+            run_id: format!("bench{i:08}"),
+            procedure_toml: format!("[procedure]\nname = \"{procedure}\"\n"),
+            procedure_path: format!("procedures/{procedure}.toml"),
+            bench: format!("bench-{}", i % 8),
+            station: format!("pc-{}", i % 8),
+            dut_serial: format!("RL16-{unit:05}"),
+            dut_type: "RL-16".into(),
+            software_version: "bench".into(),
+            start_time_utc: started.clone(),
+            part_start_time_utc: started,
+            part: 1,
+            ..RunMeta::default()
+        };
+        let key = store.begin_part(&meta, log)?;
+        let measurements: Vec<Measurement> = (0..per).map(|k| measurement(i, k)).collect();
+        let outcome = match i % 100 {
+            0..=94 => Outcome::Pass,
+            95..=98 => Outcome::Fail,
+            _ => Outcome::Error,
+        };
+        let result = RunResult {
+            outcome,
+            measurements,
+            error: None,
+            cleanup_completed: true,
+            device_time_s: 40_000.0,
+            frames: 16_000_000,
+            records: Records::default(),
+            bench_left: None,
+            others: Vec::new(),
+        };
+        store.finish_part(
+            &key,
+            log,
+            &PartEnd {
+                result: &result,
+                link: LinkStats::default(),
+                ended_utc: meta.part_start_time_utc.clone(),
+                slots: Vec::new(),
+            },
+        )?;
+    }
+    Ok(())
+}
+
+/// Measurement `k` of generated run `i`: the compensated drift first,
+/// the rest numbered figures, every value inside or just outside 0.05.
+fn measurement(i: usize, k: usize) -> Measurement {
+    let name = if k == 0 {
+        "compensated_drift_pp_dph".to_owned()
+    } else {
+        format!("figure_{k:02}")
+    };
+    let value = 0.03 + 0.01 * (((i * 7 + k * 13) % 100) as f64 / 50.0 - 1.0);
+    Measurement {
+        name,
+        value: Some(value),
+        unit: "deg/h".into(),
+        low: Some(0.0),
+        high: Some(0.05),
+        outcome: if value <= 0.05 {
+            MeasureOutcome::Pass
+        } else {
+            MeasureOutcome::Fail
+        },
+        step: format!("main.{k}"),
+        metric: Metric::CompensatedDriftPp,
+        averaging_s: 600.0,
+        records: Vec::new(),
+        note: String::new(),
+        std_error: None,
+        uncertainty: None,
+        uncertainty_reason: None,
+        guard_band: None,
+        margin: None,
+        margin_u: None,
+        noise_floor: None,
+        trace: None,
+        band: None,
+    }
 }

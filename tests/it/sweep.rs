@@ -418,89 +418,17 @@ impl Sweep {
                     .join(" / ")
             ));
         }
-        let mut worst = (String::new(), 0.0);
-        if let Some(r) = &report {
-            if r["bench_left"]["verified"] != true {
-                problems.push(format!(
-                    "bench unverified after the resume: {}",
-                    r["bench_left"]
-                ));
+        let worst = match &report {
+            Some(r) => {
+                self.resumed_report(r, spread, &dir, &last, resume.status.code(), &mut problems)
             }
-            // A resume that switched the unit on again inside the thermal
-            // cycle (a power-on in a later part) puts a second warm-up in
-            // the records: the temperature-rate fit, one constant per
-            // power-on and no warm-up term, reads part of it as a rate
-            // sensitivity (seen: -0.065 against the references'
-            // -0.060..-0.052 for a break at the end of the cold soak,
-            // whose segment is retaken after an hour at +50 degC from a
-            // fresh switch-on). That figure is then another experiment's:
-            // still judged against its limits, not against uninterrupted
-            // runs' spread.
-            let powered_again = r["power_ons"].as_array().is_some_and(|ons| {
-                ons.iter()
-                    .any(|o| o["part"].as_u64().is_some_and(|p| p > 1))
-            });
-            for m in r["measurements"].as_array().into_iter().flatten() {
-                let (Some(name), Some(v)) = (m["name"].as_str(), m["value"].as_f64()) else {
-                    continue;
-                };
-                if powered_again && m["metric"] == "temperature_rate_sensitivity" {
-                    continue;
-                }
-                let Some(sp) = spread.get(name) else { continue };
-                let z = (v - sp.mean).abs() / sp.sd.max(1e-12);
-                if z > worst.1 {
-                    worst = (name.to_owned(), z);
-                }
-                if z > SPREAD_SD && (v < sp.min || v > sp.max) {
-                    problems.push(format!(
-                        "figure {name} = {v:.4} outside the reference runs' {:.4}..{:.4} by more than {SPREAD_SD} sd ({:.4})",
-                        sp.min, sp.max, sp.sd
-                    ));
-                }
+            None => {
+                problems.push("lost: no report after the resume".into());
+                (String::new(), 0.0)
             }
-            // Nothing lost: the last part replays to the same report.
-            let replayed = dir.join("replay");
-            let rr = gyrobench(
-                &self.bin,
-                &self.dir,
-                &["replay", s(&last), "--out", s(&replayed)],
-            );
-            let same = std::fs::read(dir.join("report.json")).ok()
-                == std::fs::read(replayed.join("report.json")).ok();
-            if rr.status.code() != resume.status.code() || !same {
-                problems.push("lost: the last part does not replay to the report".into());
-            }
-        } else {
-            problems.push("lost: no report after the resume".into());
-        }
+        };
         // Steps taken again: only the interrupted segment's.
-        let mut completed = completed1.iter().max().map_or(0, |m| m + 1);
-        let steps: Vec<_> = procedure.setup.iter().chain(&procedure.main).collect();
-        if completed >= steps.len() {
-            // Every step done but the log cut short before its end record
-            // (a full disk at the very end): the interrupted segment is the
-            // last record's.
-            completed = steps
-                .iter()
-                .rposition(|s| matches!(s.kind, gyrobench::procedure::StepKind::Record { .. }))
-                .unwrap_or(completed);
-        }
-        let (start_at, _) = resume_plan(procedure, completed);
-        let mut retaken = 0;
-        for k in 2..=parts {
-            let (started, _) = started_and_completed(&dir.join(format!("run.part{k}.mcap")));
-            for i in started {
-                if completed1.contains(&i) {
-                    retaken += 1;
-                    if i < start_at {
-                        problems.push(format!(
-                            "retaken: step {i} is before the segment at {start_at}"
-                        ));
-                    }
-                }
-            }
-        }
+        let retaken = retaken_steps(procedure, &completed1, &dir, parts, &mut problems);
         Row {
             fault: fault.to_owned(),
             at_s,
@@ -512,6 +440,74 @@ impl Sweep {
             worst,
             retaken,
         }
+    }
+
+    /// The resumed run's report `r` checked: the bench verified, every
+    /// figure within the reference runs' spread, and the last part `last`
+    /// replayed to the same report; the figure furthest from its
+    /// references, in their standard deviations.
+    fn resumed_report(
+        &self,
+        r: &serde_json::Value,
+        spread: &BTreeMap<String, Spread>,
+        dir: &Path,
+        last: &Path,
+        resume_exit: Option<i32>,
+        problems: &mut Vec<String>,
+    ) -> (String, f64) {
+        let mut worst = (String::new(), 0.0);
+        if r["bench_left"]["verified"] != true {
+            problems.push(format!(
+                "bench unverified after the resume: {}",
+                r["bench_left"]
+            ));
+        }
+        // A resume that switched the unit on again inside the thermal
+        // cycle (a power-on in a later part) puts a second warm-up in
+        // the records: the temperature-rate fit, one constant per
+        // power-on and no warm-up term, reads part of it as a rate
+        // sensitivity (seen: -0.065 against the references'
+        // -0.060..-0.052 for a break at the end of the cold soak,
+        // whose segment is retaken after an hour at +50 degC from a
+        // fresh switch-on). That figure is then another experiment's:
+        // still judged against its limits, not against uninterrupted
+        // runs' spread.
+        let powered_again = r["power_ons"].as_array().is_some_and(|ons| {
+            ons.iter()
+                .any(|o| o["part"].as_u64().is_some_and(|p| p > 1))
+        });
+        for m in r["measurements"].as_array().into_iter().flatten() {
+            let (Some(name), Some(v)) = (m["name"].as_str(), m["value"].as_f64()) else {
+                continue;
+            };
+            if powered_again && m["metric"] == "temperature_rate_sensitivity" {
+                continue;
+            }
+            let Some(sp) = spread.get(name) else { continue };
+            let z = (v - sp.mean).abs() / sp.sd.max(1e-12);
+            if z > worst.1 {
+                worst = (name.to_owned(), z);
+            }
+            if z > SPREAD_SD && (v < sp.min || v > sp.max) {
+                problems.push(format!(
+                    "figure {name} = {v:.4} outside the reference runs' {:.4}..{:.4} by more than {SPREAD_SD} sd ({:.4})",
+                    sp.min, sp.max, sp.sd
+                ));
+            }
+        }
+        // Nothing lost: the last part replays to the same report.
+        let replayed = dir.join("replay");
+        let rr = gyrobench(
+            &self.bin,
+            &self.dir,
+            &["replay", s(last), "--out", s(&replayed)],
+        );
+        let same = std::fs::read(dir.join("report.json")).ok()
+            == std::fs::read(replayed.join("report.json")).ok();
+        if rr.status.code() != resume_exit || !same {
+            problems.push("lost: the last part does not replay to the report".into());
+        }
+        worst
     }
 
     /// The first part through the station: it is started on the embedded
@@ -687,4 +683,43 @@ pub fn render_rows(rows: &[Row]) -> String {
         ));
     }
     out
+}
+
+/// The steps of parts 2..=`parts` in `dir` taken again (completed in the
+/// first part, `completed1`), each one before the interrupted segment a
+/// problem.
+fn retaken_steps(
+    procedure: &Procedure,
+    completed1: &[usize],
+    dir: &Path,
+    parts: usize,
+    problems: &mut Vec<String>,
+) -> usize {
+    let mut completed = completed1.iter().max().map_or(0, |m| m + 1);
+    let steps: Vec<_> = procedure.setup.iter().chain(&procedure.main).collect();
+    if completed >= steps.len() {
+        // Every step done but the log cut short before its end record
+        // (a full disk at the very end): the interrupted segment is the
+        // last record's.
+        completed = steps
+            .iter()
+            .rposition(|s| matches!(s.kind, gyrobench::procedure::StepKind::Record { .. }))
+            .unwrap_or(completed);
+    }
+    let (start_at, _) = resume_plan(procedure, completed);
+    let mut retaken = 0;
+    for k in 2..=parts {
+        let (started, _) = started_and_completed(&dir.join(format!("run.part{k}.mcap")));
+        for i in started {
+            if completed1.contains(&i) {
+                retaken += 1;
+                if i < start_at {
+                    problems.push(format!(
+                        "retaken: step {i} is before the segment at {start_at}"
+                    ));
+                }
+            }
+        }
+    }
+    retaken
 }
