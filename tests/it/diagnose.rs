@@ -1,6 +1,8 @@
 //! `gyrobench diagnose`: a withheld effect is found in recorded runs, the
 //! updated twin closes the gap, and the quick self-check holds its targets.
 
+use std::path::{Path, PathBuf};
+
 use crate::cli::{gyrobench, gyrobench_ok, temp_dir};
 use crate::common::{figure, json, s};
 
@@ -35,6 +37,28 @@ fn a_withheld_effect_is_found_and_the_updated_twin_closes_the_gap() {
         "{}",
         String::from_utf8_lossy(&r.stderr)
     );
+    let gap = hysteresis_is_named(&out);
+    updated_twin_closes_the_gap(&dir, &logs, &out, gap);
+    a_wrong_network_is_fitted_again(&dir, &twin, &logs);
+    the_interchange_csv_finds_it_again(&dir, &twin, &logs, gap);
+
+    // Bad input: a clear error.
+    std::fs::write(dir.join("junk.mcap"), b"junk").expect("junk");
+    let r = gyrobench(&[
+        "diagnose",
+        s(&dir.join("junk.mcap")),
+        "--out",
+        s(&dir.join("d4")),
+    ]);
+    assert_eq!(r.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&r.stderr).contains("not an MCAP log"));
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
+
+/// The first diagnosis (no twin given) of the hysteresis unit's runs, in
+/// `out`: the contract's keys, the thermal network fitted, hysteresis
+/// named with its play width, and the page. Returns the rate layer's gap.
+fn hysteresis_is_named(out: &Path) -> f64 {
     let d = json(&out.join("diagnosis.json"));
     // The contract.
     assert!(
@@ -102,8 +126,13 @@ fn a_withheld_effect_is_found_and_the_updated_twin_closes_the_gap() {
     // sits at one of them).
     let rows = html.matches("<tr><td class=num>").count();
     assert!(rows >= 9, "{rows} position rows");
+    gap
+}
 
-    // The updated twin as the reference: the gap is closed.
+/// The updated twin (from the diagnosis in `out`) as the reference: the
+/// rate layer's gap closes below 0.7 of `gap` and nothing more is named.
+fn updated_twin_closes_the_gap(dir: &Path, logs: &[PathBuf], out: &Path, gap: f64) {
+    let (a, b) = (s(&logs[0]), s(&logs[1]));
     let updated = out.join("twin-updated.toml");
     let text = std::fs::read_to_string(&updated).expect("twin-updated.toml");
     assert!(
@@ -129,12 +158,17 @@ fn a_withheld_effect_is_found_and_the_updated_twin_closes_the_gap() {
     );
     // The twin's own thermal network reproduces the sensors it made.
     assert!(d2["layers"]["thermal"]["gap_c"].as_f64().expect("gap_c") < 0.05);
+}
 
+/// A twin whose thermal network is wrong: its gap shows, and the network
+/// fitted from the runs is the unit's and is written to the updated twin.
+fn a_wrong_network_is_fitted_again(dir: &Path, twin: &Path, logs: &[PathBuf]) {
+    let (a, b) = (s(&logs[0]), s(&logs[1]));
     // A twin whose thermal network is wrong (case time constant 1800 s,
     // the unit's is 1200 s): the thermal layer carries the gap, and the
     // network fitted from the twin's values closes it in twin-updated.toml.
     let slow = dir.join("slow-case.toml");
-    let wrong = std::fs::read_to_string(&twin).expect("twin").replacen(
+    let wrong = std::fs::read_to_string(twin).expect("twin").replacen(
         "case_tau_s = 1200.0",
         "case_tau_s = 1800.0",
         1,
@@ -163,13 +197,17 @@ fn a_withheld_effect_is_found_and_the_updated_twin_closes_the_gap() {
         .expect("toml");
     let tau = updated["thermal"]["case_tau_s"].as_float().expect("tau");
     assert!((tau - fitted_tau).abs() < 1e-6, "{tau}");
+}
 
+/// The runs exported to the interchange CSV and imported at the twin's
+/// site: the diagnosis names hysteresis again, its gap within twice `gap`.
+fn the_interchange_csv_finds_it_again(dir: &Path, twin: &Path, logs: &[PathBuf], gap: f64) {
     // The same runs through the interchange CSV (a lab's own recording):
     // exported, imported at the twin's site and diagnosed, the effect is
     // found again. The CSV carries the table's moves inside the steps that
     // made them; the diagnosis leaves them out.
     let site_toml = {
-        let text = std::fs::read_to_string(&twin).expect("twin");
+        let text = std::fs::read_to_string(twin).expect("twin");
         let start = text.find("[site]").expect("a site");
         let end = text[start + 1..]
             .find("\n[")
@@ -216,18 +254,6 @@ fn a_withheld_effect_is_found_and_the_updated_twin_closes_the_gap() {
     let gap5 = d5["layers"]["rate"]["gap_dph"].as_f64().expect("gap_dph");
     assert!(gap5 < 2.0 * gap, "imported: {gap5} deg/h against {gap}");
     assert_eq!(d5["effects"][0]["name"], "hysteresis", "{}", d5["effects"]);
-
-    // Bad input: a clear error.
-    std::fs::write(dir.join("junk.mcap"), b"junk").expect("junk");
-    let r = gyrobench(&[
-        "diagnose",
-        s(&dir.join("junk.mcap")),
-        "--out",
-        s(&dir.join("d4")),
-    ]);
-    assert_eq!(r.status.code(), Some(1));
-    assert!(String::from_utf8_lossy(&r.stderr).contains("not an MCAP log"));
-    std::fs::remove_dir_all(&dir).expect("cleanup");
 }
 
 /// `diagnose selfcheck --runs 1 --effects EFFECTS [extra] --out DIR`:

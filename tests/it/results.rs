@@ -7,7 +7,7 @@
 //! a server and sets it). Without it these tests say so and pass, except
 //! under CI (`CI` set), where a missing server fails them.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::process::Stdio;
 
 use crate::cli::{command, temp_dir};
@@ -47,10 +47,53 @@ fn stdout(o: &std::process::Output) -> String {
 /// list, show, unit, trend, exports, and a sync that adds nothing.
 fn lifecycle(db: &str, tag: &str) {
     let dir = temp_dir(&format!("results-{tag}"));
-    let p = write(&dir, "tiny.toml", TINY);
-    let mini = write(&dir, "mini.toml", MINI);
     let (a, b) = (format!("{tag}-A-1"), format!("{tag}-B-2"));
-    for (serial, seed) in [(&a, "1"), (&b, "2")] {
+    let resumed = record_runs(db, &dir, &a, &b);
+    let unit = list_show_and_unit(db, &a, &resumed);
+    trend_of_the_store(db, &dir, &b);
+
+    let xml = dir.join("results.xml");
+    let csv = dir.join("results.csv");
+    let r = with_db(
+        db,
+        &[
+            "results",
+            "export",
+            "--serial",
+            &a,
+            "--junit",
+            s(&xml),
+            "--csv",
+            s(&csv),
+        ],
+    );
+    assert_eq!(r.status.code(), Some(0), "{}", stderr(&r));
+    check_junit(&xml, 2);
+    let rows = std::fs::read_to_string(&csv).expect("csv").lines().count();
+    assert_eq!(
+        rows,
+        1 + unit["measurements"].as_array().map_or(0, Vec::len)
+    );
+
+    // The logs are the truth: a sync of them adds nothing, twice.
+    for _ in 0..2 {
+        let r = with_db(db, &["results", "sync", s(&dir)]);
+        assert_eq!(r.status.code(), Some(0), "{}", stderr(&r));
+        assert!(
+            stdout(&r).contains(": 0 part(s) indexed, 4 already in"),
+            "{}",
+            stdout(&r)
+        );
+    }
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
+
+/// Two units' runs and a run of `a` that stops and is resumed, each
+/// recorded in the store `db`; returns the resumed run's folder.
+fn record_runs(db: &str, dir: &Path, a: &str, b: &str) -> PathBuf {
+    let p = write(dir, "tiny.toml", TINY);
+    let mini = write(dir, "mini.toml", MINI);
+    for (serial, seed) in [(a, "1"), (b, "2")] {
         let r = with_db(
             db,
             &[
@@ -61,7 +104,7 @@ fn lifecycle(db: &str, tag: &str) {
                 "--seed",
                 seed,
                 "--out",
-                s(&dir.join(serial.as_str())),
+                s(&dir.join(serial)),
                 "--operator",
                 "ana",
             ],
@@ -81,7 +124,7 @@ fn lifecycle(db: &str, tag: &str) {
             "run",
             s(&mini),
             "--dut",
-            &a,
+            a,
             "--out",
             s(&resumed),
             "--inject",
@@ -91,8 +134,14 @@ fn lifecycle(db: &str, tag: &str) {
     assert_eq!(r.status.code(), Some(1));
     let r = with_db(db, &["run", "--resume", s(&resumed)]);
     assert_eq!(r.status.code(), Some(0), "{}", stderr(&r));
+    resumed
+}
 
-    let list = with_db(db, &["results", "list", "--serial", &a, "--json"]);
+/// The store's list (latest parts, all parts, by outcome), one run's
+/// record and one unit's: each as the runs recorded by `record_runs`
+/// left them. Returns the unit's record.
+fn list_show_and_unit(db: &str, a: &str, resumed: &Path) -> serde_json::Value {
+    let list = with_db(db, &["results", "list", "--serial", a, "--json"]);
     assert_eq!(list.status.code(), Some(0), "{}", stderr(&list));
     let runs: serde_json::Value = serde_json::from_slice(&list.stdout).expect("JSON");
     let runs = runs.as_array().expect("list");
@@ -106,7 +155,7 @@ fn lifecycle(db: &str, tag: &str) {
     assert_eq!(runs[0]["outcome"], "pass");
     let all = with_db(
         db,
-        &["results", "list", "--serial", &a, "--all-parts", "--json"],
+        &["results", "list", "--serial", a, "--all-parts", "--json"],
     );
     let all: serde_json::Value = serde_json::from_slice(&all.stdout).expect("JSON");
     assert_eq!(all.as_array().map(Vec::len), Some(3));
@@ -116,7 +165,7 @@ fn lifecycle(db: &str, tag: &str) {
             "results",
             "list",
             "--serial",
-            &a,
+            a,
             "--all-parts",
             "--outcome",
             "error",
@@ -143,14 +192,20 @@ fn lifecycle(db: &str, tag: &str) {
         assert!(text.contains(m["name"].as_str().expect("name")), "{text}");
     }
 
-    let unit = with_db(db, &["results", "unit", &a, "--json"]);
+    let unit = with_db(db, &["results", "unit", a, "--json"]);
     let unit: serde_json::Value = serde_json::from_slice(&unit.stdout).expect("JSON");
     assert_eq!(unit["runs"].as_array().map(Vec::len), Some(2));
     assert_eq!(
         unit["measurements"].as_array().map(Vec::len),
         Some(2 + report["measurements"].as_array().map_or(0, Vec::len))
     );
+    unit
+}
 
+/// The store's trend of one figure: withheld below 25 values, Cpk and
+/// Ppk once allowed, the same mean, sigma and extremes as the rows the
+/// store exports, and a page for unit `b`.
+fn trend_of_the_store(db: &str, dir: &Path, b: &str) {
     let trend = with_db(
         db,
         &[
@@ -260,7 +315,7 @@ fn lifecycle(db: &str, tag: &str) {
             "trend",
             "bias_dph:up",
             "--serial",
-            &b,
+            b,
             "--html",
             s(&page),
         ],
@@ -271,41 +326,6 @@ fn lifecycle(db: &str, tag: &str) {
             .expect("page")
             .contains("<svg")
     );
-
-    let xml = dir.join("results.xml");
-    let csv = dir.join("results.csv");
-    let r = with_db(
-        db,
-        &[
-            "results",
-            "export",
-            "--serial",
-            &a,
-            "--junit",
-            s(&xml),
-            "--csv",
-            s(&csv),
-        ],
-    );
-    assert_eq!(r.status.code(), Some(0), "{}", stderr(&r));
-    check_junit(&xml, 2);
-    let rows = std::fs::read_to_string(&csv).expect("csv").lines().count();
-    assert_eq!(
-        rows,
-        1 + unit["measurements"].as_array().map_or(0, Vec::len)
-    );
-
-    // The logs are the truth: a sync of them adds nothing, twice.
-    for _ in 0..2 {
-        let r = with_db(db, &["results", "sync", s(&dir)]);
-        assert_eq!(r.status.code(), Some(0), "{}", stderr(&r));
-        assert!(
-            stdout(&r).contains(": 0 part(s) indexed, 4 already in"),
-            "{}",
-            stdout(&r)
-        );
-    }
-    std::fs::remove_dir_all(&dir).expect("cleanup");
 }
 
 /// The JUnit file parses with a third-party parser (Python's junitparser,

@@ -136,8 +136,42 @@ fn the_station_runs_a_procedure_from_start_to_report_and_refuses_what_it_must() 
     let _busy = crate::common::busy_turn();
     let dir = temp_dir("station");
     let st = Served::start(&dir, &[]);
+    refusals_and_offers(&st);
+    a_run_to_its_verdict_and_its_files(&st, &dir);
+    abort_at_the_prompt_and_resume(&st);
 
-    // Refusals, each with its reason.
+    // The page itself, in a browser, when there is one.
+    browser_check(&st);
+    // A browser left open on the page (its event stream streaming) must
+    // not hold the stop: the stream ends and the station exits.
+    let host = st.base.trim_start_matches("http://").to_owned();
+    let mut open = TcpStream::connect(&host).expect("connect");
+    write!(
+        open,
+        "GET /api/events?token={} HTTP/1.1\r\nHost: {host}\r\n\r\n",
+        st.token
+    )
+    .expect("send");
+    let mut first = [0u8; 256];
+    let n = open.read(&mut first).expect("the stream starts");
+    assert!(
+        String::from_utf8_lossy(&first[..n]).starts_with("HTTP/1.1 200"),
+        "{}",
+        String::from_utf8_lossy(&first[..n])
+    );
+    assert_eq!(
+        st.stop().code(),
+        Some(0),
+        "SIGTERM stops the station cleanly, an event stream open"
+    );
+    drop(open);
+    std::fs::remove_dir_all(&dir).expect("cleanup");
+}
+
+/// The station's refusals, each with its reason (no token, a blank
+/// serial, a path out of the procedures, the unit named two ways or by
+/// slot on a bench of one), and the procedures it offers.
+fn refusals_and_offers(st: &Served) {
     let (code, body) = st.request("POST", "/api/start", false, SMOKE);
     assert_eq!(code, 403, "no token: {body}");
     let (code, body) = st.request(
@@ -184,8 +218,12 @@ fn the_station_runs_a_procedure_from_start_to_report_and_refuses_what_it_must() 
         .expect("smoke offered");
     assert!(smoke["device_s"].as_f64().expect("device time") > 300.0);
     assert!(!smoke["prompts"].as_array().expect("prompts").is_empty());
+}
 
-    // A run: it waits at its prompt, the bench is busy meanwhile.
+/// A run from the page: it waits at its prompt (the bench busy
+/// meanwhile), ends in a verdict, and its files are served; its log
+/// replays to its report, and its operator is the report's and the store's.
+fn a_run_to_its_verdict_and_its_files(st: &Served, dir: &Path) {
     let (code, body) = st.request("POST", "/api/start", true, SMOKE);
     assert_eq!(code, 200, "{body}");
     let waiting = st.until("the prompt", |s| !s["run"]["prompt"].is_null());
@@ -231,9 +269,12 @@ fn the_station_runs_a_procedure_from_start_to_report_and_refuses_what_it_must() 
     let (code, body) = st.request("GET", "/api/history?serial=RL16-0042", true, "");
     assert_eq!(code, 200, "{body}");
     assert!(body.contains("\"outcome\":\"pass\""), "{body}");
+}
 
-    // Abort at the prompt: cleanup runs, the verdict is aborted and the
-    // bench left safe.
+/// Abort at the prompt: cleanup runs, the verdict is aborted and the
+/// bench left safe; then resumed from the page, a new part in the same
+/// directory, to a verdict.
+fn abort_at_the_prompt_and_resume(st: &Served) {
     let (code, body) = st.request("POST", "/api/start", true, SMOKE);
     assert_eq!(code, 200, "{body}");
     st.until("the second prompt", |s| {
@@ -273,33 +314,6 @@ fn the_station_runs_a_procedure_from_start_to_report_and_refuses_what_it_must() 
         Some(aborted_dir.clone())
     );
     assert!(aborted_dir.join("run.part2.mcap").is_file());
-
-    // The page itself, in a browser, when there is one.
-    browser_check(&st);
-    // A browser left open on the page (its event stream streaming) must
-    // not hold the stop: the stream ends and the station exits.
-    let host = st.base.trim_start_matches("http://").to_owned();
-    let mut open = TcpStream::connect(&host).expect("connect");
-    write!(
-        open,
-        "GET /api/events?token={} HTTP/1.1\r\nHost: {host}\r\n\r\n",
-        st.token
-    )
-    .expect("send");
-    let mut first = [0u8; 256];
-    let n = open.read(&mut first).expect("the stream starts");
-    assert!(
-        String::from_utf8_lossy(&first[..n]).starts_with("HTTP/1.1 200"),
-        "{}",
-        String::from_utf8_lossy(&first[..n])
-    );
-    assert_eq!(
-        st.stop().code(),
-        Some(0),
-        "SIGTERM stops the station cleanly, an event stream open"
-    );
-    drop(open);
-    std::fs::remove_dir_all(&dir).expect("cleanup");
 }
 
 /// A station on a bench with slots: a serial per slot (blank ones empty),
