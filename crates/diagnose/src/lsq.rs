@@ -56,7 +56,7 @@ const TRIES: usize = 12;
 /// every quantity on a bound held). Non-finite residuals count as a worse
 /// point.
 pub fn minimize(
-    residuals: impl Fn(&[f64]) -> Vec<f64>,
+    residuals: impl Fn(&[f64]) -> Vec<f64> + Sync,
     start: &[f64],
     lo: &[f64],
     hi: &[f64],
@@ -82,28 +82,41 @@ fn clamp(p: &mut [f64], lo: &[f64], hi: &[f64]) {
 }
 
 /// The forward-difference Jacobian at `p` (residuals `r`), by columns,
-/// each stepping into the box.
+/// each stepping into the box; the columns on two threads (each column
+/// is the same arithmetic wherever it runs, so the search's path does
+/// not depend on it). A search that runs alone, the first fit on all the
+/// runs or the one candidate left to settle, then has both cores; two
+/// searches side by side share them.
 fn jacobian(
-    residuals: &impl Fn(&[f64]) -> Vec<f64>,
+    residuals: &(impl Fn(&[f64]) -> Vec<f64> + Sync),
     p: &[f64],
     r: &[f64],
     hi: &[f64],
 ) -> Vec<Vec<f64>> {
-    (0..p.len())
-        .map(|i| {
-            let mut h = FD_STEP * p[i].abs().max(1.0);
-            if p[i] + h > hi[i] {
-                h = -h;
-            }
-            let mut q = p.to_vec();
-            q[i] += h;
-            residuals(&q)
-                .iter()
-                .zip(r)
-                .map(|(a, b)| (a - b) / h)
-                .collect()
-        })
-        .collect()
+    let column = |i: usize| -> Vec<f64> {
+        let mut h = FD_STEP * p[i].abs().max(1.0);
+        if p[i] + h > hi[i] {
+            h = -h;
+        }
+        let mut q = p.to_vec();
+        q[i] += h;
+        residuals(&q)
+            .iter()
+            .zip(r)
+            .map(|(a, b)| (a - b) / h)
+            .collect()
+    };
+    // The first half of the columns on a second thread, the rest here.
+    let half = p.len() / 2;
+    std::thread::scope(|s| {
+        let first = s.spawn(|| (0..half).map(column).collect::<Vec<_>>());
+        let rest: Vec<Vec<f64>> = (half..p.len()).map(column).collect();
+        let mut cols = first
+            .join()
+            .unwrap_or_else(|e| std::panic::resume_unwind(e));
+        cols.extend(rest);
+        cols
+    })
 }
 
 /// The quantities free to move: not on a bound their gradient `g`
@@ -227,7 +240,7 @@ fn step(
 /// damping is tried with the free quantities, then (when some sit on a
 /// bound) with those on a bound held.
 fn levenberg_marquardt(
-    residuals: &impl Fn(&[f64]) -> Vec<f64>,
+    residuals: &(impl Fn(&[f64]) -> Vec<f64> + Sync),
     start: &[f64],
     (lo, hi): (&[f64], &[f64]),
     iters: usize,
@@ -337,9 +350,10 @@ mod tests {
     /// evaluations than the plain steps.
     #[test]
     fn a_long_curved_valley_is_followed_to_its_end() {
-        let evals = std::cell::Cell::new(0usize);
+        use std::sync::atomic::{AtomicUsize, Ordering};
+        let evals = AtomicUsize::new(0);
         let res = |p: &[f64]| {
-            evals.set(evals.get() + 1);
+            evals.fetch_add(1, Ordering::Relaxed);
             p.chunks(2)
                 .flat_map(|c| [10.0 * (c[1] - c[0] * c[0]), 1.0 - c[0]])
                 .collect::<Vec<f64>>()
@@ -349,13 +363,13 @@ mod tests {
         let (p, f) = minimize(res, &start, &lo, &hi, 100);
         assert!(f < 1e-14, "{f} at {p:?}");
         assert!(p.iter().all(|v| (v - 1.0).abs() < 1e-6), "{p:?}");
-        let accelerated = evals.replace(0);
+        let accelerated = evals.swap(0, Ordering::Relaxed);
         let (_, f) = levenberg_marquardt(&res, &start, (&lo, &hi), 100, false);
         assert!(f < 1e-14);
         assert!(
-            accelerated < evals.get(),
+            accelerated < evals.load(Ordering::Relaxed),
             "{accelerated} evaluations against {} without the acceleration",
-            evals.get()
+            evals.load(Ordering::Relaxed)
         );
     }
 

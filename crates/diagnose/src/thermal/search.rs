@@ -42,7 +42,9 @@ where
 /// A cost that is a sum of squares of residuals, its searched quantities
 /// within box bounds: searched by the simplex, settled by
 /// [`lsq::minimize`].
-pub(super) trait Squares: CostFunction<Param = Vec<f64>, Output = f64> + Clone {
+pub(super) trait Squares:
+    CostFunction<Param = Vec<f64>, Output = f64> + Clone + Sync
+{
     /// The residuals the cost sums the squares of, at `p` (within bounds).
     fn residuals(&self, p: &[f64]) -> Vec<f64>;
     /// The searched quantities' lower and upper bounds.
@@ -59,6 +61,17 @@ pub(super) fn multistart<C: Squares>(
     keep: usize,
     iters: u64,
 ) -> Vec<f64> {
+    multistart_settled(cost, starts, keep, iters, SETTLE_ITERS)
+}
+
+/// [`multistart`] with a settling search of at most `settle` Jacobians.
+pub(super) fn multistart_settled<C: Squares>(
+    cost: C,
+    starts: &[Vec<f64>],
+    keep: usize,
+    iters: u64,
+    settle: usize,
+) -> Vec<f64> {
     let mut scored: Vec<(&Vec<f64>, f64)> = starts
         .iter()
         .map(|q| (q, cost.cost(q).unwrap_or(f64::MAX)))
@@ -71,7 +84,7 @@ pub(super) fn multistart<C: Squares>(
         .min_by(|a, b| a.1.total_cmp(&b.1))
         .unwrap_or_else(|| (starts[0].clone(), f64::MAX));
     let (lo, hi) = cost.bounds();
-    let settled = lsq::minimize(|p| cost.residuals(p), &best.0, &lo, &hi, SETTLE_ITERS);
+    let settled = lsq::minimize(|p| cost.residuals(p), &best.0, &lo, &hi, settle);
     if settled.1 <= best.1 {
         settled.0
     } else {
@@ -148,6 +161,52 @@ pub(super) fn search_shape(
     let starts: Vec<Vec<f64>> = starts.iter().map(|q| cost.searched(q)).collect();
     let p = multistart(cost, &starts, keep, iters);
     cost.shape(&p).0
+}
+
+/// The network's shape in `form` on the blocks outside `held_out`,
+/// searched from `starts` by the simplex for `iters` iterations and
+/// settled by at most `settle` Jacobians: a screening fit, which
+/// [`settle_shape`] may carry on.
+pub(super) fn screen_shape(
+    runs: &[Vec<Block>],
+    held_out: Option<usize>,
+    form: Form,
+    starts: &[Shape],
+    iters: u64,
+    settle: usize,
+) -> Shape {
+    let cost = Cost {
+        runs,
+        held_out,
+        form,
+    };
+    let starts: Vec<Vec<f64>> = starts.iter().map(|q| cost.searched(q)).collect();
+    let p = multistart_settled(cost, &starts, 1, iters, settle);
+    cost.shape(&p).0
+}
+
+/// The settling search carried on from `start` for at most `settle`
+/// Jacobians (the start kept where it does not gain).
+pub(super) fn settle_shape(
+    runs: &[Vec<Block>],
+    held_out: Option<usize>,
+    form: Form,
+    start: &Shape,
+    settle: usize,
+) -> Shape {
+    let cost = Cost {
+        runs,
+        held_out,
+        form,
+    };
+    let (lo, hi) = cost.bounds();
+    let p = cost.searched(start);
+    let (q, f) = lsq::minimize(|x| cost.residuals(x), &p, &lo, &hi, settle);
+    if f <= cost.cost(&p).unwrap_or(f64::MAX) {
+        cost.shape(&q).0
+    } else {
+        *start
+    }
 }
 
 /// Starts of the full form's search around a fit of the simpler one: a
