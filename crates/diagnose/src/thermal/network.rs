@@ -339,6 +339,7 @@ pub(super) fn discretize<const N: usize, const M: usize>(
     dt_s: f64,
 ) -> (SMatrix<f64, N, N>, Nodes<N>)
 where
+    Const<N>: DimMin<Const<N>, Output = Const<N>>,
     Const<M>: DimMin<Const<M>, Output = Const<M>>,
 {
     debug_assert!(M == N + INPUTS && N == layout.nodes);
@@ -405,11 +406,28 @@ where
         m[(node, from)] = kl;
         m[(node, node)] = -kl;
     }
-    let e = (m * dt_s).exp();
-    (
-        e.fixed_view::<N, N>(0, 0).into_owned(),
-        e.fixed_view::<N, INPUTS>(0, N).into_owned(),
-    )
+    // The augmented matrix's exponential is [[e^(A dt), G], [0, I]] with
+    // G = (A dt)^-1 (e^(A dt) - I) B dt: the exponential of the nodes'
+    // matrix alone and one solve, a fifth of the work of the augmented
+    // one's (the network's A is never singular: every node reaches the
+    // air; where it were, the augmented exponential is taken).
+    let a = m.fixed_view::<N, N>(0, 0).into_owned() * dt_s;
+    let b = m.fixed_view::<N, INPUTS>(0, N).into_owned() * dt_s;
+    let phi = a.exp();
+    let gamma = a
+        .lu()
+        .solve(&((phi - SMatrix::<f64, N, N>::identity()) * b))
+        .filter(|g| g.iter().all(|v| v.is_finite()));
+    match gamma {
+        Some(gamma) => (phi, gamma),
+        None => {
+            let e = (m * dt_s).exp();
+            (
+                e.fixed_view::<N, N>(0, 0).into_owned(),
+                e.fixed_view::<N, INPUTS>(0, N).into_owned(),
+            )
+        }
+    }
 }
 
 /// Per block and sensor (T1, T2, TK), the mean response to each input
@@ -444,6 +462,7 @@ fn simulate_nodes<const N: usize, const M: usize>(
     run: &[Block],
 ) -> Responses
 where
+    Const<N>: DimMin<Const<N>, Output = Const<N>>,
     Const<M>: DimMin<Const<M>, Output = Const<M>>,
 {
     let Some(first) = run.first() else {
