@@ -170,16 +170,17 @@ pub struct ThermalThresholds {
     /// Each candidate is first fitted with its settling search cut at
     /// this many Jacobians (a fifth of the whole budget), which ranks
     /// them. Ours: on the conductance unit of docs/benchmarks.md the
-    /// leading candidate's sum of squares is 2.58 after 20 Jacobians and
-    /// 2.28 after its whole settle, the next one's over a thousand times
-    /// more; on the twelve units of docs/diagnosis.md the same effects
+    /// leading candidate's sum of squares is about 2.5 after 20
+    /// Jacobians and 2.28 after its whole settle, the next one's over a
+    /// thousand times more; on the twelve units of docs/diagnosis.md the same effects
     /// are named as with every candidate settled whole, and the effect
     /// step takes a quarter less time.
     pub screen_jacobians: usize,
     /// The candidates whose screened training sum of squares is within
     /// this factor of the best's settle on to the whole budget before
-    /// they are ranked (ours: twice [`Self::scored_within`], so none
-    /// that could be scored is ranked on its screening fit).
+    /// they are ranked (ours: twice [`Self::scored_within`], room for a
+    /// candidate's whole settle to gain more on the leader than the
+    /// leader's own).
     pub contends_within: f64,
 }
 
