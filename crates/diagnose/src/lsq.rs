@@ -9,7 +9,7 @@
 //! for nalgebra take no bounds (and `levenberg-marquardt` pins an older
 //! nalgebra than ours).
 //!
-//! Two things make it fast on the network's residuals, where a plain
+//! What makes it fast on the network's residuals, where a plain
 //! projected Levenberg-Marquardt crawled (a unit the simple form does not
 //! hold spent its whole budget of 100 Jacobians and ended at three times
 //! the sum of squares this reaches in a fifth of the evaluations):
@@ -58,8 +58,9 @@ const TRIES: usize = 12;
 /// squares by less than this fraction of it has settled (ours: on the
 /// conductance unit of docs/benchmarks.md the full form's fit on all the
 /// runs spent 24 of its 38 Jacobians on steps that each gained under
-/// 3e-7; a fit crossing a plateau there gains 1e-6 to 1e-5 a step and
-/// goes on).
+/// 3e-7, the trace's resolution, most of them far less; a fit crossing a
+/// plateau there gains 1e-6 to 1e-5 a step and goes on, five times
+/// above the bar: a flatter plateau would be ended on it).
 const STALL_TOL: f64 = 1e-6;
 /// The steps [`STALL_TOL`] is summed over (ours).
 const STALL_STEPS: usize = 5;
@@ -125,6 +126,9 @@ fn jacobian(
     };
     // The first half of the columns on a second thread, the rest here.
     let half = p.len() / 2;
+    if half == 0 {
+        return (0..p.len()).map(column).collect();
+    }
     std::thread::scope(|s| {
         let first = s.spawn(|| (0..half).map(column).collect::<Vec<_>>());
         let rest: Vec<Vec<f64>> = (half..p.len()).map(column).collect();
@@ -428,6 +432,16 @@ mod tests {
             n_stall * 10 < n_whole,
             "{n_stall} evaluations against {n_whole} without the stall rule"
         );
+        // It ends once its window of steps is full, not before: each step
+        // costs a Jacobian (two evaluations here) and a trial at least.
+        assert!(
+            n_stall >= 3 * STALL_STEPS,
+            "ended after {n_stall} evaluations"
+        );
+        // `minimize` is the search with the rule.
+        evals.store(0, Ordering::Relaxed);
+        let (_, f) = minimize(res, &[1.0, 1.0], &lo, &hi, 200);
+        assert_eq!((f, evals.load(Ordering::Relaxed)), (f_stall, n_stall));
         assert!(
             f_whole <= f_stall && f_stall <= f_whole * 1.001,
             "{f_stall} against {f_whole}"

@@ -342,6 +342,44 @@ where
     Const<N>: DimMin<Const<N>, Output = Const<N>>,
     Const<M>: DimMin<Const<M>, Output = Const<M>>,
 {
+    let m = rates::<N, M>(q, form, layout, key);
+    // The augmented matrix's exponential is [[e^(A dt), G], [0, I]] with
+    // G = (A dt)^-1 (e^(A dt) - I) B dt: the exponential of the nodes'
+    // matrix alone and one solve, a fifth of the work of the augmented
+    // one's. The subtraction loses the digits by which the slowest mode
+    // is slower than the step: at the search box's slowest corner (a mode
+    // of 1e6 s against 10 s) G is 4e-13 of itself off the augmented
+    // exponential's (a test), against the forward differences' step of
+    // 1.5e-8. A is never singular (every node reaches the air); should a
+    // pivot be exactly zero or the solve not finite, the augmented
+    // exponential is taken.
+    let a = m.fixed_view::<N, N>(0, 0).into_owned() * dt_s;
+    let b = m.fixed_view::<N, INPUTS>(0, N).into_owned() * dt_s;
+    let phi = a.exp();
+    let gamma = a
+        .lu()
+        .solve(&((phi - SMatrix::<f64, N, N>::identity()) * b))
+        .filter(|g| g.iter().all(|v| v.is_finite()));
+    match gamma {
+        Some(gamma) => (phi, gamma),
+        None => {
+            let e = (m * dt_s).exp();
+            (
+                e.fixed_view::<N, N>(0, 0).into_owned(),
+                e.fixed_view::<N, INPUTS>(0, N).into_owned(),
+            )
+        }
+    }
+}
+
+/// The network's rates as the augmented matrix `[[A, B], [0, 0]]`: the
+/// nodes' matrix `A` (N x N) and the inputs' `B` (N x [`INPUTS`]).
+pub(super) fn rates<const N: usize, const M: usize>(
+    q: &Shape,
+    form: &Form,
+    layout: &Layout,
+    key: &Key,
+) -> SMatrix<f64, M, M> {
     debug_assert!(M == N + INPUTS && N == layout.nodes);
     let [tm, tk, t1, t2, tc, ts] = [
         at::MOUNT_TAU,
@@ -406,28 +444,7 @@ where
         m[(node, from)] = kl;
         m[(node, node)] = -kl;
     }
-    // The augmented matrix's exponential is [[e^(A dt), G], [0, I]] with
-    // G = (A dt)^-1 (e^(A dt) - I) B dt: the exponential of the nodes'
-    // matrix alone and one solve, a fifth of the work of the augmented
-    // one's (the network's A is never singular: every node reaches the
-    // air; where it were, the augmented exponential is taken).
-    let a = m.fixed_view::<N, N>(0, 0).into_owned() * dt_s;
-    let b = m.fixed_view::<N, INPUTS>(0, N).into_owned() * dt_s;
-    let phi = a.exp();
-    let gamma = a
-        .lu()
-        .solve(&((phi - SMatrix::<f64, N, N>::identity()) * b))
-        .filter(|g| g.iter().all(|v| v.is_finite()));
-    match gamma {
-        Some(gamma) => (phi, gamma),
-        None => {
-            let e = (m * dt_s).exp();
-            (
-                e.fixed_view::<N, N>(0, 0).into_owned(),
-                e.fixed_view::<N, INPUTS>(0, N).into_owned(),
-            )
-        }
-    }
+    m
 }
 
 /// Per block and sensor (T1, T2, TK), the mean response to each input

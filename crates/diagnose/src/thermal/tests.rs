@@ -361,6 +361,66 @@ fn a_block_as_one_map_is_the_block_stepped() {
     }
 }
 
+/// A step's transition and input matrices, from the nodes' exponential
+/// and one solve, are the augmented matrix's exponential's blocks at the
+/// twin's network and at the corners of the search's box where the
+/// slowest mode is slowest (heavy blocks and sink, the longest time
+/// constants: the solve's subtraction loses most there, 4e-13 measured)
+/// and fastest (the shortest), with a lagging sensor and an air path, and
+/// over a step 10 times the usual.
+#[test]
+fn a_step_from_the_nodes_alone_is_the_augmented_exponential() {
+    let base = shape_of(&TwinConfig::default_rl16().thermal);
+    let corner = |pick: &dyn Fn(usize) -> f64| {
+        let mut q = base;
+        for (i, v) in q.iter_mut().enumerate().take(BASE_LEN) {
+            *v = pick(i);
+        }
+        q[at::LAG_TAU] = pick(at::LAG_TAU);
+        q[at::AIR_PATH_TAU] = pick(at::AIR_PATH_TAU);
+        q
+    };
+    let bound = |i: usize, hi: bool| {
+        let v = if hi { SHAPE[i].2 } else { SHAPE[i].1 };
+        if LOG_SCALED.contains(&i) { v.ln() } else { v }
+    };
+    let slow = corner(&|i| bound(i, i != at::CONVECTION));
+    let fast = corner(&|i| bound(i, i == at::RATIO1 || i == at::RATIO2 || i == at::SINK_RATIO));
+    let form = Form {
+        full: true,
+        lag: Some(0),
+        air_path: Some(1),
+        ..Form::default()
+    };
+    let layout = form.layout(true);
+    let key = Key {
+        convection: 1.3,
+        coupling: 0.0,
+        air_c: twin_effects::CONDUCTANCE_REFERENCE_C,
+    };
+    for (name, q) in [("twin", base), ("slow corner", slow), ("fast corner", fast)] {
+        for dt in [STEP_S, 10.0 * STEP_S] {
+            let (phi, gamma) = discretize::<6, 10>(&q, &form, &layout, &key, dt);
+            let e = (rates::<6, 10>(&q, &form, &layout, &key) * dt).exp();
+            let (phi_aug, gamma_aug) = (
+                e.fixed_view::<6, 6>(0, 0).into_owned(),
+                e.fixed_view::<6, INPUTS>(0, 6).into_owned(),
+            );
+            let worst = |a: &SMatrix<f64, 6, 6>, b: &SMatrix<f64, 6, 6>| (a - b).abs().max();
+            assert!(
+                worst(&phi, &phi_aug) < 1e-13,
+                "{name}, dt {dt}: {phi} vs {phi_aug}"
+            );
+            let scale = gamma_aug.abs().max();
+            let off = (gamma - gamma_aug).abs().max();
+            assert!(
+                off < 1e-11 * scale.max(1e-300),
+                "{name}, dt {dt}: {gamma} vs {gamma_aug}"
+            );
+        }
+    }
+}
+
 #[test]
 fn the_fitted_form_is_the_twins_network() {
     // What the fit simulates for a network is what the twin makes of it
