@@ -172,9 +172,9 @@ pub struct ThermalThresholds {
     /// them. Ours: on the conductance unit of docs/benchmarks.md the
     /// leading candidate's sum of squares is about 2.5 after 20
     /// Jacobians and 2.28 after its whole settle, the next one's over a
-    /// thousand times more; on the twelve units of docs/diagnosis.md the same effects
-    /// are named as with every candidate settled whole, and the effect
-    /// step takes a quarter less time.
+    /// thousand times more; on the twelve units of docs/diagnosis.md the
+    /// same effects are named as with every candidate settled whole, and
+    /// the effect step takes a quarter less time.
     pub screen_jacobians: usize,
     /// The candidates whose screened training sum of squares is within
     /// this factor of the best's settle on to the whole budget before

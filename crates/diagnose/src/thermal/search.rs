@@ -153,20 +153,12 @@ pub(super) fn search_shape(
     keep: usize,
     iters: u64,
 ) -> Shape {
-    let cost = Cost {
-        runs,
-        held_out,
-        form,
-    };
-    let starts: Vec<Vec<f64>> = starts.iter().map(|q| cost.searched(q)).collect();
-    let p = multistart(cost, &starts, keep, iters);
-    cost.shape(&p).0
+    shape_settled(runs, held_out, form, starts, (keep, iters), SETTLE_ITERS)
 }
 
-/// The network's shape in `form` on the blocks outside `held_out`,
-/// searched from `starts` by the simplex for `iters` iterations and
-/// settled by at most `settle` Jacobians: a screening fit, which
-/// [`settle_shape`] may carry on.
+/// [`search_shape`] from the best of `starts`, its settling search cut
+/// at `settle` Jacobians: a screening fit, which [`settle_shape`] may
+/// carry on.
 pub(super) fn screen_shape(
     runs: &[Vec<Block>],
     held_out: Option<usize>,
@@ -175,13 +167,26 @@ pub(super) fn screen_shape(
     iters: u64,
     settle: usize,
 ) -> Shape {
+    shape_settled(runs, held_out, form, starts, (1, iters), settle)
+}
+
+/// [`multistart_settled`] on the network's shape in `form`, the `keep`
+/// best starts searched by the simplex for `iters` iterations each.
+fn shape_settled(
+    runs: &[Vec<Block>],
+    held_out: Option<usize>,
+    form: Form,
+    starts: &[Shape],
+    (keep, iters): (usize, u64),
+    settle: usize,
+) -> Shape {
     let cost = Cost {
         runs,
         held_out,
         form,
     };
     let starts: Vec<Vec<f64>> = starts.iter().map(|q| cost.searched(q)).collect();
-    let p = multistart_settled(cost, &starts, 1, iters, settle);
+    let p = multistart_settled(cost, &starts, keep, iters, settle);
     cost.shape(&p).0
 }
 
