@@ -252,13 +252,14 @@ pub struct Considered {
     /// `shared` (by every unit), `shared_by_some` (all but one),
     /// `own` (each unit that named it), `explained_by_bench` (every unit
     /// that named it holds no more of it once the bench's Earth-rate
-    /// error is given to the bench), or `not_in_lot`.
+    /// error, or the effects the lot shares, are given to the bench), or
+    /// `not_in_lot`.
     pub decision: String,
     /// Serials whose own diagnosis named it.
     pub named_alone_in: Vec<String>,
     /// Of those, the serials where it adds nothing once the bench's
-    /// Earth-rate error is the bench's (it is not theirs: left out of
-    /// their `effects`).
+    /// Earth-rate error or the lot's shared effects are the bench's (it
+    /// is not theirs: left out of their `effects`).
     pub explained_by_bench_in: Vec<String>,
     /// p-value of one shared set over the lot's model without it.
     pub p_value: f64,

@@ -11,7 +11,8 @@
 //! of three or more, an effect all but one unit share (the one's own
 //! parameters let free) is **shared by the rest**, and that unit's
 //! difference is outlier evidence. Otherwise it is each naming unit's
-//! **own**.
+//! **own**, where the lot shares an effect only if that unit's term still
+//! passes the bars over everything else the lot holds.
 //!
 //! The bench's own effects ([`BENCH`]: the Earth rate it subtracts off by
 //! a fixed vector) come first: one unit's diagnosis cannot name them, and
@@ -80,8 +81,8 @@ pub(super) struct Settled {
     pub inconclusive: Option<Inconclusive>,
     /// Its deciding run.
     pub deciding_procedure: Option<String>,
-    /// Effects a unit named alone that the bench's vector explains (unit,
-    /// effect): not the unit's.
+    /// Effects a unit named alone that the bench's vector or the lot's
+    /// shared effects explain (unit, effect): not the unit's.
     pub explained: Vec<(usize, Effect)>,
 }
 
@@ -103,6 +104,7 @@ impl Settled {
         self.considered.push(w.considered);
         self.shared.extend(w.found);
         self.differs.extend(w.differs);
+        self.explained.extend(w.explained);
         w.model
     }
 }
@@ -113,6 +115,8 @@ struct Weighed {
     considered: Considered,
     found: Option<Found>,
     differs: Option<Differs>,
+    /// Units whose own term of it the lot's shared effects explain.
+    explained: Vec<(usize, Effect)>,
 }
 
 /// The bars an effect's fits are held to.
@@ -424,6 +428,7 @@ fn weigh(
                 per_unit,
             }),
             differs: None,
+            explained: Vec::new(),
         };
     }
     if n >= 3
@@ -446,18 +451,52 @@ fn weigh(
                 per_unit,
             }),
             differs: Some(w.differs),
+            explained: Vec::new(),
         };
+    }
+    // Each naming unit's own term, where the lot shares an effect: kept
+    // only where it still passes the bars over everything else the lot
+    // holds, as over the bench's Earth-rate error ([`Route::bench_first`]).
+    // A unit alone takes part of a fixture's tilt for an effect of its
+    // own that the tilt explains once the lot shares it (at low latitude,
+    // a magnetic sensitivity: both project a northward vector).
+    let mut model = model.to_vec();
+    let mut explained = Vec::new();
+    let lot_shares = without
+        .iter()
+        .any(|t| (0..n).filter(|&u| t.units.holds(u)).count() > 1);
+    for &u in named_in.iter().filter(|_| lot_shares) {
+        let Some(own) = model
+            .iter()
+            .copied()
+            .find(|t| t.effect == e && t.units == Units::one(u))
+        else {
+            continue;
+        };
+        let rest: Vec<Term> = model.iter().copied().filter(|t| *t != own).collect();
+        let (base, with) = (score(data, &rest), score(data, &model));
+        let p = improvement(&base, &with).1;
+        let before = stack.units_sse(&base, own.units);
+        let gain = before - stack.units_sse(&with, own.units);
+        if !(p < bars.level && gain > THRESHOLDS.min_gain * before) {
+            model = rest;
+            explained.push((u, e));
+            considered.explained_by_bench_in.push(serials[u].clone());
+        }
     }
     considered.decision = if named_in.is_empty() {
         "not_in_lot".into()
+    } else if explained.len() == named_in.len() {
+        "explained_by_bench".into()
     } else {
         "own".into()
     };
     Weighed {
-        model: model.to_vec(),
+        model,
         considered,
         found: None,
         differs: None,
+        explained,
     }
 }
 
