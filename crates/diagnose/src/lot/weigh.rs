@@ -131,6 +131,17 @@ impl Bars {
         p < self.level && gain > THRESHOLDS.min_gain * base.sse()
     }
 
+    /// A unit's own term (in `units`) still passes the bars: `with` (the
+    /// lot's fit holding it) over `base` (the same without it), its
+    /// improvement significant and a `min_gain` share of that unit's sum
+    /// of squares.
+    fn own_holds(&self, stack: &Stack<'_>, base: &Scored, with: &Scored, units: Units) -> bool {
+        let p = improvement(base, with).1;
+        let before = stack.units_sse(base, units);
+        let gain = before - stack.units_sse(with, units);
+        p < self.level && gain > THRESHOLDS.min_gain * before
+    }
+
     /// One shared set `shared` is as good as one set per unit `own`: the
     /// own sets do not improve on it significantly, and it is not worse
     /// held out (within `tie`).
@@ -288,10 +299,7 @@ impl Route<'_, '_> {
                 };
                 let with: Vec<Term> = lot.iter().copied().chain([own]).collect();
                 let s = score(&stack.data, &with);
-                let p = improvement(&base, &s).1;
-                let before = stack.units_sse(&base, own.units);
-                let gain = before - stack.units_sse(&s, own.units);
-                if p < bars.level && gain > THRESHOLDS.min_gain * before {
+                if bars.own_holds(stack, &base, &s, own.units) {
                     kept.push(own);
                 } else {
                     settled.explained.push((u, *x));
@@ -475,10 +483,7 @@ fn weigh(
         };
         let rest: Vec<Term> = model.iter().copied().filter(|t| *t != own).collect();
         let (base, with) = (score(data, &rest), score(data, &model));
-        let p = improvement(&base, &with).1;
-        let before = stack.units_sse(&base, own.units);
-        let gain = before - stack.units_sse(&with, own.units);
-        if !(p < bars.level && gain > THRESHOLDS.min_gain * before) {
+        if !bars.own_holds(stack, &base, &with, own.units) {
             model = rest;
             explained.push((u, e));
             considered.explained_by_bench_in.push(serials[u].clone());
