@@ -462,33 +462,10 @@ fn weigh(
             explained: Vec::new(),
         };
     }
-    // Each naming unit's own term, where the lot shares an effect: kept
-    // only where it still passes the bars over everything else the lot
-    // holds, as over the bench's Earth-rate error ([`Route::bench_first`]).
-    // A unit alone takes part of a fixture's tilt for an effect of its
-    // own that the tilt explains once the lot shares it (at low latitude,
-    // a magnetic sensitivity: both project a northward vector).
-    let mut model = model.to_vec();
-    let mut explained = Vec::new();
-    let lot_shares = without
-        .iter()
-        .any(|t| (0..n).filter(|&u| t.units.holds(u)).count() > 1);
-    for &u in named_in.iter().filter(|_| lot_shares) {
-        let Some(own) = model
-            .iter()
-            .copied()
-            .find(|t| t.effect == e && t.units == Units::one(u))
-        else {
-            continue;
-        };
-        let rest: Vec<Term> = model.iter().copied().filter(|t| *t != own).collect();
-        let (base, with) = (score(data, &rest), score(data, &model));
-        if !bars.own_holds(stack, &base, &with, own.units) {
-            model = rest;
-            explained.push((u, e));
-            considered.explained_by_bench_in.push(serials[u].clone());
-        }
-    }
+    let (model, explained) = own_over_the_lot(stack, model, e, named_in, bars);
+    considered
+        .explained_by_bench_in
+        .extend(explained.iter().map(|&(u, _)| serials[u].clone()));
     considered.decision = if named_in.is_empty() {
         "not_in_lot".into()
     } else if explained.len() == named_in.len() {
@@ -503,6 +480,44 @@ fn weigh(
         differs: None,
         explained,
     }
+}
+
+/// Each naming unit's own term of `e` in `model`, where the lot shares
+/// an effect: kept only where it still passes the bars over everything
+/// else the lot holds, as over the bench's Earth-rate error
+/// ([`Route::bench_first`]). A unit alone takes part of a fixture's tilt
+/// for an effect of its own that the tilt explains once the lot shares it
+/// (at low latitude, a magnetic sensitivity: both project a northward
+/// vector). The model with the terms kept, and the (unit, effect) left out.
+fn own_over_the_lot(
+    stack: &Stack<'_>,
+    model: &[Term],
+    e: Effect,
+    named_in: &[usize],
+    bars: &Bars,
+) -> (Vec<Term>, Vec<(usize, Effect)>) {
+    let mut model = model.to_vec();
+    let mut explained = Vec::new();
+    let lot_shares = model
+        .iter()
+        .filter(|t| t.effect != e)
+        .any(|t| (0..stack.units).filter(|&u| t.units.holds(u)).count() > 1);
+    for &u in named_in.iter().filter(|_| lot_shares) {
+        let Some(own) = model
+            .iter()
+            .copied()
+            .find(|t| t.effect == e && t.units == Units::one(u))
+        else {
+            continue;
+        };
+        let rest: Vec<Term> = model.iter().copied().filter(|t| *t != own).collect();
+        let (base, with) = (score(&stack.data, &rest), score(&stack.data, &model));
+        if !bars.own_holds(stack, &base, &with, own.units) {
+            model = rest;
+            explained.push((u, e));
+        }
+    }
+    (model, explained)
 }
 
 /// An effect all units but one share.
