@@ -176,6 +176,19 @@ pub struct ThermalThresholds {
     /// same effects are named as with every candidate settled whole, and
     /// the effect step takes a quarter less time.
     pub screen_jacobians: usize,
+    /// Before that, each choice is glanced at: its best start settled for
+    /// this many Jacobians, with no simplex search (a fifth of a
+    /// screening's evaluations).
+    pub glance_jacobians: usize,
+    /// Only the choices whose glanced training sum of squares is within
+    /// this factor of the best glance's are screened; the others keep
+    /// their glance (ours: on the twelve units of docs/diagnosis.md the
+    /// candidates that went on to contend were at most 3.2 times behind
+    /// the best glance; at three Jacobians one was 15 times behind, at
+    /// five none. A unit whose effect dominates, a conductance that
+    /// changes with temperature, leaves one or two choices in sight; one
+    /// whose effects are close, nearly all twelve).
+    pub glance_within: f64,
     /// The candidates whose screened training sum of squares is within
     /// this factor of the best's settle on to the whole budget before
     /// they are ranked (ours: twice [`Self::scored_within`], room for a
@@ -194,6 +207,8 @@ pub const THERMAL_THRESHOLDS: ThermalThresholds = ThermalThresholds {
     scored_within: 2.0,
     max_effects: 2,
     screen_jacobians: 20,
+    glance_jacobians: 5,
+    glance_within: 10.0,
     contends_within: 4.0,
 };
 
@@ -231,12 +246,29 @@ pub struct CandidateScore {
     pub on: Option<String>,
     /// Share of the sum of squares it removes fitted on all the runs.
     pub in_sample_improvement: f64,
+    /// How far that fit went: `glance`, `screen` or `whole`
+    /// ([`ThermalThresholds::glance_jacobians`],
+    /// [`ThermalThresholds::screen_jacobians`], the whole budget).
+    pub in_sample_fit: Fit,
     /// Its held-out gap, degC, when it was among the scored.
     pub held_out_gap_c: Option<f64>,
     /// Share of the held-out sum of squares it removes.
     pub improvement: Option<f64>,
     /// As [`FoundEffect::p_value`].
     pub p_value: Option<f64>,
+}
+
+/// How far a candidate's fit on all the runs went before it was ranked.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Fit {
+    /// Its best start settled for a few Jacobians: it was not in sight.
+    Glance,
+    /// Searched from its starts, its settling cut short: it was in sight
+    /// but did not contend.
+    Screen,
+    /// Settled to the whole budget: a contender.
+    Whole,
 }
 
 /// The selection's outcome: the network it ends with, the effects named,
@@ -336,11 +368,14 @@ struct Named {
 
 /// Every effect in `remaining` fitted with `current` on all the runs (its
 /// best choice kept), the best in sample scored held out against
-/// `current`. Each choice's fit is screened first
-/// ([`ThermalThresholds::screen_jacobians`]); those within
+/// `current`. Each choice is glanced at
+/// ([`ThermalThresholds::glance_jacobians`]), those within
+/// [`ThermalThresholds::glance_within`] of the best glance are screened
+/// ([`ThermalThresholds::screen_jacobians`]) and those within
 /// [`ThermalThresholds::contends_within`] of the best screened settle
 /// on, so the ranking and the named effect's parameters come from whole
-/// fits and the others' `in_sample_improvement` from their screening.
+/// fits and the others' `in_sample_improvement` from their screening or
+/// their glance.
 fn weigh(
     runs: &[RunData],
     data: &[Vec<Block>],
@@ -353,37 +388,7 @@ fn weigh(
         .iter()
         .flat_map(|&e| (0..e.choices()).map(move |c| (e, c)))
         .collect();
-    let fits = on_two_threads(&jobs, |&(e, c)| {
-        let form = e.with(current.form, c);
-        let starts: Vec<Shape> = e
-            .starts()
-            .iter()
-            .map(|s| {
-                let mut q = current.all;
-                for &(i, v) in s {
-                    q[i] = v;
-                }
-                q
-            })
-            .collect();
-        let q = screen_shape(data, None, form, &starts, WARM_ITERS, th.screen_jacobians);
-        (q, form, training_cost(data, &q, form))
-    });
-    // The contenders' settling searches carried on to the whole budget.
-    let lead = fits.iter().map(|f| f.2).fold(f64::MAX, f64::min);
-    let contenders: Vec<usize> = (0..fits.len())
-        .filter(|&i| fits[i].2 <= th.contends_within * lead)
-        .collect();
-    let settled = on_two_threads(&contenders, |&i| {
-        let (q, form, _) = fits[i];
-        let rest = SETTLE_ITERS.saturating_sub(th.screen_jacobians);
-        let q = settle_shape(data, None, form, &q, rest);
-        (q, form, training_cost(data, &q, form))
-    });
-    let mut fits = fits;
-    for (&i, f) in contenders.iter().zip(settled) {
-        fits[i] = f;
-    }
+    let fits = fit_choices(data, current, &jobs);
     let mut weighed: Vec<Weighed> = remaining
         .iter()
         .map(|&e| {
@@ -391,16 +396,18 @@ fn weigh(
                 .iter()
                 .zip(&fits)
                 .filter(|((je, _), _)| *je == e)
-                .min_by(|a, b| a.1.2.total_cmp(&b.1.2));
-            let (choice, all) = best.map_or((0, (current.all, current.form, f64::MAX)), |b| {
-                (b.0.1, *b.1)
-            });
+                .min_by(|a, b| a.1.0.2.total_cmp(&b.1.0.2));
+            let (choice, all, fit) = best.map_or(
+                (0, (current.all, current.form, f64::MAX), Fit::Glance),
+                |b| (b.0.1, b.1.0, b.1.1),
+            );
             Weighed {
                 effect: e,
                 score: CandidateScore {
                     name: e.name().to_owned(),
                     on: e.on(choice),
                     in_sample_improvement: 1.0 - all.2 / base_sse,
+                    in_sample_fit: fit,
                     held_out_gap_c: None,
                     improvement: None,
                     p_value: None,
@@ -430,6 +437,82 @@ fn weigh(
         w.held = Some(net);
     }
     weighed
+}
+
+/// A choice's fit on all the runs: its network and form, its training
+/// sum of squares, and how far its search went.
+type ChoiceFit = ((Shape, Form, f64), Fit);
+
+/// Each (effect, choice) of `jobs` fitted with `current` on all the runs,
+/// from the network's optimum and the effect's starts: glanced at, the
+/// choices in sight screened, the contenders settled whole
+/// ([`weigh`]).
+fn fit_choices(
+    data: &[Vec<Block>],
+    current: &NetworkHeldOut,
+    jobs: &[(ThermalEffect, usize)],
+) -> Vec<ChoiceFit> {
+    let th = THERMAL_THRESHOLDS;
+    let starts_of = |e: ThermalEffect| -> Vec<Shape> {
+        e.starts()
+            .iter()
+            .map(|s| {
+                let mut q = current.all;
+                for &(i, v) in s {
+                    q[i] = v;
+                }
+                q
+            })
+            .collect()
+    };
+    // A glance at every choice: its best start settled a few Jacobians.
+    let glanced = on_two_threads(jobs, |&(e, c)| {
+        let form = e.with(current.form, c);
+        let q = screen_shape(data, None, form, &starts_of(e), 0, th.glance_jacobians);
+        (q, form, training_cost(data, &q, form))
+    });
+    let sight = glanced.iter().map(|f| f.2).fold(f64::MAX, f64::min);
+    let mut fits: Vec<ChoiceFit> = glanced.into_iter().map(|f| (f, Fit::Glance)).collect();
+    let in_sight: Vec<usize> = (0..jobs.len())
+        .filter(|&i| fits[i].0.2 <= th.glance_within * sight)
+        .collect();
+    // Those in sight screened from their starts.
+    let screened = on_two_threads(&in_sight, |&i| {
+        let (e, c) = jobs[i];
+        let form = e.with(current.form, c);
+        let q = screen_shape(
+            data,
+            None,
+            form,
+            &starts_of(e),
+            WARM_ITERS,
+            th.screen_jacobians,
+        );
+        (q, form, training_cost(data, &q, form))
+    });
+    for (&i, f) in in_sight.iter().zip(screened) {
+        fits[i] = (f, Fit::Screen);
+    }
+    // The contenders' settling searches carried on to the whole budget.
+    let lead = in_sight
+        .iter()
+        .map(|&i| fits[i].0.2)
+        .fold(f64::MAX, f64::min);
+    let contenders: Vec<usize> = in_sight
+        .iter()
+        .copied()
+        .filter(|&i| fits[i].0.2 <= th.contends_within * lead)
+        .collect();
+    let settled = on_two_threads(&contenders, |&i| {
+        let (q, form, _) = fits[i].0;
+        let rest = SETTLE_ITERS.saturating_sub(th.screen_jacobians);
+        let q = settle_shape(data, None, form, &q, rest);
+        (q, form, training_cost(data, &q, form))
+    });
+    for (&i, f) in contenders.iter().zip(settled) {
+        fits[i] = (f, Fit::Whole);
+    }
+    fits
 }
 
 /// The training sum of squares of the network `q` in `form` on all the

@@ -34,7 +34,7 @@ mod network;
 mod search;
 
 pub use effects::{
-    CandidateScore, FoundEffect, THERMAL_LIBRARY, THERMAL_THRESHOLDS, ThermalEffect,
+    CandidateScore, Fit, FoundEffect, THERMAL_LIBRARY, THERMAL_THRESHOLDS, ThermalEffect,
     ThermalThresholds, match_limit_c,
 };
 pub use floor::noise_floor;

@@ -52,9 +52,9 @@ pub(super) trait Squares:
 }
 
 /// Every start scored, the best `keep` searched by the simplex for
-/// `iters` iterations, the best of them settled by Levenberg-Marquardt
-/// within the bounds (at most the evaluations of [`SETTLE_ITERS`]
-/// Jacobians).
+/// `iters` iterations (with none, the best start as it is), the best of
+/// them settled by Levenberg-Marquardt within the bounds (at most the
+/// evaluations of [`SETTLE_ITERS`] Jacobians).
 pub(super) fn multistart<C: Squares>(
     cost: C,
     starts: &[Vec<f64>],
@@ -77,11 +77,14 @@ pub(super) fn multistart_settled<C: Squares>(
         .map(|q| (q, cost.cost(q).unwrap_or(f64::MAX)))
         .collect();
     scored.sort_by(|a, b| a.1.total_cmp(&b.1));
+    // No simplex iterations: the best start as it is.
+    let keep = if iters == 0 { 0 } else { keep };
     let best = scored
         .iter()
         .take(keep)
         .map(|(q, _)| search(cost.clone(), q, iters))
         .min_by(|a, b| a.1.total_cmp(&b.1))
+        .or_else(|| scored.first().map(|(q, c)| ((*q).clone(), *c)))
         .unwrap_or_else(|| (starts[0].clone(), f64::MAX));
     let (lo, hi) = cost.bounds();
     let settled = lsq::minimize(|p| cost.residuals(p), &best.0, &lo, &hi, settle);

@@ -757,6 +757,12 @@ fn a_thermal_effect_the_form_lacks_is_named_and_none_where_there_is_none() {
         "{:?}",
         with.effect_candidates
     );
+    // The named candidate was ranked on its whole fit; the others, far
+    // behind, on their screened or glanced fits.
+    for c in &with.effect_candidates {
+        let whole = c.name == "conductance_temperature";
+        assert_eq!(c.in_sample_fit == Fit::Whole, whole, "{c:?}");
+    }
     let e = &with.effects[0];
     let per_c = e.parameters["case_conductance_per_c"];
     assert!((per_c / 0.008 - 1.0).abs() < 0.25, "{per_c}");
