@@ -43,8 +43,9 @@
 //!   took their columns only to learn their gradients still point out
 //!   of the box. A quantity held at a whole Jacobian stays held for the
 //!   next [`REFRESH`] - 1, its column not taken; a failed step takes a
-//!   whole Jacobian at once, so a quantity the search needs back is
-//!   released before the search can end.
+//!   whole Jacobian at once (a search ends on a failed step only at a
+//!   whole one), so a quantity the search needs back is released before
+//!   it gives up.
 
 use nalgebra::{DMatrix, DVector};
 

@@ -304,17 +304,13 @@ pub fn fitted_network(runs: &[RunData], base: &ThermalConfig, prior: bool) -> Fi
     let prior = prior.as_ref().map(|(q, f)| (q, *f));
     let form = prior.map_or_else(Form::default, |p| p.1);
     let (outs, all_modes) = fits_on_all_and_folds(&data, base, prior, base_axis);
-    let mut modes: Vec<[f64; MODES]> = outs
+    let modes: Vec<[f64; MODES]> = outs
         .iter()
         .filter_map(|o| match o {
             FitOut::Modal(t) => Some(*t),
             FitOut::Network(_) => None,
         })
         .collect();
-    let axis = convection_axis(&data, &all_modes, base_axis);
-    if axis != base_axis {
-        modes = modes_on_axis(&data, axis);
-    }
     let shapes: Vec<Shape> = outs
         .iter()
         .filter_map(|o| match o {
@@ -322,9 +318,30 @@ pub fn fitted_network(runs: &[RunData], base: &ThermalConfig, prior: bool) -> Fi
             FitOut::Modal(_) => None,
         })
         .collect();
-    let shapes = cross_started(&data, shapes, form);
-    let in_form = network_in_its_form(runs, &data, &shapes, form, base);
     let (_, floor_c) = noise_floor(runs);
+    // The modal model's axis and held-out score need nothing from the
+    // network's form and effects: they run alongside (on a unit whose
+    // convection follows another axis, its modes searched again were a
+    // tenth of the diagnosis, each phase of it one thread at a time).
+    let ((modes, modal), selected) = std::thread::scope(|s| {
+        let modal = s.spawn(|| {
+            let axis = convection_axis(&data, &all_modes, base_axis);
+            let modes = if axis == base_axis {
+                modes
+            } else {
+                modes_on_axis(&data, axis)
+            };
+            let modal = modal_held_out(runs, &data, &modes, axis);
+            (modes, modal)
+        });
+        let shapes = cross_started(&data, shapes, form);
+        let in_form = network_in_its_form(runs, &data, &shapes, form, base);
+        let selected = effects::select(runs, &data, in_form, floor_c);
+        let modal = modal
+            .join()
+            .unwrap_or_else(|p| std::panic::resume_unwind(p));
+        (modal, selected)
+    });
     let effects::Selected {
         net:
             NetworkHeldOut {
@@ -336,8 +353,7 @@ pub fn fitted_network(runs: &[RunData], base: &ThermalConfig, prior: bool) -> Fi
             },
         effects,
         candidates,
-    } = effects::select(runs, &data, in_form, floor_c);
-    let modal = modal_held_out(runs, &data, &modes, axis);
+    } = selected;
     let network = to_config(base, &all, &form, &all_lin);
     let net_gap = quadratic_mean(&net.per_sensor_c);
     let modal_gap = quadratic_mean(&modal.per_sensor_c);
