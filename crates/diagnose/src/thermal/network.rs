@@ -496,14 +496,26 @@ where
         *x = phi * *x + u;
     };
     type Cached<const N: usize> = (Key, SMatrix<f64, N, N>, Nodes<N>, BlockStep<N>);
-    let at_key = |cache: &mut Vec<Cached<N>>, key: Key| match cache.iter().position(|c| c.0 == key)
-    {
-        Some(k) => k,
-        None => {
-            let (p, g) = discretize::<N, M>(q, form, layout, &key, STEP_S);
-            cache.push((key, p, g, BlockStep::new(&p, &g, &layout.sensors)));
-            cache.len() - 1
-        }
+    // Consecutive blocks mostly share their keys: the last two found are
+    // looked at first (with the conductance effect the cache holds a key
+    // per grid air and orientation, and its search from the start was a
+    // twentieth of the evaluation).
+    let mut last = [0usize; 2];
+    let mut at_key = |cache: &mut Vec<Cached<N>>, key: Key| {
+        let k = match last
+            .into_iter()
+            .find(|&k| cache.get(k).is_some_and(|c| c.0 == key))
+            .or_else(|| cache.iter().position(|c| c.0 == key))
+        {
+            Some(k) => k,
+            None => {
+                let (p, g) = discretize::<N, M>(q, form, layout, &key, STEP_S);
+                cache.push((key, p, g, BlockStep::new(&p, &g, &layout.sensors)));
+                cache.len() - 1
+            }
+        };
+        last = [k, last[0]];
+        k
     };
     let mut t = 0.0;
     let mut blended = None;
@@ -512,25 +524,31 @@ where
             let (key, above) = Key::of(q, form, b);
             let k = at_key(&mut cache, key);
             let k_above = (above > 0.0).then(|| at_key(&mut cache, key.above()));
-            let (phi, gamma, whole) = match k_above {
-                None => (cache[k].1, cache[k].2, &cache[k].3),
-                Some(j) => {
-                    let (lo, hi) = (&cache[k], &cache[j]);
-                    let w = |a: f64, b: f64| a + above * (b - a);
-                    let step = blended.insert(BlockStep::blend(&lo.3, &hi.3, above));
-                    (lo.1.zip_map(&hi.1, w), lo.2.zip_map(&hi.2, w), &*step)
-                }
+            let whole = match k_above {
+                None => &cache[k].3,
+                Some(j) => &*blended.insert(BlockStep::blend(&cache[k].3, &cache[j].3, above)),
             };
-            // Up to the block (gaps between records) on its first air.
-            while t < b.start_s - 1e-9 {
-                let dt = (b.start_s - t).min(STEP_S);
-                if dt == STEP_S {
-                    advance(&mut x, &phi, &gamma, b.air_c[0]);
-                } else {
-                    let (p, g) = discretize::<N, M>(q, form, layout, &key, dt);
-                    advance(&mut x, &p, &g, b.air_c[0]);
+            // Up to the block (gaps between records) on its first air,
+            // by the one-step maps (blended as the block's).
+            if t < b.start_s - 1e-9 {
+                let (phi, gamma) = match k_above {
+                    None => (cache[k].1, cache[k].2),
+                    Some(j) => {
+                        let (lo, hi) = (&cache[k], &cache[j]);
+                        let w = |a: f64, b: f64| a + above * (b - a);
+                        (lo.1.zip_map(&hi.1, w), lo.2.zip_map(&hi.2, w))
+                    }
+                };
+                while t < b.start_s - 1e-9 {
+                    let dt = (b.start_s - t).min(STEP_S);
+                    if dt == STEP_S {
+                        advance(&mut x, &phi, &gamma, b.air_c[0]);
+                    } else {
+                        let (p, g) = discretize::<N, M>(q, form, layout, &key, dt);
+                        advance(&mut x, &p, &g, b.air_c[0]);
+                    }
+                    t += dt;
                 }
-                t += dt;
             }
             t += STEP_S * BLOCK_STEPS as f64;
             whole.apply(&mut x, &b.air_c)
@@ -645,16 +663,10 @@ impl<const N: usize> BlockStep<N> {
 }
 
 /// The linear quantities given the responses: air gain, the three rises,
-/// the three sensor offsets.
+/// the three sensor offsets. A sensor's reading in a block is its row
+/// (its four responses, then a one for its own offset and zeros for the
+/// others') times them.
 pub(super) type Linear = [f64; 7];
-
-/// The row of the linear model for one sensor of one block.
-pub(super) fn row(r: &[[f64; 4]; 3], sensor: usize) -> [f64; 7] {
-    let mut x = [0.0; 7];
-    x[..4].copy_from_slice(&r[sensor]);
-    x[4 + sensor] = 1.0;
-    x
-}
 
 /// Least squares for the linear quantities on the blocks outside
 /// `held_out`, with the weak prior, the rises kept within 0..RISE_MAX_C
@@ -665,12 +677,13 @@ pub(super) fn solve_linear(
     resp: &[Responses],
     held_out: Option<usize>,
 ) -> Linear {
-    // The normal equations of the rows ([`row`]: a sensor's four
-    // responses, then a one for its offset), summed by their structure:
+    // The normal equations of the rows ([`Linear`]), summed by their structure:
     // the responses' products, each response's sum against its sensor's
     // offset, and each sensor's count (the upper triangle, mirrored).
-    let mut ata = SMatrix::<f64, 7, 7>::zeros();
-    let mut atb = SVector::<f64, 7>::zeros();
+    // (Summed in plain arrays, the same sums in the same order: indexing
+    // the matrices here was a tenth of an evaluation.)
+    let mut sums = [[0.0f64; 7]; 7];
+    let mut rhs = [0.0f64; 7];
     for (run, r) in runs.iter().zip(resp) {
         for (b, rb) in run.iter().zip(r) {
             if Some(b.fold) == held_out {
@@ -680,16 +693,18 @@ pub(super) fn solve_linear(
                 let m = b.measured[s];
                 for i in 0..4 {
                     for j in i..4 {
-                        ata[(i, j)] += x[i] * x[j];
+                        sums[i][j] += x[i] * x[j];
                     }
-                    ata[(i, 4 + s)] += x[i];
-                    atb[i] += x[i] * m;
+                    sums[i][4 + s] += x[i];
+                    rhs[i] += x[i] * m;
                 }
-                ata[(4 + s, 4 + s)] += 1.0;
-                atb[4 + s] += m;
+                sums[4 + s][4 + s] += 1.0;
+                rhs[4 + s] += m;
             }
         }
     }
+    let mut ata = SMatrix::<f64, 7, 7>::from_fn(|i, j| sums[i][j]);
+    let mut atb = SVector::<f64, 7>::from_fn(|i, _| rhs[i]);
     ata.fill_lower_triangle_with_upper_triangle();
     ata[(0, 0)] += PRIOR_GAIN;
     atb[0] += PRIOR_GAIN;
@@ -746,8 +761,14 @@ pub(super) fn solve_linear(
     theta
 }
 
+/// The readings the linear quantities `lin` predict from a block's
+/// responses: a sensor's row ([`Linear`]) times them, its other
+/// sensors' offsets left out (their terms are zeros).
 pub(super) fn predict(rb: &[[f64; 4]; 3], lin: &Linear) -> [f64; 3] {
-    [0, 1, 2].map(|s| row(rb, s).iter().zip(lin).map(|(x, c)| x * c).sum())
+    [0, 1, 2].map(|s| {
+        let x = &rb[s];
+        x[0] * lin[0] + x[1] * lin[1] + x[2] * lin[2] + x[3] * lin[3] + lin[4 + s]
+    })
 }
 
 /// Sum of squares of the block residuals outside `held_out`, the linear
