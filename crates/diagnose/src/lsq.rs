@@ -296,6 +296,50 @@ fn step(
     Some(accelerated)
 }
 
+/// The quantities held on a bound at the last whole Jacobian, whose
+/// columns are not taken until the next whole one.
+struct Pins {
+    held: Vec<bool>,
+    since_whole: usize,
+    refresh: usize,
+}
+
+impl Pins {
+    /// None held; the first Jacobian whole.
+    fn new(n: usize, refresh: usize) -> Self {
+        Self {
+            held: vec![false; n],
+            since_whole: refresh,
+            refresh,
+        }
+    }
+
+    /// Whether the next Jacobian is whole (every `refresh`, or after
+    /// [`Pins::release`]); a whole one holds nothing.
+    fn next(&mut self) -> bool {
+        let whole = self.since_whole >= self.refresh;
+        if whole {
+            self.held.fill(false);
+            self.since_whole = 0;
+        }
+        self.since_whole += 1;
+        whole
+    }
+
+    /// At a whole Jacobian: hold the quantities on a bound that are not
+    /// `free` to move (their gradients point out of the box).
+    fn hold(&mut self, p: &[f64], free: &[usize], (lo, hi): (&[f64], &[f64])) {
+        for (i, h) in self.held.iter_mut().enumerate() {
+            *h = (p[i] <= lo[i] || p[i] >= hi[i]) && !free.contains(&i);
+        }
+    }
+
+    /// The next Jacobian whole: a step failed with quantities held.
+    fn release(&mut self) {
+        self.since_whole = self.refresh;
+    }
+}
+
 /// Levenberg-Marquardt with a forward-difference Jacobian at every
 /// accepted point, at most `iters` Jacobians; the damping falls by 0.3
 /// on a step that gains and rises tenfold on one that does not. Each
@@ -328,30 +372,20 @@ fn levenberg_marquardt(
     let mut lambda = 1e-3;
     // The last steps' gains (none yet: no stall).
     let mut recent = [f64::INFINITY; STALL_STEPS];
-    // The quantities held on a bound at the last whole Jacobian, and the
-    // Jacobians since it.
-    let mut pinned = vec![false; p.len()];
-    let mut since_whole = refresh;
+    let mut pins = Pins::new(p.len(), refresh);
     for _ in 0..iters {
-        let whole = since_whole >= refresh;
-        if whole {
-            pinned.fill(false);
-            since_whole = 0;
-        }
-        since_whole += 1;
-        let cols = jacobian(residuals, &p, &r, (hi, &pinned));
+        let whole = pins.next();
+        let cols = jacobian(residuals, &p, &r, (hi, &pins.held));
         let g: Vec<f64> = cols
             .iter()
             .map(|c| if c.is_empty() { 0.0 } else { dot(c, &r) })
             .collect();
         let free: Vec<usize> = free_set(&p, &g, lo, hi)
             .into_iter()
-            .filter(|&i| !pinned[i])
+            .filter(|&i| !pins.held[i])
             .collect();
         if whole {
-            for (i, pin) in pinned.iter_mut().enumerate() {
-                *pin = (p[i] <= lo[i] || p[i] >= hi[i]) && !free.contains(&i);
-            }
+            pins.hold(&p, &free, (lo, hi));
         }
         if free.is_empty() {
             // Nothing to move: a whole Jacobian decides whether the
@@ -359,7 +393,7 @@ fn levenberg_marquardt(
             if whole {
                 break;
             }
-            since_whole = refresh;
+            pins.release();
             continue;
         }
         // The free quantities, then (when some of them sit on a bound)
@@ -408,7 +442,7 @@ fn levenberg_marquardt(
             if whole {
                 break;
             }
-            since_whole = refresh;
+            pins.release();
             continue;
         };
         lambda = (lambda * 0.3).max(1e-12);
